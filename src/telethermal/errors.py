@@ -1,0 +1,28 @@
+"""The project's one error tree.
+
+Each class also inherits the built-in exception whose meaning it carries, so
+callers that only know Python's built-ins still catch the right thing.
+"""
+
+
+class TelethermalError(Exception):
+    """Base of every error raised on purpose by telethermal."""
+
+
+class UnknownMaterialError(TelethermalError, KeyError):
+    """A material name that the materials table does not hold."""
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return str(self.args[0]) if self.args else ""
+
+
+class SceneError(TelethermalError, ValueError):
+    """A scene file that cannot be read, or a scene the simulator cannot model."""
+
+
+class DatasetError(TelethermalError, ValueError):
+    """A dataset (manifest or trial file) that breaks the dataset format."""
+
+
+class ModelError(TelethermalError, ValueError):
+    """Bad parameters given to a physics model."""

@@ -1,0 +1,1 @@
+"""Contact physics: materials, closed forms, layered conduction, sensors, scenes."""
