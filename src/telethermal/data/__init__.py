@@ -1,0 +1,1 @@
+"""Datasets: the on-disk format, generation of the two databases, plots."""

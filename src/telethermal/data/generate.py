@@ -1,0 +1,169 @@
+"""Generate the two databases of a scene from the physics simulator.
+
+Database 1 (``pad/``): the sensing pad against each object, for
+identification. Database 2 (``finger/``): the operator's fingertip directly on
+each object (5 persons x 10 trials in the first paper), for flux generation;
+written only when the scene has a ``[finger]``.
+
+Trial-to-trial variability: pressing force and through it the contact
+conductance (``h ~ F^0.8``), the onset of contact relative to the recorded
+``t_s = 0``, the object's true temperature and the infrared thermometer's error
+on it (the pad is set from the IR reading, so the real gap varies), the
+pad's own set-point error (Peltier) or pre-conditioning (water pad), each
+person's skin properties and finger temperature, and sensor noise and
+quantisation.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from telethermal.data.dataset import Trial, staged_dir, write_trials
+from telethermal.physics.scene import (Scene, finger_contact_model, pad_contact_model)
+from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, InfraredThermometer,
+                                         Thermocouple)
+from telethermal.physics.waterpad import precondition
+
+#: Standard deviation of a Peltier pad's set-point error, K.
+PELTIER_SETPOINT_SD_K = 0.05
+#: Length of the water pad's pre-conditioning (STEP 1), s.
+PRECONDITION_S = 120.0
+
+
+@dataclass
+class _Contacts:
+    """Per-trial draws for one object (arrays of shape (n,))."""
+
+    force_n: np.ndarray
+    conductance_w_m2k: np.ndarray
+    onset_s: np.ndarray
+    object_true_c: np.ndarray
+    object_ir_c: np.ndarray
+
+
+def _draw(scene: Scene, obj, n: int, reference_h: float, rng) -> _Contacts:
+    var, sens = scene.variability, scene.sensors
+    force = np.clip(rng.normal(var.force_n, var.force_sd_n, n), 0.3 * var.force_n,
+                    3.0 * var.force_n)
+    h = reference_h * (force / var.force_n) ** var.conductance_force_exponent
+    jitter = sens.onset_jitter_s
+    onset = np.clip(rng.normal(0.0, jitter, n), -3 * jitter, 3 * jitter) if jitter else np.zeros(n)
+    true_c = obj.temp_c + rng.normal(0.0, var.object_temp_sd_c, n)
+    ir_c = InfraredThermometer(sens.ir_error_k).read_c(true_c, rng)
+    return _Contacts(force, h, onset, true_c, ir_c)
+
+
+def _time_axis(scene: Scene, duration_s: float) -> np.ndarray:
+    rate = scene.sample_rate_hz
+    n_pre = int(round(scene.pre_contact_s * rate))
+    n_post = int(round(duration_s * rate))
+    return (np.arange(-n_pre, n_post + 1)) / rate
+
+
+def _record(scene, result, times, draws, first_contact_temp, rng, group_of, prefix, model_kind,
+            extra_of):
+    """Turn a ContactResult into trials with sensor readings."""
+    sens = scene.sensors
+    flux = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv).read_w_m2(
+        result.flux_sensed_w_m2, rng)
+    thermo = Thermocouple(noise_uv_rms=sens.thermocouple_noise_uv,
+                          cold_junction_c=scene.room_temp_c)
+    temp = thermo.read_c(result.surface_temp_a_c, rng)
+    trials = []
+    for i in range(len(draws.force_n)):
+        force = ForceSensor().read_n(times - draws.onset_s[i], draws.force_n[i], rng)
+        trial_id = f"{prefix}-{i:02d}" if group_of is None else f"{prefix}-{group_of(i)}-{i:02d}"
+        trials.append(Trial(
+            trial_id=trial_id, material=prefix, file=f"trials/{trial_id}.csv",
+            sample_rate_hz=scene.sample_rate_hz,
+            T_object_C=round(float(draws.object_ir_c[i]), 3),
+            T_pad_C=round(float(first_contact_temp[i]), 3),
+            T_room_C=scene.room_temp_c,
+            group=f"trial-{i % 10}" if group_of is None else group_of(i),
+            extra={"T_object_true_C": f"{draws.object_true_c[i]:.4f}",
+                   "contact_conductance_w_m2k": f"{draws.conductance_w_m2k[i]:.1f}",
+                   "force_N": f"{draws.force_n[i]:.3f}",
+                   "onset_offset_s": f"{draws.onset_s[i]:.5f}",
+                   "model": model_kind, **extra_of(i)},
+            channels={"t_s": times, "heat_flux_W_m2": flux[i], "temperature_C": temp[i],
+                      "force_N": force}))
+    return trials
+
+
+def pad_database(scene: Scene, rng: np.random.Generator) -> list[Trial]:
+    """Database 1: the scene's pad against each object."""
+    trials = []
+    n = scene.pad.trials_per_material
+    times = _time_axis(scene, scene.pad.contact_duration_s)
+    for obj in scene.objects:
+        model, choice = pad_contact_model(scene, obj)
+        draws = _draw(scene, obj, n, scene.pad.contact_conductance_w_m2k, rng)
+        command = np.array([scene.pad_temp_c(t) for t in draws.object_ir_c])
+        if scene.pad.kind == "peltier":
+            pad_c = command + rng.normal(0.0, PELTIER_SETPOINT_SD_K, n)
+            back_c = pad_c                          # junction held at the set point
+        else:
+            run = precondition(command, scene.room_temp_c, PRECONDITION_S)
+            pad_c, back_c = run.final_pad_c, run.final_water_c
+        result = model.solve(times[None, :] - draws.onset_s[:, None], pad_c,
+                             draws.object_true_c, draws.conductance_w_m2k,
+                             back_temp_a_c=back_c, sensor_lag_s=scene.sensors.flux_lag_s)
+        # T_pad_C is what the pad's thermocouple read just before contact.
+        before = Thermocouple(cold_junction_c=scene.room_temp_c).read_c(pad_c, rng)
+        trials += _record(scene, result, times, draws, before, rng, None, obj.material,
+                          choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}"})
+    return trials
+
+
+def finger_database(scene: Scene, rng: np.random.Generator) -> list[Trial]:
+    """Database 2: each person's fingertip directly on each object."""
+    finger = scene.finger
+    persons = finger.persons
+    # One draw of skin properties per person, shared across objects.
+    k_scale = np.exp(rng.normal(0.0, finger.property_sd, persons))
+    heat_scale = np.exp(rng.normal(0.0, finger.property_sd, persons))
+    per = finger.trials_per_person
+    person = np.repeat(np.arange(persons), per)
+    times = _time_axis(scene, finger.contact_duration_s)
+    ir = InfraredThermometer(scene.sensors.ir_error_k)
+    trials = []
+    for obj in scene.objects:
+        model, choice = finger_contact_model(scene, obj)
+        draws = _draw(scene, obj, persons * per, finger.contact_conductance_w_m2k, rng)
+        finger_c = rng.normal(finger.temp_c, finger.temp_sd_c, persons * per)
+        result = model.solve(times[None, :] - draws.onset_s[:, None], finger_c,
+                             draws.object_true_c, draws.conductance_w_m2k,
+                             k_scale_a=k_scale[person], heat_scale_a=heat_scale[person],
+                             sensor_lag_s=scene.sensors.flux_lag_s)
+        finger_ir = ir.read_c(finger_c, rng)
+        trials += _record(scene, result, times, draws, finger_ir, rng,
+                          lambda i: f"person-{person[i]}", obj.material, choice.kind,
+                          lambda i: {"T_finger_true_C": f"{finger_c[i]:.4f}",
+                                     "person": str(person[i]),
+                                     "skin_effusivity_scale": f"{np.sqrt(k_scale[person[i]] * heat_scale[person[i]]):.4f}"})
+    return trials
+
+
+def generate_databases(scene: Scene, out: str | Path, seed: int = 0, overwrite: bool = False,
+                       progress: Callable[[str], None] | None = None) -> dict:
+    """Write ``out/pad`` (and ``out/finger``) all or nothing; return a summary."""
+    rng = np.random.default_rng(seed)
+    summary = {"scene": scene.name, "seed": seed, "datasets": {}}
+    with staged_dir(out, overwrite) as staging:
+        parts = [("pad", pad_database)]
+        if scene.finger is not None:
+            parts.append(("finger", finger_database))
+        for name, build in parts:
+            if progress:
+                progress(name)
+            trials = build(scene, rng)
+            write_trials(staging / name, trials)
+            summary["datasets"][name] = {"trials": len(trials),
+                                         "materials": sorted({t.material for t in trials})}
+        (staging / "generation.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

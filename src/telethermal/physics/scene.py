@@ -1,0 +1,317 @@
+"""Scenes: what a session contains, read from TOML, validated, and turned
+into the cheapest contact models that meet the scene's tolerance.
+
+A scene names the room, the pad (``peltier``: the fingertip display of the
+first paper, a Peltier held at a set temperature under a sensor film; or
+``water``: the active gripper pad of the second paper, pre-conditioned by
+eq. (11)-(13)), optionally the operator's finger, the objects, the sensors,
+the trial-to-trial variability and the model tolerance. The shipped scenes are
+listed by :func:`list_scenes`; ``load_scene`` takes a shipped name or a path.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from telethermal.errors import SceneError, UnknownMaterialError
+from telethermal.physics.layered import Boundary, Layer
+from telethermal.physics.materials import get_material, object_materials
+from telethermal.physics.model import ModelChoice, choose_model
+
+PAD_KINDS = ("peltier", "water")
+
+
+@dataclass(frozen=True)
+class PadSpec:
+    kind: str
+    layers: tuple[Layer, ...]          # from the contact surface inwards
+    gap_k: float | None                # pad = object (IR-measured) + gap; or
+    temp_c: float | None               # a fixed pad temperature
+    contact_duration_s: float
+    trials_per_material: int
+    contact_conductance_w_m2k: float   # at reference_force_n
+    back_h_w_m2k: float                # water pad: natural convection to the water
+
+
+@dataclass(frozen=True)
+class FingerSpec:
+    temp_c: float
+    temp_sd_c: float
+    persons: int
+    trials_per_person: int
+    contact_duration_s: float
+    contact_conductance_w_m2k: float
+    property_sd: float
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    material: str
+    temp_c: float
+    thickness_m: float
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    flux_lag_s: float = 0.15
+    flux_noise_uv: float = 0.5
+    ir_error_k: float = 0.4
+    onset_jitter_s: float = 0.005
+    thermocouple_noise_uv: float = 1.0
+
+
+@dataclass(frozen=True)
+class VariabilitySpec:
+    force_n: float = 10.0
+    force_sd_n: float = 1.5
+    conductance_force_exponent: float = 0.8
+    object_temp_sd_c: float = 0.2
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    description: str
+    room_temp_c: float
+    sample_rate_hz: float
+    pre_contact_s: float
+    pad: PadSpec
+    finger: FingerSpec | None
+    objects: tuple[ObjectSpec, ...]
+    sensors: SensorSpec = field(default_factory=SensorSpec)
+    variability: VariabilitySpec = field(default_factory=VariabilitySpec)
+    tolerance_rel: float = 1e-3
+    source: str = ""
+
+    @property
+    def materials(self) -> list[str]:
+        return [o.material for o in self.objects]
+
+    def pad_temp_c(self, object_temp_c: float) -> float:
+        """The pad's set temperature before contact with an object."""
+        return self.pad.temp_c if self.pad.gap_k is None else object_temp_c + self.pad.gap_k
+
+
+# ---------------------------------------------------------------- parsing
+class _Reader:
+    """Pulls typed, range-checked values out of a TOML table, naming the key."""
+
+    def __init__(self, table: dict, where: str, source: str):
+        self.table, self.where, self.source = table, where, source
+        self.used: set[str] = set()
+
+    def fail(self, message: str):
+        raise SceneError(f"{self.source}: {self.where}: {message}")
+
+    def num(self, key, default=None, lo=-math.inf, hi=math.inf, integer=False):
+        self.used.add(key)
+        value = self.table.get(key, default)
+        if value is None:
+            self.fail(f"missing '{key}'")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(f"'{key}' must be a number, got {value!r}")
+        if integer and int(value) != value:
+            self.fail(f"'{key}' must be a whole number, got {value!r}")
+        if not (lo <= value <= hi) or math.isnan(value):
+            self.fail(f"'{key}' = {value} is outside [{lo}, {hi}]")
+        return int(value) if integer else float(value)
+
+    def text(self, key, default=None, choices=None):
+        self.used.add(key)
+        value = self.table.get(key, default)
+        if not isinstance(value, str):
+            self.fail(f"'{key}' must be a string, got {value!r}")
+        if choices and value not in choices:
+            self.fail(f"'{key}' = {value!r}; expected one of {', '.join(choices)}")
+        return value
+
+    def done(self):
+        extra = sorted(set(self.table) - self.used)
+        if extra:
+            self.fail(f"unknown key(s) {', '.join(extra)}")
+
+
+def _material(name, reader: _Reader, roles=None):
+    try:
+        mat = get_material(name)
+    except UnknownMaterialError as exc:
+        reader.fail(str(exc))
+    if roles and mat.role not in roles:
+        reader.fail(f"material {name!r} is a {mat.role} material; objects must be one of "
+                    f"{', '.join(object_materials())}")
+    return mat
+
+
+def _layers(raw, reader: _Reader) -> tuple[Layer, ...]:
+    reader.used.add("layers")
+    if not isinstance(raw, list) or not raw:
+        reader.fail("'layers' must be a non-empty list of [material, thickness_m]")
+    layers = []
+    for i, item in enumerate(raw):
+        if (not isinstance(item, list) or len(item) != 2 or not isinstance(item[0], str)
+                or isinstance(item[1], bool) or not isinstance(item[1], (int, float))
+                or not item[1] > 0):
+            reader.fail(f"layers[{i}] must be [material, thickness_m > 0], got {item!r}")
+        layers.append(Layer(_material(item[0], reader), float(item[1])))
+    return tuple(layers)
+
+
+def _parse_pad(table, source, room_c) -> PadSpec:
+    r = _Reader(table, "[pad]", source)
+    kind = r.text("kind", choices=PAD_KINDS)
+    layers = _layers(table.get("layers"), r)
+    gap = table.get("gap_k")
+    fixed = table.get("temp_c")
+    if (gap is None) == (fixed is None):
+        r.fail("give exactly one of 'gap_k' (pad = object + gap) or 'temp_c' (fixed)")
+    spec = PadSpec(
+        kind=kind, layers=layers,
+        gap_k=None if gap is None else r.num("gap_k", lo=-40, hi=40),
+        temp_c=None if fixed is None else r.num("temp_c", lo=0, hi=60),
+        contact_duration_s=r.num("contact_duration_s", 1.0, 1e-3, 3600),
+        trials_per_material=r.num("trials_per_material", 10, 1, 10000, integer=True),
+        contact_conductance_w_m2k=r.num("contact_conductance_w_m2k", 3000.0, 1.0, 1e7),
+        back_h_w_m2k=r.num("back_h_w_m2k", 300.0, 1e-3, 1e7),
+    )
+    r.done()
+    return spec
+
+
+def _parse_finger(table, source) -> FingerSpec:
+    r = _Reader(table, "[finger]", source)
+    spec = FingerSpec(
+        temp_c=r.num("temp_c", 33.0, 15, 42), temp_sd_c=r.num("temp_sd_c", 0.8, 0, 5),
+        persons=r.num("persons", 5, 1, 1000, integer=True),
+        trials_per_person=r.num("trials_per_person", 10, 1, 10000, integer=True),
+        contact_duration_s=r.num("contact_duration_s", 60.0, 1e-3, 3600),
+        contact_conductance_w_m2k=r.num("contact_conductance_w_m2k", 5000.0, 1.0, 1e7),
+        property_sd=r.num("property_sd", 0.12, 0, 0.5))
+    r.done()
+    return spec
+
+
+def _parse_objects(items, source, room_c) -> tuple[ObjectSpec, ...]:
+    if not isinstance(items, list) or not items:
+        raise SceneError(f"{source}: at least one [[objects]] table is needed")
+    objects = []
+    for i, table in enumerate(items):
+        r = _Reader(table, f"[[objects]] #{i + 1}", source)
+        name = r.text("material")
+        _material(name, r, roles=("object",))
+        temp = table.get("temp_c", "room")
+        r.used.add("temp_c")
+        if temp == "room":
+            temp = room_c
+        elif isinstance(temp, bool) or not isinstance(temp, (int, float)) or not -20 <= temp <= 100:
+            r.fail(f"'temp_c' must be 'room' or a number in [-20, 100], got {temp!r}")
+        objects.append(ObjectSpec(name, float(temp), r.num("thickness_m", 0.02, 1e-6, 10)))
+        r.done()
+    names = [o.material for o in objects]
+    if len(set(names)) != len(names):
+        raise SceneError(f"{source}: an object material appears twice: {names}")
+    return tuple(objects)
+
+
+def _parse_dataclass(cls, table, where, source):
+    r = _Reader(table or {}, where, source)
+    defaults = cls()
+    values = {f: r.num(f, getattr(defaults, f), lo=0) for f in cls.__dataclass_fields__}
+    r.done()
+    return cls(**values)
+
+
+def parse_scene(data: dict, source: str = "<scene>") -> Scene:
+    """Build a :class:`Scene` from parsed TOML, naming every bad key."""
+    r = _Reader(data, "top level", source)
+    room = r.num("room_temp_c", lo=-20, hi=60)
+    for table in ("pad", "finger", "objects", "sensors", "variability", "model"):
+        r.used.add(table)
+    if not isinstance(data.get("pad"), dict):
+        r.fail("a [pad] table is needed")
+    model = data.get("model") or {}
+    mr = _Reader(model, "[model]", source)
+    tolerance = mr.num("tolerance_rel", 1e-3, 1e-9, 0.5)
+    mr.done()
+    scene = Scene(
+        name=r.text("name"), description=r.text("description", ""),
+        room_temp_c=room, sample_rate_hz=r.num("sample_rate_hz", lo=1, hi=1e6),
+        pre_contact_s=r.num("pre_contact_s", 0.5, 0, 60),
+        pad=_parse_pad(data["pad"], source, room),
+        finger=_parse_finger(data["finger"], source) if "finger" in data else None,
+        objects=_parse_objects(data.get("objects"), source, room),
+        sensors=_parse_dataclass(SensorSpec, data.get("sensors"), "[sensors]", source),
+        variability=_parse_dataclass(VariabilitySpec, data.get("variability"),
+                                     "[variability]", source),
+        tolerance_rel=tolerance, source=source)
+    r.done()
+    return scene
+
+
+def _shipped():
+    return resources.files("telethermal").joinpath("scenes")
+
+
+def list_scenes() -> list[str]:
+    """Names of the scenes shipped with telethermal."""
+    return sorted(p.name[:-5] for p in _shipped().iterdir() if p.name.endswith(".toml"))
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Load a shipped scene by name, or any scene file by path."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise SceneError(f"scene file {path} does not exist")
+        text, source = path.read_text(), str(path)
+    else:
+        name = str(name_or_path)
+        if name not in list_scenes():
+            raise SceneError(f"unknown scene {name!r}; shipped scenes: {', '.join(list_scenes())}")
+        text, source = _shipped().joinpath(f"{name}.toml").read_text(), f"{name}.toml"
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: not valid TOML: {exc}") from None
+    return parse_scene(data, source)
+
+
+# ---------------------------------------------------------------- models
+def pad_contact_model(scene: Scene, obj: ObjectSpec):
+    """Model for the pad (side a) touching ``obj``; returns (model, ModelChoice)."""
+    if scene.pad.kind == "peltier":
+        back_a = Boundary("isothermal")          # Peltier junction held at the set point
+    else:
+        back_a = Boundary("convective", h_w_m2k=scene.pad.back_h_w_m2k)  # water, pump off
+    return _choose(scene, scene.pad.layers, obj, back_a, scene.pad.contact_duration_s,
+                   scene.pad.contact_conductance_w_m2k)
+
+
+def finger_contact_model(scene: Scene, obj: ObjectSpec):
+    """Model for the operator's fingertip (side a) touching ``obj``."""
+    if scene.finger is None:
+        raise SceneError(f"{scene.source}: the scene has no [finger]")
+    skin = (Layer(get_material("skin"), math.inf),)
+    return _choose(scene, skin, obj, Boundary("adiabatic"), scene.finger.contact_duration_s,
+                   scene.finger.contact_conductance_w_m2k)
+
+
+def _choose(scene, side_a, obj, back_a, duration_s, conductance):
+    side_b = (Layer(get_material(obj.material), obj.thickness_m),)
+    t_min = min(1.0 / scene.sample_rate_hz, 0.05)
+    try:
+        return choose_model(side_a, side_b, back_a, Boundary("adiabatic"), t_min, duration_s,
+                            scene.tolerance_rel, conductance)
+    except Exception as exc:  # a ModelError from deep inside: say which scene and object
+        raise SceneError(f"{scene.source}: cannot model {obj.material}: {exc}") from exc
+
+
+def describe_models(scene: Scene) -> list[tuple[str, str, ModelChoice]]:
+    """(side, material, choice) for every contact the scene contains."""
+    rows = [("pad", o.material, pad_contact_model(scene, o)[1]) for o in scene.objects]
+    if scene.finger is not None:
+        rows += [("finger", o.material, finger_contact_model(scene, o)[1]) for o in scene.objects]
+    return rows

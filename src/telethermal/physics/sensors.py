@@ -1,0 +1,113 @@
+"""Sensor models: heat-flux film, type-T thermocouple, force sensor, IR thermometer.
+
+Each model turns a true physical signal into what a data-acquisition system
+would record: through the transducer's units (microvolts), noise and ADC
+quantisation, and back to SI units the way a driver would convert it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from telethermal.errors import ModelError
+
+# NIST ITS-90 type-T reference functions (Monograph 175): E in mV, T in degC.
+_TYPE_T_EMF_NEG = (0.0, 3.8748106364e-2, 4.4194434347e-5, 1.1844323105e-7,
+                   2.0032973554e-8, 9.0138019559e-10, 2.2651156593e-11,
+                   3.6071154205e-13, 3.8493939883e-15, 2.8213521925e-17,
+                   1.4251594779e-19, 4.8768662286e-22, 1.0795539270e-24,
+                   1.3945027062e-27, 7.9795153927e-31)          # -270 .. 0 degC
+_TYPE_T_EMF_POS = (0.0, 3.8748106364e-2, 3.3292227880e-5, 2.0618243404e-7,
+                   -2.1882256846e-9, 1.0996880928e-11, -3.0815758772e-14,
+                   4.5479135290e-17, -2.7512901673e-20)          # 0 .. 400 degC
+_TYPE_T_INV_NEG = (0.0, 2.5949192e1, -2.1316967e-1, 7.9018692e-1, 4.2527777e-1,
+                   1.3304473e-1, 2.0241446e-2, 1.2668171e-3)      # -5.603 .. 0 mV
+_TYPE_T_INV_POS = (0.0, 2.592800e1, -7.602961e-1, 4.637791e-2, -2.165394e-3,
+                   6.048144e-5, -7.293422e-7)                     # 0 .. 20.872 mV
+
+
+def type_t_emf_mv(temp_c):
+    """Type-T thermocouple EMF (reference junction at 0 degC), mV, -270..400 degC."""
+    t = np.asarray(temp_c, dtype=np.float64)
+    if np.any((t < -270.0) | (t > 400.0)):
+        raise ModelError(f"type-T range is -270..400 degC, got {t.min()}..{t.max()}")
+    return np.where(t < 0, np.polynomial.polynomial.polyval(t, _TYPE_T_EMF_NEG),
+                    np.polynomial.polynomial.polyval(t, _TYPE_T_EMF_POS))
+
+
+def type_t_temp_c(emf_mv):
+    """Inverse of :func:`type_t_emf_mv` (NIST inverse polynomials, +-0.04 degC)."""
+    e = np.asarray(emf_mv, dtype=np.float64)
+    if np.any((e < -5.603) | (e > 20.872)):
+        raise ModelError(f"type-T EMF range is -5.603..20.872 mV, got {e.min()}..{e.max()}")
+    return np.where(e < 0, np.polynomial.polynomial.polyval(e, _TYPE_T_INV_NEG),
+                    np.polynomial.polynomial.polyval(e, _TYPE_T_INV_POS))
+
+
+def quantise(values, lsb):
+    """Round to the nearest multiple of ``lsb`` (an ideal mid-tread ADC)."""
+    return np.round(np.asarray(values) / lsb) * lsb
+
+
+@dataclass(frozen=True, slots=True)
+class HeatFluxSensor:
+    """A thin-film heat-flux sensor read through an amplifier and an ADC.
+
+    The first-order lag (``lag_s``) is applied by the physics solver itself,
+    exactly (see ``LayeredContact.solve(sensor_lag_s=...)``); this class adds
+    what follows the film: microvolts, noise, quantisation, conversion back.
+    """
+
+    sensitivity_uv_per_w_m2: float = 1.26
+    lag_s: float = 0.15
+    noise_uv_rms: float = 0.5
+    adc_lsb_uv: float = 0.3
+
+    def read_w_m2(self, flux_w_m2, rng: np.random.Generator):
+        """Flux as recorded, W/m^2, from the (already lagged) film flux."""
+        volts_uv = np.asarray(flux_w_m2) * self.sensitivity_uv_per_w_m2
+        volts_uv = volts_uv + rng.normal(0.0, self.noise_uv_rms, volts_uv.shape)
+        return quantise(volts_uv, self.adc_lsb_uv) / self.sensitivity_uv_per_w_m2
+
+
+@dataclass(frozen=True, slots=True)
+class Thermocouple:
+    """A type-T thermocouple with cold-junction compensation."""
+
+    noise_uv_rms: float = 1.0
+    adc_lsb_uv: float = 0.5
+    cold_junction_c: float = 25.0
+
+    def read_c(self, temp_c, rng: np.random.Generator):
+        """Temperature as recorded, degC."""
+        emf_uv = 1e3 * (type_t_emf_mv(temp_c) - type_t_emf_mv(self.cold_junction_c))
+        emf_uv = quantise(emf_uv + rng.normal(0.0, self.noise_uv_rms, emf_uv.shape),
+                          self.adc_lsb_uv)
+        return type_t_temp_c(emf_uv / 1e3 + type_t_emf_mv(self.cold_junction_c))
+
+
+@dataclass(frozen=True, slots=True)
+class ForceSensor:
+    """A force or pressure sensor: zero before contact, then a first-order
+    rise to the pressing force."""
+
+    rise_s: float = 0.03
+    noise_n_rms: float = 0.05
+
+    def read_n(self, t_s, force_n: float, rng: np.random.Generator):
+        t = np.asarray(t_s, dtype=np.float64)
+        true = np.where(t > 0, force_n * -np.expm1(-np.clip(t, 0, None) / self.rise_s), 0.0)
+        return true + rng.normal(0.0, self.noise_n_rms, t.shape)
+
+
+@dataclass(frozen=True, slots=True)
+class InfraredThermometer:
+    """A radiation thermometer for temperatures before contact (+-error_k, 1 sigma)."""
+
+    error_k: float = 0.4
+
+    def read_c(self, temp_c, rng: np.random.Generator):
+        temp_c = np.asarray(temp_c, dtype=np.float64)
+        return temp_c + rng.normal(0.0, self.error_k, temp_c.shape)

@@ -1,0 +1,144 @@
+"""The water-circulation gripper pad of active-heat-flow-sensing, eq. (11)-(12).
+
+STEP 1 of that paper: before contact, a PI controller drives the Peltier
+element to its command, the Peltier heats or cools a small water tank, and an
+on/off micro-pump circulates the water under the pad surface when the pad is
+away from its command ``T_g^cmd = T_object + gap`` (eq. 13). With the pump off
+only natural convection couples water and pad, which is the state kept during
+contact (STEP 2) so the sensor sees the object's natural heat flow.
+
+States per trial: Peltier ``T_p``, water ``T_w``, pad ``T_g`` (degC):
+
+    C_p dT_p/dt = u - (T_p - T_w)/R_w - (T_p - T_a)/R_pa
+    C_w dT_w/dt = (T_p - T_w)/R_w - (T_w - T_g)/R_g          (11)
+    C_g dT_g/dt = (T_w - T_g)/R_g - (T_g - T_a)/R_a          (12)
+
+``u`` (W, saturated at +-``u_max_w``) comes from the PI; ``R_g`` is
+``r_g_pump_on`` or ``r_g_pump_off``. The system is linear for each pump state,
+so each step is the exact zero-order-hold discretisation (matrix exponential,
+computed once per pump state): stable at any step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm
+
+from telethermal.errors import ModelError
+
+
+@dataclass(frozen=True, slots=True)
+class WaterPadParams:
+    """Lumped parameters of a 15 x 15 mm water-cooled pad (SI units)."""
+
+    c_p_j_k: float = 2.0
+    c_w_j_k: float = 10.0
+    c_g_j_k: float = 0.5
+    r_w_k_w: float = 2.0
+    r_pa_k_w: float = 50.0
+    r_a_k_w: float = 220.0
+    r_g_pump_on_k_w: float = 4.0
+    r_g_pump_off_k_w: float = 150.0
+    u_max_w: float = 6.0
+    kp_w_k: float = 3.0
+    ki_w_ks: float = 0.3
+    pump_on_error_k: float = 0.3
+    pump_off_error_k: float = 0.1
+    #: The Peltier is driven this far beyond the pad command (away from room),
+    #: so the water can make up the pad's losses and the pump has work to do.
+    peltier_overdrive_k: float = 1.0
+
+
+@dataclass
+class WaterPadRun:
+    """Result of :func:`precondition`; arrays are (n_steps, batch) or (batch,)."""
+
+    t_s: np.ndarray
+    temp_peltier_c: np.ndarray
+    temp_water_c: np.ndarray
+    temp_pad_c: np.ndarray
+    pump_on: np.ndarray
+    peltier_w: np.ndarray
+
+    @property
+    def final_pad_c(self) -> np.ndarray:
+        return self.temp_pad_c[-1]
+
+    @property
+    def final_water_c(self) -> np.ndarray:
+        return self.temp_water_c[-1]
+
+
+def _discretise(p: WaterPadParams, r_g: float, dt_s: float):
+    """Exact ZOH matrices (A_d, B_d) for inputs [u, T_a]."""
+    a = np.array([
+        [-(1 / p.r_w_k_w + 1 / p.r_pa_k_w) / p.c_p_j_k, 1 / (p.r_w_k_w * p.c_p_j_k), 0.0],
+        [1 / (p.r_w_k_w * p.c_w_j_k), -(1 / p.r_w_k_w + 1 / r_g) / p.c_w_j_k, 1 / (r_g * p.c_w_j_k)],
+        [0.0, 1 / (r_g * p.c_g_j_k), -(1 / r_g + 1 / p.r_a_k_w) / p.c_g_j_k],
+    ])
+    b = np.array([[1 / p.c_p_j_k, 1 / (p.r_pa_k_w * p.c_p_j_k)],
+                  [0.0, 0.0],
+                  [0.0, 1 / (p.r_a_k_w * p.c_g_j_k)]])
+    block = np.zeros((5, 5))
+    block[:3, :3], block[:3, 3:] = a, b
+    e = expm(block * dt_s)
+    return e[:3, :3], e[:3, 3:]
+
+
+def precondition(target_pad_c, room_c: float, duration_s: float, dt_s: float = 0.05,
+                 params: WaterPadParams = WaterPadParams(), start_c=None) -> WaterPadRun:
+    """Run STEP 1 for a batch of pads, each driven to its own command.
+
+    Parameters
+    ----------
+    target_pad_c : ndarray, shape (B,)
+        Pad temperature commands ``T_object + gap``, degC.
+    room_c : float
+        Air temperature, degC.
+    duration_s, dt_s : float
+        Length of the pre-conditioning and the control period, s.
+    start_c : ndarray, shape (B,), optional
+        Initial temperature of all three nodes (default: room).
+
+    Returns
+    -------
+    WaterPadRun
+        The pump is left off at the end (the state kept during contact).
+    """
+    if not (dt_s > 0 and duration_s >= dt_s):
+        raise ModelError(f"need 0 < dt_s <= duration_s, got {dt_s}, {duration_s}")
+    target = np.atleast_1d(np.asarray(target_pad_c, dtype=np.float64))
+    n = int(round(duration_s / dt_s))
+    pump_mats = {on: _discretise(params, params.r_g_pump_on_k_w if on else
+                                 params.r_g_pump_off_k_w, dt_s) for on in (False, True)}
+    start = np.full_like(target, room_c) if start_c is None else np.broadcast_to(start_c, target.shape)
+    x = np.stack([start, start, start], axis=1).astype(np.float64)
+    integral = np.zeros_like(target)
+    pump = np.zeros(target.shape, dtype=bool)
+    hist = np.empty((n, 5, len(target)))
+    peltier_cmd = target + params.peltier_overdrive_k * np.sign(target - room_c)
+    for k in range(n):
+        err_p = peltier_cmd - x[:, 0]
+        u_raw = params.kp_w_k * err_p + params.ki_w_ks * (integral + err_p * dt_s)
+        u = np.clip(u_raw, -params.u_max_w, params.u_max_w)
+        integral = np.where(u == u_raw, integral + err_p * dt_s, integral)  # clamp anti-windup
+        # Pump on while the pad lags its command (towards the Peltier side),
+        # off once it is within pump_off_error_k of it or past it.
+        lag = (target - x[:, 2]) * np.sign(target - room_c)
+        pump = np.where(lag > params.pump_on_error_k, True,
+                        np.where(lag < params.pump_off_error_k, False, pump))
+        if k == n - 1:
+            pump[:] = False
+        x_next = np.empty_like(x)
+        for on in (False, True):
+            sel = pump == on
+            if sel.any():
+                ad, bd = pump_mats[on]
+                inputs = np.stack([u[sel], np.full(sel.sum(), room_c)], axis=1)
+                x_next[sel] = x[sel] @ ad.T + inputs @ bd.T
+        x = x_next
+        hist[k, :3], hist[k, 3], hist[k, 4] = x.T, pump, u
+    return WaterPadRun(dt_s * np.arange(1, n + 1), hist[:, 0], hist[:, 1], hist[:, 2],
+                       hist[:, 3].astype(bool), hist[:, 4])
