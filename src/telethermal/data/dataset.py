@@ -131,9 +131,9 @@ def read_trial_file(path: str | Path, sample_rate_hz: float | None = None) -> di
         raise DatasetError(f"{path}: repeated column names in the header")
     try:
         table = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
-    except ValueError:
+    except ValueError as exc:
         _locate_bad_cell(path, lines, header)
-        raise
+        raise DatasetError(f"{path}: cannot read the numbers ({exc})") from None
     if table.shape[0] == 0:
         raise DatasetError(f"{path}: no data rows")
     if table.shape[1] != len(header):

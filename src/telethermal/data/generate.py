@@ -24,7 +24,9 @@ from typing import Callable
 import numpy as np
 
 from telethermal.data.dataset import Trial, staged_dir, write_trials
-from telethermal.physics.scene import (Scene, finger_contact_model, pad_contact_model)
+from telethermal.errors import ModelError
+from telethermal.physics.scene import (Scene, SensorSpec, finger_contact_model,
+                                       pad_contact_model)
 from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, InfraredThermometer,
                                          Thermocouple)
 from telethermal.physics.waterpad import precondition
@@ -167,3 +169,44 @@ def generate_databases(scene: Scene, out: str | Path, seed: int = 0, overwrite: 
                                          "materials": sorted({t.material for t in trials})}
         (staging / "generation.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def single_contact(pad: str, obj: str, pad_temp_c: float, object_temp_c: float, seconds: float,
+                   rate_hz: float, ideal: bool = False, seed: int = 0,
+                   contact_conductance_w_m2k: float = 3000.0, sensors: SensorSpec = SensorSpec(),
+                   room_temp_c: float = 24.0) -> Trial:
+    """One contact between two semi-infinite bodies, as a one-trial dataset row.
+
+    ``ideal``: perfect contact, no sensor, no noise; the closed form itself.
+    Its flux is infinite at t = 0, so the samples start one period after
+    contact. Otherwise: the given contact conductance and the scene-default
+    sensors (lag, noise, quantisation), samples from t = 0.
+    """
+    from telethermal.physics.materials import get_material
+    from telethermal.physics.model import AnalyticContact
+
+    if not (seconds > 0 and rate_hz > 0):
+        raise ModelError(f"need seconds > 0 and rate_hz > 0, got {seconds}, {rate_hz}")
+    n = int(round(seconds * rate_hz))
+    model = AnalyticContact(get_material(pad), get_material(obj))
+    if ideal:
+        times = np.arange(1, n + 1) / rate_hz
+        result = model.solve(times, pad_temp_c, object_temp_c, np.inf)
+        flux, temp = result.flux_w_m2[0], result.surface_temp_a_c[0]
+    else:
+        rng = np.random.default_rng(seed)
+        times = np.arange(0, n + 1) / rate_hz
+        result = model.solve(times, pad_temp_c, object_temp_c, contact_conductance_w_m2k,
+                             sensor_lag_s=sensors.flux_lag_s)
+        flux = HeatFluxSensor(lag_s=sensors.flux_lag_s, noise_uv_rms=sensors.flux_noise_uv
+                              ).read_w_m2(result.flux_sensed_w_m2, rng)[0]
+        temp = Thermocouple(noise_uv_rms=sensors.thermocouple_noise_uv,
+                            cold_junction_c=room_temp_c).read_c(result.surface_temp_a_c, rng)[0]
+    trial_id = f"{pad}-on-{obj}"
+    return Trial(trial_id=trial_id, material=obj, file=f"trials/{trial_id}.csv",
+                 sample_rate_hz=float(rate_hz), T_object_C=float(object_temp_c),
+                 T_pad_C=float(pad_temp_c), T_room_C=float(room_temp_c), group="single",
+                 extra={"pad_material": pad, "ideal": str(bool(ideal)).lower(),
+                        "contact_conductance_w_m2k": "inf" if ideal else
+                        f"{contact_conductance_w_m2k:g}", "model": "analytic"},
+                 channels={"t_s": times, "heat_flux_W_m2": flux, "temperature_C": temp})

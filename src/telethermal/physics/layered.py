@@ -30,6 +30,7 @@ from typing import Sequence
 
 import numpy as np
 from scipy.linalg import eigh_tridiagonal, solve_banded
+from scipy.signal import lfilter
 
 from telethermal.errors import ModelError
 from telethermal.physics.materials import Material
@@ -240,29 +241,142 @@ def _modal_state(lam, t, w0, f):
     return w
 
 
+def _phi_any(lam, t):
+    """_phi for any broadcastable shapes (small arrays; no column tricks)."""
+    lam, t = np.broadcast_arrays(np.asarray(lam, dtype=np.float64), np.asarray(t, dtype=np.float64))
+    zero = lam == 0
+    return np.where(zero, t, np.expm1(-lam * t) / -np.where(zero, 1.0, lam))
+
+
+def _lag_kernels(lam, t, tau_s):
+    """Lag (time constant tau, zero start) at time t of exp(-lam t) and of
+    phi(lam, t), elementwise. With mu = 1/tau the first is
+    mu exp(-min(lam, mu) t) phi(|lam - mu|, t); the second follows from
+    phi = (1 - exp(-lam t)) / lam (and is t - tau (1 - exp(-mu t)) at lam = 0)."""
+    mu = 1.0 / tau_s
+    lag_one = -np.expm1(-mu * t)
+    lag_exp = mu * np.exp(-np.minimum(lam, mu) * t) * _phi_any(np.abs(lam - mu), t)
+    zero = lam == 0
+    lag_phi = np.where(zero, t - tau_s * lag_one,
+                       (lag_one - lag_exp) / np.where(zero, 1.0, lam))
+    return lag_exp, lag_phi
+
+
 def _lagged(lam, t, w0, f, m_row, tau_s):
-    """First-order lag (time constant tau, zero state at t = 0) of the output
-    ``m_row . w(t)``, exact for each mode. With mu = 1/tau, the lag of
-    exp(-lam t) is mu exp(-min(lam, mu) t) phi(|lam - mu|, t) (for a settled
-    mode, mu exp(-mu t) / (lam - mu)); the lag of phi(lam, t) follows from
-    phi = (1 - exp(-lam t)) / lam."""
+    """First-order lag (zero state at t = 0) of the output ``m_row . w(t)`` at
+    times ``t`` (n, 1), exact mode by mode (see :func:`_lag_kernels`); a
+    settled mode's lag of exp(-lam t) is mu exp(-mu t) / (lam - mu)."""
     mu = 1.0 / tau_s
     after, slow = _split(lam, t)
     out = np.zeros(len(t))
     if not after.any():
         return out
     ta = t[after]
-    lag_one = -np.expm1(-mu * ta)                          # lag of the constant 1
     lag_exp = np.empty((len(ta), len(lam)))
-    ls = lam[slow]
-    lag_exp[:, slow] = mu * np.exp(-np.minimum(ls, mu) * ta) * _phi(np.abs(ls - mu), ta)
-    lag_exp[:, ~slow] = mu * np.exp(-mu * ta) / (lam[~slow] - mu)
-    zero = lam == 0
-    lag_phi = (lag_one - lag_exp) / np.where(zero, 1.0, lam)
-    if zero.any():
-        lag_phi[:, zero] = ta - tau_s * lag_one
+    lag_phi = np.empty((len(ta), len(lam)))
+    lag_exp[:, slow], lag_phi[:, slow] = _lag_kernels(lam[slow], ta, tau_s)
+    fast = lam[~slow]
+    lag_exp[:, ~slow] = mu * np.exp(-mu * ta) / (fast - mu)
+    lag_phi[:, ~slow] = (-np.expm1(-mu * ta) - lag_exp[:, ~slow]) / fast
     out[after] = (lag_exp * w0 + lag_phi * f) @ m_row
     return out
+
+
+def _uniform_step(tc: np.ndarray) -> float | None:
+    """The common sampling step if, in every row, the times after contact are
+    evenly spaced by it (rows may start at different instants); else None."""
+    if tc.shape[1] < 3:
+        return None
+    after = tc[:, :-1] > 0
+    steps = np.diff(tc, axis=1)[after]
+    if steps.size == 0 or not np.all(steps > 0):
+        return None
+    dt = float(np.median(steps))
+    return dt if np.allclose(steps, dt, rtol=1e-7, atol=0.0) else None
+
+
+def _step_outputs(lam, w_first, f, dt, steps, rows):
+    """``rows @ w_j`` for j = 0 .. steps-1 steps of dt after ``w_first``,
+    shape (n_rows, steps), where each mode follows
+    ``w_inf + exp(-lam dt)^j (w_first - w_inf)``, ``w_inf = f / lam``: powers
+    by cumulative product along contiguous memory. A mode settled within one
+    step (lam dt > 41) only adds a constant from j = 1; a zero mode (no
+    boundary anywhere) grows as ``j dt f``."""
+    zero = lam == 0
+    w_inf = f / np.where(zero, 1.0, lam)
+    slow = (lam * dt < _SETTLED) & ~zero
+    settled = ~slow & ~zero
+    out = np.empty((len(rows), steps))
+    out[:, 0] = rows @ w_first
+    if steps == 1:
+        return out
+    out[:, 1:] = (rows[:, settled] @ w_inf[settled])[:, None]
+    if slow.any():
+        out[:, 1:] += (rows[:, slow] @ w_inf[slow])[:, None]
+        # A mode's powers fall below exp(-41) after 41 / (lam dt) steps: group
+        # the modes by that length (powers of two) and stop each group there.
+        idx = np.flatnonzero(slow)
+        needed = np.minimum(np.ceil(_SETTLED / (lam[idx] * dt)), steps - 1).astype(int)
+        group = np.ceil(np.log2(np.maximum(needed, 1))).astype(int)
+        for g in np.unique(group):
+            modes = idx[group == g]
+            length = min(2 ** int(g), steps - 1)
+            powers = np.empty((len(modes), length))
+            powers[:] = np.exp(-lam[modes] * dt)[:, None]
+            np.cumprod(powers, axis=1, out=powers)
+            powers *= (w_first[modes] - w_inf[modes])[:, None]
+            out[:, 1:length + 1] += rows[:, modes] @ powers
+    if zero.any():
+        j = np.arange(1, steps)
+        out[:, 1:] += (rows[:, zero] @ w_first[zero])[:, None]
+        out[:, 1:] += np.outer(rows[:, zero] @ f[zero], dt * j)
+    return out
+
+
+def _stepped(lam, w0, f, m, tc, dt, tau_s):
+    """Outputs ``m . w`` (and the lagged first output) at evenly spaced times.
+
+    From each trial's first instant after contact, mode by mode,
+    ``w_j = exp(-lam dt)^j w_first + phi(lam, j dt) f`` with the powers built
+    by a cumulative product (no exponential per sample), and the sensor
+    follows the exact one-step map ``s <- exp(-dt/tau) s + m0 . (lag_exp(dt) w
+    + lag_phi(dt) f)``, run as a linear filter. Exact for a time-invariant
+    system and stable for any dt.
+
+    Parameters
+    ----------
+    lam, w0, f : ndarray, shape (B, N)
+    m : ndarray, shape (B, n_out, N)
+    tc : ndarray, shape (B, n)  times clipped at 0 (0 = initial state)
+    """
+    batch, n = tc.shape
+    out = np.empty((batch, m.shape[1], n))
+    sensed = np.zeros((batch, n)) if tau_s else None
+    started = tc > 0
+    for i in range(batch):
+        out[i] = (m[i] @ w0[i])[:, None]          # the initial state, until contact
+        if not started[i].any():
+            continue
+        k0 = int(np.argmax(started[i]))
+        t_first = tc[i, k0]
+        w_first = np.exp(-lam[i] * t_first) * w0[i] + _phi_any(lam[i], t_first) * f[i]
+        steps = n - k0
+        rows = m[i]
+        if tau_s:
+            ge, gp = _lag_kernels(lam[i], dt, tau_s)
+            rows = np.vstack([rows, ge * m[i, 0]])          # the sensor's drive
+        y = _step_outputs(lam[i], w_first, f[i], dt, steps, rows)
+        out[i, :, k0:] = y[:m.shape[1]]
+        if tau_s:
+            ke, kp = _lag_kernels(lam[i], t_first, tau_s)
+            s_first = (ke * w0[i] + kp * f[i]) @ m[i, 0]
+            drive = y[-1, :-1] + (gp * f[i]) @ m[i, 0]
+            e_tau = np.exp(-dt / tau_s)
+            sensed[i, k0] = s_first
+            if steps > 1:
+                sensed[i, k0 + 1:] = lfilter([1.0], [1.0, -e_tau], drive,
+                                             zi=[e_tau * s_first])[0]
+    return out, sensed
 
 
 #: Ratio of neighbouring points of the dense evaluation grid.
@@ -410,23 +524,26 @@ class LayeredContact:
         res = np.empty((batch, n_out, n_t))
         integ = np.empty((batch, n_out, n_t)) if energy else None
         sensed = np.empty((batch, n_t)) if sensor_lag_s else None
-        dense = _dense_grid(tc)
-        for i in range(batch):
-            lam, vec = eigh_tridiagonal(diag[i] / cap[i],
-                                        -g_link[i] / (root_c[i, :-1] * root_c[i, 1:]))
-            w0 = vec.T @ (root_c[i] * theta0[i])
-            f = vec.T @ (load[i] / root_c[i])
-            m = out[i, :n_out] @ vec                                 # (n_out, N)
-            times = tc[i] if dense is None else dense
-            outputs = self._outputs(lam, times, w0, f, m, energy, sensor_lag_s)
-            if dense is not None:
-                outputs = [np.stack([np.interp(tc[i], dense, row) for row in np.atleast_2d(o)])
-                           if o is not None else None for o in outputs]
-            res[i] = outputs[0]
-            if energy:
-                integ[i] = outputs[1]
-            if sensor_lag_s:
-                sensed[i] = outputs[2][0]
+        modes = [self._modes(diag[i], cap[i], g_link[i], theta0[i], load[i], out[i, :n_out])
+                 for i in range(batch)]
+        lam, w0, f, m = (np.stack(x) for x in zip(*modes))
+        dt = None if energy else _uniform_step(tc)
+        if dt is not None:
+            res, sensed = _stepped(lam, w0, f, m, np.ascontiguousarray(tc), dt, sensor_lag_s)
+        else:
+            dense = _dense_grid(tc)
+            for i in range(batch):
+                times = tc[i] if dense is None else dense
+                outputs = self._outputs(lam[i], times, w0[i], f[i], m[i], energy, sensor_lag_s)
+                if dense is not None:
+                    outputs = [None if o is None else
+                               np.stack([np.interp(tc[i], dense, row) for row in o])
+                               for o in outputs]
+                res[i] = outputs[0]
+                if energy:
+                    integ[i] = outputs[1]
+                if sensor_lag_s:
+                    sensed[i] = outputs[2][0]
         flux = res[:, 0]
         base = tb[:, None]
         result = ContactResult(
@@ -440,6 +557,13 @@ class LayeredContact:
             result.energy_stored_j_m2 = res[:, 3] - (cap * theta0).sum(axis=1)[:, None]
             result.energy_into_b_j_m2 = integ[:, 0]
         return result
+
+    @staticmethod
+    def _modes(diag, cap, g_link, theta0, load, out):
+        """Eigen-decomposition of one trial: (lam, w0, f, m) in modal space."""
+        root_c = np.sqrt(cap)
+        lam, vec = eigh_tridiagonal(diag / cap, -g_link / (root_c[:-1] * root_c[1:]))
+        return lam, vec.T @ (root_c * theta0), vec.T @ (load / root_c), out @ vec
 
     @staticmethod
     def _outputs(lam, times, w0, f, m, energy, sensor_lag_s):

@@ -17,6 +17,7 @@ was chosen, why, and its error bound.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Sequence
@@ -160,7 +161,9 @@ def choose_model(side_a: Sequence[Layer], side_b: Sequence[Layer], back_a: Bound
                  back_b: Boundary, t_min_s: float, t_max_s: float,
                  tolerance_rel: float = 1e-3, nominal_conductance_w_m2k: float = math.inf):
     """Return ``(model, ModelChoice)`` for contacts lasting up to ``t_max_s``
-    and sampled from ``t_min_s`` on.
+    and sampled from ``t_min_s`` on. The choice is remembered (models are
+    immutable once built), so a scene pays for it once per process;
+    ``choose_model.cache_clear()`` forgets.
 
     Raises
     ------
@@ -168,6 +171,16 @@ def choose_model(side_a: Sequence[Layer], side_b: Sequence[Layer], back_a: Bound
         If no model reaches ``tolerance_rel`` (a layered grid that cannot be
         refined enough) or the inputs make no sense.
     """
+    return _choose_cached(tuple(side_a), tuple(side_b), back_a, back_b, float(t_min_s),
+                          float(t_max_s), float(tolerance_rel), float(nominal_conductance_w_m2k))
+
+
+choose_model.cache_clear = lambda: _choose_cached.cache_clear()
+
+
+@functools.lru_cache(maxsize=256)
+def _choose_cached(side_a, side_b, back_a, back_b, t_min_s, t_max_s, tolerance_rel,
+                   nominal_conductance_w_m2k):
     if not 0 < tolerance_rel < 1:
         raise ModelError(f"tolerance_rel must be in (0, 1), got {tolerance_rel}")
     if len(side_a) == 1 and len(side_b) == 1:
@@ -184,12 +197,13 @@ def choose_model(side_a: Sequence[Layer], side_b: Sequence[Layer], back_a: Bound
                   f"tolerance {tolerance_rel:.0e})")
     else:
         reason = f"stacked layers ({len(side_a)} | {len(side_b)})"
-    return _layered(side_a, side_b, back_a, back_b, t_min_s, t_max_s, tolerance_rel,
+    return layered_model(side_a, side_b, back_a, back_b, t_min_s, t_max_s, tolerance_rel,
                     nominal_conductance_w_m2k, reason)
 
 
-def _layered(side_a, side_b, back_a, back_b, t_min_s, t_max_s, tol, conductance, reason):
-    """The coarsest grid of a refinement ladder whose estimated error meets tol."""
+def layered_model(side_a, side_b, back_a, back_b, t_min_s, t_max_s, tol, conductance, reason):
+    """The coarsest layered grid of a refinement ladder whose estimated error
+    meets ``tol``; returns ``(model, ModelChoice)`` (``reason`` says why)."""
     t = np.geomspace(t_min_s, t_max_s, 200)
     previous = None
     for resolution, growth in ((0.4, 1.3), (0.2, 1.2), (0.1, 1.15), (0.05, 1.1), (0.025, 1.05)):

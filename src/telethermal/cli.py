@@ -1,0 +1,255 @@
+"""The ``telethermal`` command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from telethermal import __version__
+from telethermal.errors import TelethermalError
+
+log = logging.getLogger("telethermal")
+console = Console(stderr=True)
+
+
+@contextmanager
+def _progress(total: int, what: str):
+    """A rich progress bar on stderr; ``advance(label)`` moves it on."""
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(),
+                  console=console, transient=True, disable=not console.is_terminal) as bar:
+        task = bar.add_task(what, total=total)
+
+        def advance(label: str):
+            bar.update(task, advance=1, description=f"{what}: {label}")
+        yield advance
+
+
+def _write_json(path: str | Path, payload: dict) -> Path:
+    """Write JSON through a temporary file so a failure leaves no half file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+    tmp.replace(path)
+    return path
+
+
+# ------------------------------------------------------------------ commands
+def cmd_scenes(args) -> int:
+    from telethermal.physics.scene import describe_models, list_scenes, load_scene
+
+    table = Table(title="shipped scenes")
+    for col in ("name", "pad", "rate (Hz)", "objects", "finger"):
+        table.add_column(col)
+    for name in list_scenes():
+        scene = load_scene(name)
+        table.add_row(name, scene.pad.kind, f"{scene.sample_rate_hz:g}",
+                      ", ".join(scene.materials), "yes" if scene.finger else "no")
+        if args.verbose:
+            for side, material, choice in describe_models(scene):
+                table.add_row("", side, "", material, choice.describe())
+    Console().print(table)
+    return 0
+
+
+def cmd_dataset_generate(args) -> int:
+    from telethermal.data.generate import generate_databases
+    from telethermal.physics.scene import describe_models, load_scene
+
+    scene = load_scene(args.scene)
+    for side, material, choice in describe_models(scene):
+        log.info("%s on %s: %s", side, material, choice.describe())
+    parts = 2 if scene.finger is not None else 1
+    start = time.perf_counter()
+    with _progress(parts, f"generating {scene.name}") as advance:
+        summary = generate_databases(scene, args.out, seed=args.seed, overwrite=args.force,
+                                     progress=advance)
+    for name, info in summary["datasets"].items():
+        print(f"{Path(args.out) / name}: {info['trials']} trials of "
+              f"{', '.join(info['materials'])}")
+    print(f"done in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def cmd_dataset_show(args) -> int:
+    from telethermal.data.plots import plot_datasets
+
+    print(plot_datasets(args.dir, args.out))
+    return 0
+
+
+def cmd_dataset_validate(args) -> int:
+    from telethermal.data.dataset import load_dataset
+
+    trials = load_dataset(args.dir)
+    materials = sorted({t.material for t in trials})
+    channels = sorted({c for t in trials for c in t.channels})
+    print(f"{args.dir}: {len(trials)} trials, materials {', '.join(materials)}; "
+          f"channels {', '.join(channels)}")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    from telethermal.data.dataset import write_dataset
+    from telethermal.data.generate import single_contact
+
+    trial = single_contact(args.pad, args.object, args.pad_temp_c, args.object_temp_c,
+                           args.seconds, args.rate_hz, ideal=args.ideal, seed=args.seed,
+                           contact_conductance_w_m2k=args.contact_conductance_w_m2k)
+    write_dataset(args.out, [trial], overwrite=args.force)
+    print(f"{Path(args.out) / trial.file}: {len(trial.channels['t_s'])} samples")
+    return 0
+
+
+def cmd_bench_physics(args) -> int:
+    from telethermal.bench import physics
+
+    with _progress(6, "bench physics") as advance:
+        report = physics.run(repeats=args.repeats, progress=advance)
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    png = physics.plot(report, args.png or Path(args.json).with_suffix(".png"))
+    report["png"] = str(png)
+    _write_json(args.json, report)
+    d = report["default"]
+    print(f"default model: max relative flux error {d['max_rel_error']:.2e} over "
+          f"{d['window_s'][0]}-{d['window_s'][1]:g} s, "
+          f"{d['runtime_s_per_simulated_s'] * 1e3:.3f} ms per simulated second")
+    b = report["batch_70x1s_1khz"]
+    print(f"batch of {b['trials']} one-second trials at 1 kHz: {b['runtime_s']:.3f} s "
+          f"(+ {b['model_choice_s']:.3f} s choosing the models, once per scene)")
+    db = report["databases_fingertip_7"]
+    print(f"fingertip-7 databases: simulation {db['simulation_s']:.2f} s, "
+          f"with CSV files {db['with_csv_files_s']:.2f} s")
+    print(f"heat balance over 60 s: {report['heat_balance_60s']['relative_error']:.1e} relative")
+    print(f"wrote {args.json} and {png}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    """Until the services exist: the default scene's two databases and their plots."""
+    from telethermal.data.generate import generate_databases
+    from telethermal.data.plots import plot_datasets
+    from telethermal.physics.scene import describe_models, load_scene
+
+    out = Path(args.out)
+    scene = load_scene(args.scene)
+    print(f"scene {scene.name}: {scene.description.splitlines()[0]}")
+    for side, material, choice in describe_models(scene):
+        print(f"  {side:6s} on {material:10s} {choice.describe()}")
+    start = time.perf_counter()
+    with _progress(2, "generating") as advance:
+        summary = generate_databases(scene, out / "databases", seed=args.seed, overwrite=True,
+                                     progress=advance)
+    print(f"databases in {time.perf_counter() - start:.1f} s: "
+          + ", ".join(f"{k} {v['trials']} trials" for k, v in summary["datasets"].items()))
+    print(f"plot: {plot_datasets(out / 'databases', out / 'databases.png')}")
+    return 0
+
+
+# ------------------------------------------------------------------ parser
+def _positive(kind=float):
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not (value > 0 and math.isfinite(value)):
+            raise argparse.ArgumentTypeError(f"{text!r} must be positive and finite")
+        return value
+    return parse
+
+
+def _finite(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} must be finite")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="telethermal", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"telethermal {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("scenes", help="list the shipped scenes")
+    p.add_argument("--verbose", "-v", action="store_true", help="show each contact's model")
+    p.set_defaults(func=cmd_scenes)
+
+    ds = sub.add_parser("dataset", help="generate, show or validate datasets")
+    dsub = ds.add_subparsers(dest="dataset_command", required=True)
+    p = dsub.add_parser("generate", help="write a scene's databases (pad/ and finger/)")
+    p.add_argument("--scene", required=True, help="shipped scene name or TOML path")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    p.set_defaults(func=cmd_dataset_generate)
+    p = dsub.add_parser("show", help="plot a dataset (or a folder of datasets)")
+    p.add_argument("dir")
+    p.add_argument("--out", required=True, help="PNG to write")
+    p.set_defaults(func=cmd_dataset_show)
+    p = dsub.add_parser("validate", help="read and check every file of a dataset")
+    p.add_argument("dir")
+    p.set_defaults(func=cmd_dataset_validate)
+
+    p = sub.add_parser("simulate", help="one contact between two semi-infinite bodies")
+    p.add_argument("--pad", required=True, help="material of the pad (or finger: skin)")
+    p.add_argument("--object", required=True, help="material of the object")
+    p.add_argument("--pad-temp-c", type=_finite, required=True)
+    p.add_argument("--object-temp-c", type=_finite, required=True)
+    p.add_argument("--seconds", type=_positive(), required=True)
+    p.add_argument("--rate-hz", type=_positive(), required=True)
+    p.add_argument("--out", required=True, help="output dataset folder")
+    p.add_argument("--ideal", action="store_true",
+                   help="perfect contact, no sensor, no noise: the closed form")
+    p.add_argument("--contact-conductance-w-m2k", type=_positive(), default=3000.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    p.set_defaults(func=cmd_simulate)
+
+    bench = sub.add_parser("bench", help="benchmarks: speed against error")
+    bsub = bench.add_subparsers(dest="bench_command", required=True)
+    p = bsub.add_parser("physics", help="contact models: error against runtime")
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--png", help="plot (default: beside the JSON)")
+    p.add_argument("--repeats", type=_positive(int), default=3)
+    p.set_defaults(func=cmd_bench_physics)
+
+    p = sub.add_parser("demo", help="run the main job on the default scene")
+    p.add_argument("--scene", default="fingertip-7")
+    p.add_argument("--out", default="out/demo")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except TelethermalError as exc:
+        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        return 2
+    except KeyboardInterrupt:
+        console.print("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

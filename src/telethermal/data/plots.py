@@ -1,0 +1,71 @@
+"""Plots of datasets, in the manner of Fig. 2 of learning-based-thermal-rendering:
+heat flux (left) and temperature (right) against time after contact, one
+colour per material, the mean of its trials with a band of +-1 standard
+deviation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from telethermal.data.dataset import MANIFEST, Trial, load_dataset  # noqa: E402
+from telethermal.errors import DatasetError  # noqa: E402
+
+PANELS = (("heat_flux_W_m2", "heat flux (W/m$^2$)"), ("temperature_C", "temperature ($^\\circ$C)"))
+
+
+def _dataset_dirs(root: Path) -> list[Path]:
+    if (root / MANIFEST).is_file():
+        return [root]
+    subs = [p for p in sorted(root.iterdir()) if (p / MANIFEST).is_file()] if root.is_dir() else []
+    if not subs:
+        raise DatasetError(f"{root}: neither a dataset (no {MANIFEST}) nor a folder of datasets")
+    return subs
+
+
+def _mean_band(trials: list[Trial], channel: str):
+    """Common time axis (the shortest trial's) and mean/std of a channel."""
+    usable = [t for t in trials if channel in t.channels]
+    if not usable:
+        return None
+    shortest = min(usable, key=lambda t: len(t.channels["t_s"]))
+    axis = shortest.channels["t_s"]
+    stack = np.stack([np.interp(axis, t.channels["t_s"], t.channels[channel]) for t in usable])
+    return axis, stack.mean(axis=0), stack.std(axis=0)
+
+
+def plot_datasets(root: str | Path, out_png: str | Path) -> Path:
+    """Plot one dataset, or every dataset in a folder (one row each)."""
+    dirs = _dataset_dirs(Path(root))
+    fig, axes = plt.subplots(len(dirs), 2, figsize=(12, 4.2 * len(dirs)), squeeze=False)
+    for row, folder in zip(axes, dirs):
+        trials = load_dataset(folder)
+        materials = sorted({t.material for t in trials})
+        colours = plt.cm.tab10(np.linspace(0, 1, max(len(materials), 10)))
+        for ax, (channel, label) in zip(row, PANELS):
+            for colour, material in zip(colours, materials):
+                band = _mean_band([t for t in trials if t.material == material], channel)
+                if band is None:
+                    continue
+                axis, mean, std = band
+                ax.plot(axis, mean, color=colour, label=material, lw=1.4)
+                ax.fill_between(axis, mean - std, mean + std, color=colour, alpha=0.2, lw=0)
+            ax.axvline(0.0, color="0.5", lw=0.8, ls=":")
+            ax.set_xlabel("time after contact (s)")
+            ax.set_ylabel(label)
+            ax.set_title(f"{folder.name}: {len(trials)} trials")
+            ax.grid(alpha=0.3)
+        row[0].legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_png.with_name(f".{out_png.name}.tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(out_png)
+    return out_png

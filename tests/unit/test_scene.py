@@ -1,0 +1,111 @@
+import math
+import tomllib
+
+import pytest
+
+from telethermal.errors import SceneError
+from telethermal.physics.scene import (describe_models, finger_contact_model, list_scenes,
+                                       load_scene, pad_contact_model, parse_scene)
+
+REQUIRED = {"fingertip-7", "gripper-case-I-cnv", "gripper-case-I-pro", "gripper-case-II",
+            "gripper-case-III", "gripper-case-IV", "gripper-case-V"}
+
+MINIMAL = """
+name = "mini"
+room_temp_c = 24.0
+sample_rate_hz = 100.0
+[pad]
+kind = "peltier"
+layers = [["flux_sensor_film", 3.0e-4], ["alumina", 2.5e-4]]
+gap_k = 10.0
+contact_duration_s = 1.0
+trials_per_material = 2
+[[objects]]
+material = "wood"
+"""
+
+
+def test_every_required_scene_is_shipped_and_loads():
+    assert REQUIRED <= set(list_scenes())
+    for name in REQUIRED:
+        scene = load_scene(name)
+        assert scene.name == name
+
+
+def test_gripper_scenes_follow_tables_1_and_2():
+    expected = {"I-cnv": (34.0, 34.0), "I-pro": (44.0, 34.0), "II": (34.0, 24.0),
+                "III": (29.0, 19.0), "IV": (24.0, 34.0), "V": (19.0, 29.0)}
+    for case, (pad_c, obj_c) in expected.items():
+        scene = load_scene(f"gripper-case-{case}")
+        assert scene.sample_rate_hz == 1000.0 and scene.room_temp_c == 24.0
+        assert all(o.temp_c == obj_c for o in scene.objects)
+        assert scene.pad_temp_c(obj_c) == pad_c
+
+
+def test_fingertip_scene_is_the_first_papers_setup():
+    scene = load_scene("fingertip-7")
+    assert scene.sample_rate_hz == 100.0 and scene.pad.gap_k == 10.0
+    assert len(scene.objects) == 7 and scene.finger.persons == 5
+
+
+def test_unknown_material_names_the_file_and_the_known_ones(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(MINIMAL.replace('"wood"', '"kryptonite"'))
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    message = str(info.value)
+    assert "bad.toml" in message and "kryptonite" in message and "aluminium" in message
+
+
+@pytest.mark.parametrize("change,needle", [
+    (("gap_k = 10.0", "gap_k = 10.0\ntemp_c = 30.0"), "exactly one"),
+    (("kind = \"peltier\"", "kind = \"laser\""), "kind"),
+    (("sample_rate_hz = 100.0", "sample_rate_hz = \"fast\""), "sample_rate_hz"),
+    (("trials_per_material = 2", "trials_per_material = 2.5"), "trials_per_material"),
+    (("room_temp_c = 24.0", "room_temp_c = 24.0\ncolour = 3"), "colour"),
+    (("[\"alumina\", 2.5e-4]", "[\"alumina\", -1]"), "layers[1]"),
+])
+def test_bad_keys_are_named(change, needle):
+    with pytest.raises(SceneError) as info:
+        parse_scene(tomllib.loads(MINIMAL.replace(*change)), "x.toml")
+    assert needle in str(info.value)
+
+
+def test_not_toml_and_missing_file_are_clear_errors(tmp_path):
+    bad = tmp_path / "broken.toml"
+    bad.write_text("name = ")
+    with pytest.raises(SceneError, match="not valid TOML"):
+        load_scene(bad)
+    with pytest.raises(SceneError, match="does not exist"):
+        load_scene(tmp_path / "absent.toml")
+    with pytest.raises(SceneError, match="shipped scenes"):
+        load_scene("no-such-scene")
+
+
+def test_model_choice_follows_penetration_depth():
+    scene = load_scene("fingertip-7")
+    by_material = {o.material: o for o in scene.objects}
+    # Wood: sqrt(alpha t) over 60 s is 2.8 mm in a 30 mm block -> closed form.
+    _, wood = finger_contact_model(scene, by_material["wood"])
+    # Aluminium: 8 cm penetration in 30 mm -> the finite block matters.
+    _, alu = finger_contact_model(scene, by_material["aluminium"])
+    # The pad is a stack of thin layers -> layered.
+    _, pad = pad_contact_model(scene, by_material["wood"])
+    assert wood.kind == "analytic" and alu.kind == "layered" and pad.kind == "layered"
+    for choice in (wood, alu, pad):
+        assert choice.error_bound_rel <= scene.tolerance_rel
+
+
+def test_every_shipped_contact_can_be_modelled_within_tolerance():
+    for name in list_scenes():
+        scene = load_scene(name)
+        for _side, _material, choice in describe_models(scene):
+            assert choice.error_bound_rel <= scene.tolerance_rel
+
+
+def test_scene_with_unreachable_tolerance_is_refused():
+    data = tomllib.loads(MINIMAL.replace("trials_per_material = 2",
+                                         "trials_per_material = 2\n") + "[model]\ntolerance_rel = 1e-9\n")
+    scene = parse_scene(data, "tight.toml")
+    with pytest.raises(SceneError, match="cannot model wood"):
+        pad_contact_model(scene, scene.objects[0])

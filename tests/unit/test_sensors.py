@@ -1,0 +1,56 @@
+import numpy as np
+import pytest
+
+from telethermal.errors import ModelError
+from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, InfraredThermometer,
+                                         Thermocouple, quantise, type_t_emf_mv, type_t_temp_c)
+
+
+@pytest.mark.parametrize("temp_c,emf_mv", [(100.0, 4.279), (-100.0, -3.379), (300.0, 14.862),
+                                           (25.0, 0.992)])
+def test_type_t_matches_nist_table(temp_c, emf_mv):
+    # NIST Monograph 175 type-T table values, given to 1 uV.
+    assert type_t_emf_mv(temp_c) == pytest.approx(emf_mv, abs=1e-3)
+
+
+def test_type_t_inverse_round_trips_within_nist_accuracy():
+    temps = np.linspace(-200.0, 400.0, 601)
+    # NIST quotes the inverse polynomials to +-0.04 degC (negative range) and +-0.03 degC.
+    np.testing.assert_allclose(type_t_temp_c(type_t_emf_mv(temps)), temps, atol=0.04)
+
+
+def test_type_t_refuses_out_of_range():
+    with pytest.raises(ModelError):
+        type_t_emf_mv(500.0)
+    with pytest.raises(ModelError):
+        type_t_temp_c(30.0)
+
+
+def test_thermocouple_reads_true_temperature_on_average(rng):
+    reading = Thermocouple(noise_uv_rms=1.0).read_c(np.full(20000, 31.0), rng)
+    # 1 uV is ~0.025 K of type T near 30 degC: the mean of 20000 is within 1e-3 K
+    # (plus the 0.03 K inverse-polynomial accuracy).
+    assert reading.mean() == pytest.approx(31.0, abs=0.035)
+
+
+def test_heat_flux_sensor_converts_through_microvolts(rng):
+    sensor = HeatFluxSensor(noise_uv_rms=0.0, adc_lsb_uv=0.3)
+    out = sensor.read_w_m2(np.array([0.0, 1000.0]), rng)
+    lsb = 0.3 / 1.26
+    assert out[0] == 0.0
+    assert abs(out[1] - 1000.0) <= lsb / 2 + 1e-9
+
+
+def test_quantise_is_a_mid_tread_adc():
+    np.testing.assert_allclose(quantise(np.array([0.49, 0.51, -0.51]), 1.0), [0.0, 1.0, -1.0])
+
+
+def test_force_sensor_is_zero_before_contact_and_rises_to_the_force(rng):
+    t = np.array([-0.1, 0.0, 1.0])
+    f = ForceSensor(noise_n_rms=0.0).read_n(t, 10.0, rng)
+    assert f[0] == 0.0 and f[1] == 0.0 and f[2] == pytest.approx(10.0, rel=1e-9)
+
+
+def test_ir_thermometer_error_has_its_stated_spread(rng):
+    err = InfraredThermometer(0.4).read_c(np.zeros(20000), rng)
+    assert err.std() == pytest.approx(0.4, rel=0.05)
