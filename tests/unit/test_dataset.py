@@ -38,7 +38,8 @@ def test_round_trip(tmp_path):
 
 def edit_manifest(root, row, column, value):
     path = root / "manifest.csv"
-    rows = list(csv.DictReader(path.open()))
+    with path.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
     rows[row][column] = value
     with path.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))

@@ -563,6 +563,10 @@ class LayeredContact:
         """Eigen-decomposition of one trial: (lam, w0, f, m) in modal space."""
         root_c = np.sqrt(cap)
         lam, vec = eigh_tridiagonal(diag / cap, -g_link / (root_c[:-1] * root_c[1:]))
+        # With no boundary to the outside the smallest eigenvalue is 0 (the
+        # conserved mean temperature); rounding leaves it at +-1e-13 lam_max.
+        # Make it exactly 0 so nothing grows and the zero-mode branches apply.
+        lam[np.abs(lam) < 1e-11 * lam.max()] = 0.0
         return lam, vec.T @ (root_c * theta0), vec.T @ (load / root_c), out @ vec
 
     @staticmethod
