@@ -22,7 +22,7 @@ test: $(STAMP)
 	$(PY) -m pytest tests
 
 bench: $(STAMP)
-	$(VENV)/bin/telethermal bench physics --json $(OUT)/bench/physics.json
+	$(VENV)/bin/telethermal bench physics --json $(OUT)/bench/physics.json --png $(OUT)/bench/physics.png
 
 clean:
 	rm -rf $(VENV) $(OUT)
