@@ -85,14 +85,17 @@ def cmd_dataset_generate(args) -> int:
 def cmd_dataset_show(args) -> int:
     from telethermal.data.plots import plot_datasets
 
-    print(plot_datasets(args.dir, args.out))
+    with console.status(f"reading and plotting {args.dir}"):
+        png = plot_datasets(args.dir, args.out)
+    print(png)
     return 0
 
 
 def cmd_dataset_validate(args) -> int:
     from telethermal.data.dataset import load_dataset
 
-    trials = load_dataset(args.dir)
+    with console.status(f"reading {args.dir}"):
+        trials = load_dataset(args.dir)
     materials = sorted({t.material for t in trials})
     channels = sorted({c for t in trials for c in t.channels})
     print(f"{args.dir}: {len(trials)} trials, materials {', '.join(materials)}; "
