@@ -28,22 +28,23 @@ _TYPE_T_INV_POS = (0.0, 2.592800e1, -7.602961e-1, 4.637791e-2, -2.165394e-3,
                    6.048144e-5, -7.293422e-7)                     # 0 .. 20.872 mV
 
 
+def _two_piece(x, lo, hi, negative, positive, what):
+    """Evaluate one of two NIST polynomials (split at 0) after a range check."""
+    x = np.asarray(x, dtype=np.float64)
+    if np.any((x < lo) | (x > hi)):
+        raise ModelError(f"type-T {what} range is {lo}..{hi}, got {x.min()}..{x.max()}")
+    poly = np.polynomial.polynomial.polyval
+    return np.where(x < 0, poly(x, negative), poly(x, positive))
+
+
 def type_t_emf_mv(temp_c):
     """Type-T thermocouple EMF (reference junction at 0 degC), mV, -270..400 degC."""
-    t = np.asarray(temp_c, dtype=np.float64)
-    if np.any((t < -270.0) | (t > 400.0)):
-        raise ModelError(f"type-T range is -270..400 degC, got {t.min()}..{t.max()}")
-    return np.where(t < 0, np.polynomial.polynomial.polyval(t, _TYPE_T_EMF_NEG),
-                    np.polynomial.polynomial.polyval(t, _TYPE_T_EMF_POS))
+    return _two_piece(temp_c, -270.0, 400.0, _TYPE_T_EMF_NEG, _TYPE_T_EMF_POS, "degC")
 
 
 def type_t_temp_c(emf_mv):
     """Inverse of :func:`type_t_emf_mv` (NIST inverse polynomials, +-0.04 degC)."""
-    e = np.asarray(emf_mv, dtype=np.float64)
-    if np.any((e < -5.603) | (e > 20.872)):
-        raise ModelError(f"type-T EMF range is -5.603..20.872 mV, got {e.min()}..{e.max()}")
-    return np.where(e < 0, np.polynomial.polynomial.polyval(e, _TYPE_T_INV_NEG),
-                    np.polynomial.polynomial.polyval(e, _TYPE_T_INV_POS))
+    return _two_piece(emf_mv, -5.603, 20.872, _TYPE_T_INV_NEG, _TYPE_T_INV_POS, "EMF (mV)")
 
 
 def quantise(values, lsb):
