@@ -26,3 +26,11 @@ class DatasetError(TelethermalError, ValueError):
 
 class ModelError(TelethermalError, ValueError):
     """Bad parameters given to a physics model."""
+
+
+class IdentificationError(TelethermalError, ValueError):
+    """An identifier used wrongly: unfitted, bad input, channels that do not match."""
+
+
+class ModelFileError(TelethermalError, ValueError):
+    """A model file that is not one, is truncated, or is from another version."""

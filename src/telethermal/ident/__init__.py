@@ -1,0 +1,1 @@
+"""Material identification from the first fraction of a second of contact."""

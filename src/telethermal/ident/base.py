@@ -1,0 +1,253 @@
+"""The identifier interface, shared by every method (scikit-learn conventions).
+
+``fit(contacts)`` learns; learned attributes end in ``_``. Posteriors come for
+any prefix of a contact: :meth:`Identifier.predict_proba` takes raw samples
+since contact (the model's channels, at the model's sample rate) with the
+gap and object temperature measured before contact.
+
+Window-bank methods (``pca-fnn``, ``effusivity-lda``) fit one small model per
+window length (every ``window_step_s`` up to ``max_window_s``) and answer a
+prefix with the longest window it covers; their confidences are calibrated by
+one temperature per window, fitted on out-of-fold predictions of the training
+set (grouped k-fold, so trials of one group never both train and calibrate).
+
+A model is saved as one ``.npz`` file: a JSON header (format version, method,
+classes, channels, sample rate, windows, hyper-parameters, calibration) and
+named weight arrays. No pickle: ``numpy.load(allow_pickle=False)``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+from scipy.special import log_softmax
+
+from telethermal import __version__
+from telethermal.errors import IdentificationError, ModelFileError
+from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts, normalise
+
+FORMAT_VERSION = 1
+
+
+def group_folds(groups: list[str], k: int) -> list[np.ndarray]:
+    """Test indices of k folds that never split a group (round-robin by group)."""
+    unique = sorted(set(groups))
+    k = max(1, min(k, len(unique)))
+    fold_of = {g: i % k for i, g in enumerate(unique)}
+    return [np.array([i for i, g in enumerate(groups) if fold_of[g] == f]) for f in range(k)]
+
+
+class Identifier:
+    """Base of all identification methods."""
+
+    method = ""
+    streaming = False        # True: one model answers every prefix (recurrent nets)
+
+    def __init__(self, channels=(FLUX,), max_window_s: float = 1.0, window_step_s: float = 0.05,
+                 threshold: float = 0.99, calibrate: bool = True, seed: int = 0):
+        self.channels = tuple(channels)
+        self.max_window_s = max_window_s
+        self.window_step_s = window_step_s
+        self.threshold = threshold
+        self.calibrate = calibrate
+        self.seed = seed
+
+    # ------------------------------------------------------------ fitting
+    def hyper(self) -> dict:
+        return {k: getattr(self, k) for k in ("max_window_s", "window_step_s", "threshold",
+                                              "calibrate", "seed")}
+
+    def _check_fit_input(self, contacts: Contacts):
+        if tuple(contacts.channels) != self.channels:
+            raise IdentificationError(f"contacts have channels {contacts.channels}, the "
+                                      f"identifier was set up for {self.channels}")
+        classes = sorted(set(contacts.labels))
+        if len(classes) < 2:
+            raise IdentificationError(f"need at least two materials to tell apart, got {classes}")
+        return classes
+
+    def fit(self, contacts: Contacts) -> "Identifier":
+        self.classes_ = self._check_fit_input(contacts)
+        self.sample_rate_hz_ = contacts.sample_rate_hz
+        y = np.array([self.classes_.index(c) for c in contacts.labels])
+        step = max(self.window_step_s, 1.0 / self.sample_rate_hz_)
+        usable = float(np.min(contacts.lengths - 1)) / self.sample_rate_hz_
+        top = min(self.max_window_s, usable)
+        if top < step:
+            raise IdentificationError(f"trials are too short ({usable:.3g} s after contact) "
+                                      f"for a window of {step:.3g} s")
+        self.windows_s_ = [round(w, 6) for w in np.arange(1, int(top / step + 1e-9) + 1) * step]
+        self.params_ = [self._fit_window(self._window(contacts.x, w), y) for w in self.windows_s_]
+        self.temperature_ = np.ones(len(self.windows_s_))
+        if self.calibrate and not self.streaming:
+            self._calibrate(contacts, y)
+        return self
+
+    def _window(self, x: np.ndarray, window_s: float) -> np.ndarray:
+        """The first ``window_s`` of each contact, (N, n_w, C); n_w includes t = 0."""
+        n = int(round(window_s * self.sample_rate_hz_)) + 1
+        return x[:, :n]
+
+    def _calibrate(self, contacts: Contacts, y: np.ndarray):
+        """One temperature per window minimising out-of-fold log loss."""
+        folds = group_folds(contacts.groups, 3)
+        if len(folds) < 2:
+            return
+        logits = [np.full((len(y), len(self.classes_)), np.nan) for _ in self.windows_s_]
+        for test in folds:
+            train = np.setdiff1d(np.arange(len(y)), test)
+            if len(set(y[train])) < len(self.classes_):
+                return                        # a class missing from a fold: keep T = 1
+            for i, w in enumerate(self.windows_s_):
+                params = self._fit_window(self._window(contacts.x[train], w), y[train])
+                logits[i][test] = self._logits(params, self._window(contacts.x[test], w))
+        for i, z in enumerate(logits):
+            def nll(log_t, z=z):
+                p = log_softmax(z / np.exp(log_t), axis=1)
+                return -np.mean(p[np.arange(len(y)), y])
+            self.temperature_[i] = float(np.exp(minimize_scalar(nll, bounds=(-5, 5),
+                                                                method="bounded").x))
+
+    # ------------------------------------------------------------ predicting
+    def _require_fitted(self):
+        if not hasattr(self, "classes_"):
+            raise IdentificationError(f"this {self.method} identifier is not fitted; call fit()")
+
+    def window_index(self, n_samples: int) -> int | None:
+        """Index of the longest window a prefix of n samples covers, or None."""
+        elapsed = (n_samples - 1) / self.sample_rate_hz_
+        index = None
+        for i, w in enumerate(self.windows_s_):
+            if w <= elapsed + 1e-9:
+                index = i
+        return index
+
+    def proba_normalised(self, x: np.ndarray, window_index: int) -> np.ndarray:
+        """Posteriors (N, n_classes) for normalised contacts x (N, >= n_w, C)."""
+        w = self.windows_s_[window_index]
+        z = self._logits(self.params_[window_index], self._window(x, w))
+        return np.exp(log_softmax(z / self.temperature_[window_index], axis=1))
+
+    def predict_proba(self, samples: np.ndarray, gap_k: float, t_object_c: float | None = None
+                      ) -> np.ndarray:
+        """Posterior over ``classes_`` for raw samples since contact.
+
+        Parameters
+        ----------
+        samples : ndarray, shape (n,) or (n, n_channels)
+            From t = 0 at ``sample_rate_hz_``, channels in ``channels`` order.
+        gap_k : float
+            Pad minus object temperature before contact, K.
+        t_object_c : float, optional
+            Needed when a temperature channel is used.
+
+        Returns
+        -------
+        ndarray, shape (n_classes,)
+            Uniform when the prefix is shorter than the first window (nothing
+            to go on yet).
+
+        Raises
+        ------
+        IdentificationError
+            Unfitted, wrong shape, non-finite samples, or a gap under
+            ``MIN_GAP_K`` (use :mod:`telethermal.ident.anytime` for "unknown").
+        """
+        self._require_fitted()
+        x = self._check_samples(samples, gap_k, t_object_c)
+        index = self.window_index(len(x))
+        if index is None:
+            return np.full(len(self.classes_), 1.0 / len(self.classes_))
+        return self.proba_normalised(x[None], index)[0]
+
+    def _check_samples(self, samples, gap_k, t_object_c):
+        x = np.asarray(samples, dtype=np.float64)
+        if x.ndim == 1:
+            x = x[:, None]
+        if x.ndim != 2 or x.shape[1] != len(self.channels):
+            raise IdentificationError(f"samples must have shape (n, {len(self.channels)}) for "
+                                      f"channels {self.channels}, got {np.shape(samples)}")
+        bad = ~np.isfinite(x)
+        if bad.any():
+            row, col = np.argwhere(bad)[0]
+            raise IdentificationError(f"sample {row} of channel {self.channels[col]} is "
+                                      f"{x[row, col]}")
+        if not np.isfinite(gap_k) or abs(gap_k) < MIN_GAP_K:
+            raise IdentificationError(f"gap {gap_k} K: below {MIN_GAP_K} K nothing can be "
+                                      "identified")
+        return np.stack([normalise(x[:, i], c, gap_k, t_object_c)
+                         for i, c in enumerate(self.channels)], axis=1)
+
+    # ------------------------------------------------------------ subclass hooks
+    def _fit_window(self, x: np.ndarray, y: np.ndarray) -> dict:
+        raise NotImplementedError
+
+    def _logits(self, params: dict, x: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def outside_classes(self, x: np.ndarray, window_index: int) -> np.ndarray:
+        """Per contact: True where the sample lies outside every learnt class
+        (methods that cannot tell return False)."""
+        return np.zeros(len(x), dtype=bool)
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path: str | Path) -> Path:
+        """Write one ``.npz`` (header JSON + arrays), through a temporary file."""
+        self._require_fitted()
+        path = Path(path)
+        header = {"format": "telethermal-identifier", "format_version": FORMAT_VERSION,
+                  "telethermal_version": __version__, "method": self.method,
+                  "classes": self.classes_, "channels": list(self.channels),
+                  "sample_rate_hz": self.sample_rate_hz_, "windows_s": self.windows_s_,
+                  "temperature": self.temperature_.tolist(), "hyper": self.hyper(),
+                  "min_gap_k": MIN_GAP_K}
+        arrays = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)}
+        for i, params in enumerate(self.params_):
+            for name, value in params.items():
+                arrays[f"w{i}.{name}"] = np.asarray(value)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def restore(cls, header: dict, arrays: dict) -> "Identifier":
+        model = cls(channels=header["channels"], **header["hyper"])
+        model.classes_ = list(header["classes"])
+        model.sample_rate_hz_ = float(header["sample_rate_hz"])
+        model.windows_s_ = list(header["windows_s"])
+        model.temperature_ = np.asarray(header["temperature"], dtype=np.float64)
+        model.params_ = [{k.split(".", 1)[1]: v for k, v in arrays.items()
+                          if k.startswith(f"w{i}.")} for i in range(len(model.windows_s_))]
+        return model
+
+
+def read_model_file(path: str | Path) -> tuple[dict, dict]:
+    """Header and arrays of a model file, with clear errors for anything else."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"{path}: no such model file")
+    try:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError) as exc:
+        raise ModelFileError(f"{path}: not a readable model file (truncated or not "
+                             f"a telethermal model): {exc}") from None
+    try:
+        header = json.loads(arrays.pop("header").tobytes().decode())
+    except (KeyError, UnicodeDecodeError, json.JSONDecodeError):
+        raise ModelFileError(f"{path}: no valid header; not a telethermal model") from None
+    if header.get("format") != "telethermal-identifier":
+        raise ModelFileError(f"{path}: not a telethermal identifier")
+    if header.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"{path}: model format version {header.get('format_version')} "
+                             f"(written by telethermal {header.get('telethermal_version')}); "
+                             f"this telethermal reads version {FORMAT_VERSION}")
+    return header, arrays

@@ -1,0 +1,135 @@
+"""Window-bank identifiers: the first paper's PCA + LM network, and
+telethermal's effusivity features with linear discriminant analysis."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2
+
+from telethermal.ident.base import Identifier
+from telethermal.ident.lm import MLP, train_lm
+from telethermal.ident.pca import SnapshotPCA
+from telethermal.ident.prepare import FLUX
+
+
+class PcaFnn(Identifier):
+    """learning-based-thermal-rendering section 3: the gap-normalised window,
+    PCA by the snapshot method (at most ``n_components`` directions, scaled
+    together by the first one's spread),
+    a one-hidden-layer sigmoid network with MSE loss trained by
+    Levenberg-Marquardt from ``restarts`` random starts (the best kept)."""
+
+    method = "pca-fnn"
+
+    def __init__(self, channels=(FLUX,), n_components: int = 8, n_hidden: int = 8,
+                 max_iter: int = 60, restarts: int = 1, window_step_s: float = 0.1,
+                 calibrate: bool = False, **kw):
+        super().__init__(channels, window_step_s=window_step_s, calibrate=calibrate, **kw)
+        self.n_components = n_components
+        self.n_hidden = n_hidden
+        self.max_iter = max_iter
+        self.restarts = restarts
+
+    def hyper(self) -> dict:
+        return {**super().hyper(), "n_components": self.n_components,
+                "n_hidden": self.n_hidden, "max_iter": self.max_iter, "restarts": self.restarts}
+
+    def _features(self, params, x):
+        flat = x.reshape(len(x), -1)
+        u = (flat - params["mean"]) @ params["components"].T
+        # One scale for all components (the first's spread): whitening each
+        # would blow the noise directions up to the size of the signal one.
+        return u / np.sqrt(params["eigenvalues"][0])
+
+    def _fit_window(self, x, y):
+        pca = SnapshotPCA(min(self.n_components, len(x) - 1)).fit(x.reshape(len(x), -1))
+        params = {"mean": pca.mean_, "components": pca.components_,
+                  "eigenvalues": pca.eigenvalues_}
+        n_classes = int(y.max()) + 1
+        if len(pca.eigenvalues_) == 0:          # nothing varies: no information
+            return params
+        u = self._features(params, x)
+        target = np.eye(n_classes)[y]
+        rng = np.random.default_rng(self.seed + x.shape[1])
+        best = None
+        for _ in range(self.restarts):
+            net, hist = train_lm(MLP.init(u.shape[1], self.n_hidden, n_classes, rng), u, target,
+                                 max_iter=self.max_iter)
+            if best is None or hist.loss[-1] < best[1]:
+                best = (net, hist.loss[-1])
+        net = best[0]
+        return {**params, "w1": net.w1, "b1": net.b1, "w2": net.w2, "b2": net.b2}
+
+    def _logits(self, params, x):
+        if "w1" not in params:
+            return np.zeros((len(x), len(self.classes_)))
+        net = MLP(params["w1"], params["b1"], params["w2"], params["b2"])
+        z = net(self._features(params, x))
+        return np.log(np.clip(z, 1e-6, None))
+
+
+class EffusivityLda(Identifier):
+    """telethermal's own method, from the closed form: for a semi-infinite
+    contact ``q sqrt(t) / gap = e_eff / sqrt(pi)`` whatever the gap, so the
+    window is cut into ``n_boxes`` equal boxes and each box's mean normalised
+    flux, times the square root of its mid time, estimates an effusivity (the
+    pad's film, lag and contact conductance bend it in a way that is itself
+    characteristic). ``asinh`` compresses the range; linear discriminant
+    analysis with a shrunk pooled covariance classifies, and a contact whose
+    squared Mahalanobis distance to every class exceeds the chi-square
+    quantile ``1 - outlier_p`` is outside every class."""
+
+    method = "effusivity-lda"
+
+    def __init__(self, channels=(FLUX,), n_boxes: int = 8, shrinkage: float = 0.1,
+                 outlier_p: float = 1e-4, window_step_s: float = 0.02, **kw):
+        super().__init__(channels, window_step_s=window_step_s, **kw)
+        self.n_boxes = n_boxes
+        self.shrinkage = shrinkage
+        self.outlier_p = outlier_p
+
+    def hyper(self) -> dict:
+        return {**super().hyper(), "n_boxes": self.n_boxes, "shrinkage": self.shrinkage,
+                "outlier_p": self.outlier_p}
+
+    def _raw_features(self, x):
+        n = x.shape[1]
+        boxes = min(self.n_boxes, n)
+        edges = np.linspace(0, n, boxes + 1).round().astype(int)
+        cols = []
+        for c in range(x.shape[2]):
+            for a, b in zip(edges[:-1], edges[1:]):
+                mean = x[:, a:b, c].mean(axis=1)
+                if self.channels[c] == FLUX:
+                    mid_s = 0.5 * (a + b - 1) / self.sample_rate_hz_
+                    mean = np.arcsinh(mean * np.sqrt(max(mid_s, 0.5 / self.sample_rate_hz_)))
+                cols.append(mean)
+        return np.stack(cols, axis=1)
+
+    def _fit_window(self, x, y):
+        f = self._raw_features(x)
+        centre, scale = f.mean(axis=0), np.maximum(f.std(axis=0), 1e-9)
+        z = (f - centre) / scale
+        classes = np.arange(int(y.max()) + 1)
+        means = np.stack([z[y == c].mean(axis=0) for c in classes])
+        resid = z - means[y]
+        cov = resid.T @ resid / max(len(z) - len(classes), 1)
+        p = cov.shape[0]
+        target = np.trace(cov) / p if np.trace(cov) > 0 else 1.0
+        cov = (1 - self.shrinkage) * cov + self.shrinkage * target * np.eye(p)
+        return {"centre": centre, "scale": scale, "means": means,
+                "precision": np.linalg.pinv(cov, hermitian=True)}
+
+    def _distances(self, params, x):
+        z = (self._raw_features(x) - params["centre"]) / params["scale"]
+        diff = z[:, None, :] - params["means"][None]
+        return np.einsum("ncp,pq,ncq->nc", diff, params["precision"], diff)
+
+    def _logits(self, params, x):
+        return -0.5 * self._distances(params, x)
+
+    def outside_classes(self, x, window_index):
+        params = self.params_[window_index]
+        d2 = self._distances(params, self._window(x, self.windows_s_[window_index]))
+        limit = chi2.ppf(1.0 - self.outlier_p, df=params["means"].shape[1])
+        return d2.min(axis=1) > limit
