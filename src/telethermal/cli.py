@@ -139,6 +139,98 @@ def cmd_bench_physics(args) -> int:
     return 0
 
 
+def _channels(text: str) -> tuple[str, ...]:
+    names = tuple(c.strip() for c in text.split(",") if c.strip())
+    if not names:
+        raise argparse.ArgumentTypeError("give at least one channel")
+    return names
+
+
+def cmd_identify_methods(args) -> int:
+    from telethermal.ident.registry import METHODS
+
+    for name, cls in sorted(METHODS.items()):
+        print(f"{name:16s} {cls.__doc__.strip().splitlines()[0]}")
+    return 0
+
+
+def cmd_identify_train(args) -> int:
+    from telethermal.data.dataset import load_dataset
+    from telethermal.ident.prepare import from_trials
+    from telethermal.ident.registry import make
+
+    with console.status(f"reading {args.data}"):
+        trials = load_dataset(args.data)
+    model = make(args.method, channels=args.channels, max_window_s=args.max_window_s)
+    contacts, skipped = from_trials(trials, model.channels, max_s=args.max_window_s)
+    if skipped:
+        log.warning("%d trial(s) with a gap under 1 K left out of training", len(skipped))
+    start = time.perf_counter()
+    with console.status(f"training {args.method} on {len(contacts)} trials"):
+        model.fit(contacts)
+    path = model.save(args.out)
+    print(f"{path}: {args.method} on {', '.join(model.classes_)}; "
+          f"{len(model.windows_s_)} windows up to {model.windows_s_[-1]} s; "
+          f"trained in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def cmd_identify_eval(args) -> int:
+    from telethermal.data.dataset import load_dataset
+    from telethermal.ident.evaluate import evaluate, plot_accuracy
+    from telethermal.ident.registry import load_model
+
+    model = load_model(args.model)
+    with console.status(f"evaluating on {args.data}"):
+        report = evaluate(model, load_dataset(args.data))
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    _write_json(args.json, report)
+    png = args.png or Path(args.json).with_suffix(".png")
+    plot_accuracy({model.method: report}, png, f"{args.model} on {args.data}")
+    acc = ", ".join(f"{k} s {100 * v:.0f} %" for k, v in report["accuracy_by_window_s"].items())
+    print(f"accuracy: {acc}")
+    d = report["decision_time_s"]
+    if d["n"]:
+        print(f"decisions: {d['n']} committed, median {d['p50']:.2f} s, accuracy "
+              f"{100 * report['decision_accuracy']:.1f} %; unknown "
+              f"{100 * report['decision_unknown_rate']:.0f} %")
+    print(f"inference p50 {report['inference_ms_p50']:.3f} ms, p99 {report['inference_ms_p99']:.3f} ms")
+    print(f"wrote {args.json} and {png}")
+    return 0
+
+
+def cmd_bench_identify(args) -> int:
+    from telethermal.bench import identify
+
+    methods = args.methods.split(",") if args.methods else None
+    with _progress(3 * len(methods or identify.METHODS), "bench identify") as advance:
+        report = identify.run(seed=args.seed, methods=methods, progress=advance)
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    png = args.png or Path(args.json).with_suffix(".png")
+    identify.plot(report, png)
+    _write_json(args.json, report)
+    for method, rep in report["methods"].items():
+        t1 = rep["table1"]
+        print(f"{method}: Table 1, 7 classes " + ", ".join(
+            f"{k} s {100 * v:.0f} %" for k, v in t1["accuracy_7"].items()))
+        print(f"{' ' * len(method)}  5 classes " + ", ".join(
+            f"{k} s {100 * v:.0f} % (paper {100 * t1['paper_accuracy_5'][k]:.0f} %)"
+            if k in t1["paper_accuracy_5"] else f"{k} s {100 * v:.0f} %"
+            for k, v in t1["accuracy_5"].items()))
+        print(f"{' ' * len(method)}  train {t1['train_s_full_database']:.1f} s; inference "
+              f"p99 {t1['inference_ms_p99']:.3f} ms")
+        ap = rep["active_passive"]
+        print(f"{' ' * len(method)}  active pad: " + ", ".join(
+            f"{k} s {100 * v:.0f} %" for k, v in ap["active_accuracy_by_window_s"].items())
+            + f"; passive pad unknown {100 * ap['passive_unknown_rate']:.0f} %")
+        for name, row in rep["cross_temperature"].items():
+            print(f"{' ' * len(method)}  {name}: >= 99 % from "
+                  f"{row['first_window_at_99pct_s']} s (paper 100 % within "
+                  f"{row['paper_100pct_within_s']} s)")
+    print(f"wrote {args.json} and {png}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     """Until the services exist: the default scene's two databases and their plots."""
     from telethermal.data.generate import generate_databases
@@ -231,6 +323,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--png", help="plot (default: beside the JSON)")
     p.add_argument("--repeats", type=_positive(int), default=3)
     p.set_defaults(func=cmd_bench_physics)
+
+    ident = sub.add_parser("identify", help="material identification")
+    isub = ident.add_subparsers(dest="identify_command", required=True)
+    p = isub.add_parser("methods", help="list the identification methods")
+    p.set_defaults(func=cmd_identify_methods)
+    p = isub.add_parser("train", help="fit an identifier on a dataset")
+    p.add_argument("--data", required=True, help="dataset folder")
+    p.add_argument("--method", required=True)
+    p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),
+                   help="comma-separated channels (default heat_flux_W_m2)")
+    p.add_argument("--max-window-s", type=_positive(), default=1.0)
+    p.add_argument("--out", required=True, help="model file to write (.npz)")
+    p.set_defaults(func=cmd_identify_train)
+    p = isub.add_parser("eval", help="score a model on a dataset")
+    p.add_argument("--model", required=True)
+    p.add_argument("--data", required=True)
+    p.add_argument("--json", required=True)
+    p.add_argument("--png")
+    p.set_defaults(func=cmd_identify_eval)
+
+    p = bsub.add_parser("identify", help="the papers' identification tables, ours beside")
+    p.add_argument("--json", required=True)
+    p.add_argument("--png")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--methods", help="comma-separated (default: all)")
+    p.set_defaults(func=cmd_bench_identify)
 
     p = sub.add_parser("demo", help="run the main job on the default scene")
     p.add_argument("--scene", default="fingertip-7")

@@ -1,0 +1,134 @@
+"""Evaluate an identifier on a dataset: accuracy against time after contact,
+confusions (7 classes and the first paper's 5 merged ones), anytime
+decisions and the cost of one decision."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from telethermal.data.dataset import Trial
+from telethermal.ident.anytime import UNKNOWN, decide
+from telethermal.ident.base import Identifier
+from telethermal.ident.prepare import FLUX, from_trials
+
+#: The first paper's merged classes (Table 1): metals, and graphite with rubber.
+FIRST_PAPER_MERGE = {"aluminium": "aluminium-steel", "steel": "aluminium-steel",
+                     "graphite": "graphite-rubber", "rubber": "graphite-rubber"}
+
+
+def default_windows(channels) -> list[float]:
+    """0.1..1.0 s for heat flux; 1.0..5.0 s for temperature-only models."""
+    if FLUX in channels:
+        return [round(0.1 * k, 1) for k in range(1, 11)]
+    return [float(k) for k in range(1, 6)]
+
+
+def _confusion(truth, predicted, merge=None):
+    merge = merge or {}
+    table: dict[str, dict[str, int]] = {}
+    for t, p in zip(truth, predicted):
+        t, p = merge.get(t, t), merge.get(p, p)
+        row = table.setdefault(t, {})
+        row[p] = row.get(p, 0) + 1
+    return table
+
+
+def _percentiles(values):
+    if not values:
+        return {"n": 0}
+    v = np.asarray(values)
+    return {"n": int(len(v)), "p50": float(np.percentile(v, 50)),
+            "p90": float(np.percentile(v, 90)), "max": float(v.max()),
+            "values": [round(float(x), 4) for x in v]}
+
+
+def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> dict:
+    """Milliseconds for one posterior update (one window, one contact), on one
+    CPU thread, over ``repeats`` updates at random windows."""
+    import torch  # only to pin its thread pool, for methods that use it
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(0)
+    costs = []
+    try:
+        for _ in range(repeats):
+            i = int(rng.integers(len(model.windows_s_)))
+            row = x[int(rng.integers(len(x)))][None]
+            start = time.perf_counter()
+            model.proba_normalised(row, i)
+            costs.append((time.perf_counter() - start) * 1e3)
+    finally:
+        torch.set_num_threads(threads)
+    return {"inference_ms_p50": float(np.percentile(costs, 50)),
+            "inference_ms_p99": float(np.percentile(costs, 99))}
+
+
+def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
+    """Score a fitted identifier on trials it has not seen."""
+    windows_s = windows_s or default_windows(model.channels)
+    contacts, skipped = from_trials(trials, model.channels, model.sample_rate_hz_,
+                                    max_s=max(windows_s))
+    accuracy = {}
+    predicted_at_end = None
+    for w in windows_s:
+        n_w = int(round(w * model.sample_rate_hz_)) + 1
+        index = model.window_index(n_w)
+        usable = contacts.lengths >= n_w
+        if index is None or not usable.any():
+            continue
+        p = model.proba_normalised(contacts.x[usable], index)
+        guess = [model.classes_[k] for k in p.argmax(axis=1)]
+        truth = [lab for lab, ok in zip(contacts.labels, usable) if ok]
+        accuracy[f"{w:.1f}"] = float(np.mean([a == b for a, b in zip(guess, truth)]))
+        if usable.all():
+            predicted_at_end = guess
+    decisions = [decide(model, contacts.x[i], contacts.gap_k[i]) for i in range(len(contacts))]
+    decisions += [decide(model, np.empty((0, len(model.channels))), t.gap_k) for t in skipped]
+    truth_all = contacts.labels + [t.material for t in skipped]
+    committed = [(d, t) for d, t in zip(decisions, truth_all) if d.label != UNKNOWN]
+    report = {
+        "method": model.method, "classes": model.classes_, "channels": list(model.channels),
+        "trials": len(truth_all), "trials_without_gap": len(skipped),
+        "accuracy_by_window_s": accuracy,
+        "decision_time_s": _percentiles([d.time_s for d, _ in committed]),
+        "decision_accuracy": (float(np.mean([d.label == t for d, t in committed]))
+                              if committed else None),
+        "decision_unknown_rate": 1.0 - len(committed) / len(truth_all),
+        "unknown_reasons": {r: sum(d.reason == r for d in decisions if d.label == UNKNOWN)
+                            for r in sorted({d.reason for d in decisions if d.label == UNKNOWN})},
+        "threshold": model.threshold,
+        **inference_cost_ms(model, contacts.x),
+    }
+    if predicted_at_end is not None:
+        report["confusion"] = _confusion(contacts.labels, predicted_at_end)
+        if set(contacts.labels) & set(FIRST_PAPER_MERGE):
+            report["confusion_5"] = _confusion(contacts.labels, predicted_at_end,
+                                               FIRST_PAPER_MERGE)
+            merge = FIRST_PAPER_MERGE
+            report["accuracy_5_at_end"] = float(np.mean(
+                [merge.get(a, a) == merge.get(b, b)
+                 for a, b in zip(contacts.labels, predicted_at_end)]))
+    return report
+
+
+def plot_accuracy(reports: dict[str, dict], out_png, title: str = "") -> None:
+    """Accuracy against time after contact, one line per method."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for name, rep in reports.items():
+        acc = rep["accuracy_by_window_s"]
+        ax.plot([float(k) for k in acc], [100 * v for v in acc.values()], "o-", label=name)
+    ax.set_xlabel("time after contact (s)")
+    ax.set_ylabel("accuracy (%)")
+    ax.set_ylim(0, 102)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
