@@ -21,6 +21,7 @@ import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
 
 from telethermal.errors import IdentificationError
+from telethermal.threads import single_threaded_blas
 
 
 def _sigmoid(x):
@@ -117,6 +118,7 @@ def _damped_step(jtj, grad, mu, history):
         return lstsq(a, grad, cond=None)[0]
 
 
+@single_threaded_blas
 def train_lm(net: MLP, x: np.ndarray, y: np.ndarray, max_iter: int = 200, l2: float = 1e-4,
              mu: float = 1e-2, tol: float = 1e-9) -> tuple[MLP, FitHistory]:
     """Levenberg-Marquardt on the mean squared error of ``net(x)`` against ``y``.
@@ -167,6 +169,7 @@ def train_lm(net: MLP, x: np.ndarray, y: np.ndarray, max_iter: int = 200, l2: fl
     return net, history
 
 
+@single_threaded_blas
 def train_adam(net: MLP, x: np.ndarray, y: np.ndarray, epochs: int = 2000, lr: float = 1e-2,
                l2: float = 1e-4) -> tuple[MLP, FitHistory]:
     """Full-batch Adam on the same loss, for comparison with LM."""

@@ -34,6 +34,7 @@ from scipy.signal import lfilter
 
 from telethermal.errors import ModelError
 from telethermal.physics.materials import Material
+from telethermal.threads import single_threaded_blas
 
 #: Penetration depths of the run beyond which a semi-infinite layer is cut.
 TRUNCATION_DEPTHS = 5.0
@@ -443,6 +444,7 @@ class LayeredContact:
             g_back.append(np.zeros(len(ka)) if h == 0 else 1.0 / (r_half[:, cell] + 1.0 / h))
         return g_link, g_back[0], g_back[1], rc * self.grid.dx_m, r_half
 
+    @single_threaded_blas
     def solve(self, t_s, temp_a_c, temp_b_c, conductance_w_m2k=math.inf,
               k_scale_a=1.0, heat_scale_a=1.0, k_scale_b=1.0, heat_scale_b=1.0,
               back_temp_a_c=None, back_temp_b_c=None, sensor_lag_s=None,
