@@ -186,3 +186,19 @@ def test_model_file_from_another_version(tmp_path, rng, monkeypatch):
     monkeypatch.setattr(base, "FORMAT_VERSION", 1)
     with pytest.raises(ModelFileError, match="version 99"):
         load_model(path)
+
+
+@pytest.mark.parametrize("method", ["lstm", "rnn"])
+def test_recurrent_learns_levels_and_round_trips(tmp_path, rng, method):
+    data = contacts(rng, per_class=5)
+    model = make(method, epochs=60, n_hidden=16).fit(data)
+    p = model.proba_normalised(data.x, len(model.windows_s_) - 1)
+    assert np.mean(p.argmax(1) == [model.classes_.index(c) for c in data.labels]) >= 0.9
+    # One pass gives the posterior after every step; its last row is the full window's.
+    path = model.posterior_path(data.x[0])
+    np.testing.assert_allclose(path[-1], p[0], atol=1e-6)
+    again = load_model(model.save(tmp_path / "r.npz"))
+    np.testing.assert_allclose(again.proba_normalised(data.x, 10), model.proba_normalised(data.x, 10),
+                               atol=1e-6)
+    d = decide(model, data.x[0], 0.0)
+    assert d.label == "unknown" and d.reason == "gap too small"

@@ -30,23 +30,20 @@ class Decision:
 def decide(model: Identifier, x: np.ndarray, gap_k: float) -> Decision:
     """Walk one contact's normalised samples ``x`` (n, C) window by window.
 
-    Posteriors change only where a longer window becomes available, so this
-    gives the same decision as updating at every sample, at a fraction of
-    the cost.
+    Posteriors change only where a longer window (or, for a recurrent
+    network, a new input step) becomes available, so this gives the same
+    decision as updating at every sample, at a fraction of the cost.
     """
     if not np.isfinite(gap_k) or abs(gap_k) < MIN_GAP_K:
         return Decision(UNKNOWN, 0.0, None, "gap too small")
     n = int(np.sum(np.all(np.isfinite(x), axis=1)))
-    last = model.window_index(n)
-    if last is None:
-        return Decision(UNKNOWN, 0.0, None, "not confident")
-    best = (0.0, 0)
-    for i in range(last + 1):
-        p = model.proba_normalised(x[None, :n], i)[0]
+    path = model.posterior_path(x[:n])
+    best = 0.0
+    for i, p in enumerate(path):
         k = int(np.argmax(p))
-        best = (float(p[k]), k)
+        best = float(p[k])
         if p[k] >= model.threshold:
             if model.outside_classes(x[None, :n], i)[0]:
-                return Decision(UNKNOWN, float(p[k]), model.windows_s_[i], "outside classes")
-            return Decision(model.classes_[k], float(p[k]), model.windows_s_[i], "confident")
-    return Decision(UNKNOWN, best[0], None, "not confident")
+                return Decision(UNKNOWN, best, model.windows_s_[i], "outside classes")
+            return Decision(model.classes_[k], best, model.windows_s_[i], "confident")
+    return Decision(UNKNOWN, best, None, "not confident")

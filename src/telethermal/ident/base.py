@@ -133,6 +133,18 @@ class Identifier:
         z = self._logits(self.params_[window_index], self._window(x, w))
         return np.exp(log_softmax(z / self.temperature_[window_index], axis=1))
 
+    def posterior_path(self, x: np.ndarray) -> np.ndarray:
+        """Posteriors of one normalised contact (n, C) at each window it
+        covers, (k, n_classes): what a per-sample update would have shown."""
+        last = self.window_index(len(x))
+        if last is None:
+            return np.empty((0, len(self.classes_)))
+        return np.vstack([self.proba_normalised(x[None], i) for i in range(last + 1)])
+
+    def update_probe(self, row: np.ndarray, window_index: int) -> None:
+        """The work of one posterior update (for timing): one window model."""
+        self.proba_normalised(row, window_index)
+
     def predict_proba(self, samples: np.ndarray, gap_k: float, t_object_c: float | None = None
                       ) -> np.ndarray:
         """Posterior over ``classes_`` for raw samples since contact.

@@ -57,7 +57,7 @@ def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> d
             i = int(rng.integers(len(model.windows_s_)))
             row = x[int(rng.integers(len(x)))][None]
             start = time.perf_counter()
-            model.proba_normalised(row, i)
+            model.update_probe(row, i)
             costs.append((time.perf_counter() - start) * 1e3)
     finally:
         torch.set_num_threads(threads)

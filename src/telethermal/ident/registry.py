@@ -7,8 +7,10 @@ from pathlib import Path
 from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.base import Identifier, read_model_file
 from telethermal.ident.methods import EffusivityLda, PcaFnn
+from telethermal.ident.recurrent import Lstm, Rnn
 
-METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, EffusivityLda)}
+METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, EffusivityLda, Lstm,
+                                                                Rnn)}
 
 
 def make(method: str, **kw) -> Identifier:
