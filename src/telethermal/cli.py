@@ -203,7 +203,7 @@ def cmd_bench_identify(args) -> int:
     from telethermal.bench import identify
 
     methods = args.methods.split(",") if args.methods else None
-    with _progress(3 * len(methods or identify.METHODS), "bench identify") as advance:
+    with _progress(3 * len(methods or identify.METHODS) + 2, "bench identify") as advance:
         report = identify.run(seed=args.seed, methods=methods, progress=advance)
     report["command"] = "telethermal " + " ".join(sys.argv[1:])
     png = args.png or Path(args.json).with_suffix(".png")
@@ -227,6 +227,14 @@ def cmd_bench_identify(args) -> int:
             print(f"{' ' * len(method)}  {name}: >= 99 % from "
                   f"{row['first_window_at_99pct_s']} s (paper 100 % within "
                   f"{row['paper_100pct_within_s']} s)")
+    if "lm_vs_adam" in report:
+        print("LM against Adam: " + "; ".join(
+            f"{k} loss {v['final_loss']:.4f} after {v['iterations']} iterations, "
+            f"{v['runtime_s']:.2f} s" for k, v in report["lm_vs_adam"].items()))
+    if "lstm_hidden_sweep" in report:
+        print("LSTM width sweep (0.4 s / 1 s): " + "; ".join(
+            f"{k}: {100 * v['0.4']:.0f} / {100 * v['1']:.0f} %"
+            for k, v in report["lstm_hidden_sweep"]["accuracy"].items()))
     print(f"wrote {args.json} and {png}")
     return 0
 
