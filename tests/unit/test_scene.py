@@ -109,3 +109,25 @@ def test_scene_with_unreachable_tolerance_is_refused():
     scene = parse_scene(data, "tight.toml")
     with pytest.raises(SceneError, match="cannot model wood"):
         pad_contact_model(scene, scene.objects[0])
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_values = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6),
+                    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8),
+                    st.lists(st.integers(), max_size=3))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.sampled_from(["room_temp_c", "sample_rate_hz", "pre_contact_s", "name"]), _values,
+       st.sampled_from(["kind", "gap_k", "layers", "contact_duration_s", "trials_per_material"]),
+       _values)
+def test_any_bad_value_is_a_scene_error_not_a_crash(top_key, top_value, pad_key, pad_value):
+    data = tomllib.loads(MINIMAL)
+    data[top_key] = top_value
+    data["pad"][pad_key] = pad_value
+    try:
+        parse_scene(data, "fuzz.toml")
+    except SceneError as exc:
+        assert "fuzz.toml" in str(exc)
