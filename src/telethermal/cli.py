@@ -156,7 +156,7 @@ def cmd_identify_methods(args) -> int:
 
 def cmd_identify_train(args) -> int:
     from telethermal.data.dataset import load_dataset
-    from telethermal.ident.prepare import from_trials
+    from telethermal.ident.prepare import MIN_GAP_K, from_trials
     from telethermal.ident.registry import make
 
     with console.status(f"reading {args.data}"):
@@ -164,7 +164,8 @@ def cmd_identify_train(args) -> int:
     model = make(args.method, channels=args.channels, max_window_s=args.max_window_s)
     contacts, skipped = from_trials(trials, model.channels, max_s=args.max_window_s)
     if skipped:
-        log.warning("%d trial(s) with a gap under 1 K left out of training", len(skipped))
+        log.warning("%d trial(s) with a gap under %g K left out of training", len(skipped),
+                    MIN_GAP_K)
     start = time.perf_counter()
     with console.status(f"training {args.method} on {len(contacts)} trials"):
         model.fit(contacts)
@@ -203,7 +204,7 @@ def cmd_bench_identify(args) -> int:
     from telethermal.bench import identify
 
     methods = args.methods.split(",") if args.methods else None
-    with _progress(3 * len(methods or identify.METHODS) + 2, "bench identify") as advance:
+    with _progress(4 * len(methods or identify.METHODS) + 2, "bench identify") as advance:
         report = identify.run(seed=args.seed, methods=methods, progress=advance)
     report["command"] = "telethermal " + " ".join(sys.argv[1:])
     png = args.png or Path(args.json).with_suffix(".png")
@@ -223,6 +224,11 @@ def cmd_bench_identify(args) -> int:
         print(f"{' ' * len(method)}  active pad: " + ", ".join(
             f"{k} s {100 * v:.0f} %" for k, v in ap["active_accuracy_by_window_s"].items())
             + f"; passive pad unknown {100 * ap['passive_unknown_rate']:.0f} %")
+        if "temperature" in rep:
+            tr = rep["temperature"]
+            print(f"{' ' * len(method)}  temperature channel, active pad: " + ", ".join(
+                f"{k} s {100 * v:.0f} %" for k, v in tr["active_accuracy_by_window_s"].items())
+                + f"; passive unknown {100 * tr['passive_unknown_rate']:.0f} %")
         for name, row in rep["cross_temperature"].items():
             print(f"{' ' * len(method)}  {name}: >= 99 % from "
                   f"{row['first_window_at_99pct_s']} s (paper 100 % within "

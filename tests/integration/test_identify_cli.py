@@ -71,7 +71,6 @@ def test_passive_pad_at_zero_gap_is_unknown(tmp_path):
     model = make("effusivity-lda").fit(from_trials(load_dataset(tmp_path / "pro" / "pad"))[0])
     report = evaluate(model, load_dataset(tmp_path / "cnv" / "pad"))
     # The passive pad sits at the object's temperature: the measured gap is
-    # under 1 K (or, with the IR error, barely over it, and the flux then
-    # fits no class). Never a confident wrong class.
+    # under 2 K (five IR-thermometer sigmas). Never a confident wrong class.
     assert report["decision_unknown_rate"] == 1.0
-    assert report["unknown_reasons"].get("gap too small", 0) >= report["trials"] // 2
+    assert report["unknown_reasons"] == {"gap too small": report["trials"]}

@@ -11,7 +11,7 @@ import numpy as np
 from telethermal.data.dataset import Trial
 from telethermal.ident.anytime import UNKNOWN, decide
 from telethermal.ident.base import Identifier
-from telethermal.ident.prepare import FLUX, from_trials
+from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials
 
 #: The first paper's merged classes (Table 1): metals, and graphite with rubber.
 FIRST_PAPER_MERGE = {"aluminium": "aluminium-steel", "steel": "aluminium-steel",
@@ -65,13 +65,10 @@ def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> d
             "inference_ms_p99": float(np.percentile(costs, 99))}
 
 
-def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
-    """Score a fitted identifier on trials it has not seen."""
-    windows_s = windows_s or default_windows(model.channels)
-    contacts, skipped = from_trials(trials, model.channels, model.sample_rate_hz_,
-                                    max_s=max(windows_s))
-    accuracy = {}
-    predicted_at_end = None
+def _accuracy_by_window(model, contacts, windows_s):
+    """Accuracy at each window (trials too short for it left out), and the
+    guesses at the last window every trial covers."""
+    accuracy, predicted_at_end = {}, None
     for w in windows_s:
         n_w = int(round(w * model.sample_rate_hz_)) + 1
         index = model.window_index(n_w)
@@ -84,9 +81,23 @@ def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
         accuracy[f"{w:.1f}"] = float(np.mean([a == b for a, b in zip(guess, truth)]))
         if usable.all():
             predicted_at_end = guess
-    decisions = [decide(model, contacts.x[i], contacts.gap_k[i]) for i in range(len(contacts))]
+    return accuracy, predicted_at_end
+
+
+def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
+    """Score a fitted identifier on trials it has not seen."""
+    windows_s = windows_s or default_windows(model.channels)
+    skipped = [t for t in trials if not abs(t.gap_k) >= MIN_GAP_K]
+    usable_trials = [t for t in trials if abs(t.gap_k) >= MIN_GAP_K]
+    accuracy, predicted_at_end, decisions, labels = {}, None, [], []
+    if usable_trials:
+        contacts, _ = from_trials(usable_trials, model.channels, model.sample_rate_hz_,
+                                  max_s=max(windows_s))
+        accuracy, predicted_at_end = _accuracy_by_window(model, contacts, windows_s)
+        decisions = [decide(model, contacts.x[i], contacts.gap_k[i]) for i in range(len(contacts))]
+        labels = contacts.labels
     decisions += [decide(model, np.empty((0, len(model.channels))), t.gap_k) for t in skipped]
-    truth_all = contacts.labels + [t.material for t in skipped]
+    truth_all = labels + [t.material for t in skipped]
     committed = [(d, t) for d, t in zip(decisions, truth_all) if d.label != UNKNOWN]
     report = {
         "method": model.method, "classes": model.classes_, "channels": list(model.channels),
@@ -99,8 +110,9 @@ def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
         "unknown_reasons": {r: sum(d.reason == r for d in decisions if d.label == UNKNOWN)
                             for r in sorted({d.reason for d in decisions if d.label == UNKNOWN})},
         "threshold": model.threshold,
-        **inference_cost_ms(model, contacts.x),
     }
+    if usable_trials:
+        report.update(inference_cost_ms(model, contacts.x))
     if predicted_at_end is not None:
         report["confusion"] = _confusion(contacts.labels, predicted_at_end)
         if set(contacts.labels) & set(FIRST_PAPER_MERGE):

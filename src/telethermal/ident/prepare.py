@@ -20,8 +20,10 @@ from telethermal.errors import IdentificationError
 
 FLUX = "heat_flux_W_m2"
 TEMPERATURE = "temperature_C"
-#: Below this gap (K) a contact is not normalised and not identified.
-MIN_GAP_K = 1.0
+#: Below this gap (K) a contact is not normalised and not identified: five
+#: standard deviations of an infrared thermometer's error (0.4 K), so a gap
+#: measured smaller may be no gap at all (the passive pad of Case I-cnv).
+MIN_GAP_K = 2.0
 
 
 @dataclass
