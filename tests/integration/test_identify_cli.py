@@ -19,7 +19,7 @@ def gripper_db(tmp_path_factory):
     return root / "pad"
 
 
-def test_train_eval_round_trip(gripper_db, tmp_path, capsys):
+def test_train_eval_round_trip(gripper_db, tmp_path):
     model = tmp_path / "lda.npz"
     assert main(["identify", "train", "--data", str(gripper_db), "--method", "effusivity-lda",
                  "--out", str(model)]) == 0

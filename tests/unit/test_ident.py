@@ -153,7 +153,7 @@ def test_unfitted_and_channel_mismatch(rng):
         make("crystal-ball")
 
 
-def test_trials_without_a_channel_are_named(tmp_path):
+def test_trials_without_a_channel_are_named():
     from telethermal.data.dataset import Trial
     trial = Trial("t1", "wood", "t1.csv", 100.0, 24.0, 34.0, 24.0, "trial-0",
                   channels={"t_s": np.arange(10) / 100.0, "force_N": np.ones(10)})

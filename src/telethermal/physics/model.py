@@ -23,7 +23,6 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from scipy.signal import lfilter
 from scipy.special import erfcx
 
 from telethermal.errors import ModelError
@@ -108,6 +107,8 @@ class AnalyticContact:
                                          np.atleast_1d(k_scale_b), np.atleast_1d(heat_scale_b)))
         if not np.all(h > 0):
             raise ModelError(f"contact conductance must be > 0, got {h.min()}")
+        if energy:
+            raise ModelError("heat-balance accounting needs the layered model")
         e_a = self.material_a.effusivity * np.sqrt(ka * ha)
         e_b = self.material_b.effusivity * np.sqrt(kb * hb)
         flux, settled = self._unit(t, h, e_a, e_b)

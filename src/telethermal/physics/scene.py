@@ -160,7 +160,7 @@ def _layers(raw, reader: _Reader) -> tuple[Layer, ...]:
     return tuple(layers)
 
 
-def _parse_pad(table, source, room_c) -> PadSpec:
+def _parse_pad(table, source) -> PadSpec:
     r = _Reader(table, "[pad]", source)
     kind = r.text("kind", choices=PAD_KINDS)
     layers = _layers(table.get("layers"), r)
@@ -240,7 +240,7 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         name=r.text("name"), description=r.text("description", ""),
         room_temp_c=room, sample_rate_hz=r.num("sample_rate_hz", lo=1, hi=1e6),
         pre_contact_s=r.num("pre_contact_s", 0.5, 0, 60),
-        pad=_parse_pad(data["pad"], source, room),
+        pad=_parse_pad(data["pad"], source),
         finger=_parse_finger(data["finger"], source) if "finger" in data else None,
         objects=_parse_objects(data.get("objects"), source, room),
         sensors=_parse_dataclass(SensorSpec, data.get("sensors"), "[sensors]", source),
