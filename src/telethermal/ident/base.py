@@ -236,8 +236,10 @@ class Identifier:
         model.sample_rate_hz_ = float(header["sample_rate_hz"])
         model.windows_s_ = list(header["windows_s"])
         model.temperature_ = np.asarray(header["temperature"], dtype=np.float64)
+        # One parameter set per window for a bank, one in all for a network.
+        n_sets = len({k.split(".", 1)[0] for k in arrays})
         model.params_ = [{k.split(".", 1)[1]: v for k, v in arrays.items()
-                          if k.startswith(f"w{i}.")} for i in range(len(model.windows_s_))]
+                          if k.startswith(f"w{i}.")} for i in range(n_sets)]
         return model
 
 

@@ -137,12 +137,7 @@ class Recurrent(Identifier):
 
     @classmethod
     def restore(cls, header: dict, arrays: dict) -> "Recurrent":
-        model = cls(channels=header["channels"], **header["hyper"])
-        model.classes_ = list(header["classes"])
-        model.sample_rate_hz_ = float(header["sample_rate_hz"])
-        model.windows_s_ = list(header["windows_s"])
-        model.temperature_ = np.asarray(header["temperature"], dtype=np.float64)
-        model.params_ = [{k.split(".", 1)[1]: v for k, v in arrays.items() if k.startswith("w0.")}]
+        model = super().restore(header, arrays)
         model.scale_ = model.params_[0]["scale"]
         return model
 
