@@ -198,6 +198,31 @@ def temperature_rows(method: str, seed: int) -> dict:
             "paper": "temperature sensing needed 4 s and reached 75 % (glass and acrylic alike)"}
 
 
+def ir_ablation(seed: int, method: str = "effusivity-lda") -> dict:
+    """Where the accuracy goes: the same leave-trials-out runs with the
+    infrared thermometer's error (which sets the pad, and so the gap used for
+    normalisation) at the scene's 0.4 K and at zero."""
+    import dataclasses
+
+    rows = {}
+    for name in ("fingertip-7", "gripper-case-I-pro"):
+        scene = load_scene(name)
+        for ir in (scene.sensors.ir_error_k, 0.0):
+            varied = dataclasses.replace(scene, sensors=dataclasses.replace(scene.sensors,
+                                                                             ir_error_k=ir))
+            contacts, _ = from_trials(pad_database(varied, np.random.default_rng(seed)),
+                                      max_s=1.0)
+            hits = {0.2: [], 0.5: [], 1.0: []}
+            for test in group_folds(contacts.groups, 5):
+                train = np.setdiff1d(np.arange(len(contacts)), test)
+                model = make(method).fit(contacts.subset(train))
+                for w in hits:
+                    hits[w] += _accuracy(model, contacts.subset(test), w)
+            rows[f"{name}, ir_error_k={ir:g}"] = {f"{w:g}": float(np.mean(v))
+                                                  for w, v in hits.items()}
+    return {"method": method, "accuracy": rows}
+
+
 def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = None) -> dict:
     step = progress or (lambda _m: None)
     methods = methods or sorted(METHODS)
@@ -218,6 +243,8 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
         if not make(method).streaming:
             step(f"{method}: temperature channel")
             report["methods"][method]["temperature"] = temperature_rows(method, seed)
+    step("IR-thermometer ablation")
+    report["ir_ablation"] = ir_ablation(seed)
     if "pca-fnn" in methods:
         step("LM against Adam")
         report["lm_vs_adam"] = lm_vs_adam(seed)
