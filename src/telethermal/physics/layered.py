@@ -174,6 +174,8 @@ class ContactResult:
         """max|in - stored| over the run, relative to the largest of the heat
         that entered, was stored or crossed the contact; per trial. Zero for a
         conservative model (0 as well when no heat moved at all)."""
+        if self.energy_in_j_m2 is None:
+            raise ModelError("no heat balance: solve(..., energy=True) computes it")
         scale = np.maximum.reduce([np.abs(a).max(axis=-1) for a in (
             self.energy_in_j_m2, self.energy_stored_j_m2, self.energy_into_b_j_m2)])
         miss = np.abs(self.energy_in_j_m2 - self.energy_stored_j_m2).max(axis=-1)
