@@ -34,3 +34,7 @@ class IdentificationError(TelethermalError, ValueError):
 
 class ModelFileError(TelethermalError, ValueError):
     """A model file that is not one, is truncated, or is from another version."""
+
+
+class ControlError(TelethermalError, ValueError):
+    """A controller called with an input it cannot act on (a non-positive step)."""

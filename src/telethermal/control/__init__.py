@@ -1,0 +1,1 @@
+"""Control: PID heat-flux loop and the safety supervisor (time always injected)."""

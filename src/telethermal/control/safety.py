@@ -1,0 +1,162 @@
+"""The safety supervisor: a pure function every pad setpoint passes through.
+
+``supervise(state, reading, request, limits, dt_s)`` returns what was
+actually applied and the next state; it never touches a device and never
+reads a clock. It keeps the skin-contact pad temperature inside a band
+(default 15-43 C), limits the rate of change of the temperature setpoint,
+clamps the flux setpoint (and refuses flux that would drive the pad further
+past either end of the band), and enters a **safe state** — hold the pad at a
+neutral 33 C, since "off" is not neutral for a Peltier — within the same
+control period on:
+
+- a temperature or flux reading that is NaN, infinite or outside the
+  plausible range;
+- a stuck sensor: readings bit-for-bit unchanged for ``stuck_after_s`` (a
+  live sensor always shows noise);
+- no setpoint, a non-finite one, or one older than ``setpoint_lifetime_s``.
+
+It leaves the safe state when every condition has cleared, logs entering
+and leaving, and counts every event.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field, replace
+
+from telethermal.errors import ControlError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class SafetyLimits:
+    skin_min_c: float = 15.0
+    skin_max_c: float = 43.0
+    neutral_c: float = 33.0
+    max_rate_k_s: float = 5.0
+    max_flux_w_m2: float = 10_000.0
+    setpoint_lifetime_s: float = 0.5
+    stuck_after_s: float = 0.5
+    reading_min_c: float = -20.0
+    reading_max_c: float = 80.0
+
+    def __post_init__(self):
+        if not self.skin_min_c <= self.neutral_c <= self.skin_max_c:
+            raise ControlError("the neutral temperature must lie inside the skin band")
+
+
+@dataclass(frozen=True, slots=True)
+class Reading:
+    t_s: float
+    pad_temp_c: float
+    flux_w_m2: float
+
+
+@dataclass(frozen=True, slots=True)
+class Request:
+    """A setpoint: the pad temperature and the flux wanted, issued at ``issued_s``."""
+
+    temp_c: float
+    flux_w_m2: float
+    issued_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class Applied:
+    temp_c: float                    # pad temperature setpoint actually applied
+    flux_w_m2: float | None          # flux setpoint applied; None in the safe state
+    safe: bool
+    reasons: tuple[str, ...] = ()    # why safe
+    clamps: tuple[str, ...] = ()     # what was limited
+
+
+@dataclass(frozen=True)
+class SafetyState:
+    applied_temp_c: float
+    safe: bool = False
+    last_reading: tuple[float, float] | None = None
+    unchanged_since_s: float = math.inf      # when the current reading was first seen
+    events: dict = field(default_factory=dict)
+
+    def count(self, name: str) -> int:
+        return self.events.get(name, 0)
+
+
+def initial_state(limits: SafetyLimits = SafetyLimits()) -> SafetyState:
+    """Start in the safe state at the neutral temperature until told otherwise."""
+    return SafetyState(applied_temp_c=limits.neutral_c, safe=True)
+
+
+def _faults(state: SafetyState, reading: Reading, request: Request | None,
+            limits: SafetyLimits) -> list[str]:
+    faults = []
+    temp_ok = math.isfinite(reading.pad_temp_c) and \
+        limits.reading_min_c <= reading.pad_temp_c <= limits.reading_max_c
+    if not temp_ok:
+        faults.append("temperature reading out of range")
+    if not math.isfinite(reading.flux_w_m2):
+        faults.append("flux reading not finite")
+    if reading.t_s - state.unchanged_since_s >= limits.stuck_after_s:
+        faults.append("stuck sensor")
+    if request is None:
+        faults.append("no setpoint")
+    elif not (math.isfinite(request.temp_c) and math.isfinite(request.flux_w_m2)):
+        faults.append("setpoint not finite")
+    elif reading.t_s - request.issued_s > limits.setpoint_lifetime_s:
+        faults.append("setpoint expired")
+    return faults
+
+
+def _limit(state, reading, request, limits, dt_s):
+    """Band, rate and flux limits on a healthy request: (temp, flux, clamps)."""
+    clamps = []
+    temp = min(max(request.temp_c, limits.skin_min_c), limits.skin_max_c)
+    if temp != request.temp_c:
+        clamps.append("temperature band")
+    step = limits.max_rate_k_s * dt_s
+    limited = min(max(temp, state.applied_temp_c - step), state.applied_temp_c + step)
+    if limited != temp:
+        clamps.append("rate")
+    flux = min(max(request.flux_w_m2, -limits.max_flux_w_m2), limits.max_flux_w_m2)
+    if flux != request.flux_w_m2:
+        clamps.append("flux")
+    # Positive flux heats the skin: none at or past the top of the band, and
+    # no cooling flux at or past its bottom.
+    if (reading.pad_temp_c >= limits.skin_max_c and flux > 0) or \
+            (reading.pad_temp_c <= limits.skin_min_c and flux < 0):
+        flux = 0.0
+        clamps.append("flux at temperature limit")
+    return limited, flux, clamps
+
+
+def supervise(state: SafetyState, reading: Reading, request: Request | None,
+              limits: SafetyLimits, dt_s: float) -> tuple[Applied, SafetyState]:
+    """One control period. Returns (what is applied, the next state)."""
+    if not (dt_s > 0 and math.isfinite(dt_s)):
+        raise ControlError(f"supervise needs a positive control period, got {dt_s}")
+    pair = (reading.pad_temp_c, reading.flux_w_m2)
+    first_seen = state.unchanged_since_s if pair == state.last_reading else reading.t_s
+    tracked = replace(state, last_reading=pair, unchanged_since_s=first_seen)
+    faults = _faults(tracked, reading, request, limits)
+    events = dict(state.events)
+    if faults:
+        for fault in faults:
+            events[fault] = events.get(fault, 0) + 1
+        if not state.safe:
+            events["entered safe state"] = events.get("entered safe state", 0) + 1
+            log.warning("safe state entered: %s", ", ".join(faults))
+        applied = Applied(limits.neutral_c, None, True, tuple(faults))
+        return applied, replace(tracked, applied_temp_c=limits.neutral_c, safe=True,
+                                events=events)
+    if state.safe:
+        events["left safe state"] = events.get("left safe state", 0) + 1
+        log.info("safe state left")
+    temp, flux, clamps = _limit(state, reading, request, limits, dt_s)
+    for clamp in clamps:
+        events[f"clamped: {clamp}"] = events.get(f"clamped: {clamp}", 0) + 1
+    if clamps:
+        log.info("setpoint limited (%s)", ", ".join(clamps))
+    return (Applied(temp, flux, False, (), tuple(clamps)),
+            replace(tracked, applied_temp_c=temp, safe=False, events=events))
