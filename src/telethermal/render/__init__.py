@@ -1,0 +1,1 @@
+"""Rendering: flux generation (and, later, latency compensation)."""
