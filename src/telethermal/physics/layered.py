@@ -212,6 +212,25 @@ def _output_rows(g_link, g_ba, g_bb, root_c, na):
     return out
 
 
+@dataclass
+class ModalSystem:
+    """A diagonalised batch: modes (B, N), output rows (B, n_out, N), and the
+    assembly pieces the outputs need (temperatures as deviations from the
+    object's initial temperature)."""
+
+    lam: np.ndarray
+    w0: np.ndarray
+    f: np.ndarray
+    m: np.ndarray
+    g_ba: np.ndarray
+    g_bb: np.ndarray
+    tba: np.ndarray
+    tbb: np.ndarray
+    cap: np.ndarray
+    theta0: np.ndarray
+    r_half: np.ndarray
+
+
 class LayeredContact:
     """Batch solver for one grid and many trials (different temperatures,
     contact conductances and property scalings on the same layer structure).
@@ -293,29 +312,12 @@ class LayeredContact:
         t = np.asarray(t_s, dtype=np.float64)
         if t.ndim not in (1, 2) or not np.all(np.isfinite(t)):
             raise ModelError(f"t_s must be finite, of shape (n,) or (batch, n); got {t.shape}")
-        # Work in deviations from the object's initial temperature, so that a
-        # zero gap with matching back faces is an exact zero everywhere.
-        tba = self._back_temp(self.back_a, back_temp_a_c, ta) - tb
-        tbb = self._back_temp(self.back_b, back_temp_b_c, tb) - tb
-        g_link, g_ba, g_bb, cap, r_half = self._assemble(hc, ksa, hsa, ksb, hsb)
-        batch, n = cap.shape
-        na = self.grid.n_a
-        diag = np.zeros_like(cap)
-        diag[:, :-1] += g_link
-        diag[:, 1:] += g_link
-        diag[:, 0] += g_ba
-        diag[:, -1] += g_bb
-        root_c = np.sqrt(cap)
-        theta0 = np.where(self._is_a, (ta - tb)[:, None], 0.0)
-        load = np.zeros_like(cap)
-        load[:, 0] = g_ba * tba
-        load[:, -1] = g_bb * tbb
-        out = _output_rows(g_link, g_ba, g_bb, root_c, na)
-        n_out = 5 if energy else 3
-        tc = np.broadcast_to(np.clip(t, 0.0, None), (batch, t.shape[-1]))
-        modes = [self._modes(diag[i], cap[i], g_link[i], theta0[i], load[i], out[i, :n_out])
-                 for i in range(batch)]
-        lam, w0, f, m = (np.stack(x) for x in zip(*modes))
+        system = self._system(ta, tb, hc, (ksa, hsa, ksb, hsb), back_temp_a_c, back_temp_b_c,
+                              5 if energy else 3)
+        lam, w0, f, m = system.lam, system.w0, system.f, system.m
+        g_ba, g_bb, tba, tbb = system.g_ba, system.g_bb, system.tba, system.tbb
+        cap, theta0, r_half, na = system.cap, system.theta0, system.r_half, self.grid.n_a
+        tc = np.broadcast_to(np.clip(t, 0.0, None), (len(ta), t.shape[-1]))
         res, integ, sensed = evaluate_modes(lam, w0, f, m, tc, energy, sensor_lag_s)
         flux = res[:, 0]
         base = tb[:, None]
@@ -330,6 +332,29 @@ class LayeredContact:
             result.energy_stored_j_m2 = res[:, 3] - (cap * theta0).sum(axis=1)[:, None]
             result.energy_into_b_j_m2 = integ[:, 0]
         return result
+
+    def _system(self, ta, tb, hc, scales, back_temp_a_c, back_temp_b_c, n_out) -> "ModalSystem":
+        """Assemble and diagonalise every trial of a batch (arrays of shape (B,)).
+
+        Temperatures are deviations from the object's initial temperature,
+        so that a zero gap with matching back faces is an exact zero."""
+        tba = self._back_temp(self.back_a, back_temp_a_c, ta) - tb
+        tbb = self._back_temp(self.back_b, back_temp_b_c, tb) - tb
+        g_link, g_ba, g_bb, cap, r_half = self._assemble(hc, *scales)
+        diag = np.zeros_like(cap)
+        diag[:, :-1] += g_link
+        diag[:, 1:] += g_link
+        diag[:, 0] += g_ba
+        diag[:, -1] += g_bb
+        theta0 = np.where(self._is_a, (ta - tb)[:, None], 0.0)
+        load = np.zeros_like(cap)
+        load[:, 0] = g_ba * tba
+        load[:, -1] = g_bb * tbb
+        out = _output_rows(g_link, g_ba, g_bb, np.sqrt(cap), self.grid.n_a)
+        modes = [self._modes(diag[i], cap[i], g_link[i], theta0[i], load[i], out[i, :n_out])
+                 for i in range(len(cap))]
+        lam, w0, f, m = (np.stack(x) for x in zip(*modes))
+        return ModalSystem(lam, w0, f, m, g_ba, g_bb, tba, tbb, cap, theta0, r_half)
 
     @staticmethod
     def _modes(diag, cap, g_link, theta0, load, out):

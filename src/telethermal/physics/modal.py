@@ -78,21 +78,21 @@ def _modal_state(lam, t, w0, f):
     return w
 
 
-def _phi_any(lam, t):
+def phi_any(lam, t):
     """_phi for any broadcastable shapes (small arrays; no column tricks)."""
     lam, t = np.broadcast_arrays(np.asarray(lam, dtype=np.float64), np.asarray(t, dtype=np.float64))
     zero = lam == 0
     return np.where(zero, t, np.expm1(-lam * t) / -np.where(zero, 1.0, lam))
 
 
-def _lag_kernels(lam, t, tau_s):
+def lag_kernels(lam, t, tau_s):
     """Lag (time constant tau, zero start) at time t of exp(-lam t) and of
     phi(lam, t), elementwise. With mu = 1/tau the first is
     mu exp(-min(lam, mu) t) phi(|lam - mu|, t); the second follows from
     phi = (1 - exp(-lam t)) / lam (and is t - tau (1 - exp(-mu t)) at lam = 0)."""
     mu = 1.0 / tau_s
     lag_one = -np.expm1(-mu * t)
-    lag_exp = mu * np.exp(-np.minimum(lam, mu) * t) * _phi_any(np.abs(lam - mu), t)
+    lag_exp = mu * np.exp(-np.minimum(lam, mu) * t) * phi_any(np.abs(lam - mu), t)
     zero = lam == 0
     lag_phi = np.where(zero, t - tau_s * lag_one,
                        (lag_one - lag_exp) / np.where(zero, 1.0, lam))
@@ -101,7 +101,7 @@ def _lag_kernels(lam, t, tau_s):
 
 def _lagged(lam, t, w0, f, m_row, tau_s):
     """First-order lag (zero state at t = 0) of the output ``m_row . w(t)`` at
-    times ``t`` (n, 1), exact mode by mode (see :func:`_lag_kernels`); a
+    times ``t`` (n, 1), exact mode by mode (see :func:`lag_kernels`); a
     settled mode's lag of exp(-lam t) is mu exp(-mu t) / (lam - mu)."""
     mu = 1.0 / tau_s
     after, slow = _split(lam, t)
@@ -111,7 +111,7 @@ def _lagged(lam, t, w0, f, m_row, tau_s):
     ta = t[after]
     lag_exp = np.empty((len(ta), len(lam)))
     lag_phi = np.empty((len(ta), len(lam)))
-    lag_exp[:, slow], lag_phi[:, slow] = _lag_kernels(lam[slow], ta, tau_s)
+    lag_exp[:, slow], lag_phi[:, slow] = lag_kernels(lam[slow], ta, tau_s)
     fast = lam[~slow]
     lag_exp[:, ~slow] = mu * np.exp(-mu * ta) / (fast - mu)
     lag_phi[:, ~slow] = (-np.expm1(-mu * ta) - lag_exp[:, ~slow]) / fast
@@ -196,16 +196,16 @@ def _stepped(lam, w0, f, m, tc, dt, tau_s):
             continue
         k0 = int(np.argmax(started[i]))
         t_first = tc[i, k0]
-        w_first = np.exp(-lam[i] * t_first) * w0[i] + _phi_any(lam[i], t_first) * f[i]
+        w_first = np.exp(-lam[i] * t_first) * w0[i] + phi_any(lam[i], t_first) * f[i]
         steps = n - k0
         rows = m[i]
         if tau_s:
-            ge, gp = _lag_kernels(lam[i], dt, tau_s)
+            ge, gp = lag_kernels(lam[i], dt, tau_s)
             rows = np.vstack([rows, ge * m[i, 0]])          # the sensor's drive
         y = _step_outputs(lam[i], w_first, f[i], dt, steps, rows)
         out[i, :, k0:] = y[:m.shape[1]]
         if tau_s:
-            ke, kp = _lag_kernels(lam[i], t_first, tau_s)
+            ke, kp = lag_kernels(lam[i], t_first, tau_s)
             s_first = (ke * w0[i] + kp * f[i]) @ m[i, 0]
             drive = y[-1, :-1] + (gp * f[i]) @ m[i, 0]
             e_tau = np.exp(-dt / tau_s)

@@ -1,0 +1,1 @@
+"""Devices: the simulated plants (and, later, serial and CAN drivers)."""

@@ -1,0 +1,91 @@
+"""The master's display as a plant for a control loop: the Peltier pad under
+the operator's finger, stepped at a fixed period.
+
+The input is the Peltier junction temperature behind the pad's layers, held
+over each period (zero-order hold). Each step is exact: in the modal form of
+:class:`~telethermal.physics.layered.LayeredContact` every mode moves by
+``w <- exp(-lam dt) w + phi(lam, dt) f_unit (u - T_ref)``, and the heat-flux
+sensor's first-order lag by its own exact one-step map, so a step costs
+O(cells) and holds at any period.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from telethermal.errors import ControlError
+from telethermal.physics.layered import LayeredContact
+from telethermal.physics.modal import lag_kernels, phi_any
+
+
+@dataclass(frozen=True, slots=True)
+class PlantReading:
+    t_s: float
+    flux_w_m2: float             # as the pad's sensor reads it (lagged)
+    contact_flux_w_m2: float     # true flux from the pad into the finger
+    pad_surface_c: float
+    skin_surface_c: float
+
+
+class DisplayPlant:
+    """Pad (side a, junction behind it) pressed on the finger (side b).
+
+    Parameters
+    ----------
+    model : LayeredContact
+        Pad layers as side a (isothermal back = the junction), the finger as side b.
+    pad_temp_c, finger_temp_c : float
+        Uniform temperatures at contact (t = 0).
+    conductance_w_m2k : float
+        Pad-finger contact conductance.
+    dt_s : float
+        Control period.
+    sensor_lag_s : float, optional
+        Time constant of the pad's heat-flux sensor (none: reads the true flux).
+    """
+
+    def __init__(self, model: LayeredContact, pad_temp_c: float, finger_temp_c: float,
+                 conductance_w_m2k: float, dt_s: float, sensor_lag_s: float | None = None):
+        if not dt_s > 0:
+            raise ControlError(f"plant period must be > 0, got {dt_s}")
+        one = np.ones(1)
+        ta, tb = np.array([pad_temp_c], float), np.array([finger_temp_c], float)
+        system = model._system(ta, tb, np.array([conductance_w_m2k], float), (one,) * 4,
+                               finger_temp_c + 1.0, None, 3)
+        self._ref_c = finger_temp_c
+        lam, f_unit = system.lam[0], system.f[0]
+        self._m = system.m[0]
+        na = model.grid.n_a
+        self._r_pad, self._r_skin = system.r_half[0, na - 1], system.r_half[0, na]
+        self._decay = np.exp(-lam * dt_s)
+        self._drive = phi_any(lam, dt_s) * f_unit
+        self._w = system.w0[0].copy()
+        self._dt = dt_s
+        self._lag = None
+        if sensor_lag_s:
+            ge, gp = lag_kernels(lam, dt_s, sensor_lag_s)
+            self._lag = (np.exp(-dt_s / sensor_lag_s), ge * self._m[0],
+                         float((gp * f_unit) @ self._m[0]))
+        self._sensed = 0.0
+        self.t_s = 0.0
+
+    def read(self) -> PlantReading:
+        out = self._m @ self._w
+        flux = float(out[0])
+        return PlantReading(self.t_s, self._sensed if self._lag else flux, flux,
+                            self._ref_c + float(out[1]) - flux * self._r_pad,
+                            self._ref_c + float(out[2]) + flux * self._r_skin)
+
+    def step(self, junction_c: float) -> PlantReading:
+        """Hold the junction at ``junction_c`` for one period; read at its end."""
+        if not np.isfinite(junction_c):
+            raise ControlError(f"junction temperature must be finite, got {junction_c}")
+        u = junction_c - self._ref_c
+        if self._lag:
+            e_tau, ge_m, gp_m = self._lag
+            self._sensed = e_tau * self._sensed + float(ge_m @ self._w) + gp_m * u
+        self._w = self._decay * self._w + self._drive * u
+        self.t_s += self._dt
+        return self.read()
