@@ -170,3 +170,44 @@ def test_whatever_is_asked_the_applied_temperature_stays_in_the_band(steps):
             assert abs(applied.flux_w_m2) <= LIM.max_flux_w_m2
         previous = applied.temp_c
     assert np.isfinite(previous)
+
+
+# ------------------------------------------------------------------ contact
+from telethermal.control.contact import ContactDetector  # noqa: E402
+from telethermal.physics.sensors import ForceSensor  # noqa: E402
+
+
+def test_press_and_lift_are_detected_once_with_the_true_onset(rng):
+    # A 10 N press rising with a 30 ms time constant from t = 0.2 s, noisy;
+    # the first sample above 2 N is at t0 + 0.03 ln(10/8) = 6.7 ms after onset.
+    t = np.arange(0, 2.0, 1e-3)
+    force = ForceSensor(noise_n_rms=0.05).read_n(t - 0.2, 10.0, rng)
+    force[t > 1.5] = rng.normal(0, 0.05, np.sum(t > 1.5))      # lifted at 1.5 s
+    detector = ContactDetector()
+    events = [e for e in (detector.update(a, b) for a, b in zip(t, force)) if e]
+    assert [e.touching for e in events] == [True, False]
+    assert events[0].t_s == pytest.approx(0.2 + 0.03 * math.log(10 / 8), abs=3e-3)
+    assert events[1].t_s == pytest.approx(1.5, abs=2e-3)
+
+
+def test_a_brush_shorter_than_the_debounce_is_not_a_touch():
+    detector = ContactDetector(debounce_s=0.02)
+    t = np.arange(0, 0.1, 1e-3)
+    force = np.where((t > 0.05) & (t < 0.06), 5.0, 0.0)           # 10 ms spike
+    assert not any(detector.update(a, b) for a, b in zip(t, force))
+
+
+def test_noise_around_one_threshold_does_not_chatter():
+    detector = ContactDetector(on_n=2.0, off_n=1.0, debounce_s=0.0)
+    events = [detector.update(k * 1e-3, 2.5 if k == 0 else 1.5 + 0.4 * (-1) ** k)
+              for k in range(200)]
+    assert sum(e is not None for e in events) == 1                 # in, and stays in
+
+
+def test_bad_contact_samples_are_refused():
+    detector = ContactDetector()
+    detector.update(0.0, 0.0)
+    with pytest.raises(ControlError):
+        detector.update(0.0, 1.0)
+    with pytest.raises(ControlError):
+        detector.update(0.1, math.nan)
