@@ -52,7 +52,7 @@ class DisplayPlant:
             raise ControlError(f"plant period must be > 0, got {dt_s}")
         one = np.ones(1)
         ta, tb = np.array([pad_temp_c], float), np.array([finger_temp_c], float)
-        system = model._system(ta, tb, np.array([conductance_w_m2k], float), (one,) * 4,
+        system = model.modal_system(ta, tb, np.array([conductance_w_m2k], float), (one,) * 4,
                                finger_temp_c + 1.0, None, 3)
         self._ref_c = finger_temp_c
         lam, f_unit = system.lam[0], system.f[0]

@@ -312,8 +312,8 @@ class LayeredContact:
         t = np.asarray(t_s, dtype=np.float64)
         if t.ndim not in (1, 2) or not np.all(np.isfinite(t)):
             raise ModelError(f"t_s must be finite, of shape (n,) or (batch, n); got {t.shape}")
-        system = self._system(ta, tb, hc, (ksa, hsa, ksb, hsb), back_temp_a_c, back_temp_b_c,
-                              5 if energy else 3)
+        system = self.modal_system(ta, tb, hc, (ksa, hsa, ksb, hsb), back_temp_a_c,
+                                   back_temp_b_c, 5 if energy else 3)
         lam, w0, f, m = system.lam, system.w0, system.f, system.m
         g_ba, g_bb, tba, tbb = system.g_ba, system.g_bb, system.tba, system.tbb
         cap, theta0, r_half, na = system.cap, system.theta0, system.r_half, self.grid.n_a
@@ -333,7 +333,8 @@ class LayeredContact:
             result.energy_into_b_j_m2 = integ[:, 0]
         return result
 
-    def _system(self, ta, tb, hc, scales, back_temp_a_c, back_temp_b_c, n_out) -> "ModalSystem":
+    def modal_system(self, ta, tb, hc, scales, back_temp_a_c, back_temp_b_c,
+                     n_out) -> "ModalSystem":
         """Assemble and diagonalise every trial of a batch (arrays of shape (B,)).
 
         Temperatures are deviations from the object's initial temperature,
