@@ -1,0 +1,67 @@
+"""The fixed-rate loop runner on the simulated clock (exact) and, for
+structure only, on the real clock (no wall-clock figure is asserted)."""
+
+import pytest
+
+from telethermal.control.loop import FixedRateLoop, RealClock, SimClock
+from telethermal.errors import ControlError
+
+
+def test_on_the_simulated_clock_every_step_is_on_its_deadline():
+    seen = []
+    stats = FixedRateLoop(0.01, SimClock()).run(lambda t, dt: seen.append((t, dt)), 100)
+    assert [round(t, 12) for t, _ in seen] == [round(0.01 * k, 12) for k in range(100)]
+    assert all(abs(dt - 0.01) < 1e-12 for _, dt in seen)
+    s = stats.summary()
+    assert s["steps"] == 100 and s["deadline_misses"] == 0 and s["overruns"] == 0
+    assert s["lateness_max_us"] == 0.0 and abs(s["period_p99_us"] - 1e4) < 1e-6
+
+
+def test_an_overrun_skips_missed_deadlines_and_reports_the_true_step():
+    # Step 5 "takes" 2.5 periods: deadlines 6 and 7 are missed, not made up
+    # in a burst; step 8 starts on its own deadline and is told dt = 3 periods.
+    clock = SimClock()
+    seen = []
+
+    def step(t, dt):
+        seen.append((round(t / 0.01, 9), round(dt / 0.01, 9)))
+        if len(seen) == 6:
+            clock.advance(0.025)
+
+    stats = FixedRateLoop(0.01, clock).run(step, 10)
+    starts = [k for k, _ in seen]
+    assert starts == [0, 1, 2, 3, 4, 5, 8, 9, 10, 11]
+    assert seen[6][1] == 3.0 and seen[7][1] == 1.0
+    s = stats.summary()
+    assert s["deadline_misses"] == 2 and s["overruns"] == 1
+
+
+def test_a_step_that_ends_exactly_on_the_next_deadline_misses_nothing():
+    clock = SimClock()
+    stats = FixedRateLoop(0.01, clock).run(lambda t, dt: clock.advance(0.01), 5)
+    assert stats.summary()["deadline_misses"] == 0
+
+
+def test_a_step_can_stop_the_loop():
+    stats = FixedRateLoop(0.01, SimClock()).run(lambda t, dt: t < 0.045, 100)
+    assert stats.summary()["steps"] == 6
+
+
+@pytest.mark.parametrize("period", [0.0, -1.0, float("nan"), float("inf")])
+def test_bad_periods_are_refused(period):
+    with pytest.raises(ControlError, match="period"):
+        FixedRateLoop(period)
+
+
+def test_the_simulated_clock_cannot_go_back():
+    with pytest.raises(ControlError):
+        SimClock().advance(-1.0)
+
+
+def test_real_clock_structure():
+    # Structure only: 30 steps happen in order, lateness is never negative.
+    stats = FixedRateLoop(0.002, RealClock()).run(lambda t, dt: None, 30)
+    s = stats.summary()
+    assert s["steps"] == 30
+    assert min(stats.lateness_s) >= 0.0
+    assert all(b > a for a, b in zip(stats.starts_s, stats.starts_s[1:]))
