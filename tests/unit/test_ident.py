@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from telethermal.errors import IdentificationError, ModelFileError
-from telethermal.ident.anytime import decide
+from telethermal.ident.anytime import StreamingIdentifier, decide
 from telethermal.ident.base import group_folds
 from telethermal.ident.lm import MLP, train_adam, train_lm
 from telethermal.ident.pca import SnapshotPCA
@@ -202,3 +202,41 @@ def test_recurrent_learns_levels_and_round_trips(tmp_path, rng, method):
                                atol=1e-6)
     d = decide(model, data.x[0], 0.0)
     assert d.label == "unknown" and d.reason == "gap too small"
+
+
+# ------------------------------------------------------------------ streaming
+def _stream(model, raw, gap):
+    stream = StreamingIdentifier(model, gap)
+    for row in raw:
+        stream.push(row)
+    return stream.estimate
+
+
+@pytest.mark.parametrize("threshold", [0.95, 0.999999])
+def test_streaming_gives_the_batch_decision(rng, threshold):
+    # Sample by sample, the same commitment (label, time, reason) as decide()
+    # on the whole contact, for every contact, confident or not.
+    data = contacts(rng)
+    model = make("effusivity-lda", threshold=threshold).fit(data)
+    gap = 10.0
+    for i in range(len(data)):
+        raw = data.x[i] * gap                      # back to raw samples
+        batch = decide(model, data.x[i], gap)
+        est = _stream(model, raw, gap)
+        assert est.decided
+        assert (est.label, est.reason) == (batch.label, batch.reason)
+        if batch.time_s is not None:
+            assert est.t_s == batch.time_s
+
+
+def test_streaming_refuses_bad_samples_and_answers_tiny_gaps_at_once(rng):
+    model = make("effusivity-lda").fit(contacts(rng))
+    stream = StreamingIdentifier(model, 0.5)
+    assert stream.decided and stream.estimate.reason == "gap too small"
+    assert stream.push(1.0) is None                     # decided: samples are ignored
+    stream = StreamingIdentifier(model, 10.0)
+    with pytest.raises(IdentificationError, match="finite"):
+        stream.push(np.nan)
+    with pytest.raises(IdentificationError, match="1 finite"):
+        stream.push([1.0, 2.0])
+    assert stream.estimate.posteriors == pytest.approx((1 / 3,) * 3)  # nothing learnt yet

@@ -131,7 +131,10 @@ class Identifier:
         """Posteriors (N, n_classes) for normalised contacts x (N, >= n_w, C)."""
         w = self.windows_s_[window_index]
         z = self._logits(self.params_[window_index], self._window(x, w))
-        return np.exp(log_softmax(z / self.temperature_[window_index], axis=1))
+        z = z / self.temperature_[window_index]
+        z = z - z.max(axis=1, keepdims=True)          # a softmax without scipy's overhead
+        e = np.exp(z)
+        return e / e.sum(axis=1, keepdims=True)
 
     def posterior_path(self, x: np.ndarray) -> np.ndarray:
         """Posteriors of one normalised contact (n, C) at each window it

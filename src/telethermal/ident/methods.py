@@ -93,18 +93,20 @@ class EffusivityLda(Identifier):
                 "outlier_p": self.outlier_p}
 
     def _raw_features(self, x):
-        n = x.shape[1]
+        """Box means (cumulative sums: one pass, no Python loop over boxes),
+        channel-major, (N, n_channels * n_boxes)."""
+        n_trials, n, n_channels = x.shape
         boxes = min(self.n_boxes, n)
         edges = np.linspace(0, n, boxes + 1).round().astype(int)
-        cols = []
-        for c in range(x.shape[2]):
-            for a, b in zip(edges[:-1], edges[1:]):
-                mean = x[:, a:b, c].mean(axis=1)
-                if self.channels[c] == FLUX:
-                    mid_s = 0.5 * (a + b - 1) / self.sample_rate_hz_
-                    mean = np.arcsinh(mean * np.sqrt(max(mid_s, 0.5 / self.sample_rate_hz_)))
-                cols.append(mean)
-        return np.stack(cols, axis=1)
+        cs = np.zeros((n_trials, n + 1, n_channels))
+        np.cumsum(x, axis=1, out=cs[:, 1:])
+        means = (cs[:, edges[1:]] - cs[:, edges[:-1]]) / np.diff(edges)[None, :, None]
+        mid_s = 0.5 * (edges[:-1] + edges[1:] - 1) / self.sample_rate_hz_
+        root = np.sqrt(np.maximum(mid_s, 0.5 / self.sample_rate_hz_))
+        for c, name in enumerate(self.channels):
+            if name == FLUX:
+                means[:, :, c] = np.arcsinh(means[:, :, c] * root)
+        return means.transpose(0, 2, 1).reshape(n_trials, n_channels * boxes)
 
     def _fit_window(self, x, y):
         f = self._raw_features(x)
@@ -123,7 +125,7 @@ class EffusivityLda(Identifier):
     def _distances(self, params, x):
         z = (self._raw_features(x) - params["centre"]) / params["scale"]
         diff = z[:, None, :] - params["means"][None]
-        return np.einsum("ncp,pq,ncq->nc", diff, params["precision"], diff)
+        return np.sum((diff @ params["precision"]) * diff, axis=2)
 
     def _logits(self, params, x):
         return -0.5 * self._distances(params, x)
