@@ -11,7 +11,10 @@ from telethermal.data.generate import finger_database
 from telethermal.errors import IdentificationError
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
+from telethermal.errors import ModelFileError
+from telethermal.render.generator import (ContactGenerator, NetworkGenerator, display_flux,
+                                          load_generator, mixture, rendering_error,
+                                          save_generator)
 
 E_SKIN = get_material("skin").effusivity
 
@@ -50,3 +53,52 @@ def test_on_held_out_persons_the_network_renders_within_three_percent():
 def test_unknown_material_is_refused():
     with pytest.raises(IdentificationError):
         NetworkGenerator().fit(closed_form_trials()).normalised("wood", np.array([1.0]))
+
+
+@pytest.mark.parametrize("kind", [NetworkGenerator, ContactGenerator])
+def test_generator_files_round_trip_and_refuse_damage(tmp_path, kind):
+    gen = kind().fit(closed_form_trials())
+    path = save_generator(gen, tmp_path / "gen.npz")
+    back = load_generator(path)
+    t = np.geomspace(1e-3, 60, 50)
+    np.testing.assert_array_equal(back.normalised("marble", t), gen.normalised("marble", t))
+    path.write_bytes(path.read_bytes()[:100])                     # cut short
+    with pytest.raises(ModelFileError, match="gen.npz"):
+        load_generator(path)
+    with pytest.raises(ModelFileError, match="no such"):
+        load_generator(tmp_path / "missing.npz")
+    assert not list(tmp_path.glob(".*tmp"))                       # no temporary left
+
+
+def test_network_below_the_first_fitted_time_ramps_from_zero():
+    gen = NetworkGenerator().fit(closed_form_trials())
+    t_first = gen.t_range_s_[0]
+    at = gen.normalised("marble", np.array([0.0, t_first / 2, t_first]))
+    assert at[0] == 0.0 and at[1] == pytest.approx(at[2] / 2, rel=1e-12)
+    # Continuous at the first fitted time.
+    assert gen.normalised("marble", t_first * (1 - 1e-9))[0] == pytest.approx(at[2], rel=1e-6)
+
+
+def test_batched_evaluation_matches_one_by_one():
+    trials = closed_form_trials() + [dataclasses.replace(t, material="wood", channels={
+        "t_s": t.channels["t_s"], "heat_flux_W_m2": 0.5 * t.channels["heat_flux_W_m2"]})
+        for t in closed_form_trials()]
+    gen = NetworkGenerator().fit(trials)
+    t = np.array([0.0, 0.003, 0.02, 0.5, 7.0])
+    many = gen.normalised_many(["wood", "marble"], t)
+    np.testing.assert_allclose(many[0], gen.normalised("wood", t), rtol=1e-12)
+    np.testing.assert_allclose(many[1], gen.normalised("marble", t), rtol=1e-12)
+    g, dg = mixture(gen, ["wood", "marble"], [0.25, 0.75], 0.5)
+    assert g == pytest.approx(0.25 * many[0, 3] + 0.75 * many[1, 3], rel=1e-12)
+    h = 1e-3
+    slope = (mixture(gen, ["wood", "marble"], [0.25, 0.75], 0.5 + h)[0]
+             - mixture(gen, ["wood", "marble"], [0.25, 0.75], 0.5 - h)[0]) / (2 * h)
+    assert dg == pytest.approx(slope, rel=1e-3)
+
+
+def test_display_flux_sign():
+    # A finger warmer than the object loses heat to it, so the display pad
+    # must take heat from the finger: pad -> finger flux is negative.
+    gen = ContactGenerator().fit(closed_form_trials())
+    assert np.all(display_flux(gen, "marble", np.array([0.1, 1.0]), 33.0, 24.0) < 0)
+    assert np.all(display_flux(gen, "marble", np.array([0.1, 1.0]), 30.0, 40.0) > 0)

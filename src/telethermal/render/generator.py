@@ -20,14 +20,19 @@ renders better.
 
 from __future__ import annotations
 
+import json
+import os
+import zipfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.special import erfcx
 
+from telethermal import __version__
 from telethermal.data.dataset import Trial
-from telethermal.errors import IdentificationError
+from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.lm import MLP, train_lm
 from telethermal.ident.prepare import FLUX, MIN_GAP_K
 from telethermal.physics.materials import get_material
@@ -51,6 +56,7 @@ def mean_normalised_curves(trials: list[Trial], t_knots: np.ndarray | None = Non
         # Log-spaced, snapped to the sample grid: no interpolation between
         # samples where the curve bends most.
         t_knots = np.unique(np.round(np.geomspace(1.0 / rate, last, N_KNOTS) * rate)) / rate
+        t_knots = t_knots[t_knots > 0]
     curves: dict[str, list[np.ndarray]] = {}
     for trial in usable:
         q = np.interp(t_knots, trial.channels["t_s"], trial.channels[FLUX]) / trial.gap_k
@@ -66,8 +72,11 @@ class NetworkGenerator:
     max_iter: int = 300
     seed: int = 0
 
+    kind = "network"
+
     def fit(self, trials: list[Trial]) -> "NetworkGenerator":
         t, curves = mean_normalised_curves(trials)
+        self.t_range_s_ = (float(t[0]), float(t[-1]))
         x = np.log10(t)[:, None]
         self.x_mean_, self.x_scale_ = float(x.mean()), float(x.std())
         self.nets_, self.scale_ = {}, {}
@@ -80,19 +89,87 @@ class NetworkGenerator:
             self.nets_[material], self.scale_[material] = net, scale
         return self
 
+    @property
+    def materials(self) -> list[str]:
+        return sorted(getattr(self, "nets_", {}))
+
     def normalised(self, material: str, t_s) -> np.ndarray:
-        """flux / gap, W/m^2/K, at times since contact (0 before contact)."""
+        """flux / gap, W/m^2/K, at times since contact (0 before contact).
+
+        Below the first fitted time (one sample period of database 2) the
+        network is not extrapolated: the curve ramps linearly from 0 at
+        contact, which is what the recorded (sensor-lagged) flux does."""
         if material not in getattr(self, "nets_", {}):
-            raise IdentificationError(f"no generator for {material!r}")
-        t = np.asarray(t_s, dtype=np.float64)
-        x = (np.log10(np.clip(t, 1e-6, None))[:, None] - self.x_mean_) / self.x_scale_
+            raise IdentificationError(f"no generator for {material!r}; it knows "
+                                      f"{', '.join(self.materials)}")
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        t_first = self.t_range_s_[0]
+        x = (np.log10(np.clip(t, t_first, None))[:, None] - self.x_mean_) / self.x_scale_
         q = self.nets_[material](x)[:, 0] * self.scale_[material]
-        return np.where(t > 0, q, 0.0)
+        return np.where(t >= t_first, q, np.clip(t, 0, None) / t_first * q)
+
+    def normalised_many(self, materials, t_s) -> np.ndarray:
+        """``normalised`` for several materials at once, (n_materials, n_t)."""
+        key = tuple(materials)
+        stacked = getattr(self, "_stacked", {}).get(key)
+        if stacked is None:
+            for m in key:
+                if m not in self.nets_:
+                    raise IdentificationError(f"no generator for {m!r}")
+            nets = [self.nets_[m] for m in key]
+            stacked = (np.stack([n.w1[:, 0] for n in nets]), np.stack([n.b1 for n in nets]),
+                       np.stack([n.w2[0] for n in nets]), np.array([n.b2[0] for n in nets]),
+                       np.array([self.scale_[m] for m in key]))
+            self.__dict__.setdefault("_stacked", {})[key] = stacked
+        w1, b1, w2, b2, scale = stacked
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        t_first = self.t_range_s_[0]
+        x = (np.log10(np.maximum(t, t_first)) - self.x_mean_) / self.x_scale_
+        hidden = 0.5 * (1.0 + np.tanh(0.5 * (w1[:, :, None] * x + b1[:, :, None])))
+        q = (np.einsum("mh,mht->mt", w2, hidden) + b2[:, None]) * scale[:, None]
+        return np.where(t >= t_first, q, np.clip(t, 0, None) / t_first * q)
+
+    def _state(self):
+        header = {"x_mean": self.x_mean_, "x_scale": self.x_scale_,
+                  "t_range_s": list(self.t_range_s_), "scale": self.scale_,
+                  "hyper": {"n_hidden": self.n_hidden, "max_iter": self.max_iter,
+                            "seed": self.seed}}
+        arrays = {f"{m}.{k}": getattr(net, k) for m, net in self.nets_.items()
+                  for k in ("w1", "b1", "w2", "b2")}
+        return header, arrays
+
+    @classmethod
+    def _restore(cls, header, arrays):
+        gen = cls(**header["hyper"])
+        gen.x_mean_, gen.x_scale_ = float(header["x_mean"]), float(header["x_scale"])
+        gen.t_range_s_ = tuple(header["t_range_s"])
+        gen.scale_ = {m: float(v) for m, v in header["scale"].items()}
+        gen.nets_ = {m: MLP(*(arrays[f"{m}.{k}"] for k in ("w1", "b1", "w2", "b2")),
+                            output="linear") for m in gen.scale_}
+        return gen
 
 
 @dataclass
 class ContactGenerator:
     """The finger-material closed form with fitted ``h`` and effusivity."""
+
+    kind = "contact"
+
+    @property
+    def materials(self) -> list[str]:
+        return sorted(getattr(self, "params_", {}))
+
+    def _state(self):
+        return {"params": self.params_}, {}
+
+    @classmethod
+    def _restore(cls, header, arrays):
+        gen = cls()
+        gen.params_ = {m: tuple(float(x) for x in v) for m, v in header["params"].items()}
+        return gen
+
+    def normalised_many(self, materials, t_s) -> np.ndarray:
+        return np.stack([self.normalised(m, t_s) for m in materials])
 
     def fit(self, trials: list[Trial]) -> "ContactGenerator":
         t, curves = mean_normalised_curves(trials)
@@ -109,9 +186,10 @@ class ContactGenerator:
 
     def normalised(self, material: str, t_s) -> np.ndarray:
         if material not in getattr(self, "params_", {}):
-            raise IdentificationError(f"no generator for {material!r}")
+            raise IdentificationError(f"no generator for {material!r}; it knows "
+                                      f"{', '.join(self.materials)}")
         h, e_m, e_f = self.params_[material]
-        t = np.asarray(t_s, dtype=np.float64)
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         q = h * erfcx(h * (1 / e_f + 1 / e_m) * np.sqrt(np.clip(t, 0, None)))
         return np.where(t > 0, q, 0.0)
 
@@ -129,3 +207,80 @@ def rendering_error(generator, trials: list[Trial]) -> float:
         generated = generator.normalised(trial.material, t[after]) * trial.gap_k
         errors.append(np.sqrt(np.mean((generated - recorded) ** 2)) / np.abs(recorded).max())
     return float(np.mean(errors))
+
+
+# ---------------------------------------------------------------- rendering
+def display_flux(generator, material: str, t_s, finger_c: float, object_c: float) -> np.ndarray:
+    """The flux the display pad must put into the finger (pad -> finger
+    positive) at times since contact: the finger would lose
+    ``g(t) (T_finger - T_object)`` to the object, so the pad gives minus that.
+    """
+    return generator.normalised(material, t_s) * (object_c - finger_c)
+
+
+def mixture(generator, materials, weights, t_s: float, step_s: float = 1e-4):
+    """``(sum_m w_m g_m(t), d/dt of it)`` at one time since contact, with the
+    derivative by central difference (one-sided at contact); one batched
+    evaluation per material."""
+    lo, hi = max(t_s - step_s, 0.0), t_s + step_s
+    g = np.asarray(weights, dtype=np.float64) @ generator.normalised_many(
+        materials, np.array([t_s, lo, hi]))
+    return float(g[0]), float((g[2] - g[1]) / (hi - lo))
+
+
+def normalised_rate(generator, material: str, t_s, step_s: float = 1e-4) -> np.ndarray:
+    """d/dt of ``generator.normalised`` by a central difference (one-sided at
+    contact), for feed-forward through a lagged sensor."""
+    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+    lo = np.clip(t - step_s, 0, None)
+    hi = t + step_s
+    return (generator.normalised(material, hi) - generator.normalised(material, lo)) / (hi - lo)
+
+
+# ---------------------------------------------------------------- files
+GENERATOR_FORMAT_VERSION = 1
+GENERATORS = {"network": NetworkGenerator, "contact": ContactGenerator}
+
+
+def save_generator(generator, path: str | Path) -> Path:
+    """One ``.npz``: a JSON header and named weight arrays; written through a
+    temporary file, so a crash leaves the old file or none, never half a one."""
+    if not generator.materials:
+        raise IdentificationError("this generator is not fitted; call fit()")
+    path = Path(path)
+    state, arrays = generator._state()
+    header = {"format": "telethermal-generator", "format_version": GENERATOR_FORMAT_VERSION,
+              "telethermal_version": __version__, "kind": generator.kind,
+              "materials": generator.materials, **state}
+    payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as fh:
+        np.savez(fh, **payload)
+    os.replace(tmp, path)
+    return path
+
+
+def load_generator(path: str | Path):
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"{path}: no such generator file")
+    try:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        header = json.loads(arrays.pop("header").tobytes().decode())
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError, UnicodeDecodeError):
+        raise ModelFileError(f"{path}: not a readable telethermal generator file "
+                             "(truncated, or some other file)") from None
+    if header.get("format") != "telethermal-generator":
+        raise ModelFileError(f"{path}: not a telethermal generator")
+    if header.get("format_version") != GENERATOR_FORMAT_VERSION:
+        raise ModelFileError(f"{path}: generator format version {header.get('format_version')}; "
+                             f"this telethermal reads version {GENERATOR_FORMAT_VERSION}")
+    cls = GENERATORS.get(header.get("kind"))
+    if cls is None:
+        raise ModelFileError(f"{path}: unknown generator kind {header.get('kind')!r}")
+    try:
+        return cls._restore(header, arrays)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFileError(f"{path}: generator file is incomplete: {exc}") from None
