@@ -211,3 +211,18 @@ def test_bad_contact_samples_are_refused():
         detector.update(0.0, 1.0)
     with pytest.raises(ControlError):
         detector.update(0.1, math.nan)
+
+
+def test_a_limit_downstream_of_the_controller_stops_integration():
+    # The output asked for is cut after the controller (a slew limit): the
+    # integral must not keep growing against it, so it does not overshoot later.
+    pid = Pid(PidGains(kp=0.0, ki=10.0), DT)
+    for _ in range(100):
+        out = pid.update(1.0, 0.0, DT)
+        pid.limited_downstream(out.output, min(out.output, 0.0))      # nothing passes
+    assert pid.update(1.0, 0.0, DT).integral == pytest.approx(10.0 * DT)
+    free = Pid(PidGains(kp=0.0, ki=10.0), DT)
+    for _ in range(100):
+        out = free.update(1.0, 0.0, DT)
+        free.limited_downstream(out.output, out.output)                # all passes
+    assert out.integral == pytest.approx(100 * 10.0 * DT)

@@ -105,6 +105,17 @@ class Pid:
         # into the saturation the output is already in.
         pushes_out = (unclamped > g.output_max and error > 0) or \
                      (unclamped < g.output_min and error < 0)
+        self._before_update = self._integral
+        self._last_error = error
         if not (saturated and pushes_out):
             self._integral = candidate
         return PidOutput(output, saturated, proportional, self._integral, derivative, long_step)
+
+    def limited_downstream(self, requested: float, applied: float) -> None:
+        """Anti-windup for limits applied after the controller (a slew limit,
+        a safety supervisor): when what was applied differs from what the
+        last :meth:`update` asked for in the direction its error pushes, that
+        step's integration is undone."""
+        error = getattr(self, "_last_error", 0.0)
+        if (applied < requested and error > 0) or (applied > requested and error < 0):
+            self._integral = self._before_update

@@ -44,16 +44,20 @@ class DisplayPlant:
         Control period.
     sensor_lag_s : float, optional
         Time constant of the pad's heat-flux sensor (none: reads the true flux).
+    skin_k_scale, skin_heat_scale : float
+        This operator's skin conductivity and rho*c relative to the nominal skin.
     """
 
     def __init__(self, model: LayeredContact, pad_temp_c: float, finger_temp_c: float,
-                 conductance_w_m2k: float, dt_s: float, sensor_lag_s: float | None = None):
+                 conductance_w_m2k: float, dt_s: float, sensor_lag_s: float | None = None,
+                 skin_k_scale: float = 1.0, skin_heat_scale: float = 1.0):
         if not dt_s > 0:
             raise ControlError(f"plant period must be > 0, got {dt_s}")
         one = np.ones(1)
         ta, tb = np.array([pad_temp_c], float), np.array([finger_temp_c], float)
-        system = model.modal_system(ta, tb, np.array([conductance_w_m2k], float), (one,) * 4,
-                               finger_temp_c + 1.0, None, 3)
+        scales = (one, one, one * skin_k_scale, one * skin_heat_scale)
+        system = model.modal_system(ta, tb, np.array([conductance_w_m2k], float), scales,
+                                    finger_temp_c + 1.0, None, 3)
         self._ref_c = finger_temp_c
         lam, f_unit = system.lam[0], system.f[0]
         self._m = system.m[0]

@@ -87,6 +87,69 @@ def _discretise(p: WaterPadParams, r_g: float, dt_s: float):
     return e[:3, :3], e[:3, 3:]
 
 
+class WaterPad:
+    """STEP 1 as a loop: the pad's PI and pump logic and its exact plant, one
+    control period per :meth:`step`, for a batch of pads (arrays of shape (B,)).
+
+    The slave service runs one of these before contact; :func:`precondition`
+    runs it for the databases.
+    """
+
+    def __init__(self, target_pad_c, room_c: float, dt_s: float,
+                 params: WaterPadParams = WaterPadParams(), start_c=None):
+        if not (dt_s > 0 and np.isfinite(dt_s)):
+            raise ModelError(f"water pad control period must be > 0, got {dt_s}")
+        self.params, self.room_c, self.dt_s = params, float(room_c), dt_s
+        self._mats = {on: _discretise(params, params.r_g_pump_on_k_w if on else
+                                      params.r_g_pump_off_k_w, dt_s) for on in (False, True)}
+        self.retarget(target_pad_c)
+        start = np.full_like(self.target, room_c) if start_c is None else \
+            np.broadcast_to(np.asarray(start_c, dtype=np.float64), self.target.shape)
+        self.x = np.stack([start, start, start], axis=1).astype(np.float64)
+        self.integral = np.zeros_like(self.target)
+        self.pump = np.zeros(self.target.shape, dtype=bool)
+        self.u = np.zeros_like(self.target)
+
+    def retarget(self, target_pad_c) -> None:
+        """A new pad command ``T_object + gap`` (e.g. a new IR reading)."""
+        target = np.atleast_1d(np.asarray(target_pad_c, dtype=np.float64))
+        if not np.all(np.isfinite(target)):
+            raise ModelError(f"water pad command must be finite, got {target}")
+        self.target = target
+        self.peltier_cmd = target + self.params.peltier_overdrive_k * np.sign(target - self.room_c)
+
+    @property
+    def pad_c(self) -> np.ndarray:
+        return self.x[:, 2]
+
+    @property
+    def water_c(self) -> np.ndarray:
+        return self.x[:, 1]
+
+    def step(self, pump_allowed: bool = True) -> None:
+        """One period: PI on the Peltier, pump on/off on the pad's lag."""
+        p, dt, x = self.params, self.dt_s, self.x
+        err_p = self.peltier_cmd - x[:, 0]
+        u_raw = p.kp_w_k * err_p + p.ki_w_ks * (self.integral + err_p * dt)
+        u = np.clip(u_raw, -p.u_max_w, p.u_max_w)
+        self.integral = np.where(u == u_raw, self.integral + err_p * dt, self.integral)  # anti-windup
+        # Pump on while the pad lags its command (towards the Peltier side),
+        # off once it is within pump_off_error_k of it or past it.
+        lag = (self.target - x[:, 2]) * np.sign(self.target - self.room_c)
+        pump = np.where(lag > p.pump_on_error_k, True,
+                        np.where(lag < p.pump_off_error_k, False, self.pump))
+        if not pump_allowed:
+            pump[:] = False
+        x_next = np.empty_like(x)
+        for on in (False, True):
+            sel = pump == on
+            if sel.any():
+                ad, bd = self._mats[on]
+                inputs = np.stack([u[sel], np.full(sel.sum(), self.room_c)], axis=1)
+                x_next[sel] = x[sel] @ ad.T + inputs @ bd.T
+        self.x, self.pump, self.u = x_next, pump, u
+
+
 def precondition(target_pad_c, room_c: float, duration_s: float, dt_s: float = 0.05,
                  params: WaterPadParams = WaterPadParams(), start_c=None) -> WaterPadRun:
     """Run STEP 1 for a batch of pads, each driven to its own command.
@@ -109,36 +172,11 @@ def precondition(target_pad_c, room_c: float, duration_s: float, dt_s: float = 0
     """
     if not (dt_s > 0 and duration_s >= dt_s):
         raise ModelError(f"need 0 < dt_s <= duration_s, got {dt_s}, {duration_s}")
-    target = np.atleast_1d(np.asarray(target_pad_c, dtype=np.float64))
+    pad = WaterPad(target_pad_c, room_c, dt_s, params, start_c)
     n = int(round(duration_s / dt_s))
-    pump_mats = {on: _discretise(params, params.r_g_pump_on_k_w if on else
-                                 params.r_g_pump_off_k_w, dt_s) for on in (False, True)}
-    start = np.full_like(target, room_c) if start_c is None else np.broadcast_to(start_c, target.shape)
-    x = np.stack([start, start, start], axis=1).astype(np.float64)
-    integral = np.zeros_like(target)
-    pump = np.zeros(target.shape, dtype=bool)
-    hist = np.empty((n, 5, len(target)))
-    peltier_cmd = target + params.peltier_overdrive_k * np.sign(target - room_c)
+    hist = np.empty((n, 5, len(pad.target)))
     for k in range(n):
-        err_p = peltier_cmd - x[:, 0]
-        u_raw = params.kp_w_k * err_p + params.ki_w_ks * (integral + err_p * dt_s)
-        u = np.clip(u_raw, -params.u_max_w, params.u_max_w)
-        integral = np.where(u == u_raw, integral + err_p * dt_s, integral)  # clamp anti-windup
-        # Pump on while the pad lags its command (towards the Peltier side),
-        # off once it is within pump_off_error_k of it or past it.
-        lag = (target - x[:, 2]) * np.sign(target - room_c)
-        pump = np.where(lag > params.pump_on_error_k, True,
-                        np.where(lag < params.pump_off_error_k, False, pump))
-        if k == n - 1:
-            pump[:] = False
-        x_next = np.empty_like(x)
-        for on in (False, True):
-            sel = pump == on
-            if sel.any():
-                ad, bd = pump_mats[on]
-                inputs = np.stack([u[sel], np.full(sel.sum(), room_c)], axis=1)
-                x_next[sel] = x[sel] @ ad.T + inputs @ bd.T
-        x = x_next
-        hist[k, :3], hist[k, 3], hist[k, 4] = x.T, pump, u
+        pad.step(pump_allowed=k < n - 1)
+        hist[k, :3], hist[k, 3], hist[k, 4] = pad.x.T, pad.pump, pad.u
     return WaterPadRun(dt_s * np.arange(1, n + 1), hist[:, 0], hist[:, 1], hist[:, 2],
                        hist[:, 3].astype(bool), hist[:, 4])
