@@ -35,12 +35,23 @@ def _progress(total: int, what: str):
         yield advance
 
 
+def _json_safe(value):
+    """NaN and infinities become null (JSON has neither): "not measured"."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
+
+
 def _write_json(path: str | Path, payload: dict) -> Path:
     """Write JSON through a temporary file so a failure leaves no half file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+    tmp.write_text(json.dumps(_json_safe(payload), indent=2, allow_nan=False) + "\n")
     tmp.replace(path)
     return path
 
@@ -135,6 +146,41 @@ def cmd_bench_physics(args) -> int:
     print(f"fingertip-7 databases: simulation {db['simulation_s']:.2f} s, "
           f"with CSV files {db['with_csv_files_s']:.2f} s")
     print(f"heat balance over 60 s: {report['heat_balance_60s']['relative_error']:.1e} relative")
+    print(f"wrote {args.json} and {png}")
+    return 0
+
+
+def cmd_bench_render(args) -> int:
+    from telethermal.bench import render
+
+    with _progress(7, "bench render") as advance:
+        report = render.run(progress=advance, quick=args.quick)
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    png = render.plot(report, args.png or Path(args.json).with_suffix(".png"))
+    report["png"] = str(png)
+    _write_json(args.json, report)
+    for r in report["rate"]:
+        print(f"{r['rate_hz']:6.0f} Hz: flux error after identification "
+              f"{100 * r['mean_flux_rms_error_rel']:.2f} % (max "
+              f"{100 * r['max_flux_rms_error_rel']:.2f} %), first second "
+              f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
+              f"{r['mean_temp_rms_error_c']:.2f} K, CPU {r['mean_cpu_s_per_simulated_s']:.3f} s/s, "
+              f"safety events {r['safety_events']}")
+    for r in report["gains"]:
+        print(f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
+              f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin {r['mean_temp_rms_error_c']:.2f} K")
+    for r in report["before"]:
+        print(f"before identification {r['before']:5s}: first second "
+              f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
+              f"{r['mean_temp_rms_error_c']:.2f} K")
+    if report["generator"]:
+        g = report["generator"]["rms_error_rel_of_peak"]
+        print(f"generators on held-out persons: network {100 * g['network']:.2f} %, "
+              f"closed form {100 * g['contact']:.2f} % RMS of peak")
+    for r in report["real_clock"]:
+        print(f"real clock {r['rate_hz']:6.0f} Hz: period p50 {r['period_p50_us']:.0f} us, p99 "
+              f"{r['period_p99_us']:.0f} us, max {r['period_max_us']:.0f} us, deadline misses "
+              f"{r['deadline_misses']} of {r['steps']}, stalls {r['stalls']}")
     print(f"wrote {args.json} and {png}")
     return 0
 
@@ -294,6 +340,59 @@ def _demo_identify(scene, out: Path, seed: int) -> None:
           + f"; decisions {report['decision_time_s']['n']}/{report['trials']} committed")
 
 
+def _session_models(scene, identifier_path, generator_path, seed):
+    """Load the saved identifier and generator, or train them on the scene's
+    databases (simulated in memory with ``seed``)."""
+    from telethermal.ident.registry import load_model
+    from telethermal.render.generator import load_generator
+    from telethermal.session.models import train_generator, train_identifier
+
+    with console.status("identifier: " + ("loading" if identifier_path else
+                                          f"training on {scene.name}'s pad database")):
+        identifier = load_model(identifier_path) if identifier_path else \
+            train_identifier(scene, seed)
+    with console.status("generator: " + ("loading" if generator_path else
+                                         f"training on {scene.name}'s finger database")):
+        generator = load_generator(generator_path) if generator_path else \
+            train_generator(scene, seed)
+    return identifier, generator
+
+
+def cmd_session(args) -> int:
+    """One touch, slave and master in one process; JSON and Fig. 3 plot."""
+    from telethermal.physics.scene import load_scene
+    from telethermal.session.master import DisplayConfig
+    from telethermal.session.plots import plot_session
+    from telethermal.session.run import run_session, with_finger
+
+    scene = load_scene(args.scene)
+    if scene.finger is None:
+        console.print(f"scene {scene.name} has no [finger]: the operator is the default "
+                      "fingertip (33 C, nominal skin)")
+    scene = with_finger(scene)
+    identifier, generator = _session_models(scene, args.identifier, args.generator, args.seed)
+    config = DisplayConfig(rate_hz=args.rate_hz, before=args.before)
+    result = run_session(scene, args.material, identifier, generator, config,
+                         contact_s=args.contact_s, seed=args.seed, realtime=args.realtime)
+    s = result.summary
+    _write_json(args.json, s)
+    if args.plot:
+        plot_session(result, args.plot)
+    decided = (f"{s['identified']} at {s['decision_time_s']:.2f} s ({s['decision_reason']})"
+               if s["decision_time_s"] is not None else "no decision")
+    print(f"{s['material']} on {scene.name}: slave identified {decided}; rendered flux error "
+          f"{100 * s['flux_rms_error_rel']:.2f} % of peak after identification, "
+          f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second; skin "
+          f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}")
+    if args.realtime:
+        loop = s["loop"]
+        print(f"real clock at {args.rate_hz:g} Hz: period p50 {loop['period_p50_us']:.0f} us, "
+              f"p99 {loop['period_p99_us']:.0f} us, max {loop['period_max_us']:.0f} us, "
+              f"{loop['deadline_misses']} deadline misses, {loop['stalls']} stalls")
+    print(f"wrote {args.json}" + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
 # ------------------------------------------------------------------ parser
 def _positive(kind=float):
     def parse(text):
@@ -366,6 +465,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=_positive(int), default=3)
     p.set_defaults(func=cmd_bench_physics)
 
+    p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "
+                                       "the loop on the real clock")
+    p.add_argument("--json", required=True)
+    p.add_argument("--png")
+    p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
+    p.set_defaults(func=cmd_bench_render)
+
     ident = sub.add_parser("identify", help="material identification")
     isub = ident.add_subparsers(dest="identify_command", required=True)
     p = isub.add_parser("methods", help="list the identification methods")
@@ -391,6 +497,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--methods", help="comma-separated (default: all)")
     p.set_defaults(func=cmd_bench_identify)
+
+    p = sub.add_parser("session", help="one telepresence touch, slave and master in one "
+                                       "process on the simulator")
+    p.add_argument("--scene", default="fingertip-7", help="shipped scene name or TOML path")
+    p.add_argument("--material", required=True, help="the remote object's material")
+    p.add_argument("--json", required=True, help="summary to write")
+    p.add_argument("--plot", help="PNG of flux and temperature against direct contact")
+    p.add_argument("--identifier", help="saved identifier (.npz); default: train one")
+    p.add_argument("--generator", help="saved flux generator (.npz); default: train one")
+    p.add_argument("--rate-hz", type=_positive(), default=1000.0, help="display loop rate")
+    p.add_argument("--before", choices=("prior", "hold"), default="prior",
+                   help="before identification: track the posterior-weighted flux (prior) "
+                        "or hold the pad at the object temperature (hold, the paper's)")
+    p.add_argument("--contact-s", type=_positive(), default=5.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--realtime", action="store_true",
+                   help="run the master loop on the real clock and report its timing")
+    p.set_defaults(func=cmd_session)
 
     p = sub.add_parser("demo", help="run the main job on the default scene")
     p.add_argument("--scene", default="fingertip-7")

@@ -1,0 +1,194 @@
+"""``telethermal bench render``: rendering error against control rate, PID
+gains, the before-identification strategy and the flux generator, and the
+display loop's timing on the real clock.
+
+Every session is the in-process session of ``telethermal session`` on
+``fingertip-7`` (identifier and generator trained once on the scene's own
+databases, seed 0), 3 s contacts, operators and slave trials drawn from the
+session seeds, so that every configuration sees the very same touches.
+Errors are those of the session JSON: ``flux_rms_error_rel`` (after the
+identification decision), ``flux_rms_error_rel_first_s`` and
+``temp_rms_error_c`` (skin surface, the whole contact), against the same
+operator's finger touching the object directly.
+"""
+
+from __future__ import annotations
+
+import datetime
+import platform
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from telethermal.control.pid import PidGains
+from telethermal.data.generate import finger_database
+from telethermal.physics.scene import load_scene
+from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
+from telethermal.session.master import DEFAULT_GAINS, DisplayConfig
+from telethermal.session.models import train_generator, train_identifier
+from telethermal.session.run import run_session, with_finger
+
+RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
+SEEDS = (1, 2)
+CONTACT_S = 3.0
+_SAT = dict(output_min=-25.0, output_max=25.0)
+GAIN_SETS = {
+    "feed-forward only": PidGains(0.0, 0.0, 0.0, **_SAT),
+    "P 1e-4": PidGains(1e-4, 0.0, 0.0, **_SAT),
+    "PI 1e-4/1e-3": PidGains(1e-4, 1e-3, 0.0, **_SAT),
+    "PID 3e-4/2e-3/2e-5": PidGains(3e-4, 2e-3, 2e-5, **_SAT),
+    "PI 1e-3/1e-2 (default)": PidGains(1e-3, 1e-2, 0.0, **_SAT),
+    "PI 1e-3/3e-2": PidGains(1e-3, 3e-2, 0.0, **_SAT),
+}
+KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
+        "time_to_correct_flux_s", "safety_events")
+
+
+def _session_row(scene, material, identifier, generator, config, seed, realtime=False):
+    start = time.process_time()
+    s = run_session(scene, material, identifier, generator, config, contact_s=CONTACT_S,
+                    seed=seed, realtime=realtime).summary
+    cpu = time.process_time() - start
+    row = {"material": material, "seed": seed, "identified": s["identified"],
+           **{k: s[k] for k in KEYS},
+           "cpu_s_per_simulated_s": cpu / (CONTACT_S + 0.4)}
+    if realtime:
+        row["loop"] = s["loop"]
+    return row
+
+
+def _mean(rows, key):
+    vals = [r[key] for r in rows if r[key] is not None and np.isfinite(r[key])]
+    return float(np.mean(vals)) if vals else None
+
+
+def _aggregate(rows):
+    out = {f"mean_{k}": _mean(rows, k) for k in KEYS[:3]}
+    out["max_flux_rms_error_rel"] = float(max(r["flux_rms_error_rel"] for r in rows))
+    out["safety_events"] = int(sum(r["safety_events"] for r in rows))
+    out["mean_cpu_s_per_simulated_s"] = _mean(rows, "cpu_s_per_simulated_s")
+    return out
+
+
+def generator_comparison(scene) -> dict:
+    """Network against fitted closed form, leave one person out of database 2."""
+    trials = finger_database(scene, np.random.default_rng(1000))
+    persons = sorted({t.group for t in trials})
+    scores = {"network": [], "contact": []}
+    for person in persons:
+        train = [t for t in trials if t.group != person]
+        test = [t for t in trials if t.group == person]
+        scores["network"].append(rendering_error(NetworkGenerator().fit(train), test))
+        scores["contact"].append(rendering_error(ContactGenerator().fit(train), test))
+    return {"held_out": persons, "rms_error_rel_of_peak": {k: float(np.mean(v))
+                                                          for k, v in scores.items()},
+            "per_person": scores}
+
+
+def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> dict:
+    step = progress or (lambda _msg: None)
+    scene = with_finger(load_scene("fingertip-7"))
+    materials = scene.materials[::3] if quick else scene.materials
+    seeds = SEEDS[:1] if quick else SEEDS
+    rates = (100.0, 1000.0) if quick else RATES_HZ
+    step("training")
+    t0 = time.perf_counter()
+    identifier, generator = train_identifier(scene, 0), train_generator(scene, 0)
+    training_s = time.perf_counter() - t0
+
+    def sweep(config, mats=materials, sds=seeds):
+        return [_session_row(scene, m, identifier, generator, config, s) for m in mats for s in sds]
+
+    report = {"scene": scene.name, "contact_s": CONTACT_S, "seeds": list(seeds),
+              "materials": list(materials), "training_s": training_s}
+    step("control rate")
+    report["rate"] = []
+    for rate in rates:
+        rows = sweep(DisplayConfig(rate_hz=rate))
+        report["rate"].append({"rate_hz": rate, **_aggregate(rows), "rows": rows})
+    step("PID gains")
+    report["gains"] = []
+    for name, gains in GAIN_SETS.items():
+        for belief in (1.0, 1.3):
+            rows = sweep(DisplayConfig(gains=gains, r_pad_belief=belief))
+            report["gains"].append({"gains": name, "kp": gains.kp, "ki": gains.ki,
+                                    "kd": gains.kd, "pad_resistance_belief": belief,
+                                    **_aggregate(rows), "rows": rows})
+    step("before identification")
+    report["before"] = []
+    for before in ("hold", "prior"):
+        rows = sweep(DisplayConfig(before=before))
+        report["before"].append({"before": before, **_aggregate(rows), "rows": rows})
+    step("generators")
+    report["generator"] = generator_comparison(scene) if not quick else None
+    step("real clock")
+    report["real_clock"] = []
+    for rate in (100.0, 1000.0):
+        row = _session_row(scene, "steel", identifier, generator,
+                           DisplayConfig(rate_hz=rate), seeds[0], realtime=True)
+        report["real_clock"].append({"rate_hz": rate, **row["loop"],
+                                     "flux_rms_error_rel": row["flux_rms_error_rel"]})
+    report["default_gains"] = {"kp": DEFAULT_GAINS.kp, "ki": DEFAULT_GAINS.ki,
+                               "kd": DEFAULT_GAINS.kd}
+    report["machine"] = (f"{platform.node()} ({platform.machine()}, "
+                         f"{platform.python_implementation()} {platform.python_version()})")
+    report["date"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    return report
+
+
+def plot(report: dict, out_png: str | Path) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
+    ax = axes[0]
+    rates = [r["rate_hz"] for r in report["rate"]]
+    for material in report["materials"]:
+        err = [np.mean([x["flux_rms_error_rel"] for x in r["rows"] if x["material"] == material])
+               for r in report["rate"]]
+        ax.plot(rates, np.array(err) * 100, "o-", ms=3, lw=1, label=material)
+    ax.set_xscale("log")
+    ax.set_xlabel("display loop rate (Hz)")
+    ax.set_ylabel("flux RMS error after identification (% of peak)")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3, which="both")
+    ax2 = ax.twinx()
+    ax2.plot(rates, [r["mean_cpu_s_per_simulated_s"] for r in report["rate"]], "k--", lw=1)
+    ax2.set_ylabel("CPU s per simulated s (dashed)")
+    ax = axes[1]
+    labels, nominal, wrong = [], [], []
+    for r in report["gains"]:
+        if r["pad_resistance_belief"] == 1.0:
+            labels.append(r["gains"])
+            nominal.append(100 * r["mean_flux_rms_error_rel"])
+        else:
+            wrong.append(100 * r["mean_flux_rms_error_rel"])
+    x = np.arange(len(labels))
+    ax.bar(x - 0.2, nominal, 0.4, label="model right")
+    ax.bar(x + 0.2, wrong, 0.4, label="pad resistance believed 30 % high")
+    ax.set_xticks(x, labels, rotation=20, fontsize=7, ha="right")
+    ax.set_ylabel("mean flux RMS error after identification (%)")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3, axis="y")
+    ax = axes[2]
+    for i, r in enumerate(report["before"]):
+        ax.bar(i - 0.2, 100 * r["mean_flux_rms_error_rel_first_s"], 0.4, color="C0",
+               label="flux, first second (%)" if i == 0 else None)
+        ax.bar(i + 0.2, r["mean_temp_rms_error_c"], 0.4, color="C3",
+               label="skin temperature RMS (K)" if i == 0 else None)
+    ax.set_xticks(range(len(report["before"])), [r["before"] for r in report["before"]])
+    ax.set_title("before identification", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.suptitle(f"telethermal bench render - {report['date']} - {report['machine']}\n"
+                 f"{report['scene']}, {report['contact_s']:g} s contacts, seeds "
+                 f"{report['seeds']}", fontsize=9)
+    fig.tight_layout()
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+    return out_png

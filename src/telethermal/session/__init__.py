@@ -1,0 +1,1 @@
+"""Telepresence sessions: the slave, the master, and a session joining them."""

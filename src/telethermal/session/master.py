@@ -1,0 +1,246 @@
+"""The master: the operator's finger on a Peltier display pad, a heat-flux
+PID loop, force-based contact detection and the safety supervisor.
+
+One :meth:`MasterDisplay.step` per control period. It is given the time,
+the period actually elapsed, what its own sensors read and what the slave
+has said so far (object temperature, material estimate); it returns the
+Peltier junction temperature the supervisor let through. It never touches a
+device or a clock, so the same object runs in the in-process session, in the
+master service and under test.
+
+Phases of a touch:
+
+``idle``
+    No contact. The junction is held at the standby temperature: the
+    object's temperature as the slave measured it (so the pad's own contact
+    carries the first instants with the right sign and a plausible size,
+    as in learning-based-thermal-rendering Fig. 3), or neutral while it is
+    unknown.
+``contact``
+    Touching, the slave not yet decided. ``before="hold"``: keep the
+    junction at standby (the paper's choice). ``before="prior"``: track the
+    flux of the scene's materials weighted by the slave's streaming
+    posteriors.
+``render``
+    The slave has committed to a material: track the generator's flux for
+    it, timed from the master's own contact onset.
+
+The controller: the flux setpoint is what the pad's sensor should read (the
+generator was trained on sensor readings, so both carry the same lag). The
+feed-forward inverts the sensor lag (``q + tau dq/dt``) and the pad's layers
+(``T_junction = T_pad_surface + q R_pad``); the PID on the measured flux
+removes what the model misses (the operator's own skin, contact, drift).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from telethermal.control.contact import ContactDetector
+from telethermal.control.pid import Pid, PidGains
+from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
+                                        supervise)
+from telethermal.errors import ControlError
+from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.render.generator import mixture
+
+BEFORE_MODES = ("hold", "prior")
+
+#: PID gains of the flux loop: K of junction per W/m^2 of flux error. Chosen
+#: by ``telethermal bench render`` (bench/results/render.json): the lowest
+#: mean flux error with the pad model right and with it 30 % off; three times
+#: the integral gain oscillates (the flux sensor's 0.15 s lag), and the
+#: derivative term bought nothing measurable, so it is off.
+DEFAULT_GAINS = PidGains(kp=1e-3, ki=1e-2, kd=0.0, derivative_filter_s=0.01,
+                         output_min=-25.0, output_max=25.0)
+
+
+@dataclass(frozen=True)
+class DisplayConfig:
+    rate_hz: float = 1000.0
+    gains: PidGains = DEFAULT_GAINS
+    feedforward: bool = True
+    before: str = "prior"
+    #: The controller's own slew limit on the junction command; the
+    #: supervisor's rate limit above it is the independent backstop.
+    slew_k_s: float = 100.0
+    #: After a hand-over (hold -> render), the step between what was applied
+    #: and what the controller asks for is closed at this slope.
+    handover_k_s: float = 50.0
+    limits: SafetyLimits = field(default_factory=lambda: SafetyLimits(
+        max_rate_k_s=200.0, max_flux_w_m2=20_000.0))
+    #: For robustness studies: the controller's pad resistance relative to
+    #: the true one (1: the model is right).
+    r_pad_belief: float = 1.0
+    contact_on_n: float = 2.0
+    contact_off_n: float = 1.0
+    debounce_s: float = 0.02
+
+    def __post_init__(self):
+        if not (self.rate_hz > 0 and math.isfinite(self.rate_hz)):
+            raise ControlError(f"display rate_hz must be > 0, got {self.rate_hz}")
+        if not (self.slew_k_s > 0 and self.handover_k_s > 0):
+            raise ControlError("slew_k_s and handover_k_s must be > 0")
+        if self.before not in BEFORE_MODES:
+            raise ControlError(f"before must be one of {BEFORE_MODES}, got {self.before!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class PadSensors:
+    """One period's readings of the master's own sensors."""
+
+    flux_w_m2: float        # pad -> finger, as the film sensor reads it
+    pad_temp_c: float       # the sensor's thermocouple, at the contact surface
+    force_n: float
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveNews:
+    """What the master knows from the slave at this instant."""
+
+    object_temp_c: float | None = None
+    estimate: Estimate | None = None
+    classes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class MasterStep:
+    t_s: float
+    phase: str
+    touching: bool
+    desired_flux_w_m2: float        # what the loop tracks (nan when holding)
+    junction_cmd_c: float           # the controller's request
+    junction_applied_c: float       # what the supervisor let through
+    safe: bool
+
+
+class MasterDisplay:
+    """The display's control logic, one period per :meth:`step`."""
+
+    def __init__(self, config: DisplayConfig, generator, pad_resistance_m2k_w: float,
+                 sensor_lag_s: float, finger_temp_c: float, idle_c: float | None = None):
+        self.config = config
+        self.generator = generator
+        self.r_pad = pad_resistance_m2k_w * config.r_pad_belief
+        self.tau = sensor_lag_s
+        self.finger_c = finger_temp_c           # measured before contact
+        self.dt_nominal = 1.0 / config.rate_hz
+        self.pid = Pid(config.gains, self.dt_nominal)
+        self.detector = ContactDetector(config.contact_on_n, config.contact_off_n,
+                                        config.debounce_s)
+        # Start in the safe state (neutral), or, when told the pad has been
+        # idling at ``idle_c`` already, from there.
+        self.safety = initial_state(config.limits) if idle_c is None else \
+            replace(initial_state(config.limits), applied_temp_c=idle_c, safe=False)
+        self._command_c = self.safety.applied_temp_c
+        self._offset = 0.0
+        self._held = False      # the pad was held (not tracking) during this contact
+        self.onset_s: float | None = None          # of the contact going on
+        self.last_onset_s: float | None = None
+        self.last_release_s: float | None = None
+        self.phase = "idle"
+        self.rendering: str | None = None       # material being rendered
+        self.rendered_from_s: float | None = None
+        self._pid_running = False
+
+    # ------------------------------------------------------------ pieces
+    @staticmethod
+    def standby_c_for(limits: SafetyLimits, object_temp_c: float | None) -> float:
+        """The object's temperature inside the skin band; neutral if unknown."""
+        if object_temp_c is None or not math.isfinite(object_temp_c):
+            return limits.neutral_c
+        return min(max(object_temp_c, limits.skin_min_c), limits.skin_max_c)
+
+    def standby_c(self, news: SlaveNews) -> float:
+        return self.standby_c_for(self.config.limits, news.object_temp_c)
+
+    def _desired(self, t_contact: float, news: SlaveNews, gap: float):
+        """(flux setpoint, flux for the feed-forward) at time since onset."""
+        if self.rendering is not None:
+            names, weights = [self.rendering], [1.0]
+        else:
+            names = list(news.classes)
+            post = news.estimate.posteriors if news.estimate is not None else ()
+            weights = list(post) if len(post) == len(names) else [1.0 / len(names)] * len(names)
+            known = self.generator.materials
+            pairs = [(n, w) for n, w in zip(names, weights) if n in known]
+            total = sum(w for _, w in pairs) or 1.0
+            names, weights = [n for n, _ in pairs], [w / total for _, w in pairs]
+        g, dg = mixture(self.generator, names, weights, t_contact)
+        q = g * gap
+        return q, q + self.tau * dg * gap
+
+    # ------------------------------------------------------------ the period
+    def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:
+        cfg, lim = self.config, self.config.limits
+        event = None
+        if math.isfinite(sensors.force_n):
+            event = self.detector.update(t_s, sensors.force_n)
+        if event is not None and event.touching:
+            self._held = False
+            self.onset_s, self.phase, self.rendering = event.t_s, "contact", None
+            self.last_onset_s, self.rendered_from_s = event.t_s, None
+            self._pid_running = False
+        elif event is not None:
+            self.onset_s, self.phase, self.rendering = None, "idle", None
+            self.last_release_s = event.t_s
+            self._pid_running = False
+
+        est = news.estimate
+        if self.phase == "contact" and est is not None and est.decided and est.label != UNKNOWN \
+                and self.generator is not None and est.label in self.generator.materials:
+            self.phase, self.rendering, self.rendered_from_s = "render", est.label, t_s
+
+        standby = self.standby_c(news)
+        desired = math.nan
+        command = standby
+        obj_c = news.object_temp_c
+        tracking = self.phase == "render" or (self.phase == "contact" and cfg.before == "prior"
+                                              and news.classes and self.generator is not None)
+        readings_ok = math.isfinite(sensors.flux_w_m2) and math.isfinite(sensors.pad_temp_c)
+        if self.phase != "idle" and not (tracking and readings_ok):
+            self._held = True
+        if tracking and not readings_ok:
+            # The supervisor puts the pad in its safe state this very period;
+            # the controller stands still and restarts bumplessly afterwards.
+            self._pid_running = False
+        elif tracking and obj_c is not None and math.isfinite(obj_c):
+            gap = obj_c - self.finger_c        # display flux = g(t) (T_object - T_finger)
+            t_contact = max(t_s - self.onset_s, 0.0)
+            desired, ff_flux = self._desired(t_contact, news, gap)
+            ff = (sensors.pad_temp_c + ff_flux * self.r_pad - standby) if cfg.feedforward else 0.0
+            if not self._pid_running:
+                # Saturate where the junction would leave the skin band, so the
+                # integral does not wind up against the supervisor.
+                g = cfg.gains
+                self.pid.gains = replace(g, output_min=max(g.output_min, lim.skin_min_c - standby),
+                                         output_max=min(g.output_max, lim.skin_max_c - standby))
+                self.pid.reset(sensors.flux_w_m2)
+            out = self.pid.update(desired, sensors.flux_w_m2, dt_s, feedforward=ff)
+            command = standby + out.output
+            if not self._pid_running:
+                # Hand-over from holding (or from the safe state) during a
+                # contact: start from what is applied and close the step at a
+                # bounded slope (no jump, no offset left in the integral). At
+                # the start of a contact the pad should move at once: no offset.
+                self._offset = self.safety.applied_temp_c - command if self._held else 0.0
+                self._pid_running = True
+            step = cfg.handover_k_s * dt_s
+            self._offset -= min(max(self._offset, -step), step)
+            command += self._offset
+
+        # The controller's own slew limit (the supervisor's is looser).
+        step = cfg.slew_k_s * dt_s
+        wanted = command
+        command = min(max(command, self._command_c - step), self._command_c + step)
+        self._command_c = command
+        request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
+        reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
+        applied, self.safety = supervise(self.safety, reading, request, lim, dt_s)
+        if self._pid_running:
+            self.pid.limited_downstream(wanted, applied.temp_c)
+        return MasterStep(t_s, self.phase, self.detector.touching, desired, command,
+                          applied.temp_c, applied.safe)

@@ -1,0 +1,238 @@
+"""An in-process telepresence session on the simulator: the slave touches
+the object, identifies it, the master renders the flux, and the result is
+compared with the operator's finger touching the object directly.
+
+Both sides touch at session time 0 (learning-based-thermal-rendering:
+"contact is established at the same time both in the master and the slave
+side"). The master runs its loop at ``config.rate_hz`` on a simulated clock
+(exact and instant) or on the real clock (``realtime=True``: the same loop,
+sleeping to absolute deadlines, its period measured). There is no network:
+what the slave knows at time t, the master knows at time t.
+
+The operator is drawn like a person of database 2: finger temperature,
+skin properties, pressing force (hence the contact conductance); the same
+draws give the direct-contact reference, so the comparison is with what
+*this* finger would have felt.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from telethermal.control.loop import FixedRateLoop, RealClock, SimClock
+from telethermal.devices.sim_plant import DisplayPlant
+from telethermal.errors import SceneError
+from telethermal.ident.anytime import UNKNOWN
+from telethermal.physics.layered import Boundary, Layer, LayeredContact
+from telethermal.physics.materials import get_material
+from telethermal.physics.scene import FingerSpec, Scene, finger_contact_model
+from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, InfraredThermometer, quantise
+from telethermal.session.master import DisplayConfig, MasterDisplay, PadSensors, SlaveNews
+from telethermal.session.slave import Slave
+
+#: The fingertip used where a scene has none (the gripper scenes): the
+#: first paper's operator, nominal skin.
+DEFAULT_FINGER = FingerSpec(temp_c=33.0, temp_sd_c=0.8, persons=5, trials_per_person=10,
+                            contact_duration_s=60.0, contact_conductance_w_m2k=5000.0,
+                            property_sd=0.12)
+#: Rendered flux within this fraction of the direct-contact peak counts as correct.
+CORRECT_WITHIN = 0.10
+PRE_CONTACT_S = 0.2
+AFTER_RELEASE_S = 0.2
+
+
+def with_finger(scene: Scene) -> Scene:
+    return scene if scene.finger is not None else replace(scene, finger=DEFAULT_FINGER)
+
+
+@functools.lru_cache(maxsize=16)
+def display_model(pad_layers: tuple[Layer, ...], t_max_s: float, t_min_s: float) -> LayeredContact:
+    """The display pad (junction behind its layers) on a semi-infinite fingertip."""
+    return LayeredContact(pad_layers, (Layer(get_material("skin"), math.inf),),
+                          Boundary("isothermal"), Boundary("adiabatic"), t_min_s, t_max_s)
+
+
+def pad_resistance(layers) -> float:
+    return sum(layer.thickness_m / layer.material.conductivity_w_mk for layer in layers)
+
+
+@dataclass
+class Operator:
+    finger_c: float
+    finger_ir_c: float
+    skin_k_scale: float
+    skin_heat_scale: float
+    force_n: float
+    conductance_w_m2k: float
+
+
+def draw_operator(scene: Scene, rng: np.random.Generator) -> Operator:
+    finger, var = scene.finger, scene.variability
+    finger_c = float(rng.normal(finger.temp_c, finger.temp_sd_c))
+    k, c = np.exp(rng.normal(0.0, finger.property_sd, 2))
+    force = float(np.clip(rng.normal(var.force_n, var.force_sd_n), 0.3 * var.force_n,
+                          3 * var.force_n))
+    h = finger.contact_conductance_w_m2k * (force / var.force_n) ** var.conductance_force_exponent
+    ir = float(InfraredThermometer(scene.sensors.ir_error_k).read_c(finger_c, rng))
+    return Operator(finger_c, ir, float(k), float(c), force, float(h))
+
+
+@dataclass
+class SessionResult:
+    summary: dict
+    trace: dict          # arrays over the master's periods
+
+
+def run_session(scene: Scene, material: str, identifier, generator,
+                config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
+                realtime: bool = False) -> SessionResult:
+    """One touch; see the module docstring. Returns the summary and the trace."""
+    if not (contact_s > 0 and math.isfinite(contact_s)):
+        raise SceneError(f"contact_s must be > 0, got {contact_s}")
+    scene = with_finger(scene)
+    rng = np.random.default_rng(seed)
+    slave = Slave(scene, material, identifier, rng)
+    operator = draw_operator(scene, rng)
+    obj = next(o for o in scene.objects if o.material == material)
+    dt = 1.0 / config.rate_hz
+    sens = scene.sensors
+    layers = tuple(scene.pad.layers)
+    model = display_model(layers, round(contact_s + 1.0, 3), min(dt, 1e-3))
+    # The master has idled at the standby temperature before this touch.
+    master = MasterDisplay(config, generator, pad_resistance(layers), sens.flux_lag_s,
+                           operator.finger_ir_c,
+                           idle_c=MasterDisplay.standby_c_for(config.limits, slave.object_ir_c))
+    flux_sensor = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
+    force_sensor = ForceSensor()
+
+    n_pre = int(round(PRE_CONTACT_S * config.rate_hz))
+    n_total = n_pre + int(round((contact_s + AFTER_RELEASE_S) * config.rate_hz))
+    noise = rng.normal(size=(n_total, 3))
+    trace = {k: np.full(n_total, np.nan) for k in (
+        "t_s", "desired_flux_w_m2", "flux_w_m2", "flux_sensed_w_m2", "pad_surface_c",
+        "skin_surface_c", "junction_cmd_c", "junction_c", "safe", "force_n")}
+    trace["phase"] = np.empty(n_total, dtype=object)
+    state = {"k": 0, "plant": None, "junction": master.safety.applied_temp_c}
+
+    def one_period(t_loop: float, dt_loop: float) -> bool:
+        k = state["k"]
+        if k >= n_total:
+            return False
+        # Simulated time follows the loop: exact on the simulated clock, the
+        # real elapsed time on the real one.
+        t = t_loop - PRE_CONTACT_S
+        slave.advance_to(t)
+        news = SlaveNews(slave.object_ir_c, slave.estimate, slave.classes)
+        touching = 0.0 <= t < contact_s
+        plant = state["plant"]
+        if touching and plant is None:
+            # Contact: the pad, held at the junction temperature, meets the finger.
+            plant = state["plant"] = DisplayPlant(
+                model, state["junction"], operator.finger_c, operator.conductance_w_m2k, dt,
+                sens.flux_lag_s, operator.skin_k_scale, operator.skin_heat_scale)
+        if touching:
+            reading = plant.read()
+            true_flux, sensed, pad_c, skin_c = (reading.contact_flux_w_m2, reading.flux_w_m2,
+                                                reading.pad_surface_c, reading.skin_surface_c)
+        else:
+            true_flux = sensed = 0.0
+            pad_c, skin_c = state["junction"], math.nan
+        flux_meas = quantise(sensed * flux_sensor.sensitivity_uv_per_w_m2 + flux_sensor.noise_uv_rms
+                             * noise[k, 0], flux_sensor.adc_lsb_uv) / flux_sensor.sensitivity_uv_per_w_m2
+        pad_meas = pad_c + 0.025 * noise[k, 1]          # thermocouple noise, 1 uV ~ 0.025 K
+        force = (operator.force_n * -math.expm1(-t / force_sensor.rise_s) if touching else 0.0) \
+            + force_sensor.noise_n_rms * noise[k, 2]
+        step = master.step(t, dt_loop, PadSensors(float(flux_meas), pad_meas, force), news)
+        state["junction"] = step.junction_applied_c
+        if touching:
+            # The physics keeps going through a stall of the loop.
+            for _ in range(max(1, round(dt_loop / dt))):
+                plant.step(step.junction_applied_c)
+        for key, value in (("t_s", t), ("desired_flux_w_m2", step.desired_flux_w_m2),
+                           ("flux_w_m2", true_flux), ("flux_sensed_w_m2", sensed),
+                           ("pad_surface_c", pad_c), ("skin_surface_c", skin_c),
+                           ("junction_cmd_c", step.junction_cmd_c),
+                           ("junction_c", step.junction_applied_c), ("safe", step.safe),
+                           ("force_n", force)):
+            trace[key][k] = value
+        trace["phase"][k] = step.phase
+        state["k"] = k + 1
+        return True
+
+    clock = RealClock() if realtime else SimClock()
+    stats = FixedRateLoop(dt, clock).run(one_period, n_total)
+    return SessionResult(_summarise(scene, obj, material, slave, master, operator, trace,
+                                    contact_s, config, stats, realtime, seed), trace)
+
+
+def _summarise(scene, obj, material, slave, master, operator, trace, contact_s, config, stats,
+               realtime, seed) -> dict:
+    t = trace["t_s"]
+    during = (t >= 0) & (t < contact_s)
+    finger_model, _ = finger_contact_model(scene, obj)
+    tc = t[during]
+    ref = finger_model.solve(np.clip(tc, 1e-9, None), operator.finger_c, slave.object_true_c,
+                             operator.conductance_w_m2k, k_scale_a=operator.skin_k_scale,
+                             heat_scale_a=operator.skin_heat_scale,
+                             sensor_lag_s=scene.sensors.flux_lag_s)
+    # Direct contact: the finger loses q to the object; the display must give -q.
+    direct = -ref.flux_w_m2[0]
+    trace["direct_flux_w_m2"] = np.full(len(t), np.nan)
+    trace["direct_flux_w_m2"][during] = direct
+    trace["direct_flux_sensed_w_m2"] = np.full(len(t), np.nan)
+    trace["direct_flux_sensed_w_m2"][during] = -ref.flux_sensed_w_m2[0]
+    trace["direct_skin_c"] = np.full(len(t), np.nan)
+    trace["direct_skin_c"][during] = ref.surface_temp_a_c[0]
+    err = trace["flux_w_m2"][during] - direct
+    peak = float(np.max(np.abs(direct)))
+    est = slave.estimate
+    decided = est is not None and est.decided
+    identified = est.label if decided else UNKNOWN
+    # The error "after identification" starts where the master began to
+    # render the material, or, when the slave said "unknown", where it said so.
+    render_from = master.rendered_from_s
+    if render_from is None and decided and slave.onset_s is not None:
+        render_from = slave.onset_s + est.t_s
+    window = tc >= render_from if render_from is not None else np.ones(len(tc), bool)
+
+    def rms_rel(mask):
+        return float(np.sqrt(np.mean(err[mask] ** 2)) / peak) if mask.any() and peak > 0 \
+            else math.nan
+
+    bad = np.abs(err) > CORRECT_WITHIN * peak
+    correct_from = float(tc[np.nonzero(bad)[0][-1] + 1]) if bad.any() and not bad[-1] else \
+        (float(tc[0]) if not bad.any() else math.nan)
+    events = dict(master.safety.events)
+    safety_events = sum(v for k, v in events.items()
+                        if k == "entered safe state" or k.startswith("clamped"))
+    summary = {
+        "scene": scene.name, "material": material, "seed": seed,
+        "identified": identified, "identified_correctly": identified == material,
+        "decision_reason": est.reason if decided else "no decision",
+        "decision_time_s": est.t_s if decided else None,
+        "slave_onset_s": slave.onset_s, "master_onset_s": master.last_onset_s,
+        "master_release_s": master.last_release_s,
+        "render_start_s": render_from,
+        "before_identification": config.before, "rate_hz": config.rate_hz,
+        "gains": asdict(config.gains), "contact_s": contact_s,
+        "operator": asdict(operator), "object_true_c": slave.object_true_c,
+        "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
+        "direct_peak_flux_w_m2": peak,
+        "flux_rms_error_rel": rms_rel(window),
+        "flux_rms_error_rel_first_s": rms_rel(tc < 1.0),
+        "flux_rms_error_rel_whole": rms_rel(np.ones(len(tc), bool)),
+        "temp_rms_error_c": float(np.sqrt(np.nanmean(
+            (trace["skin_surface_c"][during] - ref.surface_temp_a_c[0]) ** 2))),
+        "time_to_correct_flux_s": correct_from,
+        "correct_within_rel": CORRECT_WITHIN,
+        "safety_events": int(safety_events), "safety_event_counts": events,
+        "clock": "real" if realtime else "simulated",
+        "loop": stats.summary(),
+    }
+    if realtime:
+        summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
+    return summary

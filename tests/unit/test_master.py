@@ -1,0 +1,172 @@
+"""The master's display loop on the simulated plant: tracking against the
+exact direct-contact solution, hand-over, the skin band and the safe state."""
+
+import math
+
+import numpy as np
+import pytest
+
+from telethermal.control.pid import PidGains
+from telethermal.control.safety import SafetyLimits
+from telethermal.data.dataset import Trial
+from telethermal.errors import ControlError
+from telethermal.ident.anytime import Estimate
+from telethermal.physics.scene import finger_contact_model, load_scene
+from telethermal.render.generator import NetworkGenerator
+from telethermal.session.master import DisplayConfig, MasterDisplay, PadSensors, SlaveNews
+from telethermal.session.run import display_model, pad_resistance
+from telethermal.devices.sim_plant import DisplayPlant
+
+SCENE = load_scene("fingertip-7")
+FINGER_C, OBJECT_C, H = 33.0, 24.0, 5000.0
+TAU = SCENE.sensors.flux_lag_s
+
+
+@pytest.fixture(scope="module")
+def exact():
+    """A generator fitted on the exact direct-contact curves (nominal skin,
+    no noise), and those curves: the loop is then asked for the truth."""
+    t = np.arange(0, 3001) / 1000.0
+    trials, refs = [], {}
+    for obj in SCENE.objects:
+        if obj.material not in ("steel", "plexiglass"):
+            continue
+        model, _ = finger_contact_model(SCENE, obj)
+        ref = model.solve(np.clip(t, 1e-9, None), FINGER_C, OBJECT_C, H, sensor_lag_s=TAU)
+        refs[obj.material] = ref
+        sensed = np.where(t > 0, ref.flux_sensed_w_m2[0], 0.0)
+        trials.append(Trial(f"{obj.material}-0", obj.material, "x.csv", 1000.0, OBJECT_C,
+                            FINGER_C, 24.0, "person-0",
+                            channels={"t_s": t, "heat_flux_W_m2": sensed}))
+    return NetworkGenerator().fit(trials), refs, t
+
+
+def decided(material, classes=("plexiglass", "steel")):
+    p = tuple(1.0 if c == material else 0.0 for c in classes)
+    return Estimate(0.0, p, material, 1.0, True, "confident")
+
+
+def run(gen, news_at, seconds=3.0, config=DisplayConfig(), fault_at=None, pre_s=0.1):
+    """Drive the master on the plant; ``news_at(t)`` gives the slave's news."""
+    dt = 1.0 / config.rate_hz
+    layers = tuple(SCENE.pad.layers)
+    master = MasterDisplay(config, gen, pad_resistance(layers), TAU, FINGER_C, idle_c=OBJECT_C)
+    plant, rows = None, []
+    junction = OBJECT_C
+    for k in range(int(round((pre_s + seconds) * config.rate_hz))):
+        t = k * dt - pre_s
+        touching = t >= 0
+        if touching and plant is None:
+            plant = DisplayPlant(display_model(layers, seconds + 1, dt), junction, FINGER_C, H,
+                                 dt, TAU)
+        r = plant.read() if touching else None
+        flux = r.flux_w_m2 if r else 0.0
+        if fault_at and fault_at[0] <= t < fault_at[1]:
+            flux = math.nan
+        force = 10.0 if touching else 0.0
+        step = master.step(t, dt, PadSensors(flux, r.pad_surface_c if r else junction, force),
+                           news_at(t))
+        junction = step.junction_applied_c
+        if touching:
+            plant.step(junction)
+        rows.append((t, r.contact_flux_w_m2 if r else 0.0, junction, step.safe, step.phase))
+    return master, rows
+
+
+def _tracking_error(exact, material, config, window):
+    gen, refs, tt = exact
+    master, rows = run(gen, lambda t: SlaveNews(OBJECT_C, decided(material),
+                                                ("plexiglass", "steel")), config=config)
+    t = np.array([r[0] for r in rows])
+    q = np.array([r[1] for r in rows])
+    direct = -refs[material].flux_w_m2[0]
+    mask = (t >= window[0]) & (t < window[1])
+    err = q[mask] - np.interp(t[mask], tt, direct)
+    return np.sqrt(np.mean(err ** 2)) / np.abs(direct[1:]).max(), master
+
+
+@pytest.mark.parametrize("material", ["steel", "plexiglass"])
+def test_feed_forward_inverts_the_pad_exactly(exact, material):
+    # Feed-forward alone (no feedback), asked for the exact direct-contact
+    # flux: over 1-3 s the finger receives it within 0.5 % RMS of the direct
+    # peak (measured 0.19 % steel, 0.30 % plexiglass); over 0.2-3 s within
+    # 2 % (measured 0.6 %, 1.2 %). The inversion is quasi-static (junction =
+    # pad surface + q R_pad) and the sensor film's own heat capacity (time
+    # constant ~ L^2/alpha ~ 1 s) is what it misses; the first 0.2 s are out
+    # of the pad's reach (a metal's h-limited spike; the junction at the band).
+    ff_only = DisplayConfig(gains=PidGains(0.0, 0.0, 0.0, output_min=-25, output_max=25))
+    assert _tracking_error(exact, material, ff_only, (1.0, 3.0))[0] < 0.005
+    assert _tracking_error(exact, material, ff_only, (0.2, 3.0))[0] < 0.02
+
+
+@pytest.mark.parametrize("material", ["steel", "plexiglass"])
+def test_default_loop_tracks_the_exact_direct_contact_flux(exact, material):
+    # The default PI pays back, through its integral, the heat the pad could
+    # not deliver in the first instants, so the flux runs over for a while
+    # (measured 1.1-1.4 % RMS of peak over 0.2-3 s) and then settles (0.07 %
+    # and 0.09 % over 2-3 s); no safety event on the way.
+    err, master = _tracking_error(exact, material, DisplayConfig(), (0.2, 3.0))
+    assert err < 0.03
+    late, _ = _tracking_error(exact, material, DisplayConfig(), (2.0, 3.0))
+    assert late < 0.003
+    assert master.safety.events.get("entered safe state", 0) == 0
+    assert not any(k.startswith("clamped") for k in master.safety.events)
+
+
+def test_hand_over_is_slew_limited(exact):
+    # Hold until 0.4 s, then render: the junction never moves faster than
+    # the controller's slew limit, and the supervisor's rate limit is never hit.
+    gen, _, _ = exact
+    config = DisplayConfig(before="hold")
+    master, rows = run(gen, lambda t: SlaveNews(OBJECT_C, decided("steel") if t >= 0.4 else None,
+                                                ("plexiglass", "steel")), config=config)
+    junction = np.array([r[2] for r in rows])
+    assert np.max(np.abs(np.diff(junction))) <= config.slew_k_s / config.rate_hz + 1e-9
+    phases = [r[4] for r in rows]
+    assert phases[0] == "idle" and "contact" in phases and phases[-1] == "render"
+    assert master.rendered_from_s == pytest.approx(0.4, abs=1e-9)
+    assert "clamped: rate" not in master.safety.events
+
+
+def test_an_impossible_request_stays_in_the_skin_band(exact):
+    # An object at -30 C (as the slave says) asks the pad to pull far more
+    # heat than the band allows: the junction stays within 15-43 C.
+    gen, _, _ = exact
+    limits = SafetyLimits(max_rate_k_s=200.0, max_flux_w_m2=20_000.0)
+    master, rows = run(gen, lambda t: SlaveNews(-30.0, decided("steel"), ("plexiglass", "steel")),
+                       config=DisplayConfig(limits=limits), seconds=1.0)
+    junction = np.array([r[2] for r in rows])
+    assert junction.min() >= limits.skin_min_c - 1e-12
+    assert junction.max() <= limits.skin_max_c + 1e-12
+
+
+def test_a_dead_flux_sensor_is_the_safe_state_within_one_period(exact):
+    gen, _, _ = exact
+    limits = DisplayConfig().limits
+    master, rows = run(gen, lambda t: SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel")),
+                       fault_at=(1.0, 1.2), seconds=2.0)
+    for t, _, junction, safe, _ in rows:
+        if 1.0 <= t < 1.2:
+            assert safe and junction == limits.neutral_c       # the very period it happens
+    after = [r for r in rows if r[0] >= 1.3]
+    assert not any(r[3] for r in after)                        # back once the reading is
+    assert master.safety.events["entered safe state"] == 1
+
+
+def test_release_returns_to_standby_and_bad_config_is_refused(exact):
+    gen, _, _ = exact
+    layers = tuple(SCENE.pad.layers)
+    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+                           idle_c=OBJECT_C)
+    news = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
+    t = 0.0
+    for k in range(200):                                     # touch for 0.2 s
+        master.step(k * 1e-3, 1e-3, PadSensors(-2000.0 - k, 26.0, 10.0), news)
+    for k in range(200, 400):                                # lift
+        step = master.step(k * 1e-3, 1e-3, PadSensors(0.5 * (-1) ** k, 26.0, 0.0), news)
+    assert step.phase == "idle" and master.last_release_s is not None
+    assert step.junction_applied_c == pytest.approx(OBJECT_C)
+    with pytest.raises(ControlError, match="before"):
+        DisplayConfig(before="guess")
+    with pytest.raises(ControlError, match="rate_hz"):
+        DisplayConfig(rate_hz=0.0)
