@@ -295,7 +295,8 @@ def cmd_bench_identify(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """Until the services exist: the default scene's two databases and their plots."""
+    """Until the services exist: the default scene's databases, the identifier
+    and the generator trained on them, and one in-process touch per material."""
     from telethermal.data.generate import generate_databases
     from telethermal.data.plots import plot_datasets
     from telethermal.physics.scene import describe_models, load_scene
@@ -312,8 +313,45 @@ def cmd_demo(args) -> int:
     print(f"databases in {time.perf_counter() - start:.1f} s: "
           + ", ".join(f"{k} {v['trials']} trials" for k, v in summary["datasets"].items()))
     print(f"plot: {plot_datasets(out / 'databases', out / 'databases.png')}")
-    _demo_identify(scene, out, args.seed)
+    identifier = _demo_identify(scene, out, args.seed)
+    _demo_sessions(scene, out, identifier, args.seed)
     return 0
+
+
+DEMO_MATERIALS = ("aluminium", "plexiglass", "wood")
+
+
+def _demo_sessions(scene, out: Path, identifier, seed: int) -> None:
+    """Train the generator on database 2 and run one touch per material."""
+    from telethermal.data.dataset import load_dataset
+    from telethermal.render.generator import NetworkGenerator, save_generator
+    from telethermal.session.plots import plot_session
+    from telethermal.session.run import run_session, with_finger
+
+    scene = with_finger(scene)
+    finger = out / "databases" / "finger"
+    with console.status("training the flux generator on database 2"):
+        generator = NetworkGenerator().fit(load_dataset(finger)) if finger.exists() else None
+    if generator is None:
+        print(f"scene {scene.name} has no finger database: no rendering in the demo")
+        return
+    save_generator(generator, out / "generator.npz")
+    touches = []
+    for material in [m for m in DEMO_MATERIALS if m in scene.materials] or scene.materials[:3]:
+        result = run_session(scene, material, identifier, generator, contact_s=5.0,
+                             seed=seed + 1)
+        s = result.summary
+        plot_session(result, out / f"session-{material}.png")
+        touches.append({k: s[k] for k in ("material", "identified", "decision_time_s",
+                                          "flux_rms_error_rel", "flux_rms_error_rel_first_s",
+                                          "temp_rms_error_c", "safety_events")})
+        when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
+        print(f"touch on {material:10s}: slave said {s['identified']} {when}; rendered flux {100 * s['flux_rms_error_rel']:.2f} % "
+              f"of peak from then on, {100 * s['flux_rms_error_rel_first_s']:.2f} % over the "
+              f"first second; skin {s['temp_rms_error_c']:.2f} K RMS; safety events "
+              f"{s['safety_events']}")
+    _write_json(out / "sessions.json", {"scene": scene.name, "touches": touches})
+    print(f"session plots: {out}/session-*.png")
 
 
 def _demo_identify(scene, out: Path, seed: int) -> None:
@@ -338,6 +376,7 @@ def _demo_identify(scene, out: Path, seed: int) -> None:
           + ", ".join(f"{k} s {100 * v:.0f} %" for k, v in acc.items() if k in ("0.2", "0.5", "1.0"))
           + f"; 5 merged classes at 1 s {100 * report.get('accuracy_5_at_end', float('nan')):.0f} %"
           + f"; decisions {report['decision_time_s']['n']}/{report['trials']} committed")
+    return model
 
 
 def _session_models(scene, identifier_path, generator_path, seed):
