@@ -122,3 +122,20 @@ def test_session_command_writes_json_and_plot(tmp_path, models, capsys):
     assert main(["session", "--material", "glass", "--json", str(bad), "--identifier",
                  str(ident_path), "--generator", str(gen_path)]) == 2
     assert "glass" in capsys.readouterr().err and not bad.exists()
+
+
+def test_no_gap_between_finger_and_object(models):
+    # Object at the finger's temperature: direct contact exchanges (almost)
+    # nothing, and so must the display: the rendered flux stays under 5 % of
+    # what a 9 K gap gives, the junction near 33 C, nothing trips.
+    identifier, generator = models
+    warm = dataclasses.replace(
+        SCENE, objects=tuple(dataclasses.replace(o, temp_c=33.0) for o in SCENE.objects),
+        finger=dataclasses.replace(SCENE.finger, temp_sd_c=0.0))
+    r = run_session(warm, "steel", identifier, generator, contact_s=1.5, seed=1)
+    reference = run_session(SCENE, "steel", identifier, generator, contact_s=1.5, seed=1)
+    during = r.trace["t_s"] >= 0.1
+    assert np.nanmax(np.abs(r.trace["flux_w_m2"][during])) < \
+        0.05 * np.nanmax(np.abs(reference.trace["flux_w_m2"][during]))
+    assert np.nanmax(np.abs(r.trace["junction_c"] - 33.0)) < 3.0
+    assert r.summary["safety_events"] == 0

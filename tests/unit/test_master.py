@@ -170,3 +170,86 @@ def test_release_returns_to_standby_and_bad_config_is_refused(exact):
         DisplayConfig(before="guess")
     with pytest.raises(ControlError, match="rate_hz"):
         DisplayConfig(rate_hz=0.0)
+
+
+# ------------------------------------------------------------------ hard cases
+def closed_form_generator(h=5000.0, e_m=14000.0):
+    """The finger-material closed form as a generator (no fitting)."""
+    from telethermal.physics.materials import get_material
+    from telethermal.render.generator import ContactGenerator
+    return ContactGenerator._restore(
+        {"params": {"steel": (h, e_m, get_material("skin").effusivity),
+                    "plexiglass": (h, 600.0, get_material("skin").effusivity)}}, {})
+
+
+def test_a_step_of_desired_flux_at_onset_gives_no_kick_and_stays_in_the_band():
+    # The closed form steps from 0 to h*gap at contact; with a derivative
+    # term in the gains the junction still moves at most one slew step per
+    # period and never leaves the skin band.
+    config = DisplayConfig(gains=PidGains(1e-3, 1e-2, 5e-5, output_min=-25, output_max=25))
+    master, rows = run(closed_form_generator(), lambda t: SlaveNews(
+        OBJECT_C, decided("steel"), ("plexiglass", "steel")), config=config, seconds=1.0)
+    junction = np.array([r[2] for r in rows])
+    assert np.max(np.abs(np.diff(junction))) <= config.slew_k_s / config.rate_hz + 1e-9
+    assert junction.min() >= 15.0 and junction.max() <= 43.0
+    assert master.safety.events.get("entered safe state", 0) == 0
+
+
+def test_a_hot_object_is_limited_at_the_band_counted_and_logged(caplog):
+    # An 80 C object: the flux asked for would heat the skin past 43 C. The
+    # controller stops at the band, counts it and logs it; the supervisor
+    # never has to clamp a request past the band, and the pad surface stays
+    # under 43 C.
+    import logging
+    with caplog.at_level(logging.INFO):
+        master, rows = run(closed_form_generator(), lambda t: SlaveNews(
+            80.0, decided("steel"), ("plexiglass", "steel")), seconds=2.0)
+    junction = np.array([r[2] for r in rows])
+    assert junction.max() <= 43.0 + 1e-12
+    assert master.events["rendering limited by the skin band"] >= 1
+    assert "limited by the skin band" in caplog.text
+    assert master.safety.events.get("clamped: temperature band", 0) == 0
+
+
+def test_a_stuck_flux_sensor_mid_contact_is_the_safe_state():
+    gen = closed_form_generator()
+    limits = DisplayConfig().limits
+    layers = tuple(SCENE.pad.layers)
+    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+                           idle_c=OBJECT_C)
+    news = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
+    safe_at = None
+    for k in range(1500):
+        t = k * 1e-3
+        stuck = t >= 0.5
+        flux = -3000.0 if stuck else -3000.0 - 0.3 * (k % 7)      # bit-identical from 0.5 s
+        temp = 26.0 if stuck else 26.0 + 1e-3 * (k % 5)
+        step = master.step(t, 1e-3, PadSensors(flux, temp, 10.0), news)
+        if step.safe and safe_at is None and t > 0.1:
+            safe_at = t
+            assert step.junction_applied_c == limits.neutral_c
+    assert safe_at == pytest.approx(0.5 + limits.stuck_after_s, abs=2e-3)
+    assert master.safety.events["stuck sensor"] >= 1
+
+
+@pytest.mark.parametrize("dt", [0.0, -1e-3])
+def test_a_non_positive_period_is_a_clear_error(dt):
+    master = MasterDisplay(DisplayConfig(), closed_form_generator(), 1e-3, TAU, FINGER_C,
+                           idle_c=OBJECT_C)
+    with pytest.raises(ControlError, match="period|dt"):
+        master.step(0.0, dt, PadSensors(0.0, OBJECT_C, 0.0), SlaveNews(OBJECT_C))
+
+
+def test_a_period_100_times_nominal_makes_no_jump():
+    config = DisplayConfig()
+    master = MasterDisplay(config, closed_form_generator(), 1e-3, TAU, FINGER_C, idle_c=OBJECT_C)
+    news = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
+    last = None
+    for k in range(300):
+        dt = 0.1 if k == 200 else 1e-3                      # one stall of 100 periods
+        t = k * 1e-3 + (0.099 if k >= 200 else 0.0)
+        step = master.step(t, dt, PadSensors(-2000.0 + (k % 3), 27.0 + 1e-3 * (k % 4), 10.0),
+                           news)
+        if last is not None:
+            assert abs(step.junction_applied_c - last) <= 2 * config.slew_k_s * 1e-3 + 1e-9
+        last = step.junction_applied_c

@@ -18,6 +18,7 @@ named weight arrays. No pickle: ``numpy.load(allow_pickle=False)``.
 
 from __future__ import annotations
 
+import bisect
 import json
 import os
 import zipfile
@@ -121,11 +122,8 @@ class Identifier:
     def window_index(self, n_samples: int) -> int | None:
         """Index of the longest window a prefix of n samples covers, or None."""
         elapsed = (n_samples - 1) / self.sample_rate_hz_
-        index = None
-        for i, w in enumerate(self.windows_s_):
-            if w <= elapsed + 1e-9:
-                index = i
-        return index
+        count = bisect.bisect_right(self.windows_s_, elapsed + 1e-9)   # windows are ascending
+        return count - 1 if count else None
 
     def proba_normalised(self, x: np.ndarray, window_index: int) -> np.ndarray:
         """Posteriors (N, n_classes) for normalised contacts x (N, >= n_w, C)."""

@@ -34,6 +34,7 @@ removes what the model misses (the operator's own skin, contact, drift).
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field, replace
 
@@ -46,6 +47,8 @@ from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_
 from telethermal.errors import ControlError
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.generator import mixture
+
+log = logging.getLogger(__name__)
 
 BEFORE_MODES = ("hold", "prior")
 
@@ -138,6 +141,8 @@ class MasterDisplay:
         self._command_c = self.safety.applied_temp_c
         self._offset = 0.0
         self._held = False      # the pad was held (not tracking) during this contact
+        self._band_limited = False
+        self.events: dict[str, int] = {}
         self.onset_s: float | None = None          # of the contact going on
         self.last_onset_s: float | None = None
         self.last_release_s: float | None = None
@@ -221,6 +226,14 @@ class MasterDisplay:
                 self.pid.reset(sensors.flux_w_m2)
             out = self.pid.update(desired, sensors.flux_w_m2, dt_s, feedforward=ff)
             command = standby + out.output
+            if out.saturated and not self._band_limited:
+                # The flux asked for would take the pad past the skin band:
+                # the controller stops at the band; counted and logged.
+                self.events["rendering limited by the skin band"] = \
+                    self.events.get("rendering limited by the skin band", 0) + 1
+                log.info("rendering limited by the skin band at t=%.3f s (junction %.1f C)",
+                         t_s, command)
+            self._band_limited = out.saturated
             if not self._pid_running:
                 # Hand-over from holding (or from the safe state) during a
                 # contact: start from what is applied and close the step at a
@@ -233,7 +246,7 @@ class MasterDisplay:
             command += self._offset
 
         # The controller's own slew limit (the supervisor's is looser).
-        step = cfg.slew_k_s * dt_s
+        step = cfg.slew_k_s * min(dt_s, 2 * self.dt_nominal)   # a stall buys no bigger jump
         wanted = command
         command = min(max(command, self._command_c - step), self._command_c + step)
         self._command_c = command

@@ -230,6 +230,7 @@ def _summarise(scene, obj, material, slave, master, operator, trace, contact_s, 
         "time_to_correct_flux_s": correct_from,
         "correct_within_rel": CORRECT_WITHIN,
         "safety_events": int(safety_events), "safety_event_counts": events,
+        "display_event_counts": dict(master.events),
         "clock": "real" if realtime else "simulated",
         "loop": stats.summary(),
     }
