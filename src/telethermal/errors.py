@@ -38,3 +38,11 @@ class ModelFileError(TelethermalError, ValueError):
 
 class ControlError(TelethermalError, ValueError):
     """A controller called with an input it cannot act on (a non-positive step)."""
+
+
+class ProtocolError(TelethermalError):
+    """A message that does not follow the wire protocol (says which field)."""
+
+
+class TransportError(TelethermalError):
+    """A socket, key or peer problem of the networked services."""

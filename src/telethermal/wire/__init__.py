@@ -1,0 +1,1 @@
+"""The wire protocol between master and slave: schema, codec, transport."""

@@ -1,0 +1,66 @@
+"""Golden vectors: one example message per kind, encoded, beside its JSON.
+
+``python -m telethermal.wire.golden DIR`` (re)writes ``DIR/<kind>.msgpack``
+and ``DIR/<kind>.json``; the committed files in ``proto/golden/`` are what the
+codec is tested against, both ways, so a change of encoding shows up as a
+failing test rather than as a silent incompatibility.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from telethermal.wire.codec import encode
+
+_ENV = {"v": 1, "seq": 7, "sent_s": 1234.5625}
+EXAMPLES = {
+    "hello": {"role": "master", "versions": [1], "software": "telethermal 0.1.0",
+              "session_id": "4f2a9c1e", "resume_from": 1},
+    "heartbeat": {"ack": 6, "echo_sent_s": 1234.5, "echo_held_s": 0.00025},
+    "resend": {"from_seq": 4},
+    "session_config": {"scene": "fingertip-7", "sample_rate_hz": 100.0,
+                       "classes": ["plexiglass", "steel"], "identifier": "effusivity-lda",
+                       "threshold": 0.99,
+                       "curves": {"plexiglass": {"t_s": [0.01, 0.1, 1.0],
+                                                 "g_w_m2k": [120.5, 410.25, 160.0]},
+                                  "steel": {"t_s": [0.01, 0.1, 1.0],
+                                            "g_w_m2k": [350.0, 1200.5, 640.0]}}},
+    "contact_event": {"contact_id": 3, "touching": True, "t_s": 1234.25, "force_n": 2.125,
+                      "finger_temp_c": 33.25},
+    "material_estimate": {"contact_id": 3, "t_since_contact_s": 0.25,
+                          "classes": ["plexiglass", "steel"], "posteriors": [0.125, 0.875],
+                          "label": "steel", "confidence": 0.875, "decided": False,
+                          "reason": "", "object_temp_c": 24.5},
+    "flux_trajectory": {"contact_id": 3, "material": "steel", "object_temp_c": 24.5,
+                        "t_s": [0.0, 0.5, 1.0], "g_w_m2k": [0.0, 900.0, 640.0],
+                        "valid_s": 60.0},
+    "flux_setpoint": {"contact_id": 3, "t_since_contact_s": 0.5, "flux_w_m2": -7650.0},
+    "measurement_batch": {"contact_id": 3, "t0_s": 1234.0, "rate_hz": 100.0,
+                          "flux_w_m2": [-120.5, -3400.0], "temp_c": [34.5, 33.75],
+                          "force_n": [9.5, 10.25]},
+    "status": {"state": "rendering", "counters": {"lossless_resent": 0, "heartbeats_missed": 1},
+               "message": "ok"},
+    "fault": {"code": "sensor-nan", "message": "heat-flux reading NaN", "safe_state": True},
+}
+
+
+def messages() -> dict[str, dict]:
+    return {kind: {"kind": kind, **_ENV, **fields} for kind, fields in EXAMPLES.items()}
+
+
+def write(folder: str | Path) -> list[Path]:
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for kind, message in messages().items():
+        (folder / f"{kind}.msgpack").write_bytes(encode(message))
+        (folder / f"{kind}.json").write_text(json.dumps(message, indent=2) + "\n")
+        written.append(folder / f"{kind}.msgpack")
+    return written
+
+
+if __name__ == "__main__":
+    for path in write(sys.argv[1] if len(sys.argv) > 1 else "proto/golden"):
+        print(path)

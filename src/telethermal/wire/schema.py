@@ -1,0 +1,167 @@
+"""The message kinds of the telethermal wire protocol, version 1.
+
+This table is the single source of truth the codec validates against;
+``proto/PROTOCOL.md`` is its normative description (a test checks that every
+kind and field here is documented there). Every message is one msgpack map
+holding the envelope keys and then its kind's fields.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+PROTOCOL_VERSION = 1
+#: Versions this implementation speaks (negotiated by ``hello``).
+SUPPORTED_VERSIONS = (1,)
+#: Largest encoded message accepted or sent, bytes.
+MAX_MESSAGE_BYTES = 256 * 1024
+#: Longest array in any field.
+MAX_ARRAY = 8192
+MAX_STRING = 256
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str
+    type: str              # str, bool, uint, float, list[str], list[float], curves, counters
+    unit: str = "-"
+    lo: float = -math.inf
+    hi: float = math.inf
+    required: bool = True
+    nullable: bool = False
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Kind:
+    name: str
+    stream: str            # "control" (lossless, ordered) or "stream" (latest value, lossy)
+    direction: str         # "master->slave", "slave->master" or "both"
+    fields: tuple[Field, ...]
+    doc: str = ""
+
+
+ENVELOPE = (
+    Field("kind", "str", doc="message kind, one of the kinds below"),
+    Field("v", "uint", lo=1, hi=255, doc="protocol major version of the sender"),
+    Field("seq", "uint", doc="lossless kinds: the lossless sequence number (one counter "
+                             "per direction, from 1); other kinds: a counter of that kind"),
+    Field("sent_s", "float", "s", doc="sender's monotonic clock when sent"),
+)
+
+_T = dict(unit="s")
+KINDS: dict[str, Kind] = {k.name: k for k in (
+    Kind("hello", "control", "both", (
+        Field("role", "str", doc="'master' or 'slave'"),
+        Field("versions", "list[uint]", doc="protocol versions the sender speaks"),
+        Field("software", "str", doc="name and version of the sender"),
+        Field("session_id", "str", doc="random id of this run of the sender; a new id "
+                                       "means the peer restarted"),
+        Field("resume_from", "uint", doc="the next lossless seq the sender expects from "
+                                         "the peer (1 on a fresh start)"),
+    ), "first message on a connection and after every reconnection"),
+    Kind("heartbeat", "control", "both", (
+        Field("ack", "uint", doc="highest lossless seq received in order from the peer"),
+        Field("echo_sent_s", "float", "s", nullable=True,
+              doc="sent_s of the last heartbeat received from the peer"),
+        Field("echo_held_s", "float", "s", lo=0, nullable=True,
+              doc="how long the sender held that heartbeat before this one"),
+    ), "every heartbeat_s (default 0.1 s); acknowledges the lossless stream and carries "
+       "the clock-offset exchange"),
+    Kind("resend", "control", "both", (
+        Field("from_seq", "uint", doc="resend every lossless message from this seq on"),
+    ), "a receiver saw a gap in the lossless sequence"),
+    Kind("session_config", "control", "slave->master", (
+        Field("scene", "str"),
+        Field("sample_rate_hz", "float", "Hz", lo=1, hi=100_000),
+        Field("classes", "list[str]", doc="materials the identifier knows"),
+        Field("identifier", "str", doc="identification method"),
+        Field("threshold", "float", lo=0, hi=1, doc="decision confidence"),
+        Field("curves", "curves", "W/m^2/K",
+              doc="per material: {t_s: [...], g_w_m2k: [...]} the generator's "
+                  "normalised finger flux at log-spaced times since contact"),
+    ), "what the slave can identify and render; sent after hello"),
+    Kind("contact_event", "control", "both", (
+        Field("contact_id", "uint", doc="numbered by the master, echoed by the slave"),
+        Field("touching", "bool"),
+        Field("t_s", "float", "s", doc="onset or release on the sender's clock"),
+        Field("force_n", "float", "N", lo=0, hi=1000),
+        Field("object_temp_c", "float", "degC", lo=-50, hi=200, required=False,
+              nullable=True, doc="slave: the object's temperature measured before contact"),
+        Field("finger_temp_c", "float", "degC", lo=0, hi=50, required=False,
+              nullable=True, doc="master: the finger's temperature measured before contact"),
+    ), "the master's operator touched or lifted; the slave's pad touched or left"),
+    Kind("material_estimate", "control", "slave->master", (
+        Field("contact_id", "uint"),
+        Field("t_since_contact_s", "float", "s", lo=0),
+        Field("classes", "list[str]"),
+        Field("posteriors", "list[float]", lo=0, hi=1, doc="same order as classes"),
+        Field("label", "str", doc="best class, or 'unknown'"),
+        Field("confidence", "float", lo=0, hi=1),
+        Field("decided", "bool", doc="true once committed (to a class or to 'unknown')"),
+        Field("reason", "str", doc="confident | outside classes | gap too small | "
+                                   "not confident | '' while undecided"),
+        Field("object_temp_c", "float", "degC", lo=-50, hi=200),
+    ), "streamed at every identification window; the last has decided = true"),
+    Kind("flux_trajectory", "control", "slave->master", (
+        Field("contact_id", "uint"),
+        Field("material", "str"),
+        Field("object_temp_c", "float", "degC", lo=-50, hi=200),
+        Field("t_s", "list[float]", "s", lo=0, doc="times since the contact onset, ascending"),
+        Field("g_w_m2k", "list[float]", "W/m^2/K",
+              doc="normalised finger flux at t_s; the display flux is "
+                  "g (T_object - T_finger), pad -> finger positive"),
+        Field("valid_s", "float", "s", lo=0, doc="how long after the onset it may be played"),
+    ), "what to render for a contact, anchored to its onset on the master's own clock"),
+    Kind("flux_setpoint", "stream", "slave->master", (
+        Field("contact_id", "uint"),
+        Field("t_since_contact_s", "float", "s", lo=0),
+        Field("flux_w_m2", "float", "W/m^2", lo=-1e5, hi=1e5),
+    ), "latest-value setpoint, sample by sample (the naive, uncompensated path)"),
+    Kind("measurement_batch", "stream", "slave->master", (
+        Field("contact_id", "uint"),
+        Field("t0_s", "float", "s", doc="sender-clock time of the first sample"),
+        Field("rate_hz", "float", "Hz", lo=1, hi=100_000),
+        Field("flux_w_m2", "list[float]", "W/m^2"),
+        Field("temp_c", "list[float]", "degC"),
+        Field("force_n", "list[float]", "N"),
+    ), "raw samples of the sender's pad, for display and recording (lossy)"),
+    Kind("status", "control", "both", (
+        Field("state", "str", doc="idle | touching | rendering | safe | stopping"),
+        Field("counters", "counters", doc="name -> non-negative integer"),
+        Field("message", "str", required=False),
+    ), "on change of state and every second"),
+    Kind("fault", "control", "both", (
+        Field("code", "str"),
+        Field("message", "str"),
+        Field("safe_state", "bool", doc="the sender's pad is in its safe state"),
+    ), "something went wrong; the sender says what it did about it"),
+)}
+
+LOSSLESS = frozenset(k for k, v in KINDS.items() if v.stream == "control" and
+                     k not in ("hello", "heartbeat", "resend"))
+
+
+def field_tables() -> str:
+    """The kinds and their fields as Markdown (embedded in PROTOCOL.md)."""
+    def rng(f: Field) -> str:
+        if f.lo == -math.inf and f.hi == math.inf:
+            return ""
+        lo = "" if f.lo == -math.inf else f"{f.lo:g}"
+        hi = "" if f.hi == math.inf else f"{f.hi:g}"
+        return f"[{lo}, {hi}]"
+
+    def row(f: Field) -> str:
+        req = "yes" if f.required else "no"
+        t = f.type + (" or nil" if f.nullable else "")
+        return f"| `{f.name}` | {t} | {f.unit} | {rng(f)} | {req} | {f.doc} |"
+
+    head = "| field | type | unit | range | required | meaning |\n|---|---|---|---|---|---|"
+    out = ["### Envelope (every message)", "", head] + [row(f) for f in ENVELOPE]
+    for kind in KINDS.values():
+        out += ["", f"### `{kind.name}`", "",
+                f"Stream: **{kind.stream}** ({'lossless, ordered' if kind.name in LOSSLESS else 'not acknowledged' if kind.stream == 'control' else 'latest value, lossy'}); "
+                f"direction: {kind.direction}. {kind.doc}.", "", head]
+        out += [row(f) for f in kind.fields]
+    return "\n".join(out) + "\n"
