@@ -1,0 +1,462 @@
+"""ZeroMQ transport of the wire protocol (``proto/PROTOCOL.md`` sections 1-5).
+
+:class:`Endpoint` is one side's two connections (control, stream) with the
+lossless-stream machinery (sequence numbers, acknowledgements in
+heartbeats, resends, duplicate and gap accounting), liveness, clock-offset
+estimation and CURVE security. It never blocks for long: the services call
+:meth:`Endpoint.poll` from their loops with a timeout that fits the loop.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import os
+import socket
+import time
+import uuid
+from collections import OrderedDict, deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zmq
+import zmq.auth
+from zmq.auth.thread import ThreadAuthenticator
+
+from telethermal import __version__
+from telethermal.errors import ProtocolError, TransportError
+from telethermal.wire.codec import decode, encode
+from telethermal.wire.schema import (KINDS, LOSSLESS, MAX_MESSAGE_BYTES, PROTOCOL_VERSION,
+                                     SUPPORTED_VERSIONS)
+
+log = logging.getLogger(__name__)
+
+MAX_BUFFERED = 1024
+MAX_UNACKED = 4096
+COUNTERS = ("lossless_sent", "lossless_received", "duplicates", "gaps", "recovered", "resent",
+            "lossless_dropped", "stream_lost", "invalid", "unknown_kind", "heartbeats_missed",
+            "reconnects")
+
+
+@dataclass
+class TransportConfig:
+    """Where and how the two peers meet.
+
+    ``host`` is the slave's address (the master connects to it; the slave
+    binds on ``bind_host``). ``security``: "curve" (default) or "plain",
+    which is accepted only when both ends are loopback.
+    """
+
+    host: str = "127.0.0.1"
+    bind_host: str = "127.0.0.1"
+    control_port: int = 5560
+    stream_port: int = 5561
+    security: str = "curve"
+    keys_dir: str | None = None          # this side's <name>.key_secret, the server's .key
+    allowed_dir: str | None = None       # slave: public keys of masters it accepts
+    server_key: str = "slave"
+    client_key: str = "master"
+    heartbeat_s: float = 0.1
+    dead_after_s: float = 1.0
+    stream_hwm: int = 64
+
+    def validate(self, role: str) -> None:
+        if self.security not in ("curve", "plain"):
+            raise TransportError(f"security must be 'curve' or 'plain', got {self.security!r}")
+        if self.security == "plain":
+            hosts = [self.host] if role == "master" else [self.bind_host]
+            for h in hosts:
+                if not is_loopback(h):
+                    raise TransportError(f"security = 'plain' is allowed only on loopback; "
+                                         f"{h!r} is not a loopback address (use 'curve')")
+        elif not self.keys_dir:
+            raise TransportError("security = 'curve' needs keys_dir (see `telethermal keys`)")
+        if role == "slave" and self.security == "curve" and not self.allowed_dir:
+            raise TransportError("a CURVE slave needs allowed_dir: the public keys of the "
+                                 "masters it accepts")
+        if not (0 < self.heartbeat_s < self.dead_after_s):
+            raise TransportError("need 0 < heartbeat_s < dead_after_s")
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        try:
+            return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback
+        except OSError:
+            return False
+
+
+def generate_keys(folder: str | Path, name: str) -> tuple[Path, Path]:
+    """``name.key`` (public) and ``name.key_secret`` in ``folder``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    public, secret = zmq.auth.create_certificates(str(folder), name)
+    os.chmod(secret, 0o600)
+    return Path(public), Path(secret)
+
+
+def _load_secret(folder, name):
+    path = Path(folder) / f"{name}.key_secret"
+    if not path.is_file():
+        raise TransportError(f"{path}: no such key file (create it with `telethermal keys`)")
+    public, secret = zmq.auth.load_certificate(str(path))
+    if secret is None:
+        raise TransportError(f"{path}: holds no secret key")
+    return public, secret
+
+
+def _load_public(folder, name):
+    path = Path(folder) / f"{name}.key"
+    if not path.is_file():
+        raise TransportError(f"{path}: no such public key file")
+    return zmq.auth.load_certificate(str(path))[0]
+
+
+@dataclass
+class ClockOffset:
+    """Peer clock minus ours, from the heartbeat exchange (min-RTT filter)."""
+
+    samples: deque = field(default_factory=lambda: deque(maxlen=64))
+
+    def add(self, rtt_s: float, offset_s: float) -> None:
+        if rtt_s >= 0:
+            self.samples.append((rtt_s, offset_s))
+
+    @property
+    def offset_s(self) -> float | None:
+        return min(self.samples)[1] if self.samples else None
+
+    @property
+    def rtt_s(self) -> float | None:
+        return min(self.samples)[0] if self.samples else None
+
+
+class Endpoint:
+    """One side of a master-slave link."""
+
+    def __init__(self, role: str, config: TransportConfig, context: zmq.Context | None = None,
+                 clock=time.monotonic):
+        if role not in ("master", "slave"):
+            raise TransportError(f"role must be master or slave, got {role!r}")
+        config.validate(role)
+        self.role, self.config, self.clock = role, config, clock
+        self.ctx = context or zmq.Context.instance()
+        self.session_id = uuid.uuid4().hex[:16]
+        self.counters = dict.fromkeys(COUNTERS, 0)
+        self.offset = ClockOffset()
+        self._auth = None
+        self._next_seq = 1
+        self._outbox: OrderedDict[int, dict] = OrderedDict()
+        self._expected = 1
+        self._buffer: dict[int, dict] = {}
+        self._kind_seq: dict[str, int] = {}
+        self._stream_seen: dict[str, int] = {}
+        self.latest: dict[str, dict] = {}             # newest message per lossy kind
+        self.peer_session: str | None = None
+        self.peer_identity: bytes | None = None
+        self.peer_version: int | None = None
+        self._last_heard = None
+        self._last_heartbeat_sent = -1e9
+        self._last_peer_hb: tuple[float, float] | None = None   # (its sent_s, our receipt)
+        self._resend_asked_at = -1e9
+        self._was_alive = False
+        self._open_sockets()
+
+    # ------------------------------------------------------------ sockets
+    def _secure(self, sock, server: bool):
+        cfg = self.config
+        if cfg.security != "curve":
+            return
+        if server:
+            public, secret = _load_secret(cfg.keys_dir, cfg.server_key)
+            sock.curve_publickey, sock.curve_secretkey = public, secret
+            sock.curve_server = True
+        else:
+            public, secret = _load_secret(cfg.keys_dir, cfg.client_key)
+            sock.curve_publickey, sock.curve_secretkey = public, secret
+            sock.curve_serverkey = _load_public(cfg.keys_dir, cfg.server_key)
+
+    def _common(self, sock):
+        sock.linger = 0
+        sock.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
+        sock.setsockopt(zmq.RECONNECT_IVL, 100)
+        sock.setsockopt(zmq.RECONNECT_IVL_MAX, 2000)
+
+    def _bind(self, sock, port: int) -> int:
+        """Bind; port 0 takes a free one (tests). Returns the port bound."""
+        if port == 0:
+            return sock.bind_to_random_port(f"tcp://{self.config.bind_host}")
+        sock.bind(f"tcp://{self.config.bind_host}:{port}")
+        return port
+
+    def _open_sockets(self):
+        cfg = self.config
+        try:
+            if self.role == "slave":
+                if cfg.security == "curve":
+                    allowed = Path(cfg.allowed_dir)
+                    if not allowed.is_dir():
+                        raise TransportError(f"{allowed}: allowed-keys folder does not exist")
+                    self._auth = ThreadAuthenticator(self.ctx, log=logging.getLogger(
+                        "telethermal.zap"))
+                    self._auth.start()
+                    self._auth.configure_curve(domain="*", location=str(allowed))
+                self.control = self.ctx.socket(zmq.ROUTER)
+                self.control.setsockopt(zmq.ROUTER_MANDATORY, 1)
+                self._common(self.control)
+                self._secure(self.control, server=True)
+                self.ports = [self._bind(self.control, cfg.control_port)]
+                self.stream = self.ctx.socket(zmq.PUB)
+                self._common(self.stream)
+                self.stream.sndhwm = cfg.stream_hwm
+                self._secure(self.stream, server=True)
+                self.ports.append(self._bind(self.stream, cfg.stream_port))
+            else:
+                self.control = self.ctx.socket(zmq.DEALER)
+                self.control.setsockopt(zmq.IDENTITY, self.session_id.encode())
+                self.control.setsockopt(zmq.IMMEDIATE, 1)
+                self._common(self.control)
+                self._secure(self.control, server=False)
+                self.control.connect(f"tcp://{cfg.host}:{cfg.control_port}")
+                self.stream = self.ctx.socket(zmq.SUB)
+                self._common(self.stream)
+                self._secure(self.stream, server=False)
+                self.stream.setsockopt(zmq.SUBSCRIBE, b"")
+                self.stream.rcvhwm = cfg.stream_hwm
+                self.stream.connect(f"tcp://{cfg.host}:{cfg.stream_port}")
+        except TransportError:
+            self.close()
+            raise
+        except zmq.ZMQError as exc:
+            self.close()
+            raise TransportError(f"{self.role}: cannot open sockets on {cfg.bind_host if self.role == 'slave' else cfg.host}:"
+                                 f"{cfg.control_port}/{cfg.stream_port}: {exc}") from None
+        self.poller = zmq.Poller()
+        self.poller.register(self.control, zmq.POLLIN)
+        self.poller.register(self.stream, zmq.POLLIN)
+
+    def close(self) -> None:
+        for name in ("control", "stream"):
+            sock = getattr(self, name, None)
+            if sock is not None:
+                sock.close(linger=0)
+        if self._auth is not None:
+            self._auth.stop()
+            self._auth = None
+
+    # ------------------------------------------------------------ state
+    @property
+    def peer_alive(self) -> bool:
+        return self._last_heard is not None and \
+            self.clock() - self._last_heard < self.config.dead_after_s
+
+    @property
+    def unacked(self) -> int:
+        return len(self._outbox)
+
+    def to_peer_clock(self, t_s: float) -> float | None:
+        off = self.offset.offset_s
+        return None if off is None else t_s + off
+
+    # ------------------------------------------------------------ sending
+    def _raw_send(self, sock, message: dict) -> bool:
+        data = encode(message)
+        try:
+            if sock is self.control and self.role == "slave":
+                if self.peer_identity is None:
+                    return False
+                sock.send_multipart([self.peer_identity, data], flags=zmq.NOBLOCK)
+            else:
+                sock.send(data, flags=zmq.NOBLOCK)
+            return True
+        except zmq.Again:
+            return False
+        except zmq.ZMQError as exc:            # EHOSTUNREACH: the peer is gone (ROUTER)
+            if exc.errno == zmq.EHOSTUNREACH:
+                return False
+            raise
+
+    def send(self, kind: str, **fields) -> int:
+        """Send one message; returns its seq. Lossless kinds are kept until
+        acknowledged; a lossy kind goes on the stream socket (slave only)."""
+        if kind not in KINDS:
+            raise ProtocolError(f"unknown message kind {kind!r}")
+        now = self.clock()
+        if kind in LOSSLESS:
+            seq = self._next_seq
+            self._next_seq += 1
+            message = {"kind": kind, "v": PROTOCOL_VERSION, "seq": seq, "sent_s": now, **fields}
+            encode(message)                     # refuse bad content before keeping it
+            self._outbox[seq] = message
+            if len(self._outbox) > MAX_UNACKED:
+                self._outbox.popitem(last=False)
+                self.counters["lossless_dropped"] += 1
+            self.counters["lossless_sent"] += 1
+            if self.peer_version is not None:
+                self._raw_send(self.control, message)
+            return seq
+        seq = self._kind_seq.get(kind, 0) + 1
+        self._kind_seq[kind] = seq
+        message = {"kind": kind, "v": PROTOCOL_VERSION, "seq": seq, "sent_s": now, **fields}
+        sock = self.stream if KINDS[kind].stream == "stream" else self.control
+        if sock is self.stream and self.role != "slave":
+            raise TransportError(f"{kind} goes from the slave to the master")
+        self._raw_send(sock, message)
+        return seq
+
+    def _hello(self):
+        self._raw_send(self.control, {
+            "kind": "hello", "v": PROTOCOL_VERSION, "seq": 0, "sent_s": self.clock(),
+            "role": self.role, "versions": list(SUPPORTED_VERSIONS),
+            "software": f"telethermal {__version__}", "session_id": self.session_id,
+            "resume_from": self._expected})
+
+    def _heartbeat(self, now):
+        echo = held = None
+        if self._last_peer_hb is not None:
+            echo, received = self._last_peer_hb
+            held = max(now - received, 0.0)
+        self._raw_send(self.control, {
+            "kind": "heartbeat", "v": PROTOCOL_VERSION, "seq": 0, "sent_s": now,
+            "ack": self._expected - 1, "echo_sent_s": echo, "echo_held_s": held})
+        self._last_heartbeat_sent = now
+
+    def _resend_from(self, first: int):
+        for seq, message in list(self._outbox.items()):
+            if seq >= first:
+                self._raw_send(self.control, {**message, "sent_s": self.clock()})
+                self.counters["resent"] += 1
+
+    # ------------------------------------------------------------ receiving
+    def poll(self, timeout_s: float = 0.0) -> list[dict]:
+        """Housekeeping (heartbeats, hellos, resends, liveness) and every
+        application message that arrived, lossless ones in order."""
+        now = self.clock()
+        alive = self.peer_alive
+        if self._was_alive and not alive:
+            self.counters["heartbeats_missed"] += 1
+            log.warning("%s: peer silent for %.2f s", self.role, self.config.dead_after_s)
+        self._was_alive = alive
+        if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
+            if self.role == "master" and (not alive or self.peer_version is None):
+                self._hello()
+            if self.peer_version is not None:
+                self._heartbeat(now)
+            else:
+                self._last_heartbeat_sent = now
+        out = []
+        events = dict(self.poller.poll(max(0.0, timeout_s) * 1000))
+        if self.control in events:
+            while True:
+                try:
+                    frames = self.control.recv_multipart(flags=zmq.NOBLOCK)
+                except zmq.Again:
+                    break
+                identity = frames[0] if self.role == "slave" and len(frames) > 1 else None
+                out += self._on_control(frames[-1], identity)
+        if self.stream in events:
+            while True:
+                try:
+                    data = self.stream.recv(flags=zmq.NOBLOCK)
+                except zmq.Again:
+                    break
+                self._on_stream(data)
+        return out
+
+    def _decode(self, data):
+        try:
+            return decode(data)
+        except ProtocolError as exc:
+            key = "unknown_kind" if "unknown message kind" in str(exc) else "invalid"
+            self.counters[key] += 1
+            log.warning("%s: dropped a message: %s", self.role, exc)
+            return None
+
+    def _on_stream(self, data):
+        message = self._decode(data)
+        if message is None:
+            return
+        kind = message["kind"]
+        last = self._stream_seen.get(kind)
+        if last is not None and message["seq"] > last + 1:
+            self.counters["stream_lost"] += message["seq"] - last - 1
+        if last is None or message["seq"] > last:
+            self._stream_seen[kind] = message["seq"]
+            self.latest[kind] = message
+
+    def _on_control(self, data, identity) -> list[dict]:
+        message = self._decode(data)
+        if message is None:
+            return []
+        now = self.clock()
+        kind = message["kind"]
+        if kind == "hello":
+            return self._on_hello(message, identity)
+        if self.peer_version is None or (identity is not None and identity != self.peer_identity):
+            return []                              # nothing before hello
+        self._last_heard = now
+        if kind == "heartbeat":
+            ack = message["ack"]
+            for seq in [s for s in self._outbox if s <= ack]:
+                del self._outbox[seq]
+            self._last_peer_hb = (message["sent_s"], now)
+            if message["echo_sent_s"] is not None:
+                rtt = (now - message["echo_sent_s"]) - message["echo_held_s"]
+                self.offset.add(rtt, message["sent_s"] - now + rtt / 2)
+            return []
+        if kind == "resend":
+            self._resend_from(message["from_seq"])
+            return []
+        return self._on_lossless(message, now)
+
+    def _on_hello(self, message, identity) -> list[dict]:
+        common = set(message["versions"]) & set(SUPPORTED_VERSIONS)
+        if not common:
+            log.error("%s: peer speaks protocol %s, we speak %s", self.role,
+                      message["versions"], SUPPORTED_VERSIONS)
+            return []
+        restarted = self.peer_session is not None and message["session_id"] != self.peer_session
+        if restarted or (self.peer_session is None and self._next_seq > 1 and
+                         message["resume_from"] == 1 and self.role == "slave"):
+            # A new run of the peer: both directions start again from 1.
+            log.info("%s: peer restarted (session %s)", self.role, message["session_id"])
+            self._expected, self._buffer = 1, {}
+            self._next_seq, self._outbox = 1, OrderedDict()
+        if self.peer_session is not None:
+            self.counters["reconnects"] += 1
+        self.peer_session = message["session_id"]
+        self.peer_version = max(common)
+        self.peer_identity = identity
+        self._last_heard = self.clock()
+        if self.role == "slave":
+            self._hello()                          # answer every hello
+        self._resend_from(message["resume_from"])
+        return [message]
+
+    def _on_lossless(self, message, now) -> list[dict]:
+        seq = message["seq"]
+        self.counters["lossless_received"] += 1
+        if seq < self._expected or seq in self._buffer:
+            self.counters["duplicates"] += 1
+            return []
+        if seq > self._expected:
+            if len(self._buffer) < MAX_BUFFERED:
+                self._buffer[seq] = message
+            if now - self._resend_asked_at >= self.config.heartbeat_s:
+                self.counters["gaps"] += 1
+                self._resend_asked_at = now
+                self._raw_send(self.control, {"kind": "resend", "v": PROTOCOL_VERSION,
+                                              "seq": 0, "sent_s": now,
+                                              "from_seq": self._expected})
+            return []
+        out = [message]
+        self._expected += 1
+        while self._expected in self._buffer:
+            out.append(self._buffer.pop(self._expected))
+            self.counters["recovered"] += 1
+            self._expected += 1
+        return out

@@ -1,0 +1,170 @@
+"""The transport over loopback: handshake, lossless ordering, recovery of
+lost and duplicated messages, peer restarts, CURVE authentication."""
+
+import dataclasses
+import time
+
+import pytest
+
+from telethermal.errors import TransportError
+from telethermal.wire.transport import Endpoint, TransportConfig, generate_keys
+
+PLAIN = TransportConfig(security="plain", control_port=0, stream_port=0, heartbeat_s=0.02,
+                        dead_after_s=0.3)
+
+
+def pump(*endpoints, seconds=0.3, until=None):
+    """Poll every endpoint for up to ``seconds`` (or until ``until()``);
+    returns what each delivered."""
+    got = {id(e): [] for e in endpoints}
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        for e in endpoints:
+            got[id(e)] += e.poll(0.002)
+        if until is not None and until():
+            break
+    return [got[id(e)] for e in endpoints]
+
+
+def pair(config=PLAIN, master_config=None):
+    slave = Endpoint("slave", dataclasses.replace(config))
+    cfg = master_config or config
+    master = Endpoint("master", dataclasses.replace(cfg, control_port=slave.ports[0],
+                                                    stream_port=slave.ports[1]))
+    pump(slave, master, seconds=3.0, until=lambda: slave.peer_alive and master.peer_alive)
+    return slave, master
+
+
+@pytest.fixture
+def link():
+    slave, master = pair()
+    yield slave, master
+    slave.close()
+    master.close()
+
+
+def contact(i):
+    return dict(contact_id=i, touching=True, t_s=float(i), force_n=10.0)
+
+
+def test_handshake_heartbeats_and_clock_offset(link):
+    slave, master = link
+    assert slave.peer_alive and master.peer_alive
+    pump(slave, master, seconds=0.3)
+    # Same host, same monotonic clock: the offset is within the round trip.
+    assert master.offset.rtt_s is not None and master.offset.rtt_s < 0.05
+    assert abs(master.offset.offset_s) <= master.offset.rtt_s
+
+
+def test_lossless_messages_arrive_in_order_both_ways(link):
+    slave, master = link
+    for i in range(1, 301):
+        master.send("contact_event", **contact(i))
+        slave.send("contact_event", **contact(1000 + i))
+    s_got, m_got = pump(slave, master, seconds=5.0,
+                        until=lambda: master.unacked == 0 and slave.unacked == 0)
+    assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == \
+        list(range(1, 301))
+    assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == \
+        list(range(1001, 1301))
+    assert master.unacked == 0 and slave.unacked == 0        # acknowledged by heartbeats
+
+
+def test_a_lost_message_is_detected_resent_and_delivered_in_order(link, monkeypatch):
+    slave, master = link
+    real = master._raw_send
+    dropped = []
+
+    def lossy(sock, message):
+        if message.get("seq") == 3 and message["kind"] == "contact_event" and not dropped:
+            dropped.append(3)
+            return True                                       # lost on the way
+        return real(sock, message)
+
+    monkeypatch.setattr(master, "_raw_send", lossy)
+    for i in range(1, 8):
+        master.send("contact_event", **contact(i))
+    (s_got, _) = pump(slave, master, seconds=3.0, until=lambda: master.unacked == 0)
+    assert dropped == [3]
+    assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == list(range(1, 8))
+    assert slave.counters["gaps"] >= 1 and slave.counters["recovered"] == 4
+    assert master.counters["resent"] >= 1
+
+
+def test_duplicates_are_counted_and_delivered_once(link):
+    slave, master = link
+    for i in range(1, 4):
+        master.send("contact_event", **contact(i))
+    master._resend_from(1)
+    master._resend_from(2)
+    (s_got, _) = pump(slave, master, seconds=1.0)
+    assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [1, 2, 3]
+    assert slave.counters["duplicates"] >= 5
+
+
+def test_a_restarted_master_starts_a_fresh_sequence(link):
+    slave, master = link
+    for i in range(1, 4):
+        master.send("contact_event", **contact(i))
+    pump(slave, master, seconds=0.5, until=lambda: master.unacked == 0)
+    master.close()
+    fresh = Endpoint("master", dataclasses.replace(PLAIN, control_port=slave.ports[0],
+                                                   stream_port=slave.ports[1]))
+    try:
+        fresh.send("contact_event", **contact(99))
+        s_got, _ = pump(slave, fresh, seconds=3.0, until=lambda: fresh.unacked == 0 and
+                        fresh.peer_alive)
+        assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [99]
+        assert slave.peer_session == fresh.session_id
+    finally:
+        fresh.close()
+
+
+def test_the_lossy_stream_keeps_the_latest_and_counts_gaps(link):
+    slave, master = link
+    for i in range(1, 51):
+        slave.send("flux_setpoint", contact_id=1, t_since_contact_s=i * 0.01, flux_w_m2=-i)
+        if i == 20:
+            slave._kind_seq["flux_setpoint"] += 5                   # five lost on the wire
+    pump(slave, master, seconds=1.0,
+         until=lambda: master.latest.get("flux_setpoint", {}).get("flux_w_m2") == -50.0)
+    assert master.latest["flux_setpoint"]["flux_w_m2"] == -50.0
+    assert master.counters["stream_lost"] >= 5
+
+
+def test_curve_admits_the_allowed_master_and_no_other(tmp_path):
+    server_dir, allowed, client_dir, stranger_dir = (tmp_path / d for d in
+                                                     ("slave", "allowed", "master", "other"))
+    generate_keys(server_dir, "slave")
+    public, _ = generate_keys(client_dir, "master")
+    allowed.mkdir()
+    (allowed / "master.key").write_bytes(public.read_bytes())
+    for d in (client_dir, stranger_dir):
+        (d).mkdir(exist_ok=True)
+        (d / "slave.key").write_bytes((server_dir / "slave.key").read_bytes())
+    generate_keys(stranger_dir, "master")
+    secure = dataclasses.replace(PLAIN, security="curve")
+    slave = Endpoint("slave", dataclasses.replace(secure, keys_dir=str(server_dir),
+                                                  allowed_dir=str(allowed)))
+    ports = dict(control_port=slave.ports[0], stream_port=slave.ports[1])
+    good = Endpoint("master", dataclasses.replace(secure, keys_dir=str(client_dir), **ports))
+    bad = Endpoint("master", dataclasses.replace(secure, keys_dir=str(stranger_dir), **ports))
+    try:
+        bad.send("contact_event", **contact(666))
+        good.send("contact_event", **contact(1))
+        s_got, _, _ = pump(slave, good, bad, seconds=3.0,
+                           until=lambda: good.peer_alive and good.unacked == 0)
+        assert good.peer_alive and not bad.peer_alive
+        assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [1]
+    finally:
+        for e in (slave, good, bad):
+            e.close()
+
+
+def test_plain_is_refused_off_loopback_and_curve_needs_keys():
+    with pytest.raises(TransportError, match="only on loopback"):
+        Endpoint("master", dataclasses.replace(PLAIN, host="10.1.2.3"))
+    with pytest.raises(TransportError, match="keys_dir"):
+        Endpoint("master", dataclasses.replace(PLAIN, security="curve"))
+    with pytest.raises(TransportError, match="no such key file"):
+        Endpoint("master", dataclasses.replace(PLAIN, security="curve", keys_dir="/nonexistent"))
