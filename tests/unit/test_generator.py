@@ -102,3 +102,14 @@ def test_display_flux_sign():
     gen = ContactGenerator().fit(closed_form_trials())
     assert np.all(display_flux(gen, "marble", np.array([0.1, 1.0]), 33.0, 24.0) < 0)
     assert np.all(display_flux(gen, "marble", np.array([0.1, 1.0]), 30.0, 40.0) > 0)
+
+
+def test_a_sampled_generator_reproduces_the_network():
+    from telethermal.render.sampled import SampledGenerator, sample_curves
+    gen = NetworkGenerator().fit(closed_form_trials())
+    wire = SampledGenerator(sample_curves(gen))
+    t = np.concatenate([[0.0, 0.004], np.geomspace(0.01, 60, 500)])
+    peak = np.abs(gen.normalised("marble", t)).max()
+    assert np.max(np.abs(wire.normalised("marble", t) - gen.normalised("marble", t))) < 1e-4 * peak
+    with pytest.raises(IdentificationError, match="ascending"):
+        SampledGenerator({"x": {"t_s": [1.0, 1.0], "g_w_m2k": [1.0, 2.0]}})

@@ -81,6 +81,83 @@ def draw_operator(scene: Scene, rng: np.random.Generator) -> Operator:
     return Operator(finger_c, ir, float(k), float(c), force, float(h))
 
 
+class DisplayTouch:
+    """The master's hardware for one touch, simulated: the operator's finger
+    and pressing force, the display pad under it, and the pad's sensors.
+
+    Session time 0 is the finger's true contact; it lasts ``contact_s``.
+    ``sense(t)`` reads the sensors, ``actuate(t, junction, dt)`` holds the
+    junction for the period (stepping the physics through a stall of the
+    loop), and every period is recorded in ``trace``.
+    """
+
+    def __init__(self, scene: Scene, operator: Operator, rate_hz: float, contact_s: float,
+                 idle_c: float, rng: np.random.Generator):
+        self.scene, self.operator, self.contact_s = scene, operator, contact_s
+        self.dt = 1.0 / rate_hz
+        self.layers = tuple(scene.pad.layers)
+        self.model = display_model(self.layers, round(contact_s + 1.0, 3), min(self.dt, 1e-3))
+        sens = scene.sensors
+        self.flux_sensor = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
+        self.force_sensor = ForceSensor()
+        self.n_total = int(round((PRE_CONTACT_S + contact_s + AFTER_RELEASE_S) * rate_hz))
+        self.noise = rng.normal(size=(self.n_total + 1, 3))
+        self.trace = {k: np.full(self.n_total, np.nan) for k in (
+            "t_s", "desired_flux_w_m2", "flux_w_m2", "flux_sensed_w_m2", "pad_surface_c",
+            "skin_surface_c", "junction_cmd_c", "junction_c", "safe", "force_n")}
+        self.trace["phase"] = np.empty(self.n_total, dtype=object)
+        self.k = 0
+        self.plant = None
+        self.junction = idle_c
+        self._reading = None
+
+    @property
+    def done(self) -> bool:
+        return self.k >= self.n_total
+
+    def touching(self, t: float) -> bool:
+        return 0.0 <= t < self.contact_s
+
+    def sense(self, t: float) -> PadSensors:
+        op, sens = self.operator, self.scene.sensors
+        touching = self.touching(t)
+        if touching and self.plant is None:
+            # Contact: the pad, held at the junction temperature, meets the finger.
+            self.plant = DisplayPlant(self.model, self.junction, op.finger_c,
+                                      op.conductance_w_m2k, self.dt, sens.flux_lag_s,
+                                      op.skin_k_scale, op.skin_heat_scale)
+        if touching:
+            r = self.plant.read()
+            reading = (r.contact_flux_w_m2, r.flux_w_m2, r.pad_surface_c, r.skin_surface_c)
+        else:
+            reading = (0.0, 0.0, self.junction, math.nan)
+        self._reading = reading
+        fs, noise = self.flux_sensor, self.noise[min(self.k, self.n_total)]
+        flux = quantise(reading[1] * fs.sensitivity_uv_per_w_m2 + fs.noise_uv_rms * noise[0],
+                        fs.adc_lsb_uv) / fs.sensitivity_uv_per_w_m2
+        pad = reading[2] + 0.025 * noise[1]           # thermocouple noise, 1 uV ~ 0.025 K
+        force = (op.force_n * -math.expm1(-t / self.force_sensor.rise_s) if touching else 0.0) \
+            + self.force_sensor.noise_n_rms * noise[2]
+        return PadSensors(float(flux), float(pad), float(force))
+
+    def actuate(self, t: float, step, dt_loop: float, force_n: float) -> None:
+        self.junction = step.junction_applied_c
+        if self.touching(t):
+            for _ in range(max(1, round(dt_loop / self.dt))):
+                self.plant.step(step.junction_applied_c)
+        if self.k < self.n_total:
+            true_flux, sensed, pad_c, skin_c = self._reading
+            for key, value in (("t_s", t), ("desired_flux_w_m2", step.desired_flux_w_m2),
+                               ("flux_w_m2", true_flux), ("flux_sensed_w_m2", sensed),
+                               ("pad_surface_c", pad_c), ("skin_surface_c", skin_c),
+                               ("junction_cmd_c", step.junction_cmd_c),
+                               ("junction_c", step.junction_applied_c), ("safe", step.safe),
+                               ("force_n", force_n)):
+                self.trace[key][self.k] = value
+            self.trace["phase"][self.k] = step.phase
+        self.k += 1
+
+
 @dataclass
 class SessionResult:
     summary: dict
@@ -97,107 +174,87 @@ def run_session(scene: Scene, material: str, identifier, generator,
     rng = np.random.default_rng(seed)
     slave = Slave(scene, material, identifier, rng)
     operator = draw_operator(scene, rng)
-    obj = next(o for o in scene.objects if o.material == material)
-    dt = 1.0 / config.rate_hz
-    sens = scene.sensors
-    layers = tuple(scene.pad.layers)
-    model = display_model(layers, round(contact_s + 1.0, 3), min(dt, 1e-3))
     # The master has idled at the standby temperature before this touch.
-    master = MasterDisplay(config, generator, pad_resistance(layers), sens.flux_lag_s,
-                           operator.finger_ir_c,
-                           idle_c=MasterDisplay.standby_c_for(config.limits, slave.object_ir_c))
-    flux_sensor = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
-    force_sensor = ForceSensor()
-
-    n_pre = int(round(PRE_CONTACT_S * config.rate_hz))
-    n_total = n_pre + int(round((contact_s + AFTER_RELEASE_S) * config.rate_hz))
-    noise = rng.normal(size=(n_total, 3))
-    trace = {k: np.full(n_total, np.nan) for k in (
-        "t_s", "desired_flux_w_m2", "flux_w_m2", "flux_sensed_w_m2", "pad_surface_c",
-        "skin_surface_c", "junction_cmd_c", "junction_c", "safe", "force_n")}
-    trace["phase"] = np.empty(n_total, dtype=object)
-    state = {"k": 0, "plant": None, "junction": master.safety.applied_temp_c}
+    idle = MasterDisplay.standby_c_for(config.limits, slave.object_ir_c)
+    master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
+                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle)
+    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
 
     def one_period(t_loop: float, dt_loop: float) -> bool:
-        k = state["k"]
-        if k >= n_total:
+        if touch.done:
             return False
         # Simulated time follows the loop: exact on the simulated clock, the
         # real elapsed time on the real one.
         t = t_loop - PRE_CONTACT_S
         slave.advance_to(t)
-        news = SlaveNews(slave.object_ir_c, slave.estimate, slave.classes)
-        touching = 0.0 <= t < contact_s
-        plant = state["plant"]
-        if touching and plant is None:
-            # Contact: the pad, held at the junction temperature, meets the finger.
-            plant = state["plant"] = DisplayPlant(
-                model, state["junction"], operator.finger_c, operator.conductance_w_m2k, dt,
-                sens.flux_lag_s, operator.skin_k_scale, operator.skin_heat_scale)
-        if touching:
-            reading = plant.read()
-            true_flux, sensed, pad_c, skin_c = (reading.contact_flux_w_m2, reading.flux_w_m2,
-                                                reading.pad_surface_c, reading.skin_surface_c)
-        else:
-            true_flux = sensed = 0.0
-            pad_c, skin_c = state["junction"], math.nan
-        flux_meas = quantise(sensed * flux_sensor.sensitivity_uv_per_w_m2 + flux_sensor.noise_uv_rms
-                             * noise[k, 0], flux_sensor.adc_lsb_uv) / flux_sensor.sensitivity_uv_per_w_m2
-        pad_meas = pad_c + 0.025 * noise[k, 1]          # thermocouple noise, 1 uV ~ 0.025 K
-        force = (operator.force_n * -math.expm1(-t / force_sensor.rise_s) if touching else 0.0) \
-            + force_sensor.noise_n_rms * noise[k, 2]
-        step = master.step(t, dt_loop, PadSensors(float(flux_meas), pad_meas, force), news)
-        state["junction"] = step.junction_applied_c
-        if touching:
-            # The physics keeps going through a stall of the loop.
-            for _ in range(max(1, round(dt_loop / dt))):
-                plant.step(step.junction_applied_c)
-        for key, value in (("t_s", t), ("desired_flux_w_m2", step.desired_flux_w_m2),
-                           ("flux_w_m2", true_flux), ("flux_sensed_w_m2", sensed),
-                           ("pad_surface_c", pad_c), ("skin_surface_c", skin_c),
-                           ("junction_cmd_c", step.junction_cmd_c),
-                           ("junction_c", step.junction_applied_c), ("safe", step.safe),
-                           ("force_n", force)):
-            trace[key][k] = value
-        trace["phase"][k] = step.phase
-        state["k"] = k + 1
+        sensors = touch.sense(t)
+        step = master.step(t, dt_loop, sensors,
+                           SlaveNews(slave.object_ir_c, slave.estimate, slave.classes))
+        touch.actuate(t, step, dt_loop, sensors.force_n)
         return True
 
     clock = RealClock() if realtime else SimClock()
-    stats = FixedRateLoop(dt, clock).run(one_period, n_total)
-    return SessionResult(_summarise(scene, obj, material, slave, master, operator, trace,
-                                    contact_s, config, stats, realtime, seed), trace)
-
-
-def _summarise(scene, obj, material, slave, master, operator, trace, contact_s, config, stats,
-               realtime, seed) -> dict:
-    t = trace["t_s"]
-    during = (t >= 0) & (t < contact_s)
-    finger_model, _ = finger_contact_model(scene, obj)
-    tc = t[during]
-    ref = finger_model.solve(np.clip(tc, 1e-9, None), operator.finger_c, slave.object_true_c,
-                             operator.conductance_w_m2k, k_scale_a=operator.skin_k_scale,
-                             heat_scale_a=operator.skin_heat_scale,
-                             sensor_lag_s=scene.sensors.flux_lag_s)
-    # Direct contact: the finger loses q to the object; the display must give -q.
-    direct = -ref.flux_w_m2[0]
-    trace["direct_flux_w_m2"] = np.full(len(t), np.nan)
-    trace["direct_flux_w_m2"][during] = direct
-    trace["direct_flux_sensed_w_m2"] = np.full(len(t), np.nan)
-    trace["direct_flux_sensed_w_m2"][during] = -ref.flux_sensed_w_m2[0]
-    trace["direct_skin_c"] = np.full(len(t), np.nan)
-    trace["direct_skin_c"][during] = ref.surface_temp_a_c[0]
-    err = trace["flux_w_m2"][during] - direct
-    peak = float(np.max(np.abs(direct)))
+    stats = FixedRateLoop(1.0 / config.rate_hz, clock).run(one_period, touch.n_total)
     est = slave.estimate
     decided = est is not None and est.decided
-    identified = est.label if decided else UNKNOWN
     # The error "after identification" starts where the master began to
     # render the material, or, when the slave said "unknown", where it said so.
     render_from = master.rendered_from_s
     if render_from is None and decided and slave.onset_s is not None:
         render_from = slave.onset_s + est.t_s
-    window = tc >= render_from if render_from is not None else np.ones(len(tc), bool)
+    metrics = compare_with_direct(scene, material, slave.object_true_c, operator, touch.trace,
+                                  contact_s, render_from)
+    summary = {
+        "scene": scene.name, "material": material, "seed": seed,
+        "identified": est.label if decided else UNKNOWN,
+        "identified_correctly": decided and est.label == material,
+        "decision_reason": est.reason if decided else "no decision",
+        "decision_time_s": est.t_s if decided else None,
+        "slave_onset_s": slave.onset_s, "master_onset_s": master.last_onset_s,
+        "master_release_s": master.last_release_s, "render_start_s": render_from,
+        "before_identification": config.before, "rate_hz": config.rate_hz,
+        "gains": asdict(config.gains), "contact_s": contact_s,
+        "operator": asdict(operator), "object_true_c": slave.object_true_c,
+        "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
+        **metrics, **safety_summary(master),
+        "clock": "real" if realtime else "simulated", "loop": stats.summary(),
+    }
+    if realtime:
+        summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
+    return SessionResult(summary, touch.trace)
+
+
+def safety_summary(master: MasterDisplay) -> dict:
+    events = dict(master.safety.events)
+    count = sum(v for k, v in events.items() if k == "entered safe state" or
+                k.startswith("clamped"))
+    return {"safety_events": int(count), "safety_event_counts": events,
+            "display_event_counts": dict(master.events)}
+
+
+def compare_with_direct(scene: Scene, material: str, object_true_c: float, operator: Operator,
+                        trace: dict, contact_s: float, render_from_s: float | None) -> dict:
+    """The issue's metrics against the same finger touching the object
+    directly; adds the direct-contact curves to ``trace``."""
+    obj = next(o for o in scene.objects if o.material == material)
+    t = trace["t_s"]
+    during = (t >= 0) & (t < contact_s)
+    finger_model, _ = finger_contact_model(scene, obj)
+    tc = t[during]
+    ref = finger_model.solve(np.clip(tc, 1e-9, None), operator.finger_c, object_true_c,
+                             operator.conductance_w_m2k, k_scale_a=operator.skin_k_scale,
+                             heat_scale_a=operator.skin_heat_scale,
+                             sensor_lag_s=scene.sensors.flux_lag_s)
+    # Direct contact: the finger loses q to the object; the display must give -q.
+    direct = -ref.flux_w_m2[0]
+    for key, values in (("direct_flux_w_m2", direct),
+                        ("direct_flux_sensed_w_m2", -ref.flux_sensed_w_m2[0]),
+                        ("direct_skin_c", ref.surface_temp_a_c[0])):
+        trace[key] = np.full(len(t), np.nan)
+        trace[key][during] = values
+    err = trace["flux_w_m2"][during] - direct
+    peak = float(np.max(np.abs(direct)))
+    window = tc >= render_from_s if render_from_s is not None else np.ones(len(tc), bool)
 
     def rms_rel(mask):
         return float(np.sqrt(np.mean(err[mask] ** 2)) / peak) if mask.any() and peak > 0 \
@@ -206,34 +263,10 @@ def _summarise(scene, obj, material, slave, master, operator, trace, contact_s, 
     bad = np.abs(err) > CORRECT_WITHIN * peak
     correct_from = float(tc[np.nonzero(bad)[0][-1] + 1]) if bad.any() and not bad[-1] else \
         (float(tc[0]) if not bad.any() else math.nan)
-    events = dict(master.safety.events)
-    safety_events = sum(v for k, v in events.items()
-                        if k == "entered safe state" or k.startswith("clamped"))
-    summary = {
-        "scene": scene.name, "material": material, "seed": seed,
-        "identified": identified, "identified_correctly": identified == material,
-        "decision_reason": est.reason if decided else "no decision",
-        "decision_time_s": est.t_s if decided else None,
-        "slave_onset_s": slave.onset_s, "master_onset_s": master.last_onset_s,
-        "master_release_s": master.last_release_s,
-        "render_start_s": render_from,
-        "before_identification": config.before, "rate_hz": config.rate_hz,
-        "gains": asdict(config.gains), "contact_s": contact_s,
-        "operator": asdict(operator), "object_true_c": slave.object_true_c,
-        "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
-        "direct_peak_flux_w_m2": peak,
-        "flux_rms_error_rel": rms_rel(window),
-        "flux_rms_error_rel_first_s": rms_rel(tc < 1.0),
-        "flux_rms_error_rel_whole": rms_rel(np.ones(len(tc), bool)),
-        "temp_rms_error_c": float(np.sqrt(np.nanmean(
-            (trace["skin_surface_c"][during] - ref.surface_temp_a_c[0]) ** 2))),
-        "time_to_correct_flux_s": correct_from,
-        "correct_within_rel": CORRECT_WITHIN,
-        "safety_events": int(safety_events), "safety_event_counts": events,
-        "display_event_counts": dict(master.events),
-        "clock": "real" if realtime else "simulated",
-        "loop": stats.summary(),
-    }
-    if realtime:
-        summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
-    return summary
+    return {"direct_peak_flux_w_m2": peak,
+            "flux_rms_error_rel": rms_rel(window),
+            "flux_rms_error_rel_first_s": rms_rel(tc < 1.0),
+            "flux_rms_error_rel_whole": rms_rel(np.ones(len(tc), bool)),
+            "temp_rms_error_c": float(np.sqrt(np.nanmean(
+                (trace["skin_surface_c"][during] - ref.surface_temp_a_c[0]) ** 2))),
+            "time_to_correct_flux_s": correct_from, "correct_within_rel": CORRECT_WITHIN}

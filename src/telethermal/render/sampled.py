@@ -1,0 +1,61 @@
+"""A generator carried over the wire: each material's normalised flux
+sampled at log-spaced times (``session_config.curves``, ``flux_trajectory``)
+and interpolated in log t on the receiving side.
+
+256 knots from the generator's first fitted time to its last reproduce the
+network to 1e-4 of its peak (tested); below the first knot the curve ramps
+linearly from 0 at contact, as the network does; past the last it holds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from telethermal.errors import IdentificationError
+
+N_KNOTS = 256
+
+
+def sample_curves(generator, materials=None, n_knots: int = N_KNOTS,
+                  t_last_s: float = 60.0) -> dict[str, dict[str, list[float]]]:
+    """``{material: {"t_s": [...], "g_w_m2k": [...]}}`` for the wire."""
+    t_first = getattr(generator, "t_range_s_", (1e-3, t_last_s))[0]
+    t_last = max(getattr(generator, "t_range_s_", (t_first, t_last_s))[1], t_first * 10)
+    t = np.geomspace(t_first, t_last, n_knots)
+    names = list(materials) if materials is not None else generator.materials
+    return {m: {"t_s": t.tolist(), "g_w_m2k": generator.normalised(m, t).tolist()}
+            for m in names}
+
+
+class SampledGenerator:
+    """``normalised``/``normalised_many``/``materials`` like the fitted ones."""
+
+    def __init__(self, curves: dict):
+        self._curves = {}
+        for name, curve in curves.items():
+            t = np.asarray(curve["t_s"], dtype=np.float64)
+            g = np.asarray(curve["g_w_m2k"], dtype=np.float64)
+            if len(t) < 2 or len(t) != len(g) or np.any(np.diff(t) <= 0) or t[0] <= 0:
+                raise IdentificationError(f"curve for {name!r}: need >= 2 ascending positive "
+                                          "times and as many values")
+            self._curves[name] = (np.log(t), g, t[0])
+
+    @property
+    def materials(self) -> list[str]:
+        return sorted(self._curves)
+
+    def set_curve(self, name: str, t_s, g_w_m2k) -> None:
+        self.__init__({**{m: {"t_s": np.exp(c[0]), "g_w_m2k": c[1]}
+                          for m, c in self._curves.items()},
+                       name: {"t_s": t_s, "g_w_m2k": g_w_m2k}})
+
+    def normalised(self, material: str, t_s) -> np.ndarray:
+        if material not in self._curves:
+            raise IdentificationError(f"no curve for {material!r}; have {', '.join(self.materials)}")
+        log_t, g, t_first = self._curves[material]
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        q = np.interp(np.log(np.maximum(t, t_first)), log_t, g)
+        return np.where(t >= t_first, q, np.clip(t, 0, None) / t_first * g[0])
+
+    def normalised_many(self, materials, t_s) -> np.ndarray:
+        return np.stack([self.normalised(m, t_s) for m in materials])
