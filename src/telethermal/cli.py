@@ -295,14 +295,19 @@ def cmd_bench_identify(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """Until the services exist: the default scene's databases, the identifier
-    and the generator trained on them, and one in-process touch per material."""
+    """The main job on the default scene: databases, identifier and generator
+    trained on them, then slave and master as two processes on loopback and
+    a touch on each of several materials."""
+    from telethermal.data.dataset import load_dataset
     from telethermal.data.generate import generate_databases
     from telethermal.data.plots import plot_datasets
     from telethermal.physics.scene import describe_models, load_scene
+    from telethermal.render.generator import NetworkGenerator, save_generator
+    from telethermal.services.demo import run_demo
+    from telethermal.session.run import with_finger
 
     out = Path(args.out)
-    scene = load_scene(args.scene)
+    scene = with_finger(load_scene(args.scene))
     print(f"scene {scene.name}: {scene.description.splitlines()[0]}")
     for side, material, choice in describe_models(scene):
         print(f"  {side:6s} on {material:10s} {choice.describe()}")
@@ -313,45 +318,20 @@ def cmd_demo(args) -> int:
     print(f"databases in {time.perf_counter() - start:.1f} s: "
           + ", ".join(f"{k} {v['trials']} trials" for k, v in summary["datasets"].items()))
     print(f"plot: {plot_datasets(out / 'databases', out / 'databases.png')}")
-    identifier = _demo_identify(scene, out, args.seed)
-    _demo_sessions(scene, out, identifier, args.seed)
-    return 0
+    _demo_identify(scene, out, args.seed)
+    with console.status("training the flux generator on database 2"):
+        save_generator(NetworkGenerator().fit(load_dataset(out / "databases" / "finger")),
+                       out / "generator.npz")
+    materials = [m for m in args.materials.split(",") if m] if args.materials else \
+        [m for m in DEMO_MATERIALS if m in scene.materials] or scene.materials[:3]
+    report = run_demo(out, args.scene, out / "identifier.npz", out / "generator.npz",
+                      materials, seed=args.seed, contact_s=args.contact_s)
+    path = _write_json(args.json or out / "demo.json", report)
+    print(f"touch plots: {out}/touch-*.png; summary: {path}")
+    return 0 if all(c == 0 for c in report["exit_codes"].values()) else 1
 
 
 DEMO_MATERIALS = ("aluminium", "plexiglass", "wood")
-
-
-def _demo_sessions(scene, out: Path, identifier, seed: int) -> None:
-    """Train the generator on database 2 and run one touch per material."""
-    from telethermal.data.dataset import load_dataset
-    from telethermal.render.generator import NetworkGenerator, save_generator
-    from telethermal.session.plots import plot_session
-    from telethermal.session.run import run_session, with_finger
-
-    scene = with_finger(scene)
-    finger = out / "databases" / "finger"
-    with console.status("training the flux generator on database 2"):
-        generator = NetworkGenerator().fit(load_dataset(finger)) if finger.exists() else None
-    if generator is None:
-        print(f"scene {scene.name} has no finger database: no rendering in the demo")
-        return
-    save_generator(generator, out / "generator.npz")
-    touches = []
-    for material in [m for m in DEMO_MATERIALS if m in scene.materials] or scene.materials[:3]:
-        result = run_session(scene, material, identifier, generator, contact_s=5.0,
-                             seed=seed + 1)
-        s = result.summary
-        plot_session(result, out / f"session-{material}.png")
-        touches.append({k: s[k] for k in ("material", "identified", "decision_time_s",
-                                          "flux_rms_error_rel", "flux_rms_error_rel_first_s",
-                                          "temp_rms_error_c", "safety_events")})
-        when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
-        print(f"touch on {material:10s}: slave said {s['identified']} {when}; rendered flux {100 * s['flux_rms_error_rel']:.2f} % "
-              f"of peak from then on, {100 * s['flux_rms_error_rel_first_s']:.2f} % over the "
-              f"first second; skin {s['temp_rms_error_c']:.2f} K RMS; safety events "
-              f"{s['safety_events']}")
-    _write_json(out / "sessions.json", {"scene": scene.name, "touches": touches})
-    print(f"session plots: {out}/session-*.png")
 
 
 def _demo_identify(scene, out: Path, seed: int) -> None:
@@ -429,6 +409,60 @@ def cmd_session(args) -> int:
               f"p99 {loop['period_p99_us']:.0f} us, max {loop['period_max_us']:.0f} us, "
               f"{loop['deadline_misses']} deadline misses, {loop['stalls']} stalls")
     print(f"wrote {args.json}" + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
+def _serve(service) -> int:
+    """Run a service until SIGTERM or SIGINT; the pad goes to its safe state
+    first (the service's shutdown), then the sockets close."""
+    import signal
+
+    def stop(signum, _frame):
+        log.info("signal %s: stopping", signal.Signals(signum).name)
+        service.stop_requested = True
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    if console.is_terminal:
+        from rich.live import Live
+
+        class Line:
+            def __rich__(self):
+                s = service.status()
+                rtt = f"{1e6 * s['rtt_s']:.0f} us" if s.get("rtt_s") is not None else "-"
+                c = s["counters"]
+                return (f"[bold]{s['role']}[/bold] {s['state']:9s} peer "
+                        f"{'[green]alive[/green]' if s['peer_alive'] else '[red]silent[/red]'}"
+                        f"  rtt {rtt}  resent {c['resent']}  gaps {c['gaps']}  "
+                        f"reconnects {c['reconnects']}  invalid {c['invalid']}")
+
+        with Live(Line(), console=console, refresh_per_second=2, transient=True):
+            service.run()
+    else:
+        service.run()
+    print(f"{service.status()['role']} stopped cleanly")
+    return 0
+
+
+def cmd_slave(args) -> int:
+    from telethermal.services.config import load_config
+    from telethermal.services.slave import SlaveService
+
+    return _serve(SlaveService(load_config(args.config, "slave")))
+
+
+def cmd_master(args) -> int:
+    from telethermal.services.config import load_config
+    from telethermal.services.master import MasterService
+
+    return _serve(MasterService(load_config(args.config, "master")))
+
+
+def cmd_keys(args) -> int:
+    from telethermal.wire.transport import generate_keys
+
+    public, secret = generate_keys(args.out, args.name)
+    print(f"wrote {public} (give it to the peer) and {secret} (keep it here, mode 600)")
     return 0
 
 
@@ -555,9 +589,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the master loop on the real clock and report its timing")
     p.set_defaults(func=cmd_session)
 
-    p = sub.add_parser("demo", help="run the main job on the default scene")
+    for role, func in (("slave", cmd_slave), ("master", cmd_master)):
+        p = sub.add_parser(role, help=f"run the {role} service until SIGTERM/SIGINT")
+        p.add_argument("--config", required=True, help=f"TOML (see services/{role}/config.toml)")
+        p.set_defaults(func=func)
+    p = sub.add_parser("keys", help="make a CURVE key pair (name.key, name.key_secret)")
+    p.add_argument("--out", required=True, help="folder")
+    p.add_argument("--name", required=True, help="e.g. slave or master")
+    p.set_defaults(func=cmd_keys)
+
+    p = sub.add_parser("demo", help="run the main job on the default scene: master and slave "
+                                    "as two processes on loopback, a touch per material")
     p.add_argument("--scene", default="fingertip-7")
     p.add_argument("--out", default="out/demo")
+    p.add_argument("--json", help="per-touch summary (default: OUT/demo.json)")
+    p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
+    p.add_argument("--contact-s", type=_positive(), default=5.0)
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_demo)
     return parser
@@ -565,8 +612,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    service = args.command in ("slave", "master")
+    logging.basicConfig(level=logging.INFO if args.verbose or service else logging.WARNING,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s" if service
+                        else "%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
     except TelethermalError as exc:

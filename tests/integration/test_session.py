@@ -125,17 +125,21 @@ def test_session_command_writes_json_and_plot(tmp_path, models, capsys):
 
 
 def test_no_gap_between_finger_and_object(models):
-    # Object at the finger's temperature: direct contact exchanges (almost)
-    # nothing, and so must the display: the rendered flux stays under 5 % of
-    # what a 9 K gap gives, the junction near 33 C, nothing trips.
+    # Object at the finger's temperature, both measured exactly: direct
+    # contact exchanges nothing, and so must the display (under 1 % of what a
+    # 9 K gap gives), the junction stays near 33 C and nothing trips. With
+    # the IR thermometer's 0.4 K error the rendered flux follows the measured
+    # gap instead; that is the sensor's limit, not the loop's.
     identifier, generator = models
     warm = dataclasses.replace(
         SCENE, objects=tuple(dataclasses.replace(o, temp_c=33.0) for o in SCENE.objects),
-        finger=dataclasses.replace(SCENE.finger, temp_sd_c=0.0))
+        finger=dataclasses.replace(SCENE.finger, temp_sd_c=0.0),
+        sensors=dataclasses.replace(SCENE.sensors, ir_error_k=0.0),
+        variability=dataclasses.replace(SCENE.variability, object_temp_sd_c=0.0))
     r = run_session(warm, "steel", identifier, generator, contact_s=1.5, seed=1)
     reference = run_session(SCENE, "steel", identifier, generator, contact_s=1.5, seed=1)
     during = r.trace["t_s"] >= 0.1
     assert np.nanmax(np.abs(r.trace["flux_w_m2"][during])) < \
-        0.05 * np.nanmax(np.abs(reference.trace["flux_w_m2"][during]))
-    assert np.nanmax(np.abs(r.trace["junction_c"] - 33.0)) < 3.0
+        0.01 * np.nanmax(np.abs(reference.trace["flux_w_m2"][during]))
+    assert np.nanmax(np.abs(r.trace["junction_c"] - 33.0)) < 1.0
     assert r.summary["safety_events"] == 0

@@ -113,3 +113,15 @@ def test_a_sampled_generator_reproduces_the_network():
     assert np.max(np.abs(wire.normalised("marble", t) - gen.normalised("marble", t))) < 1e-4 * peak
     with pytest.raises(IdentificationError, match="ascending"):
         SampledGenerator({"x": {"t_s": [1.0, 1.0], "g_w_m2k": [1.0, 2.0]}})
+
+
+def test_sampled_batched_evaluation_matches_one_by_one():
+    from telethermal.render.sampled import SampledGenerator, sample_curves
+    trials = closed_form_trials() + [dataclasses.replace(t, material="wood", channels={
+        "t_s": t.channels["t_s"], "heat_flux_W_m2": 0.5 * t.channels["heat_flux_W_m2"]})
+        for t in closed_form_trials()]
+    wire = SampledGenerator(sample_curves(NetworkGenerator().fit(trials)))
+    t = np.array([0.0, 0.003, 0.02, 0.5, 7.0, 100.0])
+    many = wire.normalised_many(["wood", "marble"], t)
+    np.testing.assert_allclose(many[0], wire.normalised("wood", t), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(many[1], wire.normalised("marble", t), rtol=1e-12, atol=1e-12)

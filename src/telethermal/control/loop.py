@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -74,13 +75,19 @@ class LoopStats:
     lateness_s: list = field(default_factory=list)     # start - its deadline
     busy_s: list = field(default_factory=list)         # how long each step took
     missed_deadlines: int = 0                          # deadlines skipped
+    count: int = 0                                     # steps run (all, even if not kept)
 
-    def summary(self) -> dict:
-        """Period p50/p99/max, lateness p99/max, overruns, stalls (us)."""
-        starts = np.asarray(self.starts_s)
+    def summary(self, last: int | None = None) -> dict:
+        """Period p50/p99/max, lateness p99/max, overruns, stalls (us), over
+        every kept step or the ``last`` ones (deadline misses: all steps)."""
+        def tail(xs):
+            xs = list(xs)
+            return np.asarray(xs[-last:] if last else xs)
+
+        starts = tail(self.starts_s)
         periods = np.diff(starts) if len(starts) > 1 else np.zeros(0)
-        late = np.asarray(self.lateness_s)
-        busy = np.asarray(self.busy_s)
+        late = tail(self.lateness_s)
+        busy = tail(self.busy_s)
 
         def pct(a, q):
             return float(np.percentile(a, q) * 1e6) if len(a) else math.nan
@@ -111,15 +118,25 @@ class FixedRateLoop:
         self.period_s = period_s
         self.clock = clock if clock is not None else RealClock()
 
-    def run(self, step: Callable[[float, float], bool | None], n_steps: int) -> LoopStats:
+    def run(self, step: Callable[[float, float], bool | None], n_steps: int,
+            keep_last: int | None = None) -> LoopStats:
+        """Run ``n_steps`` (``math.inf``: until ``step`` returns False);
+        ``keep_last`` bounds the timing kept in memory (a long-running service)."""
         if n_steps < 0:
             raise ControlError(f"n_steps must be >= 0, got {n_steps}")
         stats = LoopStats(self.period_s)
+        if keep_last:
+            stats.starts_s, stats.lateness_s, stats.busy_s = (deque(maxlen=keep_last)
+                                                              for _ in range(3))
+        self.stats = stats
         clock, period = self.clock, self.period_s
         t0 = clock.now()
         k = 0                                   # index of the next deadline
         last_start = None
-        for _ in range(n_steps):
+        done = 0
+        while done < n_steps:
+            done += 1
+            stats.count += 1
             deadline = t0 + k * period
             clock.sleep_until(deadline)
             start = clock.now()

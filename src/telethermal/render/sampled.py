@@ -32,6 +32,7 @@ class SampledGenerator:
 
     def __init__(self, curves: dict):
         self._curves = {}
+        self._shared = {}
         for name, curve in curves.items():
             t = np.asarray(curve["t_s"], dtype=np.float64)
             g = np.asarray(curve["g_w_m2k"], dtype=np.float64)
@@ -39,6 +40,7 @@ class SampledGenerator:
                 raise IdentificationError(f"curve for {name!r}: need >= 2 ascending positive "
                                           "times and as many values")
             self._curves[name] = (np.log(t), g, t[0])
+        self._shared: dict = {}
 
     @property
     def materials(self) -> list[str]:
@@ -58,4 +60,24 @@ class SampledGenerator:
         return np.where(t >= t_first, q, np.clip(t, 0, None) / t_first * g[0])
 
     def normalised_many(self, materials, t_s) -> np.ndarray:
-        return np.stack([self.normalised(m, t_s) for m in materials])
+        """Every material at once; one interpolation when they share knots
+        (they do when they come from one ``sample_curves``)."""
+        key = tuple(materials)
+        shared = self._shared.get(key)
+        if shared is None:
+            curves = [self._curves[m] for m in key] if all(m in self._curves for m in key) \
+                else None
+            if curves and all(np.array_equal(c[0], curves[0][0]) for c in curves):
+                shared = (curves[0][0], np.stack([c[1] for c in curves]), curves[0][2])
+            else:
+                shared = False
+            self._shared[key] = shared
+        if shared is False:
+            return np.stack([self.normalised(m, t_s) for m in materials])
+        log_t, g, t_first = shared
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        x = np.log(np.maximum(t, t_first))
+        i = np.clip(np.searchsorted(log_t, x), 1, len(log_t) - 1)
+        w = np.clip((x - log_t[i - 1]) / (log_t[i] - log_t[i - 1]), 0.0, 1.0)
+        q = g[:, i - 1] * (1 - w) + g[:, i] * w
+        return np.where(t >= t_first, q, np.clip(t, 0, None) / t_first * g[:, :1])

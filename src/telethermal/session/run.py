@@ -45,6 +45,18 @@ PRE_CONTACT_S = 0.2
 AFTER_RELEASE_S = 0.2
 
 
+def slave_rng(seed: int) -> np.random.Generator:
+    """The slave side's draws for a touch (object, pad, sensors)."""
+    return np.random.default_rng([seed, 0])
+
+
+def master_rng(seed: int) -> np.random.Generator:
+    """The master side's draws for a touch (operator, display sensors). Apart
+    from the slave's, so a networked touch with the same seed sees the very
+    same physics as the in-process session."""
+    return np.random.default_rng([seed, 1])
+
+
 def with_finger(scene: Scene) -> Scene:
     return scene if scene.finger is not None else replace(scene, finger=DEFAULT_FINGER)
 
@@ -171,8 +183,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     if not (contact_s > 0 and math.isfinite(contact_s)):
         raise SceneError(f"contact_s must be > 0, got {contact_s}")
     scene = with_finger(scene)
-    rng = np.random.default_rng(seed)
-    slave = Slave(scene, material, identifier, rng)
+    slave = Slave(scene, material, identifier, slave_rng(seed))
+    rng = master_rng(seed)
     operator = draw_operator(scene, rng)
     # The master has idled at the standby temperature before this touch.
     idle = MasterDisplay.standby_c_for(config.limits, slave.object_ir_c)

@@ -1,0 +1,1 @@
+"""The master and slave as separate networked processes."""

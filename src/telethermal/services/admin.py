@@ -1,0 +1,89 @@
+"""A local control socket for the simulation harness (the demo, the tests,
+a person at a terminal): place an object under the slave pad, make the
+simulated operator touch the master, read status and results, stop.
+
+It is not part of the wire protocol between master and slave: a REP socket
+bound on loopback only, msgpack requests ``{"cmd": ..., ...}`` and replies
+``{"ok": bool, ...}``.
+"""
+
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import zmq
+
+from telethermal.errors import TransportError
+
+
+def _plain(value):
+    """numpy values to msgpack-able ones."""
+    if isinstance(value, np.ndarray):
+        if value.dtype == object:
+            return [None if v is None else str(v) for v in value]
+        return [float(v) for v in value]
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+class AdminServer:
+    def __init__(self, port: int, context: zmq.Context | None = None):
+        self.ctx = context or zmq.Context.instance()
+        self.sock = self.ctx.socket(zmq.REP)
+        self.sock.linger = 0
+        try:
+            if port == 0:
+                self.port = self.sock.bind_to_random_port("tcp://127.0.0.1")
+            else:
+                self.sock.bind(f"tcp://127.0.0.1:{port}")
+                self.port = port
+        except zmq.ZMQError as exc:
+            self.sock.close()
+            raise TransportError(f"admin socket 127.0.0.1:{port}: {exc}") from None
+        self.pending = False
+
+    def receive(self) -> dict | None:
+        """A request, if one is waiting (never blocks)."""
+        if self.pending:
+            return None
+        try:
+            data = self.sock.recv(flags=zmq.NOBLOCK)
+        except zmq.Again:
+            return None
+        self.pending = True
+        try:
+            request = msgpack.unpackb(data, raw=False)
+            if not isinstance(request, dict) or not isinstance(request.get("cmd"), str):
+                raise ValueError("a request is a map with a 'cmd' string")
+            return request
+        except (ValueError, msgpack.exceptions.ExtraData, msgpack.exceptions.FormatError,
+                TypeError) as exc:
+            self.reply(ok=False, error=f"bad request: {exc}")
+            return None
+
+    def reply(self, **payload) -> None:
+        self.sock.send(msgpack.packb(_plain(payload), use_bin_type=True))
+        self.pending = False
+
+    def close(self):
+        self.sock.close(linger=0)
+
+
+def call(port: int, cmd: str, timeout_s: float = 10.0, context=None, **args) -> dict:
+    """Send one admin request to 127.0.0.1:port and wait for the reply."""
+    ctx = context or zmq.Context.instance()
+    sock = ctx.socket(zmq.REQ)
+    sock.linger = 0
+    sock.connect(f"tcp://127.0.0.1:{port}")
+    try:
+        sock.send(msgpack.packb({"cmd": cmd, **args}, use_bin_type=True))
+        if not sock.poll(timeout_s * 1000):
+            raise TransportError(f"admin {cmd!r} on port {port}: no reply in {timeout_s} s")
+        return msgpack.unpackb(sock.recv(), raw=False)
+    finally:
+        sock.close(linger=0)

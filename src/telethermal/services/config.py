@@ -1,0 +1,92 @@
+"""Service configuration files (TOML), read with errors that name the file
+and the key. Relative paths are relative to the file's own folder."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+from telethermal.errors import TelethermalError
+from telethermal.wire.transport import TransportConfig
+
+
+class ConfigError(TelethermalError):
+    """A service configuration file that cannot be used."""
+
+
+@dataclass
+class SlaveConfig:
+    scene: str = "fingertip-7"
+    identifier: str = ""            # saved identifier; empty: train on the scene (seed)
+    generator: str = ""             # saved generator; empty: train on the scene (seed)
+    seed: int = 0
+    place: str = ""                 # object under the pad at start; empty: the scene's first
+    admin_port: int = 5570
+    transport: TransportConfig = field(default_factory=TransportConfig)
+
+
+@dataclass
+class MasterConfig:
+    scene: str = "fingertip-7"
+    rate_hz: float = 1000.0
+    before: str = "prior"
+    seed: int = 0
+    admin_port: int = 5571
+    #: SCHED_FIFO priority of the display loop (1-99); 0 leaves the default
+    #: scheduler. Needs CAP_SYS_NICE (root); refused with a warning otherwise.
+    realtime_priority: int = 0
+    #: CPU cores the display loop may run on (empty: any).
+    cpus: str = ""
+    transport: TransportConfig = field(default_factory=TransportConfig)
+
+
+def _fill(cls, table: dict, where: str):
+    known = {f.name: f for f in fields(cls)}
+    out = {}
+    for key, value in table.items():
+        if key not in known or key == "transport":
+            raise ConfigError(f"{where}: unknown key {key!r}; keys: "
+                              f"{', '.join(k for k in known if k != 'transport')}")
+        expected = known[key].type
+        kind = {"int": int, "float": (int, float), "str": str, "bool": bool}.get(
+            expected if isinstance(expected, str) else expected.__name__)
+        if kind is not None and (not isinstance(value, kind) or
+                                 (kind is int and isinstance(value, bool))):
+            raise ConfigError(f"{where}.{key}: expected {expected}, got {value!r}")
+        out[key] = float(value) if expected == "float" else value
+    return out
+
+
+def load_config(path: str | Path, role: str):
+    """Read ``[<role>]``, ``[transport]`` of a service config file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such config file")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    extra = set(data) - {role, "transport"}
+    if extra:
+        raise ConfigError(f"{path}: unknown section(s) {', '.join(sorted(extra))}; expected "
+                          f"[{role}] and [transport]")
+    cls = SlaveConfig if role == "slave" else MasterConfig
+    config = cls(**_fill(cls, data.get(role, {}), f"{path} [{role}]"))
+    transport = TransportConfig(**_fill(TransportConfig, data.get("transport", {}),
+                                        f"{path} [transport]"))
+    base = path.resolve().parent
+    for key in ("keys_dir", "allowed_dir"):
+        value = getattr(transport, key)
+        if value and not Path(value).is_absolute():
+            transport = replace(transport, **{key: str(base / value)})
+    for key in ("identifier", "generator"):
+        value = getattr(config, key, "")
+        if value and not Path(value).is_absolute():
+            setattr(config, key, str(base / value))
+    config.transport = transport
+    try:
+        transport.validate(role)
+    except TelethermalError as exc:
+        raise ConfigError(f"{path} [transport]: {exc}") from None
+    return config

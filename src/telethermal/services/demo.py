@@ -1,0 +1,190 @@
+"""The loopback demo: slave and master as two processes, a touch on each of
+several materials, each compared with the same finger touching the
+material directly."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from telethermal.errors import TelethermalError, TransportError
+from telethermal.services.admin import call
+from telethermal.session.plots import plot_session
+from telethermal.session.run import SessionResult, compare_with_direct, with_finger
+from telethermal.wire.transport import generate_keys
+
+
+def free_ports(n: int) -> list[int]:
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+def write_configs(out: Path, scene: str, identifier: Path, generator: Path, ports, seed: int,
+                  rate_hz: float = 1000.0, realtime_priority: int = 0) -> tuple[Path, Path]:
+    keys = out / "keys"
+    generate_keys(keys / "slave", "slave")
+    generate_keys(keys / "master", "master")
+    (keys / "allowed").mkdir(exist_ok=True)
+    (keys / "allowed" / "master.key").write_bytes((keys / "master" / "master.key").read_bytes())
+    (keys / "master" / "slave.key").write_bytes((keys / "slave" / "slave.key").read_bytes())
+    control, stream, slave_admin, master_admin = ports
+    common = (f'control_port = {control}\nstream_port = {stream}\nsecurity = "curve"\n')
+    slave = out / "slave.toml"
+    ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
+    slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n'
+                     f'generator = "{gen}"\nseed = {seed}\n'
+                     f'admin_port = {slave_admin}\n\n[transport]\nbind_host = "127.0.0.1"\n'
+                     f'{common}keys_dir = "keys/slave"\nallowed_dir = "keys/allowed"\n')
+    master = out / "master.toml"
+    master.write_text(f'[master]\nscene = "{scene}"\nrate_hz = {rate_hz}\nseed = {seed}\n'
+                      f'realtime_priority = {realtime_priority}\n'
+                      f'admin_port = {master_admin}\n\n[transport]\nhost = "127.0.0.1"\n'
+                      f'{common}keys_dir = "keys/master"\n')
+    return slave, master
+
+
+class Services:
+    """Slave and master processes; stopped by SIGTERM on exit."""
+
+    def __init__(self, out: Path, slave_config: Path, master_config: Path):
+        self.out = out
+        self.procs = {}
+        self._logs = []
+        for role, config in (("slave", slave_config), ("master", master_config)):
+            log = open(out / f"{role}.log", "w")
+            self._logs.append(log)
+            self.procs[role] = subprocess.Popen(
+                [sys.executable, "-m", "telethermal", role, "--config", str(config)],
+                stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+    def log_tail(self, role: str, n: int = 15) -> str:
+        lines = (self.out / f"{role}.log").read_text().splitlines()
+        return "\n".join(lines[-n:])
+
+    def check_running(self):
+        for role, proc in self.procs.items():
+            if proc.poll() is not None:
+                raise TransportError(f"the {role} process exited ({proc.returncode}):\n"
+                                     f"{self.log_tail(role)}")
+
+    def stop(self, timeout_s: float = 10.0) -> dict[str, int]:
+        codes = {}
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        for role, proc in self.procs.items():
+            try:
+                codes[role] = proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                codes[role] = proc.wait()
+        for log in self._logs:
+            log.close()
+        return codes
+
+
+def wait_connected(services: Services, master_admin: int, timeout_s: float = 90.0) -> dict:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        services.check_running()
+        try:
+            status = call(master_admin, "status", timeout_s=1.0)
+            if status.get("peer_alive") and status.get("session") and \
+                    status.get("object_temp_c") is not None:
+                return status
+        except TransportError:
+            pass
+        time.sleep(0.2)
+    raise TransportError(f"master and slave did not connect within {timeout_s} s:\n"
+                         f"{services.log_tail('master')}\n{services.log_tail('slave')}")
+
+
+def networked_touch(scene, material: str, ports, seed: int, contact_s: float) -> SessionResult:
+    """Place, touch, compare with direct contact; returns the session result."""
+    _, _, slave_admin, master_admin = ports
+    placed = call(slave_admin, "place", material=material, seed=seed)
+    if not placed.get("ok"):
+        raise TelethermalError(f"slave: {placed.get('error')}")
+    end = time.monotonic() + 2.0                    # the master hears of the new object
+    while time.monotonic() < end and abs((call(master_admin, "status").get("object_temp_c")
+                                          or 1e9) - placed["object_ir_c"]) > 1e-9:
+        time.sleep(0.05)
+    result = call(master_admin, "touch", timeout_s=contact_s + 30, contact_s=contact_s,
+                  seed=seed)
+    if not result.get("ok"):
+        raise TelethermalError(f"master: {result.get('error')}")
+    report = call(slave_admin, "report")
+    import numpy as np
+
+    from telethermal.session.run import Operator
+    trace = {k: np.array(v, dtype=object if k == "phase" else float)
+             for k, v in result["trace"].items()}
+    operator = Operator(**result["operator"])
+    render_from = result["render_start_s"]
+    if render_from is None and report.get("decision_time_s") is not None and \
+            report.get("onset_s") is not None:
+        render_from = report["onset_s"] + report["decision_time_s"]
+    metrics = compare_with_direct(scene, material, report["object_true_c"], operator, trace,
+                                  contact_s, render_from)
+    summary = {"scene": scene.name, "material": material, "seed": seed,
+               "identified": report["identified"], "decision_time_s": report["decision_time_s"],
+               "decision_reason": report["reason"], "render_start_s": render_from,
+               "rate_hz": 1.0 / float(np.median(np.diff(trace["t_s"]))),
+               "contact_s": contact_s, **metrics,
+               **{k: result[k] for k in ("safety_events", "safety_event_counts",
+                                         "display_event_counts", "loop", "transport",
+                                         "trajectory_at_s", "rtt_s")},
+               "loop_period_p99_us": result["loop"]["period_p99_us"], "clock": "real"}
+    return SessionResult(summary, trace)
+
+
+def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
+             materials, seed: int = 0, contact_s: float = 5.0, echo=print) -> dict:
+    from telethermal.physics.scene import load_scene
+
+    scene = with_finger(load_scene(scene_name))
+    ports = free_ports(4)
+    slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
+                                          ports, seed)
+    services = Services(out, slave_cfg, master_cfg)
+    touches = []
+    try:
+        status = wait_connected(services, ports[3])
+        echo(f"slave and master up as two processes on loopback (CURVE), rtt "
+             f"{1e3 * (status['rtt_s'] or 0):.2f} ms")
+        for i, material in enumerate(materials):
+            result = networked_touch(scene, material, ports, seed + 1 + i, contact_s)
+            s = result.summary
+            plot_session(result, out / f"touch-{material}.png",
+                         f"{scene.name}: {material} over the network (two processes); flux "
+                         f"error {100 * s['flux_rms_error_rel']:.2f} % of peak after "
+                         f"identification, skin {s['temp_rms_error_c']:.2f} K RMS")
+            touches.append({k: s[k] for k in (
+                "material", "identified", "decision_time_s", "flux_rms_error_rel",
+                "flux_rms_error_rel_first_s", "temp_rms_error_c", "time_to_correct_flux_s",
+                "safety_events", "loop_period_p99_us")} |
+                {"deadline_misses": s["loop"]["deadline_misses"],
+                 "loop_steps": s["loop"]["steps"], "transport": s["transport"]})
+            when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
+            echo(f"touch on {material:10s}: slave said {s['identified']} {when}; rendered flux "
+                 f"{100 * s['flux_rms_error_rel']:.2f} % of peak from then on, "
+                 f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second; skin "
+                 f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}; "
+                 f"master loop p99 {s['loop_period_p99_us']:.0f} us, "
+                 f"{s['loop']['deadline_misses']} missed deadlines")
+    finally:
+        codes = services.stop()
+    echo(f"services stopped: exit codes slave {codes['slave']}, master {codes['master']}")
+    return {"scene": scene.name, "touches": touches, "exit_codes": codes,
+            "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports))}

@@ -1,0 +1,226 @@
+"""``telethermal master --config F``: the display side as a process.
+
+Owns: the transport's master end (control DEALER and stream SUB,
+connecting), the simulated display pad, operator and force sensor, and
+the display loop at ``rate_hz`` on the real clock. Each period it reads the
+network and the admin socket and, during a touch, runs one period of
+:class:`~telethermal.session.master.MasterDisplay` with what the slave has
+said so far. Rendering is timed from the master's own contact onset, so
+the network's delay shifts nothing once the trajectory is here.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+
+import numpy as np
+
+from telethermal.control.loop import FixedRateLoop, RealClock
+from telethermal.errors import TelethermalError
+from telethermal.ident.anytime import Estimate
+from telethermal.physics.scene import load_scene
+from telethermal.render.sampled import SampledGenerator
+from telethermal.services.admin import AdminServer
+from telethermal.services.config import MasterConfig
+from telethermal.session.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
+                                     pad_resistance, safety_summary, with_finger)
+from telethermal.wire.transport import Endpoint
+
+log = logging.getLogger("telethermal.master")
+
+
+class Touch:
+    """One operator touch in progress."""
+
+    def __init__(self, service: "MasterService", contact_s: float, seed: int, now: float):
+        scene, cfg = service.scene, service.display_config
+        rng = master_rng(seed)
+        self.operator = draw_operator(scene, rng)
+        self.idle_c = MasterDisplay.standby_c_for(cfg.limits, service.object_temp_c)
+        self.display = MasterDisplay(cfg, service.generator, pad_resistance(scene.pad.layers),
+                                     scene.sensors.flux_lag_s, self.operator.finger_ir_c,
+                                     idle_c=self.idle_c)
+        self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
+        self.start = now
+        self.contact_s = contact_s
+        self.contact_id = service.next_contact_id
+        self.estimates: list[Estimate] = []
+        self.loop_count0 = service.loop.stats.count
+        self.misses0 = service.loop.stats.missed_deadlines
+        self.trajectory_at: float | None = None
+
+
+class MasterService:
+    def __init__(self, config: MasterConfig):
+        self.config = config
+        self.scene = with_finger(load_scene(config.scene))
+        self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before)
+        self.endpoint = Endpoint("master", config.transport)
+        try:
+            self.admin = AdminServer(config.admin_port)
+        except TelethermalError:
+            self.endpoint.close()
+            raise
+        self.generator: SampledGenerator | None = None
+        self.classes: tuple[str, ...] = ()
+        self.object_temp_c: float | None = None
+        self.touch: Touch | None = None
+        self.next_contact_id = 1
+        self.stop_requested = False
+        self.state = "idle"
+
+    # ------------------------------------------------------------ network
+    def _on_message(self, m: dict, now: float) -> None:
+        kind, touch = m["kind"], self.touch
+        if kind == "session_config":
+            self.generator = SampledGenerator(m["curves"])
+            self.classes = tuple(m["classes"])
+            log.info("session config from slave: %d classes, scene %s", len(self.classes),
+                     m["scene"])
+        elif kind == "contact_event":
+            if m.get("object_temp_c") is not None:
+                self.object_temp_c = m["object_temp_c"]
+        elif kind == "material_estimate" and touch is not None and \
+                m["contact_id"] == touch.contact_id:
+            touch.estimates.append(Estimate(m["t_since_contact_s"], tuple(m["posteriors"]),
+                                            m["label"], m["confidence"], m["decided"],
+                                            m["reason"]))
+            self.object_temp_c = m["object_temp_c"]
+        elif kind == "flux_trajectory" and touch is not None and \
+                m["contact_id"] == touch.contact_id:
+            t = np.asarray(m["t_s"][1:] if m["t_s"][0] == 0 else m["t_s"])
+            g = np.asarray(m["g_w_m2k"][1:] if m["t_s"][0] == 0 else m["g_w_m2k"])
+            self.generator.set_curve(m["material"], t, g)
+            touch.trajectory_at = now - touch.start - PRE_CONTACT_S
+
+    # ------------------------------------------------------------ loop
+    def step(self, t_loop: float, dt_s: float) -> bool:
+        now = time.monotonic()
+        for message in self.endpoint.poll(0.0):
+            self._on_message(message, now)
+        request = self.admin.receive()
+        if request is not None:
+            self._on_admin(request, now)
+        if self.touch is not None:
+            self._touch_period(now, dt_s)
+        return not self.stop_requested
+
+    def _touch_period(self, now: float, dt_s: float) -> None:
+        touch = self.touch
+        t = now - touch.start - PRE_CONTACT_S
+        news = SlaveNews(self.object_temp_c, touch.estimates[-1] if touch.estimates else None,
+                         self.classes)
+        onset_before = touch.display.last_onset_s
+        release_before = touch.display.last_release_s
+        sensors = touch.sim.sense(t)
+        step = touch.display.step(t, dt_s, sensors, news)
+        touch.sim.actuate(t, step, dt_s, sensors.force_n)
+        if touch.display.last_onset_s != onset_before:
+            self.state = "touching"
+            self.endpoint.send("contact_event", contact_id=touch.contact_id, touching=True,
+                               t_s=touch.start + PRE_CONTACT_S + touch.display.last_onset_s,
+                               force_n=max(float(sensors.force_n), 0.0),
+                               finger_temp_c=touch.operator.finger_ir_c)
+        if touch.display.last_release_s != release_before:
+            self.endpoint.send("contact_event", contact_id=touch.contact_id, touching=False,
+                               t_s=touch.start + PRE_CONTACT_S + touch.display.last_release_s,
+                               force_n=0.0, finger_temp_c=touch.operator.finger_ir_c)
+        if touch.display.phase == "render":
+            self.state = "rendering"
+        if touch.sim.done:
+            self._finish_touch()
+
+    def _finish_touch(self) -> None:
+        touch, stats = self.touch, self.loop.stats
+        est = touch.estimates[-1] if touch.estimates else None
+        loop = stats.summary(last=stats.count - touch.loop_count0)
+        loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
+        result = {
+            "ok": True, "contact_id": touch.contact_id, "contact_s": touch.contact_s,
+            "operator": vars(touch.operator), "trace": touch.sim.trace,
+            "render_start_s": touch.display.rendered_from_s,
+            "master_onset_s": touch.display.last_onset_s,
+            "identified": est.label if est is not None and est.decided else "unknown",
+            "decision_time_s": est.t_s if est is not None and est.decided else None,
+            "estimates": len(touch.estimates), "trajectory_at_s": touch.trajectory_at,
+            **safety_summary(touch.display), "loop": loop,
+            "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
+        }
+        self.touch, self.state = None, "idle"
+        self.next_contact_id += 1
+        self.admin.reply(**result)
+
+    def _on_admin(self, request: dict, now: float) -> None:
+        cmd = request["cmd"]
+        try:
+            if cmd == "touch":
+                if self.generator is None or not self.endpoint.peer_alive:
+                    self.admin.reply(ok=False, error="no slave session yet (not connected or "
+                                                     "no session_config)")
+                    return
+                contact_s = float(request.get("contact_s", 5.0))
+                if not (0 < contact_s <= 60):
+                    raise ValueError(f"contact_s must be in (0, 60], got {contact_s}")
+                self.touch = Touch(self, contact_s, int(request.get("seed", 0)), now)
+                log.info("touch contact_id=%d contact_s=%.1f", self.touch.contact_id, contact_s)
+                # The reply is sent when the touch is over.
+            elif cmd == "status":
+                self.admin.reply(ok=True, **self.status())
+            elif cmd == "stop":
+                self.stop_requested = True
+                self.admin.reply(ok=True)
+            else:
+                self.admin.reply(ok=False, error=f"unknown command {cmd!r}")
+        except (TelethermalError, KeyError, ValueError) as exc:
+            self.admin.reply(ok=False, error=str(exc))
+
+    def status(self) -> dict:
+        e = self.endpoint
+        return {"role": "master", "state": self.state, "peer_alive": e.peer_alive,
+                "session": self.generator is not None, "object_temp_c": self.object_temp_c,
+                "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
+                "counters": dict(e.counters)}
+
+    def _realtime(self) -> None:
+        """Real-time scheduling for the display loop, where allowed."""
+        cfg = self.config
+        if cfg.cpus:
+            try:
+                os.sched_setaffinity(0, {int(c) for c in cfg.cpus.split(",")})
+            except (OSError, ValueError) as exc:
+                log.warning("cpus=%r not applied: %s", cfg.cpus, exc)
+        if cfg.realtime_priority:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(cfg.realtime_priority))
+                log.info("display loop at SCHED_FIFO priority %d", cfg.realtime_priority)
+            except (OSError, AttributeError) as exc:
+                log.warning("SCHED_FIFO %d not granted (%s): running at normal priority",
+                            cfg.realtime_priority, exc)
+
+    def run(self) -> None:
+        self._realtime()
+        self.loop = FixedRateLoop(1.0 / self.config.rate_hz, RealClock())
+        try:
+            self.loop.run(self.step, math.inf, keep_last=100_000)
+        finally:
+            self.shutdown()
+
+    def shutdown(self) -> None:
+        # The display pad to its safe state first: neutral, not off.
+        neutral = self.display_config.limits.neutral_c
+        log.info("stopping: display pad to the safe state (%.1f C), sockets closed", neutral)
+        if self.touch is not None and self.admin.pending:
+            self.admin.reply(ok=False, error="master stopping")
+        try:
+            if self.endpoint.peer_version is not None:
+                self.endpoint.send("status", state="stopping",
+                                   counters=dict(self.endpoint.counters),
+                                   message="master stopping; pad at neutral")
+                self.endpoint.poll(0.05)
+        finally:
+            self.endpoint.close()
+            self.admin.close()

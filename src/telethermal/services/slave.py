@@ -1,0 +1,205 @@
+"""``telethermal slave --config F``: the sensing side as a process.
+
+Owns: the transport's slave end (control ROUTER and stream PUB, bound), the
+simulated sensing pad and the object under it, the identifier and the flux
+generator, and a loop at the scene's sample rate on the real clock. Each
+period it reads the network, the admin socket and, during a contact, the
+pad's new samples; it streams estimates and, once decided, the flux
+trajectory (``proto/PROTOCOL.md`` section 6).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+import zmq
+
+from telethermal.errors import TelethermalError
+from telethermal.ident.anytime import UNKNOWN
+from telethermal.physics.scene import load_scene
+from telethermal.render.sampled import sample_curves
+from telethermal.services.admin import AdminServer
+from telethermal.services.config import SlaveConfig
+from telethermal.session.run import slave_rng, with_finger
+from telethermal.session.slave import Slave
+from telethermal.wire.transport import Endpoint
+
+log = logging.getLogger("telethermal.slave")
+BATCH = 10            # samples per measurement_batch
+TRAJECTORY_VALID_S = 60.0
+
+
+class SlaveService:
+    def __init__(self, config: SlaveConfig, identifier=None, generator=None):
+        from telethermal.session.models import train_generator, train_identifier
+        from telethermal.ident.registry import load_model
+        from telethermal.render.generator import load_generator
+
+        self.config = config
+        self.scene = with_finger(load_scene(config.scene))
+        if identifier is None:
+            identifier = load_model(config.identifier) if config.identifier else \
+                train_identifier(self.scene, config.seed)
+        if generator is None:
+            generator = load_generator(config.generator) if config.generator else \
+                train_generator(self.scene, config.seed)
+        self.identifier, self.generator = identifier, generator
+        renderable = [c for c in identifier.classes_ if c in generator.materials]
+        self.curves = sample_curves(generator, renderable)
+        self.rate_hz = self.scene.sample_rate_hz
+        self.endpoint = Endpoint("slave", config.transport)
+        try:
+            self.admin = AdminServer(config.admin_port)
+        except TelethermalError:
+            self.endpoint.close()
+            raise
+        self.stop_requested = False
+        self.state = "idle"
+        self.contact_id = 0
+        self.touch_t0: float | None = None
+        self._sent = 0
+        self._seed = config.seed
+        self.place(config.place or self.scene.materials[0], config.seed)
+
+    # ------------------------------------------------------------ the object
+    def place(self, material: str, seed: int) -> None:
+        """Put ``material`` under the pad and measure it (IR) before contact."""
+        self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed))
+        self.material = material
+        self._seed = seed
+        self._sent = 0
+        log.info("object placed material=%s object_ir_c=%.2f", material, self.pad.object_ir_c)
+        if self.endpoint.peer_version is not None:
+            self._announce_object()
+
+    def _announce_object(self):
+        self.endpoint.send("contact_event", contact_id=0, touching=False,
+                           t_s=time.monotonic(), force_n=0.0,
+                           object_temp_c=self.pad.object_ir_c)
+
+    # ------------------------------------------------------------ loop
+    def _on_message(self, m: dict, now: float) -> None:
+        kind = m["kind"]
+        if kind == "hello":
+            self.endpoint.send("session_config", scene=self.scene.name,
+                               sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
+                               identifier=self.identifier.method,
+                               threshold=float(self.identifier.threshold), curves=self.curves)
+            self._announce_object()
+        elif kind == "contact_event" and m["touching"] and self.touch_t0 is None:
+            # The operator touched: the slave's pad goes down on the object now.
+            self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
+            log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
+        elif kind == "contact_event" and not m["touching"] and m["contact_id"] == self.contact_id \
+                and self.touch_t0 is not None:
+            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
+                               t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
+            log.info("lift contact_id=%d", self.contact_id)
+            self.last_touch = self._report()
+            self.touch_t0, self.state = None, "idle"
+            self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
+
+    def _sample(self, now: float) -> None:
+        pad = self.pad
+        before = pad.onset_s
+        events = pad.advance_to(now - self.touch_t0)
+        if before is None and pad.onset_s is not None:
+            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
+                               t_s=self.touch_t0 + pad.onset_s, force_n=float(pad.force_n[
+                                   pad._onset_index]), object_temp_c=pad.object_ir_c)
+        for ev in events:
+            e = ev.estimate
+            self.endpoint.send("material_estimate", contact_id=self.contact_id,
+                               t_since_contact_s=float(e.t_s), classes=list(pad.classes),
+                               posteriors=[float(p) for p in e.posteriors], label=e.label,
+                               confidence=float(e.confidence), decided=e.decided,
+                               reason=e.reason, object_temp_c=pad.object_ir_c)
+            if e.decided and e.label != UNKNOWN and e.label in self.curves:
+                curve = self.curves[e.label]
+                self.endpoint.send("flux_trajectory", contact_id=self.contact_id,
+                                   material=e.label, object_temp_c=pad.object_ir_c,
+                                   t_s=[0.0] + curve["t_s"], g_w_m2k=[0.0] + curve["g_w_m2k"],
+                                   valid_s=TRAJECTORY_VALID_S)
+                log.info("decided contact_id=%d material=%s t=%.2f s", self.contact_id,
+                         e.label, e.t_s)
+        read = pad._next
+        if read - self._sent >= BATCH:
+            i = slice(self._sent, read)
+            ch = pad.trial.channels
+            self.endpoint.send("measurement_batch", contact_id=self.contact_id,
+                               t0_s=self.touch_t0 + float(pad.t_s[self._sent]),
+                               rate_hz=self.rate_hz,
+                               flux_w_m2=[float(v) for v in ch["heat_flux_W_m2"][i]],
+                               temp_c=[float(v) for v in ch["temperature_C"][i]],
+                               force_n=[float(v) for v in ch["force_N"][i]])
+            self._sent = read
+
+    def _report(self) -> dict:
+        pad = self.pad
+        est = pad.estimate
+        return {"material": self.material, "object_true_c": pad.object_true_c,
+                "object_ir_c": pad.object_ir_c, "onset_s": pad.onset_s,
+                "identified": est.label if est is not None and est.decided else UNKNOWN,
+                "decision_time_s": est.t_s if est is not None and est.decided else None,
+                "reason": est.reason if est is not None else "no estimate"}
+
+    def _on_admin(self, request: dict) -> None:
+        cmd = request["cmd"]
+        try:
+            if cmd == "place":
+                self.place(str(request["material"]), int(request.get("seed", self._seed + 1)))
+                self.admin.reply(ok=True, object_ir_c=self.pad.object_ir_c)
+            elif cmd == "report":
+                self.admin.reply(ok=True, **getattr(self, "last_touch", {}))
+            elif cmd == "status":
+                self.admin.reply(ok=True, **self.status())
+            elif cmd == "stop":
+                self.stop_requested = True
+                self.admin.reply(ok=True)
+            else:
+                self.admin.reply(ok=False, error=f"unknown command {cmd!r}")
+        except (TelethermalError, KeyError, ValueError) as exc:
+            self.admin.reply(ok=False, error=str(exc))
+
+    def status(self) -> dict:
+        e = self.endpoint
+        return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
+                "material": self.material, "rtt_s": e.offset.rtt_s,
+                "offset_s": e.offset.offset_s, "counters": dict(e.counters)}
+
+    def run(self) -> None:
+        """Wake at every sample period, and at once when a message arrives
+        (waiting in the socket poll, not in a sleep), so the slave reacts to
+        the master's contact event without a period's delay."""
+        self.endpoint.poller.register(self.admin.sock, zmq.POLLIN)
+        period = 1.0 / self.rate_hz
+        deadline = time.monotonic()
+        try:
+            while not self.stop_requested:
+                now = time.monotonic()
+                if now >= deadline:
+                    deadline = max(deadline + period, now)
+                    if self.touch_t0 is not None:
+                        self._sample(now)
+                for message in self.endpoint.poll(max(0.0, min(deadline - time.monotonic(),
+                                                               self.config.transport.heartbeat_s))):
+                    self._on_message(message, time.monotonic())
+                request = self.admin.receive()
+                if request is not None:
+                    self._on_admin(request)
+        finally:
+            self.shutdown()
+
+    def shutdown(self) -> None:
+        # The sensing pad to its safe state first (simulated: nothing to hold).
+        log.info("stopping: pad to safe state, sockets closed")
+        try:
+            if self.endpoint.peer_version is not None:
+                self.endpoint.send("status", state="stopping",
+                                   counters=dict(self.endpoint.counters), message="slave stopping")
+                self.endpoint.poll(0.05)
+        finally:
+            self.endpoint.close()
+            self.admin.close()
