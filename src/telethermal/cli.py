@@ -185,6 +185,33 @@ def cmd_bench_render(args) -> int:
     return 0
 
 
+def cmd_bench_transport(args) -> int:
+    from telethermal.bench import transport
+
+    with _progress(2, "bench transport") as advance:
+        report = transport.run(progress=advance)
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    _write_json(args.json, report)
+    worst = max(report["codec"].items(), key=lambda kv: kv[1]["encode_us"] + kv[1]["decode_us"])
+    print(f"codec: slowest kind {worst[0]} ({worst[1]['bytes']} B) encode "
+          f"{worst[1]['encode_us']:.1f} us, decode {worst[1]['decode_us']:.1f} us")
+    for where in ("loopback", "namespaces"):
+        block = report[where]
+        if "skipped" in block:
+            print(f"{where}: skipped ({block['skipped']})")
+            continue
+        for name, r in block.items():
+            if isinstance(r, dict):
+                extra = f", {r['messages_per_s']:.0f} msg/s" if "messages_per_s" in r else ""
+                print(f"{where:10s} {name:10s} one-way p50 {r['p50_us']:6.0f} us, p99 "
+                      f"{r['p99_us']:6.0f} us, max {r['max_us']:6.0f} us{extra}")
+    print(f"end to end on loopback: p50 {report['e2e_p50_us']:.0f} us, p99 "
+          f"{report['e2e_p99_us']:.0f} us; {report['ratio_to_raw_zmq_p50']:.2f}x raw pyzmq "
+          f"(plain), {report['curve_ratio_to_raw_zmq_p50']:.2f}x with CURVE")
+    print(f"wrote {args.json}")
+    return 0
+
+
 def _channels(text: str) -> tuple[str, ...]:
     names = tuple(c.strip() for c in text.split(",") if c.strip())
     if not names:
@@ -537,6 +564,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--png", help="plot (default: beside the JSON)")
     p.add_argument("--repeats", type=_positive(int), default=3)
     p.set_defaults(func=cmd_bench_physics)
+
+    p = bsub.add_parser("transport", help="codec cost; one-way latency beside raw pyzmq on "
+                                          "loopback and across network namespaces")
+    p.add_argument("--json", required=True)
+    p.set_defaults(func=cmd_bench_transport)
 
     p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "
                                        "the loop on the real clock")

@@ -75,3 +75,34 @@ def test_shipped_service_configs_load():
     root = Path(__file__).resolve().parents[2] / "services"
     assert load_config(root / "slave" / "config.toml", "slave").transport.security == "curve"
     assert load_config(root / "master" / "config.toml", "master").rate_hz == 1000.0
+
+
+def test_master_and_slave_in_two_network_namespaces(tmp_path, models):
+    # Real addresses on a veth pair, separate network stacks: the slave binds
+    # 10.231.0.1 in one namespace, the master connects from the other, over
+    # CURVE. The admin sockets are Unix sockets (ipc://), which the test
+    # reaches from outside both namespaces.
+    from telethermal.netns import Namespaces
+    reason = Namespaces.why_not()
+    if reason:
+        pytest.skip(f"cannot make network namespaces here: {reason}")
+    ident_path, gen_path, _, _ = models
+    admin = (f"ipc://{tmp_path}/slave-admin", f"ipc://{tmp_path}/master-admin")
+    with Namespaces() as ns:
+        ports = (5600, 5601, *admin)
+        slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports,
+                                              0, slave_host=ns.addresses[0])
+        services = Services(tmp_path, slave_cfg, master_cfg, namespaces=ns.names)
+        try:
+            wait_connected(services, admin[1])
+            result = networked_touch(SCENE, "plexiglass", ports, seed=2, contact_s=1.0)
+        finally:
+            codes = services.stop()
+    assert codes == {"slave": 0, "master": 0}
+    assert result.summary["safety_events"] == 0
+    assert result.summary["flux_rms_error_rel"] < 0.05
+    assert result.summary["transport"]["invalid"] == 0
+    # Nothing of the namespaces is left behind.
+    import subprocess
+    left = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    assert all(name not in left for name in ns.names)

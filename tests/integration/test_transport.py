@@ -75,11 +75,11 @@ def test_a_lost_message_is_detected_resent_and_delivered_in_order(link, monkeypa
     real = master._raw_send
     dropped = []
 
-    def lossy(sock, message):
+    def lossy(sock, message, data=None):
         if message.get("seq") == 3 and message["kind"] == "contact_event" and not dropped:
             dropped.append(3)
             return True                                       # lost on the way
-        return real(sock, message)
+        return real(sock, message, data)
 
     monkeypatch.setattr(master, "_raw_send", lossy)
     for i in range(1, 8):

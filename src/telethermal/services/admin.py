@@ -31,20 +31,31 @@ def _plain(value):
     return value
 
 
+def admin_address(where) -> str:
+    """A port number (127.0.0.1), or an ``ipc://`` path (a Unix socket: local
+    by nature, and reachable from another network namespace of this host)."""
+    if isinstance(where, int):
+        return f"tcp://127.0.0.1:{where}"
+    if isinstance(where, str) and where.startswith("ipc://"):
+        return where
+    raise TransportError(f"admin address must be a port or an ipc:// path, got {where!r}")
+
+
 class AdminServer:
-    def __init__(self, port: int, context: zmq.Context | None = None):
+    def __init__(self, where, context: zmq.Context | None = None):
         self.ctx = context or zmq.Context.instance()
         self.sock = self.ctx.socket(zmq.REP)
         self.sock.linger = 0
+        address = admin_address(where)
         try:
-            if port == 0:
+            if where == 0:
                 self.port = self.sock.bind_to_random_port("tcp://127.0.0.1")
             else:
-                self.sock.bind(f"tcp://127.0.0.1:{port}")
-                self.port = port
+                self.sock.bind(address)
+                self.port = where
         except zmq.ZMQError as exc:
             self.sock.close()
-            raise TransportError(f"admin socket 127.0.0.1:{port}: {exc}") from None
+            raise TransportError(f"admin socket {address}: {exc}") from None
         self.pending = False
 
     def receive(self) -> dict | None:
@@ -74,12 +85,13 @@ class AdminServer:
         self.sock.close(linger=0)
 
 
-def call(port: int, cmd: str, timeout_s: float = 10.0, context=None, **args) -> dict:
-    """Send one admin request to 127.0.0.1:port and wait for the reply."""
+def call(port, cmd: str, timeout_s: float = 10.0, context=None, **args) -> dict:
+    """Send one admin request (to a port on 127.0.0.1 or an ipc:// path)
+    and wait for the reply."""
     ctx = context or zmq.Context.instance()
     sock = ctx.socket(zmq.REQ)
     sock.linger = 0
-    sock.connect(f"tcp://127.0.0.1:{port}")
+    sock.connect(admin_address(port))
     try:
         sock.send(msgpack.packb({"cmd": cmd, **args}, use_bin_type=True))
         if not sock.poll(timeout_s * 1000):

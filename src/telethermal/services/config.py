@@ -23,6 +23,7 @@ class SlaveConfig:
     seed: int = 0
     place: str = ""                 # object under the pad at start; empty: the scene's first
     admin_port: int = 5570
+    admin_ipc: str = ""             # an ipc:// path instead of the port
     transport: TransportConfig = field(default_factory=TransportConfig)
 
 
@@ -33,6 +34,7 @@ class MasterConfig:
     before: str = "prior"
     seed: int = 0
     admin_port: int = 5571
+    admin_ipc: str = ""
     #: SCHED_FIFO priority of the display loop (1-99); 0 leaves the default
     #: scheduler. Needs CAP_SYS_NICE (root); refused with a warning otherwise.
     realtime_priority: int = 0

@@ -31,7 +31,10 @@ def free_ports(n: int) -> list[int]:
 
 
 def write_configs(out: Path, scene: str, identifier: Path, generator: Path, ports, seed: int,
-                  rate_hz: float = 1000.0, realtime_priority: int = 0) -> tuple[Path, Path]:
+                  rate_hz: float = 1000.0, realtime_priority: int = 0,
+                  slave_host: str = "127.0.0.1") -> tuple[Path, Path]:
+    """Keys and the two config files. ``ports``: control, stream, and the two
+    admin addresses (ports on 127.0.0.1, or ``ipc://`` paths)."""
     keys = out / "keys"
     generate_keys(keys / "slave", "slave")
     generate_keys(keys / "master", "master")
@@ -39,17 +42,21 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     (keys / "allowed" / "master.key").write_bytes((keys / "master" / "master.key").read_bytes())
     (keys / "master" / "slave.key").write_bytes((keys / "slave" / "slave.key").read_bytes())
     control, stream, slave_admin, master_admin = ports
+
+    def admin(where):
+        return f'admin_ipc = "{where}"' if isinstance(where, str) else f"admin_port = {where}"
+
     common = (f'control_port = {control}\nstream_port = {stream}\nsecurity = "curve"\n')
     slave = out / "slave.toml"
     ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
     slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n'
                      f'generator = "{gen}"\nseed = {seed}\n'
-                     f'admin_port = {slave_admin}\n\n[transport]\nbind_host = "127.0.0.1"\n'
+                     f'{admin(slave_admin)}\n\n[transport]\nbind_host = "{slave_host}"\n'
                      f'{common}keys_dir = "keys/slave"\nallowed_dir = "keys/allowed"\n')
     master = out / "master.toml"
     master.write_text(f'[master]\nscene = "{scene}"\nrate_hz = {rate_hz}\nseed = {seed}\n'
                       f'realtime_priority = {realtime_priority}\n'
-                      f'admin_port = {master_admin}\n\n[transport]\nhost = "127.0.0.1"\n'
+                      f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
                       f'{common}keys_dir = "keys/master"\n')
     return slave, master
 
@@ -57,15 +64,18 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
 class Services:
     """Slave and master processes; stopped by SIGTERM on exit."""
 
-    def __init__(self, out: Path, slave_config: Path, master_config: Path):
+    def __init__(self, out: Path, slave_config: Path, master_config: Path,
+                 namespaces: tuple[str | None, str | None] = (None, None)):
         self.out = out
         self.procs = {}
         self._logs = []
-        for role, config in (("slave", slave_config), ("master", master_config)):
+        for (role, config), ns in zip((("slave", slave_config), ("master", master_config)),
+                                      namespaces):
             log = open(out / f"{role}.log", "w")
             self._logs.append(log)
+            prefix = ["ip", "netns", "exec", ns] if ns else []
             self.procs[role] = subprocess.Popen(
-                [sys.executable, "-m", "telethermal", role, "--config", str(config)],
+                prefix + [sys.executable, "-m", "telethermal", role, "--config", str(config)],
                 stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
 
     def log_tail(self, role: str, n: int = 15) -> str:
@@ -150,19 +160,26 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float) ->
 
 
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
-             materials, seed: int = 0, contact_s: float = 5.0, echo=print) -> dict:
+             materials, seed: int = 0, contact_s: float = 5.0, echo=print,
+             realtime_priority: int = 20) -> dict:
+    """Returns per touch the networked figures and, for the same seeds, the
+    in-process session's (``in_process_flux_rms_error_rel``)."""
     from telethermal.physics.scene import load_scene
 
+    from telethermal.ident.registry import load_model
+    from telethermal.render.generator import load_generator
+    from telethermal.session.run import run_session
+
     scene = with_finger(load_scene(scene_name))
+    identifier, generator = load_model(identifier_path), load_generator(generator_path)
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
-                                          ports, seed)
+                                          ports, seed, realtime_priority=realtime_priority)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     try:
         status = wait_connected(services, ports[3])
-        echo(f"slave and master up as two processes on loopback (CURVE), rtt "
-             f"{1e3 * (status['rtt_s'] or 0):.2f} ms")
+        echo("slave and master up as two processes on loopback (CURVE)")
         for i, material in enumerate(materials):
             result = networked_touch(scene, material, ports, seed + 1 + i, contact_s)
             s = result.summary
@@ -170,19 +187,26 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                          f"{scene.name}: {material} over the network (two processes); flux "
                          f"error {100 * s['flux_rms_error_rel']:.2f} % of peak after "
                          f"identification, skin {s['temp_rms_error_c']:.2f} K RMS")
+            local = run_session(scene, material, identifier, generator, contact_s=contact_s,
+                                seed=seed + 1 + i).summary
             touches.append({k: s[k] for k in (
                 "material", "identified", "decision_time_s", "flux_rms_error_rel",
                 "flux_rms_error_rel_first_s", "temp_rms_error_c", "time_to_correct_flux_s",
                 "safety_events", "loop_period_p99_us")} |
                 {"deadline_misses": s["loop"]["deadline_misses"],
-                 "loop_steps": s["loop"]["steps"], "transport": s["transport"]})
+                 "loop_steps": s["loop"]["steps"], "transport": s["transport"],
+                 "in_process_identified": local["identified"],
+                 "in_process_flux_rms_error_rel": local["flux_rms_error_rel"],
+                 "network_over_in_process": s["flux_rms_error_rel"] /
+                 local["flux_rms_error_rel"]})
             when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
             echo(f"touch on {material:10s}: slave said {s['identified']} {when}; rendered flux "
                  f"{100 * s['flux_rms_error_rel']:.2f} % of peak from then on, "
                  f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second; skin "
                  f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}; "
                  f"master loop p99 {s['loop_period_p99_us']:.0f} us, "
-                 f"{s['loop']['deadline_misses']} missed deadlines")
+                 f"{s['loop']['deadline_misses']} missed deadlines; in one process "
+                 f"{100 * local['flux_rms_error_rel']:.2f} %")
     finally:
         codes = services.stop()
     echo(f"services stopped: exit codes slave {codes['slave']}, master {codes['master']}")

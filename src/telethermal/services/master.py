@@ -61,7 +61,7 @@ class MasterService:
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before)
         self.endpoint = Endpoint("master", config.transport)
         try:
-            self.admin = AdminServer(config.admin_port)
+            self.admin = AdminServer(config.admin_ipc or config.admin_port)
         except TelethermalError:
             self.endpoint.close()
             raise

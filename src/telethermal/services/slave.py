@@ -51,7 +51,7 @@ class SlaveService:
         self.rate_hz = self.scene.sample_rate_hz
         self.endpoint = Endpoint("slave", config.transport)
         try:
-            self.admin = AdminServer(config.admin_port)
+            self.admin = AdminServer(config.admin_ipc or config.admin_port)
         except TelethermalError:
             self.endpoint.close()
             raise

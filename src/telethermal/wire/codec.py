@@ -23,6 +23,7 @@ from telethermal.wire.schema import (ENVELOPE, KINDS, MAX_ARRAY, MAX_MESSAGE_BYT
                                      PROTOCOL_VERSION, Field)
 
 _UINT_MAX = 2 ** 64 - 1
+_NAMES = {k: {f.name for f in ENVELOPE + v.fields} for k, v in KINDS.items()}
 
 
 def _float(value, where: str, f: Field | None = None) -> float:
@@ -60,7 +61,31 @@ def _list(value, where: str) -> list:
     return list(value)
 
 
-def _value(f: Field, value, where: str):
+def _fast_floats(items, f: Field) -> bool:
+    lo, hi = f.lo, f.hi
+    return all(type(v) is float and math.isfinite(v) and lo <= v <= hi for v in items)
+
+
+def _value(f: Field, value, kind: str):
+    """Check one field; the error text (kind.field[index]) is built only on failure."""
+    t = f.type
+    # Fast paths for the common, valid case: no string building at all.
+    if t == "float" and type(value) is float and math.isfinite(value) and f.lo <= value <= f.hi:
+        return value
+    if t == "uint" and type(value) is int and 0 <= value <= _UINT_MAX and \
+            f.lo <= value <= f.hi:
+        return value
+    if t == "str" and type(value) is str and len(value) <= MAX_STRING:
+        return value
+    if t == "bool" and type(value) is bool:
+        return value
+    if t == "list[float]" and type(value) is list and len(value) <= MAX_ARRAY and \
+            _fast_floats(value, f):
+        return value
+    return _value_slow(f, value, f"{kind}.{f.name}")
+
+
+def _value_slow(f: Field, value, where: str):
     if value is None:
         if f.nullable:
             return None
@@ -117,12 +142,11 @@ def validate(message: dict) -> tuple[dict, list[str]]:
     kind = KINDS[kind_name]
     out = {}
     for f in ENVELOPE + kind.fields:
-        where = f"{kind_name}.{f.name}"
         if f.name not in message:
             if f.required:
-                raise ProtocolError(f"{where}: missing")
+                raise ProtocolError(f"{kind_name}.{f.name}: missing")
             continue
-        out[f.name] = _value(f, message[f.name], where)
+        out[f.name] = _value(f, message[f.name], kind_name)
     if out["v"] != PROTOCOL_VERSION:
         raise ProtocolError(f"{kind_name}: protocol version {out['v']}, this side speaks "
                             f"{PROTOCOL_VERSION}")
@@ -137,8 +161,8 @@ def validate(message: dict) -> tuple[dict, list[str]]:
         n = {len(out[c]) for c in ("flux_w_m2", "temp_c", "force_n")}
         if len(n) != 1:
             raise ProtocolError("measurement_batch: channels differ in length")
-    ignored = [k for k in message if k not in out and k not in
-               {f.name for f in ENVELOPE + kind.fields}]
+    ignored = [k for k in message if k not in out and k not in _NAMES[kind_name]] \
+        if len(message) != len(out) else []
     return out, ignored
 
 

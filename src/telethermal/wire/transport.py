@@ -263,8 +263,8 @@ class Endpoint:
         return None if off is None else t_s + off
 
     # ------------------------------------------------------------ sending
-    def _raw_send(self, sock, message: dict) -> bool:
-        data = encode(message)
+    def _raw_send(self, sock, message: dict, data: bytes | None = None) -> bool:
+        data = encode(message) if data is None else data
         try:
             if sock is self.control and self.role == "slave":
                 if self.peer_identity is None:
@@ -290,14 +290,14 @@ class Endpoint:
             seq = self._next_seq
             self._next_seq += 1
             message = {"kind": kind, "v": PROTOCOL_VERSION, "seq": seq, "sent_s": now, **fields}
-            encode(message)                     # refuse bad content before keeping it
+            data = encode(message)              # bad content is refused before it is kept
             self._outbox[seq] = message
             if len(self._outbox) > MAX_UNACKED:
                 self._outbox.popitem(last=False)
                 self.counters["lossless_dropped"] += 1
             self.counters["lossless_sent"] += 1
             if self.peer_version is not None:
-                self._raw_send(self.control, message)
+                self._raw_send(self.control, message, data)
             return seq
         seq = self._kind_seq.get(kind, 0) + 1
         self._kind_seq[kind] = seq
