@@ -168,3 +168,28 @@ def test_plain_is_refused_off_loopback_and_curve_needs_keys():
         Endpoint("master", dataclasses.replace(PLAIN, security="curve"))
     with pytest.raises(TransportError, match="no such key file"):
         Endpoint("master", dataclasses.replace(PLAIN, security="curve", keys_dir="/nonexistent"))
+
+
+def test_a_restarted_slave_is_found_again_and_the_session_starts_afresh(link):
+    # The slave process dies and a new one binds the same ports: the master
+    # notices the silence, says hello again (its socket reconnects with
+    # back-off) and the new slave session starts from seq 1 both ways.
+    slave, master = link
+    ports = slave.ports
+    master.send("contact_event", **contact(1))
+    pump(slave, master, seconds=1.0, until=lambda: master.unacked == 0)
+    old_session = slave.session_id
+    slave.close()
+    pump(master, seconds=0.5)                                 # silence: the peer is dead
+    assert not master.peer_alive
+    reborn = Endpoint("slave", dataclasses.replace(PLAIN, control_port=ports[0],
+                                                   stream_port=ports[1]))
+    try:
+        pump(reborn, master, seconds=5.0, until=lambda: master.peer_alive and reborn.peer_alive)
+        assert master.peer_alive and master.peer_session == reborn.session_id != old_session
+        reborn.send("contact_event", **contact(7))
+        _, m_got = pump(reborn, master, seconds=2.0, until=lambda: reborn.unacked == 0)
+        assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == [7]
+        assert master.counters["heartbeats_missed"] >= 1
+    finally:
+        reborn.close()

@@ -82,6 +82,9 @@ def _value(f: Field, value, kind: str):
     if t == "list[float]" and type(value) is list and len(value) <= MAX_ARRAY and \
             _fast_floats(value, f):
         return value
+    if t == "list[str]" and type(value) is list and len(value) <= MAX_ARRAY and \
+            all(type(v) is str and len(v) <= MAX_STRING for v in value):
+        return value
     return _value_slow(f, value, f"{kind}.{f.name}")
 
 
