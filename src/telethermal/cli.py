@@ -485,6 +485,38 @@ def cmd_master(args) -> int:
     return _serve(MasterService(load_config(args.config, "master")))
 
 
+def cmd_faults(args) -> int:
+    """A faulty network between a real master and slave, until SIGTERM/SIGINT."""
+    import signal
+
+    from telethermal.faults.proxy import FaultProxy, load_profile
+
+    overrides = {}
+    for item in args.set or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise TelethermalError(f"--set {item!r}: use section.key=value")
+        try:
+            overrides[key] = float(value)
+        except ValueError:
+            overrides[key] = value
+    profile = load_profile(args.profile, overrides)
+    proxy = FaultProxy(profile)
+    stop = []
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.append(1))
+    link = profile.link
+    print(f"fault proxy: masters connect to {link.listen_host}:{link.control_port}/"
+          f"{link.stream_port}, slave at {link.slave_host}:{link.slave_control_port}/"
+          f"{link.slave_stream_port}")
+    try:
+        proxy.run(lambda: bool(stop))
+    finally:
+        proxy.close()
+    print(json.dumps(proxy.counters))
+    return 0
+
+
 def cmd_keys(args) -> int:
     from telethermal.wire.transport import generate_keys
 
@@ -625,6 +657,12 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(role, help=f"run the {role} service until SIGTERM/SIGINT")
         p.add_argument("--config", required=True, help=f"TOML (see services/{role}/config.toml)")
         p.set_defaults(func=func)
+    p = sub.add_parser("faults", help="a faulty network (delay, jitter, loss, duplication, "
+                                      "reordering, bandwidth, partitions) between master and slave")
+    p.add_argument("--profile", required=True, help="TOML (see deploy/faults/*.toml)")
+    p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                   help="override a profile value, e.g. both.delay_s=0.2 (repeatable)")
+    p.set_defaults(func=cmd_faults)
     p = sub.add_parser("keys", help="make a CURVE key pair (name.key, name.key_secret)")
     p.add_argument("--out", required=True, help="folder")
     p.add_argument("--name", required=True, help="e.g. slave or master")

@@ -1,0 +1,1 @@
+"""Fault injection: a faulty network between master and slave."""
