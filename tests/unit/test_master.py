@@ -253,3 +253,48 @@ def test_a_period_100_times_nominal_makes_no_jump():
         if last is not None:
             assert abs(step.junction_applied_c - last) <= 2 * config.slew_k_s * 1e-3 + 1e-9
         last = step.junction_applied_c
+
+
+def test_the_hand_over_from_the_mixture_to_the_decision_has_no_step():
+    # Posteriors 70/30 for plexiglass until 0.4 s, then "steel" decided: the
+    # desired flux moves to steel's over blend_s, never in one step. Without
+    # the blend the step would be |q_steel - q_mix| in one period.
+    gen = closed_form_generator()
+    classes = ("plexiglass", "steel")
+
+    def news(t):
+        if t < 0.4:
+            return SlaveNews(OBJECT_C, Estimate(0.2, (0.7, 0.3), "plexiglass", 0.7, False),
+                             classes)
+        return SlaveNews(OBJECT_C, decided("steel"), classes)
+
+    desired = np.array(_desired_trace(gen, news))
+    t = np.arange(len(desired)) * 1e-3 - 0.1
+    around = (t > 0.35) & (t < 0.6)
+    q_steel = gen.normalised("steel", 0.4)[0]
+    q_mix = 0.7 * gen.normalised("plexiglass", 0.4)[0] + 0.3 * q_steel
+    jump = abs((q_steel - q_mix) * (OBJECT_C - FINGER_C))
+    assert jump > 500.0                               # a real step to smooth
+    assert np.nanmax(np.abs(np.diff(desired[around]))) < 0.1 * jump
+
+
+def _desired_trace(gen, news_at, seconds=0.8, pre_s=0.1, rate=1000.0):
+    dt = 1.0 / rate
+    layers = tuple(SCENE.pad.layers)
+    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+                           idle_c=OBJECT_C)
+    plant, junction, out = None, OBJECT_C, []
+    for k in range(int(round((pre_s + seconds) * rate))):
+        t = k * dt - pre_s
+        if t >= 0 and plant is None:
+            plant = DisplayPlant(display_model(layers, seconds + 1, dt), junction, FINGER_C, H,
+                                 dt, TAU)
+        r = plant.read() if plant else None
+        step = master.step(t, dt, PadSensors(r.flux_w_m2 if r else 0.0,
+                                             r.pad_surface_c if r else junction,
+                                             10.0 if t >= 0 else 0.0), news_at(t))
+        junction = step.junction_applied_c
+        if plant:
+            plant.step(junction)
+        out.append(step.desired_flux_w_m2)
+    return out

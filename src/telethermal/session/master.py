@@ -73,6 +73,8 @@ class DisplayConfig:
     #: After a hand-over (hold -> render), the step between what was applied
     #: and what the controller asks for is closed at this slope.
     handover_k_s: float = 50.0
+    #: From the posterior mixture to the decided material: weights blended over this long.
+    blend_s: float = 0.1
     limits: SafetyLimits = field(default_factory=lambda: SafetyLimits(
         max_rate_k_s=200.0, max_flux_w_m2=20_000.0))
     #: For robustness studies: the controller's pad resistance relative to
@@ -85,8 +87,8 @@ class DisplayConfig:
     def __post_init__(self):
         if not (self.rate_hz > 0 and math.isfinite(self.rate_hz)):
             raise ControlError(f"display rate_hz must be > 0, got {self.rate_hz}")
-        if not (self.slew_k_s > 0 and self.handover_k_s > 0):
-            raise ControlError("slew_k_s and handover_k_s must be > 0")
+        if not (self.slew_k_s > 0 and self.handover_k_s > 0 and self.blend_s > 0):
+            raise ControlError("slew_k_s, handover_k_s and blend_s must be > 0")
         if self.before not in BEFORE_MODES:
             raise ControlError(f"before must be one of {BEFORE_MODES}, got {self.before!r}")
 
@@ -142,6 +144,7 @@ class MasterDisplay:
         self._offset = 0.0
         self._held = False      # the pad was held (not tracking) during this contact
         self._band_limited = False
+        self._blend = None
         self.events: dict[str, int] = {}
         self.onset_s: float | None = None          # of the contact going on
         self.last_onset_s: float | None = None
@@ -162,19 +165,33 @@ class MasterDisplay:
     def standby_c(self, news: SlaveNews) -> float:
         return self.standby_c_for(self.config.limits, news.object_temp_c)
 
-    def _desired(self, t_contact: float, news: SlaveNews, gap: float):
+    def _mixture_weights(self, news: SlaveNews) -> dict[str, float]:
+        names = list(news.classes)
+        post = news.estimate.posteriors if news.estimate is not None else ()
+        weights = list(post) if len(post) == len(names) else [1.0 / len(names)] * len(names)
+        known = self.generator.materials
+        pairs = [(n, w) for n, w in zip(names, weights) if n in known]
+        total = sum(w for _, w in pairs) or 1.0
+        return {n: w / total for n, w in pairs}
+
+    def _desired(self, t_s: float, t_contact: float, news: SlaveNews, gap: float):
         """(flux setpoint, flux for the feed-forward) at time since onset."""
         if self.rendering is not None:
-            names, weights = [self.rendering], [1.0]
+            weights = {self.rendering: 1.0}
+            if self._blend is not None:
+                # Hand-over from the posterior mixture to the decided material:
+                # a linear blend of the weights over blend_s, no setpoint step.
+                t_switch, before = self._blend
+                a = min(1.0, (t_s - t_switch) / self.config.blend_s)
+                weights = {n: (1 - a) * before.get(n, 0.0) + a * weights.get(n, 0.0)
+                           for n in set(before) | set(weights)}
+                if a >= 1.0:
+                    self._blend = None
         else:
-            names = list(news.classes)
-            post = news.estimate.posteriors if news.estimate is not None else ()
-            weights = list(post) if len(post) == len(names) else [1.0 / len(names)] * len(names)
-            known = self.generator.materials
-            pairs = [(n, w) for n, w in zip(names, weights) if n in known]
-            total = sum(w for _, w in pairs) or 1.0
-            names, weights = [n for n, _ in pairs], [w / total for _, w in pairs]
-        g, dg = mixture(self.generator, names, weights, t_contact)
+            weights = self._mixture_weights(news)
+            self._last_weights = weights
+        names = list(weights)
+        g, dg = mixture(self.generator, names, [weights[n] for n in names], t_contact)
         q = g * gap
         return q, q + self.tau * dg * gap
 
@@ -198,6 +215,8 @@ class MasterDisplay:
         if self.phase == "contact" and est is not None and est.decided and est.label != UNKNOWN \
                 and self.generator is not None and est.label in self.generator.materials:
             self.phase, self.rendering, self.rendered_from_s = "render", est.label, t_s
+            last = getattr(self, "_last_weights", None)
+            self._blend = (t_s, last) if self._pid_running and last else None
 
         standby = self.standby_c(news)
         desired = math.nan
@@ -215,7 +234,7 @@ class MasterDisplay:
         elif tracking and obj_c is not None and math.isfinite(obj_c):
             gap = obj_c - self.finger_c        # display flux = g(t) (T_object - T_finger)
             t_contact = max(t_s - self.onset_s, 0.0)
-            desired, ff_flux = self._desired(t_contact, news, gap)
+            desired, ff_flux = self._desired(t_s, t_contact, news, gap)
             ff = (sensors.pad_temp_c + ff_flux * self.r_pad - standby) if cfg.feedforward else 0.0
             if not self._pid_running:
                 # Saturate where the junction would leave the skin band, so the
