@@ -26,6 +26,7 @@ bench: $(STAMP)
 	$(VENV)/bin/telethermal bench identify --json $(OUT)/bench/identify.json --png $(OUT)/bench/identify.png
 	$(VENV)/bin/telethermal bench render --json $(OUT)/bench/render.json --png $(OUT)/bench/render.png
 	$(VENV)/bin/telethermal bench transport --json $(OUT)/bench/transport.json
+	$(VENV)/bin/telethermal bench faults --json $(OUT)/bench/faults.json
 
 clean:
 	rm -rf $(VENV) $(OUT)

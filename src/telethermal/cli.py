@@ -212,6 +212,29 @@ def cmd_bench_transport(args) -> int:
     return 0
 
 
+def cmd_bench_faults(args) -> int:
+    from telethermal.bench import faults
+
+    with _progress(len(faults.SETTINGS) + 1, "bench faults") as advance:
+        report = faults.run(progress=advance, quick=args.quick)
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    _write_json(args.json, report)
+    print(f"{'fault':40s} {'compensated':>12s} {'naive':>8s}  safety  lossless (gaps/recovered/"
+          f"dup/resent/dropped)")
+    for r in report["rows"]:
+        lo = r["lossless"]
+        print(f"{r['fault']:40s} {100 * r['compensated_flux_rms_error_rel']:11.2f}% "
+              f"{100 * r['naive_flux_rms_error_rel']:7.2f}%  {r['safety_events']:6d}  "
+              f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
+              f"{lo['lossless_dropped']}")
+    if report["summary"]:
+        s = report["summary"]
+        print(f"compensated at {s['ratio_setting']}: {s['compensated_ratio_200ms']:.2f}x its "
+              f"zero-delay error; naive {s['naive_ratio_200ms']:.2f}x")
+    print(f"wrote {args.json}")
+    return 0
+
+
 def _channels(text: str) -> tuple[str, ...]:
     names = tuple(c.strip() for c in text.split(",") if c.strip())
     if not names:
@@ -601,6 +624,12 @@ def build_parser() -> argparse.ArgumentParser:
                                           "loopback and across network namespaces")
     p.add_argument("--json", required=True)
     p.set_defaults(func=cmd_bench_transport)
+
+    p = bsub.add_parser("faults", help="rendering under network faults, compensated beside "
+                                       "naive (processes and the fault proxy)")
+    p.add_argument("--json", required=True)
+    p.add_argument("--quick", action="store_true", help="two settings, one material")
+    p.set_defaults(func=cmd_bench_faults)
 
     p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "
                                        "the loop on the real clock")

@@ -298,3 +298,44 @@ def _desired_trace(gen, news_at, seconds=0.8, pre_s=0.1, rate=1000.0):
             plant.step(junction)
         out.append(step.desired_flux_w_m2)
     return out
+
+
+def test_a_slave_that_changes_its_mind_is_followed_without_a_step():
+    # Decided steel at 0.3 s, then plexiglass at 0.6 s: the desired flux moves
+    # to plexiglass's over blend_s, counted as a changed decision.
+    gen = closed_form_generator()
+    classes = ("plexiglass", "steel")
+
+    def news(t):
+        return SlaveNews(OBJECT_C, decided("steel" if t < 0.6 else "plexiglass"), classes)
+
+    desired = np.array(_desired_trace(gen, news, seconds=1.0))
+    t = np.arange(len(desired)) * 1e-3 - 0.1
+    jump = abs((gen.normalised("steel", 0.6)[0] - gen.normalised("plexiglass", 0.6)[0])
+               * (OBJECT_C - FINGER_C))
+    around = (t > 0.55) & (t < 0.8)
+    assert jump > 1000.0
+    assert np.nanmax(np.abs(np.diff(desired[around]))) < 0.1 * jump
+    late = desired[t > 0.75]
+    expected = gen.normalised("plexiglass", t[t > 0.75]) * (OBJECT_C - FINGER_C)
+    np.testing.assert_allclose(late, expected, rtol=1e-9)       # it ends on the new material
+
+
+def test_an_estimate_after_the_finger_lifted_changes_nothing():
+    gen = closed_form_generator()
+    layers = tuple(SCENE.pad.layers)
+    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+                           idle_c=OBJECT_C)
+    undecided = SlaveNews(OBJECT_C, None, ("plexiglass", "steel"))
+    for k in range(300):                                       # touch, no decision yet
+        master.step(k * 1e-3, 1e-3, PadSensors(-2000.0 + k % 3, 26.0 + 1e-3 * (k % 4), 10.0),
+                    undecided)
+    for k in range(300, 600):                                  # lifted
+        master.step(k * 1e-3, 1e-3, PadSensors(0.1 * (k % 3), 24.0 + 1e-3 * (k % 4), 0.0),
+                    undecided)
+    late = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
+    for k in range(600, 700):                                  # the decision arrives now
+        step = master.step(k * 1e-3, 1e-3, PadSensors(0.1 * (k % 3), 24.0 + 1e-3 * (k % 4),
+                                                      0.0), late)
+    assert step.phase == "idle" and master.rendering is None
+    assert step.junction_applied_c == pytest.approx(OBJECT_C)

@@ -32,9 +32,12 @@ def free_ports(n: int) -> list[int]:
 
 def write_configs(out: Path, scene: str, identifier: Path, generator: Path, ports, seed: int,
                   rate_hz: float = 1000.0, realtime_priority: int = 0,
-                  slave_host: str = "127.0.0.1") -> tuple[Path, Path]:
+                  slave_host: str = "127.0.0.1", security: str = "curve",
+                  master_ports: tuple[int, int] | None = None) -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
-    admin addresses (ports on 127.0.0.1, or ``ipc://`` paths)."""
+    admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
+    ``master_ports``: where the master connects, if not to the slave itself
+    (a fault proxy in between; plain loopback sockets then)."""
     keys = out / "keys"
     generate_keys(keys / "slave", "slave")
     generate_keys(keys / "master", "master")
@@ -46,18 +49,24 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     def admin(where):
         return f'admin_ipc = "{where}"' if isinstance(where, str) else f"admin_port = {where}"
 
-    common = (f'control_port = {control}\nstream_port = {stream}\nsecurity = "curve"\n')
+    common = (f'control_port = {control}\nstream_port = {stream}\nsecurity = "{security}"\n')
+    m_control, m_stream = master_ports or (control, stream)
+    master_common = (f'control_port = {m_control}\nstream_port = {m_stream}\n'
+                     f'security = "{security}"\n')
+    slave_keys = 'keys_dir = "keys/slave"\nallowed_dir = "keys/allowed"\n' \
+        if security == "curve" else ""
+    master_keys = 'keys_dir = "keys/master"\n' if security == "curve" else ""
     slave = out / "slave.toml"
     ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
     slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n'
                      f'generator = "{gen}"\nseed = {seed}\n'
                      f'{admin(slave_admin)}\n\n[transport]\nbind_host = "{slave_host}"\n'
-                     f'{common}keys_dir = "keys/slave"\nallowed_dir = "keys/allowed"\n')
+                     f'{common}{slave_keys}')
     master = out / "master.toml"
     master.write_text(f'[master]\nscene = "{scene}"\nrate_hz = {rate_hz}\nseed = {seed}\n'
                       f'realtime_priority = {realtime_priority}\n'
                       f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
-                      f'{common}keys_dir = "keys/master"\n')
+                      f'{master_common}{master_keys}')
     return slave, master
 
 
@@ -120,8 +129,10 @@ def wait_connected(services: Services, master_admin: int, timeout_s: float = 90.
                          f"{services.log_tail('master')}\n{services.log_tail('slave')}")
 
 
-def networked_touch(scene, material: str, ports, seed: int, contact_s: float) -> SessionResult:
-    """Place, touch, compare with direct contact; returns the session result."""
+def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
+                    source: str = "trajectory") -> SessionResult:
+    """Place, touch, compare with direct contact; returns the session result.
+    ``source``: "trajectory" (compensated) or "setpoints" (naive)."""
     _, _, slave_admin, master_admin = ports
     placed = call(slave_admin, "place", material=material, seed=seed)
     if not placed.get("ok"):
@@ -131,7 +142,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float) ->
                                           or 1e9) - placed["object_ir_c"]) > 1e-9:
         time.sleep(0.05)
     result = call(master_admin, "touch", timeout_s=contact_s + 30, contact_s=contact_s,
-                  seed=seed)
+                  seed=seed, source=source)
     if not result.get("ok"):
         raise TelethermalError(f"master: {result.get('error')}")
     report = call(slave_admin, "report")

@@ -15,6 +15,7 @@ import logging
 import math
 import os
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -36,8 +37,10 @@ log = logging.getLogger("telethermal.master")
 class Touch:
     """One operator touch in progress."""
 
-    def __init__(self, service: "MasterService", contact_s: float, seed: int, now: float):
-        scene, cfg = service.scene, service.display_config
+    def __init__(self, service: "MasterService", contact_s: float, seed: int, now: float,
+                 source: str = "trajectory"):
+        scene = service.scene
+        cfg = replace(service.display_config, source=source)
         rng = master_rng(seed)
         self.operator = draw_operator(scene, rng)
         self.idle_c = MasterDisplay.standby_c_for(cfg.limits, service.object_temp_c)
@@ -112,8 +115,11 @@ class MasterService:
     def _touch_period(self, now: float, dt_s: float) -> None:
         touch = self.touch
         t = now - touch.start - PRE_CONTACT_S
+        sp = self.endpoint.latest.get("flux_setpoint")
+        setpoint = sp["flux_w_m2"] if sp is not None and sp["contact_id"] == touch.contact_id \
+            else None
         news = SlaveNews(self.object_temp_c, touch.estimates[-1] if touch.estimates else None,
-                         self.classes)
+                         self.classes, setpoint)
         onset_before = touch.display.last_onset_s
         release_before = touch.display.last_release_s
         sensors = touch.sim.sense(t)
@@ -165,7 +171,8 @@ class MasterService:
                 contact_s = float(request.get("contact_s", 5.0))
                 if not (0 < contact_s <= 60):
                     raise ValueError(f"contact_s must be in (0, 60], got {contact_s}")
-                self.touch = Touch(self, contact_s, int(request.get("seed", 0)), now)
+                self.touch = Touch(self, contact_s, int(request.get("seed", 0)), now,
+                                   str(request.get("source", "trajectory")))
                 log.info("touch contact_id=%d contact_s=%.1f", self.touch.contact_id, contact_s)
                 # The reply is sent when the touch is over.
             elif cmd == "status":

@@ -19,7 +19,7 @@ import zmq
 from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
-from telethermal.render.sampled import sample_curves
+from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import AdminServer
 from telethermal.services.config import SlaveConfig
 from telethermal.session.run import slave_rng, with_finger
@@ -48,6 +48,8 @@ class SlaveService:
         self.identifier, self.generator = identifier, generator
         renderable = [c for c in identifier.classes_ if c in generator.materials]
         self.curves = sample_curves(generator, renderable)
+        self.wire_generator = SampledGenerator(self.curves)   # what the master renders
+        self.finger_c: float | None = None
         self.rate_hz = self.scene.sample_rate_hz
         self.endpoint = Endpoint("slave", config.transport)
         try:
@@ -91,6 +93,7 @@ class SlaveService:
         elif kind == "contact_event" and m["touching"] and self.touch_t0 is None:
             # The operator touched: the slave's pad goes down on the object now.
             self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
+            self.finger_c = m.get("finger_temp_c")
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
         elif kind == "contact_event" and not m["touching"] and m["contact_id"] == self.contact_id \
                 and self.touch_t0 is not None:
@@ -124,6 +127,8 @@ class SlaveService:
                                    valid_s=TRAJECTORY_VALID_S)
                 log.info("decided contact_id=%d material=%s t=%.2f s", self.contact_id,
                          e.label, e.t_s)
+        if events or (pad.onset_s is not None and pad._next > getattr(self, "_sp_sample", -1)):
+            self._stream_setpoint(now)
         read = pad._next
         if read - self._sent >= BATCH:
             i = slice(self._sent, read)
@@ -135,6 +140,32 @@ class SlaveService:
                                temp_c=[float(v) for v in ch["temperature_C"][i]],
                                force_n=[float(v) for v in ch["force_N"][i]])
             self._sent = read
+
+    def _stream_setpoint(self, now: float) -> None:
+        """The naive path: the display flux for "now", sample by sample, from
+        what the slave believes at this instant (the fault benchmark's baseline)."""
+        pad = self.pad
+        self._sp_sample = pad._next
+        if self.finger_c is None or pad.onset_s is None:
+            return
+        est = pad.estimate
+        if est is not None and est.decided and est.label in self.curves:
+            weights = {est.label: 1.0}
+        else:
+            post = est.posteriors if est is not None else ()
+            classes = pad.classes
+            raw = {c: (post[i] if len(post) == len(classes) else 1.0)
+                   for i, c in enumerate(classes) if c in self.curves}
+            total = sum(raw.values()) or 1.0
+            weights = {c: w / total for c, w in raw.items()}
+        if not weights:
+            return
+        t = max(now - self.touch_t0 - pad.onset_s, 0.0)
+        names = list(weights)
+        g = float(np.dot([weights[n] for n in names],
+                         self.wire_generator.normalised_many(names, [t])[:, 0]))
+        self.endpoint.send("flux_setpoint", contact_id=self.contact_id, t_since_contact_s=t,
+                           flux_w_m2=g * (pad.object_ir_c - self.finger_c))
 
     def _report(self) -> dict:
         pad = self.pad

@@ -51,6 +51,10 @@ from telethermal.render.generator import mixture
 log = logging.getLogger(__name__)
 
 BEFORE_MODES = ("hold", "prior")
+#: "trajectory": render the slave's curves from the master's own onset (the
+#: compensated path); "setpoints": track the latest flux setpoint streamed
+#: by the slave sample by sample (the naive baseline of the fault benchmark).
+SOURCES = ("trajectory", "setpoints")
 
 #: PID gains of the flux loop: K of junction per W/m^2 of flux error. Chosen
 #: by ``telethermal bench render`` (bench/results/render.json): the lowest
@@ -67,6 +71,7 @@ class DisplayConfig:
     gains: PidGains = DEFAULT_GAINS
     feedforward: bool = True
     before: str = "prior"
+    source: str = "trajectory"
     #: The controller's own slew limit on the junction command; the
     #: supervisor's rate limit above it is the independent backstop.
     slew_k_s: float = 100.0
@@ -89,6 +94,8 @@ class DisplayConfig:
             raise ControlError(f"display rate_hz must be > 0, got {self.rate_hz}")
         if not (self.slew_k_s > 0 and self.handover_k_s > 0 and self.blend_s > 0):
             raise ControlError("slew_k_s, handover_k_s and blend_s must be > 0")
+        if self.source not in SOURCES:
+            raise ControlError(f"source must be one of {SOURCES}, got {self.source!r}")
         if self.before not in BEFORE_MODES:
             raise ControlError(f"before must be one of {BEFORE_MODES}, got {self.before!r}")
 
@@ -109,6 +116,7 @@ class SlaveNews:
     object_temp_c: float | None = None
     estimate: Estimate | None = None
     classes: tuple[str, ...] = ()
+    setpoint_w_m2: float | None = None       # latest streamed setpoint (naive path)
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,18 +220,31 @@ class MasterDisplay:
             self._pid_running = False
 
         est = news.estimate
-        if self.phase == "contact" and est is not None and est.decided and est.label != UNKNOWN \
-                and self.generator is not None and est.label in self.generator.materials:
+        naive = cfg.source == "setpoints"
+        if not naive and self.phase == "contact" and est is not None and est.decided and \
+                est.label != UNKNOWN and self.generator is not None and \
+                est.label in self.generator.materials:
             self.phase, self.rendering, self.rendered_from_s = "render", est.label, t_s
             last = getattr(self, "_last_weights", None)
             self._blend = (t_s, last) if self._pid_running and last else None
+        elif not naive and self.phase == "render" and est is not None and est.decided and \
+                est.label not in (UNKNOWN, self.rendering) and est.label in self.generator.materials:
+            # The slave changed its mind: blend to the new material, no step.
+            log.info("rendering changes from %s to %s at t=%.3f s", self.rendering, est.label, t_s)
+            self.events["decision changed"] = self.events.get("decision changed", 0) + 1
+            self._blend = (t_s, {self.rendering: 1.0})
+            self.rendering = est.label
 
         standby = self.standby_c(news)
         desired = math.nan
         command = standby
         obj_c = news.object_temp_c
-        tracking = self.phase == "render" or (self.phase == "contact" and cfg.before == "prior"
-                                              and news.classes and self.generator is not None)
+        if naive:
+            tracking = self.phase == "contact" and news.setpoint_w_m2 is not None
+        else:
+            tracking = self.phase == "render" or (self.phase == "contact" and
+                                                  cfg.before == "prior" and news.classes and
+                                                  self.generator is not None)
         readings_ok = math.isfinite(sensors.flux_w_m2) and math.isfinite(sensors.pad_temp_c)
         if self.phase != "idle" and not (tracking and readings_ok):
             self._held = True
@@ -234,7 +255,10 @@ class MasterDisplay:
         elif tracking and obj_c is not None and math.isfinite(obj_c):
             gap = obj_c - self.finger_c        # display flux = g(t) (T_object - T_finger)
             t_contact = max(t_s - self.onset_s, 0.0)
-            desired, ff_flux = self._desired(t_s, t_contact, news, gap)
+            if naive:
+                desired = ff_flux = float(news.setpoint_w_m2)
+            else:
+                desired, ff_flux = self._desired(t_s, t_contact, news, gap)
             ff = (sensors.pad_temp_c + ff_flux * self.r_pad - standby) if cfg.feedforward else 0.0
             if not self._pid_running:
                 # Saturate where the junction would leave the skin band, so the
