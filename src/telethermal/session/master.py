@@ -242,9 +242,13 @@ class MasterDisplay:
         if naive:
             tracking = self.phase == "contact" and news.setpoint_w_m2 is not None
         else:
+            # The prior starts with the slave's first posterior: until then the
+            # pad's own contact carries the touch (a uniform prior over the
+            # scene measured worse than holding when posteriors come late).
             tracking = self.phase == "render" or (self.phase == "contact" and
                                                   cfg.before == "prior" and news.classes and
-                                                  self.generator is not None)
+                                                  self.generator is not None and
+                                                  news.estimate is not None)
         readings_ok = math.isfinite(sensors.flux_w_m2) and math.isfinite(sensors.pad_temp_c)
         if self.phase != "idle" and not (tracking and readings_ok):
             self._held = True
