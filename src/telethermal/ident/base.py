@@ -19,18 +19,15 @@ named weight arrays. No pickle: ``numpy.load(allow_pickle=False)``.
 from __future__ import annotations
 
 import bisect
-import json
-import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.special import log_softmax
 
-from telethermal import __version__
-from telethermal.errors import IdentificationError, ModelFileError
+from telethermal.errors import IdentificationError
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts, normalise
+from telethermal.npzfile import read_npz, write_npz
 
 FORMAT_VERSION = 1
 
@@ -212,23 +209,14 @@ class Identifier:
     def save(self, path: str | Path) -> Path:
         """Write one ``.npz`` (header JSON + arrays), through a temporary file."""
         self._require_fitted()
-        path = Path(path)
-        header = {"format": "telethermal-identifier", "format_version": FORMAT_VERSION,
-                  "telethermal_version": __version__, "method": self.method,
+        header = {"method": self.method,
                   "classes": self.classes_, "channels": list(self.channels),
                   "sample_rate_hz": self.sample_rate_hz_, "windows_s": self.windows_s_,
                   "temperature": self.temperature_.tolist(), "hyper": self.hyper(),
                   "min_gap_k": MIN_GAP_K}
-        arrays = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)}
-        for i, params in enumerate(self.params_):
-            for name, value in params.items():
-                arrays[f"w{i}.{name}"] = np.asarray(value)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.tmp")
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
-        os.replace(tmp, path)
-        return path
+        arrays = {f"w{i}.{name}": value for i, params in enumerate(self.params_)
+                  for name, value in params.items()}
+        return write_npz(path, "telethermal-identifier", FORMAT_VERSION, header, arrays)
 
     @classmethod
     def restore(cls, header: dict, arrays: dict) -> "Identifier":
@@ -246,23 +234,4 @@ class Identifier:
 
 def read_model_file(path: str | Path) -> tuple[dict, dict]:
     """Header and arrays of a model file, with clear errors for anything else."""
-    path = Path(path)
-    if not path.is_file():
-        raise ModelFileError(f"{path}: no such model file")
-    try:
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError) as exc:
-        raise ModelFileError(f"{path}: not a readable model file (truncated or not "
-                             f"a telethermal model): {exc}") from None
-    try:
-        header = json.loads(arrays.pop("header").tobytes().decode())
-    except (KeyError, UnicodeDecodeError, json.JSONDecodeError):
-        raise ModelFileError(f"{path}: no valid header; not a telethermal model") from None
-    if header.get("format") != "telethermal-identifier":
-        raise ModelFileError(f"{path}: not a telethermal identifier")
-    if header.get("format_version") != FORMAT_VERSION:
-        raise ModelFileError(f"{path}: model format version {header.get('format_version')} "
-                             f"(written by telethermal {header.get('telethermal_version')}); "
-                             f"this telethermal reads version {FORMAT_VERSION}")
-    return header, arrays
+    return read_npz(path, "telethermal-identifier", FORMAT_VERSION, "model")

@@ -20,9 +20,6 @@ renders better.
 
 from __future__ import annotations
 
-import json
-import os
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,11 +27,11 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.special import erfcx
 
-from telethermal import __version__
 from telethermal.data.dataset import Trial
 from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.lm import MLP, train_lm
 from telethermal.ident.prepare import FLUX, MIN_GAP_K
+from telethermal.npzfile import read_npz, write_npz
 from telethermal.physics.materials import get_material
 
 #: Curves are fitted on this many log-spaced times from the first sample to the end.
@@ -247,36 +244,14 @@ def save_generator(generator, path: str | Path) -> Path:
     temporary file, so a crash leaves the old file or none, never half a one."""
     if not generator.materials:
         raise IdentificationError("this generator is not fitted; call fit()")
-    path = Path(path)
     state, arrays = generator._state()
-    header = {"format": "telethermal-generator", "format_version": GENERATOR_FORMAT_VERSION,
-              "telethermal_version": __version__, "kind": generator.kind,
-              "materials": generator.materials, **state}
-    payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as fh:
-        np.savez(fh, **payload)
-    os.replace(tmp, path)
-    return path
+    return write_npz(path, "telethermal-generator", GENERATOR_FORMAT_VERSION,
+                     {"kind": generator.kind, "materials": generator.materials, **state}, arrays)
 
 
 def load_generator(path: str | Path):
-    path = Path(path)
-    if not path.is_file():
-        raise ModelFileError(f"{path}: no such generator file")
-    try:
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-        header = json.loads(arrays.pop("header").tobytes().decode())
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError, UnicodeDecodeError):
-        raise ModelFileError(f"{path}: not a readable telethermal generator file "
-                             "(truncated, or some other file)") from None
-    if header.get("format") != "telethermal-generator":
-        raise ModelFileError(f"{path}: not a telethermal generator")
-    if header.get("format_version") != GENERATOR_FORMAT_VERSION:
-        raise ModelFileError(f"{path}: generator format version {header.get('format_version')}; "
-                             f"this telethermal reads version {GENERATOR_FORMAT_VERSION}")
+    header, arrays = read_npz(path, "telethermal-generator", GENERATOR_FORMAT_VERSION,
+                              "generator")
     cls = GENERATORS.get(header.get("kind"))
     if cls is None:
         raise ModelFileError(f"{path}: unknown generator kind {header.get('kind')!r}")

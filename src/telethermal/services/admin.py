@@ -77,6 +77,29 @@ class AdminServer:
             self.reply(ok=False, error=f"bad request: {exc}")
             return None
 
+    def handle(self, request: dict, service, handlers: dict) -> None:
+        """Run one request: ``handlers[cmd](request)`` returns the reply's
+        fields, or None when the reply comes later (a touch); "status" and
+        "stop" are served for every service; errors become ``ok: false``."""
+        from telethermal.errors import TelethermalError
+
+        cmd = request["cmd"]
+        try:
+            if cmd == "status":
+                self.reply(ok=True, **service.status())
+            elif cmd == "stop":
+                service.stop_requested = True
+                self.reply(ok=True)
+            elif cmd in handlers:
+                payload = handlers[cmd](request)
+                if payload is not None:
+                    self.reply(**{"ok": True, **payload})
+            else:
+                self.reply(ok=False, error=f"unknown command {cmd!r}; commands: "
+                                           f"{', '.join(['status', 'stop', *handlers])}")
+        except (TelethermalError, KeyError, ValueError, TypeError) as exc:
+            self.reply(ok=False, error=f"{cmd}: {exc}")
+
     def reply(self, **payload) -> None:
         self.sock.send(msgpack.packb(_plain(payload), use_bin_type=True))
         self.pending = False

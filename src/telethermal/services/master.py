@@ -161,29 +161,18 @@ class MasterService:
         self.admin.reply(**result)
 
     def _on_admin(self, request: dict, now: float) -> None:
-        cmd = request["cmd"]
-        try:
-            if cmd == "touch":
-                if self.generator is None or not self.endpoint.peer_alive:
-                    self.admin.reply(ok=False, error="no slave session yet (not connected or "
-                                                     "no session_config)")
-                    return
-                contact_s = float(request.get("contact_s", 5.0))
-                if not (0 < contact_s <= 60):
-                    raise ValueError(f"contact_s must be in (0, 60], got {contact_s}")
-                self.touch = Touch(self, contact_s, int(request.get("seed", 0)), now,
-                                   str(request.get("source", "trajectory")))
-                log.info("touch contact_id=%d contact_s=%.1f", self.touch.contact_id, contact_s)
-                # The reply is sent when the touch is over.
-            elif cmd == "status":
-                self.admin.reply(ok=True, **self.status())
-            elif cmd == "stop":
-                self.stop_requested = True
-                self.admin.reply(ok=True)
-            else:
-                self.admin.reply(ok=False, error=f"unknown command {cmd!r}")
-        except (TelethermalError, KeyError, ValueError) as exc:
-            self.admin.reply(ok=False, error=str(exc))
+        def touch(r):
+            if self.generator is None or not self.endpoint.peer_alive:
+                raise ValueError("no slave session yet (not connected or no session_config)")
+            contact_s = float(r.get("contact_s", 5.0))
+            if not (0 < contact_s <= 60):
+                raise ValueError(f"contact_s must be in (0, 60], got {contact_s}")
+            self.touch = Touch(self, contact_s, int(r.get("seed", 0)), now,
+                               str(r.get("source", "trajectory")))
+            log.info("touch contact_id=%d contact_s=%.1f", self.touch.contact_id, contact_s)
+            return None                       # the reply is sent when the touch is over
+
+        self.admin.handle(request, self, {"touch": touch})
 
     def status(self) -> dict:
         e = self.endpoint

@@ -177,22 +177,12 @@ class SlaveService:
                 "reason": est.reason if est is not None else "no estimate"}
 
     def _on_admin(self, request: dict) -> None:
-        cmd = request["cmd"]
-        try:
-            if cmd == "place":
-                self.place(str(request["material"]), int(request.get("seed", self._seed + 1)))
-                self.admin.reply(ok=True, object_ir_c=self.pad.object_ir_c)
-            elif cmd == "report":
-                self.admin.reply(ok=True, **getattr(self, "last_touch", {}))
-            elif cmd == "status":
-                self.admin.reply(ok=True, **self.status())
-            elif cmd == "stop":
-                self.stop_requested = True
-                self.admin.reply(ok=True)
-            else:
-                self.admin.reply(ok=False, error=f"unknown command {cmd!r}")
-        except (TelethermalError, KeyError, ValueError) as exc:
-            self.admin.reply(ok=False, error=str(exc))
+        def place(r):
+            self.place(str(r["material"]), int(r.get("seed", self._seed + 1)))
+            return {"object_ir_c": self.pad.object_ir_c}
+
+        self.admin.handle(request, self, {
+            "place": place, "report": lambda r: dict(getattr(self, "last_touch", {}))})
 
     def status(self) -> dict:
         e = self.endpoint

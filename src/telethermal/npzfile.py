@@ -1,0 +1,55 @@
+"""Model files: one ``.npz`` holding a JSON header and named arrays, read
+with ``allow_pickle=False`` and written through a temporary file (a crash
+leaves the old file or none, never half of one). Identifiers and flux
+generators both use it."""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from telethermal import __version__
+from telethermal.errors import ModelFileError
+
+
+def write_npz(path: str | Path, fmt: str, version: int, header: dict, arrays: dict) -> Path:
+    path = Path(path)
+    full = {"format": fmt, "format_version": version, "telethermal_version": __version__,
+            **header}
+    payload = {"header": np.frombuffer(json.dumps(full).encode(), dtype=np.uint8),
+               **{k: np.asarray(v) for k, v in arrays.items()}}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as fh:
+        np.savez(fh, **payload)
+    os.replace(tmp, path)
+    return path
+
+
+def read_npz(path: str | Path, fmt: str, version: int, what: str) -> tuple[dict, dict]:
+    """(header, arrays) of a ``fmt`` file; ModelFileError naming the file and
+    what is wrong with it otherwise (``what``: "model", "generator")."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"{path}: no such {what} file")
+    try:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError) as exc:
+        raise ModelFileError(f"{path}: not a readable {what} file (truncated or not "
+                             f"a telethermal {what}): {exc}") from None
+    try:
+        header = json.loads(arrays.pop("header").tobytes().decode())
+    except (KeyError, UnicodeDecodeError, json.JSONDecodeError):
+        raise ModelFileError(f"{path}: no valid header; not a telethermal {what}") from None
+    if header.get("format") != fmt:
+        raise ModelFileError(f"{path}: not a {fmt.replace('-', ' ')} file")
+    if header.get("format_version") != version:
+        raise ModelFileError(f"{path}: {what} format version {header.get('format_version')} "
+                             f"(written by telethermal {header.get('telethermal_version')}); "
+                             f"this telethermal reads version {version}")
+    return header, arrays
