@@ -193,3 +193,33 @@ def test_a_restarted_slave_is_found_again_and_the_session_starts_afresh(link):
         assert master.counters["heartbeats_missed"] >= 1
     finally:
         reborn.close()
+
+
+def test_a_lost_tail_and_a_lost_resend_request_are_recovered(link, monkeypatch):
+    # The last message is lost (the receiver sees no gap) and so is the
+    # first resend request of another gap: the sender's retransmission
+    # timeout and the receiver's repeated request still get everything there.
+    slave, master = link
+    real_m, real_s = master._raw_send, slave._raw_send
+    dropped = []
+
+    def lossy_master(sock, message, data=None):
+        if message["kind"] == "contact_event" and message["seq"] in (3, 10) and \
+                message["seq"] not in dropped:
+            dropped.append(message["seq"])
+            return True
+        return real_m(sock, message, data)
+
+    def lossy_slave(sock, message, data=None):
+        if message["kind"] == "resend" and "resend" not in dropped:
+            dropped.append("resend")
+            return True
+        return real_s(sock, message, data)
+
+    monkeypatch.setattr(master, "_raw_send", lossy_master)
+    monkeypatch.setattr(slave, "_raw_send", lossy_slave)
+    for i in range(1, 11):
+        master.send("contact_event", **contact(i))
+    (s_got, _) = pump(slave, master, seconds=5.0, until=lambda: master.unacked == 0)
+    assert sorted(d for d in dropped if d != "resend") == [3, 10] and "resend" in dropped
+    assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == list(range(1, 11))

@@ -33,6 +33,8 @@ log = logging.getLogger(__name__)
 
 MAX_BUFFERED = 1024
 MAX_UNACKED = 4096
+#: Heartbeat periods a message may wait unacknowledged before it is sent again.
+RETRANSMIT_AFTER = 3
 COUNTERS = ("lossless_sent", "lossless_received", "duplicates", "gaps", "recovered", "resent",
             "lossless_dropped", "stream_lost", "invalid", "unknown_kind", "heartbeats_missed",
             "reconnects")
@@ -163,6 +165,8 @@ class Endpoint:
         self._last_heartbeat_sent = -1e9
         self._last_peer_hb: tuple[float, float] | None = None   # (its sent_s, our receipt)
         self._resend_asked_at = -1e9
+        self._ack_moved_at = -1e9
+        self._retransmitted_at = -1e9
         self._was_alive = False
         self._open_sockets()
 
@@ -325,6 +329,26 @@ class Endpoint:
             "ack": self._expected - 1, "echo_sent_s": echo, "echo_held_s": held})
         self._last_heartbeat_sent = now
 
+    def _repair(self, now: float) -> None:
+        """Once per heartbeat. As receiver: a gap still open is asked for
+        again (the first ``resend`` may itself have been lost). As sender:
+        messages kept unacknowledged for ``RETRANSMIT_AFTER`` heartbeats with
+        the peer's ack standing still are sent again from the first one (a
+        lost *tail* leaves the receiver no gap to see)."""
+        if self._buffer:
+            self._raw_send(self.control, {"kind": "resend", "v": PROTOCOL_VERSION, "seq": 0,
+                                          "sent_s": now, "from_seq": self._expected})
+            self._resend_asked_at = now
+        if self._outbox:
+            first = next(iter(self._outbox))
+            waited = now - max(self._outbox[first]["sent_s"], self._ack_moved_at)
+            # Never sooner than two round trips: on a long link the ack is on its way.
+            timeout = max(RETRANSMIT_AFTER * self.config.heartbeat_s,
+                          2 * (self.offset.rtt_s or 0.0) + self.config.heartbeat_s)
+            if waited >= timeout and now - self._retransmitted_at >= timeout:
+                self._retransmitted_at = now
+                self._resend_from(first)
+
     def _resend_from(self, first: int):
         for seq, message in list(self._outbox.items()):
             if seq >= first:
@@ -346,6 +370,7 @@ class Endpoint:
                 self._hello()
             if self.peer_version is not None:
                 self._heartbeat(now)
+                self._repair(now)
             else:
                 self._last_heartbeat_sent = now
         out = []
@@ -401,8 +426,11 @@ class Endpoint:
         self._last_heard = now
         if kind == "heartbeat":
             ack = message["ack"]
-            for seq in [s for s in self._outbox if s <= ack]:
+            acked = [s for s in self._outbox if s <= ack]
+            for seq in acked:
                 del self._outbox[seq]
+            if acked:
+                self._ack_moved_at = now
             self._last_peer_hb = (message["sent_s"], now)
             if message["echo_sent_s"] is not None:
                 rtt = (now - message["echo_sent_s"]) - message["echo_held_s"]
