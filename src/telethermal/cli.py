@@ -519,10 +519,12 @@ def cmd_faults(args) -> int:
         key, sep, value = item.partition("=")
         if not sep:
             raise TelethermalError(f"--set {item!r}: use section.key=value")
-        try:
-            overrides[key] = float(value)
-        except ValueError:
-            overrides[key] = value
+        for kind in (int, float, str):
+            try:
+                overrides[key] = kind(value)
+                break
+            except ValueError:
+                continue
     profile = load_profile(args.profile, overrides)
     proxy = FaultProxy(profile)
     stop = []

@@ -5,7 +5,6 @@ figure is asserted."""
 
 import subprocess
 import sys
-import time
 
 import pytest
 

@@ -159,7 +159,6 @@ def test_release_returns_to_standby_and_bad_config_is_refused(exact):
     master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
                            idle_c=OBJECT_C)
     news = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
-    t = 0.0
     for k in range(200):                                     # touch for 0.2 s
         master.step(k * 1e-3, 1e-3, PadSensors(-2000.0 - k, 26.0, 10.0), news)
     for k in range(200, 400):                                # lift

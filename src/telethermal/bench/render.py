@@ -17,7 +17,6 @@ from __future__ import annotations
 import datetime
 import platform
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 

@@ -21,7 +21,6 @@ import argparse
 import datetime
 import json
 import platform
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -200,21 +199,12 @@ def _run_pair(stack, security, host, port, keys, prefix=(None, None), n=N_LATENC
     return out
 
 
-def _keys(folder: Path) -> Path:
-    from telethermal.wire.transport import generate_keys
-    generate_keys(folder / "slave", "slave")
-    generate_keys(folder / "master", "master")
-    (folder / "allowed").mkdir(exist_ok=True)
-    shutil.copy(folder / "master" / "master.key", folder / "allowed" / "master.key")
-    shutil.copy(folder / "slave" / "slave.key", folder / "master" / "slave.key")
-    return folder
-
-
 def run(progress=None) -> dict:
     step = progress or (lambda _m: None)
     report = {"codec": codec_costs()}
     with tempfile.TemporaryDirectory() as tmp:
-        keys = _keys(Path(tmp))
+        from telethermal.wire.transport import generate_link_keys
+        keys = generate_link_keys(Path(tmp))
         step("loopback")
         from telethermal.services.demo import free_ports
         loop = {}

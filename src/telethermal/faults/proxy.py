@@ -17,10 +17,9 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
-import math
 import time
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ import zmq
 
 from telethermal.errors import TransportError
 from telethermal.faults.channel import Channel, Direction, FaultProfileError
+from telethermal.tomltables import table_values
 
 log = logging.getLogger("telethermal.faults")
 
@@ -51,18 +51,12 @@ class FaultProfile:
 
 
 def _table(cls, data: dict, where: str):
-    known = {f.name for f in fields(cls)}
-    for key in data:
-        if key not in known:
-            raise FaultProfileError(f"{where}: unknown key {key!r}; keys: {', '.join(sorted(known))}")
-    values = dict(data)
+    values = table_values(cls, data, where, FaultProfileError)
     if "partitions" in values:
         values["partitions"] = tuple(tuple(float(x) for x in w) for w in values["partitions"])
     try:
         return cls(**values)
-    except (TypeError, ValueError) as exc:
-        raise FaultProfileError(f"{where}: {exc}") from None
-    except FaultProfileError as exc:
+    except (TypeError, ValueError, FaultProfileError) as exc:
         raise FaultProfileError(f"{where}: {exc}") from None
 
 

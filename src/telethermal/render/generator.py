@@ -14,8 +14,8 @@ gap and averaged per material; the desired flux is then
   material with a contact conductance, ``h erfcx(h (1/e_f + 1/e_m) sqrt(t))``,
   with ``h`` and the material's effusivity fitted per material (two numbers).
 
-:func:`compare` scores both on held-out persons; the bench keeps whichever
-renders better.
+``telethermal bench render`` scores both on held-out persons
+(``bench.render.generator_comparison``); the network renders better and is kept.
 """
 
 from __future__ import annotations
@@ -215,6 +215,16 @@ def display_flux(generator, material: str, t_s, finger_c: float, object_c: float
     return generator.normalised(material, t_s) * (object_c - finger_c)
 
 
+def posterior_weights(classes, posteriors, known) -> dict[str, float]:
+    """Posteriors over ``classes`` as weights over the ``known`` materials,
+    renormalised (uniform while there are no posteriors yet)."""
+    post = list(posteriors or ())
+    raw = post if len(post) == len(classes) else [1.0] * len(classes)
+    pairs = [(c, w) for c, w in zip(classes, raw) if c in known]
+    total = sum(w for _, w in pairs) or 1.0
+    return {c: w / total for c, w in pairs}
+
+
 def mixture(generator, materials, weights, t_s: float, step_s: float = 1e-4):
     """``(sum_m w_m g_m(t), d/dt of it)`` at one time since contact, with the
     derivative by central difference (one-sided at contact); one batched
@@ -223,15 +233,6 @@ def mixture(generator, materials, weights, t_s: float, step_s: float = 1e-4):
     g = np.asarray(weights, dtype=np.float64) @ generator.normalised_many(
         materials, np.array([t_s, lo, hi]))
     return float(g[0]), float((g[2] - g[1]) / (hi - lo))
-
-
-def normalised_rate(generator, material: str, t_s, step_s: float = 1e-4) -> np.ndarray:
-    """d/dt of ``generator.normalised`` by a central difference (one-sided at
-    contact), for feed-forward through a lagged sensor."""
-    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
-    lo = np.clip(t - step_s, 0, None)
-    hi = t + step_s
-    return (generator.normalised(material, hi) - generator.normalised(material, lo)) / (hi - lo)
 
 
 # ---------------------------------------------------------------- files

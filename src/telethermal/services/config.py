@@ -4,10 +4,11 @@ and the key. Relative paths are relative to the file's own folder."""
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from telethermal.errors import TelethermalError
+from telethermal.tomltables import table_values
 from telethermal.wire.transport import TransportConfig
 
 
@@ -43,23 +44,6 @@ class MasterConfig:
     transport: TransportConfig = field(default_factory=TransportConfig)
 
 
-def _fill(cls, table: dict, where: str):
-    known = {f.name: f for f in fields(cls)}
-    out = {}
-    for key, value in table.items():
-        if key not in known or key == "transport":
-            raise ConfigError(f"{where}: unknown key {key!r}; keys: "
-                              f"{', '.join(k for k in known if k != 'transport')}")
-        expected = known[key].type
-        kind = {"int": int, "float": (int, float), "str": str, "bool": bool}.get(
-            expected if isinstance(expected, str) else expected.__name__)
-        if kind is not None and (not isinstance(value, kind) or
-                                 (kind is int and isinstance(value, bool))):
-            raise ConfigError(f"{where}.{key}: expected {expected}, got {value!r}")
-        out[key] = float(value) if expected == "float" else value
-    return out
-
-
 def load_config(path: str | Path, role: str):
     """Read ``[<role>]``, ``[transport]`` of a service config file."""
     path = Path(path)
@@ -74,8 +58,9 @@ def load_config(path: str | Path, role: str):
         raise ConfigError(f"{path}: unknown section(s) {', '.join(sorted(extra))}; expected "
                           f"[{role}] and [transport]")
     cls = SlaveConfig if role == "slave" else MasterConfig
-    config = cls(**_fill(cls, data.get(role, {}), f"{path} [{role}]"))
-    transport = TransportConfig(**_fill(TransportConfig, data.get("transport", {}),
+    config = cls(**table_values(cls, data.get(role, {}), f"{path} [{role}]", ConfigError,
+                                     exclude=("transport",)))
+    transport = TransportConfig(**table_values(TransportConfig, data.get("transport", {}),
                                         f"{path} [transport]"))
     base = path.resolve().parent
     for key in ("keys_dir", "allowed_dir"):

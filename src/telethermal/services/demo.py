@@ -16,7 +16,7 @@ from telethermal.errors import TelethermalError, TransportError
 from telethermal.services.admin import call
 from telethermal.session.plots import plot_session
 from telethermal.session.run import SessionResult, compare_with_direct, with_finger
-from telethermal.wire.transport import generate_keys
+from telethermal.wire.transport import generate_link_keys
 
 
 def free_ports(n: int) -> list[int]:
@@ -38,12 +38,7 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
     (a fault proxy in between; plain loopback sockets then)."""
-    keys = out / "keys"
-    generate_keys(keys / "slave", "slave")
-    generate_keys(keys / "master", "master")
-    (keys / "allowed").mkdir(exist_ok=True)
-    (keys / "allowed" / "master.key").write_bytes((keys / "master" / "master.key").read_bytes())
-    (keys / "master" / "slave.key").write_bytes((keys / "slave" / "slave.key").read_bytes())
+    generate_link_keys(out / "keys")
     control, stream, slave_admin, master_admin = ports
 
     def admin(where):
@@ -189,7 +184,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     try:
-        status = wait_connected(services, ports[3])
+        wait_connected(services, ports[3])
         echo("slave and master up as two processes on loopback (CURVE)")
         for i, material in enumerate(materials):
             result = networked_touch(scene, material, ports, seed + 1 + i, contact_s)

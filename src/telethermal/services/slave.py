@@ -13,12 +13,12 @@ from __future__ import annotations
 import logging
 import time
 
-import numpy as np
 import zmq
 
 from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
+from telethermal.render.generator import mixture, posterior_weights
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import AdminServer
 from telethermal.services.config import SlaveConfig
@@ -111,7 +111,7 @@ class SlaveService:
         if before is None and pad.onset_s is not None:
             self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
                                t_s=self.touch_t0 + pad.onset_s, force_n=float(pad.force_n[
-                                   pad._onset_index]), object_temp_c=pad.object_ir_c)
+                                   pad.onset_index]), object_temp_c=pad.object_ir_c)
         for ev in events:
             e = ev.estimate
             self.endpoint.send("material_estimate", contact_id=self.contact_id,
@@ -127,9 +127,9 @@ class SlaveService:
                                    valid_s=TRAJECTORY_VALID_S)
                 log.info("decided contact_id=%d material=%s t=%.2f s", self.contact_id,
                          e.label, e.t_s)
-        if events or (pad.onset_s is not None and pad._next > getattr(self, "_sp_sample", -1)):
+        if events or (pad.onset_s is not None and pad.samples_read > getattr(self, "_sp_sample", -1)):
             self._stream_setpoint(now)
-        read = pad._next
+        read = pad.samples_read
         if read - self._sent >= BATCH:
             i = slice(self._sent, read)
             ch = pad.trial.channels
@@ -145,25 +145,20 @@ class SlaveService:
         """The naive path: the display flux for "now", sample by sample, from
         what the slave believes at this instant (the fault benchmark's baseline)."""
         pad = self.pad
-        self._sp_sample = pad._next
+        self._sp_sample = pad.samples_read
         if self.finger_c is None or pad.onset_s is None:
             return
         est = pad.estimate
         if est is not None and est.decided and est.label in self.curves:
             weights = {est.label: 1.0}
         else:
-            post = est.posteriors if est is not None else ()
-            classes = pad.classes
-            raw = {c: (post[i] if len(post) == len(classes) else 1.0)
-                   for i, c in enumerate(classes) if c in self.curves}
-            total = sum(raw.values()) or 1.0
-            weights = {c: w / total for c, w in raw.items()}
+            weights = posterior_weights(pad.classes, est.posteriors if est else None,
+                                        self.curves)
         if not weights:
             return
         t = max(now - self.touch_t0 - pad.onset_s, 0.0)
         names = list(weights)
-        g = float(np.dot([weights[n] for n in names],
-                         self.wire_generator.normalised_many(names, [t])[:, 0]))
+        g, _ = mixture(self.wire_generator, names, [weights[n] for n in names], t)
         self.endpoint.send("flux_setpoint", contact_id=self.contact_id, t_since_contact_s=t,
                            flux_w_m2=g * (pad.object_ir_c - self.finger_c))
 

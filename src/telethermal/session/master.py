@@ -38,7 +38,6 @@ import logging
 import math
 from dataclasses import dataclass, field, replace
 
-import numpy as np
 
 from telethermal.control.contact import ContactDetector
 from telethermal.control.pid import Pid, PidGains
@@ -46,7 +45,7 @@ from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_
                                         supervise)
 from telethermal.errors import ControlError
 from telethermal.ident.anytime import UNKNOWN, Estimate
-from telethermal.render.generator import mixture
+from telethermal.render.generator import mixture, posterior_weights
 
 log = logging.getLogger(__name__)
 
@@ -174,13 +173,8 @@ class MasterDisplay:
         return self.standby_c_for(self.config.limits, news.object_temp_c)
 
     def _mixture_weights(self, news: SlaveNews) -> dict[str, float]:
-        names = list(news.classes)
-        post = news.estimate.posteriors if news.estimate is not None else ()
-        weights = list(post) if len(post) == len(names) else [1.0 / len(names)] * len(names)
-        known = self.generator.materials
-        pairs = [(n, w) for n, w in zip(names, weights) if n in known]
-        total = sum(w for _, w in pairs) or 1.0
-        return {n: w / total for n, w in pairs}
+        return posterior_weights(news.classes, news.estimate.posteriors if news.estimate
+                                 else None, self.generator.materials)
 
     def _desired(self, t_s: float, t_contact: float, news: SlaveNews, gap: float):
         """(flux setpoint, flux for the feed-forward) at time since onset."""

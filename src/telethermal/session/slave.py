@@ -70,6 +70,16 @@ class Slave:
         return tuple(self.identifier.classes_)
 
     @property
+    def samples_read(self) -> int:
+        """How many samples of the trial have been read so far."""
+        return self._next
+
+    @property
+    def onset_index(self) -> int | None:
+        """Index of the contact-onset sample, once detected."""
+        return self._onset_index
+
+    @property
     def estimate(self) -> Estimate | None:
         return self.events[-1].estimate if self.events else None
 

@@ -101,6 +101,19 @@ def generate_keys(folder: str | Path, name: str) -> tuple[Path, Path]:
     return Path(public), Path(secret)
 
 
+def generate_link_keys(folder: str | Path) -> Path:
+    """Keys for one master-slave link, laid out as the configs expect:
+    ``slave/`` (the slave's pair), ``master/`` (the master's pair and the
+    slave's public key), ``allowed/`` (the master's public key)."""
+    folder = Path(folder)
+    generate_keys(folder / "slave", "slave")
+    generate_keys(folder / "master", "master")
+    (folder / "allowed").mkdir(exist_ok=True)
+    (folder / "allowed" / "master.key").write_bytes((folder / "master" / "master.key").read_bytes())
+    (folder / "master" / "slave.key").write_bytes((folder / "slave" / "slave.key").read_bytes())
+    return folder
+
+
 def _load_secret(folder, name):
     path = Path(folder) / f"{name}.key_secret"
     if not path.is_file():
@@ -261,10 +274,6 @@ class Endpoint:
     @property
     def unacked(self) -> int:
         return len(self._outbox)
-
-    def to_peer_clock(self, t_s: float) -> float | None:
-        off = self.offset.offset_s
-        return None if off is None else t_s + off
 
     # ------------------------------------------------------------ sending
     def _raw_send(self, sock, message: dict, data: bytes | None = None) -> bool:

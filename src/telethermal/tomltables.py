@@ -1,0 +1,29 @@
+"""TOML tables to dataclass fields, with errors that name the file, the
+table and the key (service configs, fault profiles)."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+from telethermal.errors import TelethermalError
+
+_KINDS = {"int": int, "float": (int, float), "str": str, "bool": bool}
+
+
+def table_values(cls, table: dict, where: str, error=TelethermalError,
+                 exclude: tuple[str, ...] = ()) -> dict:
+    """The keyword arguments for ``cls`` from ``table``: unknown keys and
+    values of the wrong scalar type are refused (``error``, naming ``where``);
+    fields of other types pass as they are, for ``cls`` to check."""
+    known = {f.name: f for f in fields(cls) if f.name not in exclude}
+    out = {}
+    for key, value in table.items():
+        if key not in known:
+            raise error(f"{where}: unknown key {key!r}; keys: {', '.join(known)}")
+        expected = known[key].type
+        kind = _KINDS.get(expected if isinstance(expected, str) else expected.__name__)
+        if kind is not None and (not isinstance(value, kind) or
+                                 (kind is int and isinstance(value, bool))):
+            raise error(f"{where}.{key}: expected {expected}, got {value!r}")
+        out[key] = float(value) if expected == "float" else value
+    return out
