@@ -21,12 +21,11 @@ import numpy as np
 
 from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.errors import TelethermalError
-from telethermal.ident.anytime import Estimate
 from telethermal.physics.scene import load_scene
-from telethermal.render.sampled import SampledGenerator
 from telethermal.services.admin import AdminServer
 from telethermal.services.config import MasterConfig
-from telethermal.session.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.session.link import SlaveLink
+from telethermal.session.master import DisplayConfig, MasterDisplay
 from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
                                      pad_resistance, safety_summary, with_finger)
 from telethermal.wire.transport import Endpoint
@@ -43,15 +42,16 @@ class Touch:
         cfg = replace(service.display_config, source=source)
         rng = master_rng(seed)
         self.operator = draw_operator(scene, rng)
-        self.idle_c = MasterDisplay.standby_c_for(cfg.limits, service.object_temp_c)
-        self.display = MasterDisplay(cfg, service.generator, pad_resistance(scene.pad.layers),
+        self.idle_c = MasterDisplay.standby_c_for(cfg.limits, service.link.object_temp_c)
+        self.display = MasterDisplay(cfg, service.link.generator,
+                                     pad_resistance(scene.pad.layers),
                                      scene.sensors.flux_lag_s, self.operator.finger_ir_c,
                                      idle_c=self.idle_c)
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
         self.start = now
         self.contact_s = contact_s
         self.contact_id = service.next_contact_id
-        self.estimates: list[Estimate] = []
+        service.link.begin(self.contact_id)
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
         self.trajectory_at: float | None = None
@@ -68,9 +68,7 @@ class MasterService:
         except TelethermalError:
             self.endpoint.close()
             raise
-        self.generator: SampledGenerator | None = None
-        self.classes: tuple[str, ...] = ()
-        self.object_temp_c: float | None = None
+        self.link = SlaveLink()
         self.touch: Touch | None = None
         self.next_contact_id = 1
         self.stop_requested = False
@@ -78,27 +76,14 @@ class MasterService:
 
     # ------------------------------------------------------------ network
     def _on_message(self, m: dict, now: float) -> None:
-        kind, touch = m["kind"], self.touch
-        if kind == "session_config":
-            self.generator = SampledGenerator(m["curves"])
-            self.classes = tuple(m["classes"])
-            log.info("session config from slave: %d classes, scene %s", len(self.classes),
+        if m["kind"] == "session_config":
+            log.info("session config from slave: %d classes, scene %s", len(m["classes"]),
                      m["scene"])
-        elif kind == "contact_event":
-            if m.get("object_temp_c") is not None:
-                self.object_temp_c = m["object_temp_c"]
-        elif kind == "material_estimate" and touch is not None and \
-                m["contact_id"] == touch.contact_id:
-            touch.estimates.append(Estimate(m["t_since_contact_s"], tuple(m["posteriors"]),
-                                            m["label"], m["confidence"], m["decided"],
-                                            m["reason"]))
-            self.object_temp_c = m["object_temp_c"]
-        elif kind == "flux_trajectory" and touch is not None and \
-                m["contact_id"] == touch.contact_id:
-            t = np.asarray(m["t_s"][1:] if m["t_s"][0] == 0 else m["t_s"])
-            g = np.asarray(m["g_w_m2k"][1:] if m["t_s"][0] == 0 else m["g_w_m2k"])
-            self.generator.set_curve(m["material"], t, g)
-            touch.trajectory_at = now - touch.start - PRE_CONTACT_S
+        had = self.link.trajectory
+        self.link.on_message(m, now, self.endpoint.offset.offset_s)
+        if self.touch is not None and self.link.trajectory is not had and \
+                self.touch.trajectory_at is None:
+            self.touch.trajectory_at = now - self.touch.start - PRE_CONTACT_S
 
     # ------------------------------------------------------------ loop
     def step(self, t_loop: float, dt_s: float) -> bool:
@@ -118,8 +103,8 @@ class MasterService:
         sp = self.endpoint.latest.get("flux_setpoint")
         setpoint = sp["flux_w_m2"] if sp is not None and sp["contact_id"] == touch.contact_id \
             else None
-        news = SlaveNews(self.object_temp_c, touch.estimates[-1] if touch.estimates else None,
-                         self.classes, setpoint)
+        news = self.link.news(now, self.endpoint.peer_alive, setpoint)
+        touch.display.generator = self.link.generator      # a restarted slave sends anew
         onset_before = touch.display.last_onset_s
         release_before = touch.display.last_release_s
         sensors = touch.sim.sense(t)
@@ -127,6 +112,7 @@ class MasterService:
         touch.sim.actuate(t, step, dt_s, sensors.force_n)
         if touch.display.last_onset_s != onset_before:
             self.state = "touching"
+            self.link.onset(touch.start + PRE_CONTACT_S + touch.display.last_onset_s)
             self.endpoint.send("contact_event", contact_id=touch.contact_id, touching=True,
                                t_s=touch.start + PRE_CONTACT_S + touch.display.last_onset_s,
                                force_n=max(float(sensors.force_n), 0.0),
@@ -142,7 +128,8 @@ class MasterService:
 
     def _finish_touch(self) -> None:
         touch, stats = self.touch, self.loop.stats
-        est = touch.estimates[-1] if touch.estimates else None
+        link = self.link
+        est = link.estimates[-1] if link.estimates else None
         loop = stats.summary(last=stats.count - touch.loop_count0)
         loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
         result = {
@@ -152,17 +139,20 @@ class MasterService:
             "master_onset_s": touch.display.last_onset_s,
             "identified": est.label if est is not None and est.decided else "unknown",
             "decision_time_s": est.t_s if est is not None and est.decided else None,
-            "estimates": len(touch.estimates), "trajectory_at_s": touch.trajectory_at,
+            "estimates": len(link.estimates), "trajectory_at_s": touch.trajectory_at,
+            "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,
+            "link_counters": dict(link.counters),
             **safety_summary(touch.display), "loop": loop,
             "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
         }
         self.touch, self.state = None, "idle"
+        link.end()
         self.next_contact_id += 1
         self.admin.reply(**result)
 
     def _on_admin(self, request: dict, now: float) -> None:
         def touch(r):
-            if self.generator is None or not self.endpoint.peer_alive:
+            if self.link.generator is None or not self.endpoint.peer_alive:
                 raise ValueError("no slave session yet (not connected or no session_config)")
             contact_s = float(r.get("contact_s", 5.0))
             if not (0 < contact_s <= 60):
@@ -177,7 +167,8 @@ class MasterService:
     def status(self) -> dict:
         e = self.endpoint
         return {"role": "master", "state": self.state, "peer_alive": e.peer_alive,
-                "session": self.generator is not None, "object_temp_c": self.object_temp_c,
+                "session": self.link.generator is not None,
+                "object_temp_c": self.link.object_temp_c,
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
                 "counters": dict(e.counters)}
 

@@ -59,6 +59,7 @@ class SlaveService:
             raise
         self.stop_requested = False
         self.state = "idle"
+        self.masters_lost = 0          # contacts ended because the master went silent
         self.contact_id = 0
         self.touch_t0: float | None = None
         self._sent = 0
@@ -97,12 +98,24 @@ class SlaveService:
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
         elif kind == "contact_event" and not m["touching"] and m["contact_id"] == self.contact_id \
                 and self.touch_t0 is not None:
-            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
-                               t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
-            log.info("lift contact_id=%d", self.contact_id)
-            self.last_touch = self._report()
-            self.touch_t0, self.state = None, "idle"
-            self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
+            self._lift(now)
+
+    def _lift(self, now: float) -> None:
+        self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
+                           t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
+        log.info("lift contact_id=%d", self.contact_id)
+        self.last_touch = self._report()
+        self.touch_t0, self.state = None, "idle"
+        self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
+
+    def _master_lost(self, now: float) -> None:
+        """The master went silent mid-contact (crashed, or the link is down
+        for longer than ``dead_after_s``): the pad leaves the object and goes
+        to its safe state; the next contact event starts afresh."""
+        log.warning("master lost mid-contact contact_id=%d: pad lifted, safe state",
+                    self.contact_id)
+        self.masters_lost += 1
+        self._lift(now)
 
     def _sample(self, now: float) -> None:
         pad = self.pad
@@ -124,7 +137,8 @@ class SlaveService:
                 self.endpoint.send("flux_trajectory", contact_id=self.contact_id,
                                    material=e.label, object_temp_c=pad.object_ir_c,
                                    t_s=[0.0] + curve["t_s"], g_w_m2k=[0.0] + curve["g_w_m2k"],
-                                   valid_s=TRAJECTORY_VALID_S)
+                                   valid_s=TRAJECTORY_VALID_S,
+                                   t0_s=self.touch_t0 + float(pad.onset_s))
                 log.info("decided contact_id=%d material=%s t=%.2f s", self.contact_id,
                          e.label, e.t_s)
         if events or (pad.onset_s is not None and pad.samples_read > getattr(self, "_sp_sample", -1)):
@@ -183,6 +197,7 @@ class SlaveService:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
+                "masters_lost": self.masters_lost,
                 "offset_s": e.offset.offset_s, "counters": dict(e.counters)}
 
     def run(self) -> None:
@@ -197,6 +212,8 @@ class SlaveService:
                 now = time.monotonic()
                 if now >= deadline:
                     deadline = max(deadline + period, now)
+                    if self.touch_t0 is not None and not self.endpoint.peer_alive:
+                        self._master_lost(now)
                     if self.touch_t0 is not None:
                         self._sample(now)
                 for message in self.endpoint.poll(max(0.0, min(deadline - time.monotonic(),

@@ -24,6 +24,10 @@ Phases of a touch:
 ``render``
     The slave has committed to a material: track the generator's flux for
     it, timed from the master's own contact onset.
+``link lost``
+    During a contact, the link is down and nothing held is valid any more
+    (``SlaveNews.link_ok``): the pad goes to neutral at the slew limit, and
+    back to ``contact``/``render`` when the link returns.
 
 The controller: the flux setpoint is what the pad's sensor should read (the
 generator was trained on sensor readings, so both carry the same lag). The
@@ -116,6 +120,10 @@ class SlaveNews:
     estimate: Estimate | None = None
     classes: tuple[str, ...] = ()
     setpoint_w_m2: float | None = None       # latest streamed setpoint (naive path)
+    #: False when the link is down and nothing the master holds is valid any
+    #: more: the display decays to its safe state (neutral) at its slew limit
+    #: and resumes, bumplessly, when this is True again.
+    link_ok: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -229,9 +237,18 @@ class MasterDisplay:
             self._blend = (t_s, {self.rendering: 1.0})
             self.rendering = est.label
 
+        if self.phase in ("contact", "render") and not news.link_ok:
+            self._lost_from = self.phase
+            self.phase = "link lost"
+            self.events["link lost"] = self.events.get("link lost", 0) + 1
+            log.warning("link lost mid-contact at t=%.3f s: display to neutral", t_s)
+        elif self.phase == "link lost" and news.link_ok:
+            self.phase = self._lost_from
+            log.info("link back at t=%.3f s: rendering resumes", t_s)
+
         standby = self.standby_c(news)
         desired = math.nan
-        command = standby
+        command = lim.neutral_c if self.phase == "link lost" else standby
         obj_c = news.object_temp_c
         if naive:
             tracking = self.phase == "contact" and news.setpoint_w_m2 is not None

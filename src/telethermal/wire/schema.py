@@ -113,6 +113,9 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
               doc="normalised finger flux at t_s; the display flux is "
                   "g (T_object - T_finger), pad -> finger positive"),
         Field("valid_s", "float", "s", lo=0, doc="how long after the onset it may be played"),
+        Field("t0_s", "float", "s", required=False, nullable=True,
+              doc="the slave's contact onset on the slave's clock (the anchor); the master "
+                  "plays from its own onset and uses this only to know the lag"),
     ), "what to render for a contact, anchored to its onset on the master's own clock"),
     Kind("flux_setpoint", "stream", "slave->master", (
         Field("contact_id", "uint"),

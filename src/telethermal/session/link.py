@@ -1,0 +1,140 @@
+"""What the master knows from the slave, message by message.
+
+:class:`SlaveLink` turns the slave's messages into the :class:`SlaveNews`
+the display loop reads each period. It holds no socket and no clock of its
+own (the caller passes ``now``), so the hard cases of a network (late,
+reordered, duplicated messages, a clock offset, a lost link) are tested
+here without one.
+
+The rules, each a hard case of issue 6:
+
+* Everything is keyed by ``contact_id``. A message for another contact than
+  the one going on (an estimate that arrives after the finger lifted, the
+  previous contact's messages reordered behind the next one's) is counted as
+  ``stale`` and changes nothing.
+* Estimates of one contact are kept newest by ``t_since_contact_s``: an
+  older one arriving late does not replace a newer one.
+* A trajectory is played from the master's own contact onset. Its anchor
+  (the slave's onset, on the slave's clock) only says how far behind the
+  slave touched; an anchor that lands in the master's future (a wrong clock
+  offset) is counted and never waited for.
+* A duplicated trajectory (same contact, same material, same curve) changes
+  nothing; a different one for the same contact replaces it (the slave
+  changed its mind) and is counted.
+* Link loss: what is held stays valid for the trajectory's ``valid_s`` after
+  the onset; past that, or with no trajectory at all, the news says the link
+  is lost and the display decays to its safe state (it resumes when the link
+  returns).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from telethermal.ident.anytime import Estimate
+from telethermal.render.sampled import SampledGenerator
+from telethermal.session.master import SlaveNews
+
+
+@dataclass
+class Trajectory:
+    material: str
+    t_s: np.ndarray
+    g_w_m2k: np.ndarray
+    valid_s: float
+    anchor_lag_s: float | None       # slave onset - master onset, master clock
+
+
+@dataclass
+class SlaveLink:
+    generator: SampledGenerator | None = None
+    classes: tuple[str, ...] = ()
+    object_temp_c: float | None = None
+    contact_id: int | None = None
+    onset_s: float | None = None       # master clock, of the contact going on
+    estimates: list[Estimate] = field(default_factory=list)
+    trajectory: Trajectory | None = None
+    counters: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
+        ("stale", "older_estimate", "duplicate_trajectory", "replaced_trajectory",
+         "anchor_in_future"), 0))
+
+    # ------------------------------------------------------------ contacts
+    def begin(self, contact_id: int) -> None:
+        """A new contact is going on (the master's onset is not yet known)."""
+        self.contact_id, self.onset_s = contact_id, None
+        self.estimates, self.trajectory = [], None
+
+    def onset(self, t_s: float) -> None:
+        self.onset_s = t_s
+
+    def end(self) -> None:
+        self.contact_id = None
+
+    # ------------------------------------------------------------ messages
+    def on_message(self, m: dict, now_s: float, offset_s: float | None = None) -> None:
+        """``now_s``: the master's clock; ``offset_s``: slave clock minus
+        master clock, if known."""
+        kind = m["kind"]
+        if kind == "session_config":
+            self.generator = SampledGenerator(m["curves"])
+            self.classes = tuple(m["classes"])
+            return
+        if kind == "contact_event":
+            if m.get("object_temp_c") is not None:
+                self.object_temp_c = m["object_temp_c"]
+            return
+        if kind not in ("material_estimate", "flux_trajectory"):
+            return
+        if self.contact_id is None or m["contact_id"] != self.contact_id:
+            self.counters["stale"] += 1
+            return
+        self.object_temp_c = m["object_temp_c"]
+        if kind == "material_estimate":
+            e = Estimate(m["t_since_contact_s"], tuple(m["posteriors"]), m["label"],
+                         m["confidence"], m["decided"], m["reason"])
+            if self.estimates and e.t_s < self.estimates[-1].t_s:
+                self.counters["older_estimate"] += 1
+                return
+            self.estimates.append(e)
+            return
+        self._on_trajectory(m, now_s, offset_s)
+
+    def _on_trajectory(self, m: dict, now_s: float, offset_s: float | None) -> None:
+        t = np.asarray(m["t_s"], dtype=np.float64)
+        g = np.asarray(m["g_w_m2k"], dtype=np.float64)
+        if len(t) and t[0] == 0:          # the explicit (0, 0) knot: the ramp is implied
+            t, g = t[1:], g[1:]
+        old = self.trajectory
+        if old is not None and old.material == m["material"] and \
+                np.array_equal(old.t_s, t) and np.array_equal(old.g_w_m2k, g):
+            self.counters["duplicate_trajectory"] += 1
+            return
+        if old is not None:
+            self.counters["replaced_trajectory"] += 1
+        lag = None
+        if m.get("t0_s") is not None and offset_s is not None and self.onset_s is not None:
+            anchor = m["t0_s"] - offset_s                  # the slave's onset, our clock
+            if anchor > now_s:
+                self.counters["anchor_in_future"] += 1     # a wrong offset; not waited for
+            else:
+                lag = anchor - self.onset_s
+        self.trajectory = Trajectory(m["material"], t, g, float(m["valid_s"]), lag)
+        self.generator.set_curve(m["material"], t, g)
+
+    # ------------------------------------------------------------ per period
+    def news(self, now_s: float, link_alive: bool, setpoint_w_m2: float | None = None
+             ) -> SlaveNews:
+        estimate = self.estimates[-1] if self.estimates else None
+        valid = link_alive
+        if not link_alive and self.trajectory is not None and self.onset_s is not None:
+            valid = now_s - self.onset_s <= self.trajectory.valid_s
+        return SlaveNews(self.object_temp_c, estimate, self.classes, setpoint_w_m2,
+                         link_ok=valid)
+
+    @property
+    def anchor_lag_s(self) -> float:
+        tr = self.trajectory
+        return math.nan if tr is None or tr.anchor_lag_s is None else tr.anchor_lag_s
