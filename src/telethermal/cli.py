@@ -216,22 +216,32 @@ def cmd_bench_faults(args) -> int:
     from telethermal.bench import faults
 
     with _progress(len(faults.SETTINGS) + 1, "bench faults") as advance:
-        report = faults.run(progress=advance, quick=args.quick)
+        report = faults.run(progress=advance, quick=args.quick, only=args.only)
+    traces = report.pop("_traces")
     report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    png = faults.plot(report, traces, args.png or Path(args.json).with_suffix(".png"))
+    report["png"] = str(png)
     _write_json(args.json, report)
-    print(f"{'fault':40s} {'compensated':>12s} {'naive':>8s}  safety  lossless (gaps/recovered/"
-          f"dup/resent/dropped)")
+
+    def pct(v):
+        return "      -" if v is None else f"{100 * v:6.2f}%"
+
+    print(f"{'fault':38s} {'compensated':>11s} {'naive':>7s} safety  lossless (gaps/"
+          f"recovered/dup/resent/dropped)  recovery (bound)")
     for r in report["rows"]:
         lo = r["lossless"]
-        print(f"{r['fault']:40s} {100 * r['compensated_flux_rms_error_rel']:11.2f}% "
-              f"{100 * r['naive_flux_rms_error_rel']:7.2f}%  {r['safety_events']:6d}  "
+        rec = "" if "recovery_s" not in r else (
+            "not back" if r["recovery_s"] is None else
+            f"{r['recovery_s']:.2f} s ({r['recovery_bound_s']:.2f} s)")
+        print(f"{r['fault']:38s} {pct(r['compensated_flux_rms_error_rel']):>11s} "
+              f"{pct(r['naive_flux_rms_error_rel'])} {r['safety_events']:6d}  "
               f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
-              f"{lo['lossless_dropped']}")
+              f"{lo['lossless_dropped']:<22} {rec}")
     if report["summary"]:
         s = report["summary"]
         print(f"compensated at {s['ratio_setting']}: {s['compensated_ratio_200ms']:.2f}x its "
               f"zero-delay error; naive {s['naive_ratio_200ms']:.2f}x")
-    print(f"wrote {args.json}")
+    print(f"wrote {args.json} and {png}")
     return 0
 
 
@@ -533,7 +543,8 @@ def cmd_faults(args) -> int:
     link = profile.link
     print(f"fault proxy: masters connect to {link.listen_host}:{link.control_port}/"
           f"{link.stream_port}, slave at {link.slave_host}:{link.slave_control_port}/"
-          f"{link.slave_stream_port}")
+          f"{link.slave_stream_port}; partitions timed from monotonic {proxy.t0_s:.6f} s",
+          flush=True)
     try:
         proxy.run(lambda: bool(stop))
     finally:
@@ -630,7 +641,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = bsub.add_parser("faults", help="rendering under network faults, compensated beside "
                                        "naive (processes and the fault proxy)")
     p.add_argument("--json", required=True)
+    p.add_argument("--png", help="the Jepsen-style plot (default: next to the JSON)")
     p.add_argument("--quick", action="store_true", help="two settings, one material")
+    p.add_argument("--only", help="comma-separated parts of setting names to run "
+                                  "(e.g. 'crash,partition'); 'delay 0 ms' is always run")
     p.set_defaults(func=cmd_bench_faults)
 
     p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "

@@ -5,16 +5,19 @@ figure is asserted."""
 
 import subprocess
 import sys
+import threading
+import time
 
 import pytest
 
+from telethermal.errors import TransportError
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
 from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import with_finger
+from telethermal.session.run import PRE_CONTACT_S, with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -76,4 +79,83 @@ def test_a_partition_mid_contact_is_survived_and_counted(link):
     assert counters["lossless_dropped"] == 0 and counters["invalid"] == 0
     # After the partition the link is back: a second touch renders normally.
     again, _ = touch_through(out, services, ports, text, "delay_s = 0.005\n", seed=6)
+    assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
+
+
+def _wait_for(predicate, timeout_s):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        try:
+            if predicate():
+                return True
+        except TransportError:
+            pass
+        time.sleep(0.05)
+    return False
+
+
+def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
+    # SIGKILL the slave 0.5 s into the contact and start it again: the touch
+    # under way ends without a safety event (the display goes to neutral once
+    # the link is dead and nothing it holds is valid), and the restarted slave
+    # is found again and renders the next touch.
+    out, services, ports, text = link
+    profile = out / "profile.toml"
+    profile.write_text(text + "[both]\ndelay_s = 0.005\n")
+    proxy = subprocess.Popen([sys.executable, "-m", "telethermal", "faults", "--profile",
+                              str(profile)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def crash():
+        time.sleep(PRE_CONTACT_S + 0.5)
+        services.kill("slave")
+        time.sleep(0.5)
+        services.start("slave")
+
+    try:
+        wait_connected(services, ports[3], timeout_s=60)
+        under = networked_touch(SCENE, "wood", ports, 7, 2.0, during=crash).summary
+        assert under["safety_events"] == 0
+        assert under["display_event_counts"].get("link lost") == 1
+        wait_connected(services, ports[3], timeout_s=60)
+        again = networked_touch(SCENE, "wood", ports, 8, 2.0).summary
+    finally:
+        proxy.terminate()
+        proxy.wait(10)
+    assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
+
+
+def test_a_master_crash_mid_contact_lifts_the_slave_and_a_new_master_renders(link):
+    out, services, ports, text = link
+    profile = out / "profile.toml"
+    profile.write_text(text + "[both]\ndelay_s = 0.005\n")
+    proxy = subprocess.Popen([sys.executable, "-m", "telethermal", "faults", "--profile",
+                              str(profile)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        wait_connected(services, ports[3], timeout_s=60)
+        lost_before = call(ports[2], "status")["masters_lost"]
+        call(ports[2], "place", material="wood", seed=9)
+        time.sleep(0.3)
+        outcome = []
+
+        def touch():
+            try:
+                outcome.append(call(ports[3], "touch", timeout_s=5, contact_s=3.0, seed=9))
+            except TransportError as exc:
+                outcome.append(exc)
+
+        toucher = threading.Thread(target=touch)
+        toucher.start()
+        assert _wait_for(lambda: call(ports[2], "status")["state"] == "touching", 5)
+        services.kill("master")
+        toucher.join()
+        assert isinstance(outcome[0], TransportError)          # no reply: the master died
+        # The slave notices within its dead_after_s and lifts its pad.
+        assert _wait_for(lambda: call(ports[2], "status")["state"] == "idle", 5)
+        assert call(ports[2], "status")["masters_lost"] == lost_before + 1
+        services.start("master")
+        wait_connected(services, ports[3], timeout_s=60)
+        again = networked_touch(SCENE, "wood", ports, 10, 2.0).summary
+    finally:
+        proxy.terminate()
+        proxy.wait(10)
     assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0

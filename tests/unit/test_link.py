@@ -167,6 +167,14 @@ def test_link_loss_keeps_a_valid_trajectory_and_decays_without_one():
     _, steps = drive(link, {0.2: [estimate(1, 0.15, decided=True, p_steel=1.0),
                                   trajectory(1)]}, alive=down)
     assert all(s.phase == "render" for s in steps if 0.25 < s.t_s < 1.0)
+    # So does a final "unknown" (its posterior mixture is rendered).
+    link = fresh_link()
+    link.begin(1)
+    final_unknown = dict(estimate(1, 0.15, "unknown", p_steel=0.7), decided=True,
+                         reason="not confident")
+    _, steps = drive(link, {0.2: [final_unknown]}, alive=down)
+    assert all(s.phase == "contact" and math.isfinite(s.desired_flux_w_m2)
+               for s in steps if 0.25 < s.t_s < 1.0)
 
     # With only posteriors (or a trajectory past its valid_s): the pad goes to
     # neutral at no more than the slew limit, then resumes without a step.

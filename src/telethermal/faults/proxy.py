@@ -95,7 +95,7 @@ class FaultProxy:
         link = profile.link
         self.ctx = context or zmq.Context.instance()
         rng = np.random.default_rng(link.seed)
-        now = clock()
+        now = self.t0_s = clock()      # partitions are timed from here
         self.m2s = Channel(profile.master_to_slave, np.random.default_rng(rng.integers(2**63)), now)
         self.s2m = Channel(profile.slave_to_master, np.random.default_rng(rng.integers(2**63)), now)
         self.s2m_stream = Channel(profile.slave_to_master,

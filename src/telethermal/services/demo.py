@@ -72,15 +72,29 @@ class Services:
                  namespaces: tuple[str | None, str | None] = (None, None)):
         self.out = out
         self.procs = {}
-        self._logs = []
+        self._logs = {}
+        self._args = {}
         for (role, config), ns in zip((("slave", slave_config), ("master", master_config)),
                                       namespaces):
-            log = open(out / f"{role}.log", "w")
-            self._logs.append(log)
             prefix = ["ip", "netns", "exec", ns] if ns else []
-            self.procs[role] = subprocess.Popen(
-                prefix + [sys.executable, "-m", "telethermal", role, "--config", str(config)],
-                stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+            self._args[role] = prefix + [sys.executable, "-m", "telethermal", role,
+                                         "--config", str(config)]
+            self.start(role)
+
+    def start(self, role: str) -> None:
+        """Start (or restart) one service; its log is appended to."""
+        if role in self._logs:
+            self._logs[role].close()
+        log = self._logs[role] = open(self.out / f"{role}.log", "a")
+        self.procs[role] = subprocess.Popen(self._args[role], stdout=log,
+                                            stderr=subprocess.STDOUT,
+                                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+    def kill(self, role: str) -> int:
+        """SIGKILL: a crash, no clean-up of any kind."""
+        proc = self.procs[role]
+        proc.kill()
+        return proc.wait()
 
     def log_tail(self, role: str, n: int = 15) -> str:
         lines = (self.out / f"{role}.log").read_text().splitlines()
@@ -103,7 +117,7 @@ class Services:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 codes[role] = proc.wait()
-        for log in self._logs:
+        for log in self._logs.values():
             log.close()
         return codes
 
@@ -125,9 +139,14 @@ def wait_connected(services: Services, master_admin: int, timeout_s: float = 90.
 
 
 def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
-                    source: str = "trajectory") -> SessionResult:
+                    source: str = "trajectory", during=None) -> SessionResult:
     """Place, touch, compare with direct contact; returns the session result.
-    ``source``: "trajectory" (compensated) or "setpoints" (naive)."""
+    ``source``: "trajectory" (compensated) or "setpoints" (naive).
+    ``during``: called in a thread once the touch is under way (a fault to
+    inject mid-contact, e.g. killing the slave); the touch's figures then
+    come from the master alone if the slave's report is lost with it."""
+    import threading
+
     _, _, slave_admin, master_admin = ports
     placed = call(slave_admin, "place", material=material, seed=seed)
     if not placed.get("ok"):
@@ -136,11 +155,22 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     while time.monotonic() < end and abs((call(master_admin, "status").get("object_temp_c")
                                           or 1e9) - placed["object_ir_c"]) > 1e-9:
         time.sleep(0.05)
-    result = call(master_admin, "touch", timeout_s=contact_s + 30, contact_s=contact_s,
-                  seed=seed, source=source)
+    thread = None
+    if during is not None:
+        thread = threading.Thread(target=during, daemon=True)
+        thread.start()
+    try:
+        result = call(master_admin, "touch", timeout_s=contact_s + 30, contact_s=contact_s,
+                      seed=seed, source=source)
+    finally:
+        if thread is not None:
+            thread.join()
     if not result.get("ok"):
         raise TelethermalError(f"master: {result.get('error')}")
     report = call(slave_admin, "report")
+    if report.get("object_true_c") is None:          # the slave was restarted meanwhile
+        report = {"object_true_c": placed["object_true_c"], "identified": result["identified"],
+                  "decision_time_s": None, "onset_s": None, "reason": "slave restarted"}
     import numpy as np
 
     from telethermal.session.run import Operator
@@ -160,7 +190,8 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                "contact_s": contact_s, **metrics,
                **{k: result[k] for k in ("safety_events", "safety_event_counts",
                                          "display_event_counts", "loop", "transport",
-                                         "trajectory_at_s", "rtt_s")},
+                                         "trajectory_at_s", "rtt_s", "link_counters",
+                                         "anchor_lag_s")},
                "loop_period_p99_us": result["loop"]["period_p99_us"], "clock": "real"}
     return SessionResult(summary, trace)
 

@@ -17,7 +17,6 @@ import os
 import time
 from dataclasses import replace
 
-import numpy as np
 
 from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.errors import TelethermalError

@@ -188,7 +188,8 @@ class SlaveService:
     def _on_admin(self, request: dict) -> None:
         def place(r):
             self.place(str(r["material"]), int(r.get("seed", self._seed + 1)))
-            return {"object_ir_c": self.pad.object_ir_c}
+            # object_true_c: the simulator's truth, for comparing with direct contact
+            return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c}
 
         self.admin.handle(request, self, {
             "place": place, "report": lambda r: dict(getattr(self, "last_touch", {}))})

@@ -22,8 +22,11 @@ The rules, each a hard case of issue 6:
   nothing; a different one for the same contact replaces it (the slave
   changed its mind) and is counted.
 * Link loss: what is held stays valid for the trajectory's ``valid_s`` after
-  the onset; past that, or with no trajectory at all, the news says the link
-  is lost and the display decays to its safe state (it resumes when the link
+  the onset. A final estimate without a trajectory (the slave ended its
+  identification "unknown": the display renders that estimate's posterior
+  mixture) is as good as one, valid for ``final_valid_s``. Past that, or
+  with only streaming (not final) posteriors, the news says the link is lost
+  and the display decays to its safe state (it resumes when the link
   returns).
 """
 
@@ -57,6 +60,7 @@ class SlaveLink:
     onset_s: float | None = None       # master clock, of the contact going on
     estimates: list[Estimate] = field(default_factory=list)
     trajectory: Trajectory | None = None
+    final_valid_s: float = 60.0
     counters: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("stale", "older_estimate", "duplicate_trajectory", "replaced_trajectory",
          "anchor_in_future"), 0))
@@ -129,8 +133,11 @@ class SlaveLink:
              ) -> SlaveNews:
         estimate = self.estimates[-1] if self.estimates else None
         valid = link_alive
-        if not link_alive and self.trajectory is not None and self.onset_s is not None:
-            valid = now_s - self.onset_s <= self.trajectory.valid_s
+        if not link_alive and self.onset_s is not None:
+            if self.trajectory is not None:
+                valid = now_s - self.onset_s <= self.trajectory.valid_s
+            elif estimate is not None and estimate.decided:
+                valid = now_s - self.onset_s <= self.final_valid_s
         return SlaveNews(self.object_temp_c, estimate, self.classes, setpoint_w_m2,
                          link_ok=valid)
 
