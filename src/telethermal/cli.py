@@ -452,7 +452,8 @@ def cmd_session(args) -> int:
     identifier, generator = _session_models(scene, args.identifier, args.generator, args.seed)
     config = DisplayConfig(rate_hz=args.rate_hz, before=args.before)
     result = run_session(scene, args.material, identifier, generator, config,
-                         contact_s=args.contact_s, seed=args.seed, realtime=args.realtime)
+                         contact_s=args.contact_s, seed=args.seed, realtime=args.realtime,
+                         devices=args.devices)
     s = result.summary
     _write_json(args.json, s)
     if args.plot:
@@ -696,6 +697,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--realtime", action="store_true",
                    help="run the master loop on the real clock and report its timing")
+    p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
+                   help="sim: the simulator directly; emulated: the display's sensor board on "
+                        "a pty and its Peltier driver on a virtual CAN bus, through the drivers")
     p.set_defaults(func=cmd_session)
 
     for role, func in (("slave", cmd_slave), ("master", cmd_master)):

@@ -178,8 +178,13 @@ class SessionResult:
 
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
-                realtime: bool = False) -> SessionResult:
-    """One touch; see the module docstring. Returns the summary and the trace."""
+                realtime: bool = False, devices: str = "sim") -> SessionResult:
+    """One touch; see the module docstring. Returns the summary and the trace.
+    ``devices``: "sim" (the simulator directly) or "emulated" (the master's
+    sensor board on a pty and its Peltier driver on a CAN bus, emulated,
+    read through the real drivers)."""
+    from telethermal.devices.display import open_display
+
     if not (contact_s > 0 and math.isfinite(contact_s)):
         raise SceneError(f"contact_s must be > 0, got {contact_s}")
     scene = with_finger(scene)
@@ -191,22 +196,28 @@ def run_session(scene: Scene, material: str, identifier, generator,
     master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
                            scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle)
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
+    now = [0.0]
+    display = open_display(devices, touch, clock=lambda: now[0], realtime=realtime, seed=seed)
 
     def one_period(t_loop: float, dt_loop: float) -> bool:
         if touch.done:
             return False
         # Simulated time follows the loop: exact on the simulated clock, the
         # real elapsed time on the real one.
-        t = t_loop - PRE_CONTACT_S
+        t = now[0] = t_loop - PRE_CONTACT_S
         slave.advance_to(t)
-        sensors = touch.sense(t)
+        sensors = display.read(t)
         step = master.step(t, dt_loop, sensors,
                            SlaveNews(slave.object_ir_c, slave.estimate, slave.classes))
-        touch.actuate(t, step, dt_loop, sensors.force_n)
+        display.apply(t, step, dt_loop, sensors.force_n)
         return True
 
     clock = RealClock() if realtime else SimClock()
-    stats = FixedRateLoop(1.0 / config.rate_hz, clock).run(one_period, touch.n_total)
+    try:
+        stats = FixedRateLoop(1.0 / config.rate_hz, clock).run(one_period, touch.n_total)
+    finally:
+        device_counters = display.counters()
+        display.close()
     est = slave.estimate
     decided = est is not None and est.decided
     # The error "after identification" starts where the master began to
@@ -230,6 +241,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
         **metrics, **safety_summary(master),
         "clock": "real" if realtime else "simulated", "loop": stats.summary(),
+        "devices": devices, "device_counters": device_counters,
     }
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]

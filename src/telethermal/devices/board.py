@@ -1,0 +1,233 @@
+"""The display pad's sensor board over a serial line (pyserial).
+
+:class:`SensorBoard` opens any pyserial URL (a tty path, ``loop://``,
+``spy://``, ``socket://``...), reads the framed stream of
+:mod:`telethermal.devices.frames` and converts it: heat flux from the
+sensor's microvolts (1.26 uV per W/m^2 unless a calibration file says
+otherwise), the pad temperature from the type-T thermocouple's microvolts
+and its cold-junction temperature (NIST polynomials), the force.
+
+It never raises on what the line brings: bad frames are counted and
+skipped, a port that disappears is reopened every ``reopen_s`` while the
+readings are missing (NaN, so the safety supervisor holds the pad in its
+safe state), and a reading older than ``stale_s`` is missing too.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import select
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import serial
+
+from telethermal.devices.frames import STATUS_FLUX, STATUS_FORCE, STATUS_TC, FrameReader
+from telethermal.errors import ModelError, TelethermalError
+from telethermal.physics.sensors import type_t_emf_mv, type_t_temp_c
+
+log = logging.getLogger(__name__)
+
+
+class DeviceError(TelethermalError, OSError):
+    """A device that cannot be opened or used; names the device and the cause."""
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Conversions of the board's raw readings (a TOML file, see
+    ``deploy/hardware/calibration.toml``)."""
+
+    flux_sensitivity_uv_per_w_m2: float = 1.26
+    flux_offset_uv: float = 0.0
+    thermocouple_type: str = "T"
+    thermocouple_offset_uv: float = 0.0
+    force_scale: float = 1.0
+    force_offset_n: float = 0.0
+
+    def __post_init__(self):
+        if not (self.flux_sensitivity_uv_per_w_m2 > 0 and
+                math.isfinite(self.flux_sensitivity_uv_per_w_m2)):
+            raise DeviceError(f"calibration: flux sensitivity must be > 0 uV per W/m^2, got "
+                              f"{self.flux_sensitivity_uv_per_w_m2}")
+        if self.thermocouple_type != "T":
+            raise DeviceError(f"calibration: only type-T thermocouples are supported, got "
+                              f"{self.thermocouple_type!r}")
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Calibration":
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text())
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise DeviceError(f"calibration {path}: {exc}") from None
+        keys = {("heat_flux", "sensitivity_uv_per_w_m2"): "flux_sensitivity_uv_per_w_m2",
+                ("heat_flux", "offset_uv"): "flux_offset_uv",
+                ("thermocouple", "type"): "thermocouple_type",
+                ("thermocouple", "offset_uv"): "thermocouple_offset_uv",
+                ("force", "scale"): "force_scale", ("force", "offset_n"): "force_offset_n"}
+        values = {}
+        for section, table in data.items():
+            if not isinstance(table, dict):
+                raise DeviceError(f"calibration {path}: [{section}] must be a table")
+            for key, value in table.items():
+                name = keys.get((section, key))
+                if name is None:
+                    raise DeviceError(f"calibration {path}: unknown key {section}.{key}; "
+                                      f"known: {', '.join('.'.join(k) for k in keys)}")
+                if name != "thermocouple_type" and (isinstance(value, bool) or
+                                                    not isinstance(value, (int, float))):
+                    raise DeviceError(f"calibration {path}: {section}.{key} must be a number, "
+                                      f"got {value!r}")
+                values[name] = value
+        return cls(**values)
+
+    def flux_w_m2(self, flux_uv: float) -> float:
+        return (flux_uv - self.flux_offset_uv) / self.flux_sensitivity_uv_per_w_m2
+
+    def flux_uv(self, flux_w_m2: float) -> float:
+        return flux_w_m2 * self.flux_sensitivity_uv_per_w_m2 + self.flux_offset_uv
+
+    def temp_c(self, tc_uv: float, cold_junction_c: float) -> float:
+        """Cold-junction compensation: E(T) = E_measured + E(T_cj)."""
+        emf_mv = (tc_uv - self.thermocouple_offset_uv) / 1000.0 + \
+            float(type_t_emf_mv(cold_junction_c))
+        return float(type_t_temp_c(emf_mv))
+
+    def tc_uv(self, temp_c: float, cold_junction_c: float) -> float:
+        return 1000.0 * float(type_t_emf_mv(temp_c) - type_t_emf_mv(cold_junction_c)) + \
+            self.thermocouple_offset_uv
+
+    def force_n(self, raw_n: float) -> float:
+        return raw_n * self.force_scale + self.force_offset_n
+
+
+@dataclass(frozen=True, slots=True)
+class BoardReading:
+    seq: int
+    t_us: int
+    received_s: float
+    flux_w_m2: float          # nan where the board flagged the channel or it did not convert
+    pad_temp_c: float
+    force_n: float
+
+
+@dataclass
+class SensorBoard:
+    url: str
+    calibration: Calibration = field(default_factory=Calibration)
+    baudrate: int = 921_600
+    reopen_s: float = 0.2
+    stale_s: float = 0.05
+    clock: object = time.monotonic
+
+    def __post_init__(self):
+        self.reader = FrameReader()
+        self.counters = {"port_lost": 0, "reopened": 0, "open_failed": 0, "conversion": 0}
+        self.latest: BoardReading | None = None
+        self._ser = None
+        self._next_open = 0.0
+        self._closed = False
+        self._open(first=True)
+
+    # ------------------------------------------------------------ the port
+    def _open(self, first: bool = False) -> bool:
+        try:
+            self._ser = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            if first:
+                raise DeviceError(f"sensor board: cannot open {self.url!r}: {exc}") from None
+            self.counters["open_failed"] += 1
+            self._next_open = self.clock() + self.reopen_s
+            return False
+        if not first:
+            self.counters["reopened"] += 1
+            log.warning("sensor board: %s is back", self.url)
+        return True
+
+    def _lost(self, exc: Exception) -> None:
+        self.counters["port_lost"] += 1
+        log.warning("sensor board: %s lost (%s); reopening every %.2f s", self.url, exc,
+                    self.reopen_s)
+        try:
+            self._ser.close()
+        except Exception:           # noqa: BLE001 - the port is gone already
+            pass
+        self._ser = None
+        self._next_open = self.clock() + self.reopen_s
+
+    def close(self) -> None:
+        self._closed = True
+        if self._ser is not None:
+            self._ser.close()
+            self._ser = None
+
+    # ------------------------------------------------------------ reading
+    def _read_available(self) -> bytes:
+        ser = self._ser
+        n = ser.in_waiting
+        return ser.read(n) if n else b""
+
+    def _wait(self, timeout_s: float) -> None:
+        try:
+            fd = self._ser.fileno()
+        except (AttributeError, OSError, serial.SerialException, NotImplementedError):
+            time.sleep(min(timeout_s, 2e-4))
+            return
+        select.select([fd], [], [], timeout_s)
+
+    def poll(self, wait_s: float = 0.0) -> BoardReading | None:
+        """Read what has arrived (waiting up to ``wait_s`` for a new frame)
+        and return the newest reading, or None if nothing new came."""
+        if self._closed:
+            raise DeviceError(f"sensor board {self.url!r} is closed")
+        if self._ser is None:
+            if self.clock() < self._next_open or not self._open():
+                return None
+        end = time.monotonic() + wait_s
+        newest = None
+        while True:
+            try:
+                frames = self.reader.feed(self._read_available())
+            except (serial.SerialException, OSError) as exc:
+                self._lost(exc)
+                return newest
+            for f in frames:
+                newest = self._convert(f)
+            remaining = end - time.monotonic()
+            if newest is not None or remaining <= 0:
+                break
+            self._wait(remaining)
+        if newest is not None:
+            self.latest = newest
+        return newest
+
+    def _convert(self, f) -> BoardReading:
+        cal = self.calibration
+        nan = math.nan
+        flux = cal.flux_w_m2(f.flux_uv) if f.status & STATUS_FLUX else nan
+        force = cal.force_n(f.force_n) if f.status & STATUS_FORCE else nan
+        temp = nan
+        if f.status & STATUS_TC:
+            try:
+                temp = cal.temp_c(f.tc_uv, f.cj_c)
+            except ModelError as exc:
+                self.counters["conversion"] += 1
+                log.debug("sensor board: thermocouple reading out of range: %s", exc)
+        values = [v if math.isfinite(v) else nan for v in (flux, temp, force)]
+        return BoardReading(f.seq, f.t_us, self.clock(), *values)
+
+    def reading(self, wait_s: float = 0.0) -> tuple[float, float, float]:
+        """(flux W/m^2, pad degC, force N) now: NaN where missing or stale."""
+        self.poll(wait_s)
+        r = self.latest
+        if r is None or self.clock() - r.received_s > self.stale_s:
+            return math.nan, math.nan, math.nan
+        return r.flux_w_m2, r.pad_temp_c, r.force_n
+
+    @property
+    def all_counters(self) -> dict[str, int]:
+        return {**self.reader.counters, **self.counters}

@@ -1,0 +1,161 @@
+"""The master's display devices behind one interface, whichever they are.
+
+``read(t_s) -> PadSensors`` and ``apply(t_s, step, dt_s, force_n)`` each
+control period; ``counters()``; ``close()``.
+
+* :class:`SimDisplay` (``devices = "sim"``): the simulator directly.
+* :class:`HardwareDisplay`: the sensor board on a serial port and the
+  Peltier driver on a CAN bus, real or emulated; no simulator in it.
+* :class:`EmulatedDisplay` (``devices = "emulated"``): the simulator behind
+  emulated devices (a pty and a python-can virtual bus) and a
+  :class:`HardwareDisplay` reading them, so every byte the real devices
+  would send goes through the drivers.
+
+A reading the display cannot trust (a missing or stale frame, a channel the
+board flagged, a Peltier driver that is not healthy: no heartbeat,
+disabled by its own protection, a fault flag) comes out as NaN, and the
+safety supervisor puts the pad in its safe state in that very period.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from telethermal.devices.board import Calibration, SensorBoard
+from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
+from telethermal.devices.peltier import PeltierDriver
+from telethermal.session.master import PadSensors
+
+DEVICE_KINDS = ("sim", "emulated")
+_bus_names = itertools.count()
+
+
+class SimDisplay:
+    kind = "sim"
+
+    def __init__(self, touch):
+        self.touch = touch
+
+    def read(self, t_s: float) -> PadSensors:
+        return self.touch.sense(t_s)
+
+    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        self.touch.actuate(t_s, step, dt_s, force_n)
+
+    def counters(self) -> dict:
+        return {}
+
+    def close(self) -> None:
+        pass
+
+
+class HardwareDisplay:
+    kind = "hardware"
+
+    def __init__(self, board_url: str, can_bus: str, calibration: Calibration = Calibration(),
+                 clock=time.monotonic, wait_s: float = 0.0):
+        self.clock = clock
+        self.wait_s = wait_s
+        self.board = SensorBoard(board_url, calibration, clock=clock)
+        try:
+            self.peltier = PeltierDriver(can_bus, clock=clock)
+        except Exception:
+            self.board.close()
+            raise
+        self._first_command_s: float | None = None
+        self.untrusted_periods = 0
+
+    def _actuator_trusted(self) -> bool:
+        p = self.peltier
+        if p.healthy:
+            return True
+        # Until the driver has answered a first command, it cannot be healthy.
+        return p.status is None and (self._first_command_s is None or
+                                     self.clock() - self._first_command_s <=
+                                     p.heartbeat_timeout_s)
+
+    def read(self, t_s: float) -> PadSensors:
+        flux, temp, force = self.board.reading(self.wait_s)
+        self.peltier.poll()
+        if not self._actuator_trusted():
+            self.untrusted_periods += 1
+            flux = math.nan
+        return PadSensors(flux, temp, force)
+
+    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        if self._first_command_s is None:
+            self._first_command_s = self.clock()
+        self.peltier.command(step.junction_applied_c)
+
+    def counters(self) -> dict:
+        return {"board": self.board.all_counters, "peltier": dict(self.peltier.counters),
+                "untrusted_periods": self.untrusted_periods}
+
+    def close(self) -> None:
+        try:
+            self.peltier.close()
+        finally:
+            self.board.close()
+
+
+class EmulatedDisplay:
+    """The simulator's display touch behind emulated devices, stepped in
+    lockstep with the control loop (each period the board's frame is written
+    and waited for, and the Peltier driver's reply is read back)."""
+
+    kind = "emulated"
+
+    def __init__(self, touch, clock=time.monotonic, realtime: bool = False, seed: int = 0):
+        self.touch = touch
+        self._dir = tempfile.TemporaryDirectory(prefix="telethermal-dev-")
+        self.board_emulator = SensorBoardEmulator(Path(self._dir.name) / "sensor-board",
+                                                  seed=seed)
+        bus = f"virtual:telethermal-display-{next(_bus_names)}"
+        self._applied: float | None = None
+        self.peltier_emulator = PeltierEmulator(bus, self._on_junction, clock=clock)
+        # In lockstep on the simulated clock, wait for each frame; on the real
+        # clock, a board streams on its own and the loop takes what is there.
+        self.hardware = HardwareDisplay(self.board_emulator.path, bus, clock=clock,
+                                        wait_s=5e-4 if realtime else 0.05)
+
+    def _on_junction(self, junction_c: float) -> None:
+        self._applied = junction_c
+
+    def read(self, t_s: float) -> PadSensors:
+        s = self.touch.sense(t_s)          # the physics and the sensors' own noise and ADC
+        self.board_emulator.send(t_s, s.flux_w_m2, s.pad_temp_c, s.force_n)
+        self.peltier_emulator.poll()       # heartbeat, watchdog
+        return self.hardware.read(t_s)
+
+    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        self.hardware.apply(t_s, step, dt_s, force_n)
+        self._applied = None
+        self.peltier_emulator.poll()       # the command arrives, the junction moves
+        junction = self._applied if self._applied is not None else \
+            self.peltier_emulator.junction_c
+        self.touch.actuate(t_s, replace(step, junction_applied_c=junction), dt_s, force_n)
+
+    def counters(self) -> dict:
+        return self.hardware.counters()
+
+    def close(self) -> None:
+        try:
+            self.hardware.close()
+        finally:
+            self.peltier_emulator.close()
+            self.board_emulator.close()
+            self._dir.cleanup()
+
+
+def open_display(kind: str, touch, clock=time.monotonic, realtime: bool = False,
+                 seed: int = 0):
+    if kind == "sim":
+        return SimDisplay(touch)
+    if kind == "emulated":
+        return EmulatedDisplay(touch, clock, realtime, seed)
+    raise ValueError(f"devices must be one of {', '.join(DEVICE_KINDS)}, got {kind!r}")

@@ -1,0 +1,273 @@
+"""Device emulators driven by the physics simulator, speaking the very bytes
+and frames the real devices do, so the drivers run unchanged against them.
+
+:class:`SensorBoardEmulator` writes the sensor board's frames into a
+pseudo-terminal (``os.openpty``); a driver opens its slave side by path as
+it would open ``/dev/ttyUSB0``. Given ``link_path``, that path is a symlink
+that the emulator re-points when the "port" comes back after
+:meth:`~SensorBoardEmulator.disappear`.
+
+:class:`PeltierEmulator` is a Peltier driver on a python-can bus: it
+applies the setpoints it receives (through a callback into the simulator),
+answers with its status, sends its heartbeat, and disables itself when no
+setpoint arrives for ``watchdog_s``.
+
+Both take faults at run time: noise, a stuck value, dropouts, bit flips,
+garbage between frames, a reboot; error frames and over-temperature on CAN.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import tty
+from pathlib import Path
+
+import can
+import numpy as np
+
+from telethermal.control.safety import SafetyLimits
+from telethermal.devices.board import Calibration
+from telethermal.devices.frames import (STATUS_ALL, STATUS_FLUX, STATUS_FORCE, STATUS_TC,
+                                        TYPE_BOOT, TYPE_SAMPLE, BoardFrame, encode)
+from telethermal.devices.peltier import (CAN_VERSION, CMD, HEARTBEAT, STATE_BOOT,
+                                         STATE_DISABLED, STATE_FAULT, STATE_OPERATIONAL,
+                                         STATUS, open_bus)
+
+
+class SensorBoardEmulator:
+    def __init__(self, link_path: str | Path | None = None, cold_junction_c: float = 25.0,
+                 calibration: Calibration = Calibration(), seed: int = 0):
+        self.link_path = Path(link_path) if link_path else None
+        self.cold_junction_c = cold_junction_c
+        self.calibration = calibration
+        self.rng = np.random.default_rng(seed)
+        self.seq = 0
+        self.t0 = time.monotonic()
+        # Faults, settable at any time.
+        self.noise_uv = 0.0            # extra noise on both microvolt channels, RMS
+        self.stuck = False             # repeat the last frame's values
+        self.dropout = 0.0             # probability a frame is not sent
+        self.bit_flips = 0.0           # probability a frame has one bit flipped
+        self.counters = dict.fromkeys(("frames", "dropped", "flipped", "overruns",
+                                       "garbage_bytes", "boots"), 0)
+        self._last: BoardFrame | None = None
+        self._master = self._slave = None
+        self._open()
+
+    # ------------------------------------------------------------ the pty
+    def _open(self) -> None:
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)                  # no line discipline on our bytes
+        os.set_blocking(self._master, False)
+        if self.link_path is not None:
+            tmp = self.link_path.with_name(f".{self.link_path.name}.tmp")
+            tmp.unlink(missing_ok=True)
+            tmp.symlink_to(os.ttyname(self._slave))
+            os.replace(tmp, self.link_path)
+
+    @property
+    def path(self) -> str:
+        """What a driver opens: the symlink if any, else the tty itself."""
+        if self.link_path is not None:
+            return str(self.link_path)
+        return os.ttyname(self._slave)
+
+    def disappear(self) -> None:
+        """The port goes away (a USB cable pulled): the pty closes, the link
+        is removed; readers get an error."""
+        if self.link_path is not None:
+            self.link_path.unlink(missing_ok=True)
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                os.close(fd)
+        self._master = self._slave = None
+
+    def reappear(self) -> None:
+        """The port comes back (at the same link path), and the board boots."""
+        self._open()
+        self.reboot()
+
+    def close(self) -> None:
+        self.disappear()
+
+    # ------------------------------------------------------------ frames
+    def _write(self, data: bytes) -> bool:
+        if self._master is None:
+            return False
+        try:
+            os.write(self._master, data)
+            return True
+        except BlockingIOError:
+            self.counters["overruns"] += 1          # nobody reads: the board drops it
+            return False
+
+    def reboot(self) -> None:
+        """The board restarts: a boot frame, the sequence from 0."""
+        self.seq = 0
+        self.counters["boots"] += 1
+        self._write(encode(BoardFrame(0, 0, 0.0, 0.0, self.cold_junction_c, 0.0, 0,
+                                      TYPE_BOOT)))
+        self.seq = 1
+
+    def garbage(self, n: int) -> None:
+        """``n`` random bytes between frames (line noise, a reset board's banner)."""
+        self.counters["garbage_bytes"] += n
+        self._write(self.rng.integers(0, 256, n, dtype=np.uint8).tobytes())
+
+    def frame_for(self, t_s: float, flux_w_m2: float, pad_temp_c: float,
+                  force_n: float) -> BoardFrame:
+        cal, cj = self.calibration, self.cold_junction_c
+        status, flux_uv, tc_uv = STATUS_ALL, 0.0, 0.0
+        if math.isfinite(flux_w_m2):
+            flux_uv = cal.flux_uv(flux_w_m2)
+        else:
+            status &= ~STATUS_FLUX            # the board flags a channel it could not read
+        if math.isfinite(pad_temp_c):
+            tc_uv = cal.tc_uv(pad_temp_c, cj)
+        else:
+            status &= ~STATUS_TC
+        if not math.isfinite(force_n):
+            force_n, status = 0.0, status & ~STATUS_FORCE
+        if self.noise_uv:
+            flux_uv += self.noise_uv * self.rng.standard_normal()
+            tc_uv += self.noise_uv * self.rng.standard_normal()
+        if self.stuck and self._last is not None:
+            last = self._last
+            flux_uv, tc_uv, force_n, status = last.flux_uv, last.tc_uv, last.force_n, last.status
+        return BoardFrame(self.seq, int(t_s * 1e6), flux_uv, tc_uv, cj, force_n, status,
+                          TYPE_SAMPLE)
+
+    def send(self, t_s: float, flux_w_m2: float, pad_temp_c: float, force_n: float) -> bool:
+        """One sample's frame on the line (unless a dropout takes it)."""
+        frame = self.frame_for(t_s, flux_w_m2, pad_temp_c, force_n)
+        self._last = frame
+        self.seq = (self.seq + 1) & 0xFFFF
+        if self.dropout and self.rng.random() < self.dropout:
+            self.counters["dropped"] += 1
+            return False
+        data = bytearray(encode(frame))
+        if self.bit_flips and self.rng.random() < self.bit_flips:
+            i = int(self.rng.integers(0, len(data) - 1))         # not the delimiter
+            data[i] ^= 1 << int(self.rng.integers(0, 8))
+            self.counters["flipped"] += 1
+        self.counters["frames"] += 1
+        return self._write(bytes(data))
+
+
+class PeltierEmulator:
+    """A Peltier driver on ``bus``: ``apply(junction_c)`` is called with what
+    it drives the junction to (the setpoint, or neutral when disabled)."""
+
+    def __init__(self, bus: str, apply, watchdog_s: float = 0.1, heartbeat_s: float = 0.1,
+                 clock=time.monotonic, max_junction_c: float = 60.0,
+                 heatsink_c: float = 25.0):
+        self.bus = open_bus(bus)
+        self.apply = apply
+        self.clock = clock
+        self.watchdog_s, self.heartbeat_s = watchdog_s, heartbeat_s
+        self.max_junction_c = max_junction_c
+        self.heatsink_c = heatsink_c
+        self.neutral_c = SafetyLimits().neutral_c
+        self.enabled = False
+        self.junction_c = self.neutral_c
+        self.faults: set[str] = set()
+        self.state = STATE_BOOT
+        self._last_cmd_s: float | None = None
+        self._next_heartbeat = -math.inf
+        self._counter = 0
+        self.counters = dict.fromkeys(("commands", "bad_commands", "watchdog_trips"), 0)
+        self.offline_until_s = -math.inf       # a reboot: silent meanwhile
+
+    def _send(self, message, data) -> None:
+        self.bus.send(can.Message(arbitration_id=message.frame_id, data=data,
+                                  is_extended_id=False))
+
+    def error_frame(self) -> None:
+        self.bus.send(can.Message(arbitration_id=0, is_error_frame=True, data=b"\x00" * 8,
+                                  is_extended_id=False))
+
+    def over_temperature(self) -> None:
+        """The driver's own protection trips: disabled, junction to neutral,
+        flagged until a command with enable after :meth:`clear_faults`."""
+        self.faults.add("over_temp")
+        self._disable()
+
+    def clear_faults(self) -> None:
+        self.faults.clear()
+
+    def reboot(self, offline_s: float = 0.2) -> None:
+        self.offline_until_s = self.clock() + offline_s
+        self._disable()
+        self.state = STATE_BOOT
+        self.faults.clear()
+
+    def _disable(self) -> None:
+        self.enabled = False
+        self.junction_c = self.neutral_c
+        self.apply(self.junction_c)
+
+    def _status(self) -> None:
+        data = STATUS.encode({
+            "enabled": int(self.enabled), "over_temp": int("over_temp" in self.faults),
+            "over_current": int("over_current" in self.faults),
+            "sensor_fault": int("sensor_fault" in self.faults),
+            "watchdog": int("watchdog" in self.faults), "counter": self._counter,
+            "junction_c": self.junction_c,
+            # A rough Peltier: current to pump the junction away from the heat sink.
+            "current_a": max(-30.0, min(30.0, 0.4 * (self.heatsink_c - self.junction_c))),
+            "heatsink_c": self.heatsink_c})
+        self._counter = (self._counter + 1) & 0xFF
+        self._send(STATUS, data)
+
+    def poll(self) -> None:
+        """Handle the commands that arrived; heartbeat and watchdog."""
+        now = self.clock()
+        if now < self.offline_until_s:
+            while self.bus.recv(0.0) is not None:        # rebooting: deaf
+                pass
+            return
+        if self.state == STATE_BOOT and now >= self.offline_until_s:
+            self.state = STATE_DISABLED
+            self._send(HEARTBEAT, HEARTBEAT.encode({"state": STATE_BOOT,
+                                                    "version": CAN_VERSION}))
+        while True:
+            msg = self.bus.recv(0.0)
+            if msg is None:
+                break
+            if msg.is_error_frame or msg.arbitration_id != CMD.frame_id:
+                continue
+            try:
+                cmd = CMD.decode(bytes(msg.data))
+            except Exception:              # noqa: BLE001 - a real driver ignores it too
+                self.counters["bad_commands"] += 1
+                continue
+            self.counters["commands"] += 1
+            self._last_cmd_s = now
+            self.faults.discard("watchdog")
+            if cmd["version"] != CAN_VERSION:
+                self.counters["bad_commands"] += 1
+                continue
+            if cmd["enable"] and not self.faults:
+                self.enabled = True
+                self.junction_c = min(float(cmd["setpoint_c"]), self.max_junction_c)
+                self.apply(self.junction_c)
+            elif self.enabled or not cmd["enable"]:
+                self._disable()
+            self._status()
+        if self.enabled and self._last_cmd_s is not None and \
+                now - self._last_cmd_s > self.watchdog_s:
+            self.counters["watchdog_trips"] += 1
+            self.faults.add("watchdog")
+            self._disable()
+            self._status()
+        if now >= self._next_heartbeat:
+            self._next_heartbeat = now + self.heartbeat_s
+            state = STATE_FAULT if self.faults else \
+                STATE_OPERATIONAL if self.enabled else STATE_DISABLED
+            self.state = state
+            self._send(HEARTBEAT, HEARTBEAT.encode({"state": state, "version": CAN_VERSION}))
+
+    def close(self) -> None:
+        self.bus.shutdown()
