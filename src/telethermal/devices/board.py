@@ -157,6 +157,7 @@ class SensorBoard:
         except Exception:           # noqa: BLE001 - the port is gone already
             pass
         self._ser = None
+        self.latest = None                 # nothing read before the loss is current
         self._next_open = self.clock() + self.reopen_s
 
     def close(self) -> None:
