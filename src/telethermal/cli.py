@@ -185,6 +185,29 @@ def cmd_bench_render(args) -> int:
     return 0
 
 
+def cmd_bench_devices(args) -> int:
+    from telethermal.bench import devices
+
+    with _progress(2, "bench devices") as advance:
+        report = devices.run(n=args.samples, contact_s=args.contact_s, progress=advance)
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    _write_json(args.json, report)
+    for kind, r in report["paths"].items():
+        print(f"{kind:9s} read p50 {r['read']['p50_us']:6.1f} us p99 {r['read']['p99_us']:6.1f} us;"
+              f" apply p50 {r['apply']['p50_us']:6.1f} us p99 {r['apply']['p99_us']:6.1f} us")
+    emu = report["paths"]["emulated"]
+    for name in ("serial_sensor_to_controller", "can_controller_to_actuator"):
+        r = emu[name]
+        print(f"emulated {name}: p50 {r['p50_us']:.1f} us, p99 {r['p99_us']:.1f} us, "
+              f"max {r['max_us']:.0f} us")
+    for kind, r in report["sessions_1khz_real_clock"].items():
+        print(f"1 kHz real-clock session, {kind:8s}: period p99 {r['loop_period_p99_us']:.0f} us,"
+              f" busy p99 {r['busy_p99_us']:.0f} us, {r['deadline_misses']} missed deadlines of "
+              f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %")
+    print(f"wrote {args.json}")
+    return 0
+
+
 def cmd_bench_transport(args) -> int:
     from telethermal.bench import transport
 
@@ -638,6 +661,14 @@ def build_parser() -> argparse.ArgumentParser:
                                           "loopback and across network namespaces")
     p.add_argument("--json", required=True)
     p.set_defaults(func=cmd_bench_transport)
+
+    p = bsub.add_parser("devices", help="sensor-to-controller and controller-to-actuator "
+                                        "latency through the emulated serial and CAN paths, "
+                                        "beside the direct simulator")
+    p.add_argument("--json", required=True)
+    p.add_argument("--samples", type=int, default=3000)
+    p.add_argument("--contact-s", type=_positive(), default=3.0)
+    p.set_defaults(func=cmd_bench_devices)
 
     p = bsub.add_parser("faults", help="rendering under network faults, compensated beside "
                                        "naive (processes and the fault proxy)")

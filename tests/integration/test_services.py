@@ -25,10 +25,14 @@ def models(tmp_path_factory):
             save_generator(generator, folder / "generator.npz"), identifier, generator)
 
 
-def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models):
+@pytest.mark.parametrize("devices", ["sim", "emulated"])
+def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices):
+    # devices = "emulated": the master's display pad is read and driven
+    # through the serial and CAN drivers and their emulators.
     ident_path, gen_path, identifier, generator = models
     ports = free_ports(4)
-    slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports, 0)
+    slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports, 0,
+                                          devices=devices)
     services = Services(tmp_path, slave_cfg, master_cfg)
     try:
         wait_connected(services, ports[3])
@@ -46,6 +50,10 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models):
     # within a few percent of peak, like the in-process session.
     assert s["flux_rms_error_rel"] < 0.05 and math.isfinite(local["flux_rms_error_rel"])
     assert s["transport"]["invalid"] == 0 and s["transport"]["lossless_dropped"] == 0
+    assert s["devices"] == devices
+    if devices == "emulated":
+        board = s["device_counters"]["board"]
+        assert board["frames"] > 1000 and board["crc"] == 0 and board["port_lost"] == 0
     for role in ("slave", "master"):
         text = (tmp_path / f"{role}.log").read_text()
         assert "stopped cleanly" in text and "safe state" in text

@@ -54,3 +54,14 @@ def test_force_sensor_is_zero_before_contact_and_rises_to_the_force(rng):
 def test_ir_thermometer_error_has_its_stated_spread(rng):
     err = InfraredThermometer(0.4).read_c(np.zeros(20000), rng)
     assert err.std() == pytest.approx(0.4, rel=0.05)
+
+
+def test_the_scalar_nist_path_equals_the_array_path():
+    temps = np.linspace(-200.0, 390.0, 97)
+    emf = type_t_emf_mv(temps)
+    np.testing.assert_allclose([type_t_emf_mv(float(t)) for t in temps], emf, rtol=1e-12,
+                               atol=1e-12)
+    np.testing.assert_allclose([type_t_temp_c(float(e)) for e in emf], type_t_temp_c(emf),
+                               rtol=1e-12, atol=1e-12)
+    with pytest.raises(ModelError, match="range"):
+        type_t_temp_c(25.0)

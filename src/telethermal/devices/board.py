@@ -94,12 +94,12 @@ class Calibration:
     def temp_c(self, tc_uv: float, cold_junction_c: float) -> float:
         """Cold-junction compensation: E(T) = E_measured + E(T_cj)."""
         emf_mv = (tc_uv - self.thermocouple_offset_uv) / 1000.0 + \
-            float(type_t_emf_mv(cold_junction_c))
-        return float(type_t_temp_c(emf_mv))
+            type_t_emf_mv(float(cold_junction_c))
+        return type_t_temp_c(float(emf_mv))
 
     def tc_uv(self, temp_c: float, cold_junction_c: float) -> float:
-        return 1000.0 * float(type_t_emf_mv(temp_c) - type_t_emf_mv(cold_junction_c)) + \
-            self.thermocouple_offset_uv
+        return 1000.0 * (type_t_emf_mv(float(temp_c)) - type_t_emf_mv(float(cold_junction_c))) \
+            + self.thermocouple_offset_uv
 
     def force_n(self, raw_n: float) -> float:
         return raw_n * self.force_scale + self.force_offset_n

@@ -217,7 +217,7 @@ class PeltierEmulator:
             "junction_c": self.junction_c,
             # A rough Peltier: current to pump the junction away from the heat sink.
             "current_a": max(-30.0, min(30.0, 0.4 * (self.heatsink_c - self.junction_c))),
-            "heatsink_c": self.heatsink_c})
+            "heatsink_c": self.heatsink_c}, strict=False)
         self._counter = (self._counter + 1) & 0xFF
         self._send(STATUS, data)
 

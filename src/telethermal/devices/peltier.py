@@ -100,7 +100,7 @@ class PeltierDriver:
             return False
         data = CMD.encode({"enable": int(enable), "counter": self._counter,
                            "setpoint_c": min(max(junction_c, -50.0), 150.0),
-                           "version": CAN_VERSION})
+                           "version": CAN_VERSION}, strict=False)   # clamped above
         self._counter = (self._counter + 1) & 0xF
         try:
             self.bus.send(can.Message(arbitration_id=CMD.frame_id, data=data,

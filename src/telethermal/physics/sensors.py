@@ -29,7 +29,17 @@ _TYPE_T_INV_POS = (0.0, 2.592800e1, -7.602961e-1, 4.637791e-2, -2.165394e-3,
 
 
 def _two_piece(x, lo, hi, negative, positive, what):
-    """Evaluate one of two NIST polynomials (split at 0) after a range check."""
+    """Evaluate one of two NIST polynomials (split at 0) after a range check.
+    A Python float in, a float out by Horner's rule (a device driver converts
+    one reading per period: numpy's per-call overhead would be 30x the work);
+    arrays through numpy."""
+    if isinstance(x, float):
+        if not lo <= x <= hi:
+            raise ModelError(f"type-T {what} range is {lo}..{hi}, got {x}")
+        acc = 0.0
+        for c in reversed(negative if x < 0 else positive):
+            acc = acc * x + c
+        return acc
     x = np.asarray(x, dtype=np.float64)
     if np.any((x < lo) | (x > hi)):
         raise ModelError(f"type-T {what} range is {lo}..{hi}, got {x.min()}..{x.max()}")

@@ -41,7 +41,15 @@ class MasterConfig:
     realtime_priority: int = 0
     #: CPU cores the display loop may run on (empty: any).
     cpus: str = ""
+    #: The display's devices: "sim" (the simulator directly) or "emulated"
+    #: (the simulator behind an emulated sensor board on a pty and an emulated
+    #: Peltier driver on a CAN bus, read through the real drivers).
+    devices: str = "sim"
     transport: TransportConfig = field(default_factory=TransportConfig)
+
+    def __post_init__(self):
+        if self.devices not in ("sim", "emulated"):
+            raise ConfigError(f"devices must be 'sim' or 'emulated', got {self.devices!r}")
 
 
 def load_config(path: str | Path, role: str):
@@ -58,8 +66,13 @@ def load_config(path: str | Path, role: str):
         raise ConfigError(f"{path}: unknown section(s) {', '.join(sorted(extra))}; expected "
                           f"[{role}] and [transport]")
     cls = SlaveConfig if role == "slave" else MasterConfig
-    config = cls(**table_values(cls, data.get(role, {}), f"{path} [{role}]", ConfigError,
-                                     exclude=("transport",)))
+    try:
+        config = cls(**table_values(cls, data.get(role, {}), f"{path} [{role}]", ConfigError,
+                                    exclude=("transport",)))
+    except ConfigError as exc:
+        if str(path) in str(exc):
+            raise
+        raise ConfigError(f"{path} [{role}]: {exc}") from None
     transport = TransportConfig(**table_values(TransportConfig, data.get("transport", {}),
                                         f"{path} [transport]"))
     base = path.resolve().parent

@@ -33,7 +33,8 @@ def free_ports(n: int) -> list[int]:
 def write_configs(out: Path, scene: str, identifier: Path, generator: Path, ports, seed: int,
                   rate_hz: float = 1000.0, realtime_priority: int = 0,
                   slave_host: str = "127.0.0.1", security: str = "curve",
-                  master_ports: tuple[int, int] | None = None) -> tuple[Path, Path]:
+                  master_ports: tuple[int, int] | None = None,
+                  devices: str = "sim") -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
@@ -59,7 +60,7 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
                      f'{common}{slave_keys}')
     master = out / "master.toml"
     master.write_text(f'[master]\nscene = "{scene}"\nrate_hz = {rate_hz}\nseed = {seed}\n'
-                      f'realtime_priority = {realtime_priority}\n'
+                      f'realtime_priority = {realtime_priority}\ndevices = "{devices}"\n'
                       f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
                       f'{master_common}{master_keys}')
     return slave, master
@@ -191,7 +192,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                **{k: result[k] for k in ("safety_events", "safety_event_counts",
                                          "display_event_counts", "loop", "transport",
                                          "trajectory_at_s", "rtt_s", "link_counters",
-                                         "anchor_lag_s")},
+                                         "anchor_lag_s", "devices", "device_counters")},
                "loop_period_p99_us": result["loop"]["period_p99_us"], "clock": "real"}
     return SessionResult(summary, trace)
 

@@ -19,6 +19,7 @@ from dataclasses import replace
 
 
 from telethermal.control.loop import FixedRateLoop, RealClock
+from telethermal.devices.display import open_display
 from telethermal.errors import TelethermalError
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import AdminServer
@@ -47,6 +48,7 @@ class Touch:
                                      scene.sensors.flux_lag_s, self.operator.finger_ir_c,
                                      idle_c=self.idle_c)
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
+        self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed)
         self.start = now
         self.contact_s = contact_s
         self.contact_id = service.next_contact_id
@@ -106,9 +108,9 @@ class MasterService:
         touch.display.generator = self.link.generator      # a restarted slave sends anew
         onset_before = touch.display.last_onset_s
         release_before = touch.display.last_release_s
-        sensors = touch.sim.sense(t)
+        sensors = touch.devices.read(t)
         step = touch.display.step(t, dt_s, sensors, news)
-        touch.sim.actuate(t, step, dt_s, sensors.force_n)
+        touch.devices.apply(t, step, dt_s, sensors.force_n)
         if touch.display.last_onset_s != onset_before:
             self.state = "touching"
             self.link.onset(touch.start + PRE_CONTACT_S + touch.display.last_onset_s)
@@ -127,6 +129,8 @@ class MasterService:
 
     def _finish_touch(self) -> None:
         touch, stats = self.touch, self.loop.stats
+        devices = touch.devices.counters()
+        touch.devices.close()
         link = self.link
         est = link.estimates[-1] if link.estimates else None
         loop = stats.summary(last=stats.count - touch.loop_count0)
@@ -140,7 +144,8 @@ class MasterService:
             "decision_time_s": est.t_s if est is not None and est.decided else None,
             "estimates": len(link.estimates), "trajectory_at_s": touch.trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,
-            "link_counters": dict(link.counters),
+            "link_counters": dict(link.counters), "devices": self.config.devices,
+            "device_counters": devices,
             **safety_summary(touch.display), "loop": loop,
             "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
         }
@@ -199,8 +204,10 @@ class MasterService:
         # The display pad to its safe state first: neutral, not off.
         neutral = self.display_config.limits.neutral_c
         log.info("stopping: display pad to the safe state (%.1f C), sockets closed", neutral)
-        if self.touch is not None and self.admin.pending:
-            self.admin.reply(ok=False, error="master stopping")
+        if self.touch is not None:
+            self.touch.devices.close()         # the Peltier driver disabled first
+            if self.admin.pending:
+                self.admin.reply(ok=False, error="master stopping")
         try:
             if self.endpoint.peer_version is not None:
                 self.endpoint.send("status", state="stopping",
