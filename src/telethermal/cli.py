@@ -208,6 +208,24 @@ def cmd_bench_devices(args) -> int:
     return 0
 
 
+def cmd_bench_record(args) -> int:
+    from telethermal.bench import record
+
+    with _progress(2 * args.rounds, "bench record") as advance:
+        report = record.run(rounds=args.rounds, contact_s=args.contact_s, progress=advance)
+    report["command"] = "telethermal " + " ".join(sys.argv[1:])
+    _write_json(args.json, report)
+    b, m = report["busy_mean_us"], report["deadline_misses"]
+    print(f"master loop busy per period: {b['without']:.0f} us without recording, "
+          f"{b['with']:.0f} us with: +{report['extra_busy_per_period_us']:.1f} us = "
+          f"{100 * report['cost_of_period_budget']:.1f} % of the 1 ms budget")
+    print(f"recorder.log call: p50 {report['log_call_p50_us']:.1f} us, p99 "
+          f"{report['log_call_p99_us']:.1f} us; deadline misses {m['without']} of "
+          f"{report['steps']['without']} without, {m['with']} of {report['steps']['with']} with")
+    print(f"wrote {args.json}")
+    return 0
+
+
 def cmd_bench_transport(args) -> int:
     from telethermal.bench import transport
 
@@ -408,9 +426,14 @@ def cmd_demo(args) -> int:
     materials = [m for m in args.materials.split(",") if m] if args.materials else \
         [m for m in DEMO_MATERIALS if m in scene.materials] or scene.materials[:3]
     report = run_demo(out, args.scene, out / "identifier.npz", out / "generator.npz",
-                      materials, seed=args.seed, contact_s=args.contact_s)
+                      materials, seed=args.seed, contact_s=args.contact_s,
+                      record_dir=Path(args.record) if args.record else None)
     path = _write_json(args.json or out / "demo.json", report)
     print(f"touch plots: {out}/touch-*.png; summary: {path}")
+    if args.record:
+        files = sorted(Path(args.record).glob("*.mcap"))
+        print(f"recordings: {', '.join(str(f) for f in files)} "
+              f"(telethermal replay FILE --out DIR [--touch N])")
     return 0 if all(c == 0 for c in report["exit_codes"].values()) else 1
 
 
@@ -476,7 +499,7 @@ def cmd_session(args) -> int:
     config = DisplayConfig(rate_hz=args.rate_hz, before=args.before)
     result = run_session(scene, args.material, identifier, generator, config,
                          contact_s=args.contact_s, seed=args.seed, realtime=args.realtime,
-                         devices=args.devices)
+                         devices=args.devices, record=args.record)
     s = result.summary
     _write_json(args.json, s)
     if args.plot:
@@ -492,7 +515,61 @@ def cmd_session(args) -> int:
         print(f"real clock at {args.rate_hz:g} Hz: period p50 {loop['period_p50_us']:.0f} us, "
               f"p99 {loop['period_p99_us']:.0f} us, max {loop['period_max_us']:.0f} us, "
               f"{loop['deadline_misses']} deadline misses, {loop['stalls']} stalls")
+    if args.record:
+        r = s["recording"]
+        print(f"recorded {r['written']} messages to {r['path']}"
+              + (f"; {r['error']}" if r["error"] else ""))
     print(f"wrote {args.json}" + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
+def cmd_replay(args) -> int:
+    """Re-run the rendering and the identifier on a recording, and plot it."""
+    from dataclasses import replace
+
+    from telethermal.record.session import plot_replay, replay
+
+    identifier = generator = gains = None
+    if args.identifier:
+        from telethermal.ident.registry import load_model
+        identifier = load_model(args.identifier)
+    if args.generator:
+        from telethermal.render.generator import load_generator
+        generator = load_generator(args.generator)
+    if args.gains:
+        try:
+            kp, ki, kd = (float(x) for x in args.gains.split(","))
+        except ValueError:
+            raise TelethermalError(f"--gains {args.gains!r}: give kp,ki,kd") from None
+        from telethermal.session.master import DEFAULT_GAINS
+        gains = replace(DEFAULT_GAINS, kp=kp, ki=ki, kd=kd)
+    result = replay(args.file, identifier, generator, gains, touch=args.touch)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    png = plot_replay(result, out / "replay.png")
+    s = result["summary"]
+    _write_json(out / "replay.json", s)
+    if "periods" in s:
+        verdict = "identical to the recording, sample for sample" if s["identical"] else \
+            f"junction differs from the recording by up to {s['junction_max_abs_diff_c']:.3g} K"
+        print(f"{s['periods']} periods replayed: {verdict}")
+    if s.get("slave"):
+        sl = s["slave"]
+        print(f"slave: now {sl['identified']} at {sl['decision_time_s']}, recorded "
+              f"{sl['recorded_identified']} at {sl['recorded_decision_time_s']}")
+    if s["truncated"]:
+        print(f"the recording was cut: read up to the cut ({s['truncated']})")
+    for note in s["notes"]:
+        print(f"note: {note}")
+    print(f"wrote {out / 'replay.json'} and {png}")
+    return 0
+
+
+def cmd_dataset_import(args) -> int:
+    from telethermal.record.importer import import_recordings
+
+    before, after = import_recordings(args.recordings, args.into, args.material, args.group)
+    print(f"{args.into}: {before} trials before, {after} now")
     return 0
 
 
@@ -634,6 +711,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir")
     p.set_defaults(func=cmd_dataset_validate)
 
+    p = dsub.add_parser("import", help="add recorded slave contacts to a dataset "
+                                       "(identification database)")
+    p.add_argument("recordings", nargs="+", help="MCAP recordings (session or slave)")
+    p.add_argument("--into", required=True, help="dataset folder (created if absent)")
+    p.add_argument("--material", help="the material touched (required for lab recordings)")
+    p.add_argument("--group", default="recorded")
+    p.set_defaults(func=cmd_dataset_import)
+
+    p = sub.add_parser("replay", help="re-run the rendering and the identifier on a recording "
+                                      "(new models or gains) and plot the session")
+    p.add_argument("file")
+    p.add_argument("--out", required=True)
+    p.add_argument("--identifier", help="identifier model instead of the recorded one")
+    p.add_argument("--generator", help="generator model instead of the recorded one")
+    p.add_argument("--gains", help="kp,ki,kd instead of the recorded gains")
+    p.add_argument("--touch", type=int, default=0, help="which touch of a service's "
+                                                        "recording (0: the first)")
+    p.set_defaults(func=cmd_replay)
+
     p = sub.add_parser("simulate", help="one contact between two semi-infinite bodies")
     p.add_argument("--pad", required=True, help="material of the pad (or finger: skin)")
     p.add_argument("--object", required=True, help="material of the object")
@@ -661,6 +757,12 @@ def build_parser() -> argparse.ArgumentParser:
                                           "loopback and across network namespaces")
     p.add_argument("--json", required=True)
     p.set_defaults(func=cmd_bench_transport)
+
+    p = bsub.add_parser("record", help="what recording costs the master's 1 kHz loop")
+    p.add_argument("--json", required=True)
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--contact-s", type=_positive(), default=3.0)
+    p.set_defaults(func=cmd_bench_record)
 
     p = bsub.add_parser("devices", help="sensor-to-controller and controller-to-actuator "
                                         "latency through the emulated serial and CAN paths, "
@@ -728,6 +830,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--realtime", action="store_true",
                    help="run the master loop on the real clock and report its timing")
+    p.add_argument("--record", help="record the session to this MCAP file")
     p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
                    help="sim: the simulator directly; emulated: the display's sensor board on "
                         "a pty and its Peltier driver on a virtual CAN bus, through the drivers")
@@ -756,6 +859,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
     p.add_argument("--contact-s", type=_positive(), default=5.0)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--record", metavar="DIR", help="both services record every touch here "
+                                                   "(one MCAP file per host; see replay)")
     p.set_defaults(func=cmd_demo)
     return parser
 

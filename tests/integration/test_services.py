@@ -32,7 +32,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     ident_path, gen_path, identifier, generator = models
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports, 0,
-                                          devices=devices)
+                                          devices=devices, record_dir=tmp_path / "rec")
     services = Services(tmp_path, slave_cfg, master_cfg)
     try:
         wait_connected(services, ports[3])
@@ -57,6 +57,12 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     for role in ("slave", "master"):
         text = (tmp_path / f"{role}.log").read_text()
         assert "stopped cleanly" in text and "safe state" in text
+    # Each host recorded the touch; each replays to the same commands and estimates.
+    from telethermal.record.session import replay
+    (master_rec,) = (tmp_path / "rec").glob("master-*.mcap")
+    (slave_rec,) = (tmp_path / "rec").glob("slave-*.mcap")
+    assert replay(master_rec)["summary"]["identical"]
+    assert replay(slave_rec)["summary"]["slave"]["same_estimates"]
 
 
 def test_bad_configs_are_refused_with_the_file_and_key(tmp_path, capsys):

@@ -97,7 +97,8 @@ class LoopStats:
                 "period_max_us": float(periods.max() * 1e6) if len(periods) else math.nan,
                 "lateness_p50_us": pct(late, 50), "lateness_p99_us": pct(late, 99),
                 "lateness_max_us": float(late.max() * 1e6) if len(late) else math.nan,
-                "busy_p99_us": pct(busy, 99),
+                "busy_p50_us": pct(busy, 50), "busy_p99_us": pct(busy, 99),
+                "busy_mean_us": float(np.mean(busy) * 1e6) if len(busy) else math.nan,
                 "overruns": int(np.sum(busy > self.period_s)),
                 "deadline_misses": self.missed_deadlines,
                 "stalls": int(np.sum(late > STALL_S))}

@@ -25,6 +25,7 @@ class SlaveConfig:
     place: str = ""                 # object under the pad at start; empty: the scene's first
     admin_port: int = 5570
     admin_ipc: str = ""             # an ipc:// path instead of the port
+    record_dir: str = ""            # record every touch here (one MCAP file per run)
     transport: TransportConfig = field(default_factory=TransportConfig)
 
 
@@ -45,6 +46,8 @@ class MasterConfig:
     #: (the simulator behind an emulated sensor board on a pty and an emulated
     #: Peltier driver on a CAN bus, read through the real drivers).
     devices: str = "sim"
+    #: Folder to record every touch to (one MCAP file per run); empty: no recording.
+    record_dir: str = ""
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):
@@ -80,7 +83,7 @@ def load_config(path: str | Path, role: str):
         value = getattr(transport, key)
         if value and not Path(value).is_absolute():
             transport = replace(transport, **{key: str(base / value)})
-    for key in ("identifier", "generator"):
+    for key in ("identifier", "generator", "record_dir"):
         value = getattr(config, key, "")
         if value and not Path(value).is_absolute():
             setattr(config, key, str(base / value))

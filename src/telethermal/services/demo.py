@@ -34,7 +34,8 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
                   rate_hz: float = 1000.0, realtime_priority: int = 0,
                   slave_host: str = "127.0.0.1", security: str = "curve",
                   master_ports: tuple[int, int] | None = None,
-                  devices: str = "sim") -> tuple[Path, Path]:
+                  devices: str = "sim", record_dir: str | Path | None = None
+                  ) -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
@@ -54,13 +55,14 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     master_keys = 'keys_dir = "keys/master"\n' if security == "curve" else ""
     slave = out / "slave.toml"
     ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
-    slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n'
+    record = f'record_dir = "{Path(record_dir).resolve()}"\n' if record_dir else ""
+    slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n{record}'
                      f'generator = "{gen}"\nseed = {seed}\n'
                      f'{admin(slave_admin)}\n\n[transport]\nbind_host = "{slave_host}"\n'
                      f'{common}{slave_keys}')
     master = out / "master.toml"
     master.write_text(f'[master]\nscene = "{scene}"\nrate_hz = {rate_hz}\nseed = {seed}\n'
-                      f'realtime_priority = {realtime_priority}\ndevices = "{devices}"\n'
+                      f'realtime_priority = {realtime_priority}\ndevices = "{devices}"\n{record}'
                       f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
                       f'{master_common}{master_keys}')
     return slave, master
@@ -199,7 +201,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
 
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
-             realtime_priority: int = 20) -> dict:
+             realtime_priority: int = 20, record_dir: Path | None = None) -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
     in-process session's (``in_process_flux_rms_error_rel``)."""
     from telethermal.physics.scene import load_scene
@@ -212,7 +214,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     identifier, generator = load_model(identifier_path), load_generator(generator_path)
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
-                                          ports, seed, realtime_priority=realtime_priority)
+                                          ports, seed, realtime_priority=realtime_priority,
+                                          record_dir=record_dir)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     try:

@@ -20,6 +20,7 @@ from dataclasses import replace
 
 from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.devices.display import open_display
+from telethermal.record.session import display_params, open_recorder
 from telethermal.errors import TelethermalError
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import AdminServer
@@ -53,6 +54,9 @@ class Touch:
         self.contact_s = contact_s
         self.contact_id = service.next_contact_id
         service.link.begin(self.contact_id)
+        if service.recorder is not None:
+            service.recorder.touch_start(now, self.contact_id,
+                                         display_params(scene, cfg, self.operator, self.idle_c))
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
         self.trajectory_at: float | None = None
@@ -70,6 +74,7 @@ class MasterService:
             self.endpoint.close()
             raise
         self.link = SlaveLink()
+        self.recorder = open_recorder(config, "master")
         self.touch: Touch | None = None
         self.next_contact_id = 1
         self.stop_requested = False
@@ -81,6 +86,8 @@ class MasterService:
             log.info("session config from slave: %d classes, scene %s", len(m["classes"]),
                      m["scene"])
         had = self.link.trajectory
+        if self.recorder is not None:
+            self.recorder.wire(now, "in", m)
         self.link.on_message(m, now, self.endpoint.offset.offset_s)
         if self.touch is not None and self.link.trajectory is not had and \
                 self.touch.trajectory_at is None:
@@ -111,6 +118,8 @@ class MasterService:
         sensors = touch.devices.read(t)
         step = touch.display.step(t, dt_s, sensors, news)
         touch.devices.apply(t, step, dt_s, sensors.force_n)
+        if self.recorder is not None:
+            self.recorder.period(t, dt_s, sensors, news, step)
         if touch.display.last_onset_s != onset_before:
             self.state = "touching"
             self.link.onset(touch.start + PRE_CONTACT_S + touch.display.last_onset_s)
@@ -149,6 +158,9 @@ class MasterService:
             **safety_summary(touch.display), "loop": loop,
             "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
         }
+        if self.recorder is not None:
+            self.recorder.touch_end({k: v for k, v in result.items() if k != "trace"},
+                                    touch.sim.trace)
         self.touch, self.state = None, "idle"
         link.end()
         self.next_contact_id += 1
@@ -217,3 +229,9 @@ class MasterService:
         finally:
             self.endpoint.close()
             self.admin.close()
+            if self.recorder is not None:
+                closed = self.recorder.close()
+                log.info("recording %s closed: %d messages, %d dropped%s", closed["path"],
+                         closed["written"], closed["dropped_queue_full"] +
+                         closed["dropped_after_error"],
+                         f"; {closed['error']}" if closed["error"] else "")

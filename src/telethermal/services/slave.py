@@ -19,6 +19,7 @@ from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import mixture, posterior_weights
+from telethermal.record.session import open_recorder
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import AdminServer
 from telethermal.services.config import SlaveConfig
@@ -50,6 +51,7 @@ class SlaveService:
         self.curves = sample_curves(generator, renderable)
         self.wire_generator = SampledGenerator(self.curves)   # what the master renders
         self.finger_c: float | None = None
+        self.recorder = open_recorder(config, "slave", identifier, generator)
         self.rate_hz = self.scene.sample_rate_hz
         self.endpoint = Endpoint("slave", config.transport)
         try:
@@ -85,6 +87,8 @@ class SlaveService:
     # ------------------------------------------------------------ loop
     def _on_message(self, m: dict, now: float) -> None:
         kind = m["kind"]
+        if self.recorder is not None:
+            self.recorder.wire(now, "in", m)
         if kind == "hello":
             self.endpoint.send("session_config", scene=self.scene.name,
                                sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
@@ -101,6 +105,8 @@ class SlaveService:
             self._lift(now)
 
     def _lift(self, now: float) -> None:
+        if self.recorder is not None:
+            self.recorder.slave(self.pad, self.contact_id)
         self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
                            t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
         log.info("lift contact_id=%d", self.contact_id)
@@ -146,7 +152,7 @@ class SlaveService:
         read = pad.samples_read
         if read - self._sent >= BATCH:
             i = slice(self._sent, read)
-            ch = pad.trial.channels
+            ch = pad.channels
             self.endpoint.send("measurement_batch", contact_id=self.contact_id,
                                t0_s=self.touch_t0 + float(pad.t_s[self._sent]),
                                rate_hz=self.rate_hz,
@@ -237,3 +243,7 @@ class SlaveService:
         finally:
             self.endpoint.close()
             self.admin.close()
+            if self.recorder is not None:
+                closed = self.recorder.close()
+                log.info("recording %s closed: %d messages%s", closed["path"], closed["written"],
+                         f"; {closed['error']}" if closed["error"] else "")

@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -178,12 +179,15 @@ class SessionResult:
 
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
-                realtime: bool = False, devices: str = "sim") -> SessionResult:
+                realtime: bool = False, devices: str = "sim",
+                record: str | Path | None = None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
-    read through the real drivers)."""
+    read through the real drivers). ``record``: an MCAP file to record the
+    session to (:mod:`telethermal.record.recording`)."""
     from telethermal.devices.display import open_display
+    from telethermal.record.session import SessionRecorder
 
     if not (contact_s > 0 and math.isfinite(contact_s)):
         raise SceneError(f"contact_s must be > 0, got {contact_s}")
@@ -198,6 +202,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=realtime, seed=seed)
+    recorder = SessionRecorder.open(record, scene, material, identifier, generator, config,
+                                    operator, idle, seed, contact_s, devices) if record else None
 
     def one_period(t_loop: float, dt_loop: float) -> bool:
         if touch.done:
@@ -207,9 +213,11 @@ def run_session(scene: Scene, material: str, identifier, generator,
         t = now[0] = t_loop - PRE_CONTACT_S
         slave.advance_to(t)
         sensors = display.read(t)
-        step = master.step(t, dt_loop, sensors,
-                           SlaveNews(slave.object_ir_c, slave.estimate, slave.classes))
+        news = SlaveNews(slave.object_ir_c, slave.estimate, slave.classes)
+        step = master.step(t, dt_loop, sensors, news)
         display.apply(t, step, dt_loop, sensors.force_n)
+        if recorder is not None:
+            recorder.period(t, dt_loop, sensors, news, step)
         return True
 
     clock = RealClock() if realtime else SimClock()
@@ -218,6 +226,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     finally:
         device_counters = display.counters()
         display.close()
+        if recorder is not None:
+            recorder.slave(slave)
     est = slave.estimate
     decided = est is not None and est.decided
     # The error "after identification" starts where the master began to
@@ -243,6 +253,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "clock": "real" if realtime else "simulated", "loop": stats.summary(),
         "devices": devices, "device_counters": device_counters,
     }
+    if recorder is not None:
+        summary["recording"] = recorder.close(summary, touch.trace)
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
     return SessionResult(summary, touch.trace)

@@ -49,14 +49,33 @@ class Slave:
                       contact_duration_s=contact_s or scene.pad.contact_duration_s)
         one = replace(scene, pad=pad, objects=(objs[0],))
         self.trial = pad_database(one, rng)[0]
-        ch = self.trial.channels
+        self._load(self.trial.channels, identifier, self.trial.T_object_C,
+                   float(self.trial.extra["T_object_true_C"]), self.trial.T_pad_C,
+                   self.trial.gap_k, on_n, off_n, debounce_s)
+
+    @classmethod
+    def from_samples(cls, channels: dict, identifier, object_ir_c: float, gap_k: float,
+                     object_true_c: float = float("nan"), pad_before_c: float = float("nan"),
+                     on_n: float = 2.0, off_n: float = 1.0, debounce_s: float = 0.02) -> "Slave":
+        """A slave reading recorded samples (``t_s``, ``force_N`` and the
+        identifier's channels) instead of a simulated trial: a replay."""
+        self = cls.__new__(cls)
+        self.trial = None
+        self._load({k: np.asarray(v, dtype=np.float64) for k, v in channels.items()},
+                   identifier, object_ir_c, object_true_c, pad_before_c, gap_k, on_n, off_n,
+                   debounce_s)
+        return self
+
+    def _load(self, ch, identifier, object_ir_c, object_true_c, pad_before_c, gap_k, on_n,
+              off_n, debounce_s):
+        self.channels = ch
         self.t_s = ch["t_s"]
         self.samples = np.stack([ch[c] for c in identifier.channels], axis=1)
         self.force_n = ch["force_N"]
-        self.object_ir_c = self.trial.T_object_C
-        self.object_true_c = float(self.trial.extra["T_object_true_C"])
-        self.pad_before_c = self.trial.T_pad_C
-        self.gap_k = self.trial.gap_k
+        self.object_ir_c = object_ir_c
+        self.object_true_c = object_true_c
+        self.pad_before_c = pad_before_c
+        self.gap_k = gap_k
         self.identifier = identifier
         self.detector = ContactDetector(on_n, off_n, debounce_s)
         self.stream: StreamingIdentifier | None = None

@@ -1,0 +1,75 @@
+"""``telethermal bench record``: what recording costs the master's 1 kHz
+loop. The same real-clock session (same seeds) without and with recording,
+alternated; the loop's busy time per period, its deadline misses, and the
+recorder's own ``log`` call, beside the period budget."""
+
+from __future__ import annotations
+
+import datetime
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from telethermal.physics.scene import load_scene
+from telethermal.session.models import train_generator, train_identifier
+from telethermal.session.run import run_session, with_finger
+
+
+def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
+    step = progress or (lambda _m: None)
+    scene = with_finger(load_scene("fingertip-7"))
+    ident, gen = train_identifier(scene, 0), train_generator(scene, 0)
+    rows = {"without": [], "with": []}
+    log_calls = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(rounds):
+            for mode in ("without", "with"):
+                step(f"round {r + 1}, {mode} recording")
+                path = Path(tmp) / f"r{r}.mcap" if mode == "with" else None
+                s = run_session(scene, "wood", ident, gen, contact_s=contact_s, seed=r,
+                                realtime=True, record=path).summary
+                loop = s["loop"]
+                rows[mode].append({"busy_p50_us": loop.get("busy_p50_us"),
+                                   "busy_mean_us": loop.get("busy_mean_us"),
+                                   "busy_p99_us": loop["busy_p99_us"],
+                                   "deadline_misses": loop["deadline_misses"],
+                                   "steps": loop["steps"],
+                                   "recording": s.get("recording")})
+        # The log call alone, as the loop makes it (one period and, on
+        # change, one news message per period).
+        from telethermal.record.recording import Recorder
+        rec = Recorder(Path(tmp) / "calls.mcap", "bench")
+        msg = {"k": 0, "t_s": 0.0, "dt_s": 1e-3, "flux_w_m2": -1234.5, "pad_temp_c": 30.1,
+               "force_n": 4.0, "phase": "render", "desired_flux_w_m2": -1200.0,
+               "junction_cmd_c": 25.0, "junction_applied_c": 25.0, "safe": False}
+        for k in range(5000):
+            t0 = time.perf_counter()
+            rec.log("/master/period", k * 1e-3, dict(msg, k=k))
+            log_calls.append(time.perf_counter() - t0)
+            time.sleep(2e-4)
+        rec.close()
+
+    def mean(mode, key):
+        return float(np.mean([x[key] for x in rows[mode]]))
+
+    period_us = 1e6 / 1000.0
+    calls = np.asarray(log_calls) * 1e6
+    extra = mean("with", "busy_mean_us") - mean("without", "busy_mean_us")
+    return {
+        "rounds": rows, "contact_s": contact_s,
+        "busy_mean_us": {m: mean(m, "busy_mean_us") for m in rows},
+        "busy_p99_us": {m: mean(m, "busy_p99_us") for m in rows},
+        "deadline_misses": {m: int(sum(x["deadline_misses"] for x in rows[m])) for m in rows},
+        "steps": {m: int(sum(x["steps"] for x in rows[m])) for m in rows},
+        "log_call_p50_us": float(np.percentile(calls, 50)),
+        "log_call_p99_us": float(np.percentile(calls, 99)),
+        "extra_busy_per_period_us": extra,
+        "cost_of_period_budget": extra / period_us,
+        "log_calls_of_period_budget": 2 * float(np.percentile(calls, 50)) / period_us,
+        "machine": f"{platform.node()} ({platform.machine()}, "
+                   f"{platform.python_implementation()} {platform.python_version()})",
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    }

@@ -1,0 +1,1 @@
+"""Session recordings: MCAP files with msgpack-encoded channels."""

@@ -1,0 +1,63 @@
+"""``telethermal dataset import``: recorded slave contacts into the dataset
+format, so lab sessions grow the identification database."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from telethermal.data.dataset import Trial, load_dataset, write_dataset
+from telethermal.errors import DatasetError
+from telethermal.record.recording import read_recording
+
+CHANNELS = ("t_s", "heat_flux_W_m2", "temperature_C", "force_N")
+
+
+def trials_from_recording(path, material: str | None = None, group: str = "recorded",
+                          room_c: float | None = None) -> list[Trial]:
+    """One trial per recorded slave contact. The material is the recording's
+    (a simulated session knows it) unless ``material`` is given; a lab
+    recording must be labelled by whoever placed the object."""
+    rec = read_recording(path)
+    params = rec.config
+    label = material or params.get("material")
+    if not label:
+        raise DatasetError(f"{path}: the recording does not say which material was touched; "
+                           "pass --material")
+    samples = rec.messages("/slave/samples")
+    if not samples:
+        raise DatasetError(f"{path}: no slave samples recorded (role {rec.role!r})")
+    if room_c is None:
+        from telethermal.physics.scene import load_scene
+        room_c = load_scene(params["scene"]).room_temp_c if "scene" in params else math.nan
+    trials = []
+    for i, s in enumerate(samples):
+        missing = [c for c in CHANNELS if c not in s]
+        if missing:
+            raise DatasetError(f"{path}: recorded samples lack {', '.join(missing)}")
+        channels = {c: np.asarray(s[c], dtype=np.float64) for c in CHANNELS}
+        if len(channels["t_s"]) < 2:
+            raise DatasetError(f"{path}: contact {i} has fewer than 2 samples")
+        rate = 1.0 / float(np.median(np.diff(channels["t_s"])))
+        stem = f"{Path(path).stem}-{i}"
+        trials.append(Trial(stem, label, f"{label}/{stem}.csv", round(rate, 6),
+                            float(s["object_ir_c"]), float(s["pad_before_c"]), float(room_c),
+                            group, extra={"source": Path(path).name}, channels=channels))
+    return trials
+
+
+def import_recordings(paths, into: str | Path, material: str | None = None,
+                      group: str = "recorded") -> tuple[int, int]:
+    """Add the recordings' contacts to the dataset at ``into`` (created if
+    absent), all or nothing. Returns (trials before, trials after)."""
+    into = Path(into)
+    existing = load_dataset(into) if (into / "manifest.csv").is_file() else []
+    new = [t for p in paths for t in trials_from_recording(p, material, group)]
+    ids = {t.trial_id for t in existing}
+    clash = [t.trial_id for t in new if t.trial_id in ids]
+    if clash:
+        raise DatasetError(f"{into} already holds {', '.join(clash[:3])}: imported before?")
+    write_dataset(into, existing + new, overwrite=True)
+    return len(existing), len(existing) + len(new)

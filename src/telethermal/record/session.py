@@ -1,0 +1,414 @@
+"""What a session records, and how a recording is replayed.
+
+Recording (:class:`SessionRecorder`): every control period of the master
+(its sensors, what it knew of the slave when that changed, what it
+commanded), the slave pad's samples and its estimates, the models as
+attachments, the parameters to rebuild the display, and at the end the
+session's summary and (simulation only) the simulator's trace, which holds
+the truth a lab cannot measure.
+
+Replay (:func:`replay`): the master's rendering is re-run open loop on the
+recorded sensor readings and news, with the recorded models and gains or
+new ones; the slave's identifier is re-run on the recorded samples. With the
+same models and gains the commands come out identical, sample for sample.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from telethermal.record.recording import Recorder, RecordingError, read_recording
+
+
+def model_bytes(identifier, generator) -> dict[str, bytes]:
+    from telethermal.render.generator import save_generator
+    with tempfile.TemporaryDirectory() as tmp:
+        out = {}
+        if identifier is not None:
+            out["identifier.npz"] = identifier.save(Path(tmp) / "identifier.npz").read_bytes()
+        if generator is not None and hasattr(generator, "materials") and \
+                not type(generator).__name__.startswith("Sampled"):
+            out["generator.npz"] = save_generator(generator,
+                                                  Path(tmp) / "generator.npz").read_bytes()
+        return out
+
+
+def _estimate(e):
+    return None if e is None else [float(e.t_s), [float(p) for p in e.posteriors], e.label,
+                                   float(e.confidence), bool(e.decided), e.reason]
+
+
+def open_recorder(config, role: str, identifier=None, generator=None):
+    """A service's recorder, if its config has a ``record_dir``: one file per
+    run, ``<role>-<UTC time>.mcap``."""
+    import datetime
+    from dataclasses import asdict as as_dict
+
+    if not getattr(config, "record_dir", ""):
+        return None
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%S")
+    path = Path(config.record_dir) / f"{role}-{stamp}.mcap"
+    return SessionRecorder(Recorder(path, role, as_dict(config),
+                                    model_bytes(identifier, generator)))
+
+
+def display_params(scene, config, operator, idle_c) -> dict:
+    """What a replay needs to rebuild the display of one touch."""
+    from telethermal.session.run import pad_resistance
+    return {"display": {"rate_hz": config.rate_hz, "before": config.before,
+                        "source": config.source, "gains": asdict(config.gains),
+                        "feedforward": config.feedforward, "slew_k_s": config.slew_k_s,
+                        "handover_k_s": config.handover_k_s, "blend_s": config.blend_s,
+                        "r_pad_belief": config.r_pad_belief},
+            "pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
+            "sensor_lag_s": scene.sensors.flux_lag_s,
+            "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
+            "operator": asdict(operator)}
+
+
+class SessionRecorder:
+    """What the master's loop and the slave's pad record, on one
+    :class:`Recorder`: the in-process session (role ``session``, one touch)
+    or a service (many touches, each opened by ``touch_start``)."""
+
+    def __init__(self, recorder: Recorder):
+        self.rec = recorder
+        self._news = None
+        self._k = 0
+        self.contact_id = 0
+
+    @classmethod
+    def open(cls, path, scene, material, identifier, generator, config, operator, idle_c,
+             seed, contact_s, devices) -> "SessionRecorder":
+        params = {"scene": scene.name, "material": material, "seed": seed,
+                  "contact_s": contact_s, "devices": devices,
+                  **display_params(scene, config, operator, idle_c)}
+        return cls(Recorder(path, "session", params, model_bytes(identifier, generator)))
+
+    def touch_start(self, t_s: float, contact_id: int, params: dict) -> None:
+        self.contact_id, self._news, self._k = contact_id, None, 0
+        self.rec.log("/master/touch_start", t_s, {"contact_id": contact_id, **params})
+
+    def period(self, t_s, dt_s, sensors, news, step) -> None:
+        if news != self._news:
+            self._news = news
+            self.rec.log("/master/news", t_s, {
+                "contact_id": self.contact_id, "k": self._k, "t_s": t_s,
+                "object_temp_c": news.object_temp_c, "estimate": _estimate(news.estimate),
+                "classes": list(news.classes), "setpoint_w_m2": news.setpoint_w_m2,
+                "link_ok": news.link_ok})
+        self.rec.log("/master/period", t_s, {
+            "contact_id": self.contact_id, "k": self._k, "t_s": t_s, "dt_s": dt_s,
+            "flux_w_m2": sensors.flux_w_m2, "pad_temp_c": sensors.pad_temp_c,
+            "force_n": sensors.force_n, "phase": step.phase,
+            "desired_flux_w_m2": step.desired_flux_w_m2, "junction_cmd_c": step.junction_cmd_c,
+            "junction_applied_c": step.junction_applied_c, "safe": bool(step.safe)})
+        self._k += 1
+
+    def wire(self, t_s: float, direction: str, message: dict) -> None:
+        self.rec.log(f"/wire/{direction}/{message['kind']}", t_s, _plain(message))
+
+    def slave(self, slave, contact_id: int = 0) -> None:
+        n = slave.samples_read
+        self.rec.log("/slave/samples", 0.0, {
+            **{k: [float(v) for v in np.asarray(c)[:n]] for k, c in slave.channels.items()},
+            "contact_id": contact_id, "object_ir_c": slave.object_ir_c,
+            "object_true_c": slave.object_true_c, "pad_before_c": slave.pad_before_c,
+            "gap_k": slave.gap_k})
+        for ev in slave.events:
+            self.rec.log("/slave/estimates", ev.t_s, {"contact_id": contact_id, "t_s": ev.t_s,
+                                                      "estimate": _estimate(ev.estimate)})
+
+    def touch_end(self, summary: dict, trace: dict) -> None:
+        clean = {k: v for k, v in summary.items() if k != "recording"}
+        self.rec.log("/master/touch", 0.0, {"contact_id": self.contact_id,
+                                            "summary": _plain(clean)})
+        self.rec.log("/sim/trace", 0.0, {"contact_id": self.contact_id,
+                                         "trace": {k: [_plain(x) for x in v]
+                                                   for k, v in trace.items()}})
+
+    def close(self, summary: dict | None = None, trace: dict | None = None) -> dict:
+        if summary is not None:
+            self.touch_end(summary, trace or {})
+        return self.rec.close()
+
+
+def _plain(value):
+    """msgpack-safe: numpy scalars to Python, NaN kept."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+# ---------------------------------------------------------------- replay
+def _estimate_from(x):
+    from telethermal.ident.anytime import Estimate
+    return None if x is None else Estimate(x[0], tuple(x[1]), x[2], x[3], x[4], x[5])
+
+
+def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) -> dict:
+    """Re-run the master's rendering (open loop, on the recorded sensor
+    readings and news) and the slave's identifier (on the recorded samples)
+    of one touch of a recording. ``identifier``/``generator``: models to use
+    instead of the recorded ones; ``gains``: a :class:`PidGains` instead of
+    the recorded. Returns the replayed series beside the recorded ones and a
+    summary."""
+    rec = read_recording(path)
+    same_models = identifier is None and generator is None
+    starts = rec.messages("/master/touch_start")
+    slave_touches = sorted({m.get("contact_id", 0) for m in rec.messages("/slave/samples")})
+    params, cid = rec.config, 0
+    if starts:                                  # a master service: one touch of many
+        if not 0 <= touch < len(starts):
+            raise RecordingError(f"{path}: touch {touch} asked, the recording has "
+                                 f"{len(starts)} (0..{len(starts) - 1})")
+        params, cid = starts[touch], starts[touch]["contact_id"]
+    elif rec.role == "slave":
+        if not 0 <= touch < len(slave_touches):
+            raise RecordingError(f"{path}: touch {touch} asked, the recording has "
+                                 f"{len(slave_touches)}")
+        cid = slave_touches[touch]
+
+    def attached(name, loader):
+        if name not in rec.attachments:
+            raise RecordingError(f"{path}: no {name} attached; pass one to replay with")
+        with tempfile.TemporaryDirectory() as tmp:
+            f = Path(tmp) / name
+            f.write_bytes(rec.attachments[name])
+            return loader(f)
+
+    summary = {"file": str(path), "role": rec.role, "contact_id": cid,
+               "truncated": rec.truncated, "notes": rec.notes, "same_models": same_models}
+    out = recorded = None
+    if "display" in params:
+        out, recorded, master_summary = _replay_master(rec, params, cid, generator, gains,
+                                                       attached)
+        summary.update(master_summary)
+    elif rec.role != "slave":
+        raise RecordingError(f"{path}: no display parameters recorded (role {rec.role!r})")
+    slave = _replay_slave(rec, cid, identifier, attached)
+    if slave is not None:
+        summary["slave"] = slave
+    ends = [m for m in rec.messages("/master/touch") if m.get("contact_id", 0) == cid]
+    trace = [m for m in rec.messages("/sim/trace") if m.get("contact_id", 0) == cid]
+    pad = [m for m in rec.messages("/slave/samples") if m.get("contact_id", 0) == cid]
+    return {"summary": summary, "replayed": out, "recorded": recorded,
+            "slave_samples": pad[0] if pad else None,
+            "session": ends[0]["summary"] if ends else None,
+            "trace": trace[0]["trace"] if trace else None}
+
+
+def _replay_master(rec, params, cid, generator, gains, attached):
+    from telethermal.control.pid import PidGains
+    from telethermal.render.generator import load_generator
+    from telethermal.session.master import DisplayConfig, MasterDisplay, PadSensors, SlaveNews
+
+    if generator is None:
+        wire_configs = rec.messages("/wire/in/session_config")
+        if "generator.npz" not in rec.attachments and wire_configs:
+            # A master's recording: the curves the slave sent, and this
+            # touch's trajectories, as the master rendered them.
+            from telethermal.render.sampled import SampledGenerator
+            generator = SampledGenerator(wire_configs[-1]["curves"])
+            for m in rec.messages("/wire/in/flux_trajectory"):
+                if m["contact_id"] == cid:
+                    t, g = m["t_s"], m["g_w_m2k"]
+                    if t and t[0] == 0:
+                        t, g = t[1:], g[1:]
+                    generator.set_curve(m["material"], t, g)
+        else:
+            generator = attached("generator.npz", load_generator)
+    d = params["display"]
+    recorded_gains = PidGains(**d["gains"])
+    config = DisplayConfig(rate_hz=d["rate_hz"], before=d["before"], source=d["source"],
+                           gains=gains or recorded_gains, feedforward=d["feedforward"],
+                           slew_k_s=d["slew_k_s"], handover_k_s=d["handover_k_s"],
+                           blend_s=d["blend_s"], r_pad_belief=d["r_pad_belief"])
+    master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
+                           params["sensor_lag_s"], params["finger_ir_c"],
+                           idle_c=params["idle_c"])
+    periods = [p for p in rec.messages("/master/period") if p.get("contact_id", 0) == cid]
+    news_at = {n["k"]: n for n in rec.messages("/master/news")
+               if n.get("contact_id", 0) == cid}
+    news = SlaveNews()
+    out = {k: [] for k in ("t_s", "desired_flux_w_m2", "junction_applied_c", "phase")}
+    for p in periods:
+        n = news_at.get(p["k"])
+        if n is not None:
+            news = SlaveNews(n["object_temp_c"], _estimate_from(n["estimate"]),
+                             tuple(n["classes"]), n["setpoint_w_m2"], n["link_ok"])
+        step = master.step(p["t_s"], p["dt_s"], PadSensors(p["flux_w_m2"], p["pad_temp_c"],
+                                                           p["force_n"]), news)
+        out["t_s"].append(p["t_s"])
+        out["desired_flux_w_m2"].append(step.desired_flux_w_m2)
+        out["junction_applied_c"].append(step.junction_applied_c)
+        out["phase"].append(step.phase)
+    recorded = {k: [p[k] for p in periods] for k in
+                ("t_s", "desired_flux_w_m2", "junction_applied_c", "phase", "flux_w_m2",
+                 "pad_temp_c")}
+    a = np.array(out["junction_applied_c"], dtype=float)
+    b = np.array(recorded["junction_applied_c"], dtype=float)
+    qa = np.array(out["desired_flux_w_m2"], dtype=float)
+    qb = np.array(recorded["desired_flux_w_m2"], dtype=float)
+    same_nan = np.array_equal(np.isnan(qa), np.isnan(qb))
+    both = ~np.isnan(qa) & ~np.isnan(qb)
+    return out, recorded, {
+        "periods": len(periods), "gains": asdict(config.gains),
+        "recorded_gains": asdict(recorded_gains),
+        "junction_max_abs_diff_c": float(np.max(np.abs(a - b))) if len(a) else 0.0,
+        "desired_max_abs_diff_w_m2": float(np.max(np.abs(qa[both] - qb[both])))
+        if both.any() else 0.0,
+        "identical": bool(len(a) > 0 and np.array_equal(a, b) and same_nan and
+                          np.array_equal(qa[both], qb[both]))}
+
+
+def _replay_slave(rec, cid, identifier, attached):
+    from telethermal.ident.registry import load_model
+    from telethermal.session.slave import Slave
+
+    samples = [m for m in rec.messages("/slave/samples") if m.get("contact_id", 0) == cid]
+    if not samples:
+        return None
+    s = samples[0]
+    identifier = identifier or attached("identifier.npz", load_model)
+    channels = {k: v for k, v in s.items() if isinstance(v, list)}
+    slave = Slave.from_samples(channels, identifier, s["object_ir_c"], s["gap_k"],
+                               s["object_true_c"], s["pad_before_c"])
+    slave.advance_to(math.inf)
+    est = slave.estimate
+    recorded_est = [_estimate_from(m["estimate"]) for m in rec.messages("/slave/estimates")
+                    if m.get("contact_id", 0) == cid]
+    last = recorded_est[-1] if recorded_est else None
+    return {"onset_s": slave.onset_s,
+            "identified": est.label if est is not None and est.decided else "unknown",
+            "decision_time_s": est.t_s if est is not None and est.decided else None,
+            "recorded_identified": last.label if last is not None and last.decided
+            else "unknown",
+            "recorded_decision_time_s": last.t_s if last is not None and last.decided else None,
+            "estimates": len(slave.events), "recorded_estimates": len(recorded_est),
+            "same_estimates": [tuple(e.estimate.posteriors) for e in slave.events] ==
+            [tuple(e.posteriors) for e in recorded_est]}
+
+
+def plot_replay(result: dict, path: str | Path) -> Path:
+    """The session from its recording: flux and temperature at the master's
+    pad (recorded, and the simulator's truth and direct contact when the
+    recording has them), the replayed setpoint beside the recorded one, the
+    decision instant, and the periods the display was in its safe state or
+    had lost the link shaded."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rec, rep, s = result["recorded"], result["replayed"], result["summary"]
+    if rec is None:
+        return _plot_slave(result, path)
+    t = np.asarray(rec["t_s"], dtype=float)
+    fig, (ax_q, ax_t) = plt.subplots(1, 2, figsize=(13, 4.6))
+    tr = result.get("trace")
+    if tr:
+        # The simulator's truth (a lab recording has none): what reached the
+        # finger, and direct contact where the session computed it.
+        tt = np.asarray(tr["t_s"], dtype=float)
+        for ax, key, style, label in (
+                (ax_q, "direct_flux_w_m2", "k-", "direct contact (simulated truth)"),
+                (ax_q, "flux_w_m2", "C3-", "rendered into the finger (simulated truth)"),
+                (ax_t, "direct_skin_c", "k-", "skin, direct contact"),
+                (ax_t, "skin_surface_c", "C3-", "skin, rendered")):
+            if key in tr:
+                values = np.asarray(tr[key], dtype=float)
+                ax.plot(tt, values / 1e3 if ax is ax_q else values, style,
+                        lw=2 if style == "k-" else 1, label=label)
+    ax_q.plot(t, np.asarray(rec["flux_w_m2"], dtype=float) / 1e3, "C0-", lw=0.8,
+              label="pad sensor (recorded)")
+    ax_q.plot(t, np.asarray(rec["desired_flux_w_m2"], dtype=float) / 1e3, "C2-", lw=1.5,
+              label="setpoint (recorded)")
+    ax_q.plot(rep["t_s"], np.asarray(rep["desired_flux_w_m2"], dtype=float) / 1e3, "m--",
+              lw=1, label="setpoint (replayed)")
+    ax_t.plot(t, np.asarray(rec["pad_temp_c"], dtype=float), "C0-", lw=0.8,
+              label="display pad (recorded)")
+    ax_t.plot(t, np.asarray(rec["junction_applied_c"], dtype=float), "C7-", lw=1,
+              label="junction (recorded)")
+    ax_t.plot(rep["t_s"], rep["junction_applied_c"], "m--", lw=1, label="junction (replayed)")
+    phases = np.asarray(rec["phase"], dtype=object)
+    for ax in (ax_q, ax_t):
+        for bad, color in (("link lost", "C3"),):
+            mask = phases == bad
+            if mask.any():
+                ax.fill_between(t, 0, 1, where=mask, color=color, alpha=0.15,
+                                transform=ax.get_xaxis_transform(), label=bad)
+        slave = s.get("slave") or {}
+        if slave.get("decision_time_s") is not None and slave.get("onset_s") is not None:
+            x = slave["onset_s"] + slave["decision_time_s"]
+            ax.axvline(x, color="C2", lw=0.8)
+            ax.annotate(f"slave: {slave['identified']}", (x, 0.02),
+                        xycoords=("data", "axes fraction"), fontsize=8, color="C2")
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("time since contact (s)")
+        ax.legend(fontsize=7)
+    ax_q.set_ylabel("heat flux pad -> finger (kW/m$^2$)")
+    ax_t.set_ylabel("temperature (C)")
+    verdict = "identical to the recording" if s["identical"] else \
+        f"junction differs by up to {s['junction_max_abs_diff_c']:.3g} K"
+    fig.suptitle(f"replay of {Path(s['file']).name}: {s['periods']} periods, {verdict}",
+                 fontsize=10)
+    return _save(fig, path)
+
+
+def _save(fig, path) -> Path:
+    import os
+
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+def _plot_slave(result: dict, path) -> Path:
+    """A slave's recording: the pad's flux and temperature, the onset and
+    the decision, recorded beside replayed."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pad, sl = result["slave_samples"], result["summary"].get("slave") or {}
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    t = np.asarray(pad["t_s"], dtype=float)
+    ax.plot(t, np.asarray(pad["heat_flux_W_m2"], dtype=float) / 1e3, "C0-", lw=1,
+            label="sensing pad heat flux")
+    ax.set_ylabel("heat flux pad -> object (kW/m$^2$)")
+    ax2 = ax.twinx()
+    ax2.plot(t, np.asarray(pad["temperature_C"], dtype=float), "C1-", lw=1,
+             label="sensing pad temperature")
+    ax2.set_ylabel("temperature (C)")
+    if sl.get("onset_s") is not None:
+        ax.axvline(sl["onset_s"], color="0.5", lw=0.8)
+        for time_key, label_key, color, ls, y in (
+                ("decision_time_s", "identified", "C2", "-", 0.02),
+                ("recorded_decision_time_s", "recorded_identified", "m", "--", 0.08)):
+            if sl.get(time_key) is not None:
+                x = sl["onset_s"] + sl[time_key]
+                ax.axvline(x, color=color, ls=ls, lw=0.9)
+                who = "replayed" if label_key == "identified" else "recorded"
+                ax.annotate(f"{who}: {sl[label_key]}", (x, y),
+                            xycoords=("data", "axes fraction"), fontsize=8)
+    ax.set_xlabel("time (s)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=7)
+    fig.suptitle(f"replay of {Path(result['summary']['file']).name}, contact "
+                 f"{result['summary']['contact_id']} (slave)", fontsize=10)
+    return _save(fig, path)

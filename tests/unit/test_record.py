@@ -1,0 +1,144 @@
+"""Recordings: MCAP written beside a running session, read back whole or up
+to a cut, versions, a disk that fills up mid-recording, replay sample for
+sample, and dataset import."""
+
+import errno
+
+import numpy as np
+import pytest
+
+from telethermal.data.dataset import load_dataset
+from telethermal.errors import DatasetError
+from telethermal.physics.scene import load_scene
+from telethermal.record import recording
+from telethermal.record.importer import import_recordings
+from telethermal.record.recording import Recorder, RecordingError, read_recording
+from telethermal.record.session import replay
+from telethermal.session.models import train_generator, train_identifier
+from telethermal.session.run import run_session, with_finger
+
+SCENE = with_finger(load_scene("fingertip-7"))
+
+
+@pytest.fixture(scope="module")
+def models():
+    return train_identifier(SCENE, 0), train_generator(SCENE, 0)
+
+
+@pytest.fixture(scope="module")
+def recorded(models, tmp_path_factory):
+    path = tmp_path_factory.mktemp("rec") / "session.mcap"
+    result = run_session(SCENE, "plexiglass", *models, contact_s=1.0, seed=2, record=path)
+    return path, result
+
+
+def test_a_session_recording_holds_every_period_the_models_and_the_config(recorded):
+    path, result = recorded
+    rec = read_recording(path)
+    assert rec.truncated is None and rec.role == "session"
+    assert rec.config["material"] == "plexiglass" and rec.config["seed"] == 2
+    assert set(rec.attachments) == {"identifier.npz", "generator.npz"}
+    periods = rec.messages("/master/period")
+    assert len(periods) == len(result.trace["t_s"])
+    np.testing.assert_array_equal([p["junction_applied_c"] for p in periods],
+                                  result.trace["junction_c"])
+    assert result.summary["recording"]["dropped_queue_full"] == 0
+    assert rec.metadata["telethermal"]["protocol_version"] == "1"
+
+
+def test_the_same_models_replay_the_same_commands_sample_for_sample(recorded):
+    path, _ = recorded
+    same = replay(path)["summary"]
+    assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
+    assert same["slave"]["same_estimates"]
+    from telethermal.session.master import DEFAULT_GAINS
+    from dataclasses import replace
+    other = replay(path, gains=replace(DEFAULT_GAINS, kp=3e-3))["summary"]
+    assert not other["identical"] and other["junction_max_abs_diff_c"] > 0.01
+
+
+@pytest.mark.parametrize("keep", [0.3, 0.7, 0.999])
+def test_a_recording_cut_mid_write_is_read_up_to_the_cut(recorded, tmp_path, keep):
+    path, _ = recorded
+    data = path.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:int(len(data) * keep)])
+    whole, part = read_recording(path), read_recording(cut)
+    assert part.truncated is not None
+    got = part.messages("/master/period")
+    assert 0 < len(got) <= len(whole.messages("/master/period"))
+    # A prefix, intact (compared as text: the setpoint is NaN while idle).
+    assert repr(got) == repr(whole.messages("/master/period")[:len(got)])
+
+
+def test_versions_older_protocol_is_read_with_a_note_others_are_refused(tmp_path, monkeypatch):
+    import telethermal.wire.schema as schema
+
+    def write(name):
+        r = Recorder(tmp_path / name, "test")
+        r.log("/master/period", 0.0, {"k": 0})
+        r.close()
+        return tmp_path / name
+
+    monkeypatch.setattr(schema, "PROTOCOL_VERSION", 0)
+    older = write("older.mcap")
+    monkeypatch.setattr(schema, "PROTOCOL_VERSION", 2)
+    newer = write("newer.mcap")
+    monkeypatch.setattr(schema, "PROTOCOL_VERSION", 1)
+    monkeypatch.setattr(recording, "RECORDING_VERSION", 0)
+    old_layout = write("old-layout.mcap")
+    monkeypatch.undo()
+    rec = read_recording(older)
+    assert rec.messages("/master/period") == [{"k": 0}]
+    assert "older than 1" in rec.notes[0]
+    with pytest.raises(RecordingError, match="protocol version 2, newer"):
+        read_recording(newer)
+    with pytest.raises(RecordingError, match="recording version 0"):
+        read_recording(old_layout)
+    (tmp_path / "x.mcap").write_bytes(b"not an mcap file at all")
+    with pytest.raises(RecordingError, match="not a telethermal recording"):
+        read_recording(tmp_path / "x.mcap")
+
+
+class FillingDisk:
+    """A file on a disk that is full after ``room`` bytes."""
+
+    def __init__(self, path, mode, room):
+        self.f = open(path, mode)
+        self.room = room
+
+    def write(self, data):
+        if len(data) > self.room:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self.room -= len(data)
+        return self.f.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self.f, name)
+
+
+def test_a_disk_that_fills_up_stops_the_recording_not_the_session(models, tmp_path,
+                                                                      monkeypatch, caplog):
+    monkeypatch.setattr(recording, "_open", lambda p, m: FillingDisk(p, m, 200_000))
+    path = tmp_path / "full.mcap"
+    result = run_session(SCENE, "wood", *models, contact_s=1.0, seed=2, record=path)
+    s = result.summary
+    rec_report = s["recording"]
+    assert "No space left on device" in rec_report["error"] and str(path) in rec_report["error"]
+    assert rec_report["written"] > 0 and rec_report["dropped_after_error"] > 0
+    assert s["safety_events"] == 0 and np.isfinite(s["flux_rms_error_rel_whole"])
+    assert "the session goes on" in caplog.text
+    assert len(read_recording(path).messages("/master/period")) > 0   # up to the full disk
+
+
+def test_dataset_import_adds_recorded_contacts_all_or_nothing(recorded, tmp_path):
+    path, result = recorded
+    into = tmp_path / "db"
+    assert import_recordings([path], into) == (0, 1)
+    trial = load_dataset(into)[0]
+    assert trial.material == "plexiglass" and trial.sample_rate_hz == pytest.approx(
+        SCENE.sample_rate_hz)
+    assert len(trial.channels["t_s"]) > 10
+    with pytest.raises(DatasetError, match="imported before"):
+        import_recordings([path], into)
+    assert len(load_dataset(into)) == 1                            # left as it was
