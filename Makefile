@@ -27,6 +27,9 @@ bench: $(STAMP)
 	$(VENV)/bin/telethermal bench render --json $(OUT)/bench/render.json --png $(OUT)/bench/render.png
 	$(VENV)/bin/telethermal bench transport --json $(OUT)/bench/transport.json
 	$(VENV)/bin/telethermal bench faults --json $(OUT)/bench/faults.json
+	$(VENV)/bin/telethermal bench devices --json $(OUT)/bench/devices.json
+	$(VENV)/bin/telethermal bench record --json $(OUT)/bench/record.json
+	$(VENV)/bin/telethermal bench report --results $(OUT)/bench --out $(OUT)/bench/report.md
 
 clean:
 	rm -rf $(VENV) $(OUT)

@@ -226,6 +226,14 @@ def cmd_bench_record(args) -> int:
     return 0
 
 
+def cmd_bench_report(args) -> int:
+    from telethermal.bench.report import write_report
+
+    path = write_report(args.results, args.out, "telethermal " + " ".join(sys.argv[1:]))
+    print(f"wrote {path}")
+    return 0
+
+
 def cmd_bench_transport(args) -> int:
     from telethermal.bench import transport
 
@@ -757,6 +765,12 @@ def build_parser() -> argparse.ArgumentParser:
                                           "loopback and across network namespaces")
     p.add_argument("--json", required=True)
     p.set_defaults(func=cmd_bench_transport)
+
+    p = bsub.add_parser("report", help="every benchmark's JSON in one Markdown report with "
+                                       "its figures")
+    p.add_argument("--results", required=True, help="folder of the benches' JSON files")
+    p.add_argument("--out", required=True, help="report.md (its PNGs are written beside it)")
+    p.set_defaults(func=cmd_bench_report)
 
     p = bsub.add_parser("record", help="what recording costs the master's 1 kHz loop")
     p.add_argument("--json", required=True)

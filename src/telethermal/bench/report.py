@@ -1,0 +1,247 @@
+"""``telethermal bench report``: every benchmark's JSON in one Markdown
+report with its figures (speed against error), each stating the machine,
+the date and the command that produced it."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def _load(results: Path, name: str) -> dict | None:
+    path = results / f"{name}.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _provenance(d: dict) -> str:
+    return (f"*Machine {d.get('machine', '?')}; {d.get('date', '?')}; "
+            f"`{d.get('command', '?')}`.*")
+
+
+def _save(fig, path: Path) -> str:
+    fig.tight_layout()
+    tmp = path.with_name(f".{path.name}.tmp")
+    fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path.name
+
+
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:.2f} %"
+
+
+def _figure(out: Path, d: dict, name: str) -> str:
+    """The bench's own PNG (named in its JSON, or beside it), copied beside
+    the report."""
+    png = d.get("png") or str(d.get("_results", Path(".")) / f"{name}.png")
+    if not Path(png).is_file():
+        return ""
+    dest = out / f"{name}.png"
+    if Path(png).resolve() != dest.resolve():
+        dest.write_bytes(Path(png).read_bytes())
+    return f"![{name}]({dest.name})\n"
+
+
+def physics(out: Path, d: dict) -> list[str]:
+    rows = d["rows"]
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    for model in sorted({r["model"] for r in rows}):
+        rs = [r for r in rows if r["model"] == model]
+        ax.loglog([r["runtime_s"] for r in rs], [r["max_rel_error"] for r in rs], "o",
+                  ms=3, label=model)
+    ax.set_xlabel("runtime (s)")
+    ax.set_ylabel("max relative error against the reference")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    ax.set_title("physics: error against runtime", fontsize=9)
+    png = _save(fig, out / "physics_speed_error.png")
+    dft = d["default"]
+    return ["## Physics: error against runtime", "",
+            f"The default solver: max relative error {dft['max_rel_error']:.2g} "
+            f"(tolerance {dft['tolerance_rel']:g}) at {dft['runtime_s_per_simulated_s']:.2g} s "
+            f"of CPU per simulated second; heat balance over 60 s: relative error "
+            f"{d['heat_balance_60s']['relative_error']:.2g}.", "",
+            f"![physics]({png})", "", _figure(out, d, "physics"), _provenance(d), ""]
+
+
+def identify(out: Path, d: dict) -> list[str]:
+    lines = ["## Identification: accuracy against time after contact, per method", "",
+             "Beside learning-based-thermal-rendering Table 1 (its 7 materials, and 5 "
+             "classes with the indistinguishable pairs merged).", "",
+             "| method | classes | 0.25 s | 0.5 s | 0.75 s | 1 s |", "|---|---|---|---|---|---|"]
+    keys = ("0.25", "0.5", "0.75", "1")
+    t1 = {}
+    for name, m in d["methods"].items():
+        t1 = m.get("table1", {}) or t1
+        for n in (7, 5):
+            acc = m.get("table1", {}).get(f"accuracy_{n}", {})
+            lines.append(f"| {name} | {n} | " + " | ".join(_pct(acc.get(k)) for k in keys) + " |")
+    for n in (7, 5):
+        paper = t1.get(f"paper_accuracy_{n}")
+        if isinstance(paper, str):
+            lines.append(f"| the paper | {n} | {paper} | | | |")
+        elif paper:
+            lines.append(f"| the paper | {n} | " + " | ".join(_pct(paper.get(k)) for k in keys)
+                         + " |")
+    lines += ["",
+              _figure(out, d, "identify"), _provenance(d), ""]
+    return lines
+
+
+def render(out: Path, d: dict) -> list[str]:
+    rate = d["rate"]
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    ax.semilogx([r["rate_hz"] for r in rate], [100 * r["mean_flux_rms_error_rel"] for r in rate],
+                "o-", label="flux error after identification (% of peak)")
+    ax2 = ax.twinx()
+    ax2.loglog([r["rate_hz"] for r in rate], [r["mean_cpu_s_per_simulated_s"] for r in rate],
+               "s--", color="C1", label="CPU s per simulated s")
+    ax.set_xlabel("display loop rate (Hz)")
+    ax.set_ylabel("mean flux error (% of peak)")
+    ax2.set_ylabel("CPU s per simulated s")
+    ax.grid(alpha=0.3)
+    fig.legend(fontsize=7, loc="upper center")
+    png = _save(fig, out / "render_rate.png")
+    lines = ["## Rendering: error against loop rate", "",
+             "| rate | mean flux error | worst | skin RMS | CPU s / simulated s |",
+             "|---|---|---|---|---|"]
+    for r in rate:
+        lines.append(f"| {r['rate_hz']:g} Hz | {_pct(r['mean_flux_rms_error_rel'])} | "
+                     f"{_pct(r['max_flux_rms_error_rel'])} | {r['mean_temp_rms_error_c']:.2f} K"
+                     f" | {r['mean_cpu_s_per_simulated_s']:.3g} |")
+    for rc in d.get("real_clock", []):
+        lines.append(f"\nReal clock at {rc['rate_hz']:g} Hz: period p99 "
+                     f"{rc['period_p99_us']:.0f} us, {rc['deadline_misses']} deadline misses "
+                     f"of {rc['steps']}, {rc['stalls']} stalls.")
+    lines += ["", f"![render rate]({png})", "", _figure(out, d, "render"), _provenance(d), ""]
+    return lines
+
+
+def transport(out: Path, d: dict) -> list[str]:
+    lb = d["loopback"]
+    names = [k for k in ("raw_plain", "e2e_plain", "raw_curve", "e2e_curve") if k in lb]
+    fig, ax = plt.subplots(figsize=(6.5, 3.6))
+    x = np.arange(len(names))
+    ax.bar(x - 0.2, [lb[n]["p50_us"] for n in names], 0.4, label="p50")
+    ax.bar(x + 0.2, [lb[n]["p99_us"] for n in names], 0.4, label="p99")
+    ax.set_xticks(x, [n.replace("_", " ") for n in names])
+    ax.set_ylabel("one-way latency (us)")
+    ax.legend(fontsize=7)
+    ax.set_title("transport on loopback: telethermal (e2e) beside raw pyzmq", fontsize=9)
+    png = _save(fig, out / "transport.png")
+    return ["## Transport: latency beside raw ZeroMQ", "",
+            f"End to end (codec, sequence, acks) on loopback: p50 {d['e2e_p50_us']:.0f} us, "
+            f"p99 {d['e2e_p99_us']:.0f} us, {d['ratio_to_raw_zmq_p50']:.2f}x raw pyzmq "
+            f"({d['raw_zmq_p50_us']:.0f} us); with CURVE {d['curve_ratio_to_raw_zmq_p50']:.2f}x.",
+            "", f"![transport]({png})", "", _provenance(d), ""]
+
+
+def faults(out: Path, d: dict) -> list[str]:
+    rows = d["rows"]
+    delays = [(r["profile"].get("delay_s", 0.0), r) for r in rows
+              if r["fault"].startswith("delay") and "," not in r["fault"]]
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    xs = [1e3 * x for x, _ in delays]
+    for key, style, label in (("compensated_flux_rms_error_rel", "o-", "compensated, whole contact"),
+                              ("naive_flux_rms_error_rel", "s-", "naive, whole contact"),
+                              ("compensated_flux_rms_error_rel_late", "o--",
+                               "compensated, from 0.6 s"),
+                              ("naive_flux_rms_error_rel_late", "s--", "naive, from 0.6 s")):
+        ys = [100 * r[key] if r.get(key) is not None else np.nan for _, r in delays]
+        ax.plot(xs, ys, style, label=label)
+    ax.set_xlabel("one-way delay (ms)")
+    ax.set_ylabel("flux error (% of peak)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    png = _save(fig, out / "faults_delay.png")
+    lines = ["## Rendering under network faults, beside the naive baseline", "",
+             "| fault | compensated | naive | safety events | lossless stream "
+             "(gaps/recovered/dup/resent/dropped) | recovery (bound) |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lo = r["lossless"]
+        rec = "" if "recovery_s" not in r else (
+            "not back" if r["recovery_s"] is None else
+            f"{r['recovery_s']:.2f} s ({r['recovery_bound_s']:.2f} s)")
+        lines.append(f"| {r['fault']} | {_pct(r['compensated_flux_rms_error_rel'])} | "
+                     f"{_pct(r['naive_flux_rms_error_rel'])} | {r['safety_events']} | "
+                     f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
+                     f"{lo['lossless_dropped']} | {rec} |")
+    s = d.get("summary", {})
+    if s:
+        lines.append(f"\nAt {s['ratio_setting']}: compensated {s['compensated_ratio_200ms']:.2f}x "
+                     f"its zero-delay error over the whole contact, naive "
+                     f"{s['naive_ratio_200ms']:.2f}x; from {s.get('late_from_s', 0.6)} s on, "
+                     f"{s.get('compensated_ratio_200ms_late', float('nan')):.2f}x and "
+                     f"{s.get('naive_ratio_200ms_late', float('nan')):.2f}x.")
+    lines += ["", f"![faults against delay]({png})", "", _figure(out, d, "faults"),
+              _provenance(d), ""]
+    return lines
+
+
+def devices(out: Path, d: dict) -> list[str]:
+    p = d["paths"]
+    e = p["emulated"]
+    lines = ["## Devices: the emulated serial and CAN paths beside the direct simulator", "",
+             "| path | p50 | p99 |", "|---|---|---|",
+             f"| direct simulator read | {p['sim']['read']['p50_us']:.0f} us | "
+             f"{p['sim']['read']['p99_us']:.0f} us |",
+             f"| serial: board frame to converted reading | "
+             f"{e['serial_sensor_to_controller']['p50_us']:.0f} us | "
+             f"{e['serial_sensor_to_controller']['p99_us']:.0f} us |",
+             f"| CAN: setpoint to the driver applying it | "
+             f"{e['can_controller_to_actuator']['p50_us']:.0f} us | "
+             f"{e['can_controller_to_actuator']['p99_us']:.0f} us |", ""]
+    for kind, r in d["sessions_1khz_real_clock"].items():
+        lines.append(f"- 1 kHz real-clock session, {kind}: period p99 "
+                     f"{r['loop_period_p99_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, "
+                     f"{r['deadline_misses']} deadline misses of {r['steps']}, flux error "
+                     f"{_pct(r['flux_rms_error_rel_whole'])}.")
+    return lines + ["", _provenance(d), ""]
+
+
+def record(out: Path, d: dict) -> list[str]:
+    b, m, n = d["busy_mean_us"], d["deadline_misses"], d["steps"]
+    return ["## Recording: its cost to the master's 1 kHz loop", "",
+            f"Busy time per period {b['without']:.0f} us without recording, {b['with']:.0f} us "
+            f"with: {100 * d['cost_of_period_budget']:.1f} % of the 1 ms budget. The "
+            f"recorder's log call: p50 {d['log_call_p50_us']:.1f} us, p99 "
+            f"{d['log_call_p99_us']:.1f} us. Deadline misses {m['without']} of {n['without']} "
+            f"without, {m['with']} of {n['with']} with.", "", _provenance(d), ""]
+
+
+SECTIONS = (("physics", physics), ("identify", identify), ("render", render),
+            ("transport", transport), ("faults", faults), ("devices", devices),
+            ("record", record))
+
+
+def write_report(results: str | Path, out_md: str | Path, command: str = "") -> Path:
+    results, out_md = Path(results), Path(out_md)
+    out = out_md.parent
+    out.mkdir(parents=True, exist_ok=True)
+    lines = ["# telethermal: speed against error", "",
+             "Every figure below comes from a `telethermal bench ...` command run on the "
+             "machine and at the date stated under it; the JSON it was read from is beside "
+             f"this file. Report written by `{command or 'telethermal bench report'}`.", ""]
+    missing = []
+    for name, section in SECTIONS:
+        d = _load(results, name)
+        if d is None:
+            missing.append(name)
+            continue
+        d["_results"] = results
+        lines += section(out, d)
+    if missing:
+        lines += [f"Not run: {', '.join(missing)} (no JSON in {results})."]
+    tmp = out_md.with_name(f".{out_md.name}.tmp")
+    tmp.write_text("\n".join(lines) + "\n")
+    os.replace(tmp, out_md)
+    return out_md
