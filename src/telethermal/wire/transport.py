@@ -201,7 +201,9 @@ class Endpoint:
         sock.linger = 0
         sock.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
         sock.setsockopt(zmq.RECONNECT_IVL, 100)
-        sock.setsockopt(zmq.RECONNECT_IVL_MAX, 2000)
+        # At most 0.5 s between attempts: a restarted peer is found again well
+        # within one heartbeat timeout (a 2 s cap measured 1.4 s to relink).
+        sock.setsockopt(zmq.RECONNECT_IVL_MAX, 500)
 
     def _bind(self, sock, port: int) -> int:
         """Bind; port 0 takes a free one (tests). Returns the port bound."""

@@ -1,0 +1,30 @@
+"""bench report: every committed benchmark in one Markdown file, each
+section stating machine, date and command, its figures written beside it."""
+
+import re
+import shutil
+from pathlib import Path
+
+from telethermal.bench.report import SECTIONS, write_report
+
+RESULTS = Path(__file__).parents[2] / "bench" / "results"
+
+
+def test_the_report_has_every_section_with_its_provenance_and_figures(tmp_path):
+    md = write_report(RESULTS, tmp_path / "report.md", "make bench")
+    text = md.read_text()
+    present = [name for name, _ in SECTIONS if (RESULTS / f"{name}.json").is_file()]
+    assert len(present) == len(SECTIONS)          # every bench has committed results
+    assert text.count("*Machine ") == len(present)
+    for image in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text):
+        assert (tmp_path / image).is_file(), image
+    assert "Not run" not in text
+
+
+def test_a_missing_bench_is_named_not_invented(tmp_path):
+    partial = tmp_path / "results"
+    partial.mkdir()
+    shutil.copy(RESULTS / "transport.json", partial)
+    text = write_report(partial, tmp_path / "out" / "report.md").read_text()
+    assert "## Transport" in text and "## Physics" not in text
+    assert "Not run: physics, identify, render, faults, devices, record" in text
