@@ -573,6 +573,28 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_peltier_emulator(args) -> int:
+    """An emulated Peltier driver on a CAN bus, until SIGTERM/SIGINT: to try
+    a master's CAN path without the hardware."""
+    import signal
+
+    from telethermal.devices.emulators import PeltierEmulator
+
+    stop = []
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.append(1))
+    emulator = PeltierEmulator(args.bus, lambda _c: None)
+    print(f"Peltier driver emulator on {args.bus}", flush=True)
+    try:
+        while not stop:
+            emulator.poll()
+            time.sleep(5e-4)
+    finally:
+        emulator.close()
+    print(json.dumps(emulator.counters))
+    return 0
+
+
 def cmd_dataset_import(args) -> int:
     from telethermal.record.importer import import_recordings
 
@@ -726,6 +748,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--material", help="the material touched (required for lab recordings)")
     p.add_argument("--group", default="recorded")
     p.set_defaults(func=cmd_dataset_import)
+
+    p = sub.add_parser("peltier-emulator", help="an emulated Peltier driver on a CAN bus "
+                                                "(proto/CAN.md), until SIGTERM")
+    p.add_argument("--bus", required=True, help="interface:channel, e.g. virtual:display or "
+                                                "udp_multicast:239.74.163.2")
+    p.set_defaults(func=cmd_peltier_emulator)
 
     p = sub.add_parser("replay", help="re-run the rendering and the identifier on a recording "
                                       "(new models or gains) and plot the session")
