@@ -54,7 +54,7 @@ SETTINGS = [
     ("master crash and restart mid-contact", {"delay_s": 0.005, "crash": "master"}),
 ]
 #: The proxy starts; touches begin this long after (so a partition can be placed).
-SETTLE_S = 4.0
+SETTLE_S = 1.5
 #: Faults mid-contact start this long after the contact onset.
 FAULT_AT_S = 0.5
 PARTITION_S = 2.0
