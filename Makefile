@@ -29,7 +29,7 @@ bench: $(STAMP)
 	$(VENV)/bin/telethermal bench faults --json $(OUT)/bench/faults.json
 	$(VENV)/bin/telethermal bench devices --json $(OUT)/bench/devices.json
 	$(VENV)/bin/telethermal bench record --json $(OUT)/bench/record.json
-	$(VENV)/bin/telethermal bench report --results $(OUT)/bench --out $(OUT)/bench/report.md
+	$(VENV)/bin/telethermal bench report --results $(OUT)/bench --out bench/report.md
 
 clean:
 	rm -rf $(VENV) $(OUT)
