@@ -219,7 +219,7 @@ def cmd_bench_record(args) -> int:
     print(f"master loop busy per period: {b['without']:.0f} us without recording, "
           f"{b['with']:.0f} us with: +{report['extra_busy_per_period_us']:.1f} us = "
           f"{100 * report['cost_of_period_budget']:.1f} % of the 1 ms budget")
-    print(f"recorder.log call: p50 {report['log_call_p50_us']:.1f} us, p99 "
+    print(f"recorder call per period: p50 {report['log_call_p50_us']:.1f} us, p99 "
           f"{report['log_call_p99_us']:.1f} us; deadline misses {m['without']} of "
           f"{report['steps']['without']} without, {m['with']} of {report['steps']['with']} with")
     print(f"wrote {args.json}")

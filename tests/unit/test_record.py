@@ -13,7 +13,7 @@ from telethermal.physics.scene import load_scene
 from telethermal.record import recording
 from telethermal.record.importer import import_recordings
 from telethermal.record.recording import Recorder, RecordingError, read_recording
-from telethermal.record.session import replay
+from telethermal.record.session import periods, replay
 from telethermal.session.models import train_generator, train_identifier
 from telethermal.session.run import run_session, with_finger
 
@@ -38,9 +38,9 @@ def test_a_session_recording_holds_every_period_the_models_and_the_config(record
     assert rec.truncated is None and rec.role == "session"
     assert rec.config["material"] == "plexiglass" and rec.config["seed"] == 2
     assert set(rec.attachments) == {"identifier.npz", "generator.npz"}
-    periods = rec.messages("/master/period")
-    assert len(periods) == len(result.trace["t_s"])
-    np.testing.assert_array_equal([p["junction_applied_c"] for p in periods],
+    rows = periods(rec)
+    assert len(rows) == len(result.trace["t_s"])
+    np.testing.assert_array_equal([p["junction_applied_c"] for p in rows],
                                   result.trace["junction_c"])
     assert result.summary["recording"]["dropped_queue_full"] == 0
     assert rec.metadata["telethermal"]["protocol_version"] == "1"
@@ -65,10 +65,10 @@ def test_a_recording_cut_mid_write_is_read_up_to_the_cut(recorded, tmp_path, kee
     cut.write_bytes(data[:int(len(data) * keep)])
     whole, part = read_recording(path), read_recording(cut)
     assert part.truncated is not None
-    got = part.messages("/master/period")
-    assert 0 < len(got) <= len(whole.messages("/master/period"))
+    got = periods(part)
+    assert 0 < len(got) <= len(periods(whole))
     # A prefix, intact (compared as text: the setpoint is NaN while idle).
-    assert repr(got) == repr(whole.messages("/master/period")[:len(got)])
+    assert repr(got) == repr(periods(whole)[:len(got)])
 
 
 def test_versions_older_protocol_is_read_with_a_note_others_are_refused(tmp_path, monkeypatch):
@@ -128,7 +128,7 @@ def test_a_disk_that_fills_up_stops_the_recording_not_the_session(models, tmp_pa
     assert rec_report["written"] > 0 and rec_report["dropped_after_error"] > 0
     assert s["safety_events"] == 0 and np.isfinite(s["flux_rms_error_rel_whole"])
     assert "the session goes on" in caplog.text
-    assert len(read_recording(path).messages("/master/period")) > 0   # up to the full disk
+    assert len(periods(read_recording(path))) > 0                    # up to the full disk
 
 
 def test_dataset_import_adds_recorded_contacts_all_or_nothing(recorded, tmp_path):

@@ -38,16 +38,18 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
                                    "deadline_misses": loop["deadline_misses"],
                                    "steps": loop["steps"],
                                    "recording": s.get("recording")})
-        # The log call alone, as the loop makes it (one period and, on
-        # change, one news message per period).
+        # The recorder's call alone, as the loop makes it once per period
+        # (the news unchanged, as in most periods).
         from telethermal.record.recording import Recorder
-        rec = Recorder(Path(tmp) / "calls.mcap", "bench")
-        msg = {"k": 0, "t_s": 0.0, "dt_s": 1e-3, "flux_w_m2": -1234.5, "pad_temp_c": 30.1,
-               "force_n": 4.0, "phase": "render", "desired_flux_w_m2": -1200.0,
-               "junction_cmd_c": 25.0, "junction_applied_c": 25.0, "safe": False}
+        from telethermal.record.session import SessionRecorder
+        from telethermal.session.master import MasterStep, PadSensors, SlaveNews
+        rec = SessionRecorder(Recorder(Path(tmp) / "calls.mcap", "bench"))
+        news = SlaveNews(24.0)
         for k in range(5000):
+            sensors = PadSensors(-1234.5 + k, 30.1, 4.0)
+            step_ = MasterStep(k * 1e-3, "render", True, -1200.0, 25.0, 25.0, False)
             t0 = time.perf_counter()
-            rec.log("/master/period", k * 1e-3, dict(msg, k=k))
+            rec.period(k * 1e-3, 1e-3, sensors, news, step_)
             log_calls.append(time.perf_counter() - t0)
             time.sleep(2e-4)
         rec.close()
@@ -68,7 +70,7 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
         "log_call_p99_us": float(np.percentile(calls, 99)),
         "extra_busy_per_period_us": extra,
         "cost_of_period_budget": extra / period_us,
-        "log_calls_of_period_budget": 2 * float(np.percentile(calls, 50)) / period_us,
+        "log_call_of_period_budget": float(np.mean(calls)) / period_us,
         "machine": f"{platform.node()} ({platform.machine()}, "
                    f"{platform.python_implementation()} {platform.python_version()})",
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),

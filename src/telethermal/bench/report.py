@@ -213,7 +213,7 @@ def record(out: Path, d: dict) -> list[str]:
     return ["## Recording: its cost to the master's 1 kHz loop", "",
             f"Busy time per period {b['without']:.0f} us without recording, {b['with']:.0f} us "
             f"with: {100 * d['cost_of_period_budget']:.1f} % of the 1 ms budget. The "
-            f"recorder's log call: p50 {d['log_call_p50_us']:.1f} us, p99 "
+            f"recorder's call per period: p50 {d['log_call_p50_us']:.1f} us, p99 "
             f"{d['log_call_p99_us']:.1f} us. Deadline misses {m['without']} of {n['without']} "
             f"without, {m['with']} of {n['with']} with.", "", _provenance(d), ""]
 

@@ -25,6 +25,28 @@ import numpy as np
 from telethermal.record.recording import Recorder, RecordingError, read_recording
 
 
+#: Control periods per recorded message (columns): 20 ms at 1 kHz, the most a
+#: recording cut mid-write loses of them.
+PERIOD_BATCH = 20
+PERIOD_FIELDS = ("t_s", "dt_s", "flux_w_m2", "pad_temp_c", "force_n", "phase",
+                 "desired_flux_w_m2", "junction_cmd_c", "junction_applied_c", "safe")
+
+
+def periods(rec, contact_id: int | None = None) -> list[dict]:
+    """The recorded control periods, one dict each (from their batches)."""
+    out = []
+    for batch in rec.messages("/master/periods"):
+        cid = batch.get("contact_id", 0)
+        if contact_id is not None and cid != contact_id:
+            continue
+        n = len(batch["t_s"])
+        for i in range(n):
+            row = {k: batch[k][i] for k in PERIOD_FIELDS}
+            row["k"], row["contact_id"] = batch["k0"] + i, cid
+            out.append(row)
+    return out
+
+
 def model_bytes(identifier, generator) -> dict[str, bytes]:
     from telethermal.render.generator import save_generator
     with tempfile.TemporaryDirectory() as tmp:
@@ -81,6 +103,7 @@ class SessionRecorder:
         self._news = None
         self._k = 0
         self.contact_id = 0
+        self._cols = {k: [] for k in PERIOD_FIELDS}
 
     @classmethod
     def open(cls, path, scene, material, identifier, generator, config, operator, idle_c,
@@ -91,10 +114,14 @@ class SessionRecorder:
         return cls(Recorder(path, "session", params, model_bytes(identifier, generator)))
 
     def touch_start(self, t_s: float, contact_id: int, params: dict) -> None:
+        self._flush_periods()
         self.contact_id, self._news, self._k = contact_id, None, 0
         self.rec.log("/master/touch_start", t_s, {"contact_id": contact_id, **params})
 
     def period(self, t_s, dt_s, sensors, news, step) -> None:
+        """One control period. Periods are sent to the writer in batches of
+        ``PERIOD_BATCH`` (columns, one message), which costs the loop a few
+        list appends per period and the writer one record per batch."""
         if news != self._news:
             self._news = news
             self.rec.log("/master/news", t_s, {
@@ -102,13 +129,28 @@ class SessionRecorder:
                 "object_temp_c": news.object_temp_c, "estimate": _estimate(news.estimate),
                 "classes": list(news.classes), "setpoint_w_m2": news.setpoint_w_m2,
                 "link_ok": news.link_ok})
-        self.rec.log("/master/period", t_s, {
-            "contact_id": self.contact_id, "k": self._k, "t_s": t_s, "dt_s": dt_s,
-            "flux_w_m2": sensors.flux_w_m2, "pad_temp_c": sensors.pad_temp_c,
-            "force_n": sensors.force_n, "phase": step.phase,
-            "desired_flux_w_m2": step.desired_flux_w_m2, "junction_cmd_c": step.junction_cmd_c,
-            "junction_applied_c": step.junction_applied_c, "safe": bool(step.safe)})
+        cols = self._cols
+        if not cols["t_s"]:
+            self._k0, self._t0 = self._k, t_s
+        for key, value in (("t_s", t_s), ("dt_s", dt_s), ("flux_w_m2", sensors.flux_w_m2),
+                           ("pad_temp_c", sensors.pad_temp_c), ("force_n", sensors.force_n),
+                           ("phase", step.phase), ("desired_flux_w_m2", step.desired_flux_w_m2),
+                           ("junction_cmd_c", step.junction_cmd_c),
+                           ("junction_applied_c", step.junction_applied_c),
+                           ("safe", bool(step.safe))):
+            cols[key].append(value)
         self._k += 1
+        if len(cols["t_s"]) >= PERIOD_BATCH:
+            self._flush_periods()
+
+    def _flush_periods(self) -> None:
+        cols = self._cols
+        if cols["t_s"]:
+            # The lists are handed over as they are (Python floats, str and
+            # bool, which msgpack takes); new ones start for the next batch.
+            self.rec.log("/master/periods", self._t0, {
+                "contact_id": self.contact_id, "k0": self._k0, **cols})
+        self._cols = {k: [] for k in PERIOD_FIELDS}
 
     def wire(self, t_s: float, direction: str, message: dict) -> None:
         self.rec.log(f"/wire/{direction}/{message['kind']}", t_s, _plain(message))
@@ -125,6 +167,7 @@ class SessionRecorder:
                                                       "estimate": _estimate(ev.estimate)})
 
     def touch_end(self, summary: dict, trace: dict) -> None:
+        self._flush_periods()
         clean = {k: v for k, v in summary.items() if k != "recording"}
         self.rec.log("/master/touch", 0.0, {"contact_id": self.contact_id,
                                             "summary": _plain(clean)})
@@ -135,6 +178,7 @@ class SessionRecorder:
     def close(self, summary: dict | None = None, trace: dict | None = None) -> dict:
         if summary is not None:
             self.touch_end(summary, trace or {})
+        self._flush_periods()
         return self.rec.close()
 
 
@@ -236,12 +280,12 @@ def _replay_master(rec, params, cid, generator, gains, attached):
     master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
                            params["sensor_lag_s"], params["finger_ir_c"],
                            idle_c=params["idle_c"])
-    periods = [p for p in rec.messages("/master/period") if p.get("contact_id", 0) == cid]
+    rows = periods(rec, cid)
     news_at = {n["k"]: n for n in rec.messages("/master/news")
                if n.get("contact_id", 0) == cid}
     news = SlaveNews()
     out = {k: [] for k in ("t_s", "desired_flux_w_m2", "junction_applied_c", "phase")}
-    for p in periods:
+    for p in rows:
         n = news_at.get(p["k"])
         if n is not None:
             news = SlaveNews(n["object_temp_c"], _estimate_from(n["estimate"]),
@@ -252,7 +296,7 @@ def _replay_master(rec, params, cid, generator, gains, attached):
         out["desired_flux_w_m2"].append(step.desired_flux_w_m2)
         out["junction_applied_c"].append(step.junction_applied_c)
         out["phase"].append(step.phase)
-    recorded = {k: [p[k] for p in periods] for k in
+    recorded = {k: [p[k] for p in rows] for k in
                 ("t_s", "desired_flux_w_m2", "junction_applied_c", "phase", "flux_w_m2",
                  "pad_temp_c")}
     a = np.array(out["junction_applied_c"], dtype=float)
@@ -262,7 +306,7 @@ def _replay_master(rec, params, cid, generator, gains, attached):
     same_nan = np.array_equal(np.isnan(qa), np.isnan(qb))
     both = ~np.isnan(qa) & ~np.isnan(qb)
     return out, recorded, {
-        "periods": len(periods), "gains": asdict(config.gains),
+        "periods": len(rows), "gains": asdict(config.gains),
         "recorded_gains": asdict(recorded_gains),
         "junction_max_abs_diff_c": float(np.max(np.abs(a - b))) if len(a) else 0.0,
         "desired_max_abs_diff_w_m2": float(np.max(np.abs(qa[both] - qb[both])))
