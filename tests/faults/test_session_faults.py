@@ -3,6 +3,7 @@ compensated rendering under 200 ms of delay, and what a 2 s partition in the
 middle of a contact leaves behind. Rendering figures only; no wall-clock
 figure is asserted."""
 
+import contextlib
 import subprocess
 import sys
 import threading
@@ -39,19 +40,32 @@ def link(tmp_path_factory):
     assert codes == {"slave": 0, "master": 0}
 
 
-def touch_through(out, services, ports, link, both: str, seed=5):
+@contextlib.contextmanager
+def proxy_between(out, link: str, both: str):
+    """The fault proxy with the ``[both]`` faults, for the ``with`` block."""
     profile = out / "profile.toml"
     profile.write_text(link + "[both]\n" + both)
     proxy = subprocess.Popen([sys.executable, "-m", "telethermal", "faults", "--profile",
                               str(profile)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
+        yield proxy
+    finally:
+        proxy.terminate()
+        proxy.wait(10)
+
+
+def touch_again(services, ports, seed):
+    """Once the link is back: a touch, its summary."""
+    wait_connected(services, ports[3], timeout_s=60)
+    return networked_touch(SCENE, "wood", ports, seed, 2.0).summary
+
+
+def touch_through(out, services, ports, link, both: str, seed=5):
+    with proxy_between(out, link, both):
         wait_connected(services, ports[3], timeout_s=60)
         before = call(ports[3], "status")["counters"]
         result = networked_touch(SCENE, "wood", ports, seed, 2.0).summary
         after = call(ports[3], "status")["counters"]
-    finally:
-        proxy.terminate()
-        proxy.wait(10)
     return result, {k: after[k] - before[k] for k in after}
 
 
@@ -100,10 +114,6 @@ def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
     # the link is dead and nothing it holds is valid), and the restarted slave
     # is found again and renders the next touch.
     out, services, ports, text = link
-    profile = out / "profile.toml"
-    profile.write_text(text + "[both]\ndelay_s = 0.005\n")
-    proxy = subprocess.Popen([sys.executable, "-m", "telethermal", "faults", "--profile",
-                              str(profile)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     def crash():
         time.sleep(PRE_CONTACT_S + 0.5)
@@ -111,26 +121,18 @@ def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
         time.sleep(0.5)
         services.start("slave")
 
-    try:
+    with proxy_between(out, text, "delay_s = 0.005\n"):
         wait_connected(services, ports[3], timeout_s=60)
         under = networked_touch(SCENE, "wood", ports, 7, 2.0, during=crash).summary
         assert under["safety_events"] == 0
         assert under["display_event_counts"].get("link lost") == 1
-        wait_connected(services, ports[3], timeout_s=60)
-        again = networked_touch(SCENE, "wood", ports, 8, 2.0).summary
-    finally:
-        proxy.terminate()
-        proxy.wait(10)
+        again = touch_again(services, ports, 8)
     assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
 
 
 def test_a_master_crash_mid_contact_lifts_the_slave_and_a_new_master_renders(link):
     out, services, ports, text = link
-    profile = out / "profile.toml"
-    profile.write_text(text + "[both]\ndelay_s = 0.005\n")
-    proxy = subprocess.Popen([sys.executable, "-m", "telethermal", "faults", "--profile",
-                              str(profile)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
+    with proxy_between(out, text, "delay_s = 0.005\n"):
         wait_connected(services, ports[3], timeout_s=60)
         lost_before = call(ports[2], "status")["masters_lost"]
         call(ports[2], "place", material="wood", seed=9)
@@ -153,9 +155,5 @@ def test_a_master_crash_mid_contact_lifts_the_slave_and_a_new_master_renders(lin
         assert _wait_for(lambda: call(ports[2], "status")["state"] == "idle", 5)
         assert call(ports[2], "status")["masters_lost"] == lost_before + 1
         services.start("master")
-        wait_connected(services, ports[3], timeout_s=60)
-        again = networked_touch(SCENE, "wood", ports, 10, 2.0).summary
-    finally:
-        proxy.terminate()
-        proxy.wait(10)
+        again = touch_again(services, ports, 10)
     assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
