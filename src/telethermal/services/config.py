@@ -42,17 +42,29 @@ class MasterConfig:
     realtime_priority: int = 0
     #: CPU cores the display loop may run on (empty: any).
     cpus: str = ""
-    #: The display's devices: "sim" (the simulator directly) or "emulated"
+    #: The display's devices: "sim" (the simulator directly), "emulated"
     #: (the simulator behind an emulated sensor board on a pty and an emulated
-    #: Peltier driver on a CAN bus, read through the real drivers).
+    #: Peltier driver on a CAN bus, read through the real drivers), or
+    #: "hardware" (the sensor board at ``board_url`` and the Peltier driver on
+    #: ``can_bus``: the display loop runs all the time and the operator's
+    #: force starts each touch).
     devices: str = "sim"
+    board_url: str = ""             # pyserial URL of the sensor board (hardware)
+    can_bus: str = ""               # interface:channel of the Peltier driver (hardware)
+    calibration: str = ""           # the board's calibration TOML; empty: the defaults
+    #: The finger's temperature before contact (hardware: no IR channel yet).
+    finger_temp_c: float = 33.0
     #: Folder to record every touch to (one MCAP file per run); empty: no recording.
     record_dir: str = ""
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):
-        if self.devices not in ("sim", "emulated"):
-            raise ConfigError(f"devices must be 'sim' or 'emulated', got {self.devices!r}")
+        if self.devices not in ("sim", "emulated", "hardware"):
+            raise ConfigError(f"devices must be 'sim', 'emulated' or 'hardware', got "
+                              f"{self.devices!r}")
+        if self.devices == "hardware" and not (self.board_url and self.can_bus):
+            raise ConfigError("devices = 'hardware' needs board_url (e.g. /dev/ttyUSB0) and "
+                              "can_bus (e.g. socketcan:can0)")
 
 
 def load_config(path: str | Path, role: str):
@@ -83,7 +95,7 @@ def load_config(path: str | Path, role: str):
         value = getattr(transport, key)
         if value and not Path(value).is_absolute():
             transport = replace(transport, **{key: str(base / value)})
-    for key in ("identifier", "generator", "record_dir"):
+    for key in ("identifier", "generator", "record_dir", "calibration"):
         value = getattr(config, key, "")
         if value and not Path(value).is_absolute():
             setattr(config, key, str(base / value))

@@ -15,7 +15,7 @@ import logging
 import math
 import os
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 
 from telethermal.control.loop import FixedRateLoop, RealClock
@@ -62,6 +62,17 @@ class Touch:
         self.trajectory_at: float | None = None
 
 
+@dataclass(frozen=True)
+class _Finger:
+    """What the display parameters need of an operator on hardware."""
+    finger_ir_c: float
+    finger_c: float = float("nan")
+    skin_k_scale: float = float("nan")
+    skin_heat_scale: float = float("nan")
+    force_n: float = float("nan")
+    conductance_w_m2k: float = float("nan")
+
+
 class MasterService:
     def __init__(self, config: MasterConfig):
         self.config = config
@@ -74,11 +85,78 @@ class MasterService:
             self.endpoint.close()
             raise
         self.link = SlaveLink()
+        self.hardware = None
+        if config.devices == "hardware":
+            try:
+                self._open_hardware()
+            except TelethermalError:
+                self.endpoint.close()
+                self.admin.close()
+                raise
         self.recorder = open_recorder(config, "master")
         self.touch: Touch | None = None
         self.next_contact_id = 1
         self.stop_requested = False
         self.state = "idle"
+
+    # ------------------------------------------------------------ hardware
+    def _open_hardware(self) -> None:
+        """The real display: the board and the Peltier driver, and one display
+        loop that runs all the time; the operator's force starts each touch."""
+        from telethermal.devices.board import Calibration
+        from telethermal.devices.display import HardwareDisplay
+
+        cfg = self.config
+        calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
+        self.hardware = HardwareDisplay(cfg.board_url, cfg.can_bus, calibration)
+        self.display = MasterDisplay(self.display_config, None,
+                                     pad_resistance(self.scene.pad.layers),
+                                     self.scene.sensors.flux_lag_s, cfg.finger_temp_c)
+        self.t0 = time.monotonic()
+        self.contact_id: int | None = None
+        log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
+                 cfg.can_bus)
+
+    def _hardware_period(self, now: float, dt_s: float) -> None:
+        display, t = self.display, now - self.t0
+        sp = self.endpoint.latest.get("flux_setpoint")
+        setpoint = sp["flux_w_m2"] if sp is not None and sp["contact_id"] == self.contact_id \
+            else None
+        news = self.link.news(now, self.endpoint.peer_alive, setpoint)
+        display.generator = self.link.generator
+        onset_before, release_before = display.last_onset_s, display.last_release_s
+        sensors = self.hardware.read(t)
+        step = display.step(t, dt_s, sensors, news)
+        self.hardware.apply(t, step, dt_s, sensors.force_n)
+        if display.last_onset_s != onset_before:
+            self.contact_id = self.next_contact_id
+            self.next_contact_id += 1
+            self.link.begin(self.contact_id)
+            self.link.onset(self.t0 + display.last_onset_s)
+            self.state = "touching"
+            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
+                               t_s=self.t0 + display.last_onset_s,
+                               force_n=max(float(sensors.force_n), 0.0),
+                               finger_temp_c=self.config.finger_temp_c)
+            if self.recorder is not None:
+                # (A replay starts a fresh display at this touch; this one has
+                # run since the service started, so it may differ slightly.)
+                self.recorder.touch_start(now, self.contact_id, display_params(
+                    self.scene, self.display_config, _Finger(self.config.finger_temp_c),
+                    display.safety.applied_temp_c))
+        if self.contact_id is not None and self.recorder is not None:
+            self.recorder.period(t, dt_s, sensors, news, step)
+        if display.last_release_s != release_before and self.contact_id is not None:
+            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
+                               t_s=self.t0 + display.last_release_s, force_n=0.0,
+                               finger_temp_c=self.config.finger_temp_c)
+            if self.recorder is not None:
+                self.recorder.touch_end({"contact_id": self.contact_id, **safety_summary(
+                    display), "device_counters": self.hardware.counters()}, {})
+            self.link.end()
+            self.contact_id, self.state = None, "idle"
+        elif display.phase == "render":
+            self.state = "rendering"
 
     # ------------------------------------------------------------ network
     def _on_message(self, m: dict, now: float) -> None:
@@ -101,7 +179,9 @@ class MasterService:
         request = self.admin.receive()
         if request is not None:
             self._on_admin(request, now)
-        if self.touch is not None:
+        if self.hardware is not None:
+            self._hardware_period(now, dt_s)
+        elif self.touch is not None:
             self._touch_period(now, dt_s)
         return not self.stop_requested
 
@@ -168,6 +248,9 @@ class MasterService:
 
     def _on_admin(self, request: dict, now: float) -> None:
         def touch(r):
+            if self.hardware is not None:
+                raise ValueError("the display is on hardware: touches come from the "
+                                 "operator's finger, not from this command")
             if self.link.generator is None or not self.endpoint.peer_alive:
                 raise ValueError("no slave session yet (not connected or no session_config)")
             contact_s = float(r.get("contact_s", 5.0))
@@ -186,7 +269,10 @@ class MasterService:
                 "session": self.link.generator is not None,
                 "object_temp_c": self.link.object_temp_c,
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
-                "counters": dict(e.counters)}
+                "counters": dict(e.counters), "devices": self.config.devices,
+                **({"device_counters": self.hardware.counters(),
+                    "display_phase": self.display.phase, "contact_id": self.contact_id}
+                   if self.hardware is not None else {})}
 
     def _realtime(self) -> None:
         """Real-time scheduling for the display loop, where allowed."""
@@ -216,6 +302,8 @@ class MasterService:
         # The display pad to its safe state first: neutral, not off.
         neutral = self.display_config.limits.neutral_c
         log.info("stopping: display pad to the safe state (%.1f C), sockets closed", neutral)
+        if self.hardware is not None:
+            self.hardware.close()              # the Peltier driver disabled first
         if self.touch is not None:
             self.touch.devices.close()         # the Peltier driver disabled first
             if self.admin.pending:

@@ -1,0 +1,156 @@
+"""The master service with ``devices = "hardware"``: its display loop runs on
+a sensor board and a Peltier driver it only knows by URL and bus, here the
+emulators, in lockstep with the simulator of the pad under the finger. No
+slave is connected: the touch is found by the board's force channel, sent
+as a contact event, and the pad held at neutral (nothing to render); an
+over-temperature driver is the safe state; stopping disables the driver."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
+from telethermal.physics.scene import load_scene
+from telethermal.services.config import ConfigError, MasterConfig
+from telethermal.services.demo import free_ports
+from telethermal.services.master import MasterService
+from telethermal.session.master import MasterStep
+from telethermal.session.run import DisplayTouch, Operator, with_finger
+from telethermal.wire.transport import TransportConfig
+
+SCENE = with_finger(load_scene("fingertip-7"))
+OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat_scale=1.0,
+                    force_n=4.0, conductance_w_m2k=5000.0)
+
+
+def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tmp_path):
+    board = SensorBoardEmulator(tmp_path / "board")
+    applied = []
+    bus = "virtual:master-hardware-test"
+    peltier = PeltierEmulator(bus, applied.append)
+    control, stream, admin = free_ports(3)
+    config = MasterConfig(devices="hardware", board_url=board.path, can_bus=bus,
+                          admin_port=admin, transport=TransportConfig(
+                              security="plain", control_port=control, stream_port=stream))
+    service = MasterService(config)
+    touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 0.6, 33.0, np.random.default_rng(0))
+    phases, safe, events_sent = {}, {}, []
+    try:
+        for k in range(1200):                       # 0.2 s idle, 0.6 s touch, 0.4 s after
+            t = -0.2 + k * 1e-3
+            s = touch.sense(t)
+            board.send(t, s.flux_w_m2, s.pad_temp_c, s.force_n)
+            time.sleep(3e-4)                          # the line delivers the frame
+            if k == 600:
+                peltier.over_temperature()
+            service.step(t, 1e-3)
+            peltier.poll()
+            junction = applied[-1] if applied else 33.0
+            touch.actuate(t, MasterStep(t, "", True, math.nan, junction, junction, False),
+                          1e-3, s.force_n)
+            phases[k] = service.display.phase
+            safe[k] = service.display.safety.safe
+            events_sent.append(service.endpoint.counters["lossless_sent"])
+    finally:
+        service.shutdown()
+        peltier.poll()
+        enabled_after = peltier.enabled
+        peltier.close()
+        board.close()
+    # The touch began (force) and ended: one contact, its two events queued.
+    assert service.next_contact_id == 2 and service.contact_id is None
+    assert events_sent[-1] >= 2
+    # No slave, so nothing to render: the display says the link is lost and
+    # holds the pad at neutral.
+    assert {phases[k] for k in range(300, 600)} == {"link lost"}
+    assert applied[-1] == pytest.approx(33.0)
+    # Until the driver's over-temperature the loop was trusted; after it, safe.
+    assert not any(safe[k] for k in range(100, 600))
+    assert all(safe[k] for k in range(605, 1200))
+    counters = service.hardware.counters()
+    assert counters["board"]["frames"] > 1000 and counters["board"]["crc"] == 0
+    assert counters["peltier"]["faults_reported"] == 1
+    assert not enabled_after                                     # stopping disabled it
+
+
+def test_a_hardware_master_needs_its_ports():
+    with pytest.raises(ConfigError, match="board_url .* and can_bus"):
+        MasterConfig(devices="hardware")
+
+
+def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path):
+    # A slave process on loopback; the master in this process on the emulated
+    # devices. The operator presses for 1.5 s: the slave touches when told,
+    # streams its posteriors, and the master tracks them on the hardware path.
+    import subprocess
+    import sys
+
+    from telethermal.render.generator import save_generator
+    from telethermal.services.admin import call
+    from telethermal.services.demo import write_configs
+    from telethermal.session.models import train_generator, train_identifier
+    from telethermal.session.run import compare_with_direct
+
+    ident = train_identifier(SCENE, 0).save(tmp_path / "identifier.npz")
+    gen = save_generator(train_generator(SCENE, 0), tmp_path / "generator.npz")
+    s_control, s_stream, s_admin, m_admin = free_ports(4)
+    slave_cfg, _ = write_configs(tmp_path, SCENE.name, ident, gen,
+                                 (s_control, s_stream, s_admin, m_admin), 0, security="plain")
+    log = open(tmp_path / "slave.log", "w")
+    slave = subprocess.Popen([sys.executable, "-m", "telethermal", "slave", "--config",
+                              str(slave_cfg)], stdout=log, stderr=subprocess.STDOUT)
+    board = SensorBoardEmulator(tmp_path / "board")
+    applied = []
+    bus = "virtual:master-hardware-slave-test"
+    peltier = PeltierEmulator(bus, applied.append)
+    service = None
+    try:
+        placed = None
+        for _ in range(300):                          # the slave up, the object placed
+            try:
+                placed = call(s_admin, "place", timeout_s=0.5, material="plexiglass", seed=3)
+                break
+            except Exception:                          # noqa: BLE001 - not up yet
+                time.sleep(0.1)
+        assert placed and placed["ok"]
+        service = MasterService(MasterConfig(
+            devices="hardware", board_url=board.path, can_bus=bus, admin_port=m_admin,
+            transport=TransportConfig(security="plain", control_port=s_control,
+                                      stream_port=s_stream)))
+        end = time.monotonic() + 30
+        while not (service.endpoint.peer_alive and service.link.generator is not None and
+                   service.link.object_temp_c is not None) and time.monotonic() < end:
+            service.step(0.0, 1e-3)
+            time.sleep(1e-3)
+        idle = service.link.object_temp_c
+        touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.5, idle, np.random.default_rng(1))
+        phases = []
+        for k in range(int((0.2 + 1.5 + 0.2) * 1000)):
+            t = -0.2 + k * 1e-3
+            s = touch.sense(t)
+            board.send(t, s.flux_w_m2, s.pad_temp_c, s.force_n)
+            deadline = time.monotonic() + 1e-3
+            service.step(t, 1e-3)
+            peltier.poll()
+            junction = applied[-1] if applied else idle
+            touch.actuate(t, MasterStep(t, "", True, math.nan, junction, junction, False),
+                          1e-3, s.force_n)
+            phases.append(service.display.phase)
+            time.sleep(max(0.0, deadline - time.monotonic()))
+        metrics = compare_with_direct(SCENE, "plexiglass", placed["object_true_c"], OPERATOR,
+                                      touch.trace, 1.5, None)
+    finally:
+        if service is not None:
+            service.shutdown()
+        peltier.close()
+        board.close()
+        slave.terminate()
+        slave.wait(10)
+        log.close()
+    assert service.link.counters["stale"] == 0
+    assert phases.count("contact") + phases.count("render") > 1000    # tracked the slave
+    assert "link lost" not in phases
+    assert metrics["flux_rms_error_rel_whole"] < 0.10
+    assert service.display.safety.events.get("entered safe state", 0) == 0
