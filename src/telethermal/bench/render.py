@@ -39,7 +39,8 @@ GAIN_SETS = {
     "P 1e-4": PidGains(1e-4, 0.0, 0.0, **_SAT),
     "PI 1e-4/1e-3": PidGains(1e-4, 1e-3, 0.0, **_SAT),
     "PID 3e-4/2e-3/2e-5": PidGains(3e-4, 2e-3, 2e-5, **_SAT),
-    "PI 1e-3/1e-2 (default)": PidGains(1e-3, 1e-2, 0.0, **_SAT),
+    "PI 1e-3/3e-3 (default)": PidGains(1e-3, 3e-3, 0.0, **_SAT),
+    "PI 1e-3/1e-2": PidGains(1e-3, 1e-2, 0.0, **_SAT),
     "PI 1e-3/3e-2": PidGains(1e-3, 3e-2, 0.0, **_SAT),
 }
 KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
