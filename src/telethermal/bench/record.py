@@ -37,7 +37,10 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
                                    "busy_p99_us": loop["busy_p99_us"],
                                    "deadline_misses": loop["deadline_misses"],
                                    "steps": loop["steps"],
-                                   "recording": s.get("recording")})
+                                   # counters and error; not the temporary file's path
+                                   "recording": {k: v for k, v in
+                                                 (s.get("recording") or {}).items()
+                                                 if k != "path"}})
         # The recorder's call alone, as the loop makes it once per period
         # (the news unchanged, as in most periods).
         from telethermal.record.recording import Recorder
