@@ -37,13 +37,19 @@ DRIVER = textwrap.dedent("""
     import json, time
     from telethermal.devices.peltier import PeltierDriver
     d = PeltierDriver(%r)
-    end = time.monotonic() + 1.5
-    while time.monotonic() < end:
+    start = next_t = time.monotonic()
+    healthy = periods = 0
+    while next_t < start + 1.5:                 # a 1 kHz control loop
         d.command(31.25)
-        d.poll(0.002)
+        d.poll(0.0)
+        if next_t > start + 0.3:
+            periods += 1
+            healthy += d.healthy
+        next_t += 1e-3
+        time.sleep(max(0.0, next_t - time.monotonic()))
     s = d.status
-    print(json.dumps({"healthy": d.healthy, "junction_c": s and s.junction_c,
-                      "counters": d.counters}))
+    print(json.dumps({"healthy_fraction": healthy / periods,
+                      "junction_c": s and s.junction_c, "counters": d.counters}))
     d.close()
 """)
 
@@ -62,5 +68,9 @@ def test_driver_and_emulator_in_two_processes_on_udp_multicast(namespace):
     finally:
         emulator.terminate()
         emulator.communicate(timeout=10)
-    assert result["healthy"] and result["junction_c"] == pytest.approx(31.25)
+    # Healthy (heartbeat and status fresh, enabled, no fault) in nearly every
+    # period once started; a stall of either process on this shared machine
+    # may cost a few.
+    assert result["healthy_fraction"] > 0.9, result
+    assert result["junction_c"] == pytest.approx(31.25)
     assert result["counters"]["heartbeats"] >= 5 and result["counters"]["send_failed"] == 0

@@ -156,6 +156,10 @@ class SensorBoardEmulator:
         return self._write(bytes(data))
 
 
+#: Frames a Peltier emulator handles per poll; the rest wait for the next.
+MAX_FRAMES_PER_POLL = 64
+
+
 class PeltierEmulator:
     """A Peltier driver on ``bus``: ``apply(junction_c)`` is called with what
     it drives the junction to (the setpoint, or neutral when disabled)."""
@@ -232,7 +236,7 @@ class PeltierEmulator:
             self.state = STATE_DISABLED
             self._send(HEARTBEAT, HEARTBEAT.encode({"state": STATE_BOOT,
                                                     "version": CAN_VERSION}))
-        while True:
+        for _ in range(MAX_FRAMES_PER_POLL):      # a flood cannot starve the heartbeat
             msg = self.bus.recv(0.0)
             if msg is None:
                 break
