@@ -1,11 +1,25 @@
-"""TOML tables to dataclass fields, with errors that name the file, the
-table and the key (service configs, fault profiles)."""
+"""TOML files and tables to dataclass fields, with errors that name the file,
+the table and the key (service configs, fault profiles, calibrations)."""
 
 from __future__ import annotations
 
+import tomllib
 from dataclasses import fields
+from pathlib import Path
 
 from telethermal.errors import TelethermalError
+
+def read_toml(path: str | Path, what: str, error=TelethermalError) -> dict:
+    """The TOML file at ``path`` (a ``what``: "config file", ...) as a dict;
+    a missing file or bad TOML is ``error``, naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: no such {what}")
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML: {exc}") from None
+
 
 _KINDS = {"int": int, "float": (int, float), "str": str, "bool": bool}
 

@@ -19,7 +19,6 @@ import logging
 import math
 import select
 import time
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,6 +27,7 @@ import serial
 from telethermal.devices.frames import STATUS_FLUX, STATUS_FORCE, STATUS_TC, FrameReader
 from telethermal.errors import ModelError, TelethermalError
 from telethermal.physics.sensors import type_t_emf_mv, type_t_temp_c
+from telethermal.tomltables import read_toml
 
 log = logging.getLogger(__name__)
 
@@ -60,10 +60,7 @@ class Calibration:
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
         path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise DeviceError(f"calibration {path}: {exc}") from None
+        data = read_toml(path, "calibration file", DeviceError)
         keys = {("heat_flux", "sensitivity_uv_per_w_m2"): "flux_sensitivity_uv_per_w_m2",
                 ("heat_flux", "offset_uv"): "flux_offset_uv",
                 ("thermocouple", "type"): "thermocouple_type",

@@ -18,7 +18,6 @@ import heapq
 import itertools
 import logging
 import time
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,7 +26,7 @@ import zmq
 
 from telethermal.errors import TransportError
 from telethermal.faults.channel import Channel, Direction, FaultProfileError
-from telethermal.tomltables import table_values
+from telethermal.tomltables import read_toml, table_values
 
 log = logging.getLogger("telethermal.faults")
 
@@ -63,12 +62,7 @@ def _table(cls, data: dict, where: str):
 def load_profile(path: str | Path, overrides: dict | None = None) -> FaultProfile:
     """Read a profile file; ``overrides`` {"master_to_slave.delay_s": 0.2, ...}."""
     path = Path(path)
-    if not path.is_file():
-        raise FaultProfileError(f"{path}: no such fault profile")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise FaultProfileError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path, "fault profile", FaultProfileError)
     unknown = set(data) - {"link", "master_to_slave", "slave_to_master", "both"}
     if unknown:
         raise FaultProfileError(f"{path}: unknown section(s) {', '.join(sorted(unknown))}")

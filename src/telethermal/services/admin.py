@@ -13,7 +13,7 @@ import msgpack
 import numpy as np
 import zmq
 
-from telethermal.errors import TransportError
+from telethermal.errors import TelethermalError, TransportError
 
 
 def _plain(value):
@@ -81,7 +81,6 @@ class AdminServer:
         """Run one request: ``handlers[cmd](request)`` returns the reply's
         fields, or None when the reply comes later (a touch); "status" and
         "stop" are served for every service; errors become ``ok: false``."""
-        from telethermal.errors import TelethermalError
 
         cmd = request["cmd"]
         try:
@@ -122,3 +121,16 @@ def call(port, cmd: str, timeout_s: float = 10.0, context=None, **args) -> dict:
         return msgpack.unpackb(sock.recv(), raw=False)
     finally:
         sock.close(linger=0)
+
+
+def open_service_sockets(role: str, config) -> tuple:
+    """A service's transport endpoint and its admin socket; if the admin
+    socket cannot be opened, the endpoint is closed again (nothing leaks)."""
+    from telethermal.wire.transport import Endpoint
+
+    endpoint = Endpoint(role, config.transport)
+    try:
+        return endpoint, AdminServer(config.admin_ipc or config.admin_port)
+    except TelethermalError:
+        endpoint.close()
+        raise

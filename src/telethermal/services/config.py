@@ -3,12 +3,11 @@ and the key. Relative paths are relative to the file's own folder."""
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from telethermal.errors import TelethermalError
-from telethermal.tomltables import table_values
+from telethermal.tomltables import read_toml, table_values
 from telethermal.wire.transport import TransportConfig
 
 
@@ -70,12 +69,7 @@ class MasterConfig:
 def load_config(path: str | Path, role: str):
     """Read ``[<role>]``, ``[transport]`` of a service config file."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: no such config file")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path, "config file", ConfigError)
     extra = set(data) - {role, "transport"}
     if extra:
         raise ConfigError(f"{path}: unknown section(s) {', '.join(sorted(extra))}; expected "

@@ -23,13 +23,12 @@ from telethermal.devices.display import open_display
 from telethermal.record.session import display_params, open_recorder
 from telethermal.errors import TelethermalError
 from telethermal.physics.scene import load_scene
-from telethermal.services.admin import AdminServer
+from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
 from telethermal.session.link import SlaveLink
 from telethermal.session.master import DisplayConfig, MasterDisplay
 from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
                                      pad_resistance, safety_summary, with_finger)
-from telethermal.wire.transport import Endpoint
 
 log = logging.getLogger("telethermal.master")
 
@@ -78,12 +77,7 @@ class MasterService:
         self.config = config
         self.scene = with_finger(load_scene(config.scene))
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before)
-        self.endpoint = Endpoint("master", config.transport)
-        try:
-            self.admin = AdminServer(config.admin_ipc or config.admin_port)
-        except TelethermalError:
-            self.endpoint.close()
-            raise
+        self.endpoint, self.admin = open_service_sockets("master", config)
         self.link = SlaveLink()
         self.hardware = None
         if config.devices == "hardware":

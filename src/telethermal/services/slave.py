@@ -15,17 +15,15 @@ import time
 
 import zmq
 
-from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import mixture, posterior_weights
 from telethermal.record.session import open_recorder
 from telethermal.render.sampled import SampledGenerator, sample_curves
-from telethermal.services.admin import AdminServer
+from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
 from telethermal.session.run import slave_rng, with_finger
 from telethermal.session.slave import Slave
-from telethermal.wire.transport import Endpoint
 
 log = logging.getLogger("telethermal.slave")
 BATCH = 10            # samples per measurement_batch
@@ -53,12 +51,7 @@ class SlaveService:
         self.finger_c: float | None = None
         self.recorder = open_recorder(config, "slave", identifier, generator)
         self.rate_hz = self.scene.sample_rate_hz
-        self.endpoint = Endpoint("slave", config.transport)
-        try:
-            self.admin = AdminServer(config.admin_ipc or config.admin_port)
-        except TelethermalError:
-            self.endpoint.close()
-            raise
+        self.endpoint, self.admin = open_service_sockets("slave", config)
         self.stop_requested = False
         self.state = "idle"
         self.masters_lost = 0          # contacts ended because the master went silent
