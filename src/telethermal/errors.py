@@ -46,3 +46,8 @@ class ProtocolError(TelethermalError):
 
 class TransportError(TelethermalError):
     """A socket, key or peer problem of the networked services."""
+
+
+class CalibrationError(TelethermalError, RuntimeError):
+    """A sensor calibration that could not be trusted (a drifting target, a
+    fit that does not hold); the previous calibration stays in force."""

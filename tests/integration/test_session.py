@@ -128,13 +128,14 @@ def test_no_gap_between_finger_and_object(models):
     # Object at the finger's temperature, both measured exactly: direct
     # contact exchanges nothing, and so must the display (under 1 % of what a
     # 9 K gap gives), the junction stays near 33 C and nothing trips. With
-    # the IR thermometer's 0.4 K error the rendered flux follows the measured
-    # gap instead; that is the sensor's limit, not the loop's.
+    # the thermometer's noise the rendered flux follows the measured gap
+    # instead; that is the sensor's limit, not the loop's.
     identifier, generator = models
     warm = dataclasses.replace(
         SCENE, objects=tuple(dataclasses.replace(o, temp_c=33.0) for o in SCENE.objects),
         finger=dataclasses.replace(SCENE.finger, temp_sd_c=0.0),
-        sensors=dataclasses.replace(SCENE.sensors, ir_error_k=0.0),
+        sensors=dataclasses.replace(SCENE.sensors, object_bias_limit_k=0.0, object_noise_k=0.0,
+                                    object_resolution_k=0.0, pad_tc_bias_limit_k=0.0),
         variability=dataclasses.replace(SCENE.variability, object_temp_sd_c=0.0))
     r = run_session(warm, "steel", identifier, generator, contact_s=1.5, seed=1)
     reference = run_session(SCENE, "steel", identifier, generator, contact_s=1.5, seed=1)

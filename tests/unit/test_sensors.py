@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from telethermal.errors import ModelError
-from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, InfraredThermometer,
+from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, ObjectThermometer,
                                          Thermocouple, quantise, type_t_emf_mv, type_t_temp_c)
 
 
@@ -51,9 +51,24 @@ def test_force_sensor_is_zero_before_contact_and_rises_to_the_force(rng):
     assert f[0] == 0.0 and f[1] == 0.0 and f[2] == pytest.approx(10.0, rel=1e-9)
 
 
-def test_ir_thermometer_error_has_its_stated_spread(rng):
-    err = InfraredThermometer(0.4).read_c(np.zeros(20000), rng)
-    assert err.std() == pytest.approx(0.4, rel=0.05)
+def test_thermometer_error_is_its_bias_plus_averaged_noise(rng):
+    # Mean error = the session bias; spread = per-reading noise / sqrt(readings);
+    # 20000 measurements: the mean to 4 standard errors, the spread to 5 %.
+    thermo = ObjectThermometer(bias_k=0.5, noise_k=0.2, resolution_k=0.0, readings=4)
+    err = thermo.read_c(np.full(20000, 30.0), rng) - 30.0
+    assert err.mean() == pytest.approx(0.5, abs=4 * 0.1 / np.sqrt(20000))
+    assert err.std() == pytest.approx(0.1, rel=0.05)
+
+
+def test_thermometer_gain_error_grows_with_distance_from_reference(rng):
+    thermo = ObjectThermometer(gain_error=0.02, noise_k=0.0, resolution_k=0.0, reference_c=25.0)
+    np.testing.assert_allclose(thermo.read_c(np.array([25.0, 35.0, 15.0]), rng),
+                               [25.0, 35.2, 14.8], atol=1e-12)
+
+
+def test_thermometer_resolution_rounds_each_reading(rng):
+    thermo = ObjectThermometer(noise_k=0.0, resolution_k=0.02, readings=1)
+    assert thermo.read_c(np.array([30.013]), rng)[0] == pytest.approx(30.02, abs=1e-12)
 
 
 def test_the_scalar_nist_path_equals_the_array_path():

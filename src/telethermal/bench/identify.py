@@ -27,7 +27,8 @@ import numpy as np
 from telethermal.data.generate import pad_database
 from telethermal.ident.anytime import decide
 from telethermal.ident.base import group_folds
-from telethermal.ident.evaluate import FIRST_PAPER_MERGE, evaluate, inference_cost_ms
+from telethermal.ident.evaluate import (FIRST_PAPER_MERGE, decision_summary, evaluate,
+                                       expected_calibration_error, inference_cost_ms)
 from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import METHODS, make
 from telethermal.physics.scene import load_scene
@@ -38,6 +39,9 @@ PAPER1_5_CLASSES = {"0.25": 29 / 35, "0.5": 34 / 35, "0.75": 1.0}
 #: 100 % within 0.5 s (II, III) and 0.7 s (V).
 PAPER2 = {"active_100pct_within_s": 0.4, "cross": {"II": 0.5, "III": 0.5, "V": 0.7}}
 WINDOWS_T1 = (0.25, 0.5, 0.75, 1.0)
+#: Windows whose held-out posteriors the calibration error pools (those an
+#: anytime decision within 1 s consults, every 0.1 s).
+ECE_WINDOWS = tuple(round(0.1 * k, 1) for k in range(1, 11))
 
 
 def _trials(scene_name: str, seed: int):
@@ -52,12 +56,25 @@ def _accuracy(model, contacts, w, merge=None):
     return [merge.get(a, a) == merge.get(b, b) for a, b in zip(guess, contacts.labels)]
 
 
+def _held_out_proba(model, contacts, windows_s=ECE_WINDOWS):
+    """Posteriors of held-out contacts at each window (pooled), and the truth."""
+    probas, truth = [], []
+    y = np.array([model.classes_.index(c) for c in contacts.labels])
+    for w in windows_s:
+        index = model.window_index(int(round(w * model.sample_rate_hz_)) + 1)
+        if index is not None:
+            probas.append(model.proba_normalised(contacts.x, index))
+            truth.append(y)
+    return np.vstack(probas), np.concatenate(truth)
+
+
 def table1(method: str, seed: int) -> dict:
-    """Leave-trials-out accuracy on the first paper's pad database."""
+    """Leave-trials-out accuracy on the first paper's pad database, the
+    calibration error of the held-out posteriors and the anytime decisions."""
     contacts, _ = from_trials(_trials("fingertip-7", seed), max_s=1.0)
     hits7 = {w: [] for w in WINDOWS_T1}
     hits5 = {w: [] for w in WINDOWS_T1}
-    fit_s = []
+    fit_s, probas, truth, decisions, labels = [], [], [], [], []
     for test in group_folds(contacts.groups, 5):
         train = np.setdiff1d(np.arange(len(contacts)), test)
         start = time.perf_counter()
@@ -67,11 +84,20 @@ def table1(method: str, seed: int) -> dict:
         for w in WINDOWS_T1:
             hits7[w] += _accuracy(model, held, w)
             hits5[w] += _accuracy(model, held, w, FIRST_PAPER_MERGE)
+        p, t = _held_out_proba(model, held)
+        probas.append(p)
+        truth.append(t)
+        decisions += [decide(model, held.x[i], held.gap_k[i]) for i in range(len(held))]
+        labels += held.labels
     start = time.perf_counter()
     full = make(method).fit(contacts)
     train_all_s = time.perf_counter() - start
     return {"accuracy_7": {f"{w:g}": float(np.mean(v)) for w, v in hits7.items()},
             "accuracy_5": {f"{w:g}": float(np.mean(v)) for w, v in hits5.items()},
+            "calibration_ece": expected_calibration_error(np.vstack(probas),
+                                                          np.concatenate(truth)),
+            "calibration_ece_windows_s": list(ECE_WINDOWS),
+            "decision": {**decision_summary(decisions, labels), "threshold": full.threshold},
             "paper_accuracy_5": {k: round(v, 3) for k, v in PAPER1_5_CLASSES.items()},
             "paper_accuracy_7": "not reported (confusions Al/steel and graphite/rubber at 1 s)",
             "train_s_full_database": train_all_s, "train_s_per_fold_mean": float(np.mean(fit_s)),

@@ -5,10 +5,20 @@ identification. Database 2 (``finger/``): the operator's fingertip directly on
 each object (5 persons x 10 trials in the first paper), for flux generation;
 written only when the scene has a ``[finger]``.
 
+A database is one *session* of the scene's instruments
+(:func:`~telethermal.physics.sensors.draw_instruments`): the pad's
+thermocouple and the flux sensor keep the errors of their instrument, the
+object thermometer (infrared or contact) has this session's bias and gain
+error. Before the trials, the session calibrates the object thermometer
+against the pad (:mod:`telethermal.control.thermometer_calibration`), as a
+lab would, unless told not to; the manifest's ``T_object_C`` is the
+corrected reading and ``generation.json`` records the instruments' true
+errors and the calibration.
+
 Trial-to-trial variability: pressing force and through it the contact
 conductance (``h ~ F^0.8``), the onset of contact relative to the recorded
-``t_s = 0``, the object's true temperature and the infrared thermometer's error
-on it (the pad is set from the IR reading, so the real gap varies), the
+``t_s = 0``, the object's true temperature and the thermometer's per-reading
+noise on it (the pad is set from that reading, so the real gap varies), the
 pad's own set-point error (Peltier) or pre-conditioning (water pad), each
 person's skin properties and finger temperature, and sensor noise and
 quantisation.
@@ -27,14 +37,45 @@ from telethermal.data.dataset import Trial, staged_dir, write_trials
 from telethermal.errors import ModelError
 from telethermal.physics.scene import (Scene, SensorSpec, finger_contact_model,
                                        pad_contact_model)
-from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, InfraredThermometer,
-                                         Thermocouple)
+from telethermal.control.thermometer_calibration import (UNCALIBRATED, ThermometerCalibration,
+                                                        calibrate_simulated)
+from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, Instruments,
+                                         Thermocouple, draw_instruments)
 from telethermal.physics.waterpad import precondition
 
 #: Standard deviation of a Peltier pad's set-point error, K.
 PELTIER_SETPOINT_SD_K = 0.05
 #: Length of the water pad's pre-conditioning (STEP 1), s.
 PRECONDITION_S = 120.0
+
+
+@dataclass(frozen=True)
+class SensorSession:
+    """The instruments of one session and the calibration of its object
+    thermometer (identity when the session did not calibrate)."""
+
+    instruments: Instruments
+    calibration: ThermometerCalibration = UNCALIBRATED
+
+    def measure_c(self, true_c, rng: np.random.Generator) -> np.ndarray:
+        """The object thermometer's corrected measurement of ``true_c``."""
+        return self.calibration.correct_c(self.instruments.thermometer.read_c(true_c, rng))
+
+    def describe(self) -> dict:
+        return {"instruments": self.instruments.describe(),
+                "calibration": self.calibration.to_dict()}
+
+
+def sensor_session(scene: Scene, rng: np.random.Generator, calibrate: bool = True,
+                   instruments: Instruments | None = None) -> SensorSession:
+    """Draw a session's instruments (unless given) and calibrate its object
+    thermometer against the pad (unless ``calibrate`` is False)."""
+    instruments = instruments or draw_instruments(scene.sensors, rng)
+    if not calibrate:
+        return SensorSession(instruments)
+    cal = calibrate_simulated(instruments, scene.room_temp_c, rng,
+                              scene.sensors.thermocouple_noise_uv)
+    return SensorSession(instruments, cal)
 
 
 @dataclass
@@ -48,7 +89,8 @@ class _Contacts:
     object_ir_c: np.ndarray
 
 
-def _draw(scene: Scene, obj, n: int, reference_h: float, rng) -> _Contacts:
+def _draw(scene: Scene, obj, n: int, reference_h: float, rng,
+          session: SensorSession) -> _Contacts:
     var, sens = scene.variability, scene.sensors
     force = np.clip(rng.normal(var.force_n, var.force_sd_n, n), 0.3 * var.force_n,
                     3.0 * var.force_n)
@@ -56,8 +98,8 @@ def _draw(scene: Scene, obj, n: int, reference_h: float, rng) -> _Contacts:
     jitter = sens.onset_jitter_s
     onset = np.clip(rng.normal(0.0, jitter, n), -3 * jitter, 3 * jitter) if jitter else np.zeros(n)
     true_c = obj.temp_c + rng.normal(0.0, var.object_temp_sd_c, n)
-    ir_c = InfraredThermometer(sens.ir_error_k).read_c(true_c, rng)
-    return _Contacts(force, h, onset, true_c, ir_c)
+    measured_c = session.measure_c(true_c, rng)
+    return _Contacts(force, h, onset, true_c, measured_c)
 
 
 def _time_axis(scene: Scene, duration_s: float) -> np.ndarray:
@@ -68,13 +110,15 @@ def _time_axis(scene: Scene, duration_s: float) -> np.ndarray:
 
 
 def _record(scene, result, times, draws, first_contact_temp, rng, group_of, prefix, model_kind,
-            extra_of):
+            extra_of, session: SensorSession):
     """Turn a ContactResult into trials with sensor readings."""
     sens = scene.sensors
-    flux = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv).read_w_m2(
+    flux = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv,
+                          gain=session.instruments.flux_gain).read_w_m2(
         result.flux_sensed_w_m2, rng)
     thermo = Thermocouple(noise_uv_rms=sens.thermocouple_noise_uv,
-                          cold_junction_c=scene.room_temp_c)
+                          cold_junction_c=scene.room_temp_c,
+                          bias_k=session.instruments.pad_tc_bias_k)
     temp = thermo.read_c(result.surface_temp_a_c, rng)
     trials = []
     for i in range(len(draws.force_n)):
@@ -97,33 +141,43 @@ def _record(scene, result, times, draws, first_contact_temp, rng, group_of, pref
     return trials
 
 
-def pad_database(scene: Scene, rng: np.random.Generator) -> list[Trial]:
-    """Database 1: the scene's pad against each object."""
+def pad_database(scene: Scene, rng: np.random.Generator,
+                 session: SensorSession | None = None) -> list[Trial]:
+    """Database 1: the scene's pad against each object, in one session of
+    its instruments (drawn from ``rng`` and calibrated, unless given)."""
+    session = session or sensor_session(scene, rng)
+    tc_bias = session.instruments.pad_tc_bias_k
     trials = []
     n = scene.pad.trials_per_material
     times = _time_axis(scene, scene.pad.contact_duration_s)
     for obj in scene.objects:
         model, choice = pad_contact_model(scene, obj)
-        draws = _draw(scene, obj, n, scene.pad.contact_conductance_w_m2k, rng)
+        draws = _draw(scene, obj, n, scene.pad.contact_conductance_w_m2k, rng, session)
         command = np.array([scene.pad_temp_c(t) for t in draws.object_ir_c])
+        # The pad's loop holds its thermocouple's reading at the command: the
+        # pad itself sits the thermocouple's bias below it.
         if scene.pad.kind == "peltier":
-            pad_c = command + rng.normal(0.0, PELTIER_SETPOINT_SD_K, n)
+            pad_c = command - tc_bias + rng.normal(0.0, PELTIER_SETPOINT_SD_K, n)
             back_c = pad_c                          # junction held at the set point
         else:
-            run = precondition(command, scene.room_temp_c, PRECONDITION_S)
+            run = precondition(command - tc_bias, scene.room_temp_c, PRECONDITION_S)
             pad_c, back_c = run.final_pad_c, run.final_water_c
         result = model.solve(times[None, :] - draws.onset_s[:, None], pad_c,
                              draws.object_true_c, draws.conductance_w_m2k,
                              back_temp_a_c=back_c, sensor_lag_s=scene.sensors.flux_lag_s)
         # T_pad_C is what the pad's thermocouple read just before contact.
-        before = Thermocouple(cold_junction_c=scene.room_temp_c).read_c(pad_c, rng)
+        before = Thermocouple(cold_junction_c=scene.room_temp_c, bias_k=tc_bias).read_c(pad_c, rng)
         trials += _record(scene, result, times, draws, before, rng, None, obj.material,
-                          choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}"})
+                          choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}"}, session)
     return trials
 
 
-def finger_database(scene: Scene, rng: np.random.Generator) -> list[Trial]:
-    """Database 2: each person's fingertip directly on each object."""
+def finger_database(scene: Scene, rng: np.random.Generator,
+                    session: SensorSession | None = None) -> list[Trial]:
+    """Database 2: each person's fingertip directly on each object; the
+    finger's and the object's temperatures by the session's calibrated
+    thermometer."""
+    session = session or sensor_session(scene, rng)
     finger = scene.finger
     persons = finger.persons
     # One draw of skin properties per person, shared across objects.
@@ -132,28 +186,31 @@ def finger_database(scene: Scene, rng: np.random.Generator) -> list[Trial]:
     per = finger.trials_per_person
     person = np.repeat(np.arange(persons), per)
     times = _time_axis(scene, finger.contact_duration_s)
-    ir = InfraredThermometer(scene.sensors.ir_error_k)
     trials = []
     for obj in scene.objects:
         model, choice = finger_contact_model(scene, obj)
-        draws = _draw(scene, obj, persons * per, finger.contact_conductance_w_m2k, rng)
+        draws = _draw(scene, obj, persons * per, finger.contact_conductance_w_m2k, rng, session)
         finger_c = rng.normal(finger.temp_c, finger.temp_sd_c, persons * per)
         result = model.solve(times[None, :] - draws.onset_s[:, None], finger_c,
                              draws.object_true_c, draws.conductance_w_m2k,
                              k_scale_a=k_scale[person], heat_scale_a=heat_scale[person],
                              sensor_lag_s=scene.sensors.flux_lag_s)
-        finger_ir = ir.read_c(finger_c, rng)
+        finger_ir = session.measure_c(finger_c, rng)
         trials += _record(scene, result, times, draws, finger_ir, rng,
                           lambda i: f"person-{person[i]}", obj.material, choice.kind,
                           lambda i: {"T_finger_true_C": f"{finger_c[i]:.4f}",
                                      "person": str(person[i]),
-                                     "skin_effusivity_scale": f"{np.sqrt(k_scale[person[i]] * heat_scale[person[i]]):.4f}"})
+                                     "skin_effusivity_scale": f"{np.sqrt(k_scale[person[i]] * heat_scale[person[i]]):.4f}"},
+                          session)
     return trials
 
 
 def generate_databases(scene: Scene, out: str | Path, seed: int = 0, overwrite: bool = False,
-                       progress: Callable[[str], None] | None = None) -> dict:
-    """Write ``out/pad`` (and ``out/finger``) all or nothing; return a summary."""
+                       progress: Callable[[str], None] | None = None,
+                       calibrate: bool = True) -> dict:
+    """Write ``out/pad`` (and ``out/finger``) all or nothing; return a summary
+    (with each database's session: its instruments' true errors and the
+    thermometer calibration, or none when ``calibrate`` is False)."""
     rng = np.random.default_rng(seed)
     summary = {"scene": scene.name, "seed": seed, "datasets": {}}
     with staged_dir(out, overwrite) as staging:
@@ -163,10 +220,12 @@ def generate_databases(scene: Scene, out: str | Path, seed: int = 0, overwrite: 
         for name, build in parts:
             if progress:
                 progress(name)
-            trials = build(scene, rng)
+            session = sensor_session(scene, rng, calibrate)
+            trials = build(scene, rng, session)
             write_trials(staging / name, trials)
             summary["datasets"][name] = {"trials": len(trials),
-                                         "materials": sorted({t.material for t in trials})}
+                                         "materials": sorted({t.material for t in trials}),
+                                         "session": session.describe()}
         (staging / "generation.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 

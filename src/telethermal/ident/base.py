@@ -40,6 +40,38 @@ def group_folds(groups: list[str], k: int) -> list[np.ndarray]:
     return [np.array([i for i, g in enumerate(groups) if fold_of[g] == f]) for f in range(k)]
 
 
+def fit_temperatures(logits: np.ndarray, y: np.ndarray, pool: int = 1) -> np.ndarray:
+    """Temperature scaling (Guo et al. 2017) per window: the ``T`` that
+    minimises the log loss of ``softmax(z / T)`` on held-out logits.
+
+    Parameters
+    ----------
+    logits : ndarray, shape (n_windows, N, n_classes)
+        Held-out logits; rows with NaN are ignored.
+    y : ndarray, shape (N,)
+    pool : int
+        Windows fitted together in consecutive blocks of this many (for
+        a recurrent network's many short steps: one temperature per block).
+    """
+    n_windows = len(logits)
+    temps = np.ones(n_windows)
+    for start in range(0, n_windows, pool):
+        block = logits[start:start + pool]
+        z = block.reshape(-1, block.shape[-1])
+        yy = np.tile(y, len(block))
+        ok = np.all(np.isfinite(z), axis=1)
+        if not ok.any():
+            continue
+        z, yy = z[ok], yy[ok]
+
+        def nll(log_t, z=z, yy=yy):
+            p = log_softmax(z / np.exp(log_t), axis=1)
+            return -np.mean(p[np.arange(len(yy)), yy])
+        temps[start:start + pool] = float(np.exp(minimize_scalar(nll, bounds=(-5, 5),
+                                                                 method="bounded").x))
+    return temps
+
+
 class Identifier:
     """Base of all identification methods."""
 
@@ -92,24 +124,29 @@ class Identifier:
         return x[:, :n]
 
     def _calibrate(self, contacts: Contacts, y: np.ndarray):
-        """One temperature per window minimising out-of-fold log loss."""
+        """One temperature per window minimising out-of-fold log loss
+        (grouped folds: trials of one group never both train and calibrate)."""
+        logits = self._held_out_logits(contacts, y)
+        if logits is None:
+            return
+        self.temperature_ = fit_temperatures(logits, y)
+
+    def _held_out_logits(self, contacts: Contacts, y: np.ndarray):
+        """Logits of every trial at every window from models that did not
+        see its group, (n_windows, N, n_classes); None when the groups are too
+        few or a fold would lack a class."""
         folds = group_folds(contacts.groups, 3)
         if len(folds) < 2:
-            return
-        logits = [np.full((len(y), len(self.classes_)), np.nan) for _ in self.windows_s_]
+            return None
+        logits = np.full((len(self.windows_s_), len(y), len(self.classes_)), np.nan)
         for test in folds:
             train = np.setdiff1d(np.arange(len(y)), test)
             if len(set(y[train])) < len(self.classes_):
-                return                        # a class missing from a fold: keep T = 1
+                return None
             for i, w in enumerate(self.windows_s_):
                 params = self._fit_window(self._window(contacts.x[train], w), y[train])
                 logits[i][test] = self._logits(params, self._window(contacts.x[test], w))
-        for i, z in enumerate(logits):
-            def nll(log_t, z=z):
-                p = log_softmax(z / np.exp(log_t), axis=1)
-                return -np.mean(p[np.arange(len(y)), y])
-            self.temperature_[i] = float(np.exp(minimize_scalar(nll, bounds=(-5, 5),
-                                                                method="bounded").x))
+        return logits
 
     # ------------------------------------------------------------ predicting
     def _require_fitted(self):
@@ -193,6 +230,11 @@ class Identifier:
         return np.stack([normalise(x[:, i], c, gap_k, t_object_c)
                          for i, c in enumerate(self.channels)], axis=1)
 
+    def learned(self) -> dict:
+        """Learned scalars (names ending in ``_``) kept in the model file's
+        header beside the weights; subclasses add theirs."""
+        return {}
+
     # ------------------------------------------------------------ subclass hooks
     def _fit_window(self, x: np.ndarray, y: np.ndarray) -> dict:
         raise NotImplementedError
@@ -213,7 +255,8 @@ class Identifier:
                   "classes": self.classes_, "channels": list(self.channels),
                   "sample_rate_hz": self.sample_rate_hz_, "windows_s": self.windows_s_,
                   "temperature": self.temperature_.tolist(), "hyper": self.hyper(),
-                  "min_gap_k": MIN_GAP_K}
+                  "min_gap_k": MIN_GAP_K, "scene": getattr(self, "scene_", None),
+                  "learned": self.learned()}
         arrays = {f"w{i}.{name}": value for i, params in enumerate(self.params_)
                   for name, value in params.items()}
         return write_npz(path, "telethermal-identifier", FORMAT_VERSION, header, arrays)
@@ -225,6 +268,10 @@ class Identifier:
         model.sample_rate_hz_ = float(header["sample_rate_hz"])
         model.windows_s_ = list(header["windows_s"])
         model.temperature_ = np.asarray(header["temperature"], dtype=np.float64)
+        if header.get("scene") is not None:
+            model.scene_ = header["scene"]
+        for key, value in (header.get("learned") or {}).items():
+            setattr(model, key, value)
         # One parameter set per window for a bank, one in all for a network.
         n_sets = len({k.split(".", 1)[0] for k in arrays})
         model.params_ = [{k.split(".", 1)[1]: v for k, v in arrays.items()

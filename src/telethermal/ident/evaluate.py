@@ -44,6 +44,46 @@ def _percentiles(values):
             "values": [round(float(x), 4) for x in v]}
 
 
+def expected_calibration_error(proba: np.ndarray, truth: np.ndarray, bins: int = 15) -> float:
+    """Top-label expected calibration error (Guo et al. 2017): the mean over
+    equal-width confidence bins of |accuracy - confidence|, weighted by the
+    share of predictions in each bin.
+
+    Parameters
+    ----------
+    proba : ndarray, shape (N, n_classes)
+    truth : ndarray of int, shape (N,)
+    """
+    proba = np.asarray(proba, dtype=np.float64)
+    if len(proba) == 0:
+        return float("nan")
+    confidence = proba.max(axis=1)
+    correct = proba.argmax(axis=1) == np.asarray(truth)
+    which = np.minimum((confidence * bins).astype(int), bins - 1)
+    ece = 0.0
+    for b in range(bins):
+        inside = which == b
+        if inside.any():
+            ece += inside.mean() * abs(correct[inside].mean() - confidence[inside].mean())
+    return float(ece)
+
+
+def decision_summary(decisions, labels, within_s: float = 1.0) -> dict:
+    """Commit rate, accuracy of the committed decisions and their median
+    time, counting only commitments to a class within ``within_s``."""
+    committed = [(d, lab) for d, lab in zip(decisions, labels)
+                 if d.label != UNKNOWN and d.time_s is not None and d.time_s <= within_s + 1e-9]
+    return {"commit_rate": len(committed) / len(decisions) if decisions else float("nan"),
+            "accuracy": (float(np.mean([d.label == lab for d, lab in committed]))
+                         if committed else None),
+            "time_s_p50": (float(np.median([d.time_s for d, _ in committed]))
+                           if committed else None),
+            "committed": len(committed), "touches": len(decisions),
+            "unknown_reasons": {r: sum(d.reason == r for d in decisions if d.label == UNKNOWN)
+                                for r in sorted({d.reason for d in decisions
+                                                 if d.label == UNKNOWN})}}
+
+
 def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> dict:
     """Milliseconds for one posterior update (one window, one contact), on one
     CPU thread, over ``repeats`` updates at random windows."""

@@ -23,7 +23,7 @@ class PcaFnn(Identifier):
 
     def __init__(self, channels=(FLUX,), n_components: int = 8, n_hidden: int = 8,
                  max_iter: int = 60, restarts: int = 1, window_step_s: float = 0.1,
-                 calibrate: bool = False, **kw):
+                 calibrate: bool = True, **kw):
         super().__init__(channels, window_step_s=window_step_s, calibrate=calibrate, **kw)
         self.n_components = n_components
         self.n_hidden = n_hidden
@@ -81,7 +81,10 @@ class EffusivityLda(Identifier):
 
     method = "effusivity-lda"
 
-    def __init__(self, channels=(FLUX,), n_boxes: int = 8, shrinkage: float = 0.1,
+    #: Shrinkage values tried by grouped cross-validation (``shrinkage="cv"``).
+    SHRINKAGE_GRID = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3)
+
+    def __init__(self, channels=(FLUX,), n_boxes: int = 8, shrinkage: float | str = "cv",
                  outlier_p: float = 1e-4, window_step_s: float = 0.02, **kw):
         super().__init__(channels, window_step_s=window_step_s, **kw)
         self.n_boxes = n_boxes
@@ -108,6 +111,52 @@ class EffusivityLda(Identifier):
                 means[:, :, c] = np.arcsinh(means[:, :, c] * root)
         return means.transpose(0, 2, 1).reshape(n_trials, n_channels * boxes)
 
+    def fit(self, contacts):
+        """Choose the shrinkage (unless given as a number), then fit."""
+        if self.shrinkage == "cv":
+            self.classes_ = self._check_fit_input(contacts)
+            self.sample_rate_hz_ = contacts.sample_rate_hz
+            self.shrinkage_ = self._cv_shrinkage(contacts)
+        elif isinstance(self.shrinkage, (int, float)) and 0 <= self.shrinkage <= 1:
+            self.shrinkage_ = float(self.shrinkage)
+        else:
+            from telethermal.errors import IdentificationError
+            raise IdentificationError(f"shrinkage must be 'cv' or a number in [0, 1], got "
+                                      f"{self.shrinkage!r}")
+        return super().fit(contacts)
+
+    def learned(self) -> dict:
+        return {"shrinkage_": self.shrinkage_}
+
+    def _cv_shrinkage(self, contacts) -> float:
+        """The grid value with the lowest held-out log loss, pooled over
+        windows every 0.1 s up to 1 s; folds grouped by session or trial
+        group, so a group never both trains and scores."""
+        from telethermal.ident.base import group_folds
+        from scipy.special import log_softmax
+
+        y = np.array([self.classes_.index(c) for c in contacts.labels])
+        folds = group_folds(contacts.groups, 5)
+        if len(folds) < 2:
+            return 0.1
+        usable = float(np.min(contacts.lengths - 1)) / self.sample_rate_hz_
+        windows = [w for w in np.arange(1, 11) * 0.1 if w <= min(usable, self.max_window_s) + 1e-9]
+        windows = windows or [usable]
+        losses = []
+        for shrinkage in self.SHRINKAGE_GRID:
+            self.shrinkage_ = shrinkage
+            total = 0.0
+            for test in folds:
+                train = np.setdiff1d(np.arange(len(y)), test)
+                if len(set(y[train])) < len(self.classes_):
+                    return 0.1
+                for w in windows:
+                    params = self._fit_window(self._window(contacts.x[train], w), y[train])
+                    z = self._logits(params, self._window(contacts.x[test], w))
+                    total -= log_softmax(z, axis=1)[np.arange(len(test)), y[test]].sum()
+            losses.append(total)
+        return float(self.SHRINKAGE_GRID[int(np.argmin(losses))])
+
     def _fit_window(self, x, y):
         f = self._raw_features(x)
         centre, scale = f.mean(axis=0), np.maximum(f.std(axis=0), 1e-9)
@@ -118,7 +167,7 @@ class EffusivityLda(Identifier):
         cov = resid.T @ resid / max(len(z) - len(classes), 1)
         p = cov.shape[0]
         target = np.trace(cov) / p if np.trace(cov) > 0 else 1.0
-        cov = (1 - self.shrinkage) * cov + self.shrinkage * target * np.eye(p)
+        cov = (1 - self.shrinkage_) * cov + self.shrinkage_ * target * np.eye(p)
         return {"centre": centre, "scale": scale, "means": means,
                 "precision": np.linalg.pinv(cov, hermitian=True)}
 

@@ -22,6 +22,12 @@ from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import FLUX, Contacts
 
 
+def _softmax(z: np.ndarray) -> np.ndarray:
+    z = z - z.max(axis=-1, keepdims=True)
+    e = np.exp(z)
+    return e / e.sum(axis=-1, keepdims=True)
+
+
 class _Net(nn.Module):
     def __init__(self, n_in, n_hidden, n_out, cell):
         super().__init__()
@@ -44,7 +50,6 @@ class Recurrent(Identifier):
     def __init__(self, channels=(FLUX,), n_hidden: int = 64, epochs: int = 300,
                  lr: float = 1e-2, input_rate_hz: float = 100.0, loss_from_s: float = 0.05,
                  **kw):
-        kw.setdefault("calibrate", False)
         super().__init__(channels, **kw)
         self.n_hidden = n_hidden
         self.epochs = epochs
@@ -79,6 +84,45 @@ class Recurrent(Identifier):
 
     # ------------------------------------------------------------ fitting
     def fit(self, contacts: Contacts) -> "Recurrent":
+        """Train on ``contacts``; with ``calibrate``, first train the same
+        network on two thirds of the groups and fit one softmax temperature
+        per 0.1 s of steps on the held-out third (one extra training)."""
+        temperatures = None
+        if self.calibrate:
+            temperatures = self._held_out_temperatures(contacts)
+        self._train(contacts)
+        if temperatures is not None:
+            self.temperature_ = temperatures
+        return self
+
+    def _held_out_temperatures(self, contacts: Contacts):
+        from telethermal.ident.base import fit_temperatures, group_folds
+
+        folds = group_folds(contacts.groups, 3)
+        if len(folds) < 2:
+            return None
+        test = folds[0]
+        train = np.setdiff1d(np.arange(len(contacts)), test)
+        held = contacts.subset(test)
+        part = type(self)(**{**self.hyper(), "calibrate": False}, channels=self.channels)
+        if len(set(contacts.subset(train).labels)) < len(set(contacts.labels)):
+            return None
+        part._train(contacts.subset(train))
+        if part.classes_ != sorted(set(contacts.labels)):
+            return None
+        n = int(np.min(held.lengths))
+        with torch.no_grad():
+            logits, _ = part._net()(part._steps(held.x[:, :n]))
+        z = logits.numpy().astype(np.float64).transpose(1, 0, 2)     # (steps, N, classes)
+        y = np.array([part.classes_.index(c) for c in held.labels])
+        pool = max(1, int(round(0.1 * self.input_rate_hz)))
+        temps = fit_temperatures(z, y, pool)
+        # Steps past the held-out trials' length keep the last block's temperature.
+        out = np.full(len(part.windows_s_), temps[-1] if len(temps) else 1.0)
+        out[:len(temps)] = temps
+        return out
+
+    def _train(self, contacts: Contacts) -> None:
         self.classes_ = self._check_fit_input(contacts)
         self.sample_rate_hz_ = contacts.sample_rate_hz
         n = min(int(np.min(contacts.lengths)), int(round(self.max_window_s * self.sample_rate_hz_)) + 1)
@@ -107,23 +151,32 @@ class Recurrent(Identifier):
         self.final_loss_ = float(loss.detach())
         self.params_ = [{k: v.detach().numpy().copy() for k, v in net.state_dict().items()}]
         self.params_[0]["scale"] = self.scale_
-        self.temperature_ = np.ones(1)
+        self.temperature_ = np.ones(len(self.windows_s_))
         net.eval()
         self._module = net
-        return self
 
     # ------------------------------------------------------------ predicting
     def posterior_path(self, x: np.ndarray) -> np.ndarray:
         """Posteriors after every input step of one contact, (steps, n_classes)."""
         with torch.no_grad():
             logits, _ = self._net()(self._steps(x[None]))
-        return torch.softmax(logits[0], dim=-1).numpy().astype(np.float64)
+        z = logits[0].numpy().astype(np.float64)
+        return _softmax(z / self._temperatures(len(z))[:, None])
 
     def proba_normalised(self, x: np.ndarray, window_index: int) -> np.ndarray:
         n = (window_index + 1) * self._factor
         with torch.no_grad():
             logits, _ = self._net()(self._steps(x[:, :n]))
-        return torch.softmax(logits[:, -1], dim=-1).numpy().astype(np.float64)
+        z = logits[:, -1].numpy().astype(np.float64)
+        return _softmax(z / self._temperatures(window_index + 1)[window_index])
+
+    def _temperatures(self, steps: int) -> np.ndarray:
+        """The softmax temperature of each of the first ``steps`` steps (a
+        model file from before calibration holds a single 1)."""
+        t = np.asarray(self.temperature_, dtype=np.float64)
+        if len(t) >= steps:
+            return t[:steps]
+        return np.concatenate([t, np.full(steps - len(t), t[-1] if len(t) else 1.0)])
 
     def update_probe(self, row: np.ndarray, window_index: int) -> None:
         """One streaming update: a single step from a carried state."""

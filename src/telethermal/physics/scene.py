@@ -55,13 +55,28 @@ class ObjectSpec:
     thickness_m: float
 
 
+THERMOMETER_KINDS = ("ir", "contact")
+
+
 @dataclass(frozen=True)
 class SensorSpec:
+    """Every sensor's error, each figure from a datasheet or paper (the table
+    in README.md, "Sensor errors"). ``*_limit_*`` figures are bounds drawn
+    uniformly per instrument or session (:func:`~telethermal.physics.sensors.draw_instruments`)."""
+
     flux_lag_s: float = 0.15
     flux_noise_uv: float = 0.5
-    ir_error_k: float = 0.4
+    flux_sensitivity_limit_rel: float = 0.03
     onset_jitter_s: float = 0.005
     thermocouple_noise_uv: float = 1.0
+    pad_tc_bias_limit_k: float = 0.5
+    object_thermometer: str = "ir"
+    object_bias_limit_k: float = 0.5
+    object_gain_limit: float = 0.0
+    object_noise_k: float = 0.2
+    object_resolution_k: float = 0.02
+    object_readings: float = 4
+    instrument_seed: float = 1
 
 
 @dataclass(frozen=True)
@@ -216,10 +231,25 @@ def _parse_objects(items, source, room_c) -> tuple[ObjectSpec, ...]:
     return tuple(objects)
 
 
+#: Keys that were replaced, with what replaced them.
+_RENAMED = {"ir_error_k": "'ir_error_k' was one error drawn afresh for every reading; it is "
+                          "now 'object_bias_limit_k' (the instrument's bias in a session, a "
+                          "datasheet accuracy) and 'object_noise_k' (per reading)"}
+
+
 def _parse_dataclass(cls, table, where, source):
     r = _Reader(table or {}, where, source)
+    for old, why in _RENAMED.items():
+        if old in (table or {}):
+            r.fail(why)
     defaults = cls()
-    values = {f: r.num(f, getattr(defaults, f), lo=0) for f in cls.__dataclass_fields__}
+    values = {}
+    for f in cls.__dataclass_fields__:
+        default = getattr(defaults, f)
+        if f == "object_thermometer":
+            values[f] = r.text(f, default, choices=THERMOMETER_KINDS)
+        else:
+            values[f] = r.num(f, default, lo=0)
     r.done()
     return cls(**values)
 

@@ -1,4 +1,5 @@
-"""Sensor models: heat-flux film, type-T thermocouple, force sensor, IR thermometer.
+"""Sensor models: heat-flux film, type-T thermocouple, force sensor, object thermometer
+(infrared or contact), and the per-session errors of a set of instruments.
 
 Each model turns a true physical signal into what a data-acquisition system
 would record: through the transducer's units (microvolts), noise and ADC
@@ -75,10 +76,12 @@ class HeatFluxSensor:
     lag_s: float = 0.15
     noise_uv_rms: float = 0.5
     adc_lsb_uv: float = 0.3
+    gain: float = 1.0            # true over nominal sensitivity (this instrument)
 
     def read_w_m2(self, flux_w_m2, rng: np.random.Generator):
-        """Flux as recorded, W/m^2, from the (already lagged) film flux."""
-        volts_uv = np.asarray(flux_w_m2) * self.sensitivity_uv_per_w_m2
+        """Flux as recorded, W/m^2, from the (already lagged) film flux,
+        converted with the nominal sensitivity."""
+        volts_uv = np.asarray(flux_w_m2) * self.sensitivity_uv_per_w_m2 * self.gain
         volts_uv = volts_uv + rng.normal(0.0, self.noise_uv_rms, volts_uv.shape)
         return quantise(volts_uv, self.adc_lsb_uv) / self.sensitivity_uv_per_w_m2
 
@@ -90,9 +93,11 @@ class Thermocouple:
     noise_uv_rms: float = 1.0
     adc_lsb_uv: float = 0.5
     cold_junction_c: float = 25.0
+    bias_k: float = 0.0          # this thermocouple's deviation from ITS-90
 
     def read_c(self, temp_c, rng: np.random.Generator):
         """Temperature as recorded, degC."""
+        temp_c = np.asarray(temp_c, dtype=np.float64) + self.bias_k
         emf_uv = 1e3 * (type_t_emf_mv(temp_c) - type_t_emf_mv(self.cold_junction_c))
         emf_uv = quantise(emf_uv + rng.normal(0.0, self.noise_uv_rms, emf_uv.shape),
                           self.adc_lsb_uv)
@@ -114,11 +119,100 @@ class ForceSensor:
 
 
 @dataclass(frozen=True, slots=True)
-class InfraredThermometer:
-    """A radiation thermometer for temperatures before contact (+-error_k, 1 sigma)."""
+class ObjectThermometer:
+    """The instrument that measures an object's (or a finger's) temperature
+    before contact: an infrared thermometer (``kind="ir"``) or a contact
+    probe (``kind="contact"``, a thermocouple laid on the object).
 
-    error_k: float = 0.4
+    A reading is ``T + bias_k + gain_error (T - reference_c) + noise``,
+    averaged over ``readings`` readings and rounded to ``resolution_k``.
+    ``bias_k`` and ``gain_error`` belong to this instrument in this session
+    (drawn once by :func:`draw_instruments`); the noise is per reading.
+
+    Parameters
+    ----------
+    bias_k : float
+        Offset of this instrument in this session, K.
+    gain_error : float
+        Relative slope error about ``reference_c`` (emissivity setting,
+        calibration), dimensionless.
+    noise_k : float
+        Standard deviation of one reading, K.
+    resolution_k : float
+        Output resolution, K (0 for none).
+    readings : int
+        Readings averaged into one measurement (the target is static).
+    """
+
+    kind: str = "ir"
+    bias_k: float = 0.0
+    gain_error: float = 0.0
+    noise_k: float = 0.2
+    resolution_k: float = 0.02
+    readings: int = 4
+    reference_c: float = 25.0
 
     def read_c(self, temp_c, rng: np.random.Generator):
+        """One (averaged) measurement of each element of ``temp_c``, degC."""
         temp_c = np.asarray(temp_c, dtype=np.float64)
-        return temp_c + rng.normal(0.0, self.error_k, temp_c.shape)
+        shape = temp_c.shape + (max(1, self.readings),)
+        true = temp_c + self.bias_k + self.gain_error * (temp_c - self.reference_c)
+        each = true[..., None] + rng.normal(0.0, self.noise_k, shape)
+        if self.resolution_k > 0:
+            each = quantise(each, self.resolution_k)
+        return each.mean(axis=-1)
+
+
+#: What one measurement of the object temperature is uncertain by after
+#: the instrument's bias is removed: used to say whether a gap is above the
+#: noise floor.
+def measurement_sd_k(thermometer: ObjectThermometer) -> float:
+    return float(thermometer.noise_k / np.sqrt(max(1, thermometer.readings)))
+
+
+@dataclass(frozen=True, slots=True)
+class Instruments:
+    """The errors of one set of instruments in one session.
+
+    ``pad_tc_bias_k``: the pad's thermocouple (fixed for the instrument);
+    the pad's own temperature loop holds the *reading* at its set point, so
+    the pad's true temperature is off by minus this bias.
+    ``flux_gain``: the heat-flux sensor's true sensitivity over the nominal
+    one used to convert it (fixed for the instrument; its calibration
+    certificate's uncertainty). ``thermometer``: the object thermometer with
+    this session's bias and gain error.
+    """
+
+    thermometer: ObjectThermometer
+    pad_tc_bias_k: float = 0.0
+    flux_gain: float = 1.0
+
+    def describe(self) -> dict:
+        return {"thermometer": self.thermometer.kind,
+                "thermometer_bias_k": round(self.thermometer.bias_k, 4),
+                "thermometer_gain_error": round(self.thermometer.gain_error, 5),
+                "pad_tc_bias_k": round(self.pad_tc_bias_k, 4),
+                "flux_gain": round(self.flux_gain, 5)}
+
+
+def draw_instruments(sensors, session_rng: np.random.Generator) -> Instruments:
+    """The instruments of a scene (a :class:`~telethermal.physics.scene.SensorSpec`)
+    in one session.
+
+    Figures given as limits (a datasheet's accuracy) are drawn uniformly
+    within them (JCGM 100:2008, 4.3.7: a rectangular distribution for a
+    bound with nothing more known). What is fixed for an instrument (the
+    thermocouple's and flux sensor's errors) comes from the scene's
+    ``instrument_seed``, so every session of a scene has the same
+    instruments; the object thermometer's bias and gain error depend on the
+    session (ambient, warm-up, aim) and come from ``session_rng``.
+    """
+    fixed = np.random.default_rng((int(sensors.instrument_seed), 0x5E550))   # its own stream
+    tc_bias = fixed.uniform(-1, 1) * sensors.pad_tc_bias_limit_k
+    flux_gain = 1.0 + fixed.uniform(-1, 1) * sensors.flux_sensitivity_limit_rel
+    bias = session_rng.uniform(-1, 1) * sensors.object_bias_limit_k
+    gain = session_rng.uniform(-1, 1) * sensors.object_gain_limit
+    thermometer = ObjectThermometer(sensors.object_thermometer, bias, gain,
+                                    sensors.object_noise_k, sensors.object_resolution_k,
+                                    int(sensors.object_readings))
+    return Instruments(thermometer, tc_bias, flux_gain)

@@ -31,7 +31,7 @@ from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene, finger_contact_model
-from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, InfraredThermometer, quantise
+from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
 from telethermal.session.master import DisplayConfig, MasterDisplay, PadSensors, SlaveNews
 from telethermal.session.slave import Slave
 
@@ -83,14 +83,19 @@ class Operator:
     conductance_w_m2k: float
 
 
-def draw_operator(scene: Scene, rng: np.random.Generator) -> Operator:
+def draw_operator(scene: Scene, rng: np.random.Generator, session=None) -> Operator:
+    """The operator of one touch; the finger's temperature by the master's
+    thermometer in ``session`` (drawn from ``rng`` and calibrated, unless given)."""
+    from telethermal.data.generate import sensor_session
+
+    session = session or sensor_session(scene, rng)
     finger, var = scene.finger, scene.variability
     finger_c = float(rng.normal(finger.temp_c, finger.temp_sd_c))
     k, c = np.exp(rng.normal(0.0, finger.property_sd, 2))
     force = float(np.clip(rng.normal(var.force_n, var.force_sd_n), 0.3 * var.force_n,
                           3 * var.force_n))
     h = finger.contact_conductance_w_m2k * (force / var.force_n) ** var.conductance_force_exponent
-    ir = float(InfraredThermometer(scene.sensors.ir_error_k).read_c(finger_c, rng))
+    ir = float(session.measure_c(np.array([finger_c]), rng)[0])
     return Operator(finger_c, ir, float(k), float(c), force, float(h))
 
 

@@ -1,8 +1,8 @@
 """The slave: the sensing pad touching the remote object, its contact
 detection and its streaming identification.
 
-Before contact the pad is driven to the object's temperature (infrared
-reading) plus the scene's gap: a Peltier pad is held there; a water pad is
+Before contact the pad is driven to the object's temperature (measured by
+the session's calibrated object thermometer) plus the scene's gap: a Peltier pad is held there; a water pad is
 pre-conditioned by its PI and pump loop (:class:`~telethermal.physics.waterpad.WaterPad`,
 active-heat-flow-sensing eq. 11-13), the pump off at contact. The pad's
 contact is open loop (the pad does not react to what the master does), so
@@ -37,7 +37,7 @@ class Slave:
 
     def __init__(self, scene: Scene, material: str, identifier, rng: np.random.Generator,
                  contact_s: float | None = None, on_n: float = 2.0, off_n: float = 1.0,
-                 debounce_s: float = 0.02):
+                 debounce_s: float = 0.02, session=None):
         objs = [o for o in scene.objects if o.material == material]
         if not objs:
             raise SceneError(f"scene {scene.name} has no object of {material!r}; it has "
@@ -48,7 +48,9 @@ class Slave:
         pad = replace(scene.pad, trials_per_material=1,
                       contact_duration_s=contact_s or scene.pad.contact_duration_s)
         one = replace(scene, pad=pad, objects=(objs[0],))
-        self.trial = pad_database(one, rng)[0]
+        # ``session``: the slave's instruments and thermometer calibration,
+        # kept across touches by a service; drawn for this touch if not given.
+        self.trial = pad_database(one, rng, session)[0]
         self._load(self.trial.channels, identifier, self.trial.T_object_C,
                    float(self.trial.extra["T_object_true_C"]), self.trial.T_pad_C,
                    self.trial.gap_k, on_n, off_n, debounce_s)
