@@ -324,6 +324,10 @@ def cmd_identify_train(args) -> int:
     start = time.perf_counter()
     with console.status(f"training {args.method} on {len(contacts)} trials"):
         model.fit(contacts)
+    from telethermal.ident.registry import dataset_scene
+    scene_name = dataset_scene(args.data)
+    if scene_name is not None:
+        model.scene_ = scene_name
     path = model.save(args.out)
     print(f"{path}: {args.method} on {', '.join(model.classes_)}; "
           f"{len(model.windows_s_)} windows up to {model.windows_s_[-1]} s; "
@@ -460,6 +464,7 @@ def _demo_identify(scene, out: Path, seed: int) -> None:
     from telethermal.ident.registry import make
 
     model = make("effusivity-lda").fit(from_trials(load_dataset(out / "databases" / "pad"))[0])
+    model.scene_ = scene.name
     model.save(out / "identifier.npz")
     report = evaluate(model, pad_database(scene, np.random.default_rng(seed + 1)))
     _write_json(out / "identify.json", report)

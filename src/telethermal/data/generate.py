@@ -15,6 +15,11 @@ lab would, unless told not to; the manifest's ``T_object_C`` is the
 corrected reading and ``generation.json`` records the instruments' true
 errors and the calibration.
 
+Each trial's ``t_s = 0`` is the onset that the pad's contact detector
+finds in the recorded force (the first sample past its threshold), as a
+lab's recording made with that detector is cut and as the slave finds it
+live; ``onset_offset_s`` is the true contact instant on that axis.
+
 Trial-to-trial variability: pressing force and through it the contact
 conductance (``h ~ F^0.8``), the onset of contact relative to the recorded
 ``t_s = 0``, the object's true temperature and the thermometer's per-reading
@@ -37,6 +42,7 @@ from telethermal.data.dataset import Trial, staged_dir, write_trials
 from telethermal.errors import ModelError
 from telethermal.physics.scene import (Scene, SensorSpec, finger_contact_model,
                                        pad_contact_model)
+from telethermal.control.contact import ContactDetector
 from telethermal.control.thermometer_calibration import (UNCALIBRATED, ThermometerCalibration,
                                                         calibrate_simulated)
 from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, Instruments,
@@ -123,6 +129,10 @@ def _record(scene, result, times, draws, first_contact_temp, rng, group_of, pref
     trials = []
     for i in range(len(draws.force_n)):
         force = ForceSensor().read_n(times - draws.onset_s[i], draws.force_n[i], rng)
+        # t_s = 0 where the pad's own contact detector finds the onset, as a
+        # recording made with it would be cut (and as the slave sees it live).
+        detected = detected_onset_s(times, force)
+        t_s = np.round(times - detected, 9)
         trial_id = f"{prefix}-{i:02d}" if group_of is None else f"{prefix}-{group_of(i)}-{i:02d}"
         trials.append(Trial(
             trial_id=trial_id, material=prefix, file=f"trials/{trial_id}.csv",
@@ -134,11 +144,22 @@ def _record(scene, result, times, draws, first_contact_temp, rng, group_of, pref
             extra={"T_object_true_C": f"{draws.object_true_c[i]:.4f}",
                    "contact_conductance_w_m2k": f"{draws.conductance_w_m2k[i]:.1f}",
                    "force_N": f"{draws.force_n[i]:.3f}",
-                   "onset_offset_s": f"{draws.onset_s[i]:.5f}",
+                   "onset_offset_s": f"{draws.onset_s[i] - detected:.5f}",
                    "model": model_kind, **extra_of(i)},
-            channels={"t_s": times, "heat_flux_W_m2": flux[i], "temperature_C": temp[i],
+            channels={"t_s": t_s, "heat_flux_W_m2": flux[i], "temperature_C": temp[i],
                       "force_N": force}))
     return trials
+
+
+def detected_onset_s(times: np.ndarray, force_n: np.ndarray) -> float:
+    """The onset the contact detector (its default thresholds, those the
+    slave uses live) finds in a force trace; 0 when it finds none."""
+    detector = ContactDetector()
+    for t, f in zip(times, force_n):
+        event = detector.update(float(t), float(f))
+        if event is not None and event.touching:
+            return float(event.t_s)
+    return 0.0
 
 
 def pad_database(scene: Scene, rng: np.random.Generator,

@@ -5,6 +5,13 @@ confidence passes the identifier's threshold, or say "unknown".
 little heat (a gap under ``MIN_GAP_K``: the passive pad at the object's own
 temperature), when the contact lies outside every learnt class, or when the
 confidence never reaches the threshold within the contact.
+
+Two materials may stay ambiguous (the first paper merges aluminium with
+steel, graphite with rubber): when no class passes the threshold but the two
+most probable together do, the decision commits to that *group* (label
+``"a|b"``, members sorted) and keeps refining: a member passing the
+threshold alone later replaces it. A master renders a group as the mixture
+of its members weighted by the posteriors, as before any decision.
 """
 
 from __future__ import annotations
@@ -18,6 +25,25 @@ from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import MIN_GAP_K
 
 UNKNOWN = "unknown"
+GROUP_SEPARATOR = "|"
+
+
+def group_label(members) -> str:
+    return GROUP_SEPARATOR.join(sorted(members))
+
+
+def members(label: str) -> tuple[str, ...]:
+    """The materials a decision's label stands for (one, or a group's)."""
+    return tuple(label.split(GROUP_SEPARATOR))
+
+
+def _group(p: np.ndarray, threshold: float):
+    """Indices of the two most probable classes when together, but neither
+    alone, they pass the threshold; else None."""
+    if len(p) < 3:
+        return None
+    top = np.argsort(p)[::-1][:2]
+    return top if p[top].sum() >= threshold else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,7 +51,9 @@ class Decision:
     label: str                 # a class of the identifier, or "unknown"
     confidence: float          # posterior of the best class when decided (or at the end)
     time_s: float | None       # time after contact of the commitment; None if none
-    reason: str                # confident | outside classes | gap too small | not confident
+    reason: str                # confident | confident group | outside classes | gap too small
+    #                            | not confident
+    time_first_s: float | None = None   # first commitment (a group's), when refined later
 
 
 def decide(model: Identifier, x: np.ndarray, gap_k: float) -> Decision:
@@ -40,13 +68,21 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float) -> Decision:
     n = int(np.sum(np.all(np.isfinite(x), axis=1)))
     path = model.posterior_path(x[:n])
     best = 0.0
+    group = None
     for i, p in enumerate(path):
         k = int(np.argmax(p))
         best = float(p[k])
         if p[k] >= model.threshold:
             if model.outside_classes(x[None, :n], i)[0]:
                 return Decision(UNKNOWN, best, model.windows_s_[i], "outside classes")
-            return Decision(model.classes_[k], best, model.windows_s_[i], "confident")
+            return Decision(model.classes_[k], best, model.windows_s_[i], "confident",
+                            group.time_s if group else model.windows_s_[i])
+        pair = _group(p, model.threshold)
+        if group is None and pair is not None and not model.outside_classes(x[None, :n], i)[0]:
+            group = Decision(group_label(model.classes_[j] for j in pair), float(p[pair].sum()),
+                             model.windows_s_[i], "confident group", model.windows_s_[i])
+    if group is not None:
+        return group
     return Decision(UNKNOWN, best, None, "not confident")
 
 
@@ -58,8 +94,13 @@ class Estimate:
     posteriors: tuple[float, ...]      # over the identifier's classes
     label: str                         # the best class, or "unknown"
     confidence: float
-    decided: bool                      # committed (to a class or to "unknown")
+    decided: bool                      # committed (to a class, a group or "unknown")
     reason: str = ""
+
+    @property
+    def final(self) -> bool:
+        """Committed for good: a group's commitment may still be refined."""
+        return self.decided and self.reason != "confident group"
 
 
 class StreamingIdentifier:
@@ -92,7 +133,9 @@ class StreamingIdentifier:
 
     @property
     def decided(self) -> bool:
-        return self.estimate.decided
+        """Committed for good (a group keeps refining until the contact's
+        last window)."""
+        return self.estimate.final
 
     def push(self, sample) -> Estimate | None:
         if self.decided:
@@ -113,11 +156,18 @@ class StreamingIdentifier:
         p = model.proba_normalised(x, index)[0]
         k = int(np.argmax(p))
         t_s = model.windows_s_[index]
+        pair = _group(p, model.threshold)
+        held = self.estimate if self.estimate.reason == "confident group" else None
         if p[k] >= model.threshold:
             if model.outside_classes(x, index)[0]:
                 est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, "outside classes")
             else:
                 est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), True, "confident")
+        elif held is not None:            # a group stands until a member is sure alone
+            est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, "confident group")
+        elif pair is not None and not model.outside_classes(x, index)[0]:
+            est = Estimate(t_s, tuple(p), group_label(model.classes_[j] for j in pair),
+                           float(p[pair].sum()), True, "confident group")
         elif index == len(model.windows_s_) - 1:
             est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, "not confident")
         else:

@@ -70,14 +70,23 @@ def expected_calibration_error(proba: np.ndarray, truth: np.ndarray, bins: int =
 
 def decision_summary(decisions, labels, within_s: float = 1.0) -> dict:
     """Commit rate, accuracy of the committed decisions and their median
-    time, counting only commitments to a class within ``within_s``."""
+    time, counting commitments to a class or a group within ``within_s``
+    (the first commitment's time; a group is right when it holds the
+    truth, and ``group_rate`` says how many stayed groups)."""
+    from telethermal.ident.anytime import members
+
+    def first(d):
+        return d.time_first_s if d.time_first_s is not None else d.time_s
+
     committed = [(d, lab) for d, lab in zip(decisions, labels)
-                 if d.label != UNKNOWN and d.time_s is not None and d.time_s <= within_s + 1e-9]
+                 if d.label != UNKNOWN and first(d) is not None and first(d) <= within_s + 1e-9]
     return {"commit_rate": len(committed) / len(decisions) if decisions else float("nan"),
-            "accuracy": (float(np.mean([d.label == lab for d, lab in committed]))
+            "accuracy": (float(np.mean([lab in members(d.label) for d, lab in committed]))
                          if committed else None),
-            "time_s_p50": (float(np.median([d.time_s for d, _ in committed]))
+            "time_s_p50": (float(np.median([first(d) for d, _ in committed]))
                            if committed else None),
+            "group_rate": (sum(d.reason == "confident group" for d, _ in committed)
+                           / len(decisions) if decisions else float("nan")),
             "committed": len(committed), "touches": len(decisions),
             "unknown_reasons": {r: sum(d.reason == r for d in decisions if d.label == UNKNOWN)
                                 for r in sorted({d.reason for d in decisions

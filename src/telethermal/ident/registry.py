@@ -28,3 +28,28 @@ def load_model(path: str | Path) -> Identifier:
         raise ModelFileError(f"{path}: method {header.get('method')!r} is not one this "
                              f"telethermal knows ({', '.join(sorted(METHODS))})")
     return cls.restore(header, arrays)
+
+
+def dataset_scene(data_dir: str | Path) -> str | None:
+    """The scene a generated dataset came from (its ``generation.json``, in
+    the dataset folder or its parent), or None for a dataset without one."""
+    import json
+
+    for folder in (Path(data_dir), Path(data_dir).parent):
+        meta = folder / "generation.json"
+        if meta.is_file():
+            try:
+                return json.loads(meta.read_text()).get("scene")
+            except (OSError, ValueError):
+                return None
+    return None
+
+
+def check_scene(model: Identifier, scene_name: str, where: str = "the identifier") -> None:
+    """Refuse a model trained (and calibrated) on another scene: its
+    sensors, pad and gap differ, so its posteriors would mean nothing."""
+    trained = getattr(model, "scene_", None)
+    if trained is not None and trained != scene_name:
+        raise ModelFileError(f"{where} was trained and calibrated on scene {trained!r}; this "
+                             f"runs scene {scene_name!r}. Train one on {scene_name!r} "
+                             "(telethermal identify train) or run the scene it was made for")

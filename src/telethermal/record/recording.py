@@ -81,6 +81,9 @@ TOPIC_FIELDS = {
     "samples": {"t_s": "array", "heat_flux_W_m2": "array", "temperature_C": "array",
                 "force_N": "array"},
     "touch": {"summary": "object"},
+    "thermometer_calibration": {"calibrated": "boolean", "offset_k": "number", "gain": "number",
+                                "residual_k": "number", "offset_sd_k": "number",
+                                "points": "array"},
     "sim": {"trace": "object"},
 }
 

@@ -152,6 +152,11 @@ class SessionRecorder:
                 "contact_id": self.contact_id, "k0": self._k0, **cols})
         self._cols = {k: [] for k in PERIOD_FIELDS}
 
+    def note(self, what: str, fields: dict) -> None:
+        """A one-off record of the slave's instruments (e.g. its thermometer
+        calibration: ``/slave/thermometer_calibration``)."""
+        self.rec.log(f"/slave/{what}", 0.0, _plain(fields))
+
     def wire(self, t_s: float, direction: str, message: dict) -> None:
         self.rec.log(f"/wire/{direction}/{message['kind']}", t_s, _plain(message))
 

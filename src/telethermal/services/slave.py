@@ -59,12 +59,58 @@ class SlaveService:
         self.touch_t0: float | None = None
         self._sent = 0
         self._seed = config.seed
+        self.calibration_error: str | None = None
+        self._start_sensor_session(config.seed)
         self.place(config.place or self.scene.materials[0], config.seed)
+
+    # ------------------------------------------------------------ instruments
+    def _start_sensor_session(self, seed: int) -> None:
+        """This process's instruments (a session: the object thermometer's
+        bias is drawn once for it), calibrated against the pad at start."""
+        import numpy as np
+
+        from telethermal.data.generate import SensorSession
+        from telethermal.physics.sensors import draw_instruments
+
+        self._session_rng = np.random.default_rng((seed, 0xCA1))
+        self.sensors = SensorSession(draw_instruments(self.scene.sensors, self._session_rng))
+        self.calibrate_thermometer()
+
+    def calibrate_thermometer(self, drift_k_per_reading: float = 0.0) -> dict:
+        """Aim the object thermometer at the pad at three pad temperatures
+        and remove its bias and gain error. On failure the previous
+        calibration stays in force (none at start: readings are then used
+        as they are, and status says so); the error is logged and returned."""
+        from dataclasses import replace as dc_replace
+
+        from telethermal.control.thermometer_calibration import calibrate_simulated
+        from telethermal.errors import CalibrationError
+
+        try:
+            cal = calibrate_simulated(self.sensors.instruments, self.scene.room_temp_c,
+                                      self._session_rng, self.scene.sensors.thermocouple_noise_uv,
+                                      drift_k_per_reading=drift_k_per_reading)
+        except CalibrationError as exc:
+            self.calibration_error = str(exc)
+            log.error("object thermometer calibration failed: %s (%s in force)", exc,
+                      "the previous calibration" if self.sensors.calibration.calibrated
+                      else "NO calibration: readings carry the thermometer's bias")
+            return {"calibrated": False, "error": str(exc),
+                    "in_force": self.sensors.calibration.to_dict()}
+        self.sensors = dc_replace(self.sensors, calibration=cal)
+        self.calibration_error = None
+        log.info("object thermometer (%s) calibrated: offset %+.3f K, gain %.4f, residual %.3f K, "
+                 "offset standard error %.3f K", self.scene.sensors.object_thermometer,
+                 cal.offset_k, cal.gain, cal.residual_k, cal.offset_sd_k)
+        if self.recorder is not None:
+            self.recorder.note("thermometer_calibration", cal.to_dict())
+        return cal.to_dict()
 
     # ------------------------------------------------------------ the object
     def place(self, material: str, seed: int) -> None:
         """Put ``material`` under the pad and measure it (IR) before contact."""
-        self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed))
+        self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
+                         session=self.sensors)
         self.material = material
         self._seed = seed
         self._sent = 0
@@ -190,14 +236,22 @@ class SlaveService:
             # object_true_c: the simulator's truth, for comparing with direct contact
             return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c}
 
+        def calibrate(r):
+            if self.touch_t0 is not None:
+                raise ValueError("cannot calibrate during a contact: lift first")
+            return self.calibrate_thermometer(float(r.get("drift_k_per_reading", 0.0)))
+
         self.admin.handle(request, self, {
-            "place": place, "report": lambda r: dict(getattr(self, "last_touch", {}))})
+            "place": place, "report": lambda r: dict(getattr(self, "last_touch", {})),
+            "calibrate_thermometer": calibrate})
 
     def status(self) -> dict:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
                 "masters_lost": self.masters_lost,
+                "thermometer_calibration": {**self.sensors.calibration.to_dict(),
+                                            "error": self.calibration_error},
                 "offset_s": e.offset.offset_s, "counters": dict(e.counters)}
 
     def run(self) -> None:

@@ -15,7 +15,9 @@ from telethermal.render.generator import NetworkGenerator
 def train_identifier(scene: Scene, seed: int = 0, method: str = "effusivity-lda"):
     """Database 1 of ``scene`` (seed ``seed``) -> a fitted identifier."""
     trials = pad_database(scene, np.random.default_rng(seed))
-    return make(method).fit(from_trials(trials)[0])
+    model = make(method).fit(from_trials(trials)[0])
+    model.scene_ = scene.name
+    return model
 
 
 def train_generator(scene: Scene, seed: int = 0):
