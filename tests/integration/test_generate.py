@@ -45,8 +45,9 @@ def test_both_databases_are_written_and_valid(fingertip):
 
 
 def test_pad_is_set_ten_kelvin_above_the_ir_reading(fingertip):
-    # gap_k = 10 from the IR reading: the recorded gap is 10 K up to the IR
-    # error (0.4 K) and the thermocouple (0.03 K) -> within 2 K (5 sigma).
+    # gap_k = 10 from the calibrated IR reading: the recorded gap is 10 K up
+    # to the pad's hold (0.05 K), the thermocouple (0.03 K) and the IR's
+    # calibration residual; within 2 K is the contract, far above all three.
     for trial in load_dataset(fingertip / "pad"):
         assert abs(trial.gap_k - 10.0) < 2.0
 
@@ -55,7 +56,9 @@ def test_heat_flows_from_the_warmer_pad_and_orders_by_effusivity(fingertip):
     trials = load_dataset(fingertip / "pad")
     for trial in trials:
         assert window_mean(trial, 0.2, 1.0) > 0
-        assert abs(window_mean(trial, -0.3, -0.01)) < 5.0  # noise only before contact
+        # Noise only before contact. t_s = 0 is the detected onset, which
+        # comes up to ~0.03 s after the true one (jitter 3 x 5 ms + detection).
+        assert abs(window_mean(trial, -0.3, -0.05)) < 5.0
     mean = {m: np.mean([window_mean(t, 0.5, 1.0) for t in trials if t.material == m])
             for m in ("aluminium", "marble", "wood")}
     # e: aluminium 20 000 > marble 2 500 > wood 470 W s^0.5/m^2/K.

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from telethermal.data.generate import pad_database
-from telethermal.ident.anytime import decide
+from telethermal.ident.anytime import decide_all
 from telethermal.ident.base import group_folds
 from telethermal.ident.evaluate import (FIRST_PAPER_MERGE, decision_summary, evaluate,
                                        expected_calibration_error, inference_cost_ms)
@@ -88,7 +88,7 @@ def table1(method: str, seed: int) -> dict:
         p, t = _held_out_proba(model, held)
         probas.append(p)
         truth.append(t)
-        decisions += [decide(model, held.x[i], held.gap_k[i]) for i in range(len(held))]
+        decisions += decide_all(model, held)
         labels += held.labels
     start = time.perf_counter()
     full = make(method).fit(contacts)
@@ -118,8 +118,7 @@ def active_passive(method: str, seed: int) -> dict:
         held = active.subset(test)
         for w in [round(0.1 * k, 1) for k in range(1, 11)]:
             accuracy.setdefault(f"{w:.1f}", []).extend(_accuracy(model, held, w))
-        decisions += [(decide(model, held.x[i], held.gap_k[i]), held.labels[i])
-                      for i in range(len(held))]
+        decisions += list(zip(decide_all(model, held), held.labels))
         p, t = _held_out_proba(model, held)
         probas.append(p)
         truth.append(t)
@@ -266,7 +265,7 @@ def session_shift(method: str, seed: int) -> dict:
         test, s_b = _session_trials(scene, seed + 100, SHIFT_BIAS_K[1], calibrate)
         model = make(method).fit(from_trials(train, max_s=1.0)[0])
         held, _ = from_trials(test, max_s=1.0)
-        decisions = [decide(model, held.x[i], held.gap_k[i]) for i in range(len(held))]
+        decisions = decide_all(model, held)
         out[mode] = {
             "accuracy_5": {f"{w:g}": float(np.mean(_accuracy(model, held, w, FIRST_PAPER_MERGE)))
                            for w in WINDOWS_T1},

@@ -40,8 +40,8 @@ import numpy as np
 
 from telethermal.data.dataset import Trial, staged_dir, write_trials
 from telethermal.errors import ModelError
-from telethermal.physics.scene import (Scene, SensorSpec, finger_contact_model,
-                                       pad_contact_model)
+from telethermal.physics.scene import (ONSET_MARGIN_S, Scene, SensorSpec,
+                                       finger_contact_model, pad_contact_model)
 from telethermal.control.contact import ContactDetector
 from telethermal.control.thermometer_calibration import (UNCALIBRATED, ThermometerCalibration,
                                                         calibrate_simulated)
@@ -100,7 +100,7 @@ def _draw(scene: Scene, obj, n: int, reference_h: float, rng,
     var, sens = scene.variability, scene.sensors
     force = np.clip(rng.normal(var.force_n, var.force_sd_n, n), 0.3 * var.force_n,
                     3.0 * var.force_n)
-    h = reference_h * (force / var.force_n) ** var.conductance_force_exponent
+    h = reference_h * (force / var.reference_force_n) ** var.conductance_force_exponent
     jitter = sens.onset_jitter_s
     onset = np.clip(rng.normal(0.0, jitter, n), -3 * jitter, 3 * jitter) if jitter else np.zeros(n)
     true_c = obj.temp_c + rng.normal(0.0, var.object_temp_sd_c, n)
@@ -116,7 +116,7 @@ def _time_axis(scene: Scene, duration_s: float) -> np.ndarray:
 
 
 def _record(scene, result, times, draws, first_contact_temp, rng, group_of, prefix, model_kind,
-            extra_of, session: SensorSession):
+            extra_of, session: SensorSession, duration_s: float):
     """Turn a ContactResult into trials with sensor readings."""
     sens = scene.sensors
     flux = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv,
@@ -133,6 +133,7 @@ def _record(scene, result, times, draws, first_contact_temp, rng, group_of, pref
         # recording made with it would be cut (and as the slave sees it live).
         detected = detected_onset_s(times, force)
         t_s = np.round(times - detected, 9)
+        keep = t_s <= duration_s + 1e-9            # the contact's duration after the onset
         trial_id = f"{prefix}-{i:02d}" if group_of is None else f"{prefix}-{group_of(i)}-{i:02d}"
         trials.append(Trial(
             trial_id=trial_id, material=prefix, file=f"trials/{trial_id}.csv",
@@ -146,8 +147,8 @@ def _record(scene, result, times, draws, first_contact_temp, rng, group_of, pref
                    "force_N": f"{draws.force_n[i]:.3f}",
                    "onset_offset_s": f"{draws.onset_s[i] - detected:.5f}",
                    "model": model_kind, **extra_of(i)},
-            channels={"t_s": t_s, "heat_flux_W_m2": flux[i], "temperature_C": temp[i],
-                      "force_N": force}))
+            channels={"t_s": t_s[keep], "heat_flux_W_m2": flux[i][keep],
+                      "temperature_C": temp[i][keep], "force_N": force[keep]}))
     return trials
 
 
@@ -170,7 +171,7 @@ def pad_database(scene: Scene, rng: np.random.Generator,
     tc_bias = session.instruments.pad_tc_bias_k
     trials = []
     n = scene.pad.trials_per_material
-    times = _time_axis(scene, scene.pad.contact_duration_s)
+    times = _time_axis(scene, scene.pad.contact_duration_s + ONSET_MARGIN_S)
     for obj in scene.objects:
         model, choice = pad_contact_model(scene, obj)
         draws = _draw(scene, obj, n, scene.pad.contact_conductance_w_m2k, rng, session)
@@ -189,7 +190,8 @@ def pad_database(scene: Scene, rng: np.random.Generator,
         # T_pad_C is what the pad's thermocouple read just before contact.
         before = Thermocouple(cold_junction_c=scene.room_temp_c, bias_k=tc_bias).read_c(pad_c, rng)
         trials += _record(scene, result, times, draws, before, rng, None, obj.material,
-                          choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}"}, session)
+                          choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}"}, session,
+                          scene.pad.contact_duration_s)
     return trials
 
 
@@ -206,7 +208,7 @@ def finger_database(scene: Scene, rng: np.random.Generator,
     heat_scale = np.exp(rng.normal(0.0, finger.property_sd, persons))
     per = finger.trials_per_person
     person = np.repeat(np.arange(persons), per)
-    times = _time_axis(scene, finger.contact_duration_s)
+    times = _time_axis(scene, finger.contact_duration_s + ONSET_MARGIN_S)
     trials = []
     for obj in scene.objects:
         model, choice = finger_contact_model(scene, obj)
@@ -222,7 +224,7 @@ def finger_database(scene: Scene, rng: np.random.Generator,
                           lambda i: {"T_finger_true_C": f"{finger_c[i]:.4f}",
                                      "person": str(person[i]),
                                      "skin_effusivity_scale": f"{np.sqrt(k_scale[person[i]] * heat_scale[person[i]]):.4f}"},
-                          session)
+                          session, finger.contact_duration_s)
     return trials
 
 

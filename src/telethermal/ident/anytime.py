@@ -21,11 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from telethermal.errors import IdentificationError
-from telethermal.ident.base import Identifier
+from telethermal.ident.base import FORCE_SAMPLES, Identifier, force_at, force_in_range
 from telethermal.ident.prepare import MIN_GAP_K
 
 UNKNOWN = "unknown"
 GROUP_SEPARATOR = "|"
+FORCE_OUTSIDE = "force outside trained range"
 
 
 def group_label(members) -> str:
@@ -56,8 +57,14 @@ class Decision:
     time_first_s: float | None = None   # first commitment (a group's), when refined later
 
 
-def decide(model: Identifier, x: np.ndarray, gap_k: float) -> Decision:
+def decide(model: Identifier, x: np.ndarray, gap_k: float,
+           force_n: np.ndarray | None = None) -> Decision:
     """Walk one contact's normalised samples ``x`` (n, C) window by window.
+
+    ``force_n`` (n,): the pressing force; a window whose force lies outside
+    the range the model was trained on commits nothing (a lighter or heavier
+    touch changes the contact conductance, and so the flux), and a contact
+    that ends so is "unknown" ("force outside trained range").
 
     Posteriors change only where a longer window (or, for a recurrent
     network, a new input step) becomes available, so this gives the same
@@ -69,9 +76,16 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float) -> Decision:
     path = model.posterior_path(x[:n])
     best = 0.0
     group = None
+    outside = False
     for i, p in enumerate(path):
         k = int(np.argmax(p))
         best = float(p[k])
+        if force_n is not None:
+            n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
+            outside = not force_in_range(model, i, float(force_at(
+                np.asarray(force_n, dtype=np.float64)[None], n_w)[0]))
+            if outside:
+                continue
         if p[k] >= model.threshold:
             if model.outside_classes(x[None, :n], i)[0]:
                 return Decision(UNKNOWN, best, model.windows_s_[i], "outside classes")
@@ -83,7 +97,15 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float) -> Decision:
                              model.windows_s_[i], "confident group", model.windows_s_[i])
     if group is not None:
         return group
-    return Decision(UNKNOWN, best, None, "not confident")
+    return Decision(UNKNOWN, best, None, FORCE_OUTSIDE if outside else "not confident")
+
+
+def decide_all(model: Identifier, contacts) -> list[Decision]:
+    """:func:`decide` for every contact of a :class:`~telethermal.ident.prepare.Contacts`,
+    with its pressing force when recorded."""
+    force = contacts.force_n
+    return [decide(model, contacts.x[i], contacts.gap_k[i], None if force is None else force[i])
+            for i in range(len(contacts))]
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,6 +144,7 @@ class StreamingIdentifier:
         self.model, self.gap_k, self.t_object_c = model, gap_k, t_object_c
         self._normalise = normalise
         self._rows: list[np.ndarray] = []
+        self._forces: list[float] = []
         self._window = -1
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
@@ -137,9 +160,13 @@ class StreamingIdentifier:
         last window)."""
         return self.estimate.final
 
-    def push(self, sample) -> Estimate | None:
+    def push(self, sample, force_n: float | None = None) -> Estimate | None:
+        """One sample (the model's channels); ``force_n``, the pressing force
+        with it, lets the decision refuse a touch unlike the trained ones."""
         if self.decided:
             return None
+        if force_n is not None:
+            self._forces.append(float(force_n))
         model = self.model
         row = np.atleast_1d(np.asarray(sample, dtype=np.float64))
         if row.shape != (len(model.channels),) or not np.all(np.isfinite(row)):
@@ -158,7 +185,15 @@ class StreamingIdentifier:
         t_s = model.windows_s_[index]
         pair = _group(p, model.threshold)
         held = self.estimate if self.estimate.reason == "confident group" else None
-        if p[k] >= model.threshold:
+        outside = bool(self._forces) and not force_in_range(
+            model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
+        last = index == len(model.windows_s_) - 1
+        if outside and held is None:
+            est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
+                           last, FORCE_OUTSIDE if last else "")
+        elif outside:
+            est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, "confident group")
+        elif p[k] >= model.threshold:
             if model.outside_classes(x, index)[0]:
                 est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, "outside classes")
             else:
@@ -168,7 +203,7 @@ class StreamingIdentifier:
         elif pair is not None and not model.outside_classes(x, index)[0]:
             est = Estimate(t_s, tuple(p), group_label(model.classes_[j] for j in pair),
                            float(p[pair].sum()), True, "confident group")
-        elif index == len(model.windows_s_) - 1:
+        elif last:
             est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, "not confident")
         else:
             est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), False)

@@ -72,6 +72,41 @@ def fit_temperatures(logits: np.ndarray, y: np.ndarray, pool: int = 1) -> np.nda
     return temps
 
 
+#: Samples averaged for the pressing force at the end of a window.
+FORCE_SAMPLES = 3
+
+
+def force_at(force_n: np.ndarray, n: int) -> np.ndarray:
+    """Pressing force over the last ``FORCE_SAMPLES`` samples of the first
+    ``n``, per contact; ``force_n`` (N, >= n)."""
+    return np.nanmean(force_n[:, max(0, n - FORCE_SAMPLES):n], axis=1)
+
+
+def force_ranges(model, contacts: Contacts) -> list | None:
+    """The range of pressing forces the training touches had at the end of
+    each window, [[lo, hi], ...]: a touch outside it (lighter or heavier,
+    so its contact conductance differs) is not one the model has seen."""
+    if contacts.force_n is None or not np.all(np.isfinite(contacts.force_n[:, 0])):
+        return None
+    rate = contacts.sample_rate_hz
+    out = []
+    for w in model.windows_s_:
+        f = force_at(contacts.force_n, int(round(w * rate)) + 1)
+        f = f[np.isfinite(f)]
+        out.append([float(f.min()), float(f.max())] if len(f) else [-np.inf, np.inf])
+    return out
+
+
+def force_in_range(model, window_index: int, force_n: float | None) -> bool:
+    """Whether a touch's force at a window lies within the trained range
+    (True when either is unknown)."""
+    ranges = getattr(model, "force_range_n_", None)
+    if not ranges or force_n is None or not np.isfinite(force_n):
+        return True
+    lo, hi = ranges[min(window_index, len(ranges) - 1)]
+    return lo <= force_n <= hi
+
+
 class Identifier:
     """Base of all identification methods."""
 
@@ -113,6 +148,7 @@ class Identifier:
                                       f"for a window of {step:.3g} s")
         self.windows_s_ = [round(w, 6) for w in np.arange(1, int(top / step + 1e-9) + 1) * step]
         self.params_ = [self._fit_window(self._window(contacts.x, w), y) for w in self.windows_s_]
+        self.force_range_n_ = force_ranges(self, contacts)
         self.temperature_ = np.ones(len(self.windows_s_))
         if self.calibrate and not self.streaming:
             self._calibrate(contacts, y)
@@ -231,9 +267,9 @@ class Identifier:
                          for i, c in enumerate(self.channels)], axis=1)
 
     def learned(self) -> dict:
-        """Learned scalars (names ending in ``_``) kept in the model file's
-        header beside the weights; subclasses add theirs."""
-        return {}
+        """Learned values (names ending in ``_``, JSON-able) kept in the
+        model file's header beside the weights; subclasses add theirs."""
+        return {"force_range_n_": getattr(self, "force_range_n_", None)}
 
     # ------------------------------------------------------------ subclass hooks
     def _fit_window(self, x: np.ndarray, y: np.ndarray) -> dict:

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from telethermal.data.dataset import Trial
-from telethermal.ident.anytime import UNKNOWN, decide
+from telethermal.ident.anytime import UNKNOWN, decide, decide_all
 from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials
 
@@ -143,7 +143,7 @@ def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
         contacts, _ = from_trials(usable_trials, model.channels, model.sample_rate_hz_,
                                   max_s=max(windows_s))
         accuracy, predicted_at_end = _accuracy_by_window(model, contacts, windows_s)
-        decisions = [decide(model, contacts.x[i], contacts.gap_k[i]) for i in range(len(contacts))]
+        decisions = decide_all(model, contacts)
         labels = contacts.labels
     decisions += [decide(model, np.empty((0, len(model.channels))), t.gap_k) for t in skipped]
     truth_all = labels + [t.material for t in skipped]

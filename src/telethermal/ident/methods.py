@@ -126,7 +126,7 @@ class EffusivityLda(Identifier):
         return super().fit(contacts)
 
     def learned(self) -> dict:
-        return {"shrinkage_": self.shrinkage_}
+        return {**super().learned(), "shrinkage_": self.shrinkage_}
 
     def _cv_shrinkage(self, contacts) -> float:
         """The grid value with the lowest held-out log loss, pooled over

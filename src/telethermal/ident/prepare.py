@@ -20,6 +20,7 @@ from telethermal.errors import IdentificationError
 
 FLUX = "heat_flux_W_m2"
 TEMPERATURE = "temperature_C"
+FORCE = "force_N"
 #: Below this gap (K) a contact is not normalised and not identified: five
 #: standard deviations of an infrared thermometer's error (0.4 K), so a gap
 #: measured smaller may be no gap at all (the passive pad of Case I-cnv).
@@ -38,6 +39,7 @@ class Contacts:
     gap_k: np.ndarray
     sample_rate_hz: float
     channels: tuple[str, ...]
+    force_n: np.ndarray | None = None     # (n_trials, n_samples) pressing force, if recorded
 
     def __len__(self) -> int:
         return len(self.labels)
@@ -46,7 +48,8 @@ class Contacts:
         index = np.asarray(index)
         return Contacts(self.x[index], self.lengths[index], [self.labels[i] for i in index],
                         [self.groups[i] for i in index], self.gap_k[index],
-                        self.sample_rate_hz, self.channels)
+                        self.sample_rate_hz, self.channels,
+                        None if self.force_n is None else self.force_n[index])
 
 
 def normalise(values: np.ndarray, channel: str, gap_k, t_object_c=None) -> np.ndarray:
@@ -105,6 +108,12 @@ def from_trials(trials: list[Trial], channels=(FLUX,), sample_rate_hz: float | N
     x = np.full((len(rows), n, len(channels)), np.nan)
     for i, r in enumerate(rows):
         x[i, :len(r)] = r
+    force = None
+    if all(FORCE in t.channels for t in keep):
+        force = np.full((len(rows), n), np.nan)
+        for i, t in enumerate(keep):
+            f = trial_samples(t, (FORCE,), rate, max_s)[:, 0]
+            force[i, :len(f)] = f
     return Contacts(x, np.array([len(r) for r in rows]), [t.material for t in keep],
                     [t.group for t in keep], np.array([t.gap_k for t in keep]), float(rate),
-                    tuple(channels)), skipped
+                    tuple(channels), force), skipped

@@ -151,6 +151,8 @@ class Recurrent(Identifier):
         self.final_loss_ = float(loss.detach())
         self.params_ = [{k: v.detach().numpy().copy() for k, v in net.state_dict().items()}]
         self.params_[0]["scale"] = self.scale_
+        from telethermal.ident.base import force_ranges
+        self.force_range_n_ = force_ranges(self, contacts)
         self.temperature_ = np.ones(len(self.windows_s_))
         net.eval()
         self._module = net

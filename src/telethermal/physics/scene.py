@@ -23,6 +23,10 @@ from telethermal.physics.materials import get_material, object_materials
 from telethermal.physics.model import ModelChoice, choose_model
 
 PAD_KINDS = ("peltier", "water")
+#: Simulated beyond a contact's duration: a recording is cut at the onset its
+#: contact detector finds, up to a few periods after the true one, and must
+#: still hold the whole duration after it.
+ONSET_MARGIN_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -83,6 +87,7 @@ class SensorSpec:
 class VariabilitySpec:
     force_n: float = 10.0
     force_sd_n: float = 1.5
+    reference_force_n: float = 10.0    # the force at which the contact conductances hold
     conductance_force_exponent: float = 0.8
     object_temp_sd_c: float = 0.2
 
@@ -316,7 +321,8 @@ def pad_contact_model(scene: Scene, obj: ObjectSpec):
         back_a = Boundary("isothermal")          # Peltier junction held at the set point
     else:
         back_a = Boundary("convective", h_w_m2k=scene.pad.back_h_w_m2k)  # water, pump off
-    return _choose(scene, scene.pad.layers, obj, back_a, scene.pad.contact_duration_s,
+    return _choose(scene, scene.pad.layers, obj, back_a,
+                   scene.pad.contact_duration_s + ONSET_MARGIN_S,
                    scene.pad.contact_conductance_w_m2k)
 
 
@@ -325,7 +331,8 @@ def finger_contact_model(scene: Scene, obj: ObjectSpec):
     if scene.finger is None:
         raise SceneError(f"{scene.source}: the scene has no [finger]")
     skin = (Layer(get_material("skin"), math.inf),)
-    return _choose(scene, skin, obj, Boundary("adiabatic"), scene.finger.contact_duration_s,
+    return _choose(scene, skin, obj, Boundary("adiabatic"),
+                   scene.finger.contact_duration_s + ONSET_MARGIN_S,
                    scene.finger.contact_conductance_w_m2k)
 
 

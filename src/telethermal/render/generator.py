@@ -230,8 +230,11 @@ def mixture(generator, materials, weights, t_s: float, step_s: float = 1e-4):
     derivative by central difference (one-sided at contact); one batched
     evaluation per material."""
     lo, hi = max(t_s - step_s, 0.0), t_s + step_s
-    g = np.asarray(weights, dtype=np.float64) @ generator.normalised_many(
-        materials, np.array([t_s, lo, hi]))
+    # A row-by-row sum, not a BLAS product: BLAS may round differently with
+    # the arrays' alignment, and a replay must give the same bits.
+    w = np.asarray(weights, dtype=np.float64)
+    g = np.sum(w[:, None] * generator.normalised_many(materials, np.array([t_s, lo, hi])),
+               axis=0)
     return float(g[0]), float((g[2] - g[1]) / (hi - lo))
 
 

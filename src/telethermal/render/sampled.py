@@ -33,6 +33,7 @@ class SampledGenerator:
     def __init__(self, curves: dict):
         self._curves = {}
         self._shared = {}
+        self._given = dict(curves)
         for name, curve in curves.items():
             t = np.asarray(curve["t_s"], dtype=np.float64)
             g = np.asarray(curve["g_w_m2k"], dtype=np.float64)
@@ -47,9 +48,16 @@ class SampledGenerator:
         return sorted(self._curves)
 
     def set_curve(self, name: str, t_s, g_w_m2k) -> None:
-        self.__init__({**{m: {"t_s": np.exp(c[0]), "g_w_m2k": c[1]}
-                          for m, c in self._curves.items()},
-                       name: {"t_s": t_s, "g_w_m2k": g_w_m2k}})
+        """Replace (or add) one curve; the others keep their exact knots
+        (rebuilt from what was given, not from exp(log t), which rounds). A
+        curve equal to the one held changes nothing, caches included."""
+        held = self._given.get(name)
+        if held is not None and np.array_equal(np.asarray(held["t_s"], dtype=np.float64),
+                                               np.asarray(t_s, dtype=np.float64)) and \
+                np.array_equal(np.asarray(held["g_w_m2k"], dtype=np.float64),
+                               np.asarray(g_w_m2k, dtype=np.float64)):
+            return
+        self.__init__({**self._given, name: {"t_s": t_s, "g_w_m2k": g_w_m2k}})
 
     def normalised(self, material: str, t_s) -> np.ndarray:
         if material not in self._curves:

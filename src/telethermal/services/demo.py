@@ -218,9 +218,17 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                                           record_dir=record_dir)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
+    cal = {}
     try:
         wait_connected(services, ports[3])
         echo("slave and master up as two processes on loopback (CURVE)")
+        cal = call(ports[2], "status").get("thermometer_calibration") or {}
+        if cal.get("calibrated"):
+            echo(f"slave's object thermometer calibrated against its pad at "
+                 f"{len(cal['points'])} temperatures: offset {cal['offset_k']:+.3f} K, gain "
+                 f"{cal['gain']:.4f}, residual {cal['residual_k']:.3f} K")
+        else:
+            echo(f"slave's object thermometer NOT calibrated: {cal.get('error')}")
         for i, material in enumerate(materials):
             result = networked_touch(scene, material, ports, seed + 1 + i, contact_s)
             s = result.summary
@@ -252,4 +260,5 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         codes = services.stop()
     echo(f"services stopped: exit codes slave {codes['slave']}, master {codes['master']}")
     return {"scene": scene.name, "touches": touches, "exit_codes": codes,
+            "slave_thermometer_calibration": cal,
             "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports))}

@@ -227,7 +227,10 @@ class SlaveService:
         return {"material": self.material, "object_true_c": pad.object_true_c,
                 "object_ir_c": pad.object_ir_c, "onset_s": pad.onset_s,
                 "identified": est.label if est is not None and est.decided else UNKNOWN,
-                "decision_time_s": est.t_s if est is not None and est.decided else None,
+                # the first commitment (a group's, when refined later)
+                "decision_time_s": (pad.committed_at_s if est is not None and est.decided
+                                    and est.label != UNKNOWN else None),
+                "thermometer_calibration_residual_k": self.sensors.calibration.residual_k,
                 "reason": est.reason if est is not None else "no estimate"}
 
     def _on_admin(self, request: dict) -> None:

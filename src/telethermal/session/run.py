@@ -94,7 +94,7 @@ def draw_operator(scene: Scene, rng: np.random.Generator, session=None) -> Opera
     k, c = np.exp(rng.normal(0.0, finger.property_sd, 2))
     force = float(np.clip(rng.normal(var.force_n, var.force_sd_n), 0.3 * var.force_n,
                           3 * var.force_n))
-    h = finger.contact_conductance_w_m2k * (force / var.force_n) ** var.conductance_force_exponent
+    h = finger.contact_conductance_w_m2k * (force / var.reference_force_n) ** var.conductance_force_exponent
     ir = float(session.measure_c(np.array([finger_c]), rng)[0])
     return Operator(finger_c, ir, float(k), float(c), force, float(h))
 
@@ -247,7 +247,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "identified": est.label if decided else UNKNOWN,
         "identified_correctly": decided and est.label == material,
         "decision_reason": est.reason if decided else "no decision",
-        "decision_time_s": est.t_s if decided else None,
+        "decision_time_s": ((slave.committed_at_s if est.label != UNKNOWN else est.t_s)
+                            if decided else None),
         "slave_onset_s": slave.onset_s, "master_onset_s": master.last_onset_s,
         "master_release_s": master.last_release_s, "render_start_s": render_from,
         "before_identification": config.before, "rate_hz": config.rate_hz,

@@ -103,6 +103,13 @@ class Slave:
         return self._onset_index
 
     @property
+    def committed_at_s(self) -> float | None:
+        """Time after contact of the first commitment (to a material or a
+        group, later refined), or None."""
+        return next((ev.estimate.t_s for ev in self.events
+                     if ev.estimate.decided and ev.estimate.label != "unknown"), None)
+
+    @property
     def estimate(self) -> Estimate | None:
         return self.events[-1].estimate if self.events else None
 
@@ -120,11 +127,11 @@ class Slave:
                     new.append(SlaveEvent(float(self.t_s[i]), self.stream.estimate))
                 # Samples between the onset and the debounced detection.
                 for j in range(self._onset_index, i + 1):
-                    est = self.stream.push(self.samples[j])
+                    est = self.stream.push(self.samples[j], float(self.force_n[j]))
                     if est is not None:
                         new.append(SlaveEvent(float(self.t_s[i]), est))
             elif self.stream is not None and self.detector.touching:
-                est = self.stream.push(self.samples[i])
+                est = self.stream.push(self.samples[i], float(self.force_n[i]))
                 if est is not None:
                     new.append(SlaveEvent(float(self.t_s[i]), est))
         self.events += new

@@ -1,0 +1,133 @@
+"""Hard cases of identification on the fingertip scene: objects off room
+temperature, light and heavy touches, a gap under the noise floor, a model
+of another scene, and groups that commit and refine."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from telethermal.errors import ModelFileError
+from telethermal.ident.anytime import StreamingIdentifier, decide, members
+from telethermal.ident.registry import check_scene, load_model
+from telethermal.physics.scene import load_scene
+from telethermal.session.models import train_identifier
+from telethermal.session.run import slave_rng
+from telethermal.session.slave import Slave
+
+SCENE = load_scene("fingertip-7")
+
+
+@pytest.fixture(scope="module")
+def model():
+    return train_identifier(SCENE, 0)
+
+
+def _touches(scene, model, seeds=range(3)):
+    out = []
+    for seed in seeds:
+        for material in scene.materials:
+            slave = Slave(scene, material, model, slave_rng(seed))
+            slave.advance_to(2.0)
+            out.append((material, slave.estimate))
+    return out
+
+
+@pytest.mark.parametrize("offset_k", [5.0, -5.0])
+def test_objects_five_kelvin_off_room_are_identified(model, offset_k):
+    # The pad is set 10 K above the measured object and the flux is divided
+    # by the measured gap: a model trained at room temperature holds.
+    warm = dataclasses.replace(SCENE, objects=tuple(
+        dataclasses.replace(o, temp_c=SCENE.room_temp_c + offset_k) for o in SCENE.objects))
+    touches = _touches(warm, model)
+    right = [m in members(e.label) for m, e in touches]
+    assert all(e.decided for _, e in touches)
+    assert np.mean(right) >= 0.95, [(m, e.label) for m, e in touches]
+
+
+@pytest.mark.parametrize("force_n", [4.0, 20.0])
+def test_light_and_heavy_touches_are_unknown_not_wrong(model, force_n):
+    # Trained at 10 +- 1.5 N; at 4 N the contact conductance falls to 48 %
+    # (h ~ F^0.8), at 20 N it rises to 174 %: the flux then looks like another
+    # material's. Such a touch must not be committed to a wrong material.
+    odd = dataclasses.replace(SCENE, variability=dataclasses.replace(
+        SCENE.variability, force_n=force_n, force_sd_n=0.1, reference_force_n=10.0))
+    touches = _touches(odd, model)
+    wrong = [(m, e.label) for m, e in touches if e.label != "unknown"
+             and m not in members(e.label)]
+    assert not wrong
+    assert all(e.reason == "force outside trained range" for _, e in touches
+               if e.label == "unknown")
+
+
+def test_touches_like_the_trained_ones_commit_and_are_right(model):
+    touches = _touches(SCENE, model, seeds=range(100, 104))
+    committed = [(m, e) for m, e in touches if e.label != "unknown"]
+    assert len(committed) >= 0.9 * len(touches)
+    assert np.mean([m in members(e.label) for m, e in committed]) >= 0.95
+
+
+def test_a_gap_under_the_noise_floor_gives_unknown(model):
+    flat = dataclasses.replace(SCENE, pad=dataclasses.replace(SCENE.pad, gap_k=0.3))
+    (material, estimate), *_ = _touches(flat, model, seeds=[0])
+    assert estimate.label == "unknown" and estimate.reason == "gap too small"
+
+
+def test_a_model_of_another_scene_is_refused(model, tmp_path):
+    path = model.save(tmp_path / "fingertip.npz")
+    loaded = load_model(path)
+    assert loaded.scene_ == "fingertip-7"
+    with pytest.raises(ModelFileError, match=r"scene 'fingertip-7'.*gripper-case-II"):
+        check_scene(loaded, "gripper-case-II")
+    other = dataclasses.replace(SCENE, name="fingertip-7-other")
+    with pytest.raises(ModelFileError, match="trained and calibrated on scene"):
+        Slave(other, "wood", loaded, slave_rng(0))
+
+
+def test_model_file_keeps_calibration_and_force_range(model, tmp_path):
+    loaded = load_model(model.save(tmp_path / "m.npz"))
+    np.testing.assert_array_equal(loaded.temperature_, model.temperature_)
+    assert loaded.shrinkage_ == model.shrinkage_ and loaded.force_range_n_ == model.force_range_n_
+    lo, hi = loaded.force_range_n_[-1]
+    assert 5.0 < lo < 10.0 < hi < 15.0       # trained at 10 +- 1.5 N
+
+
+class _Fixed:
+    """A stand-in identifier whose posteriors are given per window."""
+
+    def __init__(self, path, classes=("a", "b", "c")):
+        self.path, self.classes_ = np.asarray(path, dtype=float), list(classes)
+        self.windows_s_ = [0.1 * (i + 1) for i in range(len(path))]
+        self.threshold, self.sample_rate_hz_, self.channels = 0.99, 10.0, ("x",)
+
+    def posterior_path(self, x):
+        return self.path[:max(0, (len(x) - 1))]
+
+    def outside_classes(self, x, i):
+        return np.zeros(len(x), dtype=bool)
+
+    def window_index(self, n):
+        k = n - 2
+        return None if k < 0 else min(k, len(self.path) - 1)
+
+    def proba_normalised(self, x, i):
+        return self.path[i][None]
+
+    def _require_fitted(self):
+        pass
+
+
+def test_a_group_commits_then_refines_to_its_member():
+    path = [[0.5, 0.3, 0.2], [0.6, 0.395, 0.005], [0.8, 0.195, 0.005], [0.995, 0.004, 0.001]]
+    model = _Fixed(path)
+    d = decide(model, np.zeros((6, 1)), 10.0)
+    assert (d.label, d.reason, d.time_first_s, d.time_s) == ("a", "confident", 0.2, 0.4)
+    stream = StreamingIdentifier(model, 10.0)
+    labels = [e.label for e in (stream.push([0.0]) for _ in range(6)) if e is not None]
+    assert labels == ["a", "a|b", "a|b", "a"] and stream.decided
+
+
+def test_a_group_that_never_refines_stands():
+    path = [[0.5, 0.3, 0.2], [0.6, 0.395, 0.005], [0.55, 0.445, 0.005]]
+    d = decide(_Fixed(path), np.zeros((5, 1)), 10.0)
+    assert (d.label, d.reason, d.time_s) == ("a|b", "confident group", 0.2)
