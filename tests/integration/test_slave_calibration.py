@@ -1,0 +1,48 @@
+"""The slave calibrates its object thermometer at start and on request; a
+drifting target is refused and the calibration in force stays."""
+
+import pytest
+
+from telethermal.physics.scene import load_scene
+from telethermal.render.generator import save_generator
+from telethermal.services.admin import call
+from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
+                                       write_configs)
+from telethermal.session.models import train_generator, train_identifier
+from telethermal.session.run import with_finger
+
+SCENE = with_finger(load_scene("fingertip-7"))
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("models")
+    return (train_identifier(SCENE, 0).save(folder / "identifier.npz"),
+            save_generator(train_generator(SCENE, 0), folder / "generator.npz"))
+
+
+def test_calibration_at_start_on_request_and_refused_when_drifting(tmp_path, models):
+    ports = free_ports(4)
+    slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0)
+    services = Services(tmp_path, slave_cfg, master_cfg)
+    try:
+        wait_connected(services, ports[3])
+        at_start = call(ports[2], "status")["thermometer_calibration"]
+        # Three pad temperatures, a residual well under the 0.3 K limit.
+        assert at_start["calibrated"] and len(at_start["points"]) == 3
+        assert at_start["residual_k"] < 0.1 and at_start["error"] is None
+        again = call(ports[2], "calibrate_thermometer")
+        assert again["ok"] and again["calibrated"] and again["offset_k"] != at_start["offset_k"]
+        drifting = call(ports[2], "calibrate_thermometer", drift_k_per_reading=0.02)
+        assert drifting["ok"] and not drifting["calibrated"]
+        assert "not steady" in drifting["error"]
+        status = call(ports[2], "status")["thermometer_calibration"]
+        assert status["calibrated"] and status["offset_k"] == again["offset_k"]  # still in force
+        assert "not steady" in status["error"]
+        result = networked_touch(SCENE, "wood", ports, seed=3, contact_s=1.0)
+        assert result.summary["identified"] != "unknown"
+    finally:
+        codes = services.stop()
+    assert codes == {"slave": 0, "master": 0}
+    log = (tmp_path / "slave.log").read_text()
+    assert "object thermometer (ir) calibrated" in log and "calibration failed" in log
