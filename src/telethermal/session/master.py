@@ -196,7 +196,7 @@ class MasterDisplay:
                 t_switch, before = self._blend
                 a = min(1.0, (t_s - t_switch) / self.config.blend_s)
                 weights = {n: (1 - a) * before.get(n, 0.0) + a * weights.get(n, 0.0)
-                           for n in set(before) | set(weights)}
+                           for n in sorted(set(before) | set(weights))}
                 if a >= 1.0:
                     self._blend = None
         else:
