@@ -91,9 +91,95 @@ def identify(out: Path, d: dict) -> list[str]:
         elif paper:
             lines.append(f"| the paper | {n} | " + " | ".join(_pct(paper.get(k)) for k in keys)
                          + " |")
-    lines += ["",
-              _figure(out, d, "identify"), _provenance(d), ""]
+    lines += [""] + _paper_confusions(d) + _identify_decisions(d) + _identify_shift(d) + \
+        _identify_active(d) + _identify_ablation(d) + \
+        [_figure(out, d, "identify"), _provenance(d), ""]
     return lines
+
+
+def _paper_confusions(d: dict) -> list[str]:
+    """What the materials table says of the first paper's confusions."""
+    from telethermal.physics.materials import get_material
+
+    best = max((m.get("table1", {}).get("accuracy_7", {}).get("1", 0.0), n)
+               for n, m in d["methods"].items())
+    pairs = ", ".join(
+        f"{a} {get_material(a).effusivity:,.0f} against {b} {get_material(b).effusivity:,.0f} "
+        f"W s^0.5/(m^2 K) ({get_material(a).effusivity / get_material(b).effusivity:.1f}x)"
+        for a, b in (("aluminium", "steel"), ("graphite", "rubber")))
+    return [f"The paper confuses aluminium with steel and graphite with rubber at 1 s; "
+            f"with handbook properties ({pairs}) the simulated pad tells them apart: 7 "
+            f"classes at 1 s reach {_pct(best[0])} ({best[1]}). The confusions are not "
+            "reproduced, and no property was changed to make them so.", ""]
+
+
+def _num(x, digits=3) -> str:
+    return "-" if x is None else f"{x:.{digits}g}"
+
+
+def _identify_decisions(d: dict) -> list[str]:
+    lines = ["Calibration and decisions on the first paper's protocol (held-out trials; "
+             "decisions committed within 1 s of contact, a group counting as right when it "
+             "holds the touched material):", "",
+             "| method | calibration error | committed | right | median commit time | "
+             "stayed a group | inference (ms, p50) |", "|---|---|---|---|---|---|---|"]
+    for name, m in d["methods"].items():
+        t1 = m.get("table1", {})
+        dec = t1.get("decision") or {}
+        lines.append(f"| {name} | {_num(t1.get('calibration_ece'))} | "
+                     f"{_pct(dec.get('commit_rate'))} | {_pct(dec.get('accuracy'))} | "
+                     f"{_num(dec.get('time_s_p50'))} s | {_pct(dec.get('group_rate'))} | "
+                     f"{_num(t1.get('inference_ms_p50'))} |")
+    return lines + [""]
+
+
+def _identify_shift(d: dict) -> list[str]:
+    rows = [(n, m["session_shift"]) for n, m in d["methods"].items() if "session_shift" in m]
+    if not rows:
+        return []
+    lines = ["Session shift: trained on one session, tested on another whose object "
+             "thermometer reads 1 K lower (+0.5 K then -0.5 K, the datasheet's limit both "
+             "ways); 5 classes:", "",
+             "| method | thermometer | 0.25 s | 0.5 s | 0.75 s | 1 s | committed | right |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, shift in rows:
+        for mode in ("calibrated", "uncalibrated"):
+            r = shift[mode]
+            acc = r["accuracy_5"]
+            lines.append(f"| {name} | {mode} | " + " | ".join(
+                _pct(acc.get(k)) for k in ("0.25", "0.5", "0.75", "1")) +
+                f" | {_pct(r['decision']['commit_rate'])} | {_pct(r['decision']['accuracy'])} |")
+    return lines + [""]
+
+
+def _identify_active(d: dict) -> list[str]:
+    lines = ["Second paper, active pad (gripper I-pro, 4 materials, held-out trials), and "
+             "the cross-temperature pairs (first window at 99 %):", "",
+             "| method | 0.1 s | 0.2 s | 0.3 s | 0.4 s | committed | right | calibration "
+             "error | II, III, V at 99 % from |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, m in d["methods"].items():
+        ap = m.get("active_passive", {})
+        acc = ap.get("active_accuracy_by_window_s", {})
+        dec = ap.get("decision") or {}
+        cross = ", ".join(_num(r.get("first_window_at_99pct_s")) + " s"
+                          for r in m.get("cross_temperature", {}).values())
+        lines.append(f"| {name} | " + " | ".join(_pct(acc.get(k)) for k in
+                                                ("0.1", "0.2", "0.3", "0.4")) +
+                     f" | {_pct(dec.get('commit_rate'))} | {_pct(dec.get('accuracy'))} | "
+                     f"{_num(ap.get('calibration_ece'))} | {cross} |")
+    return lines + [""]
+
+
+def _identify_ablation(d: dict) -> list[str]:
+    ab = d.get("thermometer_ablation")
+    if not ab:
+        return []
+    lines = [f"Where the accuracy goes ({ab['method']}, leave-trials-out, one session):", "",
+             "| scene, object thermometer | 0.2 s | 0.5 s | 1 s |", "|---|---|---|---|"]
+    for name, acc in ab["accuracy"].items():
+        lines.append(f"| {name} | " + " | ".join(_pct(acc.get(k)) for k in ("0.2", "0.5", "1"))
+                     + " |")
+    return lines + [""]
 
 
 def render(out: Path, d: dict) -> list[str]:
