@@ -58,6 +58,7 @@ class ViewPublisher:
         self._seq = 0
         self._cols: tuple[list, list, list] = ([], [], [])
         self._t0 = 0.0
+        self._rate_hz = 1000.0
         self._last_sent = -math.inf
 
     def period(self, now_s: float, rate_hz: float, flux_w_m2: float, pad_temp_c: float,
@@ -67,7 +68,7 @@ class ViewPublisher:
         ``touching`` (the skin estimate is sent only while touching)."""
         flux, temp, force = self._cols
         if not flux:
-            self._t0 = now_s
+            self._t0, self._rate_hz = now_s, rate_hz
         values = (flux_w_m2, pad_temp_c, force_n)
         if not all(math.isfinite(v) for v in values):      # a faulty reading: keep the last
             self.counters["nonfinite"] += 1
@@ -79,10 +80,13 @@ class ViewPublisher:
             self._publish(now_s, rate_hz, state())
 
     def idle(self, now_s: float, state) -> None:
-        """No touch going on: the state alone, every ``IDLE_EVERY_S``."""
-        if now_s - self._last_sent >= IDLE_EVERY_S:
+        """No touch going on: the samples the last touch left (at once), or
+        the state alone, every ``IDLE_EVERY_S``."""
+        if self._cols[0]:
+            self._publish(now_s, self._rate_hz, state())
+        elif now_s - self._last_sent >= IDLE_EVERY_S:
             self._t0 = now_s
-            self._publish(now_s, 1000.0, state())
+            self._publish(now_s, self._rate_hz, state())
 
     def _publish(self, now_s: float, rate_hz: float, fields: dict) -> None:
         flux, temp, force = self._cols

@@ -28,7 +28,7 @@ from telethermal.wire.codec import decode
 log = logging.getLogger(__name__)
 
 FRAME_S = 0.05
-MAX_RATE_HZ = 200.0
+MAX_RATE_HZ = 100.0
 CLIENT_QUEUE = 64
 #: Link counters the page shows (the master's transport counters).
 LINK_COUNTERS = ("stream_lost", "resent", "gaps", "heartbeats_missed", "reconnects",

@@ -87,6 +87,25 @@ def _slave_series(rec, offset, out) -> int:
     return n
 
 
+def _slave_classes(rec, n: int) -> list[str]:
+    """The class names of the slave's estimates: its attached identifier's."""
+    import tempfile
+
+    from telethermal.ident.registry import load_model
+    data = rec.attachments.get("identifier.npz")
+    if data is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "identifier.npz"
+            path.write_bytes(data)
+            try:
+                classes = [str(c) for c in load_model(path).classes_]
+                if len(classes) == n:
+                    return classes
+            except Exception:         # noqa: BLE001 - a damaged attachment: names unknown
+                pass
+    return [f"class {i}" for i in range(n)]
+
+
 def _estimates(rec, offset) -> list[dict]:
     """Posteriors over time: the master's news, or the slave's own."""
     out = []
@@ -96,11 +115,13 @@ def _estimates(rec, offset) -> list[dict]:
             out.append({"t": round(offset(m["contact_id"]) + m["t_s"], 4), "contact_id":
                         m["contact_id"], "classes": m.get("classes", []), "t_s": e[0],
                         "posteriors": e[1], "label": e[2], "decided": e[4]})
-    if not out:
-        for m in rec.messages("/slave/estimates"):
+    slave = [m for m in rec.messages("/slave/estimates") if m.get("estimate")]
+    if not out and slave:
+        classes = _slave_classes(rec, len(slave[0]["estimate"][1]))
+        for m in slave:
             e = m["estimate"]
             out.append({"t": round(offset(m["contact_id"]) + e[0], 4), "contact_id":
-                        m["contact_id"], "classes": [f"class {i}" for i in range(len(e[1]))],
+                        m["contact_id"], "classes": classes,
                         "t_s": e[0], "posteriors": e[1], "label": e[2], "decided": e[4]})
     return out
 
