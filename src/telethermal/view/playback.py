@@ -126,6 +126,24 @@ def _estimates(rec, offset) -> list[dict]:
     return out
 
 
+def _touch_ends(rec, offset, out) -> list[list]:
+    """Per touch, at its last period: [t, events, link counters, round trip]
+    from the touch's summary (what the page's safety and link panels show)."""
+    from telethermal.view.feed import LINK_COUNTERS
+    last_t: dict[int, float] = {}
+    for b in rec.messages("/master/periods"):
+        if b["t_s"]:
+            last_t[b.get("contact_id", 0)] = offset(b.get("contact_id", 0)) + b["t_s"][-1]
+    ends = []
+    for m in rec.messages("/master/touch"):
+        s, cid = m.get("summary", {}), m.get("contact_id", 0)
+        link = s.get("transport", {})
+        ends.append([round(last_t.get(cid, offset(cid)), 4),
+                     {**s.get("safety_event_counts", {}), **s.get("display_event_counts", {})},
+                     {k: link.get(k, 0) for k in LINK_COUNTERS}, s.get("rtt_s")])
+    return ends
+
+
 def load_playback(path: str | Path) -> dict:
     """The page's view of one recording (JSON-able)."""
     rec = read_recording(path)
@@ -150,6 +168,7 @@ def load_playback(path: str | Path) -> dict:
             "date": meta.get("date", ""), "t_min": min(times), "t_max": max(times),
             "series": out, "estimates": estimates, "counts": counts,
             "touches": sorted(starts) or sorted({e["contact_id"] for e in estimates}),
+            "touch_ends": _touch_ends(rec, offset, out),
             "truncated": rec.truncated, "notes": rec.notes,
             "summaries": [m.get("summary", {}).get("identified") for m in
                           rec.messages("/master/touch")]}

@@ -194,7 +194,10 @@ function startLive() {
   live.source.onerror = () => message("live stream interrupted; reconnecting…", true);
   live.source.onopen = () => message("");
 }
-function stopLive() { if (live.source) { live.source.close(); live.source = null; } }
+function stopLive() {
+  if (live.source) { live.source.close(); live.source = null; }
+  live.lags = []; live.newFrames = []; live.counts = {master: 0, slave: 0, slave_setpoint: 0};
+}
 
 // ------------------------------------------------------------------ playback
 const play = {rec: null, cursor: 0, playing: false, last: null};
@@ -213,6 +216,11 @@ async function loadRecording(name) {
   if (body.truncated) notes.unshift(`this recording was cut mid-write (${body.truncated}): it plays up to the cut`);
   message(notes.join("; "), true);
   play.rec = body; play.cursor = body.t_min;
+  // What only a live session has: cleared, not left over from it.
+  for (const cell of document.querySelectorAll("[id^=link-]")) cell.textContent = "–";
+  $("rtt").textContent = "–"; $("lag-p99").textContent = "–"; $("lag-p99").dataset.value = "";
+  $("count-slave_setpoint").textContent = "0"; $("count-slave_setpoint").dataset.value = "0";
+  $("decision").textContent = "–"; $("decision").dataset.label = "";
   for (const p of Object.values(plots)) p.clear();
   for (const [name, pts] of Object.entries(body.series)) if (SERIES_PLOT[name]) plots[SERIES_PLOT[name]].push(name, pts);
   $("count-master").textContent = body.counts.master; $("count-master").dataset.value = body.counts.master;
@@ -229,7 +237,9 @@ function drawPlayback() {
   $("cursor").textContent = `${(c - r.t_min).toFixed(2)} / ${(r.t_max - r.t_min).toFixed(2)} s`;
   $("slider").value = c;
   const ph = r.series.phase.filter((p) => p[0] <= c).pop();
-  if (ph) showState({phase: ph[1], safe: ph[2], events: {}, link: {}, rtt_s: null});
+  const end = r.touch_ends.filter((e) => e[0] <= c).pop();     // the last touch's summary
+  if (ph) showState({phase: ph[1], safe: ph[2], events: end ? end[1] : {},
+                     link: end ? end[2] : {}, rtt_s: end ? end[3] : null});
   const est = r.estimates.filter((e) => e.t <= c);
   if (est.length) {
     const cid = est[est.length - 1].contact_id;
