@@ -29,6 +29,7 @@ bench: $(STAMP)
 	$(VENV)/bin/telethermal bench faults --json $(OUT)/bench/faults.json
 	$(VENV)/bin/telethermal bench devices --json $(OUT)/bench/devices.json
 	$(VENV)/bin/telethermal bench record --json $(OUT)/bench/record.json
+	$(VENV)/bin/telethermal bench view --json $(OUT)/bench/view.json
 	$(VENV)/bin/telethermal bench report --results $(OUT)/bench --out bench/report.md
 
 clean:

@@ -439,13 +439,23 @@ def cmd_demo(args) -> int:
         [m for m in DEMO_MATERIALS if m in scene.materials] or scene.materials[:3]
     report = run_demo(out, args.scene, out / "identifier.npz", out / "generator.npz",
                       materials, seed=args.seed, contact_s=args.contact_s,
-                      record_dir=Path(args.record) if args.record else None)
+                      record_dir=Path(args.record) if args.record else None,
+                      view_port=args.view)
+    view = report.pop("view", None)
     path = _write_json(args.json or out / "demo.json", report)
     print(f"touch plots: {out}/touch-*.png; summary: {path}")
     if args.record:
         files = sorted(Path(args.record).glob("*.mcap"))
         print(f"recordings: {', '.join(str(f) for f in files)} "
               f"(telethermal replay FILE --out DIR [--touch N])")
+    if view is not None:
+        from telethermal.view.command import wait_for_signal
+        print(f"the view stays up at {view.url} (recordings play there); Ctrl-C to stop",
+              flush=True)
+        try:
+            wait_for_signal()
+        finally:
+            view.close()
     return 0 if all(c == 0 for c in report["exit_codes"].values()) else 1
 
 
@@ -908,7 +918,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--record", metavar="DIR", help="both services record every touch here "
                                                    "(one MCAP file per host; see replay)")
+    p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
+                   help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
+                        "(default 8050); it stays up after the touches until Ctrl-C")
     p.set_defaults(func=cmd_demo)
+    from telethermal.view.command import add_parsers
+    add_parsers(sub, bsub)
     return parser
 
 

@@ -304,9 +304,26 @@ def record(out: Path, d: dict) -> list[str]:
             f"without, {m['with']} of {n['with']} with.", "", _provenance(d), ""]
 
 
+def view(out: Path, d: dict) -> list[str]:
+    lines = ["## The live view: first paint, lag, and the master's loop with the page open", "",
+             f"First paint {d['first_paint_s']:.2f} s after the server started (target 2 s); "
+             f"view lag behind the 1 kHz session p50 {1000 * d['lag_p50_s']:.0f} ms, p99 "
+             f"{1000 * d['lag_p99_s']:.0f} ms over {d['lag_frames']} frames (target 200 ms). "
+             f"The view stream's call per display period alone: "
+             f"{d['publisher_call']['mean_us']:.1f} us mean.", "",
+             "| master loop | busy mean | busy p99 | period p99 | deadline misses |",
+             "|---|---|---|---|---|"]
+    for mode, text in (("no_view", "no view stream"), ("stream_no_page", "view stream, no page"),
+                       ("page_open", "view stream, page open")):
+        m = d["loop"][mode]
+        lines.append(f"| {text} | {m['busy_mean_us']:.0f} us | {m['busy_p99_us']:.0f} us | "
+                     f"{m['period_p99_us']:.0f} us | {m['deadline_misses']} of {m['steps']} |")
+    return lines + ["", _provenance(d), ""]
+
+
 SECTIONS = (("physics", physics), ("identify", identify), ("render", render),
             ("transport", transport), ("faults", faults), ("devices", devices),
-            ("record", record))
+            ("record", record), ("view", view))
 
 
 def write_report(results: str | Path, out_md: str | Path, command: str = "") -> Path:

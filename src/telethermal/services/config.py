@@ -55,6 +55,9 @@ class MasterConfig:
     finger_temp_c: float = 33.0
     #: Folder to record every touch to (one MCAP file per run); empty: no recording.
     record_dir: str = ""
+    #: The view stream (a PUB socket on 127.0.0.1, read by ``telethermal
+    #: view``); 0: off.
+    view_port: int = 0
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):

@@ -34,8 +34,8 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
                   rate_hz: float = 1000.0, realtime_priority: int = 0,
                   slave_host: str = "127.0.0.1", security: str = "curve",
                   master_ports: tuple[int, int] | None = None,
-                  devices: str = "sim", record_dir: str | Path | None = None
-                  ) -> tuple[Path, Path]:
+                  devices: str = "sim", record_dir: str | Path | None = None,
+                  view_port: int = 0) -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
@@ -63,6 +63,7 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     master = out / "master.toml"
     master.write_text(f'[master]\nscene = "{scene}"\nrate_hz = {rate_hz}\nseed = {seed}\n'
                       f'realtime_priority = {realtime_priority}\ndevices = "{devices}"\n{record}'
+                      f'view_port = {view_port}\n'
                       f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
                       f'{master_common}{master_keys}')
     return slave, master
@@ -201,9 +202,12 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
 
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
-             realtime_priority: int = 20, record_dir: Path | None = None) -> dict:
+             realtime_priority: int = 20, record_dir: Path | None = None,
+             view_port: int | None = None) -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
-    in-process session's (``in_process_flux_rms_error_rel``)."""
+    in-process session's (``in_process_flux_rms_error_rel``). ``view_port``:
+    the live view (``telethermal view``) on that HTTP port, started once the
+    services are up and returned, still running, as ``report["view"]``."""
     from telethermal.physics.scene import load_scene
 
     from telethermal.ident.registry import load_model
@@ -212,13 +216,15 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
 
     scene = with_finger(load_scene(scene_name))
     identifier, generator = load_model(identifier_path), load_generator(generator_path)
-    ports = free_ports(4)
+    ports = free_ports(5)
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
-                                          ports, seed, realtime_priority=realtime_priority,
-                                          record_dir=record_dir)
+                                          ports[:4], seed, realtime_priority=realtime_priority,
+                                          record_dir=record_dir,
+                                          view_port=ports[4] if view_port is not None else 0)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     cal = {}
+    view = None
     try:
         wait_connected(services, ports[3])
         echo("slave and master up as two processes on loopback (CURVE)")
@@ -229,8 +235,12 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                  f"{cal['gain']:.4f}, residual {cal['residual_k']:.3f} K")
         else:
             echo(f"slave's object thermometer NOT calibrated: {cal.get('error')}")
+        if view_port is not None:
+            from telethermal.view.command import open_view
+            view = open_view(master_cfg, record_dir, view_port)
+            echo(f"view: {view.url}")
         for i, material in enumerate(materials):
-            result = networked_touch(scene, material, ports, seed + 1 + i, contact_s)
+            result = networked_touch(scene, material, ports[:4], seed + 1 + i, contact_s)
             s = result.summary
             plot_session(result, out / f"touch-{material}.png",
                          f"{scene.name}: {material} over the network (two processes); flux "
@@ -256,9 +266,14 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                  f"master loop p99 {s['loop_period_p99_us']:.0f} us, "
                  f"{s['loop']['deadline_misses']} missed deadlines; in one process "
                  f"{100 * local['flux_rms_error_rel']:.2f} %")
+    except BaseException:
+        if view is not None:
+            view.close()
+        raise
     finally:
         codes = services.stop()
     echo(f"services stopped: exit codes slave {codes['slave']}, master {codes['master']}")
     return {"scene": scene.name, "touches": touches, "exit_codes": codes,
             "slave_thermometer_calibration": cal,
-            "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports))}
+            "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports)),
+            **({"view": view} if view is not None else {})}

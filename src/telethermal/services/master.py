@@ -25,6 +25,7 @@ from telethermal.errors import TelethermalError
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
+from telethermal.services.viewstream import ViewPublisher
 from telethermal.session.link import SlaveLink
 from telethermal.session.master import DisplayConfig, MasterDisplay
 from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
@@ -80,13 +81,20 @@ class MasterService:
         self.endpoint, self.admin = open_service_sockets("master", config)
         self.link = SlaveLink()
         self.hardware = None
-        if config.devices == "hardware":
-            try:
+        self.view = None
+        try:
+            if config.view_port:
+                self.view = ViewPublisher(config.view_port,
+                                          self.scene.finger.contact_conductance_w_m2k)
+                log.info("view stream on tcp://127.0.0.1:%d", self.view.port)
+            if config.devices == "hardware":
                 self._open_hardware()
-            except TelethermalError:
-                self.endpoint.close()
-                self.admin.close()
-                raise
+        except TelethermalError:
+            self.endpoint.close()
+            self.admin.close()
+            if self.view is not None:
+                self.view.close()
+            raise
         self.recorder = open_recorder(config, "master")
         self.touch: Touch | None = None
         self.next_contact_id = 1
@@ -122,6 +130,10 @@ class MasterService:
         sensors = self.hardware.read(t)
         step = display.step(t, dt_s, sensors, news)
         self.hardware.apply(t, step, dt_s, sensors.force_n)
+        if self.view is not None:
+            self.view.period(now, self.config.rate_hz, sensors.flux_w_m2, sensors.pad_temp_c,
+                             sensors.force_n, lambda: self._view_state(step, display,
+                                                                       self.contact_id or 0))
         if display.last_onset_s != onset_before:
             self.contact_id = self.next_contact_id
             self.next_contact_id += 1
@@ -177,7 +189,26 @@ class MasterService:
             self._hardware_period(now, dt_s)
         elif self.touch is not None:
             self._touch_period(now, dt_s)
+        elif self.view is not None:
+            self.view.idle(now, lambda: self._view_state(None, None, 0))
         return not self.stop_requested
+
+    def _view_state(self, step, display, contact_id: int) -> dict:
+        """The optional fields of the view stream's batch (its docstring)."""
+        e, link = self.endpoint, self.link
+        est = link.estimates[-1] if link.estimates else None
+        state = {"contact_id": contact_id, "touching": bool(step is not None and step.touching),
+                 "phase": step.phase if step is not None else self.state,
+                 "safe": bool(step.safe) if step is not None else False,
+                 "setpoint_w_m2": step.desired_flux_w_m2 if step is not None and
+                 math.isfinite(step.desired_flux_w_m2) else None,
+                 "events": dict(display.events) if display is not None else {},
+                 "link": dict(e.counters), "rtt_s": e.offset.rtt_s}
+        if est is not None:
+            state.update(classes=list(link.classes), posteriors=[float(p) for p in
+                                                                  est.posteriors],
+                         label=est.label, decided=bool(est.decided), estimate_t_s=float(est.t_s))
+        return state
 
     def _touch_period(self, now: float, dt_s: float) -> None:
         touch = self.touch
@@ -192,6 +223,10 @@ class MasterService:
         sensors = touch.devices.read(t)
         step = touch.display.step(t, dt_s, sensors, news)
         touch.devices.apply(t, step, dt_s, sensors.force_n)
+        if self.view is not None:
+            self.view.period(now, self.config.rate_hz, sensors.flux_w_m2, sensors.pad_temp_c,
+                             sensors.force_n, lambda: self._view_state(step, touch.display,
+                                                                       touch.contact_id))
         if self.recorder is not None:
             self.recorder.period(t, dt_s, sensors, news, step)
         if touch.display.last_onset_s != onset_before:
@@ -311,6 +346,8 @@ class MasterService:
         finally:
             self.endpoint.close()
             self.admin.close()
+            if self.view is not None:
+                self.view.close()
             if self.recorder is not None:
                 closed = self.recorder.close()
                 log.info("recording %s closed: %d messages, %d dropped%s", closed["path"],

@@ -37,9 +37,16 @@ EXAMPLES = {
                         "t_s": [0.0, 0.5, 1.0], "g_w_m2k": [0.0, 900.0, 640.0],
                         "valid_s": 60.0},
     "flux_setpoint": {"contact_id": 3, "t_since_contact_s": 0.5, "flux_w_m2": -7650.0},
+    # A master's batch on its view stream, with the optional fields (a
+    # slave's batch is the same without them).
     "measurement_batch": {"contact_id": 3, "t0_s": 1234.0, "rate_hz": 100.0,
                           "flux_w_m2": [-120.5, -3400.0], "temp_c": [34.5, 33.75],
-                          "force_n": [9.5, 10.25]},
+                          "force_n": [9.5, 10.25], "setpoint_w_m2": -3500.0,
+                          "skin_temp_c": 33.5, "phase": "render", "safe": False,
+                          "events": {"link lost": 0}, "link": {"stream_lost": 2, "resent": 1},
+                          "rtt_s": 0.00025, "classes": ["plexiglass", "steel"],
+                          "posteriors": [0.125, 0.875], "label": "steel", "decided": True,
+                          "estimate_t_s": 0.25},
     "status": {"state": "rendering", "counters": {"lossless_resent": 0, "heartbeats_missed": 1},
                "message": "ok"},
     "fault": {"code": "sensor-nan", "message": "heat-flux reading NaN", "safe_state": True},

@@ -122,14 +122,36 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("t_since_contact_s", "float", "s", lo=0),
         Field("flux_w_m2", "float", "W/m^2", lo=-1e5, hi=1e5),
     ), "latest-value setpoint, sample by sample (the naive, uncompensated path)"),
-    Kind("measurement_batch", "stream", "slave->master", (
+    Kind("measurement_batch", "stream", "both", (
         Field("contact_id", "uint"),
         Field("t0_s", "float", "s", doc="sender-clock time of the first sample"),
         Field("rate_hz", "float", "Hz", lo=1, hi=100_000),
         Field("flux_w_m2", "list[float]", "W/m^2"),
         Field("temp_c", "list[float]", "degC"),
         Field("force_n", "list[float]", "N"),
-    ), "raw samples of the sender's pad, for display and recording (lossy)"),
+        # The master's view stream (section 1): its state at the batch's last sample.
+        Field("setpoint_w_m2", "float", "W/m^2", required=False, nullable=True,
+              doc="master: the flux its loop tracks (nil while holding)"),
+        Field("skin_temp_c", "float", "degC", required=False, nullable=True,
+              doc="master: estimated skin surface temperature, pad minus flux over the "
+                  "nominal contact conductance (nil out of contact)"),
+        Field("phase", "str", required=False,
+              doc="master: idle | contact | render | link lost"),
+        Field("safe", "bool", required=False, doc="master: its pad is in its safe state"),
+        Field("events", "counters", required=False,
+              doc="master: safety and display events of this contact"),
+        Field("link", "counters", required=False, doc="master: its transport counters"),
+        Field("rtt_s", "float", "s", lo=0, required=False, nullable=True,
+              doc="master: link round trip (min-RTT filter)"),
+        Field("classes", "list[str]", required=False,
+              doc="master: the newest material_estimate it holds"),
+        Field("posteriors", "list[float]", lo=0, hi=1, required=False),
+        Field("label", "str", required=False),
+        Field("decided", "bool", required=False),
+        Field("estimate_t_s", "float", "s", lo=0, required=False, nullable=True,
+              doc="that estimate's t_since_contact_s"),
+    ), "raw samples of the sender's pad, for display and recording (lossy); the master "
+       "publishes its own, with the optional fields, on its view stream"),
     Kind("status", "control", "both", (
         Field("state", "str", doc="idle | touching | rendering | safe | stopping"),
         Field("counters", "counters", doc="name -> non-negative integer"),
