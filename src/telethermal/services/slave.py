@@ -102,8 +102,11 @@ class SlaveService:
             self.recorder.slave(self.pad, self.contact_id)
         self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
                            t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
-        log.info("lift contact_id=%d", self.contact_id)
         self.last_touch = self._report()
+        r = self.last_touch
+        log.info("touch over contact_id=%d material=%s identified=%s (%s)", self.contact_id,
+                 r["material"], r["identified"], "no decision: " + str(r["reason"])
+                 if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
         self.touch_t0, self.state = None, "idle"
         self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
 
@@ -197,6 +200,8 @@ class SlaveService:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
+                "object_true_c": self.pad.object_true_c, "object_ir_c": self.pad.object_ir_c,
+                "last_rejected_key": getattr(e._auth, "last_rejected", None),
                 "masters_lost": self.masters_lost,
                 "offset_s": e.offset.offset_s, "counters": dict(e.counters)}
 
