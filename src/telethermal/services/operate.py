@@ -45,7 +45,8 @@ def _admin_parser(sub) -> None:
                                        "with no session, the likely cause")
     q.add_argument("role", nargs="?", choices=("slave", "master", "both"), default="both")
     q.add_argument("--wait", type=float, default=0.0, metavar="S",
-                   help="wait up to S seconds for a live session (exit 1 if none)")
+                   help="wait up to S seconds for the services to answer and the "
+                        "master to have a live session (exit 1 if not)")
     q = asub.add_parser("place", help="put an object under the slave pad (simulation)")
     q.add_argument("material")
     q.add_argument("--seed", type=int)
@@ -84,20 +85,21 @@ def _status(args, where) -> int:
     roles = ("slave", "master") if args.role == "both" else (args.role,)
     end = time.monotonic() + args.wait
     while True:
-        replies, lines, live = {}, [], True
+        replies, lines, live, error = {}, [], True, None
         for role in roles:
             try:
-                replies[role] = s = ac.request(where[role], role, "status", timeout_s=2.0)
+                replies[role] = s = ac.request(where[role], role, "status", timeout_s=1.0)
                 lines += ac.describe_status(s)
-                live &= bool(s["peer_alive"]) and s.get("session", True) is not False
+                live &= role == "slave" or (bool(s["peer_alive"]) and bool(s.get("session")))
             except TelethermalError as exc:
-                if args.role != "both":
-                    raise
+                error = exc
                 lines.append(f"{role}: not reachable here ({exc})")
         live &= bool(replies)
         if live or time.monotonic() >= end:
             break
         time.sleep(0.2)
+    if error is not None and args.role != "both":
+        raise error
     _show(args, replies, lines)
     return 0 if live or not args.wait else 1
 
