@@ -291,7 +291,7 @@ class MasterService:
         e = self.endpoint
         return {"role": "master", "state": self.state, "peer_alive": e.peer_alive,
                 "slave": f"{self.config.transport.host}:{self.config.transport.control_port}",
-                "diagnosis": getattr(e, "diagnosis", None),
+                "diagnosis": None if e.peer_alive else e.diagnosis,
                 "session": self.link.generator is not None,
                 "object_temp_c": self.link.object_temp_c,
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 
 import zmq
 
+from telethermal.errors import ModelFileError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import mixture, posterior_weights
@@ -38,6 +40,13 @@ class SlaveService:
 
         self.config = config
         self.scene = with_finger(load_scene(config.scene))
+        for key, given in (("identifier", identifier), ("generator", generator)):
+            value = getattr(config, key)
+            if given is None and value and not Path(value).is_file():
+                raise ModelFileError(f"{value}: no such model file ({key} in the slave's "
+                                     "config): make both with `telethermal models --out DIR` "
+                                     "(deploy/README.md, step 3), or leave it empty to train "
+                                     "at start")
         if identifier is None:
             identifier = load_model(config.identifier) if config.identifier else \
                 train_identifier(self.scene, config.seed)
