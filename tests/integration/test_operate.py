@@ -18,7 +18,7 @@ from telethermal.services.demo import Services, free_ports, wait_connected, writ
 from telethermal.session.models import write_models
 from telethermal.session.run import with_finger
 from telethermal.wire.handshake import key_file_fingerprint
-from telethermal.wire.transport import DIAGNOSE_AFTER_S, RECONNECT_IVL_MAX_S
+from telethermal.wire.transport import DIAGNOSE_AFTER_S, RECONNECT_IVL_MAX_S, UNANSWERED_S
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -202,3 +202,53 @@ def test_diagnosis_of_a_silent_drop_is_the_firewall():
     watch = HandshakeWatch("tcp://10.0.0.1:5560", attempts=1)   # SYNs never answered
     d = diagnose(watch, DIAGNOSE_AFTER_S, "sha256:0", "keys")
     assert d["likely"] == "firewall" and "slave.nft" in d["fix"]
+
+
+def test_a_firewall_that_drops_the_master_is_named_then_fixed_in_namespaces(tmp_path, models):
+    # The slave's rule set admits another address than the master's: the
+    # master's SYNs are dropped, and it names the firewall. With the right
+    # address the session comes up, the master unrestarted.
+    import os
+    import subprocess
+
+    from telethermal.netns import Namespaces
+    reason = Namespaces.why_not() or (None if shutil.which("nft") else "nft is not installed")
+    if reason:
+        if os.environ.get("TELETHERMAL_REQUIRE_NETNS") == "1":
+            pytest.fail(f"TELETHERMAL_REQUIRE_NETNS=1 but {reason}")
+        pytest.skip(reason)
+    rules = Path(__file__).resolve().parents[2] / "deploy" / "two-host" / "slave.nft"
+    admin_at = (f"ipc://{tmp_path}/slave-admin", f"ipc://{tmp_path}/master-admin")
+    with Namespaces("tf") as ns:
+        def firewall(master_ip):
+            subprocess.run(["ip", "netns", "exec", ns.names[0], "nft", "-D",
+                            f"MASTER_IP={master_ip}", "-f", str(rules)], check=True)
+
+        firewall("10.231.0.99")
+        ports = (5560, 5561, *admin_at)             # the rule set's ports
+        slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0,
+                                              slave_host=ns.addresses[0])
+        services = Services(tmp_path, slave_cfg, master_cfg, namespaces=ns.names)
+        try:
+            deadline = time.monotonic() + 60
+            status = {}
+            while time.monotonic() < deadline and not status.get("diagnosis"):
+                services.check_running()
+                try:
+                    status = call(admin_at[1], "status", timeout_s=1.0)
+                except Exception:
+                    pass
+                time.sleep(0.1)
+            d = status["diagnosis"]
+            assert d["likely"] == "firewall" and "slave.nft" in d["fix"]
+            waited_s = float(d["problem"].split(" after ")[1].split(" s ")[0])
+            assert waited_s < 5.0
+            firewall(ns.addresses[1])
+            opened = time.monotonic()
+            wait_connected(services, admin_at[1], timeout_s=15)
+            # A new socket every UNANSWERED_S while nothing answers, so the
+            # opened port is found within that (not the kernel's SYN back-off).
+            assert time.monotonic() - opened < UNANSWERED_S + 1.5
+        finally:
+            codes = services.stop()
+    assert codes == {"slave": 0, "master": 0}

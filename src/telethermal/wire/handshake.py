@@ -122,10 +122,21 @@ class HandshakeWatch:
     handshake_failed: int = 0     # CURVE failed otherwise (wrong slave key, not a slave)
     succeeded: int = 0
     gave_up_at: float | None = None   # a refused key: libzmq will not retry by itself
+    # This socket's own life (not carried over, not reset):
+    created_at: float = 0.0
+    ever_connected: bool = False
+    own_refused: int = 0
 
     @classmethod
-    def on(cls, sock: zmq.Socket, endpoint: str) -> "HandshakeWatch":
-        return cls(endpoint, sock.get_monitor_socket())
+    def on(cls, sock: zmq.Socket, endpoint: str, now: float = 0.0) -> "HandshakeWatch":
+        return cls(endpoint, sock.get_monitor_socket(), created_at=now)
+
+    def unanswered(self, now: float, after_s: float) -> bool:
+        """A connect that nothing answered for ``after_s`` (its SYNs dropped):
+        the kernel retries it at 1, 3, 7, 15 s..., so a firewall opened
+        meanwhile would be noticed late; a new socket tries at once."""
+        return not self.ever_connected and not self.own_refused and \
+            now - self.created_at >= after_s
 
     def read(self, now: float) -> None:
         """Take every event waiting (never blocks)."""
@@ -135,8 +146,10 @@ class HandshakeWatch:
                 self.attempts += 1
             elif event == zmq.EVENT_CONNECT_RETRIED:
                 self.refused += 1
+                self.own_refused += 1
             elif event == zmq.EVENT_CONNECTED:
                 self.tcp_connected += 1
+                self.ever_connected = True
             elif event == zmq.EVENT_HANDSHAKE_FAILED_AUTH:
                 self.auth_failed += 1
                 self.gave_up_at = now

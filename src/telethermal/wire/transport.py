@@ -43,6 +43,8 @@ DIAGNOSE_AFTER_S = 3.0
 DIAGNOSE_REPEAT_S = 30.0
 #: libzmq's reconnect cap; also the wait before a refused socket is recreated.
 RECONNECT_IVL_MAX_S = 0.5
+#: A master socket whose connect nothing answered this long is recreated.
+UNANSWERED_S = 2.0
 
 
 @dataclass
@@ -270,12 +272,13 @@ class Endpoint:
         setattr(self, name, sock)
         self._secure(sock, server=False)
         where = f"tcp://{cfg.host}:{cfg.control_port if name == 'control' else cfg.stream_port}"
-        self._watch[name] = HandshakeWatch.on(sock, where)
+        self._watch[name] = HandshakeWatch.on(sock, where, self.clock())
         sock.connect(where)
 
     def _recreate(self, name: str) -> None:
-        """After a refused handshake libzmq never connects again: a new socket
-        tries again (the slave reads its allowed keys anew at each attempt)."""
+        """After a refused handshake libzmq never connects again, and after
+        dropped SYNs the kernel waits longer and longer: a new socket tries
+        at once (the slave reads its allowed keys anew at each attempt)."""
         old, watch = getattr(self, name), self._watch[name]
         self.poller.unregister(old)
         watch.read(self.clock())
@@ -292,7 +295,8 @@ class Endpoint:
         cause while no session comes up."""
         for name, watch in self._watch.items():
             watch.read(now)
-            if watch.gave_up_at is not None and now - watch.gave_up_at >= RECONNECT_IVL_MAX_S:
+            if (watch.gave_up_at is not None and now - watch.gave_up_at >= RECONNECT_IVL_MAX_S) \
+                    or watch.unanswered(now, UNANSWERED_S):
                 self._recreate(name)
         control = self._watch["control"]
         if alive:
