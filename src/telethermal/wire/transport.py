@@ -288,7 +288,7 @@ class Endpoint:
         self._watch[name] = watch.merged(self._watch[name])
         self.poller.register(getattr(self, name), zmq.POLLIN)
         self.counters["sockets_recreated"] += 1
-        log.debug("master: %s socket recreated after a refused handshake", name)
+        log.debug("master: %s socket recreated (refused, or nothing answered)", name)
 
     def _watch_handshakes(self, now: float, alive: bool) -> None:
         """Master: recreate a socket the slave refused, and name the likely
