@@ -41,8 +41,12 @@ COUNTERS = ("lossless_sent", "lossless_received", "duplicates", "gaps", "recover
 #: The master names the likely cause when no handshake completed this long.
 DIAGNOSE_AFTER_S = 3.0
 DIAGNOSE_REPEAT_S = 30.0
-#: libzmq's reconnect cap; also the wait before a refused socket is recreated.
+#: libzmq's reconnect cap.
 RECONNECT_IVL_MAX_S = 0.5
+#: The wait before a socket whose handshake the slave refused is recreated:
+#: half the reconnect cap, so a key copied in meanwhile is in use within one
+#: reconnect interval (this wait, a heartbeat tick and the handshake).
+REFUSED_RETRY_S = 0.25
 #: A master socket whose connect nothing answered this long is recreated.
 UNANSWERED_S = 2.0
 
@@ -295,7 +299,7 @@ class Endpoint:
         cause while no session comes up."""
         for name, watch in self._watch.items():
             watch.read(now)
-            if (watch.gave_up_at is not None and now - watch.gave_up_at >= RECONNECT_IVL_MAX_S) \
+            if (watch.gave_up_at is not None and now - watch.gave_up_at >= REFUSED_RETRY_S) \
                     or watch.unanswered(now, UNANSWERED_S):
                 self._recreate(name)
         control = self._watch["control"]
