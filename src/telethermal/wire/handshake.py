@@ -196,9 +196,9 @@ def diagnose(watch: HandshakeWatch, waited_s: float, key_fingerprint: str,
         "address": "wrong address or port, or the slave is not running: check host and "
                    "control_port/stream_port in [transport] against the slave's bind_host "
                    "and ports, and that `telethermal slave` runs there",
-        "firewall": "a firewall drops the connection: on the slave host open TCP "
-                    "control_port and stream_port to this master's address "
-                    "(deploy/two-host/slave.nft)",
+        "firewall": "nothing answers: a firewall drops the connection (on the slave host "
+                    "open TCP control_port and stream_port to this master's address, "
+                    "deploy/two-host/slave.nft), or no machine has that address",
         "key": f"this master's key is not allowed: copy {keys_dir}/master.key (fingerprint "
                f"{key_fingerprint}) into the slave's allowed_dir; no restart needed",
         "slave_key": f"{keys_dir}/slave.key is not this slave's public key: copy the "

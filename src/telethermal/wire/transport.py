@@ -247,6 +247,7 @@ class Endpoint:
                 self._watch: dict[str, HandshakeWatch] = {}
                 self._unlinked_since = self.clock()
                 self._diagnosed_at = -1e9
+                self._fingerprint: str | None = None
                 self.diagnosis: dict | None = None
                 for name in ("control", "stream"):
                     self._connect(name)
@@ -312,21 +313,21 @@ class Endpoint:
         if self._unlinked_since is None:
             self._unlinked_since = now
         waited = now - self._unlinked_since
-        refused_now = any(w.auth_failed for w in self._watch.values()) and \
-            (self.diagnosis is None or self.diagnosis["likely"] != "key")
-        if (waited >= DIAGNOSE_AFTER_S and now - self._diagnosed_at >= DIAGNOSE_REPEAT_S) or \
-                refused_now:
+        refused = control.auth_failed > 0
+        if waited < DIAGNOSE_AFTER_S and not refused:
+            return
+        if self._fingerprint is None:
+            self._fingerprint = "none (plain)" if self.config.security != "curve" else \
+                fingerprint(_load_secret(self.config.keys_dir, self.config.client_key)[0])
+        d = diagnose(control, waited, self._fingerprint, self.config.keys_dir or "keys")
+        # Logged when first known, when the likely cause changes (a refusal
+        # arrives after silence, say), and every DIAGNOSE_REPEAT_S.
+        if self.diagnosis is None or d["likely"] != self.diagnosis["likely"] or \
+                now - self._diagnosed_at >= DIAGNOSE_REPEAT_S:
             self._diagnosed_at = now
-            self.diagnosis = diagnose(control, waited, self._key_fingerprint(),
-                                      self.config.keys_dir or "keys")
-            log.warning("master: %s. Likely: %s. Other causes: %s", self.diagnosis["problem"],
-                        self.diagnosis["fix"], "; ".join(
-                            c for c in self.diagnosis["causes"] if c != self.diagnosis["fix"]))
-
-    def _key_fingerprint(self) -> str:
-        if self.config.security != "curve":
-            return "none (plain)"
-        return fingerprint(_load_secret(self.config.keys_dir, self.config.client_key)[0])
+            log.warning("master: %s. Likely: %s. Other causes: %s", d["problem"], d["fix"],
+                        "; ".join(c for c in d["causes"] if c != d["fix"]))
+        self.diagnosis = d
 
     def close(self) -> None:
         for name in ("control", "stream"):
