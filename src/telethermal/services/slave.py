@@ -210,7 +210,7 @@ class SlaveService:
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
                 "object_true_c": self.pad.object_true_c, "object_ir_c": self.pad.object_ir_c,
-                "last_rejected_key": getattr(e._auth, "last_rejected", None),
+                "last_rejected_key": e.last_rejected_key,
                 "masters_lost": self.masters_lost,
                 "offset_s": e.offset.offset_s, "counters": dict(e.counters)}
 

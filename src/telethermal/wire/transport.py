@@ -348,6 +348,11 @@ class Endpoint:
             self.clock() - self._last_heard < self.config.dead_after_s
 
     @property
+    def last_rejected_key(self) -> dict | None:
+        """Slave: the latest master key refused (fingerprint, address)."""
+        return getattr(self._auth, "last_rejected", None)
+
+    @property
     def unacked(self) -> int:
         return len(self._outbox)
 
