@@ -700,10 +700,16 @@ def cmd_faults(args) -> int:
 
 
 def cmd_keys(args) -> int:
+    from telethermal.wire.handshake import key_file_fingerprint
     from telethermal.wire.transport import generate_keys
 
     public, secret = generate_keys(args.out, args.name)
-    print(f"wrote {public} (give it to the peer) and {secret} (keep it here, mode 600)")
+    print(f"wrote {public} (give it to the peer; fingerprint {key_file_fingerprint(public)}) "
+          f"and {secret} (keep it here, mode 600)")
+    if args.name == "slave":                 # where the masters' public keys go
+        allowed = Path(args.out) / "allowed"
+        allowed.mkdir(exist_ok=True)
+        print(f"made {allowed}/: copy each master's master.key into it")
     return 0
 
 
@@ -907,6 +913,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="folder")
     p.add_argument("--name", required=True, help="e.g. slave or master")
     p.set_defaults(func=cmd_keys)
+    from telethermal.services.operate import register
+    register(sub)                            # admin, check, models
 
     p = sub.add_parser("demo", help="run the main job on the default scene: master and slave "
                                     "as two processes on loopback, a touch per material")

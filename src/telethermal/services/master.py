@@ -60,6 +60,8 @@ class Touch:
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
         self.trajectory_at: float | None = None
+        self.reply_when_done = True          # the admin "touch" request waits for the end
+        self.truth: dict | None = None       # the placed object (simulation), for the figures
 
 
 @dataclass(frozen=True)
@@ -100,6 +102,7 @@ class MasterService:
         self.next_contact_id = 1
         self.stop_requested = False
         self.state = "idle"
+        self.last_touch: dict = {}
 
     # ------------------------------------------------------------ hardware
     def _open_hardware(self) -> None:
@@ -267,13 +270,17 @@ class MasterService:
             **safety_summary(touch.display), "loop": loop,
             "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
         }
+        result.update(touch_figures(self.scene, touch, result))
         if self.recorder is not None:
             self.recorder.touch_end({k: v for k, v in result.items() if k != "trace"},
                                     touch.sim.trace)
         self.touch, self.state = None, "idle"
         link.end()
         self.next_contact_id += 1
-        self.admin.reply(**result)
+        log_touch_figures(result)
+        self.last_touch = result
+        if touch.reply_when_done:
+            self.admin.reply(**result)
 
     def _on_admin(self, request: dict, now: float) -> None:
         def touch(r):
@@ -281,20 +288,45 @@ class MasterService:
                 raise ValueError("the display is on hardware: touches come from the "
                                  "operator's finger, not from this command")
             if self.link.generator is None or not self.endpoint.peer_alive:
-                raise ValueError("no slave session yet (not connected or no session_config)")
+                d = self.endpoint.diagnosis
+                raise ValueError("no slave session yet" + (
+                    f": {d['problem']}; likely: {d['fix']}" if d else
+                    " (not connected or no session_config)"))
             contact_s = float(r.get("contact_s", 5.0))
             if not (0 < contact_s <= 60):
                 raise ValueError(f"contact_s must be in (0, 60], got {contact_s}")
+            if self.touch is not None:
+                raise ValueError(f"touch {self.touch.contact_id} is still in progress "
+                                 "(lift it first)")
             self.touch = Touch(self, contact_s, int(r.get("seed", 0)), now,
                                str(r.get("source", "trajectory")))
+            self.touch.truth = r.get("truth") or None
+            self.touch.reply_when_done = bool(r.get("wait", True))
             log.info("touch contact_id=%d contact_s=%.1f", self.touch.contact_id, contact_s)
-            return None                       # the reply is sent when the touch is over
+            if self.touch.reply_when_done:
+                return None                   # the reply is sent when the touch is over
+            return {"contact_id": self.touch.contact_id, "contact_s": contact_s}
 
-        self.admin.handle(request, self, {"touch": touch})
+        def lift(r):
+            if self.touch is None:
+                raise ValueError("no touch in progress")
+            self.touch.sim.release_at(now - self.touch.start - PRE_CONTACT_S)
+            self.touch.contact_s = self.touch.sim.contact_s
+            return {"contact_id": self.touch.contact_id, "contact_s": self.touch.contact_s}
+
+        def report(r):
+            if not self.last_touch:
+                raise ValueError("no touch has ended yet")
+            return {k: v for k, v in self.last_touch.items()
+                    if k != "trace" or r.get("trace")}
+
+        self.admin.handle(request, self, {"touch": touch, "lift": lift, "report": report})
 
     def status(self) -> dict:
         e = self.endpoint
         return {"role": "master", "state": self.state, "peer_alive": e.peer_alive,
+                "slave": f"{self.config.transport.host}:{self.config.transport.control_port}",
+                "diagnosis": None if e.peer_alive else e.diagnosis,
                 "session": self.link.generator is not None,
                 "object_temp_c": self.link.object_temp_c,
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
@@ -354,3 +386,42 @@ class MasterService:
                          closed["written"], closed["dropped_queue_full"] +
                          closed["dropped_after_error"],
                          f"; {closed['error']}" if closed["error"] else "")
+
+
+def touch_figures(scene, touch: Touch, result: dict) -> dict:
+    """The touch against the same finger touching the object directly, when
+    the touch request named the placed object (a simulated scene holding it):
+    flux and skin-temperature errors (``session/run.py``'s metrics)."""
+    import numpy as np
+
+    from telethermal.session.run import compare_with_direct
+
+    n = touch.sim.n_total
+    result["trace"] = {k: v[:n] for k, v in touch.sim.trace.items()}
+    truth = touch.truth or {}
+    material = truth.get("material")
+    if material not in [o.material for o in scene.objects] or \
+            truth.get("object_true_c") is None:
+        return {"direct": None}
+    render_from = result["render_start_s"]
+    trace = {k: np.asarray(v, dtype=object if k == "phase" else float)
+             for k, v in result["trace"].items()}
+    metrics = compare_with_direct(scene, material, float(truth["object_true_c"]),
+                                  touch.operator, trace, touch.contact_s, render_from)
+    result["trace"] = trace
+    return {"direct": {"material": material, **metrics}}
+
+
+def log_touch_figures(result: dict) -> None:
+    d = result.get("direct")
+    when = "no decision" if result["decision_time_s"] is None else \
+        f"decided at {result['decision_time_s']:.2f} s"
+    rtt = result.get("rtt_s")
+    figures = "" if not d else (
+        f"; against direct contact with {d['material']}: flux error "
+        f"{100 * d['flux_rms_error_rel']:.2f} % of peak after rendering began, "
+        f"{100 * d['flux_rms_error_rel_first_s']:.2f} % over the first second, skin "
+        f"{d['temp_rms_error_c']:.2f} K RMS")
+    log.info("touch over contact_id=%d identified=%s (%s)%s; safety events %d; rtt %s",
+             result["contact_id"], result["identified"], when, figures,
+             result["safety_events"], "-" if rtt is None else f"{1e3 * rtt:.2f} ms")

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 
 import zmq
 
+from telethermal.errors import ModelFileError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import mixture, posterior_weights
@@ -38,6 +40,13 @@ class SlaveService:
 
         self.config = config
         self.scene = with_finger(load_scene(config.scene))
+        for key, given in (("identifier", identifier), ("generator", generator)):
+            value = getattr(config, key)
+            if given is None and value and not Path(value).is_file():
+                raise ModelFileError(f"{value}: no such model file ({key} in the slave's "
+                                     "config): make both with `telethermal models --out DIR` "
+                                     "(deploy/README.md, step 3), or leave it empty to train "
+                                     "at start")
         if identifier is None:
             identifier = load_model(config.identifier) if config.identifier else \
                 train_identifier(self.scene, config.seed)
@@ -148,8 +157,11 @@ class SlaveService:
             self.recorder.slave(self.pad, self.contact_id)
         self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
                            t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
-        log.info("lift contact_id=%d", self.contact_id)
         self.last_touch = self._report()
+        r = self.last_touch
+        log.info("touch over contact_id=%d material=%s identified=%s (%s)", self.contact_id,
+                 r["material"], r["identified"], "no decision: " + str(r["reason"])
+                 if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
         self.touch_t0, self.state = None, "idle"
         self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
 
@@ -252,6 +264,8 @@ class SlaveService:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
+                "object_true_c": self.pad.object_true_c, "object_ir_c": self.pad.object_ir_c,
+                "last_rejected_key": e.last_rejected_key,
                 "masters_lost": self.masters_lost,
                 "thermometer_calibration": {**self.sensors.calibration.to_dict(),
                                             "error": self.calibration_error},

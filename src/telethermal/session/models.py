@@ -28,3 +28,35 @@ def train_generator(scene: Scene, seed: int = 0):
     ``telethermal bench render``, ``generator`` section)."""
     trials = finger_database(scene, np.random.default_rng(seed + 1000))
     return NetworkGenerator().fit(trials)
+
+
+def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0) -> list:
+    """A slave host's ``identifier.npz`` and ``generator.npz`` in ``out``,
+    with ``SHA256SUMS`` (``sha256sum -c`` checks a copy). Trained on the
+    scene's simulated databases (as the slave does at start when its config
+    names no files), or on a dataset folder ``data`` holding ``pad/`` and
+    ``finger/`` (a generated or a recorded one)."""
+    import hashlib
+    from pathlib import Path
+
+    from telethermal.data.dataset import load_dataset
+    from telethermal.physics.scene import load_scene
+    from telethermal.render.generator import save_generator
+    from telethermal.session.run import with_finger
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    scene = with_finger(load_scene(scene_name))
+    if data is None:
+        identifier, generator = train_identifier(scene, seed), train_generator(scene, seed)
+    else:
+        from telethermal.ident.registry import dataset_scene
+        identifier = make("effusivity-lda").fit(from_trials(load_dataset(Path(data) / "pad"))[0])
+        identifier.scene_ = dataset_scene(Path(data) / "pad")      # None when it has no record
+        generator = NetworkGenerator().fit(load_dataset(Path(data) / "finger"))
+    paths = [Path(identifier.save(out / "identifier.npz")),
+             Path(save_generator(generator, out / "generator.npz"))]
+    sums = out / "SHA256SUMS"
+    sums.write_text("".join(f"{hashlib.sha256(p.read_bytes()).hexdigest()}  {p.name}\n"
+                            for p in paths))
+    return paths + [sums]

@@ -136,6 +136,12 @@ class DisplayTouch:
     def touching(self, t: float) -> bool:
         return 0.0 <= t < self.contact_s
 
+    def release_at(self, t: float) -> None:
+        """The operator lifts the finger at ``t`` (s), before the planned end."""
+        if t < self.contact_s:
+            self.contact_s = max(t, 0.0)
+            self.n_total = min(self.n_total, self.k + int(round(AFTER_RELEASE_S / self.dt)))
+
     def sense(self, t: float) -> PadSensors:
         op, sens = self.operator, self.scene.sensors
         touching = self.touching(t)

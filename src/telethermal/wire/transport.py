@@ -21,11 +21,11 @@ from pathlib import Path
 
 import zmq
 import zmq.auth
-from zmq.auth.thread import ThreadAuthenticator
 
 from telethermal import __version__
 from telethermal.errors import ProtocolError, TransportError
 from telethermal.wire.codec import decode, encode
+from telethermal.wire.handshake import AllowedKeys, HandshakeWatch, diagnose, fingerprint
 from telethermal.wire.schema import (KINDS, LOSSLESS, MAX_MESSAGE_BYTES, PROTOCOL_VERSION,
                                      SUPPORTED_VERSIONS)
 
@@ -37,7 +37,18 @@ MAX_UNACKED = 4096
 RETRANSMIT_AFTER = 3
 COUNTERS = ("lossless_sent", "lossless_received", "duplicates", "gaps", "recovered", "resent",
             "lossless_dropped", "stream_lost", "invalid", "unknown_kind", "heartbeats_missed",
-            "reconnects", "duplicate_hellos")
+            "reconnects", "duplicate_hellos", "curve_rejected", "sockets_recreated")
+#: The master names the likely cause when no handshake completed this long.
+DIAGNOSE_AFTER_S = 3.0
+DIAGNOSE_REPEAT_S = 30.0
+#: libzmq's reconnect cap.
+RECONNECT_IVL_MAX_S = 0.5
+#: The wait before a socket whose handshake the slave refused is recreated:
+#: half the reconnect cap, so a key copied in meanwhile is in use within one
+#: reconnect interval (this wait, a heartbeat tick and the handshake).
+REFUSED_RETRY_S = 0.25
+#: A master socket whose connect nothing answered this long is recreated.
+UNANSWERED_S = 2.0
 
 
 @dataclass
@@ -203,7 +214,7 @@ class Endpoint:
         sock.setsockopt(zmq.RECONNECT_IVL, 100)
         # At most 0.5 s between attempts: a restarted peer is found again well
         # within one heartbeat timeout (a 2 s cap measured 1.4 s to relink).
-        sock.setsockopt(zmq.RECONNECT_IVL_MAX, 500)
+        sock.setsockopt(zmq.RECONNECT_IVL_MAX, int(RECONNECT_IVL_MAX_S * 1000))
 
     def _bind(self, sock, port: int) -> int:
         """Bind; port 0 takes a free one (tests). Returns the port bound."""
@@ -220,10 +231,8 @@ class Endpoint:
                     allowed = Path(cfg.allowed_dir)
                     if not allowed.is_dir():
                         raise TransportError(f"{allowed}: allowed-keys folder does not exist")
-                    self._auth = ThreadAuthenticator(self.ctx, log=logging.getLogger(
-                        "telethermal.zap"))
+                    self._auth = AllowedKeys(self.ctx, allowed, self.counters)
                     self._auth.start()
-                    self._auth.configure_curve(domain="*", location=str(allowed))
                 self.control = self.ctx.socket(zmq.ROUTER)
                 self.control.setsockopt(zmq.ROUTER_MANDATORY, 1)
                 self._common(self.control)
@@ -235,18 +244,13 @@ class Endpoint:
                 self._secure(self.stream, server=True)
                 self.ports.append(self._bind(self.stream, cfg.stream_port))
             else:
-                self.control = self.ctx.socket(zmq.DEALER)
-                self.control.setsockopt(zmq.IDENTITY, self.session_id.encode())
-                self.control.setsockopt(zmq.IMMEDIATE, 1)
-                self._common(self.control)
-                self._secure(self.control, server=False)
-                self.control.connect(f"tcp://{cfg.host}:{cfg.control_port}")
-                self.stream = self.ctx.socket(zmq.SUB)
-                self._common(self.stream)
-                self._secure(self.stream, server=False)
-                self.stream.setsockopt(zmq.SUBSCRIBE, b"")
-                self.stream.rcvhwm = cfg.stream_hwm
-                self.stream.connect(f"tcp://{cfg.host}:{cfg.stream_port}")
+                self._watch: dict[str, HandshakeWatch] = {}
+                self._unlinked_since = self.clock()
+                self._diagnosed_at = -1e9
+                self._fingerprint: str | None = None
+                self.diagnosis: dict | None = None
+                for name in ("control", "stream"):
+                    self._connect(name)
         except TransportError:
             self.close()
             raise
@@ -258,10 +262,80 @@ class Endpoint:
         self.poller.register(self.control, zmq.POLLIN)
         self.poller.register(self.stream, zmq.POLLIN)
 
+    def _connect(self, name: str) -> None:
+        """The master's control DEALER or stream SUB, connected and watched."""
+        cfg = self.config
+        if name == "control":
+            sock = self.ctx.socket(zmq.DEALER)
+            sock.setsockopt(zmq.IDENTITY, self.session_id.encode())
+            sock.setsockopt(zmq.IMMEDIATE, 1)
+        else:
+            sock = self.ctx.socket(zmq.SUB)
+            sock.setsockopt(zmq.SUBSCRIBE, b"")
+            sock.rcvhwm = cfg.stream_hwm
+        self._common(sock)
+        setattr(self, name, sock)
+        self._secure(sock, server=False)
+        where = f"tcp://{cfg.host}:{cfg.control_port if name == 'control' else cfg.stream_port}"
+        self._watch[name] = HandshakeWatch.on(sock, where, self.clock())
+        sock.connect(where)
+
+    def _recreate(self, name: str) -> None:
+        """After a refused handshake libzmq never connects again, and after
+        dropped SYNs the kernel waits longer and longer: a new socket tries
+        at once (the slave reads its allowed keys anew at each attempt)."""
+        old, watch = getattr(self, name), self._watch[name]
+        self.poller.unregister(old)
+        watch.read(self.clock())
+        watch.close(old)
+        old.close(linger=0)
+        self._connect(name)
+        self._watch[name] = watch.merged(self._watch[name])
+        self.poller.register(getattr(self, name), zmq.POLLIN)
+        self.counters["sockets_recreated"] += 1
+        log.debug("master: %s socket recreated (refused, or nothing answered)", name)
+
+    def _watch_handshakes(self, now: float, alive: bool) -> None:
+        """Master: recreate a socket the slave refused, and name the likely
+        cause while no session comes up."""
+        for name, watch in self._watch.items():
+            watch.read(now)
+            if (watch.gave_up_at is not None and now - watch.gave_up_at >= REFUSED_RETRY_S) \
+                    or watch.unanswered(now, UNANSWERED_S):
+                self._recreate(name)
+        control = self._watch["control"]
+        if alive:
+            if self._unlinked_since is not None:
+                for watch in self._watch.values():
+                    watch.reset()
+            self._unlinked_since, self.diagnosis = None, None
+            return
+        if self._unlinked_since is None:
+            self._unlinked_since = now
+        waited = now - self._unlinked_since
+        refused = control.auth_failed > 0
+        if waited < DIAGNOSE_AFTER_S and not refused:
+            return
+        if self._fingerprint is None:
+            self._fingerprint = "none (plain)" if self.config.security != "curve" else \
+                fingerprint(_load_secret(self.config.keys_dir, self.config.client_key)[0])
+        d = diagnose(control, waited, self._fingerprint, self.config.keys_dir or "keys")
+        # Logged when first known, when the likely cause changes (a refusal
+        # arrives after silence, say), and every DIAGNOSE_REPEAT_S.
+        if self.diagnosis is None or d["likely"] != self.diagnosis["likely"] or \
+                now - self._diagnosed_at >= DIAGNOSE_REPEAT_S:
+            self._diagnosed_at = now
+            log.warning("master: %s. Likely: %s. Other causes: %s", d["problem"], d["fix"],
+                        "; ".join(c for c in d["causes"] if c != d["fix"]))
+        self.diagnosis = d
+
     def close(self) -> None:
         for name in ("control", "stream"):
             sock = getattr(self, name, None)
+            watch = getattr(self, "_watch", {}).get(name)
             if sock is not None:
+                if watch is not None:
+                    watch.close(sock)
                 sock.close(linger=0)
         if self._auth is not None:
             self._auth.stop()
@@ -272,6 +346,11 @@ class Endpoint:
     def peer_alive(self) -> bool:
         return self._last_heard is not None and \
             self.clock() - self._last_heard < self.config.dead_after_s
+
+    @property
+    def last_rejected_key(self) -> dict | None:
+        """Slave: the latest master key refused (fingerprint, address)."""
+        return getattr(self._auth, "last_rejected", None)
 
     @property
     def unacked(self) -> int:
@@ -377,6 +456,8 @@ class Endpoint:
             log.warning("%s: peer silent for %.2f s", self.role, self.config.dead_after_s)
         self._was_alive = alive
         if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
+            if self.role == "master":
+                self._watch_handshakes(now, alive)
             if self.role == "master" and (not alive or self.peer_version is None):
                 self._hello()
             if self.peer_version is not None:

@@ -1,0 +1,136 @@
+"""``telethermal admin``: operate a session through the services' admin
+sockets (``services/admin.py``): place an object, touch, lift, status, the
+last touch's figures, or any other request by name.
+
+A thin client: every subcommand is one or two admin requests, and ``send``
+passes any request through, so a new request needs no change here. Each
+admin socket is local to its host (127.0.0.1 or an ``ipc://`` path); from
+another host, forward the port (``ssh -N -L 5570:127.0.0.1:5570 slave-host``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from telethermal.errors import TelethermalError, TransportError
+from telethermal.services.admin import call
+
+DEFAULT = {"slave": 5570, "master": 5571}
+
+
+class AdminError(TelethermalError):
+    """A service that answered an admin request with an error."""
+
+
+def resolve(where: str | int | None, role: str):
+    """A port, an ``ipc://`` path, or a service config file (its admin_ipc
+    or admin_port); None: the role's default port on 127.0.0.1."""
+    if where is None or where == "":
+        return DEFAULT[role]
+    if isinstance(where, int) or str(where).isdigit():
+        return int(where)
+    if str(where).startswith("ipc://"):
+        return str(where)
+    from telethermal.services.config import load_config
+
+    config = load_config(Path(where), role)
+    return config.admin_ipc or config.admin_port
+
+
+def request(where, role: str, cmd: str, timeout_s: float = 5.0, **args) -> dict:
+    """One request; an ``ok: false`` reply raises :class:`AdminError`."""
+    try:
+        reply = call(where, cmd, timeout_s=timeout_s, **args)
+    except TransportError as exc:
+        raise TransportError(f"{role} admin at {where}: no reply to {cmd!r} in {timeout_s} s: "
+                             f"is `telethermal {role}` running on this host with this "
+                             f"admin_port/admin_ipc? ({exc})") from None
+    if not reply.get("ok", False):
+        raise AdminError(f"{role}: {reply.get('error', 'failed')}")
+    return reply
+
+
+def parse_args(items: list[str]) -> dict:
+    """``key=value`` pairs; values are read as JSON where they parse
+    (numbers, true/false, lists), as text otherwise."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise AdminError(f"{item!r}: arguments are key=value")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def truth_for_touch(slave, material: str | None, object_c: float | None) -> dict | None:
+    """What was placed under the slave pad (simulation truth), for the
+    figures against direct contact: given explicitly, or asked of the
+    slave's admin socket when it is reachable from here."""
+    if material is not None and object_c is not None:
+        return {"material": material, "object_true_c": float(object_c)}
+    try:
+        status = request(slave, "slave", "status", timeout_s=1.0)
+    except TelethermalError:
+        return None
+    if status.get("object_true_c") is None:
+        return None
+    return {"material": status["material"], "object_true_c": status["object_true_c"]}
+
+
+def _ms(value) -> str:
+    return "-" if value is None else f"{1e3 * value:.2f} ms"
+
+
+def describe_status(status: dict) -> list[str]:
+    """Lines for a person: state, peer, round trip, counters that moved,
+    and what is wrong if no session is up."""
+    c = status.get("counters", {})
+    moved = ", ".join(f"{k} {v}" for k, v in c.items() if v)
+    lines = [f"{status['role']}: {status['state']}, peer "
+             f"{'alive' if status['peer_alive'] else 'silent'}, rtt {_ms(status.get('rtt_s'))}"
+             + (f", slave at {status['slave']}" if status.get("slave") else "")
+             + (f", object {status['material']}" if status.get("material") else ""),
+             f"  counters: {moved or 'all zero'}"]
+    d = status.get("diagnosis")
+    if d:
+        lines += [f"  problem: {d['problem']}", f"  likely: {d['fix']}"]
+        lines += [f"  or: {cause}" for cause in d["causes"] if cause != d["fix"]]
+    r = status.get("last_rejected_key")
+    if r:
+        lines.append(f"  last rejected CURVE key {r['fingerprint']} from {r['address']} "
+                     f"({c.get('curve_rejected', 0)} refusals)" + ("" if status["peer_alive"]
+                     else ": to let that master in, copy its master.key into allowed_dir"))
+    return lines
+
+
+def describe_touch(result: dict) -> list[str]:
+    when = "no decision" if result.get("decision_time_s") is None else \
+        f"decided at {result['decision_time_s']:.2f} s"
+    lines = [f"touch {result['contact_id']}: identified {result['identified']} ({when}), "
+             f"rendering from {_s(result.get('render_start_s'))}, safety events "
+             f"{result['safety_events']}, rtt {_ms(result.get('rtt_s'))}"]
+    d = result.get("direct")
+    if d:
+        lines.append(f"  against direct contact with {d['material']}: flux error "
+                     f"{_pct(d['flux_rms_error_rel'])} of peak after rendering began, "
+                     f"{_pct(d['flux_rms_error_rel_first_s'])} over the first second; skin "
+                     f"{d['temp_rms_error_c']:.2f} K RMS; flux within 10 % from "
+                     f"{_s(d.get('time_to_correct_flux_s'))}")
+    else:
+        lines.append("  no direct-contact figures: the placed object is not known here "
+                     "(reach the slave's admin socket, or give --material and --object-c)")
+    return lines
+
+
+def _s(value) -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) \
+        else f"{value:.2f} s"
+
+
+def _pct(value) -> str:
+    return "-" if value is None or math.isnan(value) else f"{100 * value:.2f} %"

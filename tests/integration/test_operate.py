@@ -1,0 +1,254 @@
+"""The operator's commands against real service processes on loopback:
+`telethermal admin` (status, place, touch, lift, report, send),
+`telethermal check`, `telethermal models`, `telethermal keys`; and a master
+whose key was missing from the slave's allowed/ coming in, unrestarted,
+once the key is copied."""
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+from telethermal.cli import main
+from telethermal.physics.scene import load_scene
+from telethermal.services.admin import call
+from telethermal.services.demo import Services, free_ports, wait_connected, write_configs
+from telethermal.session.models import write_models
+from telethermal.session.run import with_finger
+from telethermal.wire.handshake import key_file_fingerprint
+from telethermal.wire.transport import DIAGNOSE_AFTER_S, RECONNECT_IVL_MAX_S, UNANSWERED_S
+
+SCENE = with_finger(load_scene("fingertip-7"))
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("models")
+    write_models(folder, SCENE.name, seed=0)
+    return folder / "identifier.npz", folder / "generator.npz"
+
+
+def admin(ports, *argv, capsys):
+    """Exit code and what was printed (the replies on stdout, errors on stderr)."""
+    code = main(["admin", "--slave", str(ports[2]), "--master", str(ports[3]), *argv])
+    captured = capsys.readouterr()
+    return code, captured.out + captured.err
+
+
+def test_models_writes_loadable_files_and_their_checksums(models):
+    folder = models[0].parent
+    sums = (folder / "SHA256SUMS").read_text().splitlines()
+    assert [line.split("  ")[1] for line in sums] == ["identifier.npz", "generator.npz"]
+    import hashlib
+    for line in sums:
+        digest, name = line.split("  ")
+        assert hashlib.sha256((folder / name).read_bytes()).hexdigest() == digest
+
+
+def test_admin_operates_a_session_and_reports_the_touch(tmp_path, models, capsys):
+    ports = free_ports(4)
+    slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0)
+    services = Services(tmp_path, slave_cfg, master_cfg)
+    try:
+        wait_connected(services, ports[3])
+        code, out = admin(ports, "status", "--wait", "10", capsys=capsys)
+        assert code == 0 and "slave: idle, peer alive" in out and "master: idle, peer alive" \
+            in out
+        code, out = admin(ports, "place", "wood", "--seed", "1", capsys=capsys)
+        assert code == 0 and out.startswith("placed wood")
+        # The truth comes from the slave's admin socket (reachable here).
+        code, out = admin(ports, "touch", "--contact-s", "1.5", "--seed", "1", capsys=capsys)
+        assert code == 0, out
+        assert "against direct contact with wood" in out
+        touch_out = out
+        code, out = admin(ports, "--json", "report", capsys=capsys)
+        report = json.loads(out)
+        assert "trace" not in report and report["slave"]["material"] == "wood"
+        # What the master was told is what the slave decided.
+        assert report["identified"] == report["slave"]["identified"] != "unknown"
+        assert f"identified {report['identified']}" in touch_out
+        assert report["direct"]["flux_rms_error_rel"] < 0.05
+        # A touch lifted early is shorter than asked.
+        code, out = admin(ports, "touch", "--contact-s", "20", "--no-wait", capsys=capsys)
+        assert code == 0 and "started" in out
+        time.sleep(1.0)
+        code, out = admin(ports, "lift", capsys=capsys)
+        assert code == 0 and "lifted after" in out
+        lifted_s = float(out.split("lifted after ")[1].split(" s")[0])
+        assert 0.5 < lifted_s < 20
+        deadline = time.monotonic() + 10
+        while call(ports[3], "status")["state"] != "idle" and time.monotonic() < deadline:
+            time.sleep(0.1)
+        report = call(ports[3], "report")
+        assert report["contact_id"] == 2 and report["contact_s"] == pytest.approx(lifted_s, abs=0.01)
+        # Any request by name; an unknown one is an error naming the commands.
+        code, out = admin(ports, "send", "slave", "status", capsys=capsys)
+        assert code == 0 and json.loads(out)["material"] == "wood"
+        code, out = admin(ports, "send", "master", "nonsense", capsys=capsys)
+        assert code == 2 and "unknown command 'nonsense'" in " ".join(out.split())
+    finally:
+        codes = services.stop()
+    assert codes == {"slave": 0, "master": 0}
+    for role in ("slave", "master"):
+        assert "touch over contact_id=1" in (tmp_path / f"{role}.log").read_text()
+    assert "flux error" in (tmp_path / "master.log").read_text()
+
+
+def test_a_missing_master_key_is_shown_by_admin_status_and_fixed_without_restart(
+        tmp_path, models, capsys):
+    ports = free_ports(4)
+    slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0)
+    allowed_key = tmp_path / "keys" / "allowed" / "master.key"
+    allowed_key.unlink()
+    services = Services(tmp_path, slave_cfg, master_cfg)
+    master_pid = services.procs["master"].pid
+    try:
+        # The services load their models; until the slave listens the master
+        # names a refused port ("address"), then at once the refused key.
+        deadline = time.monotonic() + 60
+        status = {}
+        while time.monotonic() < deadline and \
+                (status.get("diagnosis") or {}).get("likely") != "key":
+            services.check_running()
+            try:
+                status = call(ports[3], "status", timeout_s=1.0)
+            except Exception:
+                pass
+            time.sleep(0.1)
+        d = status["diagnosis"]
+        fp = key_file_fingerprint(tmp_path / "keys" / "master" / "master.key")
+        assert d["likely"] == "key" and fp in d["fix"]
+        code, out = admin(ports, "status", capsys=capsys)
+        assert "likely: this master's key is not allowed" in out
+        assert f"last rejected CURVE key {fp} from 127.0.0.1" in out
+        assert call(ports[2], "status")["counters"]["curve_rejected"] >= 1
+        code, out = admin(ports, "touch", capsys=capsys)
+        assert code == 2                                          # refused, with the cause
+        assert "key is not allowed" in " ".join(out.split())
+        shutil.copy(tmp_path / "keys" / "master" / "master.key", allowed_key)
+        copied = time.monotonic()
+        wait_connected(services, ports[3], timeout_s=10)
+        recovered_s = time.monotonic() - copied
+        assert services.procs["master"].pid == master_pid and \
+            services.procs["master"].poll() is None
+        # One reconnect interval, plus the hello, the session config and this
+        # test's 0.2 s polling of the status.
+        assert recovered_s < RECONNECT_IVL_MAX_S + 1.0
+        assert call(ports[3], "status")["diagnosis"] is None
+    finally:
+        services.stop()
+    assert "rejected CURVE key " + fp in (tmp_path / "slave.log").read_text()
+    assert "not allowed" in (tmp_path / "master.log").read_text()
+    print(f"recovered {recovered_s:.2f} s after the key was copied")
+
+
+def test_check_names_each_problem_with_its_fix(tmp_path, models, capsys):
+    ports = free_ports(4)
+    slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0)
+    assert main(["check", "--config", str(slave_cfg)]) == 0
+    assert "ready: no problem found" in capsys.readouterr().out
+    # A master with no slave running: both ports refused, each with a fix.
+    assert main(["check", "--config", str(master_cfg), "--timeout-s", "1"]) == 1
+    out = capsys.readouterr().out
+    assert out.count("connection refused") == 2 and "fix: start `telethermal slave`" in out
+    # Break the slave's set-up three ways.
+    (tmp_path / "keys" / "allowed" / "master.key").unlink()
+    copy = tmp_path / "models-copy"
+    shutil.copytree(models[0].parent, copy)
+    with open(copy / "generator.npz", "ab") as f:
+        f.write(b"x")                                    # a copy gone wrong
+    def slave_config(name, identifier, bind_host):
+        path = tmp_path / name
+        path.write_text(f'[slave]\nidentifier = "{identifier}"\n'
+                        f'generator = "models-copy/generator.npz"\nadmin_port = {ports[2]}\n'
+                        f'[transport]\nbind_host = "{bind_host}"\ncontrol_port = {ports[0]}\n'
+                        f'stream_port = {ports[1]}\nkeys_dir = "keys/slave"\n'
+                        f'allowed_dir = "keys/allowed"\n')
+        return str(path)
+
+    assert main(["check", "--config", slave_config("broken.toml", "nowhere/identifier.npz",
+                                                   "192.0.2.77")]) == 1
+    out = capsys.readouterr().out
+    assert "holds no public key" in out and "copy each master's keys/master.key" in out
+    assert "no such model file" in out and "telethermal models" in out
+    assert "192.0.2.77: not an address of this host" in out
+    assert main(["check", "--config", slave_config("broken2.toml",
+                                                   "models-copy/identifier.npz",
+                                                   "127.0.0.1")]) == 1
+    assert "generator.npz: does not match" in capsys.readouterr().out
+
+
+def test_keys_makes_the_allowed_folder_for_a_slave(tmp_path, capsys):
+    assert main(["keys", "--out", str(tmp_path / "keys"), "--name", "slave"]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "keys" / "allowed").is_dir()
+    assert key_file_fingerprint(tmp_path / "keys" / "slave.key") in out
+    assert main(["keys", "--out", str(tmp_path / "m"), "--name", "master"]) == 0
+    assert not (tmp_path / "m" / "allowed").exists()
+
+
+def test_a_slave_without_its_model_file_says_how_to_make_it(tmp_path, capsys):
+    cfg = tmp_path / "slave.toml"
+    cfg.write_text('[slave]\nidentifier = "identifier.npz"\n\n[transport]\nsecurity = "plain"\n')
+    assert main(["slave", "--config", str(cfg)]) == 2
+    out = " ".join(capsys.readouterr().err.split())
+    assert "no such model file" in out and "telethermal models" in out
+
+
+def test_diagnosis_of_a_silent_drop_is_the_firewall():
+    from telethermal.wire.handshake import HandshakeWatch, diagnose
+    watch = HandshakeWatch("tcp://10.0.0.1:5560", attempts=1)   # SYNs never answered
+    d = diagnose(watch, DIAGNOSE_AFTER_S, "sha256:0", "keys")
+    assert d["likely"] == "firewall" and "slave.nft" in d["fix"]
+
+
+def test_a_firewall_that_drops_the_master_is_named_then_fixed_in_namespaces(tmp_path, models):
+    # The slave's rule set admits another address than the master's: the
+    # master's SYNs are dropped, and it names the firewall. With the right
+    # address the session comes up, the master unrestarted.
+    import os
+    import subprocess
+
+    from telethermal.netns import Namespaces
+    reason = Namespaces.why_not() or (None if shutil.which("nft") else "nft is not installed")
+    if reason:
+        if os.environ.get("TELETHERMAL_REQUIRE_NETNS") == "1":
+            pytest.fail(f"TELETHERMAL_REQUIRE_NETNS=1 but {reason}")
+        pytest.skip(reason)
+    rules = Path(__file__).resolve().parents[2] / "deploy" / "two-host" / "slave.nft"
+    admin_at = (f"ipc://{tmp_path}/slave-admin", f"ipc://{tmp_path}/master-admin")
+    with Namespaces("tf") as ns:
+        def firewall(master_ip):
+            subprocess.run(["ip", "netns", "exec", ns.names[0], "nft", "-D",
+                            f"MASTER_IP={master_ip}", "-f", str(rules)], check=True)
+
+        firewall("10.231.0.99")
+        ports = (5560, 5561, *admin_at)             # the rule set's ports
+        slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0,
+                                              slave_host=ns.addresses[0])
+        services = Services(tmp_path, slave_cfg, master_cfg, namespaces=ns.names)
+        try:
+            deadline = time.monotonic() + 60
+            status = {}
+            while time.monotonic() < deadline and not status.get("diagnosis"):
+                services.check_running()
+                try:
+                    status = call(admin_at[1], "status", timeout_s=1.0)
+                except Exception:
+                    pass
+                time.sleep(0.1)
+            d = status["diagnosis"]
+            assert d["likely"] == "firewall" and "slave.nft" in d["fix"]
+            waited_s = float(d["problem"].split(" after ")[1].split(" s ")[0])
+            assert waited_s < 5.0
+            firewall(ns.addresses[1])
+            opened = time.monotonic()
+            wait_connected(services, admin_at[1], timeout_s=15)
+            # A new socket every UNANSWERED_S while nothing answers, so the
+            # opened port is found within that (not the kernel's SYN back-off).
+            assert time.monotonic() - opened < UNANSWERED_S + 1.5
+        finally:
+            codes = services.stop()
+    assert codes == {"slave": 0, "master": 0}

@@ -1,0 +1,52 @@
+"""The admin client's pieces that need no service: arguments, addresses,
+and the lines a person reads."""
+
+import pytest
+
+from telethermal.services.admin_client import (AdminError, describe_status, describe_touch,
+                                               parse_args, resolve)
+
+
+def test_key_value_arguments_are_json_where_they_parse():
+    assert parse_args(["seed=3", "contact_s=1.5", "material=wood", "wait=false",
+                       "ids=[1,2]"]) == {"seed": 3, "contact_s": 1.5, "material": "wood",
+                                         "wait": False, "ids": [1, 2]}
+    with pytest.raises(AdminError, match="key=value"):
+        parse_args(["seed"])
+
+
+def test_addresses_are_ports_ipc_paths_or_config_files(tmp_path):
+    assert resolve(None, "slave") == 5570 and resolve(None, "master") == 5571
+    assert resolve("6000", "slave") == 6000
+    assert resolve("ipc:///run/x", "master") == "ipc:///run/x"
+    cfg = tmp_path / "m.toml"
+    cfg.write_text('[master]\nadmin_port = 6123\n[transport]\nsecurity = "plain"\n')
+    assert resolve(str(cfg), "master") == 6123
+
+
+def test_status_lines_name_the_problem_and_every_other_cause():
+    d = {"problem": "no session after 3.0 s", "likely": "firewall", "fix": "open the ports",
+         "causes": ["check the address", "open the ports", "copy the key"]}
+    lines = describe_status({"role": "master", "state": "idle", "peer_alive": False,
+                             "rtt_s": None, "counters": {"resent": 0, "sockets_recreated": 2},
+                             "diagnosis": d, "slave": "10.0.0.1:5560"})
+    assert lines[0] == "master: idle, peer silent, rtt -, slave at 10.0.0.1:5560"
+    assert lines[1] == "  counters: sockets_recreated 2"
+    assert "  likely: open the ports" in lines
+    assert [x for x in lines if x.startswith("  or: ")] == ["  or: check the address",
+                                                          "  or: copy the key"]
+    slave = describe_status({"role": "slave", "state": "idle", "peer_alive": False,
+                             "counters": {"curve_rejected": 4}, "material": "wood",
+                             "last_rejected_key": {"fingerprint": "sha256:ab", "address":
+                                                   "10.0.0.2"}})
+    assert "rejected CURVE key sha256:ab from 10.0.0.2 (4 refusals)" in slave[-1]
+    assert "copy its master.key" in slave[-1]
+
+
+def test_a_touch_without_the_placed_object_says_why_there_are_no_errors():
+    lines = describe_touch({"contact_id": 3, "identified": "wood", "decision_time_s": 0.6,
+                            "render_start_s": 0.62, "safety_events": 0, "rtt_s": 7.5e-4,
+                            "direct": None})
+    assert lines[0] == ("touch 3: identified wood (decided at 0.60 s), rendering from 0.62 s, "
+                        "safety events 0, rtt 0.75 ms")
+    assert "--material and --object-c" in lines[1]
