@@ -110,9 +110,10 @@ def _wait_for(predicate, timeout_s):
 
 def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
     # SIGKILL the slave 0.5 s into the contact and start it again: the touch
-    # under way ends without a safety event (the display goes to neutral once
-    # the link is dead and nothing it holds is valid), and the restarted slave
-    # is found again and renders the next touch.
+    # under way ends without a safety event (a trajectory that arrived before
+    # the crash is held through it; with none, the display goes to neutral
+    # once the link is dead), and the restarted slave is found again and
+    # renders the next touch.
     out, services, ports, text = link
 
     def crash():
@@ -125,7 +126,8 @@ def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
         wait_connected(services, ports[3], timeout_s=60)
         under = networked_touch(SCENE, "wood", ports, 7, 2.0, during=crash).summary
         assert under["safety_events"] == 0
-        assert under["display_event_counts"].get("link lost") == 1
+        held = under["trajectory_at_s"] is not None and under["trajectory_at_s"] < 0.5
+        assert under["display_event_counts"].get("link lost", 0) == (0 if held else 1)
         again = touch_again(services, ports, 8)
     assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
 

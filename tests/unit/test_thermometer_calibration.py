@@ -52,6 +52,17 @@ def test_a_drifting_target_is_refused_naming_the_point():
         calibrate_thermometer(target, [19.0, 29.0, 39.0])
 
 
+def test_a_thermometer_warming_through_a_point_is_refused():
+    # Only the thermometer moves (0.5 K over the 30 readings of a point), so
+    # the pad's thermocouple cannot see it; left in, it would shift the offset
+    # by ~0.25 K. Four standard errors of the 0.1 K noise are ~0.25 K: refused.
+    rng = np.random.default_rng(8)
+    target = SimulatedPadTarget(_instruments(0.3), ROOM_C, rng,
+                                thermometer_drift_k_per_reading=0.5 / 29)
+    with pytest.raises(CalibrationError, match=r"thermometer's difference .*not steady"):
+        calibrate_thermometer(target, [19.0, 29.0, 39.0])
+
+
 def test_a_drift_within_the_noise_is_not_refused():
     rng = np.random.default_rng(6)
     cal = calibrate_thermometer(SimulatedPadTarget(_instruments(0.3), ROOM_C, rng,

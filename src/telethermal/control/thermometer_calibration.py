@@ -10,8 +10,9 @@ same thermocouple, the thermocouple's own bias cancels from the gap.
 
 Each point waits for the pad to settle and then takes ``readings`` readings
 of both instruments; a target that drifts during them (the pad's reading, or
-the thermometer's difference from it, moving by more than ``max_drift_k``)
-is refused with a :class:`~telethermal.errors.CalibrationError` naming the
+the thermometer's difference from it, moving by more than ``max_drift_k``
+and by more than four standard errors of the readings' own scatter: about
+0.25 K for an MLX90614's 0.1 K averaged noise over 30 readings) is refused with a :class:`~telethermal.errors.CalibrationError` naming the
 point: a drifting target would fold its drift into the bias, silently.
 """
 
@@ -152,14 +153,18 @@ class SimulatedPadTarget:
     thermometer aimed at it. The pad's loop holds the thermocouple's
     *reading* at the set point (so the pad itself is off by minus the
     thermocouple's bias); ``drift_k_per_reading`` makes the pad wander
-    during a dwell (a hard case: calibration must refuse it)."""
+    during a dwell, ``thermometer_drift_k_per_reading`` the thermometer's
+    own reading (warming up): hard cases calibration must refuse."""
 
     def __init__(self, instruments: Instruments, room_c: float, rng: np.random.Generator,
-                 thermocouple_noise_uv: float = 1.0, drift_k_per_reading: float = 0.0):
+                 thermocouple_noise_uv: float = 1.0, drift_k_per_reading: float = 0.0,
+                 thermometer_drift_k_per_reading: float = 0.0):
         self.instruments, self.rng = instruments, rng
         self.tc = Thermocouple(noise_uv_rms=thermocouple_noise_uv, cold_junction_c=room_c,
                                bias_k=instruments.pad_tc_bias_k)
         self.drift = drift_k_per_reading
+        self.thermometer_drift = thermometer_drift_k_per_reading
+        self._thermometer_offset = 0.0
         self.pad_true_c = room_c
 
     def set_pad_c(self, temp_c: float) -> None:
@@ -171,8 +176,9 @@ class SimulatedPadTarget:
         return float(self.tc.read_c(np.array([self.pad_true_c]), self.rng)[0])
 
     def read_thermometer_c(self) -> float:
+        self._thermometer_offset += self.thermometer_drift
         return float(self.instruments.thermometer.read_c(np.array([self.pad_true_c]),
-                                                         self.rng)[0])
+                                                         self.rng)[0]) + self._thermometer_offset
 
 
 def calibrate_simulated(instruments: Instruments, room_c: float, rng: np.random.Generator,

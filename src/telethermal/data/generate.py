@@ -73,10 +73,11 @@ class SensorSession:
 
 
 def sensor_session(scene: Scene, rng: np.random.Generator, calibrate: bool = True,
-                   instruments: Instruments | None = None) -> SensorSession:
-    """Draw a session's instruments (unless given) and calibrate its object
-    thermometer against the pad (unless ``calibrate`` is False)."""
-    instruments = instruments or draw_instruments(scene.sensors, rng)
+                   instruments: Instruments | None = None, role: str = "slave") -> SensorSession:
+    """Draw a session's instruments of ``role`` (slave or master; unless
+    given) and calibrate its object thermometer against the pad (unless
+    ``calibrate`` is False)."""
+    instruments = instruments or draw_instruments(scene.sensors, rng, role)
     if not calibrate:
         return SensorSession(instruments)
     cal = calibrate_simulated(instruments, scene.room_temp_c, rng,
@@ -199,8 +200,8 @@ def finger_database(scene: Scene, rng: np.random.Generator,
                     session: SensorSession | None = None) -> list[Trial]:
     """Database 2: each person's fingertip directly on each object; the
     finger's and the object's temperatures by the session's calibrated
-    thermometer."""
-    session = session or sensor_session(scene, rng)
+    thermometer (the master's instruments)."""
+    session = session or sensor_session(scene, rng, role="master")
     finger = scene.finger
     persons = finger.persons
     # One draw of skin properties per person, shared across objects.
@@ -243,7 +244,8 @@ def generate_databases(scene: Scene, out: str | Path, seed: int = 0, overwrite: 
         for name, build in parts:
             if progress:
                 progress(name)
-            session = sensor_session(scene, rng, calibrate)
+            session = sensor_session(scene, rng, calibrate,
+                                     role="slave" if name == "pad" else "master")
             trials = build(scene, rng, session)
             write_trials(staging / name, trials)
             summary["datasets"][name] = {"trials": len(trials),

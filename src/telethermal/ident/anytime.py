@@ -89,8 +89,10 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         if p[k] >= model.threshold:
             if model.outside_classes(x[None, :n], i)[0]:
                 return Decision(UNKNOWN, best, model.windows_s_[i], "outside classes")
-            return Decision(model.classes_[k], best, model.windows_s_[i], "confident",
-                            group.time_s if group else model.windows_s_[i])
+            # The group's earlier commitment counts only if it held this material.
+            first = group.time_s if group and model.classes_[k] in members(group.label) \
+                else model.windows_s_[i]
+            return Decision(model.classes_[k], best, model.windows_s_[i], "confident", first)
         pair = _group(p, model.threshold)
         if group is None and pair is not None and not model.outside_classes(x[None, :n], i)[0]:
             group = Decision(group_label(model.classes_[j] for j in pair), float(p[pair].sum()),

@@ -40,6 +40,11 @@ def group_folds(groups: list[str], k: int) -> list[np.ndarray]:
     return [np.array([i for i, g in enumerate(groups) if fold_of[g] == f]) for f in range(k)]
 
 
+#: Held-out log loss under which the predictions are taken as separated (a
+#: mean probability of the truth above 99.9 %): no temperature is fitted.
+SEPARABLE_NLL = 1e-3
+
+
 def fit_temperatures(logits: np.ndarray, y: np.ndarray, pool: int = 1) -> np.ndarray:
     """Temperature scaling (Guo et al. 2017) per window: the ``T`` that
     minimises the log loss of ``softmax(z / T)`` on held-out logits.
@@ -67,6 +72,11 @@ def fit_temperatures(logits: np.ndarray, y: np.ndarray, pool: int = 1) -> np.nda
         def nll(log_t, z=z, yy=yy):
             p = log_softmax(z / np.exp(log_t), axis=1)
             return -np.mean(p[np.arange(len(yy)), yy])
+        # Held-out predictions that are all right with margin leave the loss
+        # flat near zero at any T <= 1: nothing says how much to sharpen, and
+        # the optimiser would stop anywhere. Keep T = 1 then.
+        if nll(0.0) < SEPARABLE_NLL:
+            continue
         temps[start:start + pool] = float(np.exp(minimize_scalar(nll, bounds=(-5, 5),
                                                                  method="bounded").x))
     return temps
@@ -268,7 +278,8 @@ class Identifier:
 
     def learned(self) -> dict:
         """Learned values (names ending in ``_``, JSON-able) kept in the
-        model file's header beside the weights; subclasses add theirs."""
+        model file's header beside the weights; subclasses add theirs
+        (an attribute a model file from before it lacks is saved as None)."""
         return {"force_range_n_": getattr(self, "force_range_n_", None)}
 
     # ------------------------------------------------------------ subclass hooks

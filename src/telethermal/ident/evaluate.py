@@ -87,6 +87,13 @@ def decision_summary(decisions, labels, within_s: float = 1.0) -> dict:
                            if committed else None),
             "group_rate": (sum(d.reason == "confident group" for d, _ in committed)
                            / len(decisions) if decisions else float("nan")),
+            # Commitments to one material only (a group left as a group is not one).
+            "single_commit_rate": (sum(d.reason != "confident group" for d, _ in committed)
+                                   / len(decisions) if decisions else float("nan")),
+            "single_accuracy": (float(np.mean([d.label == lab for d, lab in committed
+                                               if d.reason != "confident group"]))
+                                if any(d.reason != "confident group" for d, _ in committed)
+                                else None),
             "committed": len(committed), "touches": len(decisions),
             "unknown_reasons": {r: sum(d.reason == r for d in decisions if d.label == UNKNOWN)
                                 for r in sorted({d.reason for d in decisions

@@ -3,6 +3,8 @@ telethermal's effusivity features with linear discriminant analysis."""
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 from scipy.stats import chi2
 
@@ -10,6 +12,8 @@ from telethermal.ident.base import Identifier
 from telethermal.ident.lm import MLP, train_lm
 from telethermal.ident.pca import SnapshotPCA
 from telethermal.ident.prepare import FLUX
+
+log = logging.getLogger(__name__)
 
 
 class PcaFnn(Identifier):
@@ -126,12 +130,14 @@ class EffusivityLda(Identifier):
         return super().fit(contacts)
 
     def learned(self) -> dict:
-        return {**super().learned(), "shrinkage_": self.shrinkage_}
+        return {**super().learned(), "shrinkage_": getattr(self, "shrinkage_", None)}
 
     def _cv_shrinkage(self, contacts) -> float:
         """The grid value with the lowest held-out log loss, pooled over
-        windows every 0.1 s up to 1 s; folds grouped by session or trial
-        group, so a group never both trains and scores."""
+        windows every 0.1 s up to 1 s; folds grouped by the trials' group
+        (``trial-k`` within one session of a generated database; a dataset
+        of several sessions can name sessions as groups), so a group never
+        both trains and scores."""
         from telethermal.ident.base import group_folds
         from scipy.special import log_softmax
 
@@ -149,13 +155,19 @@ class EffusivityLda(Identifier):
             for test in folds:
                 train = np.setdiff1d(np.arange(len(y)), test)
                 if len(set(y[train])) < len(self.classes_):
+                    log.warning("shrinkage: a fold lacks a class; 0.1 used without "
+                                "cross-validation")
                     return 0.1
                 for w in windows:
                     params = self._fit_window(self._window(contacts.x[train], w), y[train])
                     z = self._logits(params, self._window(contacts.x[test], w))
                     total -= log_softmax(z, axis=1)[np.arange(len(test)), y[test]].sum()
             losses.append(total)
-        return float(self.SHRINKAGE_GRID[int(np.argmin(losses))])
+        best = int(np.argmin(losses))
+        if best in (0, len(self.SHRINKAGE_GRID) - 1):
+            log.info("shrinkage %g chosen at the edge of the grid %s", self.SHRINKAGE_GRID[best],
+                     self.SHRINKAGE_GRID)
+        return float(self.SHRINKAGE_GRID[best])
 
     def _fit_window(self, x, y):
         f = self._raw_features(x)

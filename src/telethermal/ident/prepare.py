@@ -21,9 +21,10 @@ from telethermal.errors import IdentificationError
 FLUX = "heat_flux_W_m2"
 TEMPERATURE = "temperature_C"
 FORCE = "force_N"
-#: Below this gap (K) a contact is not normalised and not identified: five
-#: standard deviations of an infrared thermometer's error (0.4 K), so a gap
-#: measured smaller may be no gap at all (the passive pad of Case I-cnv).
+#: Below this gap (K) a contact is not normalised and not identified: the
+#: passive pad at the object's own temperature (Case I-cnv) measures a gap
+#: of noise (0.1 K calibrated, up to 1 K uncalibrated: the two instruments'
+#: datasheet limits), and 2 K is twice the worst of that.
 MIN_GAP_K = 2.0
 
 

@@ -163,13 +163,6 @@ class ObjectThermometer:
         return each.mean(axis=-1)
 
 
-#: What one measurement of the object temperature is uncertain by after
-#: the instrument's bias is removed: used to say whether a gap is above the
-#: noise floor.
-def measurement_sd_k(thermometer: ObjectThermometer) -> float:
-    return float(thermometer.noise_k / np.sqrt(max(1, thermometer.readings)))
-
-
 @dataclass(frozen=True, slots=True)
 class Instruments:
     """The errors of one set of instruments in one session.
@@ -195,7 +188,8 @@ class Instruments:
                 "flux_gain": round(self.flux_gain, 5)}
 
 
-def draw_instruments(sensors, session_rng: np.random.Generator) -> Instruments:
+def draw_instruments(sensors, session_rng: np.random.Generator,
+                     role: str = "slave") -> Instruments:
     """The instruments of a scene (a :class:`~telethermal.physics.scene.SensorSpec`)
     in one session.
 
@@ -205,9 +199,11 @@ def draw_instruments(sensors, session_rng: np.random.Generator) -> Instruments:
     thermocouple's and flux sensor's errors) comes from the scene's
     ``instrument_seed``, so every session of a scene has the same
     instruments; the object thermometer's bias and gain error depend on the
-    session (ambient, warm-up, aim) and come from ``session_rng``.
+    session (ambient, warm-up, aim) and come from ``session_rng``. ``role``:
+    the slave's and the master's pads are different instruments.
     """
-    fixed = np.random.default_rng((int(sensors.instrument_seed), 0x5E550))   # its own stream
+    fixed = np.random.default_rng((int(sensors.instrument_seed), 0x5E550,
+                                   0 if role == "slave" else 1))   # its own stream
     tc_bias = fixed.uniform(-1, 1) * sensors.pad_tc_bias_limit_k
     flux_gain = 1.0 + fixed.uniform(-1, 1) * sensors.flux_sensitivity_limit_rel
     bias = session_rng.uniform(-1, 1) * sensors.object_bias_limit_k

@@ -69,6 +69,7 @@ class SlaveService:
         self._sent = 0
         self._seed = config.seed
         self.calibration_error: str | None = None
+        self.pad: Slave | None = None
         self._start_sensor_session(config.seed)
         self.place(config.place or self.scene.materials[0], config.seed)
 
@@ -108,6 +109,8 @@ class SlaveService:
                     "in_force": self.sensors.calibration.to_dict()}
         self.sensors = dc_replace(self.sensors, calibration=cal)
         self.calibration_error = None
+        if self.pad is not None and self.touch_t0 is None:
+            self.place(self.material, self._seed)   # measure the object anew, tell the master
         log.info("object thermometer (%s) calibrated: offset %+.3f K, gain %.4f, residual %.3f K, "
                  "offset standard error %.3f K", self.scene.sensors.object_thermometer,
                  cal.offset_k, cal.gain, cal.residual_k, cal.offset_sd_k)
@@ -242,7 +245,8 @@ class SlaveService:
                 # the first commitment (a group's, when refined later)
                 "decision_time_s": (pad.committed_at_s if est is not None and est.decided
                                     and est.label != UNKNOWN else None),
-                "thermometer_calibration_residual_k": self.sensors.calibration.residual_k,
+                "thermometer_calibration_residual_k":
+                    self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else "no estimate"}
 
     def _on_admin(self, request: dict) -> None:

@@ -88,7 +88,7 @@ def draw_operator(scene: Scene, rng: np.random.Generator, session=None) -> Opera
     thermometer in ``session`` (drawn from ``rng`` and calibrated, unless given)."""
     from telethermal.data.generate import sensor_session
 
-    session = session or sensor_session(scene, rng)
+    session = session or sensor_session(scene, rng, role="master")
     finger, var = scene.finger, scene.variability
     finger_c = float(rng.normal(finger.temp_c, finger.temp_sd_c))
     k, c = np.exp(rng.normal(0.0, finger.property_sd, 2))
