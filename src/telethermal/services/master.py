@@ -177,6 +177,7 @@ class MasterService:
             self._hardware_period(now, dt_s)
         elif self.touch is not None:
             self._touch_period(now, dt_s)
+        self.endpoint.state = self.state          # status: on change and every second
         return not self.stop_requested
 
     def _touch_period(self, now: float, dt_s: float) -> None:

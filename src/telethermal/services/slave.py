@@ -55,7 +55,12 @@ class SlaveService:
         self.stop_requested = False
         self.state = "idle"
         self.masters_lost = 0          # contacts ended because the master went silent
+        #: The service's own error counters, reported with the transport's
+        #: (status messages and the admin socket).
+        self.counters = self.endpoint.extra_counters
+        self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0)
         self.contact_id = 0
+        self.contact_owner: str | None = None      # the master session that opened it
         self.touch_t0: float | None = None
         self._sent = 0
         self._seed = config.seed
@@ -83,19 +88,34 @@ class SlaveService:
         if self.recorder is not None:
             self.recorder.wire(now, "in", m)
         if kind == "hello":
+            if self.touch_t0 is not None and m["session_id"] != self.contact_owner:
+                self._superseded(now, m["session_id"])
             self.endpoint.send("session_config", scene=self.scene.name,
                                sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
                                identifier=self.identifier.method,
                                threshold=float(self.identifier.threshold), curves=self.curves)
             self._announce_object()
-        elif kind == "contact_event" and m["touching"] and self.touch_t0 is None:
+        elif kind == "contact_event":
+            self._on_contact_event(m, now)
+
+    def _on_contact_event(self, m: dict, now: float) -> None:
+        """Only the session that opened a contact may lift it, and only by its
+        id; a touch while a contact is going on, or a lift of another
+        contact, changes nothing and is counted (``contact_ignored``)."""
+        if m["touching"] and self.touch_t0 is None:
             # The operator touched: the slave's pad goes down on the object now.
             self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
+            self.contact_owner = self.endpoint.peer_session
             self.finger_c = m.get("finger_temp_c")
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
-        elif kind == "contact_event" and not m["touching"] and m["contact_id"] == self.contact_id \
-                and self.touch_t0 is not None:
+        elif not m["touching"] and m["contact_id"] == self.contact_id and \
+                self.touch_t0 is not None and self.endpoint.peer_session == self.contact_owner:
             self._lift(now)
+        else:
+            self.counters["contact_ignored"] += 1
+            log.debug("contact event ignored: contact_id=%d touching=%s (going on: %s)",
+                      m["contact_id"], m["touching"],
+                      self.contact_id if self.touch_t0 is not None else None)
 
     def _lift(self, now: float) -> None:
         if self.recorder is not None:
@@ -104,7 +124,7 @@ class SlaveService:
                            t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
         log.info("lift contact_id=%d", self.contact_id)
         self.last_touch = self._report()
-        self.touch_t0, self.state = None, "idle"
+        self.touch_t0, self.state, self.contact_owner = None, "idle", None
         self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
 
     def _master_lost(self, now: float) -> None:
@@ -114,6 +134,15 @@ class SlaveService:
         log.warning("master lost mid-contact contact_id=%d: pad lifted, safe state",
                     self.contact_id)
         self.masters_lost += 1
+        self.counters["masters_lost"] = self.masters_lost
+        self._lift(now)
+
+    def _superseded(self, now: float, session: str) -> None:
+        """A new master session took over (the contact's owner is dead or
+        restarted): the pad leaves the object at once, safe state."""
+        log.warning("contact_id=%d of session %s superseded by session %s: pad lifted, "
+                    "safe state", self.contact_id, self.contact_owner, session[:32])
+        self.counters["contacts_superseded"] += 1
         self._lift(now)
 
     def _sample(self, now: float) -> None:
@@ -198,7 +227,10 @@ class SlaveService:
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
                 "masters_lost": self.masters_lost,
-                "offset_s": e.offset.offset_s, "counters": dict(e.counters)}
+                "pad_down": self.touch_t0 is not None,
+                "contact_id": self.contact_id if self.touch_t0 is not None else None,
+                "peer_session": e.peer_session,
+                "offset_s": e.offset.offset_s, "counters": e.all_counters()}
 
     def run(self) -> None:
         """Wake at every sample period, and at once when a message arrives
@@ -222,6 +254,7 @@ class SlaveService:
                 request = self.admin.receive()
                 if request is not None:
                     self._on_admin(request)
+                self.endpoint.state = self.state
         finally:
             self.shutdown()
 
@@ -229,9 +262,11 @@ class SlaveService:
         # The sensing pad to its safe state first (simulated: nothing to hold).
         log.info("stopping: pad to safe state, sockets closed")
         try:
+            if self.touch_t0 is not None:
+                self._lift(time.monotonic())        # the master hears the pad left
             if self.endpoint.peer_version is not None:
                 self.endpoint.send("status", state="stopping",
-                                   counters=dict(self.endpoint.counters), message="slave stopping")
+                                   counters=self.endpoint.all_counters(), message="slave stopping")
                 self.endpoint.poll(0.05)
         finally:
             self.endpoint.close()

@@ -40,7 +40,7 @@ EXAMPLES = {
     "measurement_batch": {"contact_id": 3, "t0_s": 1234.0, "rate_hz": 100.0,
                           "flux_w_m2": [-120.5, -3400.0], "temp_c": [34.5, 33.75],
                           "force_n": [9.5, 10.25]},
-    "status": {"state": "rendering", "counters": {"lossless_resent": 0, "heartbeats_missed": 1},
+    "status": {"state": "rendering", "counters": {"resent": 0, "heartbeats_missed": 1},
                "message": "ok"},
     "fault": {"code": "sensor-nan", "message": "heat-flux reading NaN", "safe_state": True},
 }

@@ -46,7 +46,9 @@ ENVELOPE = (
     Field("kind", "str", doc="message kind, one of the kinds below"),
     Field("v", "uint", lo=1, hi=255, doc="protocol major version of the sender"),
     Field("seq", "uint", doc="lossless kinds: the lossless sequence number (one counter "
-                             "per direction, from 1); other kinds: a counter of that kind"),
+                             "per direction, from 1); other kinds: a counter of that kind "
+                             "(per direction, from 1); 0 only on a `fault` that refuses a "
+                             "hello (section 3)"),
     Field("sent_s", "float", "s", doc="sender's monotonic clock when sent"),
 )
 
