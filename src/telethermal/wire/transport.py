@@ -547,8 +547,11 @@ class Endpoint:
             self._drop("before_hello", now, "%s before hello", kind)
             return []
         if identity is not None and identity != self.peer_identity:
-            self._drop("not_peer", now, "%s from a connection that is not the session's "
-                       "master", kind)
+            if self.peer_alive:
+                self._drop("not_peer", now, "%s from a connection that is not the session's "
+                           "master", kind)
+            else:
+                self._drop("before_hello", now, "%s from a connection before its hello", kind)
             return []
         self._last_heard = now
         if not self._may_receive(kind):
