@@ -28,6 +28,15 @@ DEAD_AFTER_S = 0.5
 SCENE = "fingertip-7"
 
 
+def pytest_collection_modifyitems(items):
+    """Tests that stop the suite's slave (SIGTERM) run after all others."""
+    items.sort(key=lambda item: item.get_closest_marker("stops_slave") is not None)
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "stops_slave: the test ends the shared slave process")
+
+
 def free_ports(n: int) -> list[int]:
     socks = [socket.socket() for _ in range(n)]
     try:
@@ -41,14 +50,23 @@ def free_ports(n: int) -> list[int]:
 
 @pytest.fixture(scope="session")
 def slave_models(tmp_path_factory):
+    """The slave's identifier decides within 0.3 s of contact (its longest
+    window), so each touch the suite makes is short."""
+    import numpy as np
+
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.prepare import from_trials
+    from telethermal.ident.registry import make
     from telethermal.physics.scene import load_scene
     from telethermal.render.generator import save_generator
-    from telethermal.session.models import train_generator, train_identifier
+    from telethermal.session.models import train_generator
     from telethermal.session.run import with_finger
 
     scene = with_finger(load_scene(SCENE))
     folder = tmp_path_factory.mktemp("conformance-models")
-    return (train_identifier(scene, 0).save(folder / "identifier.npz"),
+    trials = pad_database(scene, np.random.default_rng(0))
+    identifier = make("effusivity-lda", max_window_s=0.3).fit(from_trials(trials)[0])
+    return (identifier.save(folder / "identifier.npz"),
             save_generator(train_generator(scene, 0), folder / "generator.npz"))
 
 
@@ -140,12 +158,13 @@ class SlaveProcess:
             return self.proc.wait()
         finally:
             self._log.close()
-            self.ctx.destroy(linger=0)
+            if not self.ctx.closed:
+                self.ctx.destroy(linger=0)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def slave(tmp_path_factory, slave_models, curve_keys):
-    """One slave process for a module's tests; it must exit 0 at the end."""
+    """One slave process for the suite; it must exit 0 at the end."""
     proc = SlaveProcess(tmp_path_factory.mktemp("slave"), slave_models, curve_keys)
     yield proc
     assert proc.terminate() == 0, proc.log.read_text()[-3000:]
@@ -154,7 +173,8 @@ def slave(tmp_path_factory, slave_models, curve_keys):
 @pytest.fixture
 def masters(slave, curve_keys):
     """``masters(key="a")`` opens a document master on ``slave``; all are
-    closed after the test, and the slave is let forget them (dead_after_s)."""
+    closed after the test. (The next test's master is refused as "busy"
+    until the slave declares these dead; its hello is repeated until then.)"""
     ctx = zmq.Context()
     opened = []
 
@@ -170,4 +190,3 @@ def masters(slave, curve_keys):
     for m in opened:
         m.close()
     ctx.destroy(linger=0)
-    time.sleep(DEAD_AFTER_S + 0.1)          # the next test's master is not "busy"-refused

@@ -156,6 +156,28 @@ def _check(t: str, value, where: str, f: DocField | None) -> list[str]:
     return [f"{where}: the document's type {t!r} is unknown to this suite"]
 
 
+#: Rules section 7 states across fields, in its "meaning" column; each is
+#: tied to the document's words (a test fails if the wording goes).
+ACROSS = {
+    "material_estimate": "same order and length as classes",
+    "flux_trajectory": "strictly ascending; as many as g_w_m2k, at least 2",
+    "measurement_batch": "the three channels hold one value per sample (equal lengths)",
+}
+
+
+def _across_fields(kind: str, m: dict) -> list[str]:
+    if kind == "material_estimate" and len(m["classes"]) != len(m["posteriors"]):
+        return [f"{kind}: {ACROSS[kind]}"]
+    if kind == "flux_trajectory":
+        t, g = m["t_s"], m["g_w_m2k"]
+        if len(t) != len(g) or len(t) < 2 or any(b <= a for a, b in zip(t, t[1:])):
+            return [f"{kind}.t_s: {ACROSS[kind]}"]
+    if kind == "measurement_batch" and \
+            len({len(m[c]) for c in ("flux_w_m2", "temp_c", "force_n")}) != 1:
+        return [f"{kind}: {ACROSS[kind]}"]
+    return []
+
+
 def deviations(message, sender: str | None = None, stream: str | None = None,
                version: int | None = 1) -> list[str]:
     """Everything in ``message`` (decoded msgpack) that the document does not
@@ -164,8 +186,10 @@ def deviations(message, sender: str | None = None, stream: str | None = None,
     session's, which every kind but hello must carry in ``v``."""
     if not isinstance(message, dict):
         return ["not a map"]
+    if not all(isinstance(key, str) for key in message):
+        return ["a map with keys that are not strings"]
     kind = message.get("kind")
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in KINDS:
         return [f"unknown kind {kind!r}"]
     k = KINDS[kind]
     errors = []
@@ -180,6 +204,8 @@ def deviations(message, sender: str | None = None, stream: str | None = None,
                 errors.append(f"{kind}.{f.name}: nil")
             continue
         errors += _check(f.type, value, f"{kind}.{f.name}", f)
+    if not errors:
+        errors += _across_fields(kind, message)
     if version is not None and kind != "hello" and "v" in message and \
             message["v"] != version and not errors:
         errors.append(f"{kind}.v: {message['v']}, the session speaks {version}")

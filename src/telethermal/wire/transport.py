@@ -588,7 +588,9 @@ class Endpoint:
         if acked:
             self._ack_moved_at = now
         self._last_peer_hb = (message["sent_s"], now)
-        if message["echo_sent_s"] is not None:
+        # Both echo fields or neither: with one of them nil there is no
+        # exchange to time (a peer that sent that crashed the slave: fuzzing).
+        if message["echo_sent_s"] is not None and message["echo_held_s"] is not None:
             rtt = (now - message["echo_sent_s"]) - message["echo_held_s"]
             self.offset.add(rtt, message["sent_s"] - now + rtt / 2)
 
@@ -645,12 +647,14 @@ def _lossless_seq(data: bytes) -> int | None:
     """The seq of a lossless message that failed validation, if its envelope
     (a lossless kind and an unsigned seq >= 1) can still be read."""
     try:
-        raw = msgpack.unpackb(data, raw=False, strict_map_key=False)
+        # A bad string elsewhere (not UTF-8) must not hide a good envelope.
+        raw = msgpack.unpackb(data, raw=False, strict_map_key=False, unicode_errors="replace")
     except Exception:                          # noqa: BLE001 - any garbage: no envelope
         return None
     if not isinstance(raw, dict):
         return None
     seq = raw.get("seq")
-    if raw.get("kind") in LOSSLESS and type(seq) is int and 1 <= seq < 2 ** 64:
+    kind = raw.get("kind")
+    if isinstance(kind, str) and kind in LOSSLESS and type(seq) is int and 1 <= seq < 2 ** 64:
         return seq
     return None
