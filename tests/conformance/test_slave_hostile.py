@@ -8,12 +8,13 @@ completes with the same decision as a clean touch on the same trial."""
 from __future__ import annotations
 
 import math
+import os
 import time
 
 import msgpack
 import pytest
 
-from conftest import DEAD_AFTER_S, HEARTBEAT_S
+from conftest import HEARTBEAT_S
 from doc_peer import pack
 from touch import assert_pad_safe, touch
 
@@ -33,8 +34,11 @@ def nested(depth: int) -> bytes:
 
 
 def invalid_utf8(m) -> bytes:
-    head = pack({**m.envelope("status", True), "counters": {}, "state": "x"})
-    return head.replace(b"\xa1x", b"\xa1\xff")         # the state's one byte: not UTF-8
+    """A status whose state is one byte that is not UTF-8 (built key by key:
+    patching packed bytes could hit a seq or a float that holds them)."""
+    fields = {**m.envelope("status", True), "counters": {}}
+    body = b"".join(pack(k) + pack(v) for k, v in fields.items())
+    return bytes([0x80 | (len(fields) + 1)]) + body + pack("state") + b"\xa1\xff"
 
 
 # name -> (counter, builder(master) -> bytes). A builder that takes a lossless
@@ -199,5 +203,33 @@ def test_ten_thousand_hostile_messages_in_a_row(slave, session, baseline):
     # so the whole of it must fit in 100 KiB.
     assert garbage_s < 60 and grown <= 100 * 1024, (grown, garbage_s)
     print(f"10000 hostile messages in {garbage_s:.1f} s: log grew {grown} bytes")
+    m.answer_resend = True
+    assert legit_touch(slave, m, next(_ids)) == baseline
+
+
+@pytest.mark.skipif(not os.environ.get("TELETHERMAL_GARBAGE_S"),
+                    reason="the long log-growth run: TELETHERMAL_GARBAGE_S=60")
+def test_log_growth_over_a_long_run_of_garbage(slave, session, baseline):
+    # As fast as one master can send, for TELETHERMAL_GARBAGE_S seconds.
+    m = session
+    m.answer_resend = False
+    names = [c for c in CASES if CASES[c][0] not in ("oversized", "contact_ignored")
+             and c != "deeply nested"]
+    expected = dict.fromkeys(ERROR_COUNTERS, 0)
+    before, log_before = slave.counters(), slave.log_bytes()
+    t0, i = time.monotonic(), 0
+    while time.monotonic() - t0 < float(os.environ["TELETHERMAL_GARBAGE_S"]):
+        counter, build = CASES[names[i % len(names)]]
+        m.send_raw(build(m))
+        expected[counter] += 1
+        i += 1
+        if i % 200 == 0:
+            m.pump(0.0)
+    m.sync(timeout_s=120)
+    garbage_s = time.monotonic() - t0
+    grown = slave.log_bytes() - log_before
+    assert errors_moved(before, slave.counters()) == {k: v for k, v in expected.items() if v}
+    assert grown <= 100 * 1024 * garbage_s / 60, (grown, garbage_s)
+    print(f"{i} hostile messages in {garbage_s:.1f} s: log grew {grown} bytes")
     m.answer_resend = True
     assert legit_touch(slave, m, next(_ids)) == baseline

@@ -8,13 +8,12 @@ from __future__ import annotations
 import signal
 import time
 
+import pytest
 import zmq
 
 from conftest import DEAD_AFTER_S, HEARTBEAT_S
 from doc_peer import DocMaster, pack
 from touch import assert_pad_safe, touch
-
-import pytest
 
 MATERIAL, SEED = "steel", 3
 

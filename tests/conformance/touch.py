@@ -3,8 +3,6 @@ case ends with."""
 
 from __future__ import annotations
 
-import time
-
 from doc_peer import DocMaster
 
 
@@ -28,8 +26,9 @@ def touch(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
     return estimate
 
 
-def place(slave, material: str, master: DocMaster | None = None) -> float:
-    reply = slave.admin("place", material=material, seed=int(time.monotonic() * 1000) % 1000)
+def place(slave, material: str, seed: int = 0) -> float:
+    """Put ``material`` under the pad (the admin socket); its IR reading."""
+    reply = slave.admin("place", material=material, seed=seed)
     assert reply["ok"], reply
     return reply["object_ir_c"]
 

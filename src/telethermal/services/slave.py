@@ -131,8 +131,8 @@ class SlaveService:
         """The master went silent mid-contact (crashed, or the link is down
         for longer than ``dead_after_s``): the pad leaves the object and goes
         to its safe state; the next contact event starts afresh."""
-        log.warning("master lost mid-contact contact_id=%d: pad lifted, safe state",
-                    self.contact_id)
+        log.warning("master lost mid-contact contact_id=%d after %.3f s of silence: pad "
+                    "lifted, safe state", self.contact_id, self.endpoint.silent_s or 0.0)
         self.masters_lost += 1
         self.counters["masters_lost"] = self.masters_lost
         self._lift(now)

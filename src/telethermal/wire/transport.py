@@ -298,6 +298,11 @@ class Endpoint:
             self.clock() - self._last_heard < self.config.dead_after_s
 
     @property
+    def silent_s(self) -> float | None:
+        """How long since the session's peer was last heard (None: never)."""
+        return None if self._last_heard is None else self.clock() - self._last_heard
+
+    @property
     def unacked(self) -> int:
         return len(self._outbox)
 
