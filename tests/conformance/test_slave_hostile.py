@@ -21,7 +21,7 @@ from touch import assert_pad_safe, touch
 ERROR_COUNTERS = ("invalid", "unknown_kind", "oversized", "before_hello", "version_mismatch",
                   "not_peer", "wrong_direction", "out_of_window", "skipped", "resend_throttled",
                   "duplicates", "contact_ignored")
-MATERIAL, SEED = "steel", 3
+MATERIAL, SEED = "wood", 2          # a trial the suite's identifier decides (wood, 0.24 s)
 
 
 def contact(m, lossless=True, **over):

@@ -78,13 +78,29 @@ def test_status_on_change_of_state_and_every_second(slave, masters):
 
 def test_a_touch_message_by_message(slave, masters):
     m = masters("a")
-    object_c = place(slave, "steel")
-    assert m.pump(2.0, until=lambda: any(abs((x.get("object_temp_c") or 1e9) - object_c) < 1e-9
-                                         for x in m.of("contact_event", contact_id=0)))
-    estimate = touch(m, 5)
-    echo = m.of("contact_event", contact_id=5, touching=True)
+    # Trials until one the identifier decides for a material (so a
+    # flux_trajectory is sent too); "unknown" decisions are checked on the way.
+    for contact_id, seed in enumerate(range(2, 8), start=5):
+        object_c = place(slave, "wood", seed)
+        assert m.pump(2.0, until=lambda: any(
+            abs((x.get("object_temp_c") or 1e9) - object_c) < 1e-9
+            for x in m.of("contact_event", contact_id=0)))
+        estimate = touch(m, contact_id)
+        _check_touch(m, contact_id, estimate, object_c)
+        if estimate["label"] != "unknown":
+            break
+    assert estimate["label"] != "unknown", "no trial of wood was decided: no trajectory seen"
+    trajectory = m.of("flux_trajectory", contact_id=contact_id)[-1]
+    assert trajectory["material"] == estimate["label"] and trajectory["t_s"][0] == 0.0
+    assert trajectory["object_temp_c"] == pytest.approx(object_c)
+    assert m.deviations == []
+    assert_pad_safe(slave)
+
+
+def _check_touch(m, contact_id: int, estimate: dict, object_c: float) -> None:
+    echo = m.of("contact_event", contact_id=contact_id, touching=True)
     assert len(echo) == 1 and echo[0]["object_temp_c"] == pytest.approx(object_c)
-    estimates = m.of("material_estimate", contact_id=5)
+    estimates = m.of("material_estimate", contact_id=contact_id)
     times = [x["t_since_contact_s"] for x in estimates]
     assert times == sorted(times) and [x["decided"] for x in estimates].count(True) == 1
     assert estimates[-1] is estimate and all(x["classes"] == estimate["classes"]
@@ -92,15 +108,14 @@ def test_a_touch_message_by_message(slave, masters):
     assert all(abs(sum(x["posteriors"]) - 1.0) < 1e-6 for x in estimates)
     stream = [x for s, x in m.received if s == "stream"]
     assert {x["kind"] for x in stream} <= {"flux_setpoint", "measurement_batch"}
-    batches = [x for x in stream if x["kind"] == "measurement_batch" and x["contact_id"] == 5]
+    batches = [x for x in stream if x["kind"] == "measurement_batch" and
+               x["contact_id"] == contact_id]
     assert batches and all(len(b["flux_w_m2"]) == len(b["temp_c"]) == len(b["force_n"])
                            for b in batches)
     for kind in ("measurement_batch", "flux_setpoint"):
         seqs = [x["seq"] for x in stream if x["kind"] == kind]
         assert seqs == sorted(set(seqs)), kind               # per kind, increasing
-    assert m.of("contact_event", contact_id=5, touching=False)
-    assert m.deviations == []
-    assert_pad_safe(slave)
+    assert m.of("contact_event", contact_id=contact_id, touching=False)
 
 
 def test_no_common_version_gets_a_version_fault_and_no_session(slave, masters):

@@ -15,7 +15,7 @@ from conftest import DEAD_AFTER_S, HEARTBEAT_S
 from doc_peer import DocMaster, pack
 from touch import assert_pad_safe, touch
 
-MATERIAL, SEED = "steel", 3
+MATERIAL, SEED = "wood", 2          # a trial the suite's identifier decides (wood, 0.24 s)
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +88,9 @@ def test_a_master_killed_mid_contact_and_restarted(slave, masters, baseline):
     assert new.pump(10.0, until=lifted)
     assert lifted_at is not None                      # lifted before the new session began
     after = slave.counters()
-    assert after["masters_lost"] - before["masters_lost"] == 1
+    # Declared dead by the slave's loop, or superseded by the new session's
+    # hello when it arrives in the same poll: either way lifted at once.
+    assert sum(after[k] - before[k] for k in ("masters_lost", "contacts_superseded")) == 1
     print(f"pad safe {lifted_at - killed:.3f} s after the master was killed "
           f"(dead_after_s {DEAD_AFTER_S})")
     new.connect()
