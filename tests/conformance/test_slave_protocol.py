@@ -93,6 +93,11 @@ def test_a_touch_message_by_message(slave, masters):
     trajectory = m.of("flux_trajectory", contact_id=contact_id)[-1]
     assert trajectory["material"] == estimate["label"] and trajectory["t_s"][0] == 0.0
     assert trajectory["object_temp_c"] == pytest.approx(object_c)
+    # Every kind a slave sends in a touch was seen and checked against its
+    # table (resend and fault: the gap and version tests).
+    assert {x["kind"] for _, x in m.received} >= {
+        "hello", "heartbeat", "session_config", "contact_event", "material_estimate",
+        "flux_trajectory", "flux_setpoint", "measurement_batch", "status"}
     assert m.deviations == []
     assert_pad_safe(slave)
 
