@@ -46,11 +46,15 @@ class DocSlave:
     def send(self, data: bytes) -> None:
         self.control.send_multipart([self.master, data])
 
-    def pump(self, seconds: float, until=None) -> bool:
+    def pump(self, seconds: float, until=None, heartbeats: bool = False) -> bool:
         end = time.monotonic() + seconds
+        beat = 0.0
         while time.monotonic() < end:
             if until is not None and until():
                 return True
+            if heartbeats and self.master is not None and time.monotonic() - beat >= HEARTBEAT_S:
+                self.heartbeat()
+                beat = time.monotonic()
             if self.control.poll(20):
                 identity, data = self.control.recv_multipart()
                 self.master = identity
@@ -68,7 +72,11 @@ class DocSlave:
                         "resume_from": 1}))
 
     def heartbeat(self) -> None:
-        self.send(pack({**self.envelope("heartbeat"), "ack": 0, "echo_sent_s": None,
+        got = sorted(m["seq"] for m in self.received if doc.KINDS[m["kind"]].lossless)
+        ack = 0
+        for seq in got:                          # the highest received in order
+            ack = seq if seq == ack + 1 else ack
+        self.send(pack({**self.envelope("heartbeat"), "ack": ack, "echo_sent_s": None,
                         "echo_held_s": None}))
 
 
@@ -166,3 +174,51 @@ def test_a_slave_with_no_common_version_gets_a_version_fault(master_setup):
                                              for f in slave.of("fault")))
     assert admin_status(ctx, admin)["counters"]["version_mismatch"] == before + 1
     assert slave.deviations == []
+
+
+def test_a_touch_from_the_master_follows_section_6(master_setup):
+    # The document slave gives the master a session (hello, session_config,
+    # the object's temperature); the master's simulated operator touches and
+    # lifts, and the master's contact events match their table.
+    import threading
+
+    slave, proc, admin, ctx = master_setup
+    slave.received.clear()
+    slave.pump(0.6)                                       # silence: the master says hello
+    slave.hello()
+    slave.send(pack({**slave.envelope("session_config"), "scene": SCENE,
+                     "sample_rate_hz": 100.0, "classes": ["steel", "wood"],
+                     "identifier": "doc", "threshold": 0.99,
+                     "curves": {"steel": {"t_s": [0.01, 1.0], "g_w_m2k": [900.0, 500.0]},
+                                "wood": {"t_s": [0.01, 1.0], "g_w_m2k": [200.0, 100.0]}}}))
+    slave.send(pack({**slave.envelope("contact_event"), "contact_id": 0, "touching": False,
+                     "t_s": time.monotonic(), "force_n": 0.0, "object_temp_c": 22.0}))
+    assert slave.pump(5.0, heartbeats=True,
+                      until=lambda: admin_status(ctx, admin).get("session"))
+    reply = []
+    thread = threading.Thread(target=lambda: reply.append(_admin(ctx, admin, "touch",
+                                                                 contact_s=0.5, seed=1)))
+    thread.start()
+    try:
+        assert slave.pump(20.0, heartbeats=True, until=lambda: any(
+            m["kind"] == "contact_event" and not m["touching"] for m in slave.received))
+    finally:
+        thread.join(20)
+    events = [m for m in slave.received if m["kind"] == "contact_event"]
+    assert [e["touching"] for e in events] == [True, False]
+    assert events[0]["contact_id"] == events[1]["contact_id"] >= 1
+    assert events[0]["finger_temp_c"] is not None and events[0]["t_s"] <= events[1]["t_s"]
+    assert reply and reply[0]["ok"], reply
+    assert slave.deviations == []
+
+
+def _admin(ctx, port: int, cmd: str, **args) -> dict:
+    sock = ctx.socket(zmq.REQ)
+    sock.linger = 0
+    sock.connect(f"tcp://127.0.0.1:{port}")
+    try:
+        sock.send(msgpack.packb({"cmd": cmd, **args}))
+        assert sock.poll(30_000), f"admin {cmd}: no reply"
+        return msgpack.unpackb(sock.recv(), raw=False)
+    finally:
+        sock.close(linger=0)
