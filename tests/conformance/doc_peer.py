@@ -61,6 +61,13 @@ class DocMaster:
         self.ack_override: int | None = None   # a test that wants nothing acknowledged
         self.answer_resend = True
 
+    def restart(self) -> None:
+        """A new run of the master on the same connection: a new session id,
+        both lossless directions from 1 again (section 4), hello again."""
+        self.session_id = uuid.uuid4().hex[:16]
+        self.next_seq, self.kept, self.expected, self.buffer = 1, {}, 1, {}
+        self.delivered, self.received, self.peer_hello = [], [], None
+
     # ------------------------------------------------------------ sending
     def envelope(self, kind: str, lossless: bool) -> dict:
         if lossless:

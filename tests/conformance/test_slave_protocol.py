@@ -147,9 +147,9 @@ def test_no_common_version_gets_a_version_fault_and_no_session(slave, masters):
 
 
 def test_resend_is_served_once_per_heartbeat_period(slave, masters):
-    m = masters("a")
+    m = masters("a", connect=False)
     m.ack_override = 0                       # acknowledge nothing: the slave keeps it all
-    m.pump(0.2)
+    m.connect()
     kept = len(m.delivered)
     before = slave.counters()
     n = 200

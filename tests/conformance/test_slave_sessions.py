@@ -97,18 +97,24 @@ def test_a_master_killed_mid_contact_and_restarted(slave, masters, baseline):
     assert legit_touch(slave, new, 7) == baseline
 
 
-def test_a_restarted_master_on_the_same_connection_identity_supersedes_at_once(
+def test_a_new_session_on_the_same_connection_supersedes_the_contact_at_once(
         slave, masters, baseline):
-    old = masters("a", identity=b"fixed-identity")
-    _touch_down(old, slave, 8)
+    # A master that restarts behind the same connection (same routing
+    # identity, new session_id) is the contact owner's successor: the pad is
+    # lifted as its hello arrives, with no wait for dead_after_s.
+    m = masters("a")
+    _touch_down(m, slave, 8)
     before = slave.counters()
-    old.close()
-    new = masters("a", connect=False, identity=b"fixed-identity")
-    assert new.pump(5.0, until=lambda: new.peer_hello is not None)
+    m.restart()
+    assert m.pump(5.0, until=lambda: m.peer_hello is not None)
     assert not _pad_down(slave)
-    assert slave.counters()["contacts_superseded"] - before["contacts_superseded"] == 1
-    new.connect()
-    assert legit_touch(slave, new, 9) == baseline
+    after = slave.counters()
+    assert after["contacts_superseded"] - before["contacts_superseded"] == 1
+    assert after["masters_lost"] == before["masters_lost"]
+    m.connect()
+    assert m.of("session_config")[0]["seq"] == 1                 # a fresh sequence
+    assert m.of("contact_event", contact_id=8, touching=False)    # told of the lift
+    assert legit_touch(slave, m, 9) == baseline
 
 
 def test_a_second_master_cannot_lift_the_first_masters_contact(slave, masters, baseline):

@@ -88,13 +88,14 @@ class SlaveService:
         if self.recorder is not None:
             self.recorder.wire(now, "in", m)
         if kind == "hello":
-            if self.touch_t0 is not None and m["session_id"] != self.contact_owner:
-                self._superseded(now, m["session_id"])
             self.endpoint.send("session_config", scene=self.scene.name,
                                sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
                                identifier=self.identifier.method,
                                threshold=float(self.identifier.threshold), curves=self.curves)
-            self._announce_object()
+            if self.touch_t0 is not None and m["session_id"] != self.contact_owner:
+                self._superseded(now, m["session_id"])     # lifts; the new object announced
+            else:
+                self._announce_object()
         elif kind == "contact_event":
             self._on_contact_event(m, now)
 
