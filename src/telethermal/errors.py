@@ -44,6 +44,10 @@ class ProtocolError(TelethermalError):
     """A message that does not follow the wire protocol (says which field)."""
 
 
+class UnknownKindError(ProtocolError):
+    """A well-formed message whose ``kind`` is a string this side does not know."""
+
+
 class TransportError(TelethermalError):
     """A socket, key or peer problem of the networked services."""
 

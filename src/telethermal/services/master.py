@@ -194,6 +194,7 @@ class MasterService:
             self._touch_period(now, dt_s)
         elif self.view is not None:
             self.view.idle(now, lambda: self._view_state(None, None, 0))
+        self.endpoint.state = self.state          # status: on change and every second
         return not self.stop_requested
 
     def _view_state(self, step, display, contact_id: int) -> dict:

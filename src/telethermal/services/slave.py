@@ -64,7 +64,12 @@ class SlaveService:
         self.stop_requested = False
         self.state = "idle"
         self.masters_lost = 0          # contacts ended because the master went silent
+        #: The service's own error counters, reported with the transport's
+        #: (status messages and the admin socket).
+        self.counters = self.endpoint.extra_counters
+        self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0)
         self.contact_id = 0
+        self.contact_owner: str | None = None      # the master session that opened it
         self.touch_t0: float | None = None
         self._sent = 0
         self._seed = config.seed
@@ -145,15 +150,31 @@ class SlaveService:
                                sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
                                identifier=self.identifier.method,
                                threshold=float(self.identifier.threshold), curves=self.curves)
-            self._announce_object()
-        elif kind == "contact_event" and m["touching"] and self.touch_t0 is None:
+            if self.touch_t0 is not None and m["session_id"] != self.contact_owner:
+                self._superseded(now, m["session_id"])     # lifts; the new object announced
+            else:
+                self._announce_object()
+        elif kind == "contact_event":
+            self._on_contact_event(m, now)
+
+    def _on_contact_event(self, m: dict, now: float) -> None:
+        """Only the session that opened a contact may lift it, and only by its
+        id; a touch while a contact is going on, or a lift of another
+        contact, changes nothing and is counted (``contact_ignored``)."""
+        if m["touching"] and self.touch_t0 is None:
             # The operator touched: the slave's pad goes down on the object now.
             self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
+            self.contact_owner = self.endpoint.peer_session
             self.finger_c = m.get("finger_temp_c")
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
-        elif kind == "contact_event" and not m["touching"] and m["contact_id"] == self.contact_id \
-                and self.touch_t0 is not None:
+        elif not m["touching"] and m["contact_id"] == self.contact_id and \
+                self.touch_t0 is not None and self.endpoint.peer_session == self.contact_owner:
             self._lift(now)
+        else:
+            self.counters["contact_ignored"] += 1
+            log.debug("contact event ignored: contact_id=%d touching=%s (going on: %s)",
+                      m["contact_id"], m["touching"],
+                      self.contact_id if self.touch_t0 is not None else None)
 
     def _lift(self, now: float) -> None:
         if self.recorder is not None:
@@ -165,16 +186,25 @@ class SlaveService:
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", self.contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
-        self.touch_t0, self.state = None, "idle"
+        self.touch_t0, self.state, self.contact_owner = None, "idle", None
         self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
 
     def _master_lost(self, now: float) -> None:
         """The master went silent mid-contact (crashed, or the link is down
         for longer than ``dead_after_s``): the pad leaves the object and goes
         to its safe state; the next contact event starts afresh."""
-        log.warning("master lost mid-contact contact_id=%d: pad lifted, safe state",
-                    self.contact_id)
+        log.warning("master lost mid-contact contact_id=%d after %.3f s of silence: pad "
+                    "lifted, safe state", self.contact_id, self.endpoint.silent_s or 0.0)
         self.masters_lost += 1
+        self.counters["masters_lost"] = self.masters_lost
+        self._lift(now)
+
+    def _superseded(self, now: float, session: str) -> None:
+        """A new master session took over (the contact's owner is dead or
+        restarted): the pad leaves the object at once, safe state."""
+        log.warning("contact_id=%d of session %s superseded by session %s: pad lifted, "
+                    "safe state", self.contact_id, self.contact_owner, session[:32])
+        self.counters["contacts_superseded"] += 1
         self._lift(now)
 
     def _sample(self, now: float) -> None:
@@ -273,7 +303,10 @@ class SlaveService:
                 "masters_lost": self.masters_lost,
                 "thermometer_calibration": {**self.sensors.calibration.to_dict(),
                                             "error": self.calibration_error},
-                "offset_s": e.offset.offset_s, "counters": dict(e.counters)}
+                "pad_down": self.touch_t0 is not None,
+                "contact_id": self.contact_id if self.touch_t0 is not None else None,
+                "peer_session": e.peer_session,
+                "offset_s": e.offset.offset_s, "counters": e.all_counters()}
 
     def run(self) -> None:
         """Wake at every sample period, and at once when a message arrives
@@ -297,6 +330,7 @@ class SlaveService:
                 request = self.admin.receive()
                 if request is not None:
                     self._on_admin(request)
+                self.endpoint.state = self.state
         finally:
             self.shutdown()
 
@@ -304,9 +338,11 @@ class SlaveService:
         # The sensing pad to its safe state first (simulated: nothing to hold).
         log.info("stopping: pad to safe state, sockets closed")
         try:
+            if self.touch_t0 is not None:
+                self._lift(time.monotonic())        # the master hears the pad left
             if self.endpoint.peer_version is not None:
                 self.endpoint.send("status", state="stopping",
-                                   counters=dict(self.endpoint.counters), message="slave stopping")
+                                   counters=self.endpoint.all_counters(), message="slave stopping")
                 self.endpoint.poll(0.05)
         finally:
             self.endpoint.close()

@@ -18,7 +18,7 @@ import math
 
 import msgpack
 
-from telethermal.errors import ProtocolError
+from telethermal.errors import ProtocolError, UnknownKindError
 from telethermal.wire.schema import (ENVELOPE, KINDS, MAX_ARRAY, MAX_MESSAGE_BYTES, MAX_STRING,
                                      PROTOCOL_VERSION, Field)
 
@@ -45,11 +45,17 @@ def _uint(value, where: str, f: Field | None = None) -> int:
     return value
 
 
+def _short(value: str) -> bool:
+    """At most MAX_STRING bytes of UTF-8 (not characters: "é" is two bytes)."""
+    return len(value) <= MAX_STRING and (value.isascii() or
+                                         len(value.encode("utf-8", "surrogatepass")) <= MAX_STRING)
+
+
 def _str(value, where: str) -> str:
     if not isinstance(value, str):
         raise ProtocolError(f"{where}: expected a string, got {type(value).__name__}")
-    if len(value) > MAX_STRING:
-        raise ProtocolError(f"{where}: string longer than {MAX_STRING}")
+    if not _short(value):
+        raise ProtocolError(f"{where}: string longer than {MAX_STRING} bytes of UTF-8")
     return value
 
 
@@ -75,7 +81,7 @@ def _value(f: Field, value, kind: str):
     if t == "uint" and type(value) is int and 0 <= value <= _UINT_MAX and \
             f.lo <= value <= f.hi:
         return value
-    if t == "str" and type(value) is str and len(value) <= MAX_STRING:
+    if t == "str" and type(value) is str and _short(value):
         return value
     if t == "bool" and type(value) is bool:
         return value
@@ -83,7 +89,7 @@ def _value(f: Field, value, kind: str):
             _fast_floats(value, f):
         return value
     if t == "list[str]" and type(value) is list and len(value) <= MAX_ARRAY and \
-            all(type(v) is str and len(v) <= MAX_STRING for v in value):
+            all(type(v) is str and _short(v) for v in value):
         return value
     return _value_slow(f, value, f"{kind}.{f.name}")
 
@@ -140,8 +146,13 @@ def validate(message: dict) -> tuple[dict, list[str]]:
     if not isinstance(message, dict):
         raise ProtocolError(f"a message is a map, got {type(message).__name__}")
     kind_name = message.get("kind")
-    if not isinstance(kind_name, str) or kind_name not in KINDS:
-        raise ProtocolError(f"unknown message kind {kind_name!r}")
+    if not isinstance(kind_name, str):
+        # No kind, or not a string (bytes, a number): a malformed message, not
+        # an unknown kind of a newer revision.
+        raise ProtocolError(f"kind: expected a string, got "
+                            f"{'nothing' if kind_name is None else type(kind_name).__name__}")
+    if kind_name not in KINDS:
+        raise UnknownKindError(f"unknown message kind {kind_name[:64]!r}")
     kind = KINDS[kind_name]
     out = {}
     for f in ENVELOPE + kind.fields:
@@ -150,7 +161,10 @@ def validate(message: dict) -> tuple[dict, list[str]]:
                 raise ProtocolError(f"{kind_name}.{f.name}: missing")
             continue
         out[f.name] = _value(f, message[f.name], kind_name)
-    if out["v"] != PROTOCOL_VERSION:
+    # hello is the negotiation itself: its layout is the same in every version
+    # and it is read whatever its v (the receiver answers a version it does
+    # not speak with fault "version").
+    if out["v"] != PROTOCOL_VERSION and kind_name != "hello":
         raise ProtocolError(f"{kind_name}: protocol version {out['v']}, this side speaks "
                             f"{PROTOCOL_VERSION}")
     if kind_name == "material_estimate" and len(out["classes"]) != len(out["posteriors"]):

@@ -47,7 +47,7 @@ EXAMPLES = {
                           "rtt_s": 0.00025, "classes": ["plexiglass", "steel"],
                           "posteriors": [0.125, 0.875], "label": "steel", "decided": True,
                           "estimate_t_s": 0.25},
-    "status": {"state": "rendering", "counters": {"lossless_resent": 0, "heartbeats_missed": 1},
+    "status": {"state": "rendering", "counters": {"resent": 0, "heartbeats_missed": 1},
                "message": "ok"},
     "fault": {"code": "sensor-nan", "message": "heat-flux reading NaN", "safe_state": True},
 }

@@ -46,7 +46,9 @@ ENVELOPE = (
     Field("kind", "str", doc="message kind, one of the kinds below"),
     Field("v", "uint", lo=1, hi=255, doc="protocol major version of the sender"),
     Field("seq", "uint", doc="lossless kinds: the lossless sequence number (one counter "
-                             "per direction, from 1); other kinds: a counter of that kind"),
+                             "per direction, from 1); other kinds: a counter of that kind "
+                             "(per direction, from 1 at the sender's start, by one); 0 only "
+                             "on a `fault` that refuses a hello (section 3)"),
     Field("sent_s", "float", "s", doc="sender's monotonic clock when sent"),
 )
 
@@ -96,7 +98,8 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("contact_id", "uint"),
         Field("t_since_contact_s", "float", "s", lo=0),
         Field("classes", "list[str]"),
-        Field("posteriors", "list[float]", lo=0, hi=1, doc="same order as classes"),
+        Field("posteriors", "list[float]", lo=0, hi=1,
+              doc="same order and length as classes"),
         Field("label", "str", doc="best class, or 'unknown'"),
         Field("confidence", "float", lo=0, hi=1),
         Field("decided", "bool", doc="true once committed (to a class or to 'unknown')"),
@@ -108,7 +111,9 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("contact_id", "uint"),
         Field("material", "str"),
         Field("object_temp_c", "float", "degC", lo=-50, hi=200),
-        Field("t_s", "list[float]", "s", lo=0, doc="times since the contact onset, ascending"),
+        Field("t_s", "list[float]", "s", lo=0,
+              doc="times since the contact onset, strictly ascending; as many as g_w_m2k, "
+                  "at least 2"),
         Field("g_w_m2k", "list[float]", "W/m^2/K",
               doc="normalised finger flux at t_s; the display flux is "
                   "g (T_object - T_finger), pad -> finger positive"),
@@ -150,8 +155,9 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("decided", "bool", required=False),
         Field("estimate_t_s", "float", "s", lo=0, required=False, nullable=True,
               doc="that estimate's t_since_contact_s"),
-    ), "raw samples of the sender's pad, for display and recording (lossy); the master "
-       "publishes its own, with the optional fields, on its view stream"),
+    ), "raw samples of the sender's pad, for display and recording (lossy); the three "
+       "channels hold one value per sample (equal lengths); the master publishes its own, "
+       "with the optional fields, on its view stream"),
     Kind("status", "control", "both", (
         Field("state", "str", doc="idle | touching | rendering | safe | stopping"),
         Field("counters", "counters", doc="name -> non-negative integer"),

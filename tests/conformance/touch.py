@@ -1,0 +1,38 @@
+"""A legitimate touch by a document master, and the checks every hostile
+case ends with."""
+
+from __future__ import annotations
+
+from doc_peer import DocMaster
+
+
+def touch(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
+    """Touch, wait for the slave's decision (and trajectory), lift, wait for
+    the slave's lift. Returns the decided estimate."""
+    master.touch(contact_id, True)
+    decided = lambda: master.of("material_estimate", contact_id=contact_id, decided=True)  # noqa
+    assert master.pump(timeout_s, until=decided), \
+        f"contact {contact_id}: no decision in {timeout_s} s; slave said " \
+        f"{[m['kind'] for _, m in master.received[-8:]]}"
+    estimate = decided()[-1]
+    if estimate["label"] != "unknown":
+        assert master.pump(2.0, until=lambda: master.of("flux_trajectory",
+                                                        contact_id=contact_id)), \
+            f"contact {contact_id}: decided {estimate['label']} but no flux_trajectory"
+    master.touch(contact_id, False)
+    assert master.pump(3.0, until=lambda: master.of("contact_event", contact_id=contact_id,
+                                                    touching=False)), \
+        f"contact {contact_id}: the slave never lifted"
+    return estimate
+
+
+def place(slave, material: str, seed: int = 0) -> float:
+    """Put ``material`` under the pad (the admin socket); its IR reading."""
+    reply = slave.admin("place", material=material, seed=seed)
+    assert reply["ok"], reply
+    return reply["object_ir_c"]
+
+
+def assert_pad_safe(slave) -> None:
+    status = slave.admin("status")
+    assert status["ok"] and not status["pad_down"], status
