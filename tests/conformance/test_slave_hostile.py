@@ -16,7 +16,7 @@ import pytest
 
 from conftest import HEARTBEAT_S
 from doc_peer import pack
-from touch import assert_pad_safe, touch
+from touch import assert_pad_safe, final_estimate, touch
 
 ERROR_COUNTERS = ("invalid", "unknown_kind", "oversized", "before_hello", "version_mismatch",
                   "not_peer", "wrong_direction", "out_of_window", "skipped", "resend_throttled",
@@ -160,9 +160,7 @@ def test_hostile_message_mid_contact_is_counted_and_harmless(case, slave, sessio
     assert errors_moved(before, slave.counters()) == {counter: n}
     status = slave.admin("status")
     assert status["pad_down"] and status["contact_id"] == contact_id
-    decided = lambda: m.of("material_estimate", contact_id=contact_id, decided=True)  # noqa
-    assert m.pump(5.0, until=decided)
-    assert _decision(decided()[-1]) == baseline
+    assert _decision(final_estimate(m, contact_id, 5.0)) == baseline
     m.touch(contact_id, touching=False)
     assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id,
                                           touching=False))

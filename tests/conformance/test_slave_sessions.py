@@ -137,8 +137,19 @@ def test_a_second_master_cannot_lift_the_first_masters_contact(slave, masters, b
     assert_pad_safe(slave)
 
 
-def test_a_stranger_key_is_rejected_and_counted():
-    pytest.skip("to be delivered by issue 19: rejected CURVE keys logged and counted (ZAP)")
+def test_a_stranger_key_is_rejected_and_counted(slave, masters, curve_keys):
+    # Section 8: a key not in the slave's allowed folder gets no session; the
+    # slave counts the refusal (curve_rejected) and names the key by its
+    # fingerprint and the peer's address in its status.
+    before = slave.counters()
+    stranger = masters("stranger", connect=False)
+    stranger.hello()
+    assert not stranger.pump(1.5, until=lambda: stranger.peer_hello is not None,
+                             heartbeats=False)
+    after = slave.counters()
+    assert after["curve_rejected"] > before["curve_rejected"]
+    rejected = slave.admin("status")["last_rejected_key"]
+    assert rejected and rejected["fingerprint"] and "127.0.0.1" in str(rejected["address"])
 
 
 @pytest.mark.stops_slave

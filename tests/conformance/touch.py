@@ -6,16 +6,26 @@ from __future__ import annotations
 from doc_peer import DocMaster
 
 
-def touch(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
-    """Touch, wait for the slave's decision (and trajectory), lift, wait for
-    the slave's lift. Returns the decided estimate."""
-    master.touch(contact_id, True)
+def final_estimate(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
+    """The contact's last material_estimate once it is final: decided with
+    any reason but "confident group" (a pair keeps streaming until a member
+    passes alone or the identifier's last window, section 6)."""
     decided = lambda: master.of("material_estimate", contact_id=contact_id, decided=True)  # noqa
     assert master.pump(timeout_s, until=decided), \
         f"contact {contact_id}: no decision in {timeout_s} s; slave said " \
         f"{[m['kind'] for _, m in master.received[-8:]]}"
-    estimate = decided()[-1]
-    if estimate["label"] != "unknown":
+    final = lambda: [e for e in decided() if e["reason"] != "confident group"]  # noqa
+    if not final():
+        master.pump(2.0, until=final)       # the identifier's windows end within 1 s
+    return master.of("material_estimate", contact_id=contact_id)[-1]
+
+
+def touch(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
+    """Touch, wait for the slave's decision (and trajectory), lift, wait for
+    the slave's lift. Returns the decided estimate."""
+    master.touch(contact_id, True)
+    estimate = final_estimate(master, contact_id, timeout_s)
+    if estimate["label"] != "unknown" and estimate["reason"] != "confident group":
         assert master.pump(2.0, until=lambda: master.of("flux_trajectory",
                                                         contact_id=contact_id)), \
             f"contact {contact_id}: decided {estimate['label']} but no flux_trajectory"

@@ -100,13 +100,18 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("classes", "list[str]"),
         Field("posteriors", "list[float]", lo=0, hi=1,
               doc="same order and length as classes"),
-        Field("label", "str", doc="best class, or 'unknown'"),
+        Field("label", "str", doc="best class, 'unknown', or a group of two classes "
+                                  "'a|b' (sorted) while committed to the pair"),
         Field("confidence", "float", lo=0, hi=1),
-        Field("decided", "bool", doc="true once committed (to a class or to 'unknown')"),
-        Field("reason", "str", doc="confident | outside classes | gap too small | "
-                                   "not confident | '' while undecided"),
+        Field("decided", "bool", doc="true once committed (to a class, a group or "
+                                     "'unknown'); never false again in the contact"),
+        Field("reason", "str", doc="confident | confident group | outside classes | "
+                                   "gap too small | not confident | force outside trained "
+                                   "range | '' while undecided"),
         Field("object_temp_c", "float", "degC", lo=-50, hi=200),
-    ), "streamed at every identification window; the last has decided = true"),
+    ), "streamed at every identification window until a final decision (decided = true "
+       "with any reason but 'confident group'; a group keeps streaming, decided, until a "
+       "member passes alone or the contact's last window)"),
     Kind("flux_trajectory", "control", "slave->master", (
         Field("contact_id", "uint"),
         Field("material", "str"),
