@@ -363,7 +363,7 @@ def cmd_bench_identify(args) -> int:
     from telethermal.bench import identify
 
     methods = args.methods.split(",") if args.methods else None
-    with _progress(4 * len(methods or identify.METHODS) + 3, "bench identify") as advance:
+    with _progress(5 * len(methods or identify.METHODS) + 3, "bench identify") as advance:
         report = identify.run(seed=args.seed, methods=methods, progress=advance)
     report["command"] = "telethermal " + " ".join(sys.argv[1:])
     png = args.png or Path(args.json).with_suffix(".png")
@@ -392,9 +392,18 @@ def cmd_bench_identify(args) -> int:
             print(f"{' ' * len(method)}  {name}: >= 99 % from "
                   f"{row['first_window_at_99pct_s']} s (paper 100 % within "
                   f"{row['paper_100pct_within_s']} s)")
-    print("IR-thermometer ablation (effusivity-lda, 0.2 / 0.5 / 1 s): " + "; ".join(
+        t1 = rep["table1"]
+        dec = t1["decision"]
+        print(f"{' ' * len(method)}  calibration error {t1['calibration_ece']:.3f}; decisions "
+              f"within 1 s: {100 * dec['commit_rate']:.0f} % committed, "
+              + ("-" if dec["accuracy"] is None else f"{100 * dec['accuracy']:.0f} %")
+              + " of them right")
+        for mode, row in rep["session_shift"].items():
+            print(f"{' ' * len(method)}  session shift (1 K), thermometer {mode}: " + ", ".join(
+                f"{k} s {100 * v:.0f} %" for k, v in row["accuracy_5"].items()))
+    print("object-thermometer ablation (effusivity-lda, 0.2 / 0.5 / 1 s): " + "; ".join(
         f"{k}: " + " / ".join(f"{100 * x:.0f}" for x in v.values()) + " %"
-        for k, v in report["ir_ablation"]["accuracy"].items()))
+        for k, v in report["thermometer_ablation"]["accuracy"].items()))
     if "lm_vs_adam" in report:
         print("LM against Adam: " + "; ".join(
             f"{k} loss {v['final_loss']:.4f} after {v['iterations']} iterations, "

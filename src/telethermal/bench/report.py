@@ -41,7 +41,8 @@ def _pct(x) -> str:
 def _figure(out: Path, d: dict, name: str) -> str:
     """The bench's own PNG (named in its JSON, or beside it), copied beside
     the report."""
-    png = d.get("png") or str(d.get("_results", Path(".")) / f"{name}.png")
+    beside = Path(d.get("_results", Path("."))) / f"{name}.png"
+    png = d.get("png") if d.get("png") and Path(d["png"]).is_file() else beside
     if not Path(png).is_file():
         return ""
     dest = out / f"{name}.png"
