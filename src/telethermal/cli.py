@@ -338,9 +338,12 @@ def cmd_identify_train(args) -> int:
 def cmd_identify_eval(args) -> int:
     from telethermal.data.dataset import load_dataset
     from telethermal.ident.evaluate import evaluate, plot_accuracy
-    from telethermal.ident.registry import load_model
+    from telethermal.ident.registry import check_scene, dataset_scene, load_model
 
     model = load_model(args.model)
+    scene_name = dataset_scene(args.data)
+    if scene_name is not None:
+        check_scene(model, scene_name, str(args.model))
     with console.status(f"evaluating on {args.data}"):
         report = evaluate(model, load_dataset(args.data))
     report["command"] = "telethermal " + " ".join(sys.argv[1:])

@@ -74,3 +74,20 @@ def test_passive_pad_at_zero_gap_is_unknown(tmp_path):
     # under 2 K (five IR-thermometer sigmas). Never a confident wrong class.
     assert report["decision_unknown_rate"] == 1.0
     assert report["unknown_reasons"] == {"gap too small": report["trials"]}
+
+
+def test_a_model_of_another_scene_is_refused_on_its_data(gripper_db, tmp_path, capsys):
+    # The model says it was trained on gripper-case-II; a dataset generated
+    # from another scene (its generation.json) is refused, naming both.
+    model = tmp_path / "lda.npz"
+    assert main(["identify", "train", "--data", str(gripper_db), "--method", "effusivity-lda",
+                 "--out", str(model)]) == 0
+    other = tmp_path / "other"
+    import shutil
+    shutil.copytree(gripper_db.parent, other)
+    meta = other / "generation.json"
+    meta.write_text(meta.read_text().replace('"gripper-case-II"', '"gripper-case-V"'))
+    assert main(["identify", "eval", "--model", str(model), "--data", str(other / "pad"),
+                 "--json", str(tmp_path / "e.json")]) != 0
+    err = capsys.readouterr().err
+    assert "gripper-case-II" in err and "gripper-case-V" in err
