@@ -74,16 +74,16 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         return Decision(UNKNOWN, 0.0, None, "gap too small")
     n = int(np.sum(np.all(np.isfinite(x), axis=1)))
     path = model.posterior_path(x[:n])
+    forces = None if force_n is None else np.asarray(force_n, dtype=np.float64)[None]
     best = 0.0
     group = None
     outside = False
     for i, p in enumerate(path):
         k = int(np.argmax(p))
         best = float(p[k])
-        if force_n is not None:
+        if forces is not None:
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
-            outside = not force_in_range(model, i, float(force_at(
-                np.asarray(force_n, dtype=np.float64)[None], n_w)[0]))
+            outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
             if outside:
                 continue
         if p[k] >= model.threshold:
