@@ -281,7 +281,7 @@ class SimSlaveService:
                      "valid_s": 60.0, "t0_s": self.touch_t0 + float(pad.onset_s)}, True)
         if e.decided:
             self._decided_label = e.label
-        if e.final:
+        if e.decided:
             self.memory.learn(self.object_id, e, t)
 
     def _setpoint(self, now: float, send) -> None:
