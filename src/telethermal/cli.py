@@ -452,7 +452,7 @@ def cmd_demo(args) -> int:
     report = run_demo(out, args.scene, out / "identifier.npz", out / "generator.npz",
                       materials, seed=args.seed, contact_s=args.contact_s,
                       record_dir=Path(args.record) if args.record else None,
-                      view_port=args.view)
+                      view_port=args.view, devices=args.devices)
     view = report.pop("view", None)
     path = _write_json(args.json or out / "demo.json", report)
     print(f"touch plots: {out}/touch-*.png; summary: {path}")
@@ -936,6 +936,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
     p.add_argument("--contact-s", type=_positive(), default=5.0)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
+                   help="emulated: master and slave each on emulated boards (ptys) and CAN "
+                        "drivers (virtual buses), read through the drivers")
     p.add_argument("--record", metavar="DIR", help="both services record every touch here "
                                                    "(one MCAP file per host; see replay)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",

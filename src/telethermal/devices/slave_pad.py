@@ -55,12 +55,15 @@ _bus_names = itertools.count()
 @dataclass
 class LoopGains:
     """The pre-conditioning loop: junction set point = target + kp e + ki
-    integral(e), e = target - the pad's thermocouple reading; settled when
-    the readings of the last ``settle_s`` average within ``tol_k`` of the
-    target (after at least ``min_s``); refused after ``timeout_s``."""
+    integral(e), e = target - the pad's thermocouple reading, integrating
+    only within ``band_k`` of the target (no wind-up on the way); settled
+    when the readings of the last ``settle_s`` average within ``tol_k`` of
+    the target and its two halves within ``tol_k / 2`` of each other (after
+    at least ``min_s``); refused after ``timeout_s``."""
 
-    kp: float = 0.5
+    kp: float = 1.0
     ki_per_s: float = 2.0
+    band_k: float = 0.3
     settle_s: float = 0.5
     tol_k: float = 0.02
     min_s: float = 1.0
@@ -93,10 +96,10 @@ class SlavePadDrivers:
     def __init__(self, board_url: str, can_bus: str, rate_hz: float,
                  calibration: Calibration = Calibration(), clock=time.monotonic,
                  wait_s: float = 0.0, gains: LoopGains = LoopGains(),
-                 lost_after_s: float = 0.1):
+                 lost_after_s: float = 0.1, no_reading_s: float = 0.5):
         self.rate_hz = float(rate_hz)
         self.clock, self.wait_s, self.gains = clock, wait_s, gains
-        self.lost_after_s = lost_after_s
+        self.lost_after_s, self.no_reading_s = lost_after_s, no_reading_s
         self.board = SensorBoard(board_url, calibration, clock=clock, keep=True,
                                  versions=(FRAME_VERSION_SLAVE,),
                                  stale_s=max(0.05, 3.0 / self.rate_hz))
@@ -109,6 +112,7 @@ class SlavePadDrivers:
                                        "boards_lost", "ir_refused", "preconditions",
                                        "precondition_failed", "safe_commands"), 0)
         self.last_precondition: dict = {}
+        self._loop: dict | None = None          # the pad loop's target, integral, set point
         self._samples: ContactSamples | None = None
         self._seq0: int | None = None
 
@@ -124,18 +128,41 @@ class SlavePadDrivers:
         return r
 
     def hold(self):
-        """One period holding the pad at its last set point: the newest reading."""
+        """One period of the pad's loop at its last target (or the safe
+        state's neutral before any): the newest reading."""
         r = self.tick()
-        self.pad.command(self.last_precondition.get("setpoint_c", self._neutral_c()))
+        reading = r.pad_temp_c if r is not None else math.nan
+        if self._loop is not None and math.isfinite(reading):
+            self._loop_step(reading)
+        setpoint = self._loop["setpoint"] if self._loop is not None else self._neutral_c()
+        self.pad.command(setpoint)
         self._after_command()
         return r
+
+    def _loop_step(self, reading: float) -> float:
+        """PI on the pad's reading: the junction's next set point."""
+        loop, g = self._loop, self.gains
+        e = loop["target"] - reading
+        if abs(e) < g.band_k:
+            loop["integral"] += e / self.rate_hz
+        loop["setpoint"] = loop["target"] + g.kp * e + g.ki_per_s * loop["integral"]
+        return loop["setpoint"]
 
     # ------------------------------------------------------------ before contact
     def object_reading_c(self) -> float:
         """The IR thermometer's reading of the object (uncorrected), NaN if
-        the board cannot give one now."""
+        the board flags it or it is out of range; :class:`DeviceError` if
+        the board sends nothing."""
+        since = self.clock()
         r = self.tick()
-        value = math.nan if r is None else r.ir_object_c
+        # A sample frame (a boot frame carries no reading), within no_reading_s.
+        while (r is None or not math.isfinite(r.pad_temp_c)) and \
+                self.clock() - since <= self.no_reading_s:
+            r = self.tick()
+        if r is None or not math.isfinite(r.pad_temp_c):
+            raise DeviceError(f"the slave's sensor board {self.board.url} gives no frame "
+                              f"(counters {self.board.all_counters}): no object measurement")
+        value = r.ir_object_c
         if not math.isfinite(value):
             self.counters["ir_refused"] += 1
         return value
@@ -146,21 +173,34 @@ class SlavePadDrivers:
         does not settle within the timeout (the pad is then made safe)."""
         g, dt = self.gains, 1.0 / self.rate_hz
         self.counters["preconditions"] += 1
-        integral, window = 0.0, []
+        window = []
         n_settle, n_min = max(1, round(g.settle_s / dt)), round(g.min_s / dt)
-        setpoint = target_c
+        self._loop = {"target": target_c, "integral": 0.0, "setpoint": target_c}
+        missing_since = None
         for k in range(int(g.timeout_s / dt) + 1):
             r = self.tick()
             reading = r.pad_temp_c if r is not None else math.nan
             if math.isfinite(reading):
-                e = target_c - reading
-                integral += e * dt
-                setpoint = target_c + g.kp * e + g.ki_per_s * integral
+                missing_since = None
+            elif missing_since is None:
+                missing_since = self.clock()
+            elif self.clock() - missing_since > self.no_reading_s:
+                self.counters["precondition_failed"] += 1
+                self.safe()
+                raise DeviceError(f"active pad pre-conditioning: no pad temperature from the "
+                                  f"sensor board {self.board.url} for "
+                                  f"{self.clock() - missing_since:.2f} s (counters "
+                                  f"{self.board.all_counters}): pad made safe")
+            if math.isfinite(reading):
+                self._loop_step(reading)
                 window = (window + [reading])[-n_settle:]
+            setpoint = self._loop["setpoint"]
             self.pad.command(setpoint)
             self._after_command()
+            half = n_settle // 2
             if k >= n_min and len(window) == n_settle and \
-                    abs(float(np.mean(window)) - target_c) <= g.tol_k:
+                    abs(float(np.mean(window)) - target_c) <= g.tol_k and \
+                    abs(float(np.mean(window[:half]) - np.mean(window[half:]))) <= g.tol_k / 2:
                 self.last_precondition = {"target_c": target_c, "settled_s": (k + 1) * dt,
                                           "reading_c": float(np.mean(window)),
                                           "setpoint_c": setpoint}
@@ -176,6 +216,7 @@ class SlavePadDrivers:
 
     def safe(self) -> None:
         self.counters["safe_commands"] += 1
+        self._loop = None
         self.pad.safe()
         self._after_command()
 
@@ -211,7 +252,10 @@ class SlavePadDrivers:
         missing = expected - s.available
         if missing > self.lost_after_s * self.rate_hz:
             return self._lost(f"{missing} samples due have not come")
-        self.pad.command(self.last_precondition.get("setpoint_c", self._neutral_c()))
+        # During the contact the junction stays where the loop left it (the
+        # pad's thermocouple now reads the contact, not the set point).
+        self.pad.command(self._loop["setpoint"] if self._loop is not None
+                         else self._neutral_c())
         self._after_command()
         return True
 
@@ -360,6 +404,10 @@ class EmulatedSlavePad(SlavePadDrivers):
         self.board_emulator.send(self.t_s, 0.0, reading, 0.0, ir_object_c=ir,
                                  ir_ambient_c=self.room_c, pad_drive=self._drive(), ir_ok=ok)
         self.pad_emulator.poll()
+        if self.board._ser is None:
+            # The driver's port is closed (the board is away): in lockstep the
+            # period passes on the real clock too, so its reopening runs.
+            time.sleep(dt)
         return super().tick()
 
     def measure_object(self, true_c, rng: np.random.Generator) -> np.ndarray:

@@ -25,7 +25,20 @@ class SlaveConfig:
     admin_port: int = 5570
     admin_ipc: str = ""             # an ipc:// path instead of the port
     record_dir: str = ""            # record every touch here (one MCAP file per run)
+    #: The sensing pad's devices: "sim" (the simulator directly) or
+    #: "emulated" (the simulator behind an emulated sensor board, frame
+    #: version 2, on a pty and the active pad's driver on a virtual CAN bus,
+    #: read and commanded through the real drivers; a Peltier pad only).
+    devices: str = "sim"
     transport: TransportConfig = field(default_factory=TransportConfig)
+
+    def __post_init__(self):
+        if self.devices == "hardware":
+            raise ConfigError("devices = 'hardware' is not available on the slave yet: its "
+                              "drivers run against emulated devices only (devices = "
+                              "'emulated'); see proto/SERIAL.md, version 2")
+        if self.devices not in ("sim", "emulated"):
+            raise ConfigError(f"devices must be 'sim' or 'emulated', got {self.devices!r}")
 
 
 @dataclass
