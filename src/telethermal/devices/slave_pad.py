@@ -79,7 +79,7 @@ class ContactSamples:
     flux_w_m2: np.ndarray = field(init=False)
     temp_c: np.ndarray = field(init=False)
     force_n: np.ndarray = field(init=False)
-    received_s: np.ndarray = field(init=False)     # when the driver decoded it
+    received_s: np.ndarray = field(init=False)     # perf_counter when the driver decoded it
     available: int = 0                              # samples 0..available-1 are in
 
     def __post_init__(self):
@@ -285,9 +285,9 @@ class SlavePadDrivers:
             else:
                 s.flux_w_m2[j], s.temp_c[j], s.force_n[j] = (
                     s.flux_w_m2[j - 1], s.temp_c[j - 1], s.force_n[j - 1])
-            s.received_s[j] = r.received_s
+            s.received_s[j] = math.nan            # never received
         s.flux_w_m2[i], s.temp_c[i], s.force_n[i] = values
-        s.received_s[i] = r.received_s
+        s.received_s[i] = time.perf_counter()
         s.available = i + 1
 
     def _lost(self, why: str) -> bool:

@@ -156,6 +156,7 @@ class Slave:
         self._next = 0
         self.events: list[SlaveEvent] = []
         self.fault: str | None = None
+        self.detected_index: int | None = None
         #: perf_counter when each sample was pushed into the identifier.
         self.pushed_s = np.full(len(self.t_s), np.nan)
 
@@ -213,6 +214,7 @@ class Slave:
             if event is not None and event.touching and self.stream is None:
                 self.onset_s = event.t_s
                 self._onset_index = int(np.searchsorted(self.t_s, event.t_s))
+                self.detected_index = i          # the debounce's backlog is pushed now
                 self.stream = StreamingIdentifier(self.identifier, self.gap_k, self.object_ir_c)
                 if self.stream.decided:                       # gap too small: unknown at once
                     new.append(SlaveEvent(float(self.t_s[i]), self.stream.estimate))
