@@ -193,7 +193,135 @@ def test_a_water_pad_scene_is_refused_on_emulated_devices(session):
 
 def test_the_slave_config_names_the_devices_it_takes():
     assert SlaveConfig(devices="emulated").devices == "emulated"
-    with pytest.raises(ConfigError, match="not available on the slave"):
+    assert SlaveConfig(devices="hardware", board_url="/dev/ttyUSB1",
+                       can_bus="socketcan:can0").can_bus == "socketcan:can0"
+    with pytest.raises(ConfigError, match="needs board_url"):
         SlaveConfig(devices="hardware")
-    with pytest.raises(ConfigError, match="'sim' or 'emulated'"):
+    with pytest.raises(ConfigError, match="'sim', 'emulated' or 'hardware'"):
         SlaveConfig(devices="simulator")
+
+
+def test_on_hardware_the_slave_reads_a_board_that_streams_on_its_own(identifier, session,
+                                                                     devices):
+    # No simulator inside the slave: it knows the devices by their drivers
+    # only. Here the board is fed, frame by frame, the samples of a simulated
+    # touch, as a board streaming on its own clock would send them.
+    sim = Slave(SCENE, "wood", identifier, slave_rng(21), session=session)
+    sim.advance_to(10.0)
+    cal = session.calibration
+    raw = cal.offset_k + cal.gain * sim.object_ir_c           # what the IR sensor says
+    devices.show_object(raw)
+    slave = Slave.on_hardware(SCENE, identifier, devices, session)
+    assert slave.object_ir_c == pytest.approx(sim.object_ir_c, abs=1e-3)
+    assert slave.gap_k == pytest.approx(SCENE.pad.gap_k, abs=0.05)   # the loop's own reading
+    assert devices.pad_emulator.enabled
+    ch = sim.channels
+    slave.advance_to(0.0)                            # the pad goes down: frames from now on
+    for k in range(len(ch["t_s"])):
+        devices.board_emulator.send(float(ch["t_s"][k]), float(ch["heat_flux_W_m2"][k]),
+                                    float(ch["temperature_C"][k]), float(ch["force_N"][k]),
+                                    ir_object_c=raw, ir_ambient_c=SCENE.room_temp_c)
+        slave.advance_to(k / SCENE.sample_rate_hz)
+    assert slave.estimate.decided and slave.estimate.label == sim.estimate.label
+    assert slave.committed_at_s == pytest.approx(sim.committed_at_s, abs=0.05)
+    assert slave.onset_s == pytest.approx(sim.onset_s - float(ch["t_s"][0]), abs=1e-6)
+    assert devices.all_counters()["held_samples"] == 0
+
+
+def test_on_hardware_a_silent_board_ends_the_touch_unknown(identifier, session, devices):
+    devices.show_object(20.0)
+    slave = Slave.on_hardware(SCENE, identifier, devices, session)
+    slave.advance_to(0.0)
+    events = []
+    for k in range(1, 30):                          # nothing comes for 0.3 s
+        events += slave.advance_to(k / SCENE.sample_rate_hz)
+    assert [e.estimate.reason for e in events] == [BOARD_LOST]
+    devices.pad_emulator.poll()
+    assert not devices.pad_emulator.enabled
+
+
+class FreeRunningRig:
+    """A slave pad that lives on its own: a version-2 board streaming at the
+    scene's rate from a thread, the active pad's driver board on a CAN bus,
+    a Peltier pad following its junction, the thermometer seeing the pad
+    (``aim = "pad"``) or an object at ``object_c``."""
+
+    def __init__(self, tmp_path, instruments, bus):
+        import threading
+
+        from telethermal.devices.active_pad import ActivePadEmulator
+        from telethermal.devices.emulators import SensorBoardEmulator
+        from telethermal.physics.sensors import Thermocouple
+
+        self.board = SensorBoardEmulator(tmp_path / "slave-board", SCENE.room_temp_c,
+                                         version=2)
+        self.pad = ActivePadEmulator(bus, self._junction, heatsink_c=SCENE.room_temp_c)
+        self.instruments, self.rng = instruments, np.random.default_rng(5)
+        self.tc = Thermocouple(cold_junction_c=SCENE.room_temp_c,
+                               bias_k=instruments.pad_tc_bias_k)
+        self.pad_c = self.junction_c = SCENE.room_temp_c
+        self.aim, self.object_c = "pad", 20.0
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _junction(self, c):
+        self.junction_c = c
+
+    def _run(self):
+        import time
+        dt, t = 1.0 / SCENE.sample_rate_hz, 0.0
+        while not self._stop.is_set():
+            self.pad.poll()
+            self.pad_c += -math.expm1(-dt / 0.5) * (self.junction_c - self.pad_c)
+            seen = self.pad_c if self.aim == "pad" else self.object_c
+            ir = float(self.instruments.thermometer.read_c(np.array([seen]), self.rng)[0])
+            reading = float(self.tc.read_c(np.array([self.pad_c]), self.rng)[0])
+            self.board.send(t, 0.0, reading, 0.0, ir_object_c=ir,
+                            ir_ambient_c=SCENE.room_temp_c)
+            t += dt
+            time.sleep(dt)
+
+    def close(self):
+        self._stop.set()
+        self.thread.join()
+        self.pad.close()
+        self.board.close()
+
+
+def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
+        tmp_path, identifier, session):
+    from telethermal.services.demo import free_ports
+    from telethermal.services.slave import SlaveService
+    from telethermal.session.models import train_generator
+    from telethermal.wire.transport import TransportConfig
+
+    bus = "virtual:slave-service-hardware-test"
+    rig = FreeRunningRig(tmp_path, session.instruments, bus)
+    control, stream, admin = free_ports(3)
+    config = SlaveConfig(devices="hardware", board_url=rig.board.path, can_bus=bus,
+                         admin_port=admin, transport=TransportConfig(
+                             security="plain", control_port=control, stream_port=stream))
+    service = None
+    try:
+        # The lab aims the thermometer at the pad for the calibration at start...
+        service = SlaveService(config, identifier, train_generator(SCENE, 0))
+        cal = service.status()["thermometer_calibration"]
+        assert cal["calibrated"] and cal["error"] is None and cal["residual_k"] < 0.1
+        # ... then at the object, 20 C: the pad pre-conditioned to it plus the gap.
+        rig.aim = "object"
+        service.place("wood", 1)
+        assert service.pad.object_ir_c == pytest.approx(20.0, abs=0.5)
+        assert rig.pad.enabled
+        assert rig.pad_c == pytest.approx(service.pad.object_ir_c + SCENE.pad.gap_k -
+                                          session.instruments.pad_tc_bias_k, abs=0.3)
+        status = service.status()
+        assert status["devices"]["kind"] == "hardware"
+        assert status["devices"]["counters"]["board"]["frames_v2"] > 100
+    finally:
+        if service is not None:
+            service.shutdown()
+        rig.pad.poll()
+        enabled_after = rig.pad.enabled
+        rig.close()
+    assert not enabled_after                          # stopped: the pad disabled

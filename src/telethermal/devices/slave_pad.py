@@ -118,7 +118,9 @@ class SlavePadDrivers:
 
     # ------------------------------------------------------------ one period
     def tick(self):
-        """One period: the newest reading (waiting up to ``wait_s``), or None."""
+        """One period: the newest reading, or None. Waits up to ``wait_s`` for
+        a new frame, so that on a board streaming on its own a loop runs at
+        the board's rate."""
         self.pad.poll()
         self.board.poll(self.wait_s)
         self.board.take_readings()
@@ -230,7 +232,30 @@ class SlavePadDrivers:
         self._samples = ContactSamples(n)
         latest = self.board.latest
         self._seq0 = None if latest is None else (latest.seq + 1) & 0xFFFF
+        self._begun = False
         return self._samples
+
+    def begin_contact(self) -> None:
+        """The pad goes down now: the next frame is sample 0 of the contact
+        started by :meth:`contact` (what came before is dropped)."""
+        self.board.poll()
+        self.board.take_readings()
+        latest = self.board.latest
+        self._seq0 = None if latest is None else (latest.seq + 1) & 0xFFFF
+        s = self._samples
+        s.available = 0
+        for a in (s.flux_w_m2, s.temp_c, s.force_n, s.received_s):
+            a[:] = np.nan
+        self._begun = True
+
+    def feed(self, upto_t_s: float) -> bool:
+        """A board that streams on its own clock: read the samples due by
+        ``upto_t_s`` since :meth:`begin_contact` (called at the first feed);
+        False once the board is lost."""
+        if not getattr(self, "_begun", False):
+            self.begin_contact()
+        expected = min(self._samples.n, int(math.floor(upto_t_s * self.rate_hz + 1e-9)) + 1)
+        return self.collect(max(expected, 0))
 
     def collect(self, expected: int) -> bool:
         """Read what the board sent since, waiting up to ``wait_s`` for
@@ -438,11 +463,17 @@ class EmulatedSlavePad(SlavePadDrivers):
                        np.asarray(force_n))
         self._sent = 0
         self.write_s = np.full(len(t_s), np.nan)
-        return self.contact(len(t_s))
+        contact = self.contact(len(t_s))
+        self._begun = True                     # in lockstep: the next frame is sample 0
+        return contact
 
     def feed(self, upto_t_s: float) -> bool:
         """Write the frames of the samples up to ``upto_t_s`` and read them
-        back (lockstep); False once the board is lost."""
+        back (lockstep); False once the board is lost. Without a trial
+        (:meth:`start_contact` not called: a test driving the board itself)
+        the drivers' own :meth:`SlavePadDrivers.feed`."""
+        if self._trial is None:
+            return super().feed(upto_t_s)
         t, flux, temp, force = self._trial
         while self._sent < len(t) and t[self._sent] <= upto_t_s + 1e-12:
             i = self._sent

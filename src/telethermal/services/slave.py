@@ -100,8 +100,19 @@ class SlaveService:
         if self.config.devices == "emulated":
             from telethermal.devices.slave_pad import EmulatedSlavePad
             self.devices = EmulatedSlavePad(self.scene, self.sensors.instruments, seed=seed)
-            log.info("sensing pad on emulated devices: board %s (frame version 2), active "
-                     "pad driver on %s", self.devices.board.url, self.devices.pad.spec)
+        elif self.config.devices == "hardware":
+            from telethermal.devices.board import Calibration
+            from telethermal.devices.slave_pad import SlavePadDrivers
+            cfg = self.config
+            calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
+            # Each period waits (up to two sample periods) for the board's next
+            # frame: the pad's loop runs at the board's own rate.
+            self.devices = SlavePadDrivers(cfg.board_url, cfg.can_bus, self.rate_hz,
+                                           calibration, wait_s=2.0 / self.rate_hz)
+        if self.devices is not None:
+            log.info("sensing pad on %s devices: board %s (frame version 2), active pad "
+                     "driver on %s", self.devices.kind, self.devices.board.url,
+                     self.devices.pad.spec)
         self.calibrate_thermometer()
 
     def calibrate_thermometer(self, drift_k_per_reading: float = 0.0) -> dict:
@@ -120,11 +131,15 @@ class SlaveService:
                 if drift_k_per_reading:
                     raise CalibrationError("a drifting pad is a simulator-only hard case "
                                            "(devices = 'sim')")
-                self.devices.aim_at_pad(self._session_rng)
+                emulated = self.devices.kind == "emulated"
+                if emulated:
+                    self.devices.aim_at_pad(self._session_rng)
+                # On hardware the lab aims the thermometer at the pad for this.
                 try:
                     cal = calibrate_on_devices(self.devices, self.scene.room_temp_c)
                 finally:
-                    self.devices.show_object(float("nan"))
+                    if emulated:
+                        self.devices.show_object(float("nan"))
             else:
                 cal = calibrate_simulated(self.sensors.instruments, self.scene.room_temp_c,
                                           self._session_rng,
@@ -153,8 +168,12 @@ class SlaveService:
         """Put ``material`` under the pad and measure it (IR) before contact."""
         if self.devices is not None:
             self._touch_counters = _flat(self.devices.all_counters())
-        self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
-                         session=self.sensors, devices=self.devices)
+        if self.devices is not None and self.devices.kind == "hardware":
+            self.pad = Slave.on_hardware(self.scene, self.identifier, self.devices,
+                                         self.sensors)
+        else:
+            self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
+                             session=self.sensors, devices=self.devices)
         self.material = material
         self._seed = seed
         self._sent = 0

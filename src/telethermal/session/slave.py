@@ -100,6 +100,41 @@ class Slave:
                    float(self.trial.extra["T_object_true_C"]), self.trial.T_pad_C,
                    self.trial.gap_k, on_n, off_n, debounce_s)
 
+    @classmethod
+    def on_hardware(cls, scene: Scene, identifier, devices, session, contact_s: float | None = None,
+                    on_n: float = 2.0, off_n: float = 1.0,
+                    debounce_s: float = 0.02) -> "Slave":
+        """A touch on real devices (no simulator): the object measured by the
+        board's IR channel and corrected by the session's calibration, the
+        pad pre-conditioned to it plus the scene's gap through the pad's
+        driver, and from the first :meth:`advance_to` (the pad goes down)
+        every sample the board sends, ``t_s = 0`` at that instant."""
+        from telethermal.physics.scene import ONSET_MARGIN_S
+
+        self = cls.__new__(cls)
+        self.trial, self.devices = None, devices
+        if abs(identifier.sample_rate_hz_ - devices.rate_hz) > 1e-9:
+            raise SceneError(f"the identifier expects {identifier.sample_rate_hz_:g} Hz samples, "
+                             f"the slave's board is read at {devices.rate_hz:g} Hz")
+        raw = devices.object_reading_c()
+        if not np.isfinite(raw):
+            self._refuse(identifier, float("nan"), on_n, off_n, debounce_s)
+            return self
+        object_c = float(session.calibration.correct_c(raw))
+        loop = devices.precondition(scene.pad_temp_c(object_c))
+        duration = (contact_s or scene.pad.contact_duration_s) + scene.pre_contact_s + \
+            ONSET_MARGIN_S
+        n = int(round(duration * devices.rate_hz)) + 1
+        contact = devices.contact(n)
+        self._contact = contact
+        channels = {"t_s": np.arange(n) / devices.rate_hz,
+                    "heat_flux_W_m2": contact.flux_w_m2, "temperature_C": contact.temp_c,
+                    "force_N": contact.force_n}
+        pad_c = float(loop["reading_c"])
+        self._load(channels, identifier, object_c, float("nan"), pad_c, pad_c - object_c,
+                   on_n, off_n, debounce_s)
+        return self
+
     @staticmethod
     def _measure_on(devices, session):
         def measure(true_c, rng):
