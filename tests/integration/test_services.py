@@ -59,6 +59,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
         slave = s["devices_per_side"]["slave"]
         assert slave["kind"] == "emulated" and slave["frames"] > 150
         assert slave["crc_errors"] == 0 and slave["boards_lost"] == 0
+        assert slave["pad_faults_reported"] == 0          # the pad's watchdog never fired
         assert slave["counters"]["board.frames_v2"] == slave["frames"]
         assert slave["counters"]["preconditions"] == 1
         assert abs(slave["precondition"]["reading_c"] - slave["precondition"]["target_c"]) < 0.05

@@ -372,7 +372,10 @@ class EmulatedSlavePad(SlavePadDrivers):
                                                   version=FRAME_VERSION_SLAVE)
         self.board_emulator.noise_uv = board_noise_uv
         bus = f"virtual:telethermal-slave-pad-{next(_bus_names)}"
-        self.pad_emulator = ActivePadEmulator(bus, self._on_junction, heatsink_c=self.room_c)
+        # The pad's driver board keeps the rig's time (its watchdog counts
+        # periods the slave let pass, not the simulator's own computing).
+        self.pad_emulator = ActivePadEmulator(bus, self._on_junction, heatsink_c=self.room_c,
+                                              clock=lambda: self.t_s)
         try:
             super().__init__(self.board_emulator.path, bus, scene.sample_rate_hz,
                              wait_s=wait_s)
@@ -477,6 +480,12 @@ class EmulatedSlavePad(SlavePadDrivers):
         t, flux, temp, force = self._trial
         while self._sent < len(t) and t[self._sent] <= upto_t_s + 1e-12:
             i = self._sent
+            self.t_s += 1.0 / self.rate_hz
+            if self._loop is not None:
+                # A period of the rig: the slave's pad command of that period
+                # (a batch of late samples must not look like a silent slave).
+                self.pad.command(self._loop["setpoint"])
+                self.pad_emulator.poll()
             ir, ok = self._ir_c()
             self.write_s[i] = time.perf_counter()
             self.board_emulator.send(float(t[i]), float(flux[i]), float(temp[i]),
