@@ -195,7 +195,10 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
 
 def run(n: int = 3000, contact_s: float = 3.0, progress=None,
         slave_trials: int = 10) -> dict:
+    import os
+
     step = progress or (lambda _m: None)
+    load_before = os.getloadavg()
     step("paths")
     paths = _paths(n)
     step("sessions")
@@ -203,6 +206,9 @@ def run(n: int = 3000, contact_s: float = 3.0, progress=None,
     step("slave")
     slave = _slave(slave_trials)
     return {"paths": paths, "sessions_1khz_real_clock": sessions, "slave": slave,
+            # The machine's load (1, 5, 15 min) before and after: p99 figures
+            # on a shared machine carry the other jobs' scheduling.
+            "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
             "machine": f"{platform.node()} ({platform.machine()}, "
                        f"{platform.python_implementation()} {platform.python_version()})",
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
