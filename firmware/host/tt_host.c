@@ -15,7 +15,8 @@
  *                            frame, "t <ms>" sets the clock and polls,
  *                            "meas <junction_cc> <heatsink_cc> <current_ma>
  *                            <sensors_ok>" fixes the measurement; stdout
- *                            gets "tx <ms> <id> <hex>", "set <ms> <en> <cc>"
+ *                            gets "tx <ms> <id> <hex>", "set <ms> <en> <cc>",
+ *                            and "done <ms>" after each poll
  *
  * Exit status 0, 1 on a failed check, 2 on bad input (named on stderr). */
 #define _POSIX_C_SOURCE 200809L
@@ -300,6 +301,7 @@ static int peltier(void)
         if (sscanf(line, "t %lu", &ms) == 1) {
             host_set_time_us((uint64_t)ms * 1000u);
             tt_peltier_poll(&drv);
+            printf("done %lu\n", ms); /* a driving process can wait for this */
         } else if (sscanf(line, "rx %x %n", &id, &used) == 1 && used > 0) {
             uint8_t data[8];
             int dlc = parse_hex(line + used, data, 8);

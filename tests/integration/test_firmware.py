@@ -20,12 +20,13 @@ import time
 import tty
 from pathlib import Path
 
+import can
 import pytest
 
 from telethermal.devices.emulators import PeltierEmulator
 from telethermal.devices.frames import TYPE_BOOT, TYPE_SAMPLE
-from telethermal.devices.peltier import CMD, DB, HEARTBEAT, STATUS
 from telethermal.devices.board import SensorBoard
+from telethermal.devices.peltier import CMD, DB, PeltierDriver
 
 ROOT = Path(__file__).resolve().parents[2]
 FIRMWARE = ROOT / "firmware"
@@ -299,6 +300,8 @@ def peltier_trace(exe: Path, script: str) -> list[tuple]:
     events = []
     for line in run(exe, "peltier", stdin=script).splitlines():
         kind, ms, *rest = line.split()
+        if kind == "done":
+            continue
         if kind == "set":
             events.append((int(ms), "set", int(rest[0]), int(rest[1])))
         else:
@@ -366,3 +369,59 @@ def test_over_temperature_disables_until_acknowledged(tt_host):
     assert status[4]["over_temp"] == 1                                  # hot: not cleared
     assert status[5]["over_temp"] == 0                                  # cool + enable 0
     assert status[6]["enabled"] == 1
+
+
+def test_the_projects_peltier_driver_trusts_the_firmware_and_sees_its_watchdog(tt_host):
+    """The firmware on a python-can virtual bus (a bridge forwards frames to
+    and from tt_host's text lines), the project's PeltierDriver on the same
+    bus, one simulated clock: healthy while commanding, and unhealthy with
+    the watchdog flagged once the commands stop for more than 100 ms."""
+    channel = f"firmware-{os.getpid()}-{time.monotonic_ns()}"
+    now_s = [0.0]
+    driver = PeltierDriver(f"virtual:{channel}", clock=lambda: now_s[0])
+    bridge = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    proc = subprocess.Popen([str(tt_host), "peltier"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True, bufsize=1)
+    applied = []
+
+    def step(ms: int) -> None:
+        now_s[0] = ms / 1000
+        while (msg := bridge.recv(0.0)) is not None:
+            proc.stdin.write(f"rx {msg.arbitration_id:x} {bytes(msg.data).hex()}\n")
+        proc.stdin.write(f"t {ms}\n")
+        proc.stdin.flush()
+        for line in proc.stdout:
+            kind, _, *rest = line.split()
+            if kind == "done":
+                break
+            if kind == "tx":
+                bridge.send(can.Message(arbitration_id=int(rest[0], 16),
+                                        data=bytes.fromhex(rest[1]), is_extended_id=False))
+            elif kind == "set":
+                applied.append((ms, int(rest[0]), int(rest[1])))
+        driver.poll()
+
+    last_cmd_ms = 300
+    healthy = {}
+    try:
+        for ms in range(0, 700):
+            if 10 <= ms <= last_cmd_ms and ms % 10 == 0:
+                assert driver.command(35.5)
+            step(ms)
+            healthy[ms] = driver.healthy
+        c = dict(driver.counters)              # before close() sends its disable
+    finally:
+        proc.stdin.close()
+        proc.wait(timeout=10)
+        proc.stdout.close()
+        driver.close()
+        bridge.shutdown()
+    trip_ms = last_cmd_ms + WATCHDOG_MS + 1
+    assert not healthy[5] and all(healthy[ms] for ms in range(10, trip_ms)), healthy
+    assert not any(healthy[ms] for ms in range(trip_ms, 700))
+    assert driver.status.faults == ("watchdog",) and not driver.status.enabled
+    assert driver.status.junction_c == 33.0
+    assert driver.state == 128                           # the heartbeat says fault
+    assert c["sent"] == 30 and c["statuses"] == 31       # each command answered + the trip
+    assert c["heartbeats"] == 7 and c["undecodable"] == c["error_frames"] == c["reboots"] == 0
+    assert applied[1] == (10, 1, 3550) and applied[-1] == (trip_ms, 0, 3300)
