@@ -164,6 +164,8 @@ class PeltierEmulator:
     """A Peltier driver on ``bus``: ``apply(junction_c)`` is called with what
     it drives the junction to (the setpoint, or neutral when disabled)."""
 
+    CMD, STATUS, HEARTBEAT = CMD, STATUS, HEARTBEAT
+
     def __init__(self, bus: str, apply, watchdog_s: float = 0.1, heartbeat_s: float = 0.1,
                  clock=time.monotonic, max_junction_c: float = 60.0,
                  heatsink_c: float = 25.0):
@@ -213,7 +215,12 @@ class PeltierEmulator:
         self.apply(self.junction_c)
 
     def _status(self) -> None:
-        data = STATUS.encode({
+        data = self.STATUS.encode(self._status_signals(), strict=False)
+        self._counter = (self._counter + 1) & 0xFF
+        self._send(self.STATUS, data)
+
+    def _status_signals(self) -> dict:
+        return {
             "enabled": int(self.enabled), "over_temp": int("over_temp" in self.faults),
             "over_current": int("over_current" in self.faults),
             "sensor_fault": int("sensor_fault" in self.faults),
@@ -221,9 +228,16 @@ class PeltierEmulator:
             "junction_c": self.junction_c,
             # A rough Peltier: current to pump the junction away from the heat sink.
             "current_a": max(-30.0, min(30.0, 0.4 * (self.heatsink_c - self.junction_c))),
-            "heatsink_c": self.heatsink_c}, strict=False)
-        self._counter = (self._counter + 1) & 0xFF
-        self._send(STATUS, data)
+            "heatsink_c": self.heatsink_c}
+
+    def _command(self, cmd: dict) -> None:
+        """An accepted command (right version): apply or disable."""
+        if cmd["enable"] and not self.faults:
+            self.enabled = True
+            self.junction_c = min(float(cmd["setpoint_c"]), self.max_junction_c)
+            self.apply(self.junction_c)
+        elif self.enabled or not cmd["enable"]:
+            self._disable()
 
     def poll(self) -> None:
         """Handle the commands that arrived; heartbeat and watchdog."""
@@ -234,16 +248,16 @@ class PeltierEmulator:
             return
         if self.state == STATE_BOOT and now >= self.offline_until_s:
             self.state = STATE_DISABLED
-            self._send(HEARTBEAT, HEARTBEAT.encode({"state": STATE_BOOT,
-                                                    "version": CAN_VERSION}))
+            self._send(self.HEARTBEAT, self.HEARTBEAT.encode({"state": STATE_BOOT,
+                                                              "version": CAN_VERSION}))
         for _ in range(MAX_FRAMES_PER_POLL):      # a flood cannot starve the heartbeat
             msg = self.bus.recv(0.0)
             if msg is None:
                 break
-            if msg.is_error_frame or msg.arbitration_id != CMD.frame_id:
+            if msg.is_error_frame or msg.arbitration_id != self.CMD.frame_id:
                 continue
             try:
-                cmd = CMD.decode(bytes(msg.data))
+                cmd = self.CMD.decode(bytes(msg.data))
             except Exception:              # noqa: BLE001 - a real driver ignores it too
                 self.counters["bad_commands"] += 1
                 continue
@@ -253,12 +267,7 @@ class PeltierEmulator:
             if cmd["version"] != CAN_VERSION:
                 self.counters["bad_commands"] += 1
                 continue
-            if cmd["enable"] and not self.faults:
-                self.enabled = True
-                self.junction_c = min(float(cmd["setpoint_c"]), self.max_junction_c)
-                self.apply(self.junction_c)
-            elif self.enabled or not cmd["enable"]:
-                self._disable()
+            self._command(cmd)
             self._status()
         if self.enabled and self._last_cmd_s is not None and \
                 now - self._last_cmd_s > self.watchdog_s:
@@ -271,7 +280,8 @@ class PeltierEmulator:
             state = STATE_FAULT if self.faults else \
                 STATE_OPERATIONAL if self.enabled else STATE_DISABLED
             self.state = state
-            self._send(HEARTBEAT, HEARTBEAT.encode({"state": state, "version": CAN_VERSION}))
+            self._send(self.HEARTBEAT, self.HEARTBEAT.encode({"state": state,
+                                                              "version": CAN_VERSION}))
 
     def close(self) -> None:
         self.bus.shutdown()

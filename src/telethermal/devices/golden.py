@@ -1,6 +1,6 @@
 """Golden vectors of the device protocols: the sensor board's serial frames
-(``proto/SERIAL.md``) and the Peltier driver's CAN frames (``proto/CAN.md``,
-``peltier.dbc``), each as its bytes beside a JSON of its fields.
+(``proto/SERIAL.md``, versions 1 and 2) and the CAN frames of the Peltier
+driver and of the slave's active pad (``proto/CAN.md``, ``peltier.dbc``), each as its bytes beside a JSON of its fields.
 
 ``python -m telethermal.devices.golden DIR`` (re)writes
 ``DIR/serial/<name>.bin`` + ``.json`` (a whole frame on the wire: COBS
@@ -27,8 +27,10 @@ from pathlib import Path
 
 from cobs import cobs
 
-from telethermal.devices.frames import (STATUS_ALL, STATUS_FLUX, STATUS_FORCE, STATUS_TC,
-                                        TYPE_BOOT, TYPE_SAMPLE, BoardFrame, encode)
+from telethermal.devices.frames import (FRAME_VERSION, FRAME_VERSION_SLAVE, STATUS_ALL,
+                                        STATUS_FLUX, STATUS_FORCE, STATUS_HEATER, STATUS_IR,
+                                        STATUS_PUMP, STATUS_TC, TYPE_BOOT, TYPE_SAMPLE,
+                                        BoardFrame, encode)
 from telethermal.devices.peltier import DB
 
 
@@ -86,6 +88,35 @@ def _crc_with_zero_byte() -> BoardFrame:
 SERIAL_EXAMPLES["crc_low_zero"] = _crc_with_zero_byte()
 
 
+def _v2(seq, t_us, flux_uv, tc_uv, cj_c, force_n, status, ir_object_c, ir_ambient_c,
+        pad_drive, kind=TYPE_SAMPLE) -> BoardFrame:
+    return BoardFrame(seq, t_us, flux_uv, tc_uv, cj_c, force_n, status, kind,
+                      FRAME_VERSION_SLAVE, ir_object_c, ir_ambient_c, pad_drive)
+
+
+_ALL_V2 = STATUS_ALL | STATUS_IR
+#: Version 2 (the slave's board). The names start with ``v2_``.
+SERIAL_EXAMPLES.update({
+    # Before contact: the IR thermometer on the object, the Peltier pad held
+    # 10 K above it (drive a fraction of full current).
+    "v2_precontact": _v2(77, 770_000, 0.375, 412.25, 24.0, 0.0, _ALL_V2, 21.5, 24.25, 0.375),
+    # In contact: flux into the object, force on the pad, IR still read.
+    "v2_contact": _v2(1234, 1_234_567, 2205.25, 380.5, 24.0, 4.5, _ALL_V2, 21.5, 24.25,
+                      -0.125),
+    # A water pad pre-conditioning: heater on at 3/4 duty, pump on.
+    "v2_water_pad": _v2(9, 90_000, 0.0, 300.0, 24.0, 0.0,
+                        _ALL_V2 | STATUS_HEATER | STATUS_PUMP, 30.0, 24.5, 0.75),
+    # The IR channel flagged bad by the board (its values are not read).
+    "v2_ir_flagged": _v2(10, 100_000, 1.0, 2.0, 24.0, 0.0, STATUS_ALL, 0.0, 0.0, 0.0),
+    # An IR reading outside what the sensor reports: the driver refuses it.
+    "v2_ir_out_of_range": _v2(11, 110_000, 1.0, 2.0, 24.0, 0.0, _ALL_V2, 1000.0, 24.0, 0.0),
+    # The slave's board restarted.
+    "v2_boot": _v2(0, 0, 0.0, 0.0, 24.0, 0.0, 0, 0.0, 0.0, 0.0, TYPE_BOOT),
+    # Wraps, negative drive at its limit, every status bit.
+    "v2_wrap_all_bits": _v2(0xFFFF, 0xFFFF_FFFF, -1.0, 1.0, 25.0, 0.5, 63, -70.0, -40.0, -1.0),
+})
+
+
 #: name -> (message name, signals in physical units, as the DBC scales them).
 CAN_EXAMPLES: dict[str, tuple[str, dict]] = {
     "cmd_setpoint": ("PELTIER_CMD", {"enable": 1, "counter": 3, "setpoint_c": 35.25,
@@ -123,14 +154,40 @@ CAN_EXAMPLES: dict[str, tuple[str, dict]] = {
     "heartbeat_operational": ("PELTIER_HEARTBEAT", {"state": 5, "version": 1}),
     "heartbeat_disabled": ("PELTIER_HEARTBEAT", {"state": 127, "version": 1}),
     "heartbeat_fault": ("PELTIER_HEARTBEAT", {"state": 128, "version": 1}),
+    # The slave's active pad (node 2).
+    "pad_cmd_peltier": ("PAD_CMD", {"enable": 1, "pump": 0, "counter": 5, "setpoint_c": 31.5,
+                                    "heater_duty": 0.0, "version": 1}),
+    "pad_cmd_water": ("PAD_CMD", {"enable": 1, "pump": 1, "counter": 15, "setpoint_c": 34.0,
+                                  "heater_duty": 0.748, "version": 1}),
+    "pad_cmd_disable": ("PAD_CMD", {"enable": 0, "pump": 0, "counter": 0, "setpoint_c": 33.0,
+                                    "heater_duty": 0.0, "version": 1}),
+    "pad_status_peltier": ("PAD_STATUS", {"enabled": 1, "over_temp": 0, "sensor_fault": 0,
+                                          "watchdog": 0, "pump_on": 0, "heater_on": 0,
+                                          "counter": 9, "actuator_c": 31.5, "drive": -0.25,
+                                          "heatsink_c": 24.0}),
+    "pad_status_water": ("PAD_STATUS", {"enabled": 1, "over_temp": 0, "sensor_fault": 0,
+                                        "watchdog": 0, "pump_on": 1, "heater_on": 1,
+                                        "counter": 200, "actuator_c": 36.12, "drive": 0.748,
+                                        "heatsink_c": 24.0}),
+    "pad_status_watchdog": ("PAD_STATUS", {"enabled": 0, "over_temp": 0, "sensor_fault": 0,
+                                           "watchdog": 1, "pump_on": 0, "heater_on": 0,
+                                           "counter": 255, "actuator_c": 33.0, "drive": 0.0,
+                                           "heatsink_c": 24.0}),
+    "pad_heartbeat_operational": ("PAD_HEARTBEAT", {"state": 5, "version": 1}),
+    "pad_heartbeat_boot": ("PAD_HEARTBEAT", {"state": 0, "version": 1}),
 }
+
+
+#: Fields a version-1 frame does not carry (left out of its JSON).
+V2_FIELDS = ("ir_object_c", "ir_ambient_c", "pad_drive")
 
 
 def serial_vectors() -> dict[str, tuple[bytes, dict]]:
     """name -> (the frame on the wire, its fields)."""
     out = {}
     for name, frame in SERIAL_EXAMPLES.items():
-        fields = {k: getattr(frame, k) for k in BoardFrame.__slots__}
+        fields = {k: getattr(frame, k) for k in BoardFrame.__slots__
+                  if frame.version != FRAME_VERSION or k not in V2_FIELDS}
         out[name] = (encode(frame), fields)
     return out
 
