@@ -94,6 +94,19 @@ int hal_sensor_read(tt_board_sample *out)
     if (end == p || status > 0xFFu) {
         return -2;
     }
+    /* Version 2's channels, if the line has them. */
+    float *v2[3] = {&out->ir_object_c, &out->ir_ambient_c, &out->pad_drive};
+    for (int i = 0; i < 3; i++) {
+        p = end;
+        *v2[i] = strtof(p, &end);
+        if (end == p && i > 0) {
+            return -2;
+        }
+        if (end == p) {
+            *v2[0] = *v2[1] = *v2[2] = 0.0f;
+            break;
+        }
+    }
     out->status = (uint8_t)status;
     out->t_us = (uint32_t)t_us;
     host_set_time_us(t_us);

@@ -10,8 +10,9 @@
 void host_set_time_us(uint64_t t_us);
 
 /* Sensor board: samples come from `in`, one line each:
- * "t_us flux_uv tc_uv cj_c force_n status" (floats in any strtod form,
- * hexadecimal ones exact); frames go to file descriptor `uart_fd`.
+ * "t_us flux_uv tc_uv cj_c force_n status [ir_object_c ir_ambient_c pad_drive]"
+ * (floats in any strtod form, hexadecimal ones exact; the last three for
+ * version 2); frames go to file descriptor `uart_fd`.
  * `corrupt_every` > 0 flips one bit in every n-th frame written (to show
  * that the round trip test can fail). */
 void host_board_setup(FILE *in, int uart_fd, unsigned corrupt_every);

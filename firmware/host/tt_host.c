@@ -2,14 +2,17 @@
  * and for a lab checking its toolchain. One program, one mode per argument:
  *
  *   tt_host selftest         CRC check value, COBS reference vectors
- *   tt_host serial-encode    stdin "version type seq t_us flux tc cj force status"
- *                            per line -> stdout the wire frame in hex
+ *   tt_host serial-encode    stdin "version type seq t_us flux tc cj force status
+ *                            [ir_object ir_ambient pad_drive]" per line ->
+ *                            stdout the wire frame in hex
  *   tt_host can-codec        stdin "decode <id> <hex>" -> "name sig=raw ...";
  *                            "encode <id> <raw values in DBC order>" -> hex
- *   tt_host board [--cj C] [--corrupt-every N]
+ *                            (PELTIER_* and PAD_* frames)
+ *   tt_host board [--version V] [--cj C] [--corrupt-every N]
  *                            the sensor board's application: a boot frame,
- *                            then one frame per stdin sample line
- *                            ("t_us flux tc cj force status") to stdout
+ *                            then one frame per stdin sample line ("t_us flux
+ *                            tc cj force status [ir_object ir_ambient
+ *                            pad_drive]") to stdout
  *   tt_host peltier          the Peltier driver's application on a script
  *                            from stdin: "rx <id> <hex>" queues a received
  *                            frame, "t <ms>" sets the clock and polls,
@@ -29,6 +32,7 @@
 #include "../src/tt_board.h"
 #include "../src/tt_cobs.h"
 #include "../src/tt_crc16.h"
+#include "../src/tt_pad.h"
 #include "../src/tt_peltier.h"
 #include "hal_host.h"
 
@@ -109,9 +113,10 @@ static int selftest(void)
           "COBS decode refuses a short block");
     /* The boot frame restarts the sequence; samples count on and wrap. */
     tt_board_encoder enc;
-    uint8_t frame[TT_BOARD_FRAME_MAX], raw[TT_BOARD_RECORD_BYTES + 2];
-    const tt_board_sample s = {7, 1.0f, 2.0f, 25.0f, 3.0f, TT_BOARD_STATUS_ALL};
-    tt_board_encoder_init(&enc);
+    uint8_t frame[TT_BOARD_FRAME_MAX], raw[TT_BOARD_RECORD_MAX + 2];
+    const tt_board_sample s = {7, 1.0f, 2.0f, 25.0f, 3.0f, 0.0f, 0.0f, 0.0f,
+                               TT_BOARD_STATUS_ALL};
+    tt_board_encoder_init(&enc, TT_BOARD_VERSION);
     size_t n = tt_board_boot_frame(&enc, 0, 25.0f, frame);
     check(n <= TT_BOARD_FRAME_MAX && frame[n - 1] == 0 && memchr(frame, 0, n - 1) == NULL,
           "boot frame: COBS and one delimiter");
@@ -125,6 +130,11 @@ static int selftest(void)
     enc.seq = 0xFFFF;
     tt_board_sample_frame(&enc, &s, frame);
     check(enc.seq == 0, "seq wraps at 65536");
+    tt_board_encoder_init(&enc, TT_BOARD_VERSION_SLAVE);
+    n = tt_board_boot_frame(&enc, 0, 25.0f, frame);
+    check(tt_cobs_decode(frame, n - 1, raw) == TT_BOARD_RECORD_BYTES_V2 && raw[0] == 2 &&
+              raw[1] == 2 && tt_crc16(raw, 37) == (raw[37] | raw[38] << 8),
+          "version 2 boot frame: 39 bytes, CRC");
     printf("selftest: %d checks, %d failed\n", checks, failures);
     return failures ? 1 : 0;
 }
@@ -138,19 +148,21 @@ static int serial_encode(void)
     while (fgets(line, sizeof line, stdin)) {
         unsigned version, type, seq, status;
         unsigned long t_us;
-        char f[4][64];
+        char f[7][64] = {"0", "0", "0", "0", "0", "0", "0"};
         lineno++;
-        if (sscanf(line, "%u %u %u %lu %63s %63s %63s %63s %u", &version, &type, &seq, &t_us,
-                   f[0], f[1], f[2], f[3], &status) != 9 ||
-            version > 255 || type > 255 || seq > 0xFFFF || t_us > 0xFFFFFFFFul ||
-            status > 255) {
+        int n = sscanf(line, "%u %u %u %lu %63s %63s %63s %63s %u %63s %63s %63s", &version,
+                       &type, &seq, &t_us, f[0], f[1], f[2], f[3], &status, f[4], f[5], f[6]);
+        if ((n != 9 && n != 12) || version > 255 || type > 255 || seq > 0xFFFF ||
+            t_us > 0xFFFFFFFFul || status > 255) {
             fprintf(stderr, "serial-encode: line %d: expected 'version type seq t_us flux_uv "
-                            "tc_uv cj_c force_n status', got %s", lineno, line);
+                            "tc_uv cj_c force_n status [ir_object_c ir_ambient_c pad_drive]', "
+                            "got %s", lineno, line);
             return 2;
         }
         tt_board_record rec = {(uint8_t)version, (uint8_t)type, (uint16_t)seq,
                                (uint32_t)t_us, strtof(f[0], NULL), strtof(f[1], NULL),
-                               strtof(f[2], NULL), strtof(f[3], NULL), (uint8_t)status};
+                               strtof(f[2], NULL), strtof(f[3], NULL), strtof(f[4], NULL),
+                               strtof(f[5], NULL), strtof(f[6], NULL), (uint8_t)status};
         uint8_t frame[TT_BOARD_FRAME_MAX];
         print_hex(frame, tt_board_frame(&rec, frame));
     }
@@ -177,17 +189,37 @@ static int can_decode(unsigned id, const uint8_t *data, int dlc)
                "watchdog=%u counter=%u junction_c=%d current_a=%d heatsink_c=%d\n",
                s.enabled, s.over_temp, s.over_current, s.sensor_fault, s.watchdog, s.counter,
                s.junction_cc, s.current_ma, s.heatsink_cc);
-    } else if (id == TT_PELTIER_HEARTBEAT_ID) {
+    } else if (id == TT_PELTIER_HEARTBEAT_ID || id == TT_PAD_HEARTBEAT_ID) {
         tt_peltier_heartbeat h;
         if (tt_peltier_heartbeat_decode(data, (uint8_t)dlc, &h) != 0) {
             return -1;
         }
-        printf("PELTIER_HEARTBEAT state=%u version=%u\n", h.state, h.version);
+        printf("%s state=%u version=%u\n",
+               id == TT_PAD_HEARTBEAT_ID ? "PAD_HEARTBEAT" : "PELTIER_HEARTBEAT", h.state,
+               h.version);
+    } else if (id == TT_PAD_CMD_ID) {
+        tt_pad_cmd c;
+        if (tt_pad_cmd_decode(data, (uint8_t)dlc, &c) != 0) {
+            return -1;
+        }
+        printf("PAD_CMD enable=%u pump=%u counter=%u setpoint_c=%d heater_duty=%u version=%u\n",
+               c.enable, c.pump, c.counter, c.setpoint_cc, c.heater_duty_raw, c.version);
+    } else if (id == TT_PAD_STATUS_ID) {
+        tt_pad_status s;
+        if (tt_pad_status_decode(data, (uint8_t)dlc, &s) != 0) {
+            return -1;
+        }
+        printf("PAD_STATUS enabled=%u over_temp=%u sensor_fault=%u watchdog=%u pump_on=%u "
+               "heater_on=%u counter=%u actuator_c=%d drive=%d heatsink_c=%d\n",
+               s.enabled, s.over_temp, s.sensor_fault, s.watchdog, s.pump_on, s.heater_on,
+               s.counter, s.actuator_cc, s.drive_milli, s.heatsink_cc);
     } else {
         return -1;
     }
     return 0;
 }
+
+#define MAX_SIGNALS 10
 
 static int can_encode(unsigned id, const long *v, int n)
 {
@@ -202,7 +234,18 @@ static int can_encode(unsigned id, const long *v, int n)
                                      (int16_t)v[6], (int16_t)v[7], (int16_t)v[8]};
         tt_peltier_status_encode(&s, data);
         print_hex(data, TT_PELTIER_STATUS_DLC);
-    } else if (id == TT_PELTIER_HEARTBEAT_ID && n == 2) {
+    } else if (id == TT_PAD_CMD_ID && n == 6) {
+        const tt_pad_cmd c = {(uint8_t)v[0], (uint8_t)v[1], (uint8_t)v[2], (int16_t)v[3],
+                              (uint8_t)v[4], (uint8_t)v[5]};
+        tt_pad_cmd_encode(&c, data);
+        print_hex(data, TT_PAD_CMD_DLC);
+    } else if (id == TT_PAD_STATUS_ID && n == 10) {
+        const tt_pad_status s = {(uint8_t)v[0], (uint8_t)v[1], (uint8_t)v[2], (uint8_t)v[3],
+                                 (uint8_t)v[4], (uint8_t)v[5], (uint8_t)v[6], (int16_t)v[7],
+                                 (int16_t)v[8], (int16_t)v[9]};
+        tt_pad_status_encode(&s, data);
+        print_hex(data, TT_PAD_STATUS_DLC);
+    } else if ((id == TT_PELTIER_HEARTBEAT_ID || id == TT_PAD_HEARTBEAT_ID) && n == 2) {
         const tt_peltier_heartbeat h = {(uint8_t)v[0], (uint8_t)v[1]};
         tt_peltier_heartbeat_encode(&h, data);
         print_hex(data, TT_PELTIER_HEARTBEAT_DLC);
@@ -227,10 +270,10 @@ static int can_codec(void)
                 int dlc = parse_hex(line + used, data, 8);
                 ok = dlc < 0 ? -1 : can_decode(id, data, dlc);
             } else if (strcmp(verb, "encode") == 0) {
-                long v[9];
+                long v[MAX_SIGNALS];
                 int n = 0;
                 char *p = line + used, *end;
-                while (n < 9) {
+                while (n < MAX_SIGNALS) {
                     v[n] = strtol(p, &end, 0);
                     if (end == p) {
                         break;
@@ -256,8 +299,19 @@ static int board(int argc, char **argv)
 {
     float cj_c = 25.0f;
     unsigned corrupt_every = 0;
-    for (int i = 2; i + 1 < argc; i += 2) {
-        if (strcmp(argv[i], "--cj") == 0) {
+    unsigned long version = TT_BOARD_VERSION;
+    for (int i = 2; i < argc; i += 2) {
+        if (i + 1 == argc) {
+            fprintf(stderr, "board: %s needs a value\n", argv[i]);
+            return 2;
+        }
+        if (strcmp(argv[i], "--version") == 0) {
+            version = strtoul(argv[i + 1], NULL, 0);
+            if (version != TT_BOARD_VERSION && version != TT_BOARD_VERSION_SLAVE) {
+                fprintf(stderr, "board: --version is 1 or 2, not %s\n", argv[i + 1]);
+                return 2;
+            }
+        } else if (strcmp(argv[i], "--cj") == 0) {
             cj_c = strtof(argv[i + 1], NULL);
         } else if (strcmp(argv[i], "--corrupt-every") == 0) {
             corrupt_every = (unsigned)strtoul(argv[i + 1], NULL, 0);
@@ -269,7 +323,7 @@ static int board(int argc, char **argv)
     host_board_setup(stdin, 1, corrupt_every);
     host_set_time_us(0);
     tt_board_app app;
-    tt_board_app_start(&app, cj_c);
+    tt_board_app_start(&app, (uint8_t)version, cj_c);
     int r;
     while ((r = tt_board_app_poll(&app)) > 0) {
     }

@@ -31,8 +31,9 @@ static void put_f32(uint8_t *p, float v)
     put_u32(p, bits.u);
 }
 
-void tt_board_record_pack(const tt_board_record *rec, uint8_t out[TT_BOARD_RECORD_BYTES])
+size_t tt_board_record_pack(const tt_board_record *rec, uint8_t out[TT_BOARD_RECORD_MAX])
 {
+    size_t at = 24;
     out[0] = rec->version;
     out[1] = rec->type;
     put_u16(out + 2, rec->seq);
@@ -41,29 +42,36 @@ void tt_board_record_pack(const tt_board_record *rec, uint8_t out[TT_BOARD_RECOR
     put_f32(out + 12, rec->tc_uv);
     put_f32(out + 16, rec->cj_c);
     put_f32(out + 20, rec->force_n);
-    out[24] = rec->status;
-    put_u16(out + 25, tt_crc16(out, 25));
+    if (rec->version != TT_BOARD_VERSION) {
+        put_f32(out + 24, rec->ir_object_c);
+        put_f32(out + 28, rec->ir_ambient_c);
+        put_f32(out + 32, rec->pad_drive);
+        at = 36;
+    }
+    out[at] = rec->status;
+    put_u16(out + at + 1, tt_crc16(out, at + 1));
+    return at + 3;
 }
 
 size_t tt_board_frame(const tt_board_record *rec, uint8_t out[TT_BOARD_FRAME_MAX])
 {
-    uint8_t raw[TT_BOARD_RECORD_BYTES];
-    tt_board_record_pack(rec, raw);
-    size_t n = tt_cobs_encode(raw, sizeof raw, out);
+    uint8_t raw[TT_BOARD_RECORD_MAX];
+    size_t n = tt_cobs_encode(raw, tt_board_record_pack(rec, raw), out);
     out[n] = 0x00;
     return n + 1;
 }
 
-void tt_board_encoder_init(tt_board_encoder *enc)
+void tt_board_encoder_init(tt_board_encoder *enc, uint8_t version)
 {
+    enc->version = version;
     enc->seq = 0;
 }
 
 size_t tt_board_boot_frame(tt_board_encoder *enc, uint32_t t_us, float cj_c,
                            uint8_t out[TT_BOARD_FRAME_MAX])
 {
-    const tt_board_record rec = {TT_BOARD_VERSION, TT_BOARD_TYPE_BOOT, 0, t_us,
-                                 0.0f, 0.0f, cj_c, 0.0f, 0};
+    const tt_board_record rec = {enc->version, TT_BOARD_TYPE_BOOT, 0, t_us,
+                                 0.0f, 0.0f, cj_c, 0.0f, 0.0f, 0.0f, 0.0f, 0};
     enc->seq = 1;
     return tt_board_frame(&rec, out);
 }
@@ -71,8 +79,9 @@ size_t tt_board_boot_frame(tt_board_encoder *enc, uint32_t t_us, float cj_c,
 size_t tt_board_sample_frame(tt_board_encoder *enc, const tt_board_sample *s,
                              uint8_t out[TT_BOARD_FRAME_MAX])
 {
-    const tt_board_record rec = {TT_BOARD_VERSION, TT_BOARD_TYPE_SAMPLE, enc->seq, s->t_us,
-                                 s->flux_uv, s->tc_uv, s->cj_c, s->force_n, s->status};
+    const tt_board_record rec = {enc->version, TT_BOARD_TYPE_SAMPLE, enc->seq, s->t_us,
+                                 s->flux_uv, s->tc_uv, s->cj_c, s->force_n, s->ir_object_c,
+                                 s->ir_ambient_c, s->pad_drive, s->status};
     enc->seq = (uint16_t)(enc->seq + 1u);
     return tt_board_frame(&rec, out);
 }
@@ -86,12 +95,12 @@ static void send(tt_board_app *app, const uint8_t *frame, size_t len)
     }
 }
 
-void tt_board_app_start(tt_board_app *app, float cj_c)
+void tt_board_app_start(tt_board_app *app, uint8_t version, float cj_c)
 {
     uint8_t frame[TT_BOARD_FRAME_MAX];
     app->frames = 0;
     app->write_errors = 0;
-    tt_board_encoder_init(&app->enc);
+    tt_board_encoder_init(&app->enc, version);
     send(app, frame, tt_board_boot_frame(&app->enc, hal_micros(), cj_c, frame));
 }
 

@@ -1,7 +1,8 @@
-/* The sensor board's serial frames, version 1 (proto/SERIAL.md).
+/* The sensor boards' serial frames, versions 1 and 2 (proto/SERIAL.md).
  *
- * A frame is a 27-byte little-endian record, its CRC-16/CCITT-FALSE
- * included, COBS-encoded and ended by one 0x00:
+ * A frame is a little-endian record, its CRC-16/CCITT-FALSE included,
+ * COBS-encoded and ended by one 0x00. Version 1 (the display's board), 27
+ * bytes:
  *
  *    0  u8   version   1
  *    1  u8   type      1 sample, 2 boot (after a restart; seq from 0)
@@ -14,7 +15,17 @@
  *   24  u8   status    bit 0 flux ADC ok, bit 1 thermocouple ok, bit 2 force ok
  *   25  u16  crc       over bytes 0..24
  *
- * Floats are IEEE-754 binary32, written byte by byte (little-endian
+ * Version 2 (the slave's board: an IR thermometer and an active pad), 39
+ * bytes: bytes 0..23 as version 1, then
+ *
+ *   24  f32  ir_object_c   the IR thermometer's object temperature, degC
+ *   28  f32  ir_ambient_c  the IR sensor's own temperature, degC
+ *   32  f32  pad_drive     Peltier current fraction (-1..1) or heater duty (0..1)
+ *   36  u8   status        bits 0-2 as version 1; bit 3 IR ok; bit 4 heater
+ *                          on; bit 5 pump on
+ *   37  u16  crc           over bytes 0..36
+ *
+ * A board sends one version only. Floats are IEEE-754 binary32, written byte by byte (little-endian
  * whatever the MCU's own byte order). */
 #ifndef TT_BOARD_H
 #define TT_BOARD_H
@@ -24,7 +35,8 @@
 
 #include "tt_cobs.h"
 
-#define TT_BOARD_VERSION 1u
+#define TT_BOARD_VERSION 1u       /* the display's board */
+#define TT_BOARD_VERSION_SLAVE 2u /* the slave's board */
 #define TT_BOARD_TYPE_SAMPLE 1u
 #define TT_BOARD_TYPE_BOOT 2u
 
@@ -32,10 +44,15 @@
 #define TT_BOARD_STATUS_TC 0x02u
 #define TT_BOARD_STATUS_FORCE 0x04u
 #define TT_BOARD_STATUS_ALL 0x07u
+#define TT_BOARD_STATUS_IR 0x08u     /* version 2 */
+#define TT_BOARD_STATUS_HEATER 0x10u /* version 2 */
+#define TT_BOARD_STATUS_PUMP 0x20u   /* version 2 */
 
-#define TT_BOARD_RECORD_BYTES 27u /* CRC included */
+#define TT_BOARD_RECORD_BYTES 27u    /* version 1, CRC included */
+#define TT_BOARD_RECORD_BYTES_V2 39u /* version 2, CRC included */
+#define TT_BOARD_RECORD_MAX TT_BOARD_RECORD_BYTES_V2
 /* A whole frame on the wire: COBS of the record plus the 0x00 delimiter. */
-#define TT_BOARD_FRAME_MAX (TT_COBS_MAX_ENCODED(TT_BOARD_RECORD_BYTES) + 1u)
+#define TT_BOARD_FRAME_MAX (TT_COBS_MAX_ENCODED(TT_BOARD_RECORD_MAX) + 1u)
 
 /* Every field of a record, as on the wire. */
 typedef struct {
@@ -47,6 +64,9 @@ typedef struct {
     float tc_uv;
     float cj_c;
     float force_n;
+    float ir_object_c;  /* version 2 only */
+    float ir_ambient_c; /* version 2 only */
+    float pad_drive;    /* version 2 only */
     uint8_t status;
 } tt_board_record;
 
@@ -58,23 +78,31 @@ typedef struct {
     float tc_uv;
     float cj_c;
     float force_n;
+    float ir_object_c;  /* version 2 only */
+    float ir_ambient_c; /* version 2 only */
+    float pad_drive;    /* version 2 only */
     uint8_t status;
 } tt_board_sample;
 
-/* The 27 record bytes, CRC included. */
-void tt_board_record_pack(const tt_board_record *rec, uint8_t out[TT_BOARD_RECORD_BYTES]);
+/* The record's bytes, CRC included: version 1's layout (27 bytes) for
+ * version 1, version 2's (39 bytes) for any other, as the Python codec
+ * does. Returns the length. */
+size_t tt_board_record_pack(const tt_board_record *rec, uint8_t out[TT_BOARD_RECORD_MAX]);
 
 /* A whole frame on the wire (COBS + 0x00) into `out`; returns its length
  * (at most TT_BOARD_FRAME_MAX). */
 size_t tt_board_frame(const tt_board_record *rec, uint8_t out[TT_BOARD_FRAME_MAX]);
 
-/* The board's sequence counter. */
+/* The board's frame version and sequence counter. */
 typedef struct {
+    uint8_t version;
     uint16_t seq;
 } tt_board_encoder;
 
-/* After a restart: the next frame is the boot frame, seq 0. */
-void tt_board_encoder_init(tt_board_encoder *enc);
+/* After a restart: frames of `version` (TT_BOARD_VERSION for the
+ * display's board, TT_BOARD_VERSION_SLAVE for the slave's); the next frame
+ * is the boot frame, seq 0. */
+void tt_board_encoder_init(tt_board_encoder *enc, uint8_t version);
 
 /* The boot frame (seq restarts at 0; no channel flagged ok; the cold
  * junction's temperature only). The next sample gets seq 1. */
@@ -94,8 +122,9 @@ typedef struct {
     uint32_t write_errors; /* frames the UART refused (dropped; the driver sees a seq gap) */
 } tt_board_app;
 
-/* Restart: sends the boot frame with the cold junction's temperature. */
-void tt_board_app_start(tt_board_app *app, float cj_c);
+/* Restart: frames of `version` from now on; sends the boot frame with the
+ * cold junction's temperature. */
+void tt_board_app_start(tt_board_app *app, uint8_t version, float cj_c);
 
 /* If the HAL has a sample ready, frame and send it. Returns what
  * hal_sensor_read returned: 1 a frame sent (or counted as refused), 0 no

@@ -2,14 +2,14 @@
 
 #include "hal.h"
 
-static int16_t get_i16(const uint8_t *p)
+int16_t tt_get_i16(const uint8_t *p)
 {
     uint16_t u = (uint16_t)(p[0] | (p[1] << 8));
     /* Two's complement without implementation-defined conversions. */
     return u < 0x8000u ? (int16_t)u : (int16_t)(-(int32_t)(0x10000u - u));
 }
 
-static void put_i16(uint8_t *p, int16_t v)
+void tt_put_i16(uint8_t *p, int16_t v)
 {
     uint16_t u = (uint16_t)v; /* modulo 2^16: well defined */
     p[0] = (uint8_t)(u & 0xFFu);
@@ -23,7 +23,7 @@ int tt_peltier_cmd_decode(const uint8_t *data, uint8_t dlc, tt_peltier_cmd *out)
     }
     out->enable = data[0] & 0x01u;
     out->counter = (uint8_t)(data[0] >> 4);
-    out->setpoint_cc = get_i16(data + 1);
+    out->setpoint_cc = tt_get_i16(data + 1);
     out->version = data[3];
     return 0;
 }
@@ -31,7 +31,7 @@ int tt_peltier_cmd_decode(const uint8_t *data, uint8_t dlc, tt_peltier_cmd *out)
 void tt_peltier_cmd_encode(const tt_peltier_cmd *cmd, uint8_t out[TT_PELTIER_CMD_DLC])
 {
     out[0] = (uint8_t)((cmd->enable & 0x01u) | ((cmd->counter & 0x0Fu) << 4));
-    put_i16(out + 1, cmd->setpoint_cc);
+    tt_put_i16(out + 1, cmd->setpoint_cc);
     out[3] = cmd->version;
 }
 
@@ -46,9 +46,9 @@ int tt_peltier_status_decode(const uint8_t *data, uint8_t dlc, tt_peltier_status
     out->sensor_fault = (data[0] >> 3) & 0x01u;
     out->watchdog = (data[0] >> 4) & 0x01u;
     out->counter = data[1];
-    out->junction_cc = get_i16(data + 2);
-    out->current_ma = get_i16(data + 4);
-    out->heatsink_cc = get_i16(data + 6);
+    out->junction_cc = tt_get_i16(data + 2);
+    out->current_ma = tt_get_i16(data + 4);
+    out->heatsink_cc = tt_get_i16(data + 6);
     return 0;
 }
 
@@ -58,9 +58,9 @@ void tt_peltier_status_encode(const tt_peltier_status *st, uint8_t out[TT_PELTIE
                        ((st->over_current & 1u) << 2) | ((st->sensor_fault & 1u) << 3) |
                        ((st->watchdog & 1u) << 4));
     out[1] = st->counter;
-    put_i16(out + 2, st->junction_cc);
-    put_i16(out + 4, st->current_ma);
-    put_i16(out + 6, st->heatsink_cc);
+    tt_put_i16(out + 2, st->junction_cc);
+    tt_put_i16(out + 4, st->current_ma);
+    tt_put_i16(out + 6, st->heatsink_cc);
 }
 
 int tt_peltier_heartbeat_decode(const uint8_t *data, uint8_t dlc, tt_peltier_heartbeat *out)

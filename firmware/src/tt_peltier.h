@@ -61,6 +61,10 @@ typedef struct {
     uint8_t version;
 } tt_peltier_heartbeat;
 
+/* Little-endian int16 in a data field (two's complement, portably). */
+int16_t tt_get_i16(const uint8_t *p);
+void tt_put_i16(uint8_t *p, int16_t v);
+
 /* Frame codecs. A decoder returns 0, or -1 if the data field is shorter
  * than the message (`out` untouched). */
 int tt_peltier_cmd_decode(const uint8_t *data, uint8_t dlc, tt_peltier_cmd *out);

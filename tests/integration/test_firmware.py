@@ -79,10 +79,16 @@ def float_arg(value: float) -> str:
     return value.hex() if value == value and abs(value) != float("inf") else repr(value)
 
 
+V2_FIELDS = ("ir_object_c", "ir_ambient_c", "pad_drive")
+
+
 def serial_line(f: dict) -> str:
+    """A record's fields for tt_host serial-encode; version 2's extra fields
+    are there when the JSON has them."""
+    extra = [float_arg(f[k]) for k in V2_FIELDS] if V2_FIELDS[0] in f else []
     return " ".join([str(f["version"]), str(f["type"]), str(f["seq"]), str(f["t_us"]),
                      *(float_arg(f[k]) for k in ("flux_uv", "tc_uv", "cj_c", "force_n")),
-                     str(f["status"])])
+                     str(f["status"]), *extra])
 
 
 def encode_serial(exe: Path, fields: list[dict]) -> list[bytes]:
@@ -114,6 +120,7 @@ def test_the_portable_part_includes_no_mcu_or_hosted_header():
 # ------------------------------------------------------------------ golden vectors
 def test_every_serial_golden_vector_encodes_byte_for_byte(tt_host):
     golden = vectors("serial")
+    assert {f["version"] for _, f in golden.values()} == {1, 2}
     made = encode_serial(tt_host, [fields for _, fields in golden.values()])
     assert len(made) == len(golden)
     differ = [name for (name, (wire, _)), mine in zip(golden.items(), made) if wire != mine]
@@ -187,29 +194,38 @@ def random_value(rng: random.Random) -> float:
     return rng.choice([float("inf"), float("-inf"), float("nan")])
 
 
-def random_samples(n: int, seed: int) -> list[dict]:
+def random_samples(n: int, seed: int, version: int = 1) -> list[dict]:
     """Sample fields, seeded; the clock starts near its wrap so that it wraps."""
     rng = random.Random(seed)
     t_us = 2**32 - 1000 * (n // 2)
     out = []
     for _ in range(n):
         t_us = (t_us + rng.randrange(0, 2000)) & 0xFFFF_FFFF
-        out.append({"t_us": t_us, "flux_uv": random_value(rng), "tc_uv": random_value(rng),
-                    "cj_c": f32(rng.uniform(-10.0, 60.0)), "force_n": random_value(rng),
-                    "status": rng.choice([7, 7, 7, rng.randrange(8)])})
+        sample = {"t_us": t_us, "flux_uv": random_value(rng), "tc_uv": random_value(rng),
+                  "cj_c": f32(rng.uniform(-10.0, 60.0)), "force_n": random_value(rng),
+                  "status": rng.choice([7, 7, 7, rng.randrange(8)])}
+        if version == 2:
+            sample.update(ir_object_c=random_value(rng), ir_ambient_c=random_value(rng),
+                          pad_drive=random_value(rng),
+                          status=rng.choice([15, 15, 31, 47, rng.randrange(64)]))
+        out.append(sample)
     return out
 
 
 def frame_key(f) -> tuple:
+    extra = tuple(f32_bits(getattr(f, k)) for k in V2_FIELDS) if f.version == 2 else ()
     return (f.version, f.type, f.seq, f.t_us, f32_bits(f.flux_uv), f32_bits(f.tc_uv),
-            f32_bits(f.cj_c), f32_bits(f.force_n), f.status)
+            f32_bits(f.cj_c), f32_bits(f.force_n), f.status) + extra
 
 
-def expected_keys(samples: list[dict], cj_c: float) -> list[tuple]:
-    boot = (1, TYPE_BOOT, 0, 0, 0, 0, f32_bits(cj_c), 0, 0)
-    return [boot] + [(1, TYPE_SAMPLE, (i + 1) & 0xFFFF, s["t_us"], f32_bits(s["flux_uv"]),
+def expected_keys(samples: list[dict], cj_c: float, version: int = 1) -> list[tuple]:
+    boot = (version, TYPE_BOOT, 0, 0, 0, 0, f32_bits(cj_c), 0, 0) + \
+        ((0, 0, 0) if version == 2 else ())
+    return [boot] + [(version, TYPE_SAMPLE, (i + 1) & 0xFFFF, s["t_us"], f32_bits(s["flux_uv"]),
                       f32_bits(s["tc_uv"]), f32_bits(s["cj_c"]), f32_bits(s["force_n"]),
-                      s["status"]) for i, s in enumerate(samples)]
+                      s["status"]) + (tuple(f32_bits(s[k]) for k in V2_FIELDS)
+                                      if version == 2 else ())
+                     for i, s in enumerate(samples)]
 
 
 def pty_round_trip(exe: Path, samples: list[dict], tmp_path: Path, *args: str):
@@ -219,7 +235,9 @@ def pty_round_trip(exe: Path, samples: list[dict], tmp_path: Path, *args: str):
     script = tmp_path / "samples.txt"
     script.write_text("".join(
         f"{s['t_us']} {float_arg(s['flux_uv'])} {float_arg(s['tc_uv'])} "
-        f"{float_arg(s['cj_c'])} {float_arg(s['force_n'])} {s['status']}\n" for s in samples))
+        f"{float_arg(s['cj_c'])} {float_arg(s['force_n'])} {s['status']}"
+        + "".join(f" {float_arg(s[k])}" for k in V2_FIELDS if k in s) + "\n"
+        for s in samples))
     master, slave = os.openpty()
     tty.setraw(slave)                       # no line discipline on the frames
     board = SensorBoard(os.ttyname(slave))
@@ -254,11 +272,14 @@ def pty_round_trip(exe: Path, samples: list[dict], tmp_path: Path, *args: str):
     return got, board.all_counters, proc.returncode, stderr
 
 
-def test_ten_thousand_random_frames_through_a_pty_without_a_mismatch(tt_host, tmp_path):
-    samples = random_samples(10_000, seed=18)
-    got, counters, code, stderr = pty_round_trip(tt_host, samples, tmp_path)
+@pytest.mark.parametrize("version", [1, 2])
+def test_ten_thousand_random_frames_through_a_pty_without_a_mismatch(tt_host, tmp_path,
+                                                                     version):
+    samples = random_samples(10_000, seed=18, version=version)
+    got, counters, code, stderr = pty_round_trip(tt_host, samples, tmp_path,
+                                                 "--version", str(version))
     assert code == 0, stderr
-    expected = expected_keys(samples, 25.0)
+    expected = expected_keys(samples, 25.0, version)
     received = [frame_key(f) for f in got]
     mismatches = sum(a != b for a, b in zip(expected, received)) + \
         abs(len(expected) - len(received))
@@ -266,7 +287,8 @@ def test_ten_thousand_random_frames_through_a_pty_without_a_mismatch(tt_host, tm
     assert mismatches == 0, f"{mismatches} mismatches; first at frame {first}: " \
         f"{expected[first] if first is not None else ''} != " \
         f"{received[first] if first is not None else ''}; counters {counters}"
-    assert counters["frames"] == 10_001 and counters["boots"] == 1
+    assert counters["frames"] == counters[f"frames_v{version}"] == 10_001
+    assert counters["boots"] == 1
     assert {k: counters[k] for k in ("crc", "garbage", "version", "seq_gaps", "lost_frames",
                                      "overlong")} == dict.fromkeys(
         ("crc", "garbage", "version", "seq_gaps", "lost_frames", "overlong"), 0)
