@@ -44,16 +44,31 @@ static void print_hex(const uint8_t *data, size_t len)
     putchar('\n');
 }
 
-/* Hex digits to bytes; returns the count or -1. */
+static int nibble(char c)
+{
+    if (c >= '0' && c <= '9') {
+        return c - '0';
+    }
+    if (c >= 'a' && c <= 'f') {
+        return c - 'a' + 10;
+    }
+    if (c >= 'A' && c <= 'F') {
+        return c - 'A' + 10;
+    }
+    return -1;
+}
+
+/* Hex digits (pairs, up to a space or the end of the line) to bytes;
+ * returns the count or -1. */
 static int parse_hex(const char *s, uint8_t *out, int room)
 {
     int n = 0;
     while (s[0] && s[0] != '\n' && s[0] != ' ') {
-        unsigned v;
-        if (!s[1] || sscanf(s, "%2x", &v) != 1 || n == room) {
+        int hi = nibble(s[0]), lo = s[1] ? nibble(s[1]) : -1;
+        if (hi < 0 || lo < 0 || n == room) {
             return -1;
         }
-        out[n++] = (uint8_t)v;
+        out[n++] = (uint8_t)(hi << 4 | lo);
         s += 2;
     }
     return n;
