@@ -154,6 +154,7 @@ void host_set_measure(int16_t junction_cc, int16_t heatsink_cc, int16_t current_
     fixed.junction_cc = junction_cc;
     fixed.heatsink_cc = heatsink_cc;
     fixed.current_ma = current_ma;
+    fixed.drive_milli = 0;
     fixed.sensors_ok = sensors_ok;
     measure_fixed = true;
 }
@@ -193,6 +194,14 @@ void hal_peltier_set(bool enabled, int16_t junction_cc)
     }
 }
 
+void hal_pad_water_set(bool pump_on, uint8_t heater_duty_raw)
+{
+    if (trace) {
+        fprintf(trace, "water %lu %d %u\n", (unsigned long)hal_millis(), pump_on ? 1 : 0,
+                heater_duty_raw);
+    }
+}
+
 void hal_peltier_measure(tt_peltier_measure *out)
 {
     if (measure_fixed) {
@@ -205,5 +214,9 @@ void hal_peltier_measure(tt_peltier_measure *out)
     out->junction_cc = element_cc;
     out->heatsink_cc = 2500;
     out->current_ma = (int16_t)(4 * (2500 - element_cc));
+    /* The active pad's drive as the project's emulator reports it: 0.05 of
+     * full scale per kelvin above the heat sink, within -1..1. */
+    int drive = (element_cc - 2500) / 2;
+    out->drive_milli = (int16_t)(drive > 1000 ? 1000 : drive < -1000 ? -1000 : drive);
     out->sensors_ok = true;
 }

@@ -19,7 +19,8 @@ void host_board_setup(FILE *in, int uart_fd, unsigned corrupt_every);
 
 /* Peltier driver: received frames are queued by host_can_inject; sent
  * frames and the element's settings are printed to `out` as lines
- * "tx <ms> <id> <hex>" and "set <ms> <enabled> <junction_cc>". The
+ * "tx <ms> <id> <hex>", "set <ms> <enabled> <junction_cc>" and (the active
+ * pad) "water <ms> <pump_on> <heater_duty_raw>". The
  * measurement is the ideal element (junction at its target, heat sink at
  * 25 degC) unless host_set_measure overrides it. */
 void host_peltier_setup(FILE *out);

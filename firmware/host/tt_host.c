@@ -13,13 +13,15 @@
  *                            then one frame per stdin sample line ("t_us flux
  *                            tc cj force status [ir_object ir_ambient
  *                            pad_drive]") to stdout
- *   tt_host peltier          the Peltier driver's application on a script
+ *   tt_host peltier [--pad]  the Peltier driver's application (--pad: the
+ *                            slave's active pad, PAD_* frames) on a script
  *                            from stdin: "rx <id> <hex>" queues a received
  *                            frame, "t <ms>" sets the clock and polls,
  *                            "meas <junction_cc> <heatsink_cc> <current_ma>
  *                            <sensors_ok>" fixes the measurement; stdout
  *                            gets "tx <ms> <id> <hex>", "set <ms> <en> <cc>",
- *                            and "done <ms>" after each poll
+ *                            "water <ms> <pump> <duty_raw>" (--pad) and
+ *                            "done <ms>" after each poll
  *
  * Exit status 0, 1 on a failed check, 2 on bad input (named on stderr). */
 #define _POSIX_C_SOURCE 200809L
@@ -351,8 +353,13 @@ static int board(int argc, char **argv)
     return app.write_errors ? 1 : 0;
 }
 
-static int peltier(void)
+static int peltier(int argc, char **argv)
 {
+    bool pad = argc > 2 && strcmp(argv[2], "--pad") == 0;
+    if (argc > (pad ? 3 : 2)) {
+        fprintf(stderr, "peltier: the only option is --pad\n");
+        return 2;
+    }
     char line[256];
     int lineno = 0;
     tt_peltier_driver drv;
@@ -360,7 +367,11 @@ static int peltier(void)
     setvbuf(stdout, NULL, _IOLBF, 0);
     host_peltier_setup(stdout);
     host_set_time_us(0);
-    tt_peltier_default_config(&cfg);
+    if (pad) {
+        tt_pad_default_config(&cfg);
+    } else {
+        tt_peltier_default_config(&cfg);
+    }
     tt_peltier_init(&drv, &cfg);
     while (fgets(line, sizeof line, stdin)) {
         unsigned long ms;
@@ -407,9 +418,9 @@ int main(int argc, char **argv)
         return board(argc, argv);
     }
     if (strcmp(mode, "peltier") == 0) {
-        return peltier();
+        return peltier(argc, argv);
     }
     fprintf(stderr, "usage: tt_host selftest | serial-encode | can-codec | "
-                    "board [--cj C] [--corrupt-every N] | peltier\n");
+                    "board [--version V] [--cj C] [--corrupt-every N] | peltier [--pad]\n");
     return 2;
 }

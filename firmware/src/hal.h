@@ -39,7 +39,7 @@ int hal_uart_write(const uint8_t *data, size_t len);
  * ready yet; a negative value stops the board's loop (host builds only). */
 int hal_sensor_read(tt_board_sample *out);
 
-/* ---- Peltier driver */
+/* ---- Peltier driver (the display's, or the slave's active pad) */
 
 /* Send one classic CAN frame, 11-bit `id`, `dlc` <= 8 bytes. Returns 0, or
  * -1 if no transmit mailbox is free (the frame is dropped and counted). */
@@ -57,7 +57,14 @@ int hal_can_receive(uint16_t *id, uint8_t *data, uint8_t *dlc);
  * on. */
 void hal_peltier_set(bool enabled, int16_t junction_cc);
 
-/* Measure the junction and heat-sink temperatures and the current. */
+/* Measure the junction (the active pad: the actuator, junction or water)
+ * and heat-sink temperatures, the current, and for the active pad its drive
+ * (Peltier current as a fraction of full scale, or the heater's duty). */
 void hal_peltier_measure(tt_peltier_measure *out);
+
+/* The active pad only (a water pad's pump and heater; duty = raw * 0.004,
+ * 250 = full): called with every change, both off whenever the pad is
+ * disabled. A display driver, or a Peltier pad, may leave it empty. */
+void hal_pad_water_set(bool pump_on, uint8_t heater_duty_raw);
 
 #endif

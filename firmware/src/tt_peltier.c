@@ -1,6 +1,7 @@
 #include "tt_peltier.h"
 
 #include "hal.h"
+#include "tt_pad.h"
 
 int16_t tt_get_i16(const uint8_t *p)
 {
@@ -84,6 +85,7 @@ void tt_peltier_heartbeat_encode(const tt_peltier_heartbeat *hb,
 
 void tt_peltier_default_config(tt_peltier_config *cfg)
 {
+    cfg->active_pad = false;
     cfg->neutral_cc = 3300;
     cfg->max_junction_cc = 6000;
     cfg->min_junction_cc = -5000;
@@ -94,16 +96,28 @@ void tt_peltier_default_config(tt_peltier_config *cfg)
     cfg->max_frames_per_poll = 64;
 }
 
-static void apply(tt_peltier_driver *drv, bool enabled, int16_t target_cc)
+void tt_pad_default_config(tt_peltier_config *cfg)
+{
+    tt_peltier_default_config(cfg);
+    cfg->active_pad = true;
+}
+
+static void apply(tt_peltier_driver *drv, bool enabled, int16_t target_cc, bool pump,
+                  uint8_t heater_duty_raw)
 {
     drv->enabled = enabled;
     drv->target_cc = target_cc;
     hal_peltier_set(enabled, target_cc);
+    if (drv->cfg.active_pad) {
+        drv->pump_on = enabled && pump;
+        drv->heater_duty_raw = enabled ? heater_duty_raw : 0u;
+        hal_pad_water_set(drv->pump_on, drv->heater_duty_raw);
+    }
 }
 
 static void disable(tt_peltier_driver *drv)
 {
-    apply(drv, false, drv->cfg.neutral_cc);
+    apply(drv, false, drv->cfg.neutral_cc, false, 0);
 }
 
 static void send(tt_peltier_driver *drv, uint16_t id, const uint8_t *data, uint8_t dlc)
@@ -113,9 +127,33 @@ static void send(tt_peltier_driver *drv, uint16_t id, const uint8_t *data, uint8
     }
 }
 
+static void send_pad_status(tt_peltier_driver *drv)
+{
+    const tt_pad_status st = {
+        drv->enabled ? 1u : 0u,
+        (drv->faults & TT_FAULT_OVER_TEMP) ? 1u : 0u,
+        (drv->faults & TT_FAULT_SENSOR) ? 1u : 0u,
+        (drv->faults & TT_FAULT_WATCHDOG) ? 1u : 0u,
+        drv->pump_on ? 1u : 0u,
+        drv->heater_duty_raw > 0 ? 1u : 0u,
+        drv->status_counter,
+        drv->measured.junction_cc,
+        drv->measured.drive_milli,
+        drv->measured.heatsink_cc,
+    };
+    uint8_t data[TT_PAD_STATUS_DLC];
+    tt_pad_status_encode(&st, data);
+    drv->status_counter = (uint8_t)(drv->status_counter + 1u);
+    send(drv, TT_PAD_STATUS_ID, data, TT_PAD_STATUS_DLC);
+}
+
 static void send_status(tt_peltier_driver *drv)
 {
     hal_peltier_measure(&drv->measured); /* what it measures now, after the change */
+    if (drv->cfg.active_pad) {
+        send_pad_status(drv);
+        return;
+    }
     const tt_peltier_status st = {
         drv->enabled ? 1u : 0u,
         (drv->faults & TT_FAULT_OVER_TEMP) ? 1u : 0u,
@@ -139,7 +177,8 @@ static void send_heartbeat(tt_peltier_driver *drv, uint8_t state)
     uint8_t data[TT_PELTIER_HEARTBEAT_DLC];
     tt_peltier_heartbeat_encode(&hb, data);
     drv->state = state;
-    send(drv, TT_PELTIER_HEARTBEAT_ID, data, TT_PELTIER_HEARTBEAT_DLC);
+    send(drv, drv->cfg.active_pad ? TT_PAD_HEARTBEAT_ID : TT_PELTIER_HEARTBEAT_ID, data,
+         TT_PELTIER_HEARTBEAT_DLC);
 }
 
 void tt_peltier_init(tt_peltier_driver *drv, const tt_peltier_config *cfg)
@@ -155,7 +194,10 @@ void tt_peltier_init(tt_peltier_driver *drv, const tt_peltier_config *cfg)
     drv->measured.junction_cc = cfg->neutral_cc;
     drv->measured.heatsink_cc = cfg->neutral_cc;
     drv->measured.current_ma = 0;
+    drv->measured.drive_milli = 0;
     drv->measured.sensors_ok = true;
+    drv->pump_on = false;
+    drv->heater_duty_raw = 0;
     drv->commands = drv->bad_commands = drv->watchdog_trips = drv->send_failed = 0;
     disable(drv);
 }
@@ -173,7 +215,8 @@ static uint8_t protection_faults(const tt_peltier_driver *drv)
     if (m->heatsink_cc > drv->cfg.over_temp_cc || m->junction_cc > drv->cfg.over_temp_cc) {
         f |= TT_FAULT_OVER_TEMP;
     }
-    if (current_ma > drv->cfg.over_current_ma || -current_ma > drv->cfg.over_current_ma) {
+    if (!drv->cfg.active_pad &&
+        (current_ma > drv->cfg.over_current_ma || -current_ma > drv->cfg.over_current_ma)) {
         f |= TT_FAULT_OVER_CURRENT;
     }
     return f;
@@ -184,11 +227,44 @@ static int16_t clamp(int16_t v, int16_t lo, int16_t hi)
     return v < lo ? lo : v > hi ? hi : v;
 }
 
+/* A command of either kind, decoded. */
+typedef struct {
+    uint8_t enable, pump, heater_duty_raw, version;
+    int16_t setpoint_cc;
+} command;
+
+static int decode_command(const tt_peltier_driver *drv, const uint8_t *data, uint8_t dlc,
+                          command *out)
+{
+    if (drv->cfg.active_pad) {
+        tt_pad_cmd c;
+        if (tt_pad_cmd_decode(data, dlc, &c) != 0) {
+            return -1;
+        }
+        out->enable = c.enable;
+        out->pump = c.pump;
+        out->heater_duty_raw = c.heater_duty_raw;
+        out->version = c.version;
+        out->setpoint_cc = c.setpoint_cc;
+        return 0;
+    }
+    tt_peltier_cmd c;
+    if (tt_peltier_cmd_decode(data, dlc, &c) != 0) {
+        return -1;
+    }
+    out->enable = c.enable;
+    out->pump = 0;
+    out->heater_duty_raw = 0;
+    out->version = c.version;
+    out->setpoint_cc = c.setpoint_cc;
+    return 0;
+}
+
 static void handle_command(tt_peltier_driver *drv, const uint8_t *data, uint8_t dlc,
                            uint32_t now_ms)
 {
-    tt_peltier_cmd cmd;
-    if (tt_peltier_cmd_decode(data, dlc, &cmd) != 0) {
+    command cmd;
+    if (decode_command(drv, data, dlc, &cmd) != 0) {
         drv->bad_commands++;
         return;
     }
@@ -207,7 +283,8 @@ static void handle_command(tt_peltier_driver *drv, const uint8_t *data, uint8_t 
     }
     if (cmd.enable && drv->faults == 0) {
         apply(drv, true, clamp(cmd.setpoint_cc, drv->cfg.min_junction_cc,
-                               drv->cfg.max_junction_cc));
+                               drv->cfg.max_junction_cc),
+              cmd.pump != 0, cmd.heater_duty_raw);
     } else if (drv->enabled || !cmd.enable) {
         disable(drv);
     }
@@ -236,7 +313,7 @@ void tt_peltier_poll(tt_peltier_driver *drv)
         if (hal_can_receive(&id, data, &dlc) <= 0) {
             break;
         }
-        if (id == TT_PELTIER_CMD_ID) {
+        if (id == (drv->cfg.active_pad ? TT_PAD_CMD_ID : TT_PELTIER_CMD_ID)) {
             handle_command(drv, data, dlc, now);
         }
     }

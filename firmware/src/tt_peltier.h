@@ -77,26 +77,35 @@ void tt_peltier_heartbeat_encode(const tt_peltier_heartbeat *hb,
 
 /* What the driver measures each poll (filled by hal_peltier_measure). */
 typedef struct {
-    int16_t junction_cc;
+    int16_t junction_cc; /* the active pad: the actuator (junction or water) */
     int16_t heatsink_cc;
     int16_t current_ma;
-    bool sensors_ok; /* false: a temperature sensor is open or shorted */
+    int16_t drive_milli; /* the active pad only: current fraction or heater duty, 0.001 */
+    bool sensors_ok;     /* false: a temperature sensor is open or shorted */
 } tt_peltier_measure;
 
 /* Limits of the element a lab builds; tt_peltier_default_config gives
  * the values the project's emulator uses. */
 typedef struct {
+    /* false: the display's Peltier driver (node 1, PELTIER_* frames);
+     * true: the slave's active pad (node 2, PAD_* frames, tt_pad.h): the
+     * same rules, plus a water pad's pump and heater (hal_pad_water_set),
+     * off whenever the pad is disabled. */
+    bool active_pad;
     int16_t neutral_cc;        /* where a disabled element is held (33.00 degC) */
     int16_t max_junction_cc;   /* setpoints above are clamped (60.00 degC) */
     int16_t min_junction_cc;   /* setpoints below are clamped (-50.00 degC: none) */
     int16_t over_temp_cc;      /* heat sink above: over_temp (70.00 degC) */
-    int16_t over_current_ma;   /* |current| above: over_current (29000 mA) */
+    int16_t over_current_ma;   /* |current| above: over_current (29000 mA; the
+                                  display's driver only: PAD_STATUS has no flag) */
     uint16_t watchdog_ms;      /* no command for longer: disabled (100 ms) */
     uint16_t heartbeat_ms;     /* heartbeat period (100 ms) */
     uint8_t max_frames_per_poll; /* a flood cannot starve the watchdog (64) */
 } tt_peltier_config;
 
 void tt_peltier_default_config(tt_peltier_config *cfg);
+/* The same for the slave's active pad (active_pad = true). */
+void tt_pad_default_config(tt_peltier_config *cfg);
 
 typedef struct {
     tt_peltier_config cfg;
@@ -105,6 +114,8 @@ typedef struct {
     bool enabled;
     uint8_t faults;        /* TT_FAULT_* */
     int16_t target_cc;     /* what the element is driven to (neutral when disabled) */
+    bool pump_on;          /* the active pad only */
+    uint8_t heater_duty_raw; /* the active pad only, 0.004 per unit */
     uint8_t status_counter;
     bool commanded;        /* a command has arrived since the start */
     uint32_t last_cmd_ms;

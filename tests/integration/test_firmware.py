@@ -310,22 +310,31 @@ def test_the_round_trip_catches_a_corrupted_line(tt_host, tmp_path):
 
 
 # ------------------------------------------------------------------ the Peltier driver
+def pad_cmd(counter: int, setpoint_c: float, enable: int = 1, pump: int = 0,
+            heater_duty: float = 0.0) -> str:
+    message = DB.get_message_by_name("PAD_CMD")
+    data = message.encode({"enable": enable, "pump": pump, "counter": counter & 0xF,
+                           "setpoint_c": setpoint_c, "heater_duty": heater_duty,
+                           "version": 1})
+    return f"rx {message.frame_id:x} {data.hex()}\n"
+
+
 def cmd(counter: int, setpoint_c: float, enable: int = 1, version: int = 1) -> str:
     data = CMD.encode({"enable": enable, "counter": counter & 0xF, "setpoint_c": setpoint_c,
                        "version": version})
     return f"rx {CMD.frame_id:x} {data.hex()}\n"
 
 
-def peltier_trace(exe: Path, script: str) -> list[tuple]:
-    """The firmware's output as (ms, 'set', enabled, cc) and (ms, 'tx', name,
-    signals decoded by cantools from the DBC)."""
+def peltier_trace(exe: Path, script: str, *args: str) -> list[tuple]:
+    """The firmware's output as (ms, 'set', enabled, cc), (ms, 'water', pump,
+    duty_raw) and (ms, 'tx', name, signals decoded by cantools from the DBC)."""
     events = []
-    for line in run(exe, "peltier", stdin=script).splitlines():
+    for line in run(exe, "peltier", *args, stdin=script).splitlines():
         kind, ms, *rest = line.split()
         if kind == "done":
             continue
-        if kind == "set":
-            events.append((int(ms), "set", int(rest[0]), int(rest[1])))
+        if kind in ("set", "water"):
+            events.append((int(ms), kind, int(rest[0]), int(rest[1])))
         else:
             message = DB.get_message_by_frame_id(int(rest[0], 16))
             events.append((int(ms), "tx", message.name,
@@ -447,3 +456,31 @@ def test_the_projects_peltier_driver_trusts_the_firmware_and_sees_its_watchdog(t
     assert c["sent"] == 30 and c["statuses"] == 31       # each command answered + the trip
     assert c["heartbeats"] == 7 and c["undecodable"] == c["error_frames"] == c["reboots"] == 0
     assert applied[1] == (10, 1, 3550) and applied[-1] == (trip_ms, 0, 3300)
+
+
+def test_the_active_pad_variant_drives_pump_and_heater_and_its_watchdog_stops_them(tt_host):
+    """The slave's active pad (node 2, PAD_* frames): the same rules as the
+    display's driver, and pump and heater off whenever the pad is disabled."""
+    script = "t 0\n" + cmd(1, 40.0) + "t 5\n"             # the display's frame: not ours
+    for i, ms in enumerate(range(10, 201, 10)):
+        script += pad_cmd(i, 34.0, pump=1, heater_duty=0.748) + f"t {ms}\n"
+    script += "".join(f"t {ms}\n" for ms in range(201, 450))
+    events = peltier_trace(tt_host, script, "--pad")
+    assert not [e for e in events if e[0] == 5 and e[1] != "tx"]
+    water = [e for e in events if e[1] == "water"]
+    assert water[0] == (0, "water", 0, 0)
+    assert water[1] == (10, "water", 1, 187)              # 0.748 / 0.004
+    trip_ms = 200 + WATCHDOG_MS + 1
+    assert [e for e in water if e[2] == 0 and e[0] > 0] == [(trip_ms, "water", 0, 0)]
+    assert [e for e in events if e[1] == "set" and e[2] == 0 and e[0] > 0] == \
+        [(trip_ms, "set", 0, 3300)]
+    names = {e[2] for e in events if e[1] == "tx"}
+    assert names == {"PAD_STATUS", "PAD_HEARTBEAT"}
+    statuses = [e for e in events if e[2] == "PAD_STATUS"]
+    assert len(statuses) == 21                            # 20 commands + the trip
+    assert statuses[0][3]["pump_on"] == statuses[0][3]["heater_on"] == 1
+    assert statuses[0][3]["actuator_c"] == 34.0 and statuses[0][3]["drive"] == 0.45
+    assert statuses[-1][0] == trip_ms and statuses[-1][3]["watchdog"] == 1
+    assert statuses[-1][3]["pump_on"] == statuses[-1][3]["heater_on"] == 0
+    beats = [e[3]["state"] for e in events if e[2] == "PAD_HEARTBEAT"]
+    assert beats == [0, 5, 5, 5, 128]              # boot; 100, 200, 300 ms; 400 ms: fault
