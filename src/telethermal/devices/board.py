@@ -162,6 +162,8 @@ class SensorBoard:
             self._next_open = self.clock() + self.reopen_s
             return False
         if not first:
+            # Opening flushes the input: no gap is counted across the reopening.
+            self.reader.restart_sequence()
             self.counters["reopened"] += 1
             log.warning("sensor board: %s is back", self.url)
         return True

@@ -29,7 +29,8 @@ import numpy as np
 
 from telethermal.control.safety import SafetyLimits
 from telethermal.devices.board import Calibration
-from telethermal.devices.frames import (STATUS_ALL, STATUS_FLUX, STATUS_FORCE, STATUS_TC,
+from telethermal.devices.frames import (FRAME_VERSION, STATUS_ALL, STATUS_FLUX, STATUS_FORCE,
+                                        STATUS_HEATER, STATUS_IR, STATUS_PUMP, STATUS_TC,
                                         TYPE_BOOT, TYPE_SAMPLE, BoardFrame, encode)
 from telethermal.devices.peltier import (CAN_VERSION, CMD, HEARTBEAT, STATE_BOOT,
                                          STATE_DISABLED, STATE_FAULT, STATE_OPERATIONAL,
@@ -37,8 +38,13 @@ from telethermal.devices.peltier import (CAN_VERSION, CMD, HEARTBEAT, STATE_BOOT
 
 
 class SensorBoardEmulator:
+    """``version``: 1, the display's board; 2, the slave's (IR thermometer,
+    active pad state: the keyword arguments of :meth:`send`)."""
+
     def __init__(self, link_path: str | Path | None = None, cold_junction_c: float = 25.0,
-                 calibration: Calibration = Calibration(), seed: int = 0):
+                 calibration: Calibration = Calibration(), seed: int = 0,
+                 version: int = FRAME_VERSION):
+        self.version = version
         self.link_path = Path(link_path) if link_path else None
         self.cold_junction_c = cold_junction_c
         self.calibration = calibration
@@ -107,8 +113,10 @@ class SensorBoardEmulator:
         """The board restarts: a boot frame, the sequence from 0."""
         self.seq = 0
         self.counters["boots"] += 1
+        extra = {} if self.version == FRAME_VERSION else \
+            {"ir_object_c": 0.0, "ir_ambient_c": 0.0, "pad_drive": 0.0}
         self._write(encode(BoardFrame(0, 0, 0.0, 0.0, self.cold_junction_c, 0.0, 0,
-                                      TYPE_BOOT)))
+                                      TYPE_BOOT, self.version, **extra)))
         self.seq = 1
 
     def garbage(self, n: int) -> None:
@@ -117,7 +125,9 @@ class SensorBoardEmulator:
         self._write(self.rng.integers(0, 256, n, dtype=np.uint8).tobytes())
 
     def frame_for(self, t_s: float, flux_w_m2: float, pad_temp_c: float,
-                  force_n: float) -> BoardFrame:
+                  force_n: float, ir_object_c: float = math.nan, ir_ambient_c: float = math.nan,
+                  pad_drive: float = 0.0, heater: bool = False, pump: bool = False,
+                  ir_ok: bool = True) -> BoardFrame:
         cal, cj = self.calibration, self.cold_junction_c
         status, flux_uv, tc_uv = STATUS_ALL, 0.0, 0.0
         if math.isfinite(flux_w_m2):
@@ -136,12 +146,21 @@ class SensorBoardEmulator:
         if self.stuck and self._last is not None:
             last = self._last
             flux_uv, tc_uv, force_n, status = last.flux_uv, last.tc_uv, last.force_n, last.status
+        if self.version == FRAME_VERSION:
+            return BoardFrame(self.seq, int(t_s * 1e6), flux_uv, tc_uv, cj, force_n, status,
+                              TYPE_SAMPLE)
+        # The IR sensor's bit: the board clears it when the sensor did not
+        # answer (``ir_ok``); the values go as the sensor gave them.
+        status |= (STATUS_IR if ir_ok else 0) | (STATUS_HEATER if heater else 0) | \
+            (STATUS_PUMP if pump else 0)
         return BoardFrame(self.seq, int(t_s * 1e6), flux_uv, tc_uv, cj, force_n, status,
-                          TYPE_SAMPLE)
+                          TYPE_SAMPLE, self.version, ir_object_c, ir_ambient_c, pad_drive)
 
-    def send(self, t_s: float, flux_w_m2: float, pad_temp_c: float, force_n: float) -> bool:
-        """One sample's frame on the line (unless a dropout takes it)."""
-        frame = self.frame_for(t_s, flux_w_m2, pad_temp_c, force_n)
+    def send(self, t_s: float, flux_w_m2: float, pad_temp_c: float, force_n: float,
+             **slave) -> bool:
+        """One sample's frame on the line (unless a dropout takes it);
+        ``slave``: the version-2 fields (:meth:`frame_for`)."""
+        frame = self.frame_for(t_s, flux_w_m2, pad_temp_c, force_n, **slave)
         self._last = frame
         self.seq = (self.seq + 1) & 0xFFFF
         if self.dropout and self.rng.random() < self.dropout:

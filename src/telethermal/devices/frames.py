@@ -192,6 +192,12 @@ class FrameReader:
             out.append(frame)
         return out
 
+    def restart_sequence(self) -> None:
+        """The line was reopened: what the board sent meanwhile (its boot
+        frame among it) is gone, so the next frame starts the sequence."""
+        self._next_seq = None
+        self._buffer.clear()
+
     def _sequence(self, frame: BoardFrame) -> None:
         if frame.type == TYPE_BOOT:
             self.counters["boots"] += 1
