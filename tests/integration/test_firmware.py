@@ -25,6 +25,7 @@ import pytest
 
 from telethermal.devices.emulators import PeltierEmulator
 from telethermal.devices.frames import TYPE_BOOT, TYPE_SAMPLE
+from telethermal.devices.active_pad import ActivePadDriver
 from telethermal.devices.board import SensorBoard
 from telethermal.devices.peltier import CMD, DB, PeltierDriver
 
@@ -402,18 +403,22 @@ def test_over_temperature_disables_until_acknowledged(tt_host):
     assert status[6]["enabled"] == 1
 
 
-def test_the_projects_peltier_driver_trusts_the_firmware_and_sees_its_watchdog(tt_host):
+@pytest.mark.parametrize("pad", [False, True], ids=["PeltierDriver", "ActivePadDriver"])
+def test_the_projects_driver_trusts_the_firmware_and_sees_its_watchdog(tt_host, pad):
     """The firmware on a python-can virtual bus (a bridge forwards frames to
-    and from tt_host's text lines), the project's PeltierDriver on the same
-    bus, one simulated clock: healthy while commanding, and unhealthy with
-    the watchdog flagged once the commands stop for more than 100 ms."""
+    and from tt_host's text lines), the project's PeltierDriver (or, for the
+    slave's active pad, ActivePadDriver) on the same bus, one simulated
+    clock: healthy while commanding, and unhealthy with the watchdog flagged
+    once the commands stop for more than 100 ms."""
     channel = f"firmware-{os.getpid()}-{time.monotonic_ns()}"
     now_s = [0.0]
-    driver = PeltierDriver(f"virtual:{channel}", clock=lambda: now_s[0])
+    driver = (ActivePadDriver if pad else PeltierDriver)(f"virtual:{channel}",
+                                                         clock=lambda: now_s[0])
     bridge = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    proc = subprocess.Popen([str(tt_host), "peltier"], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, bufsize=1)
-    applied = []
+    proc = subprocess.Popen([str(tt_host), "peltier", *(["--pad"] if pad else [])],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            bufsize=1)
+    applied, water = [], []
 
     def step(ms: int) -> None:
         now_s[0] = ms / 1000
@@ -430,6 +435,8 @@ def test_the_projects_peltier_driver_trusts_the_firmware_and_sees_its_watchdog(t
                                         data=bytes.fromhex(rest[1]), is_extended_id=False))
             elif kind == "set":
                 applied.append((ms, int(rest[0]), int(rest[1])))
+            elif kind == "water":
+                water.append((ms, int(rest[0]), int(rest[1])))
         driver.poll()
 
     last_cmd_ms = 300
@@ -437,7 +444,8 @@ def test_the_projects_peltier_driver_trusts_the_firmware_and_sees_its_watchdog(t
     try:
         for ms in range(0, 700):
             if 10 <= ms <= last_cmd_ms and ms % 10 == 0:
-                assert driver.command(35.5)
+                assert driver.command(35.5, pump=True, heater_duty=0.5) if pad else \
+                    driver.command(35.5)
             step(ms)
             healthy[ms] = driver.healthy
         c = dict(driver.counters)              # before close() sends its disable
@@ -451,11 +459,14 @@ def test_the_projects_peltier_driver_trusts_the_firmware_and_sees_its_watchdog(t
     assert not healthy[5] and all(healthy[ms] for ms in range(10, trip_ms)), healthy
     assert not any(healthy[ms] for ms in range(trip_ms, 700))
     assert driver.status.faults == ("watchdog",) and not driver.status.enabled
-    assert driver.status.junction_c == 33.0
+    assert (driver.status.actuator_c if pad else driver.status.junction_c) == 33.0
     assert driver.state == 128                           # the heartbeat says fault
     assert c["sent"] == 30 and c["statuses"] == 31       # each command answered + the trip
     assert c["heartbeats"] == 7 and c["undecodable"] == c["error_frames"] == c["reboots"] == 0
     assert applied[1] == (10, 1, 3550) and applied[-1] == (trip_ms, 0, 3300)
+    if pad:
+        assert water[1] == (10, 1, 125) and water[-1] == (trip_ms, 0, 0)
+        assert not driver.status.pump_on and not driver.status.heater_on
 
 
 def test_the_active_pad_variant_drives_pump_and_heater_and_its_watchdog_stops_them(tt_host):
