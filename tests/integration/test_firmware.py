@@ -495,3 +495,17 @@ def test_the_active_pad_variant_drives_pump_and_heater_and_its_watchdog_stops_th
     assert statuses[-1][3]["pump_on"] == statuses[-1][3]["heater_on"] == 0
     beats = [e[3]["state"] for e in events if e[2] == "PAD_HEARTBEAT"]
     assert beats == [0, 5, 5, 5, 128]              # boot; 100, 200, 300 ms; 400 ms: fault
+
+
+@pytest.mark.parametrize("measure, flag", [("3500 2500 -29500 1", "over_current"),
+                                           ("3500 2500 -4000 0", "sensor_fault")])
+def test_over_current_and_a_failed_sensor_disable_the_element(tt_host, measure, flag):
+    script = "t 0\n" + cmd(1, 35.0) + "t 1\n" + f"meas {measure}\n" + "t 2\n" + \
+        cmd(2, 35.0) + "t 3\n"
+    events = peltier_trace(tt_host, script)
+    assert [e for e in events if e[1] == "set"][1:] == [(1, "set", 1, 3500),
+                                                         (2, "set", 0, 3300)]
+    status = {e[0]: e[3] for e in events if e[2] == "PELTIER_STATUS"}
+    assert status[2][flag] == 1 and status[2]["enabled"] == 0
+    assert status[3][flag] == 1 and status[3]["enabled"] == 0          # still refused
+    assert sum(status[2][f] for f in ("over_temp", "over_current", "sensor_fault")) == 1
