@@ -1,6 +1,7 @@
 """Golden vectors of the device protocols: the sensor board's serial frames
 (``proto/SERIAL.md``, versions 1 and 2) and the CAN frames of the Peltier
-driver and of the slave's active pad (``proto/CAN.md``, ``peltier.dbc``), each as its bytes beside a JSON of its fields.
+driver and of the slave's active pad (``proto/CAN.md``, ``peltier.dbc``),
+each as its bytes beside a JSON of its fields.
 
 ``python -m telethermal.devices.golden DIR`` (re)writes
 ``DIR/serial/<name>.bin`` + ``.json`` (a whole frame on the wire: COBS
