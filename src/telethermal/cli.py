@@ -188,8 +188,9 @@ def cmd_bench_render(args) -> int:
 def cmd_bench_devices(args) -> int:
     from telethermal.bench import devices
 
-    with _progress(2, "bench devices") as advance:
-        report = devices.run(n=args.samples, contact_s=args.contact_s, progress=advance)
+    with _progress(3, "bench devices") as advance:
+        report = devices.run(n=args.samples, contact_s=args.contact_s, progress=advance,
+                             slave_trials=args.slave_trials)
     report["command"] = "telethermal " + " ".join(sys.argv[1:])
     _write_json(args.json, report)
     for kind, r in report["paths"].items():
@@ -204,6 +205,7 @@ def cmd_bench_devices(args) -> int:
         print(f"1 kHz real-clock session, {kind:8s}: period p99 {r['loop_period_p99_us']:.0f} us,"
               f" busy p99 {r['busy_p99_us']:.0f} us, {r['deadline_misses']} missed deadlines of "
               f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %")
+    print("\n".join(devices.slave_lines(report)))
     print(f"wrote {args.json}")
     return 0
 
@@ -436,7 +438,7 @@ def cmd_demo(args) -> int:
     report = run_demo(out, args.scene, out / "identifier.npz", out / "generator.npz",
                       materials, seed=args.seed, contact_s=args.contact_s,
                       record_dir=Path(args.record) if args.record else None,
-                      view_port=args.view)
+                      view_port=args.view, devices=args.devices)
     view = report.pop("view", None)
     path = _write_json(args.json or out / "demo.json", report)
     print(f"touch plots: {out}/touch-*.png; summary: {path}")
@@ -823,12 +825,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--contact-s", type=_positive(), default=3.0)
     p.set_defaults(func=cmd_bench_record)
 
-    p = bsub.add_parser("devices", help="sensor-to-controller and controller-to-actuator "
-                                        "latency through the emulated serial and CAN paths, "
-                                        "beside the direct simulator")
+    p = bsub.add_parser("devices", help="both sides' latencies through the emulated serial "
+                                        "and CAN paths beside the direct simulator, and the "
+                                        "slave's identification through its drivers")
     p.add_argument("--json", required=True)
     p.add_argument("--samples", type=int, default=3000)
     p.add_argument("--contact-s", type=_positive(), default=3.0)
+    p.add_argument("--slave-trials", type=int, default=10,
+                   help="touches per material on the slave's side (simulated and through the "
+                        "emulated drivers, the same trials)")
     p.set_defaults(func=cmd_bench_devices)
 
     p = bsub.add_parser("faults", help="rendering under network faults, compensated beside "
@@ -927,6 +932,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
     p.add_argument("--contact-s", type=_positive(), default=5.0)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
+                   help="emulated: master and slave each on emulated boards (ptys) and CAN "
+                        "drivers (virtual buses), read through the drivers")
     p.add_argument("--record", metavar="DIR", help="both services record every touch here "
                                                    "(one MCAP file per host; see replay)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",

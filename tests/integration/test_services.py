@@ -27,8 +27,9 @@ def models(tmp_path_factory):
 
 @pytest.mark.parametrize("devices", ["sim", "emulated"])
 def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices):
-    # devices = "emulated": the master's display pad is read and driven
-    # through the serial and CAN drivers and their emulators.
+    # devices = "emulated": the master's display pad and the slave's sensing
+    # pad are read and driven through the serial and CAN drivers and their
+    # emulators.
     ident_path, gen_path, identifier, generator = models
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports, 0,
@@ -43,7 +44,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     # The same touch in one process (same seeds, so the same physics).
     local = run_session(SCENE, "wood", identifier, generator, contact_s=1.5, seed=4).summary
     assert codes == {"slave": 0, "master": 0}
-    assert s["safety_events"] == 0
+    assert s["safety_events"] == 0, s["safety_event_counts"]
     assert s["identified"] == local["identified"]
     # Over the network the slave touches when the master's contact event
     # reaches it and the loop runs on the real clock; the rendering stays
@@ -54,6 +55,15 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     if devices == "emulated":
         board = s["device_counters"]["board"]
         assert board["frames"] > 1000 and board["crc"] == 0 and board["port_lost"] == 0
+        # The slave's side too: its board's version-2 frames, its pad's loop.
+        slave = s["devices_per_side"]["slave"]
+        assert slave["kind"] == "emulated" and slave["frames"] > 150
+        assert slave["crc_errors"] == 0 and slave["boards_lost"] == 0
+        assert slave["pad_faults_reported"] == 0          # the pad's watchdog never fired
+        assert slave["counters"]["board.frames_v2"] == slave["frames"]
+        assert slave["counters"]["preconditions"] == 1
+        assert abs(slave["precondition"]["reading_c"] - slave["precondition"]["target_c"]) < 0.05
+        assert s["devices_per_side"]["master"]["frames"] > 1000
     for role in ("slave", "master"):
         text = (tmp_path / f"{role}.log").read_text()
         assert "stopped cleanly" in text and "safe state" in text

@@ -9,8 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from telethermal.devices.board import Calibration, DeviceError
-from telethermal.devices.frames import (FRAME_VERSION, MAX_FRAME_BYTES, TYPE_BOOT, BoardFrame,
-                                        FrameError, FrameReader, crc16, decode, encode)
+from telethermal.devices.frames import (FRAME_VERSION, FRAME_VERSION_SLAVE, MAX_FRAME_BYTES,
+                                        TYPE_BOOT, BoardFrame, FrameError, FrameReader, crc16,
+                                        decode, encode)
 from telethermal.physics.sensors import type_t_emf_mv
 
 f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
@@ -57,7 +58,7 @@ def test_each_bad_frame_is_counted_by_kind_and_the_next_good_one_read():
     good = [BoardFrame(i, 1000 * i, 100.0, 50.0, 25.0, 3.0) for i in range(6)]
     flipped = bytearray(encode(good[1]))
     flipped[5] ^= 0x10
-    other_version = BoardFrame(2, 0, 0, 0, 0, 0, 7, version=FRAME_VERSION + 1)
+    other_version = BoardFrame(2, 0, 0, 0, 0, 0, 7, version=FRAME_VERSION_SLAVE + 1)
     assert encode(other_version)                   # encodable, but not ours
     stream = encode(good[0]) + bytes(flipped) + encode(other_version) + b"\x13\x37\x00" + \
         encode(good[3]) + encode(good[5])
@@ -67,7 +68,7 @@ def test_each_bad_frame_is_counted_by_kind_and_the_next_good_one_read():
     assert c["crc"] == 1 and c["version"] == 1 and c["garbage"] == 1
     assert c["seq_gaps"] == 2 and c["lost_frames"] == 3        # 1, 2 lost; 4 lost
     assert "sequence gap" in reader.last_error
-    with pytest.raises(FrameError, match="version 2"):
+    with pytest.raises(FrameError, match="version 3"):
         decode(encode(other_version)[:-1])
 
 

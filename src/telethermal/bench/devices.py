@@ -11,6 +11,17 @@ each.
   ``virtual`` bus (in-process: it measures the software path, not a wire);
 * direct: one ``SimDisplay.read``/``apply`` call (the physics included,
   which the emulated path also runs, so it is the floor).
+
+The slave's side (``slave``): every scene material's touches of the
+fingertip scene, each read once by the simulator's path and once through
+the slave's emulated devices (version-2 board on a pty, the active pad's
+driver on a virtual CAN bus) on the same trial (same seeds): identification
+accuracy of each and their agreement; sensor-to-identifier latency (the
+board emulator writing a sample's frame to the identifier having taken it:
+pty, COBS, CRC, conversion, the slave's sample bookkeeping and the
+identifier's own step), of which serial (to the driver's decoded reading);
+and the pad's CAN controller-to-actuator latency (``PAD_CMD`` sent to the
+pad driver applying it).
 """
 
 from __future__ import annotations
@@ -98,13 +109,126 @@ def _sessions(contact_s: float) -> dict:
     return out
 
 
-def run(n: int = 3000, contact_s: float = 3.0, progress=None) -> dict:
+def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int = 0) -> dict:
+    from telethermal.data.generate import sensor_session
+    from telethermal.devices.slave_pad import EmulatedSlavePad
+    from telethermal.session.models import train_identifier
+    from telethermal.session.run import slave_rng
+    from telethermal.session.slave import Slave
+
+    scene = with_finger(load_scene(scene_name))
+    ident = train_identifier(scene, seed)
+    session = sensor_session(scene, np.random.default_rng((seed, 0xBE)))
+    devices = EmulatedSlavePad(scene, session.instruments, seed=seed)
+    rows, to_ident, to_ident_backlog, serial = [], [], [], []
+    try:
+        for material in scene.materials:
+            for k in range(trials_per_material):
+                trial_seed = 1000 * seed + 17 * k + scene.materials.index(material)
+                sim = Slave(scene, material, ident, slave_rng(trial_seed), session=session)
+                sim.advance_to(float(sim.t_s[-1]) + 1.0)
+                emu = Slave(scene, material, ident, slave_rng(trial_seed), session=session,
+                            devices=devices)
+                backlog = np.zeros(len(emu.t_s), dtype=bool)
+                t = float(emu.t_s[0])
+                while t <= float(emu.t_s[-1]) + 0.02:            # period by period, 100 Hz
+                    emu.advance_to(t)
+                    t += 1.0 / scene.sample_rate_hz
+                pushed = np.isfinite(emu.pushed_s)
+                if emu.detected_index is not None:
+                    # The samples between the onset and its debounced detection
+                    # wait for the detector, not for the devices: apart.
+                    backlog[emu._onset_index:emu.detected_index] = True
+                    to_ident_backlog += list((emu.pushed_s - devices.write_s)[
+                        emu._onset_index:emu.detected_index])
+                    pushed[emu._onset_index:emu.detected_index] = False
+                to_ident += list(emu.pushed_s[pushed] - devices.write_s[pushed])
+                got = np.isfinite(emu._contact.received_s)
+                serial += list(emu._contact.received_s[got] - devices.write_s[got])
+                rows.append({"material": material, "seed": trial_seed,
+                             "sim": sim.estimate.label if sim.estimate else "unknown",
+                             "emulated": emu.estimate.label if emu.estimate else "unknown",
+                             "sim_decision_s": sim.committed_at_s,
+                             "emulated_decision_s": emu.committed_at_s,
+                             "pad_true_c_sim": float(sim.trial.extra["T_pad_true_C"]),
+                             "pad_true_c_emulated": float(emu.trial.extra["T_pad_true_C"])})
+        can = []
+        for _ in range(1000):                   # the pad's CAN: command to applied
+            devices.junction_c = float("nan")
+            t0 = time.perf_counter()
+            devices.pad.command(34.0)
+            while not devices.junction_c == 34.0 and time.perf_counter() - t0 < 0.05:
+                devices.pad_emulator.poll()
+            can.append(time.perf_counter() - t0)
+            devices.pad.poll()
+        counters = devices.all_counters()
+    finally:
+        devices.close()
+    n = len(rows)
+
+    def accuracy(path):
+        return sum(r[path] == r["material"] for r in rows) / n
+
+    def accuracy_with_pairs(path):
+        return sum(r["material"] in r[path].split("|") for r in rows) / n
+
+    pad_diff = np.array([r["pad_true_c_emulated"] - r["pad_true_c_sim"] for r in rows])
+    return {"scene": scene.name, "identifier": ident.method, "trials": n,
+            "accuracy_sim": accuracy("sim"), "accuracy_emulated": accuracy("emulated"),
+            "accuracy_difference_points": 100 * (accuracy("emulated") - accuracy("sim")),
+            "accuracy_with_pairs_sim": accuracy_with_pairs("sim"),
+            "accuracy_with_pairs_emulated": accuracy_with_pairs("emulated"),
+            "agreement": sum(r["sim"] == r["emulated"] for r in rows) / n,
+            "decision_time_difference_s_max": max(
+                (abs(r["sim_decision_s"] - r["emulated_decision_s"]) for r in rows
+                 if r["sim_decision_s"] is not None and r["emulated_decision_s"] is not None),
+                default=None),
+            "pad_temp_difference_k": {"mean": float(pad_diff.mean()),
+                                      "sd": float(pad_diff.std()),
+                                      "max_abs": float(np.abs(pad_diff).max())},
+            "sensor_to_identifier": _percentiles(to_ident),
+            "sensor_to_identifier_onset_backlog": _percentiles(to_ident_backlog),
+            "serial_sensor_to_driver": _percentiles(serial),
+            "can_controller_to_actuator": _percentiles(can),
+            "device_counters": counters, "touches": rows}
+
+
+def run(n: int = 3000, contact_s: float = 3.0, progress=None,
+        slave_trials: int = 10) -> dict:
+    import os
+
     step = progress or (lambda _m: None)
+    load_before = os.getloadavg()
     step("paths")
     paths = _paths(n)
     step("sessions")
     sessions = _sessions(contact_s)
-    return {"paths": paths, "sessions_1khz_real_clock": sessions,
+    step("slave")
+    slave = _slave(slave_trials)
+    return {"paths": paths, "sessions_1khz_real_clock": sessions, "slave": slave,
+            # The machine's load (1, 5, 15 min) before and after: p99 figures
+            # on a shared machine carry the other jobs' scheduling.
+            "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
             "machine": f"{platform.node()} ({platform.machine()}, "
                        f"{platform.python_implementation()} {platform.python_version()})",
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+
+def slave_lines(report: dict) -> list[str]:
+    """What ``telethermal bench devices`` prints of the slave's side."""
+    s = report.get("slave")
+    if not s:
+        return []
+    out = [f"slave, {s['trials']} touches of {s['scene']} ({s['identifier']}), the same trials "
+           f"both ways: accuracy {100 * s['accuracy_sim']:.1f} % simulated, "
+           f"{100 * s['accuracy_emulated']:.1f} % through the drivers "
+           f"({s['accuracy_difference_points']:+.1f} points; a committed pair counted wrong; "
+           f"with pairs {100 * s['accuracy_with_pairs_sim']:.1f} / "
+           f"{100 * s['accuracy_with_pairs_emulated']:.1f} %), same label on "
+           f"{100 * s['agreement']:.1f} %"]
+    for name in ("sensor_to_identifier", "sensor_to_identifier_onset_backlog",
+                 "serial_sensor_to_driver", "can_controller_to_actuator"):
+        r = s[name]
+        out.append(f"slave {name}: p50 {r['p50_us']:.1f} us, p99 {r['p99_us']:.1f} us, "
+                   f"max {r['max_us']:.0f} us (n {r['n']})")
+    return out

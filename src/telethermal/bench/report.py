@@ -307,6 +307,21 @@ def devices(out: Path, d: dict) -> list[str]:
                      f"{r['loop_period_p99_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, "
                      f"{r['deadline_misses']} deadline misses of {r['steps']}, flux error "
                      f"{_pct(r['flux_rms_error_rel_whole'])}.")
+    slave = d.get("slave")
+    if slave:
+        lines += ["", "The slave's side (its version-2 board, its active pad's CAN driver):", "",
+                  "| slave path | p50 | p99 |", "|---|---|---|"]
+        for name, what in (("sensor_to_identifier", "board frame to the identifier"),
+                           ("serial_sensor_to_driver", "board frame to the driver's reading"),
+                           ("can_controller_to_actuator", "pad command to the driver applying "
+                                                          "it")):
+            r = slave[name]
+            lines.append(f"| {what} | {r['p50_us']:.0f} us | {r['p99_us']:.0f} us |")
+        lines += ["", f"Identification on the same {slave['trials']} touches of "
+                      f"{slave['scene']}: {100 * slave['accuracy_sim']:.1f} % simulated, "
+                      f"{100 * slave['accuracy_emulated']:.1f} % through the drivers "
+                      f"({slave['accuracy_difference_points']:+.1f} points; same label on "
+                      f"{100 * slave['agreement']:.1f} %)."]
     return lines + ["", _provenance(d), ""]
 
 

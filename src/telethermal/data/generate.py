@@ -97,7 +97,7 @@ class _Contacts:
 
 
 def _draw(scene: Scene, obj, n: int, reference_h: float, rng,
-          session: SensorSession) -> _Contacts:
+          session: SensorSession, measure=None) -> _Contacts:
     var, sens = scene.variability, scene.sensors
     force = np.clip(rng.normal(var.force_n, var.force_sd_n, n), 0.3 * var.force_n,
                     3.0 * var.force_n)
@@ -105,7 +105,7 @@ def _draw(scene: Scene, obj, n: int, reference_h: float, rng,
     jitter = sens.onset_jitter_s
     onset = np.clip(rng.normal(0.0, jitter, n), -3 * jitter, 3 * jitter) if jitter else np.zeros(n)
     true_c = obj.temp_c + rng.normal(0.0, var.object_temp_sd_c, n)
-    measured_c = session.measure_c(true_c, rng)
+    measured_c = session.measure_c(true_c, rng) if measure is None else measure(true_c, rng)
     return _Contacts(force, h, onset, true_c, measured_c)
 
 
@@ -165,9 +165,16 @@ def detected_onset_s(times: np.ndarray, force_n: np.ndarray) -> float:
 
 
 def pad_database(scene: Scene, rng: np.random.Generator,
-                 session: SensorSession | None = None) -> list[Trial]:
+                 session: SensorSession | None = None, measure=None,
+                 pad_loop=None) -> list[Trial]:
     """Database 1: the scene's pad against each object, in one session of
-    its instruments (drawn from ``rng`` and calibrated, unless given)."""
+    its instruments (drawn from ``rng`` and calibrated, unless given).
+
+    ``measure(true_c, rng)`` and ``pad_loop(command_c)``: the object's
+    measurement (corrected) and the pad's pre-conditioning (its true
+    temperatures at contact) through devices instead of the simulator's
+    shortcuts (a Peltier pad only); the random draws stay the same, so the
+    trials are the same but for what the devices change."""
     session = session or sensor_session(scene, rng)
     tc_bias = session.instruments.pad_tc_bias_k
     trials = []
@@ -175,12 +182,14 @@ def pad_database(scene: Scene, rng: np.random.Generator,
     times = _time_axis(scene, scene.pad.contact_duration_s + ONSET_MARGIN_S)
     for obj in scene.objects:
         model, choice = pad_contact_model(scene, obj)
-        draws = _draw(scene, obj, n, scene.pad.contact_conductance_w_m2k, rng, session)
+        draws = _draw(scene, obj, n, scene.pad.contact_conductance_w_m2k, rng, session, measure)
         command = np.array([scene.pad_temp_c(t) for t in draws.object_ir_c])
         # The pad's loop holds its thermocouple's reading at the command: the
         # pad itself sits the thermocouple's bias below it.
         if scene.pad.kind == "peltier":
             pad_c = command - tc_bias + rng.normal(0.0, PELTIER_SETPOINT_SD_K, n)
+            if pad_loop is not None:
+                pad_c = pad_loop(command)           # the loop's own error instead
             back_c = pad_c                          # junction held at the set point
         else:
             run = precondition(command - tc_bias, scene.room_temp_c, PRECONDITION_S)

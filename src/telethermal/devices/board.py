@@ -24,12 +24,19 @@ from pathlib import Path
 
 import serial
 
-from telethermal.devices.frames import STATUS_FLUX, STATUS_FORCE, STATUS_TC, FrameReader
+from telethermal.devices.frames import (STATUS_FLUX, STATUS_FORCE, STATUS_HEATER, STATUS_IR,
+                                        STATUS_PUMP, STATUS_TC, VERSIONS, FrameReader)
 from telethermal.errors import ModelError, TelethermalError
 from telethermal.physics.sensors import type_t_emf_mv, type_t_temp_c
 from telethermal.tomltables import read_toml
 
 log = logging.getLogger(__name__)
+
+#: What an MLX90614-class infrared thermometer can report (datasheet: object
+#: -70..382.2 C, sensor die -40..125 C); a reading outside is a fault, never a
+#: temperature (``ir_out_of_range``).
+IR_OBJECT_RANGE_C = (-70.0, 382.2)
+IR_AMBIENT_RANGE_C = (-40.0, 125.0)
 
 
 class DeviceError(TelethermalError, OSError):
@@ -110,6 +117,13 @@ class BoardReading:
     flux_w_m2: float          # nan where the board flagged the channel or it did not convert
     pad_temp_c: float
     force_n: float
+    # Version-2 frames (the slave's board); NaN, False in version 1.
+    ir_object_c: float = math.nan     # nan where flagged or out of range
+    ir_ambient_c: float = math.nan
+    pad_drive: float = math.nan
+    heater_on: bool = False
+    pump_on: bool = False
+    version: int = 1
 
 
 @dataclass
@@ -120,11 +134,18 @@ class SensorBoard:
     reopen_s: float = 0.2
     stale_s: float = 0.05
     clock: object = time.monotonic
+    #: Frame versions read (others skipped, counted in ``version``).
+    versions: tuple = VERSIONS
+    #: Keep every reading for :meth:`take_readings` (the slave reads every
+    #: sample; the display only the newest).
+    keep: bool = False
 
     def __post_init__(self):
-        self.reader = FrameReader()
-        self.counters = {"port_lost": 0, "reopened": 0, "open_failed": 0, "conversion": 0}
+        self.reader = FrameReader(self.versions)
+        self.counters = {"port_lost": 0, "reopened": 0, "open_failed": 0, "conversion": 0,
+                         "ir_flagged": 0, "ir_out_of_range": 0}
         self.latest: BoardReading | None = None
+        self._kept: list[BoardReading] = []
         self._ser = None
         self._next_open = 0.0
         self._closed = False
@@ -141,6 +162,8 @@ class SensorBoard:
             self._next_open = self.clock() + self.reopen_s
             return False
         if not first:
+            # Opening flushes the input: no gap is counted across the reopening.
+            self.reader.restart_sequence()
             self.counters["reopened"] += 1
             log.warning("sensor board: %s is back", self.url)
         return True
@@ -195,6 +218,8 @@ class SensorBoard:
                 return newest
             for f in frames:
                 newest = self._convert(f)
+                if self.keep:
+                    self._kept.append(newest)
             remaining = end - time.monotonic()
             if newest is not None or remaining <= 0:
                 break
@@ -216,7 +241,39 @@ class SensorBoard:
                 self.counters["conversion"] += 1
                 log.debug("sensor board: thermocouple reading out of range: %s", exc)
         values = [v if math.isfinite(v) else nan for v in (flux, temp, force)]
-        return BoardReading(f.seq, f.t_us, self.clock(), *values)
+        if f.version == 1:
+            return BoardReading(f.seq, f.t_us, self.clock(), *values)
+        ir_obj, ir_amb = self._ir(f)
+        return BoardReading(f.seq, f.t_us, self.clock(), *values, ir_obj, ir_amb,
+                            f.pad_drive if math.isfinite(f.pad_drive) else nan,
+                            bool(f.status & STATUS_HEATER), bool(f.status & STATUS_PUMP),
+                            f.version)
+
+    def _ir(self, f) -> tuple[float, float]:
+        """The IR thermometer's object and ambient temperatures, or NaN where
+        the board flagged the channel or a value is outside what the sensor
+        can report (counted; the slave then refuses to identify)."""
+        if f.type != 1:
+            return math.nan, math.nan
+        if not f.status & STATUS_IR:
+            self.counters["ir_flagged"] += 1
+            return math.nan, math.nan
+        lo, hi = IR_OBJECT_RANGE_C
+        alo, ahi = IR_AMBIENT_RANGE_C
+        if not (lo <= f.ir_object_c <= hi and alo <= f.ir_ambient_c <= ahi):
+            self.counters["ir_out_of_range"] += 1
+            if self.counters["ir_out_of_range"] == 1:
+                log.warning("sensor board: IR thermometer reading out of range (object %r C, "
+                            "ambient %r C; the sensor reports object %g..%g, ambient %g..%g): "
+                            "no object temperature (counted in 'ir_out_of_range')",
+                            f.ir_object_c, f.ir_ambient_c, lo, hi, alo, ahi)
+            return math.nan, math.nan
+        return float(f.ir_object_c), float(f.ir_ambient_c)
+
+    def take_readings(self) -> list[BoardReading]:
+        """Every reading since the last call (``keep=True``), oldest first."""
+        out, self._kept = self._kept, []
+        return out
 
     def reading(self, wait_s: float = 0.0) -> tuple[float, float, float]:
         """(flux W/m^2, pad degC, force N) now: NaN where missing or stale."""

@@ -69,6 +69,7 @@ class HardwareDisplay:
             raise
         self._first_command_s: float | None = None
         self.untrusted_periods = 0
+        self.stale_readings = 0          # periods the board gave no current reading
 
     def _actuator_trusted(self) -> bool:
         p = self.peltier
@@ -81,6 +82,8 @@ class HardwareDisplay:
 
     def read(self, t_s: float) -> PadSensors:
         flux, temp, force = self.board.reading(self.wait_s)
+        if not (math.isfinite(flux) and math.isfinite(temp)):
+            self.stale_readings += 1
         self.peltier.poll()
         if not self._actuator_trusted():
             self.untrusted_periods += 1
@@ -94,7 +97,8 @@ class HardwareDisplay:
 
     def counters(self) -> dict:
         return {"board": self.board.all_counters, "peltier": dict(self.peltier.counters),
-                "untrusted_periods": self.untrusted_periods}
+                "untrusted_periods": self.untrusted_periods,
+                "stale_readings": self.stale_readings}
 
     def close(self) -> None:
         try:

@@ -29,7 +29,8 @@ import numpy as np
 
 from telethermal.control.safety import SafetyLimits
 from telethermal.devices.board import Calibration
-from telethermal.devices.frames import (STATUS_ALL, STATUS_FLUX, STATUS_FORCE, STATUS_TC,
+from telethermal.devices.frames import (FRAME_VERSION, STATUS_ALL, STATUS_FLUX, STATUS_FORCE,
+                                        STATUS_HEATER, STATUS_IR, STATUS_PUMP, STATUS_TC,
                                         TYPE_BOOT, TYPE_SAMPLE, BoardFrame, encode)
 from telethermal.devices.peltier import (CAN_VERSION, CMD, HEARTBEAT, STATE_BOOT,
                                          STATE_DISABLED, STATE_FAULT, STATE_OPERATIONAL,
@@ -37,8 +38,13 @@ from telethermal.devices.peltier import (CAN_VERSION, CMD, HEARTBEAT, STATE_BOOT
 
 
 class SensorBoardEmulator:
+    """``version``: 1, the display's board; 2, the slave's (IR thermometer,
+    active pad state: the keyword arguments of :meth:`send`)."""
+
     def __init__(self, link_path: str | Path | None = None, cold_junction_c: float = 25.0,
-                 calibration: Calibration = Calibration(), seed: int = 0):
+                 calibration: Calibration = Calibration(), seed: int = 0,
+                 version: int = FRAME_VERSION):
+        self.version = version
         self.link_path = Path(link_path) if link_path else None
         self.cold_junction_c = cold_junction_c
         self.calibration = calibration
@@ -107,8 +113,10 @@ class SensorBoardEmulator:
         """The board restarts: a boot frame, the sequence from 0."""
         self.seq = 0
         self.counters["boots"] += 1
+        extra = {} if self.version == FRAME_VERSION else \
+            {"ir_object_c": 0.0, "ir_ambient_c": 0.0, "pad_drive": 0.0}
         self._write(encode(BoardFrame(0, 0, 0.0, 0.0, self.cold_junction_c, 0.0, 0,
-                                      TYPE_BOOT)))
+                                      TYPE_BOOT, self.version, **extra)))
         self.seq = 1
 
     def garbage(self, n: int) -> None:
@@ -117,7 +125,9 @@ class SensorBoardEmulator:
         self._write(self.rng.integers(0, 256, n, dtype=np.uint8).tobytes())
 
     def frame_for(self, t_s: float, flux_w_m2: float, pad_temp_c: float,
-                  force_n: float) -> BoardFrame:
+                  force_n: float, ir_object_c: float = math.nan, ir_ambient_c: float = math.nan,
+                  pad_drive: float = 0.0, heater: bool = False, pump: bool = False,
+                  ir_ok: bool = True) -> BoardFrame:
         cal, cj = self.calibration, self.cold_junction_c
         status, flux_uv, tc_uv = STATUS_ALL, 0.0, 0.0
         if math.isfinite(flux_w_m2):
@@ -136,12 +146,21 @@ class SensorBoardEmulator:
         if self.stuck and self._last is not None:
             last = self._last
             flux_uv, tc_uv, force_n, status = last.flux_uv, last.tc_uv, last.force_n, last.status
+        if self.version == FRAME_VERSION:
+            return BoardFrame(self.seq, int(t_s * 1e6), flux_uv, tc_uv, cj, force_n, status,
+                              TYPE_SAMPLE)
+        # The IR sensor's bit: the board clears it when the sensor did not
+        # answer (``ir_ok``); the values go as the sensor gave them.
+        status |= (STATUS_IR if ir_ok else 0) | (STATUS_HEATER if heater else 0) | \
+            (STATUS_PUMP if pump else 0)
         return BoardFrame(self.seq, int(t_s * 1e6), flux_uv, tc_uv, cj, force_n, status,
-                          TYPE_SAMPLE)
+                          TYPE_SAMPLE, self.version, ir_object_c, ir_ambient_c, pad_drive)
 
-    def send(self, t_s: float, flux_w_m2: float, pad_temp_c: float, force_n: float) -> bool:
-        """One sample's frame on the line (unless a dropout takes it)."""
-        frame = self.frame_for(t_s, flux_w_m2, pad_temp_c, force_n)
+    def send(self, t_s: float, flux_w_m2: float, pad_temp_c: float, force_n: float,
+             **slave) -> bool:
+        """One sample's frame on the line (unless a dropout takes it);
+        ``slave``: the version-2 fields (:meth:`frame_for`)."""
+        frame = self.frame_for(t_s, flux_w_m2, pad_temp_c, force_n, **slave)
         self._last = frame
         self.seq = (self.seq + 1) & 0xFFFF
         if self.dropout and self.rng.random() < self.dropout:
@@ -163,6 +182,8 @@ MAX_FRAMES_PER_POLL = 64
 class PeltierEmulator:
     """A Peltier driver on ``bus``: ``apply(junction_c)`` is called with what
     it drives the junction to (the setpoint, or neutral when disabled)."""
+
+    CMD, STATUS, HEARTBEAT = CMD, STATUS, HEARTBEAT
 
     def __init__(self, bus: str, apply, watchdog_s: float = 0.1, heartbeat_s: float = 0.1,
                  clock=time.monotonic, max_junction_c: float = 60.0,
@@ -213,7 +234,12 @@ class PeltierEmulator:
         self.apply(self.junction_c)
 
     def _status(self) -> None:
-        data = STATUS.encode({
+        data = self.STATUS.encode(self._status_signals(), strict=False)
+        self._counter = (self._counter + 1) & 0xFF
+        self._send(self.STATUS, data)
+
+    def _status_signals(self) -> dict:
+        return {
             "enabled": int(self.enabled), "over_temp": int("over_temp" in self.faults),
             "over_current": int("over_current" in self.faults),
             "sensor_fault": int("sensor_fault" in self.faults),
@@ -221,9 +247,16 @@ class PeltierEmulator:
             "junction_c": self.junction_c,
             # A rough Peltier: current to pump the junction away from the heat sink.
             "current_a": max(-30.0, min(30.0, 0.4 * (self.heatsink_c - self.junction_c))),
-            "heatsink_c": self.heatsink_c}, strict=False)
-        self._counter = (self._counter + 1) & 0xFF
-        self._send(STATUS, data)
+            "heatsink_c": self.heatsink_c}
+
+    def _command(self, cmd: dict) -> None:
+        """An accepted command (right version): apply or disable."""
+        if cmd["enable"] and not self.faults:
+            self.enabled = True
+            self.junction_c = min(float(cmd["setpoint_c"]), self.max_junction_c)
+            self.apply(self.junction_c)
+        elif self.enabled or not cmd["enable"]:
+            self._disable()
 
     def poll(self) -> None:
         """Handle the commands that arrived; heartbeat and watchdog."""
@@ -234,16 +267,16 @@ class PeltierEmulator:
             return
         if self.state == STATE_BOOT and now >= self.offline_until_s:
             self.state = STATE_DISABLED
-            self._send(HEARTBEAT, HEARTBEAT.encode({"state": STATE_BOOT,
-                                                    "version": CAN_VERSION}))
+            self._send(self.HEARTBEAT, self.HEARTBEAT.encode({"state": STATE_BOOT,
+                                                              "version": CAN_VERSION}))
         for _ in range(MAX_FRAMES_PER_POLL):      # a flood cannot starve the heartbeat
             msg = self.bus.recv(0.0)
             if msg is None:
                 break
-            if msg.is_error_frame or msg.arbitration_id != CMD.frame_id:
+            if msg.is_error_frame or msg.arbitration_id != self.CMD.frame_id:
                 continue
             try:
-                cmd = CMD.decode(bytes(msg.data))
+                cmd = self.CMD.decode(bytes(msg.data))
             except Exception:              # noqa: BLE001 - a real driver ignores it too
                 self.counters["bad_commands"] += 1
                 continue
@@ -253,12 +286,7 @@ class PeltierEmulator:
             if cmd["version"] != CAN_VERSION:
                 self.counters["bad_commands"] += 1
                 continue
-            if cmd["enable"] and not self.faults:
-                self.enabled = True
-                self.junction_c = min(float(cmd["setpoint_c"]), self.max_junction_c)
-                self.apply(self.junction_c)
-            elif self.enabled or not cmd["enable"]:
-                self._disable()
+            self._command(cmd)
             self._status()
         if self.enabled and self._last_cmd_s is not None and \
                 now - self._last_cmd_s > self.watchdog_s:
@@ -271,7 +299,8 @@ class PeltierEmulator:
             state = STATE_FAULT if self.faults else \
                 STATE_OPERATIONAL if self.enabled else STATE_DISABLED
             self.state = state
-            self._send(HEARTBEAT, HEARTBEAT.encode({"state": state, "version": CAN_VERSION}))
+            self._send(self.HEARTBEAT, self.HEARTBEAT.encode({"state": state,
+                                                              "version": CAN_VERSION}))
 
     def close(self) -> None:
         self.bus.shutdown()

@@ -75,6 +75,10 @@ class DriverStatus:
 
 
 class PeltierDriver:
+    CMD, STATUS, HEARTBEAT = CMD, STATUS, HEARTBEAT
+    FAULTS = FAULTS
+    what = "Peltier driver"
+
     def __init__(self, bus: str, heartbeat_timeout_s: float = 0.5, reopen_s: float = 0.2,
                  clock=time.monotonic):
         self.spec = bus
@@ -96,14 +100,17 @@ class PeltierDriver:
         """Send the setpoint; False if it could not be sent this period."""
         if not math.isfinite(junction_c):
             raise DeviceError(f"Peltier setpoint must be finite, got {junction_c}")
+        return self._send_command({"enable": int(enable), "counter": self._counter,
+                                   "setpoint_c": min(max(junction_c, -50.0), 150.0),
+                                   "version": CAN_VERSION})       # clamped above
+
+    def _send_command(self, signals: dict) -> bool:
         if self.bus is None and not self._reopen():
             return False
-        data = CMD.encode({"enable": int(enable), "counter": self._counter,
-                           "setpoint_c": min(max(junction_c, -50.0), 150.0),
-                           "version": CAN_VERSION}, strict=False)   # clamped above
+        data = self.CMD.encode(signals, strict=False)
         self._counter = (self._counter + 1) & 0xF
         try:
-            self.bus.send(can.Message(arbitration_id=CMD.frame_id, data=data,
+            self.bus.send(can.Message(arbitration_id=self.CMD.frame_id, data=data,
                                       is_extended_id=False))
         except can.CanError as exc:
             self._bus_failed(exc)
@@ -165,23 +172,21 @@ class PeltierDriver:
                         bytes(msg.data).hex())
             return
         try:
-            if msg.arbitration_id == STATUS.frame_id:
-                s = STATUS.decode(bytes(msg.data))
-                faults = tuple(f for f in FAULTS if s[f])
-                self.status = DriverStatus(bool(s["enabled"]), float(s["junction_c"]),
-                                           float(s["current_a"]), float(s["heatsink_c"]),
-                                           faults, self.clock())
+            if msg.arbitration_id == self.STATUS.frame_id:
+                s = self.STATUS.decode(bytes(msg.data))
+                faults = tuple(f for f in self.FAULTS if s[f])
+                self.status = self._status_of(s, faults)
                 self.counters["statuses"] += 1
                 if faults and faults != self._faults_seen:
                     self.counters["faults_reported"] += 1
-                    log.warning("Peltier driver reports %s: display to its safe state",
+                    log.warning("%s reports %s: pad to its safe state", self.what,
                                 ", ".join(faults))
                 self._faults_seen = faults
-            elif msg.arbitration_id == HEARTBEAT.frame_id:
-                h = HEARTBEAT.decode(bytes(msg.data), decode_choices=False)
+            elif msg.arbitration_id == self.HEARTBEAT.frame_id:
+                h = self.HEARTBEAT.decode(bytes(msg.data), decode_choices=False)
                 if h["state"] == STATE_BOOT and self.state not in (None, STATE_BOOT):
                     self.counters["reboots"] += 1
-                    log.warning("Peltier driver rebooted")
+                    log.warning("%s rebooted", self.what)
                 self.state = int(h["state"])
                 self.last_heartbeat_s = self.clock()
                 self.counters["heartbeats"] += 1
@@ -189,6 +194,10 @@ class PeltierDriver:
             self.counters["undecodable"] += 1
             log.warning("CAN %s: undecodable frame id %#x (%s)", self.spec, msg.arbitration_id,
                         exc)
+
+    def _status_of(self, s: dict, faults: tuple[str, ...]) -> DriverStatus:
+        return DriverStatus(bool(s["enabled"]), float(s["junction_c"]), float(s["current_a"]),
+                            float(s["heatsink_c"]), faults, self.clock())
 
     @property
     def alive(self) -> bool:

@@ -25,7 +25,25 @@ class SlaveConfig:
     admin_port: int = 5570
     admin_ipc: str = ""             # an ipc:// path instead of the port
     record_dir: str = ""            # record every touch here (one MCAP file per run)
+    #: The sensing pad's devices: "sim" (the simulator directly), "emulated"
+    #: (the simulator behind an emulated sensor board, frame version 2, on a
+    #: pty and the active pad's driver on a virtual CAN bus, read and
+    #: commanded through the real drivers; a Peltier pad only) or "hardware"
+    #: (the board at ``board_url`` and the pad's driver on ``can_bus``; no
+    #: simulator: ``place`` only names the object for the reports).
+    devices: str = "sim"
+    board_url: str = ""             # pyserial URL of the slave's sensor board (hardware)
+    can_bus: str = ""               # interface:channel of its active pad's driver (hardware)
+    calibration: str = ""           # the board's calibration TOML; empty: the defaults
     transport: TransportConfig = field(default_factory=TransportConfig)
+
+    def __post_init__(self):
+        if self.devices not in ("sim", "emulated", "hardware"):
+            raise ConfigError(f"devices must be 'sim', 'emulated' or 'hardware', got "
+                              f"{self.devices!r}")
+        if self.devices == "hardware" and not (self.board_url and self.can_bus):
+            raise ConfigError("devices = 'hardware' needs board_url (e.g. /dev/ttyUSB1) and "
+                              "can_bus (e.g. socketcan:can0)")
 
 
 @dataclass

@@ -57,7 +57,7 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
     record = f'record_dir = "{Path(record_dir).resolve()}"\n' if record_dir else ""
     slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n{record}'
-                     f'generator = "{gen}"\nseed = {seed}\n'
+                     f'generator = "{gen}"\nseed = {seed}\ndevices = "{devices}"\n'
                      f'{admin(slave_admin)}\n\n[transport]\nbind_host = "{slave_host}"\n'
                      f'{common}{slave_keys}')
     master = out / "master.toml"
@@ -172,6 +172,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     if not result.get("ok"):
         raise TelethermalError(f"master: {result.get('error')}")
     report = call(slave_admin, "report")
+    slave_devices = report.get("devices")
     if report.get("object_true_c") is None:          # the slave was restarted meanwhile
         report = {"object_true_c": placed["object_true_c"], "identified": result["identified"],
                   "decision_time_s": None, "onset_s": None, "reason": "slave restarted"}
@@ -196,14 +197,32 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                                          "display_event_counts", "loop", "transport",
                                          "trajectory_at_s", "rtt_s", "link_counters",
                                          "anchor_lag_s", "devices", "device_counters")},
-               "loop_period_p99_us": result["loop"]["period_p99_us"], "clock": "real"}
+               "loop_period_p99_us": result["loop"]["period_p99_us"], "clock": "real",
+               "devices_per_side": {"master": master_device_summary(result),
+                                    "slave": slave_devices}}
     return SessionResult(summary, trace)
+
+
+def master_device_summary(result: dict) -> dict | None:
+    """The master's device counters of one touch, in the slave's terms
+    (None on the simulator)."""
+    c = result.get("device_counters") or {}
+    board = c.get("board")
+    if not board:
+        return None
+    return {"kind": result.get("devices"), "frames": board["frames"],
+            "crc_errors": board["crc"], "gaps": board["seq_gaps"],
+            "lost_frames": board["lost_frames"], "garbage": board["garbage"],
+            "stale_readings": c.get("stale_readings", 0),
+            "untrusted_periods": c.get("untrusted_periods", 0),
+            "peltier_commands": c.get("peltier", {}).get("sent"),
+            "peltier_statuses": c.get("peltier", {}).get("statuses")}
 
 
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
              realtime_priority: int = 20, record_dir: Path | None = None,
-             view_port: int | None = None) -> dict:
+             view_port: int | None = None, devices: str = "sim") -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
     in-process session's (``in_process_flux_rms_error_rel``). ``view_port``:
     the live view (``telethermal view``) on that HTTP port, started once the
@@ -219,7 +238,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     ports = free_ports(5)
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
                                           ports[:4], seed, realtime_priority=realtime_priority,
-                                          record_dir=record_dir,
+                                          record_dir=record_dir, devices=devices,
                                           view_port=ports[4] if view_port is not None else 0)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
@@ -227,7 +246,9 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     view = None
     try:
         wait_connected(services, ports[3])
-        echo("slave and master up as two processes on loopback (CURVE)")
+        echo("slave and master up as two processes on loopback (CURVE)" +
+             ("; each on its emulated devices (boards on ptys, CAN drivers on virtual "
+              "buses), read through the drivers" if devices == "emulated" else ""))
         cal = call(ports[2], "status").get("thermometer_calibration") or {}
         if cal.get("calibrated"):
             echo(f"slave's object thermometer calibrated against its pad at "
@@ -254,6 +275,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                 "safety_events", "loop_period_p99_us")} |
                 {"deadline_misses": s["loop"]["deadline_misses"],
                  "loop_steps": s["loop"]["steps"], "transport": s["transport"],
+                 "devices": s["devices_per_side"],
                  "in_process_identified": local["identified"],
                  "in_process_flux_rms_error_rel": local["flux_rms_error_rel"],
                  "network_over_in_process": s["flux_rms_error_rel"] /
@@ -273,7 +295,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     finally:
         codes = services.stop()
     echo(f"services stopped: exit codes slave {codes['slave']}, master {codes['master']}")
-    return {"scene": scene.name, "touches": touches, "exit_codes": codes,
+    return {"scene": scene.name, "devices": devices, "touches": touches, "exit_codes": codes,
             "slave_thermometer_calibration": cal,
             "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports)),
             **({"view": view} if view is not None else {})}

@@ -11,12 +11,13 @@ trajectory (``proto/PROTOCOL.md`` section 6).
 from __future__ import annotations
 
 import logging
+import math
 import time
 from pathlib import Path
 
 import zmq
 
-from telethermal.errors import ModelFileError
+from telethermal.errors import ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import mixture, posterior_weights
@@ -25,7 +26,7 @@ from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
 from telethermal.session.run import slave_rng, with_finger
-from telethermal.session.slave import Slave
+from telethermal.session.slave import BOARD_LOST, Slave
 
 log = logging.getLogger("telethermal.slave")
 BATCH = 10            # samples per measurement_batch
@@ -75,8 +76,15 @@ class SlaveService:
         self._seed = config.seed
         self.calibration_error: str | None = None
         self.pad: Slave | None = None
-        self._start_sensor_session(config.seed)
-        self.place(config.place or self.scene.materials[0], config.seed)
+        self.devices = None
+        self._touch_counters: dict = {}
+        self.last_touch: dict = {}
+        try:
+            self._start_sensor_session(config.seed)
+            self.place(config.place or self.scene.materials[0], config.seed)
+        except BaseException:
+            self._close_devices()
+            raise
 
     # ------------------------------------------------------------ instruments
     def _start_sensor_session(self, seed: int) -> None:
@@ -89,6 +97,22 @@ class SlaveService:
 
         self._session_rng = np.random.default_rng((seed, 0xCA1))
         self.sensors = SensorSession(draw_instruments(self.scene.sensors, self._session_rng))
+        if self.config.devices == "emulated":
+            from telethermal.devices.slave_pad import EmulatedSlavePad
+            self.devices = EmulatedSlavePad(self.scene, self.sensors.instruments, seed=seed)
+        elif self.config.devices == "hardware":
+            from telethermal.devices.board import Calibration
+            from telethermal.devices.slave_pad import SlavePadDrivers
+            cfg = self.config
+            calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
+            # Each period waits (up to two sample periods) for the board's next
+            # frame: the pad's loop runs at the board's own rate.
+            self.devices = SlavePadDrivers(cfg.board_url, cfg.can_bus, self.rate_hz,
+                                           calibration, wait_s=2.0 / self.rate_hz)
+        if self.devices is not None:
+            log.info("sensing pad on %s devices: board %s (frame version 2), active pad "
+                     "driver on %s", self.devices.kind, self.devices.board.url,
+                     self.devices.pad.spec)
         self.calibrate_thermometer()
 
     def calibrate_thermometer(self, drift_k_per_reading: float = 0.0) -> dict:
@@ -102,9 +126,25 @@ class SlaveService:
         from telethermal.errors import CalibrationError
 
         try:
-            cal = calibrate_simulated(self.sensors.instruments, self.scene.room_temp_c,
-                                      self._session_rng, self.scene.sensors.thermocouple_noise_uv,
-                                      drift_k_per_reading=drift_k_per_reading)
+            if self.devices is not None:
+                from telethermal.devices.slave_pad import calibrate_on_devices
+                if drift_k_per_reading:
+                    raise CalibrationError("a drifting pad is a simulator-only hard case "
+                                           "(devices = 'sim')")
+                emulated = self.devices.kind == "emulated"
+                if emulated:
+                    self.devices.aim_at_pad(self._session_rng)
+                # On hardware the lab aims the thermometer at the pad for this.
+                try:
+                    cal = calibrate_on_devices(self.devices, self.scene.room_temp_c)
+                finally:
+                    if emulated:
+                        self.devices.show_object(float("nan"))
+            else:
+                cal = calibrate_simulated(self.sensors.instruments, self.scene.room_temp_c,
+                                          self._session_rng,
+                                          self.scene.sensors.thermocouple_noise_uv,
+                                          drift_k_per_reading=drift_k_per_reading)
         except CalibrationError as exc:
             self.calibration_error = str(exc)
             log.error("object thermometer calibration failed: %s (%s in force)", exc,
@@ -126,8 +166,14 @@ class SlaveService:
     # ------------------------------------------------------------ the object
     def place(self, material: str, seed: int) -> None:
         """Put ``material`` under the pad and measure it (IR) before contact."""
-        self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
-                         session=self.sensors)
+        if self.devices is not None:
+            self._touch_counters = _flat(self.devices.all_counters())
+        if self.devices is not None and self.devices.kind == "hardware":
+            self.pad = Slave.on_hardware(self.scene, self.identifier, self.devices,
+                                         self.sensors)
+        else:
+            self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
+                             session=self.sensors, devices=self.devices)
         self.material = material
         self._seed = seed
         self._sent = 0
@@ -135,10 +181,15 @@ class SlaveService:
         if self.endpoint.peer_version is not None:
             self._announce_object()
 
+    def _object_temp_c(self) -> float | None:
+        """The object's measured temperature, None when the thermometer gave none."""
+        value = self.pad.object_ir_c
+        return float(value) if math.isfinite(value) else None
+
     def _announce_object(self):
         self.endpoint.send("contact_event", contact_id=0, touching=False,
                            t_s=time.monotonic(), force_n=0.0,
-                           object_temp_c=self.pad.object_ir_c)
+                           object_temp_c=self._object_temp_c())
 
     # ------------------------------------------------------------ loop
     def _on_message(self, m: dict, now: float) -> None:
@@ -162,6 +213,13 @@ class SlaveService:
         id; a touch while a contact is going on, or a lift of another
         contact, changes nothing and is counted (``contact_ignored``)."""
         if m["touching"] and self.touch_t0 is None:
+            if self.pad.samples_read or self.pad.fault == BOARD_LOST:
+                # This trial was used (its touch ended without a lift that
+                # prepared the next, e.g. the board was away): a fresh one.
+                try:
+                    self.place(self.material, self._seed + 1)
+                except TelethermalError as exc:
+                    log.error("touch on an unprepared pad: %s", exc)
             # The operator touched: the slave's pad goes down on the object now.
             self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
             self.contact_owner = self.endpoint.peer_session
@@ -180,14 +238,22 @@ class SlaveService:
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
         self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
-                           t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
+                           t_s=now, force_n=0.0, object_temp_c=self._object_temp_c())
+        if self.devices is not None:
+            self.devices.hold()                 # the pad leaves the object, held
         self.last_touch = self._report()
         r = self.last_touch
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", self.contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
         self.touch_t0, self.state, self.contact_owner = None, "idle", None
-        self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
+        try:
+            self.place(self.material, self._seed + 1)    # the next touch: a fresh trial
+        except TelethermalError as exc:
+            # The devices could not prepare the next touch (the pad did not
+            # settle, the board is away): the pad is safe; an admin place or
+            # the next lift tries again.
+            log.error("next touch not prepared: %s", exc)
 
     def _master_lost(self, now: float) -> None:
         """The master went silent mid-contact (crashed, or the link is down
@@ -215,6 +281,10 @@ class SlaveService:
             self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
                                t_s=self.touch_t0 + pad.onset_s, force_n=float(pad.force_n[
                                    pad.onset_index]), object_temp_c=pad.object_ir_c)
+        if self._object_temp_c() is None:
+            # No object temperature (the IR reading was refused): nothing is
+            # identified or rendered from this touch; the report says why.
+            return
         for ev in events:
             e = ev.estimate
             self.endpoint.send("material_estimate", contact_id=self.contact_id,
@@ -277,7 +347,23 @@ class SlaveService:
                                     and est.label != UNKNOWN else None),
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
-                "reason": est.reason if est is not None else "no estimate"}
+                "reason": est.reason if est is not None else "no estimate",
+                **({"devices": self._device_report()} if self.devices is not None else {})}
+
+    def _device_report(self) -> dict:
+        """The devices' counters over this touch (since it was placed: its
+        object measurement, pre-conditioning and contact)."""
+        now = _flat(self.devices.all_counters())
+        d = {k: v - self._touch_counters.get(k, 0) for k, v in now.items()}
+        return {"kind": self.devices.kind, "frames": d["board.frames"],
+                "crc_errors": d["board.crc"], "gaps": d["board.seq_gaps"],
+                "lost_frames": d["board.lost_frames"], "garbage": d["board.garbage"],
+                "stale_readings": d["stale_readings"], "held_samples": d["held_samples"],
+                "boards_lost": d["boards_lost"], "ir_refused": d["ir_refused"],
+                "ir_out_of_range": d["board.ir_out_of_range"],
+                "pad_commands": d["pad.sent"], "pad_statuses": d["pad.statuses"],
+                "pad_faults_reported": d["pad.faults_reported"],
+                "precondition": dict(self.devices.last_precondition), "counters": d}
 
     def _on_admin(self, request: dict) -> None:
         def place(r):
@@ -294,6 +380,15 @@ class SlaveService:
             "place": place, "report": lambda r: dict(getattr(self, "last_touch", {})),
             "calibrate_thermometer": calibrate})
 
+    def _close_devices(self) -> None:
+        """The active pad to its safe state, the devices released."""
+        if self.devices is not None:
+            try:
+                self.devices.safe()
+            finally:
+                self.devices.close()
+                self.devices = None
+
     def status(self) -> dict:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
@@ -306,7 +401,10 @@ class SlaveService:
                 "pad_down": self.touch_t0 is not None,
                 "contact_id": self.contact_id if self.touch_t0 is not None else None,
                 "peer_session": e.peer_session,
-                "offset_s": e.offset.offset_s, "counters": e.all_counters()}
+                "offset_s": e.offset.offset_s, "counters": e.all_counters(),
+                "devices": {"kind": self.config.devices,
+                            **({"counters": self.devices.all_counters()}
+                               if self.devices is not None else {})}}
 
     def run(self) -> None:
         """Wake at every sample period, and at once when a message arrives
@@ -320,6 +418,8 @@ class SlaveService:
                 now = time.monotonic()
                 if now >= deadline:
                     deadline = max(deadline + period, now)
+                    if self.touch_t0 is None and self.devices is not None:
+                        self.devices.hold()      # the pad held at temperature, frames read
                     if self.touch_t0 is not None and not self.endpoint.peer_alive:
                         self._master_lost(now)
                     if self.touch_t0 is not None:
@@ -345,9 +445,20 @@ class SlaveService:
                                    counters=self.endpoint.all_counters(), message="slave stopping")
                 self.endpoint.poll(0.05)
         finally:
+            self._close_devices()
             self.endpoint.close()
             self.admin.close()
             if self.recorder is not None:
                 closed = self.recorder.close()
                 log.info("recording %s closed: %d messages%s", closed["path"], closed["written"],
                          f"; {closed['error']}" if closed["error"] else "")
+
+
+def _flat(counters: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in counters.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            out[f"{prefix}{k}"] = v
+    return out

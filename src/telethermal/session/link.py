@@ -119,7 +119,10 @@ class SlaveLink:
             self.classes = tuple(m["classes"])
             return
         if kind == "contact_event":
-            if m.get("object_temp_c") is not None:
+            # The slave always says what it measured; nil: it has no object
+            # temperature (its thermometer's reading was refused), so the
+            # display holds neutral rather than the previous object's.
+            if "object_temp_c" in m:
                 self.object_temp_c = m["object_temp_c"]
             self._on_object(m)
             return

@@ -10,6 +10,16 @@ its whole trace is simulated at once by the databases' own generator, and
 then read sample by sample as a pad would deliver it: the pressure sensor
 finds the onset (hysteresis and debounce), the samples from the onset feed
 a :class:`~telethermal.ident.anytime.StreamingIdentifier`.
+
+With ``devices`` (:class:`~telethermal.devices.slave_pad.EmulatedSlavePad`)
+the object is measured by the IR thermometer through the sensor board, the
+Peltier pad is pre-conditioned by a closed loop through the board and the
+pad's CAN driver, and the contact's samples reach the identifier as the
+board's frames, decoded by the driver, as they arrive: the identifier sees
+what a board would send. An IR reading the driver refuses (flagged, out of
+range) ends the touch ``unknown`` ("no object temperature") before contact;
+the board lost mid-contact ends it ``unknown`` ("sensor board lost") and the
+pad goes to its safe state.
 """
 
 from __future__ import annotations
@@ -20,9 +30,21 @@ import numpy as np
 
 from telethermal.control.contact import ContactDetector
 from telethermal.data.generate import pad_database
+import time
+
 from telethermal.errors import SceneError
-from telethermal.ident.anytime import Estimate, StreamingIdentifier
+from telethermal.ident.anytime import UNKNOWN, Estimate, StreamingIdentifier
 from telethermal.physics.scene import Scene
+
+
+#: Reasons of a touch the slave refused on its devices' account.
+NO_OBJECT_TEMPERATURE = "no object temperature"
+BOARD_LOST = "sensor board lost"
+
+
+class _ObjectRefused(Exception):
+    def __init__(self, true_c: float):
+        self.true_c = true_c
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,7 +59,7 @@ class Slave:
 
     def __init__(self, scene: Scene, material: str, identifier, rng: np.random.Generator,
                  contact_s: float | None = None, on_n: float = 2.0, off_n: float = 1.0,
-                 debounce_s: float = 0.02, session=None):
+                 debounce_s: float = 0.02, session=None, devices=None):
         objs = [o for o in scene.objects if o.material == material]
         if not objs:
             raise SceneError(f"scene {scene.name} has no object of {material!r}; it has "
@@ -52,10 +74,88 @@ class Slave:
         one = replace(scene, pad=pad, objects=(objs[0],))
         # ``session``: the slave's instruments and thermometer calibration,
         # kept across touches by a service; drawn for this touch if not given.
-        self.trial = pad_database(one, rng, session)[0]
-        self._load(self.trial.channels, identifier, self.trial.T_object_C,
+        self.devices = devices
+        if devices is None:
+            self.trial = pad_database(one, rng, session)[0]
+            channels = self.trial.channels
+        else:
+            if session is None:
+                raise SceneError("a slave on devices needs its sensor session (instruments "
+                                 "and thermometer calibration)")
+            try:
+                self.trial = pad_database(one, rng, session,
+                                          measure=self._measure_on(devices, session),
+                                          pad_loop=devices.pad_loop)[0]
+            except _ObjectRefused as refused:
+                self._refuse(identifier, refused.true_c, on_n, off_n, debounce_s)
+                return
+            ch = self.trial.channels
+            contact = devices.start_contact(ch["t_s"], ch["heat_flux_W_m2"],
+                                            ch["temperature_C"], ch["force_N"])
+            # The identifier reads these, filled as the board's frames arrive.
+            channels = {"t_s": ch["t_s"], "heat_flux_W_m2": contact.flux_w_m2,
+                        "temperature_C": contact.temp_c, "force_N": contact.force_n}
+            self._contact = contact
+        self._load(channels, identifier, self.trial.T_object_C,
                    float(self.trial.extra["T_object_true_C"]), self.trial.T_pad_C,
                    self.trial.gap_k, on_n, off_n, debounce_s)
+
+    @classmethod
+    def on_hardware(cls, scene: Scene, identifier, devices, session, contact_s: float | None = None,
+                    on_n: float = 2.0, off_n: float = 1.0,
+                    debounce_s: float = 0.02) -> "Slave":
+        """A touch on real devices (no simulator): the object measured by the
+        board's IR channel and corrected by the session's calibration, the
+        pad pre-conditioned to it plus the scene's gap through the pad's
+        driver, and from the first :meth:`advance_to` (the pad goes down)
+        every sample the board sends, ``t_s = 0`` at that instant."""
+        from telethermal.physics.scene import ONSET_MARGIN_S
+
+        self = cls.__new__(cls)
+        self.trial, self.devices = None, devices
+        if abs(identifier.sample_rate_hz_ - devices.rate_hz) > 1e-9:
+            raise SceneError(f"the identifier expects {identifier.sample_rate_hz_:g} Hz samples, "
+                             f"the slave's board is read at {devices.rate_hz:g} Hz")
+        raw = devices.object_reading_c()
+        if not np.isfinite(raw):
+            self._refuse(identifier, float("nan"), on_n, off_n, debounce_s)
+            return self
+        object_c = float(session.calibration.correct_c(raw))
+        loop = devices.precondition(scene.pad_temp_c(object_c))
+        duration = (contact_s or scene.pad.contact_duration_s) + scene.pre_contact_s + \
+            ONSET_MARGIN_S
+        n = int(round(duration * devices.rate_hz)) + 1
+        contact = devices.contact(n)
+        self._contact = contact
+        channels = {"t_s": np.arange(n) / devices.rate_hz,
+                    "heat_flux_W_m2": contact.flux_w_m2, "temperature_C": contact.temp_c,
+                    "force_N": contact.force_n}
+        pad_c = float(loop["reading_c"])
+        self._load(channels, identifier, object_c, float("nan"), pad_c, pad_c - object_c,
+                   on_n, off_n, debounce_s)
+        return self
+
+    @staticmethod
+    def _measure_on(devices, session):
+        def measure(true_c, rng):
+            raw = devices.measure_object(true_c, rng)
+            if not np.all(np.isfinite(raw)):
+                raise _ObjectRefused(float(np.asarray(true_c).ravel()[0]))
+            return session.calibration.correct_c(raw)
+        return measure
+
+    def _refuse(self, identifier, object_true_c, on_n, off_n, debounce_s) -> None:
+        """No object temperature: no pre-conditioning, no contact; the touch
+        is unknown at once (never identified against a wrong temperature)."""
+        empty = {"t_s": np.zeros(0), "force_N": np.zeros(0),
+                 **{c: np.zeros(0) for c in identifier.channels}}
+        self._load(empty, identifier, float("nan"), object_true_c, float("nan"), float("nan"),
+                   on_n, off_n, debounce_s)
+        self.fault = NO_OBJECT_TEMPERATURE
+        n = len(identifier.classes_)
+        self.events.append(SlaveEvent(0.0, Estimate(0.0, (1.0 / n,) * n, UNKNOWN, 0.0, True,
+                                                    NO_OBJECT_TEMPERATURE)))
+        self._fault_sent = False
 
     @classmethod
     def from_samples(cls, channels: dict, identifier, object_ir_c: float, gap_k: float,
@@ -65,6 +165,7 @@ class Slave:
         identifier's channels) instead of a simulated trial: a replay."""
         self = cls.__new__(cls)
         self.trial = None
+        self.devices = None
         self._load({k: np.asarray(v, dtype=np.float64) for k, v in channels.items()},
                    identifier, object_ir_c, object_true_c, pad_before_c, gap_k, on_n, off_n,
                    debounce_s)
@@ -74,7 +175,9 @@ class Slave:
               off_n, debounce_s):
         self.channels = ch
         self.t_s = ch["t_s"]
-        self.samples = np.stack([ch[c] for c in identifier.channels], axis=1)
+        self._sample_channels = [ch[c] for c in identifier.channels]
+        if getattr(self, "devices", None) is None:
+            self.samples = np.stack(self._sample_channels, axis=1)
         self.force_n = ch["force_N"]
         self.object_ir_c = object_ir_c
         self.object_true_c = object_true_c
@@ -87,6 +190,10 @@ class Slave:
         self._onset_index: int | None = None
         self._next = 0
         self.events: list[SlaveEvent] = []
+        self.fault: str | None = None
+        self.detected_index: int | None = None
+        #: perf_counter when each sample was pushed into the identifier.
+        self.pushed_s = np.full(len(self.t_s), np.nan)
 
     @property
     def classes(self) -> tuple[str, ...]:
@@ -113,26 +220,57 @@ class Slave:
     def estimate(self) -> Estimate | None:
         return self.events[-1].estimate if self.events else None
 
+    def _sample(self, i: int) -> np.ndarray:
+        if self.devices is None:
+            return self.samples[i]
+        return np.array([c[i] for c in self._sample_channels])
+
+    def _push(self, j: int):
+        est = self.stream.push(self._sample(j), float(self.force_n[j]))
+        self.pushed_s[j] = time.perf_counter()
+        return est
+
     def advance_to(self, t_s: float) -> list[SlaveEvent]:
+        if self.fault is not None:
+            if not getattr(self, "_fault_sent", True):
+                self._fault_sent = True
+                return [self.events[-1]]
+            return []
+        end = len(self.t_s)
+        if self.devices is not None:
+            if not self.devices.feed(t_s):
+                return self._board_lost(t_s)
+            end = self._contact.available
         new = []
-        while self._next < len(self.t_s) and self.t_s[self._next] <= t_s + 1e-12:
+        while self._next < end and self.t_s[self._next] <= t_s + 1e-12:
             i = self._next
             self._next += 1
             event = self.detector.update(float(self.t_s[i]), float(self.force_n[i]))
             if event is not None and event.touching and self.stream is None:
                 self.onset_s = event.t_s
                 self._onset_index = int(np.searchsorted(self.t_s, event.t_s))
+                self.detected_index = i          # the debounce's backlog is pushed now
                 self.stream = StreamingIdentifier(self.identifier, self.gap_k, self.object_ir_c)
                 if self.stream.decided:                       # gap too small: unknown at once
                     new.append(SlaveEvent(float(self.t_s[i]), self.stream.estimate))
                 # Samples between the onset and the debounced detection.
                 for j in range(self._onset_index, i + 1):
-                    est = self.stream.push(self.samples[j], float(self.force_n[j]))
+                    est = self._push(j)
                     if est is not None:
                         new.append(SlaveEvent(float(self.t_s[i]), est))
             elif self.stream is not None and self.detector.touching:
-                est = self.stream.push(self.samples[i], float(self.force_n[i]))
+                est = self._push(i)
                 if est is not None:
                     new.append(SlaveEvent(float(self.t_s[i]), est))
         self.events += new
         return new
+
+    def _board_lost(self, t_s: float) -> list[SlaveEvent]:
+        """The board went silent mid-contact: the devices made the pad safe;
+        the touch ends unknown, whatever was estimated before."""
+        self.fault = self._fault_sent = BOARD_LOST
+        n = len(self.identifier.classes_)
+        t = max(0.0, t_s - (self.onset_s or 0.0))
+        ev = SlaveEvent(t_s, Estimate(t, (1.0 / n,) * n, UNKNOWN, 0.0, True, BOARD_LOST))
+        self.events.append(ev)
+        return [ev]

@@ -90,7 +90,9 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("t_s", "float", "s", doc="onset or release on the sender's clock"),
         Field("force_n", "float", "N", lo=0, hi=1000),
         Field("object_temp_c", "float", "degC", lo=-50, hi=200, required=False,
-              nullable=True, doc="slave: the object's temperature measured before contact"),
+              nullable=True, doc="slave: the object's temperature measured before contact "
+                                 "(nil: none, its thermometer's reading was refused; the "
+                                 "master then holds neutral)"),
         Field("finger_temp_c", "float", "degC", lo=0, hi=50, required=False,
               nullable=True, doc="master: the finger's temperature measured before contact"),
     ), "the master's operator touched or lifted; the slave's pad touched or left"),
@@ -107,7 +109,7 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
                                      "'unknown'); never false again in the contact"),
         Field("reason", "str", doc="confident | confident group | outside classes | "
                                    "gap too small | not confident | force outside trained "
-                                   "range | '' while undecided"),
+                                   "range | sensor board lost | '' while undecided"),
         Field("object_temp_c", "float", "degC", lo=-50, hi=200),
     ), "streamed at every identification window until a final decision (decided = true "
        "with any reason but 'confident group'; a group keeps streaming, decided, until a "

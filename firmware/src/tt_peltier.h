@@ -1,0 +1,136 @@
+/* The Peltier driver's side of its CAN protocol, version 1 (proto/CAN.md,
+ * proto/peltier.dbc): classic CAN, 11-bit identifiers, node 1.
+ *
+ *   0x101 PELTIER_CMD       master -> driver, 4 bytes: byte 0 bit 0 enable,
+ *                           bits 4-7 counter; bytes 1-2 setpoint (int16 LE,
+ *                           0.01 degC); byte 3 version
+ *   0x181 PELTIER_STATUS    driver -> master after each command, 8 bytes:
+ *                           byte 0 bits 0-4 enabled, over_temp, over_current,
+ *                           sensor_fault, watchdog; byte 1 counter; bytes 2-3
+ *                           junction (0.01 degC), 4-5 current (1 mA), 6-7
+ *                           heat sink (0.01 degC), all int16 LE
+ *   0x701 PELTIER_HEARTBEAT driver -> master every 100 ms, 2 bytes: state
+ *                           (0 boot, 5 operational, 127 disabled, 128 fault),
+ *                           version
+ *
+ * Temperatures are integers in centidegrees (cC), currents in mA: what the
+ * frames carry, no floating point needed on the driver. */
+#ifndef TT_PELTIER_H
+#define TT_PELTIER_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#define TT_CAN_VERSION 1u
+#define TT_CAN_NODE 1u
+#define TT_PELTIER_CMD_ID (0x100u + TT_CAN_NODE)
+#define TT_PELTIER_STATUS_ID (0x180u + TT_CAN_NODE)
+#define TT_PELTIER_HEARTBEAT_ID (0x700u + TT_CAN_NODE)
+#define TT_PELTIER_CMD_DLC 4u
+#define TT_PELTIER_STATUS_DLC 8u
+#define TT_PELTIER_HEARTBEAT_DLC 2u
+
+#define TT_STATE_BOOT 0u
+#define TT_STATE_OPERATIONAL 5u
+#define TT_STATE_DISABLED 127u
+#define TT_STATE_FAULT 128u
+
+/* Fault flags, as the status frame's byte 0 carries them. */
+#define TT_FAULT_OVER_TEMP 0x02u
+#define TT_FAULT_OVER_CURRENT 0x04u
+#define TT_FAULT_SENSOR 0x08u
+#define TT_FAULT_WATCHDOG 0x10u
+
+typedef struct {
+    uint8_t enable;       /* 0 or 1 */
+    uint8_t counter;      /* 0..15 */
+    int16_t setpoint_cc;  /* junction setpoint, 0.01 degC */
+    uint8_t version;
+} tt_peltier_cmd;
+
+typedef struct {
+    uint8_t enabled, over_temp, over_current, sensor_fault, watchdog; /* 0 or 1 each */
+    uint8_t counter;
+    int16_t junction_cc;
+    int16_t current_ma;
+    int16_t heatsink_cc;
+} tt_peltier_status;
+
+typedef struct {
+    uint8_t state;
+    uint8_t version;
+} tt_peltier_heartbeat;
+
+/* Little-endian int16 in a data field (two's complement, portably). */
+int16_t tt_get_i16(const uint8_t *p);
+void tt_put_i16(uint8_t *p, int16_t v);
+
+/* Frame codecs. A decoder returns 0, or -1 if the data field is shorter
+ * than the message (`out` untouched). */
+int tt_peltier_cmd_decode(const uint8_t *data, uint8_t dlc, tt_peltier_cmd *out);
+void tt_peltier_cmd_encode(const tt_peltier_cmd *cmd, uint8_t out[TT_PELTIER_CMD_DLC]);
+int tt_peltier_status_decode(const uint8_t *data, uint8_t dlc, tt_peltier_status *out);
+void tt_peltier_status_encode(const tt_peltier_status *st, uint8_t out[TT_PELTIER_STATUS_DLC]);
+int tt_peltier_heartbeat_decode(const uint8_t *data, uint8_t dlc, tt_peltier_heartbeat *out);
+void tt_peltier_heartbeat_encode(const tt_peltier_heartbeat *hb,
+                                 uint8_t out[TT_PELTIER_HEARTBEAT_DLC]);
+
+/* What the driver measures each poll (filled by hal_peltier_measure). */
+typedef struct {
+    int16_t junction_cc; /* the active pad: the actuator (junction or water) */
+    int16_t heatsink_cc;
+    int16_t current_ma;
+    int16_t drive_milli; /* the active pad only: current fraction or heater duty, 0.001 */
+    bool sensors_ok;     /* false: a temperature sensor is open or shorted */
+} tt_peltier_measure;
+
+/* Limits of the element a lab builds; tt_peltier_default_config gives
+ * the values the project's emulator uses. */
+typedef struct {
+    /* false: the display's Peltier driver (node 1, PELTIER_* frames);
+     * true: the slave's active pad (node 2, PAD_* frames, tt_pad.h): the
+     * same rules, plus a water pad's pump and heater (hal_pad_water_set),
+     * off whenever the pad is disabled. */
+    bool active_pad;
+    int16_t neutral_cc;        /* where a disabled element is held (33.00 degC) */
+    int16_t max_junction_cc;   /* setpoints above are clamped (60.00 degC) */
+    int16_t min_junction_cc;   /* setpoints below are clamped (-50.00 degC: none) */
+    int16_t over_temp_cc;      /* heat sink above: over_temp (70.00 degC) */
+    int16_t over_current_ma;   /* |current| above: over_current (29000 mA; the
+                                  display's driver only: PAD_STATUS has no flag) */
+    uint16_t watchdog_ms;      /* no command for longer: disabled (100 ms) */
+    uint16_t heartbeat_ms;     /* heartbeat period (100 ms) */
+    uint8_t max_frames_per_poll; /* a flood cannot starve the watchdog (64) */
+} tt_peltier_config;
+
+void tt_peltier_default_config(tt_peltier_config *cfg);
+/* The same for the slave's active pad (active_pad = true). */
+void tt_pad_default_config(tt_peltier_config *cfg);
+
+typedef struct {
+    tt_peltier_config cfg;
+    uint8_t state;         /* what the last heartbeat said */
+    bool booted;           /* the boot heartbeat has been sent */
+    bool enabled;
+    uint8_t faults;        /* TT_FAULT_* */
+    int16_t target_cc;     /* what the element is driven to (neutral when disabled) */
+    bool pump_on;          /* the active pad only */
+    uint8_t heater_duty_raw; /* the active pad only, 0.004 per unit */
+    uint8_t status_counter;
+    bool commanded;        /* a command has arrived since the start */
+    uint32_t last_cmd_ms;
+    uint32_t last_heartbeat_ms;
+    tt_peltier_measure measured;
+    /* Counters, for a lab's debugger or its own diagnostics frame. */
+    uint32_t commands, bad_commands, watchdog_trips, send_failed;
+} tt_peltier_driver;
+
+/* Start (after a restart): disabled, the element to neutral. */
+void tt_peltier_init(tt_peltier_driver *drv, const tt_peltier_config *cfg);
+
+/* Call at least once a millisecond: measures, handles the commands that
+ * arrived (each answered by a status frame), the protections, the
+ * watchdog and the heartbeat. */
+void tt_peltier_poll(tt_peltier_driver *drv);
+
+#endif
