@@ -5,7 +5,7 @@ polynomials."""
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from telethermal.devices.board import Calibration, DeviceError
@@ -30,7 +30,7 @@ def test_a_frame_round_trips_and_holds_no_zero_byte_before_its_delimiter(frame):
     assert decode(wire[:-1]) == frame
 
 
-@settings(max_examples=200)
+@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(frames, min_size=1, max_size=8), st.lists(st.binary(max_size=40), max_size=8),
        st.data())
 def test_garbage_between_frames_and_any_split_lose_no_good_frame(good, junk, data):
