@@ -281,8 +281,13 @@ class SimSlaveService:
                      "valid_s": 60.0, "t0_s": self.touch_t0 + float(pad.onset_s)}, True)
         if e.decided:
             self._decided_label = e.label
-        if e.decided:
-            self.memory.learn(self.object_id, e, t)
+
+    def lift(self, now: float) -> None:
+        """The touch is over: the memory learns the contact's last decision
+        (as the service does, once per touch)."""
+        est = self.pad.estimate
+        if self.touch_t0 is not None and est is not None and est.decided:
+            self.memory.learn(self.object_id, est, now)
 
     def _setpoint(self, now: float, send) -> None:
         pad = self.pad
@@ -418,6 +423,7 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
             inbox.link.end()                  # what comes for this contact now is stale
             net.send(t, "m2s", {"kind": "contact_event", "contact_id": contact_id,
                                 "touching": False, "t_s": t, "force_n": 0.0}, True)
+    slave.lift(t)
     metrics = compare_with_direct(scene, material, pad.object_true_c, operator, touch.trace,
                                   contact_s, master.rendered_from_s)
     news_s = 0.0 if mode == "oracle" else inbox.first_news_s
