@@ -206,6 +206,10 @@ class Endpoint:
         self._kind_seq: dict[str, int] = {}
         self._stream_seen: dict[str, int] = {}
         self.latest: dict[str, dict] = {}             # newest message per lossy kind
+        #: Lossy kinds that :meth:`poll` also returns, each newer message once
+        #: as it arrives (the master's ``posterior_estimate``); the others
+        #: are only kept in ``latest``.
+        self.deliver_stream: frozenset[str] = frozenset()
         self.peer_session: str | None = None
         self.peer_identity: bytes | None = None
         self.peer_version: int | None = None
@@ -566,7 +570,7 @@ class Endpoint:
                     data = self.stream.recv(flags=zmq.NOBLOCK)
                 except zmq.Again:
                     break
-                self._on_stream(data)
+                out += self._on_stream(data)
         return out
 
     def _drop(self, key: str, now: float, fmt: str, *args) -> None:
@@ -588,21 +592,26 @@ class Endpoint:
             self._drop("invalid", now, "%s", exc)
         return None, _lossless_seq(data)
 
-    def _on_stream(self, data):
+    def _on_stream(self, data) -> list[dict]:
+        """Keep the newest message of each lossy kind; count the gaps in its
+        ``seq`` (``stream_lost``); return it if its kind is delivered."""
         now = self.clock()
         message, _ = self._decode(data, now)
         if message is None:
-            return
+            return []
         kind = message["kind"]
         if KINDS[kind].stream != "stream":
             self._drop("wrong_direction", now, "%s on the stream socket", kind)
-            return
+            return []
         last = self._stream_seen.get(kind)
         if last is not None and message["seq"] > last + 1:
             self.counters["stream_lost"] += message["seq"] - last - 1
         if last is None or message["seq"] > last:
             self._stream_seen[kind] = message["seq"]
             self.latest[kind] = message
+            if kind in self.deliver_stream:
+                return [message]
+        return []
 
     def _from_peer(self, identity) -> bool:
         return self.peer_version is not None and (identity is None or
@@ -717,6 +726,11 @@ class Endpoint:
             log.info("%s: peer session %s (new run)", self.role, message["session_id"][:32])
             self.receiver.reset()
             self._next_seq, self._outbox = 1, OrderedDict()
+            # Its lossy kinds count from 1 again too: without this, every
+            # stream message of the new run would look older than the last
+            # one of the previous run and be ignored until its seq caught up.
+            self._stream_seen.clear()
+            self.latest.clear()
         if self.peer_session is not None:
             self.counters["reconnects"] += 1
         self.peer_session = message["session_id"]
