@@ -103,33 +103,50 @@ def test_a_touch_message_by_message(slave, masters):
     # table (resend and fault: the gap and version tests).
     assert {x["kind"] for _, x in m.received} >= {
         "hello", "heartbeat", "session_config", "contact_event", "material_estimate",
-        "flux_trajectory", "flux_setpoint", "measurement_batch", "status"}
+        "posterior_estimate", "flux_trajectory", "flux_setpoint", "measurement_batch",
+        "status"}
     assert m.deviations == []
     assert_pad_safe(slave)
+
+
+def _envelope_off(message: dict) -> dict:
+    return {k: v for k, v in message.items() if k not in ("kind", "seq", "sent_s")}
 
 
 def _check_touch(m, contact_id: int, estimate: dict, object_c: float) -> None:
     echo = m.of("contact_event", contact_id=contact_id, touching=True)
     assert len(echo) == 1 and echo[0]["object_temp_c"] == pytest.approx(object_c)
-    estimates = m.of("material_estimate", contact_id=contact_id)
-    times = [x["t_since_contact_s"] for x in estimates]
-    # Section 6: estimates until a final decision; a pair ("confident group")
-    # keeps streaming, decided, until a member passes alone or the last window.
-    decided = [x["decided"] for x in estimates]
-    first = decided.index(True)
-    assert times == sorted(times) and all(decided[first:])
-    assert all(x["reason"] == "confident group" for x in estimates[first:-1])
-    assert estimates[-1]["reason"] != "confident group" or len(estimates) > first
-    assert estimates[-1] is estimate and all(x["classes"] == estimate["classes"]
-                                             for x in estimates)
-    assert all(abs(sum(x["posteriors"]) - 1.0) < 1e-6 for x in estimates)
     stream = [x for s, x in m.received if s == "stream"]
-    assert {x["kind"] for x in stream} <= {"flux_setpoint", "measurement_batch"}
+    # Section 6a: every estimate as a posterior_estimate on the stream...
+    posts = [x for x in stream if x["kind"] == "posterior_estimate" and
+             x["contact_id"] == contact_id]
+    times = [x["t_since_contact_s"] for x in posts]
+    decided = [x["decided"] for x in posts]
+    assert posts and times == sorted(times) and all(decided[decided.index(True):])
+    # ... and material_estimate, lossless, for each change of the decided
+    # label and the contact's final estimate (nothing is lost on loopback,
+    # so the decisions are exactly those of the posteriors).
+    expected, label = [], None
+    for x in posts:
+        if x["decided"] and x["label"] != label:
+            expected.append(x)
+            label = x["label"]
+    if expected[-1] is not posts[-1]:
+        expected.append(posts[-1])
+    decisions = m.of("material_estimate", contact_id=contact_id)
+    assert [_envelope_off(x) for x in decisions] == [_envelope_off(x) for x in expected]
+    assert decisions[-1] is estimate and all(x["decided"] for x in decisions)
+    # Only a group ("confident group") is followed by another decision.
+    assert all(x["reason"] == "confident group" for x in decisions[:-1])
+    assert all(x["classes"] == estimate["classes"] for x in posts + decisions)
+    assert all(abs(sum(x["posteriors"]) - 1.0) < 1e-6 for x in posts)
+    assert {x["kind"] for x in stream} <= {"posterior_estimate", "flux_setpoint",
+                                           "measurement_batch"}
     batches = [x for x in stream if x["kind"] == "measurement_batch" and
                x["contact_id"] == contact_id]
     assert batches and all(len(b["flux_w_m2"]) == len(b["temp_c"]) == len(b["force_n"])
                            for b in batches)
-    for kind in ("measurement_batch", "flux_setpoint"):
+    for kind in ("measurement_batch", "flux_setpoint", "posterior_estimate"):
         seqs = [x["seq"] for x in stream if x["kind"] == kind]
         assert seqs == sorted(set(seqs)), kind               # per kind, increasing
     assert m.of("contact_event", contact_id=contact_id, touching=False)

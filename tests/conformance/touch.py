@@ -7,17 +7,20 @@ from doc_peer import DocMaster
 
 
 def final_estimate(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
-    """The contact's last material_estimate once it is final: decided with
-    any reason but "confident group" (a pair keeps streaming until a member
-    passes alone or the identifier's last window, section 6)."""
-    decided = lambda: master.of("material_estimate", contact_id=contact_id, decided=True)  # noqa
-    assert master.pump(timeout_s, until=decided), \
-        f"contact {contact_id}: no decision in {timeout_s} s; slave said " \
+    """The contact's final material_estimate (section 6a: decisions only,
+    then the final one): decided with any reason but "confident group", or
+    a group that repeats the previous decision's label (a pair that stood
+    until the identifier's last window)."""
+    def final():
+        decisions = master.of("material_estimate", contact_id=contact_id)
+        return [e for i, e in enumerate(decisions) if e["decided"] and (
+            e["reason"] != "confident group" or
+            (i > 0 and decisions[i - 1]["label"] == e["label"]))]
+
+    assert master.pump(timeout_s, until=final), \
+        f"contact {contact_id}: no final decision in {timeout_s} s; slave said " \
         f"{[m['kind'] for _, m in master.received[-8:]]}"
-    final = lambda: [e for e in decided() if e["reason"] != "confident group"]  # noqa
-    if not final():
-        master.pump(2.0, until=final)       # the identifier's windows end within 1 s
-    return master.of("material_estimate", contact_id=contact_id)[-1]
+    return final()[-1]
 
 
 def touch(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:

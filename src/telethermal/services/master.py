@@ -81,6 +81,9 @@ class MasterService:
         self.scene = with_finger(load_scene(config.scene))
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before)
         self.endpoint, self.admin = open_service_sockets("master", config)
+        # The slave's estimates come on the lossy stream, newest wins; the
+        # link reads them as it reads the lossless kinds (PROTOCOL.md 6a).
+        self.endpoint.deliver_stream = frozenset({"posterior_estimate"})
         self.link = SlaveLink()
         self.hardware = None
         self.view = None

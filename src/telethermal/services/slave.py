@@ -71,6 +71,8 @@ class SlaveService:
         self.contact_id = 0
         self.contact_owner: str | None = None      # the master session that opened it
         self.touch_t0: float | None = None
+        self._decided_label: str | None = None      # this contact's, as last sent
+        self._decision_sent = None                  # the last estimate sent lossless
         self._sent = 0
         self._seed = config.seed
         self.calibration_error: str | None = None
@@ -166,6 +168,7 @@ class SlaveService:
             self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
             self.contact_owner = self.endpoint.peer_session
             self.finger_c = m.get("finger_temp_c")
+            self._decided_label = self._decision_sent = None
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
         elif not m["touching"] and m["contact_id"] == self.contact_id and \
                 self.touch_t0 is not None and self.endpoint.peer_session == self.contact_owner:
@@ -179,6 +182,8 @@ class SlaveService:
     def _lift(self, now: float) -> None:
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
+        if self.pad.estimate is not None and self.pad.estimate is not self._decision_sent:
+            self._send_decision(self.pad.estimate)   # the contact's final estimate (6a)
         self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
                            t_s=now, force_n=0.0, object_temp_c=self.pad.object_ir_c)
         self.last_touch = self._report()
@@ -217,11 +222,7 @@ class SlaveService:
                                    pad.onset_index]), object_temp_c=pad.object_ir_c)
         for ev in events:
             e = ev.estimate
-            self.endpoint.send("material_estimate", contact_id=self.contact_id,
-                               t_since_contact_s=float(e.t_s), classes=list(pad.classes),
-                               posteriors=[float(p) for p in e.posteriors], label=e.label,
-                               confidence=float(e.confidence), decided=e.decided,
-                               reason=e.reason, object_temp_c=pad.object_ir_c)
+            self._send_estimate(e, final=ev is events[-1] and pad.stream.finished)
             if e.decided and e.label != UNKNOWN and e.label in self.curves:
                 curve = self.curves[e.label]
                 self.endpoint.send("flux_trajectory", contact_id=self.contact_id,
@@ -244,6 +245,29 @@ class SlaveService:
                                temp_c=[float(v) for v in ch["temperature_C"][i]],
                                force_n=[float(v) for v in ch["force_N"][i]])
             self._sent = read
+
+    def _estimate_fields(self, e) -> dict:
+        return dict(contact_id=self.contact_id, t_since_contact_s=float(e.t_s),
+                    classes=list(self.pad.classes), posteriors=[float(p) for p in e.posteriors],
+                    label=e.label, confidence=float(e.confidence), decided=e.decided,
+                    reason=e.reason, object_temp_c=self.pad.object_ir_c)
+
+    def _send_estimate(self, e, final: bool) -> None:
+        """Every estimate on the stream (``posterior_estimate``: newest wins,
+        a lost one costs nothing); lossless ``material_estimate`` only for a
+        change of the decided label and the contact's final estimate, so
+        that contact events and decisions never queue behind estimates
+        (``proto/PROTOCOL.md`` section 6a)."""
+        fields = self._estimate_fields(e)
+        self.endpoint.send("posterior_estimate", **fields)
+        if (e.decided and e.label != self._decided_label) or final:
+            self._send_decision(e, fields)
+
+    def _send_decision(self, e, fields: dict | None = None) -> None:
+        self.endpoint.send("material_estimate", **(fields or self._estimate_fields(e)))
+        self._decision_sent = e
+        if e.decided:
+            self._decided_label = e.label
 
     def _stream_setpoint(self, now: float) -> None:
         """The naive path: the display flux for "now", sample by sample, from
