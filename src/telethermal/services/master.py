@@ -203,7 +203,7 @@ class MasterService:
     def _view_state(self, step, display, contact_id: int) -> dict:
         """The optional fields of the view stream's batch (its docstring)."""
         e, link = self.endpoint, self.link
-        est = link.estimates[-1] if link.estimates else None
+        est = link.estimate
         state = {"contact_id": contact_id, "touching": bool(step is not None and step.touching),
                  "phase": step.phase if step is not None else self.state,
                  "safe": bool(step.safe) if step is not None else False,
@@ -257,7 +257,7 @@ class MasterService:
         devices = touch.devices.counters()
         touch.devices.close()
         link = self.link
-        est = link.estimates[-1] if link.estimates else None
+        est = link.estimate
         loop = stats.summary(last=stats.count - touch.loop_count0)
         loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
         result = {

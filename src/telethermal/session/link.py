@@ -13,7 +13,21 @@ The rules, each a hard case of issue 6:
   previous contact's messages reordered behind the next one's) is counted as
   ``stale`` and changes nothing.
 * Estimates of one contact are kept newest by ``t_since_contact_s``: an
-  older one arriving late does not replace a newer one.
+  older one arriving late does not replace a newer one. They come two ways:
+  every posterior on the lossy stream (``posterior_estimate``: newest wins,
+  a lost one costs nothing) and the decisions on the lossless control
+  stream (``material_estimate``). A decision is never replaced by a newer
+  undecided posterior, and a decision that arrives late (it was resent)
+  still counts if no newer decision is held.
+* Object memory: the slave announces the object it is at (``contact_event``
+  with ``object_id``) and what it identified there before
+  (``object_material``). A contact that begins after such an announcement
+  renders the remembered material from t = 0 (an estimate with reason
+  "object memory"), until the slave's own decision for this touch: the
+  fresh decision wins, a disagreement is counted (``memory_overruled``)
+  and logged. The slave's touching event names its object: another object
+  than the announced one drops the memory for this contact
+  (``memory_mismatch``).
 * A trajectory is played from the master's own contact onset. Its anchor
   (the slave's onset, on the slave's clock) only says how far behind the
   slave touched; an anchor that lands in the master's future (a wrong clock
@@ -32,14 +46,20 @@ The rules, each a hard case of issue 6:
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from telethermal.ident.anytime import Estimate
+from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.sampled import SampledGenerator
 from telethermal.session.master import SlaveNews
+from telethermal.session.memory import remembered_estimate
+
+log = logging.getLogger(__name__)
+
+ESTIMATE_KINDS = ("material_estimate", "posterior_estimate")
 
 
 @dataclass
@@ -58,18 +78,29 @@ class SlaveLink:
     object_temp_c: float | None = None
     contact_id: int | None = None
     onset_s: float | None = None       # master clock, of the contact going on
-    estimates: list[Estimate] = field(default_factory=list)
+    estimates: list[Estimate] = field(default_factory=list)   # accepted, in arrival order
+    latest: Estimate | None = None          # the newest by t_since_contact_s
+    decision: Estimate | None = None        # the newest decided one
     trajectory: Trajectory | None = None
     final_valid_s: float = 60.0
+    #: The object the slave announced it is at, and what it remembers of it.
+    object_id: str | None = None
+    remembered: tuple[str, float] | None = None      # (material, confidence)
+    memory: Estimate | None = None          # the recollection this contact renders
     counters: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("stale", "older_estimate", "duplicate_trajectory", "replaced_trajectory",
-         "anchor_in_future"), 0))
+         "anchor_in_future", "memory_used", "memory_overruled", "memory_mismatch"), 0))
 
     # ------------------------------------------------------------ contacts
     def begin(self, contact_id: int) -> None:
         """A new contact is going on (the master's onset is not yet known)."""
         self.contact_id, self.onset_s = contact_id, None
         self.estimates, self.trajectory = [], None
+        self.latest = self.decision = self.memory = None
+        if self.remembered is not None and self.remembered[0] in self.classes:
+            self.memory = remembered_estimate(*self.remembered, self.classes)
+            self._memory_object = self.object_id
+            self.counters["memory_used"] += 1
 
     def onset(self, t_s: float) -> None:
         self.onset_s = t_s
@@ -89,22 +120,68 @@ class SlaveLink:
         if kind == "contact_event":
             if m.get("object_temp_c") is not None:
                 self.object_temp_c = m["object_temp_c"]
+            self._on_object(m)
             return
-        if kind not in ("material_estimate", "flux_trajectory"):
+        if kind not in ESTIMATE_KINDS and kind != "flux_trajectory":
             return
         if self.contact_id is None or m["contact_id"] != self.contact_id:
             self.counters["stale"] += 1
             return
         self.object_temp_c = m["object_temp_c"]
-        if kind == "material_estimate":
-            e = Estimate(m["t_since_contact_s"], tuple(m["posteriors"]), m["label"],
-                         m["confidence"], m["decided"], m["reason"])
-            if self.estimates and e.t_s < self.estimates[-1].t_s:
-                self.counters["older_estimate"] += 1
-                return
-            self.estimates.append(e)
+        if kind in ESTIMATE_KINDS:
+            self._on_estimate(Estimate(m["t_since_contact_s"], tuple(m["posteriors"]),
+                                       m["label"], m["confidence"], m["decided"], m["reason"]))
             return
         self._on_trajectory(m, now_s, offset_s)
+
+    def _on_object(self, m: dict) -> None:
+        if "object_id" not in m:
+            return                       # a slave that does not name its objects
+        if m.get("touching") and m.get("contact_id") == self.contact_id:
+            # The slave's pad is down: on the object the memory was for?
+            if self.memory is not None and m["object_id"] != self._memory_object:
+                log.warning("contact %s is on object %s, not the announced %s: its memory "
+                            "is not used", self.contact_id, m["object_id"], self._memory_object)
+                self.counters["memory_mismatch"] += 1
+                self.memory = None
+            return
+        self.object_id = m["object_id"]
+        material = m.get("object_material")
+        self.remembered = None if material is None else \
+            (material, float(m.get("object_confidence") or 0.0))
+
+    def _on_estimate(self, e: Estimate) -> None:
+        newest = self.latest is None or e.t_s >= self.latest.t_s
+        newest_decision = e.decided and (self.decision is None or e.t_s >= self.decision.t_s)
+        if not (newest or newest_decision):
+            self.counters["older_estimate"] += 1
+            return
+        self.estimates.append(e)
+        if newest:
+            self.latest = e
+        if newest_decision:
+            self.decision = e
+            mem = self.memory
+            # "unknown", or a pair that holds the remembered material, does
+            # not contradict the memory: it stays until a single material.
+            if mem is not None and e.label != UNKNOWN and mem.label not in e.label.split("|"):
+                log.warning("contact %s: the slave decided %s, memory said %s: the fresh "
+                            "decision wins", self.contact_id, e.label, mem.label)
+                self.counters["memory_overruled"] += 1
+                self.memory = None
+            elif mem is not None and e.label == mem.label:
+                self.memory = None             # confirmed: the decision takes over
+
+    @property
+    def estimate(self) -> Estimate | None:
+        """What the display renders from: the memory while no fresh decision
+        contradicts it; else the newest posterior, unless it is undecided and a
+        decision is held."""
+        if self.memory is not None:
+            return self.memory
+        if self.latest is not None and self.latest.decided:
+            return self.latest
+        return self.decision or self.latest
 
     def _on_trajectory(self, m: dict, now_s: float, offset_s: float | None) -> None:
         t = np.asarray(m["t_s"], dtype=np.float64)
@@ -131,7 +208,7 @@ class SlaveLink:
     # ------------------------------------------------------------ per period
     def news(self, now_s: float, link_alive: bool, setpoint_w_m2: float | None = None
              ) -> SlaveNews:
-        estimate = self.estimates[-1] if self.estimates else None
+        estimate = self.estimate
         valid = link_alive
         if not link_alive and self.onset_s is not None:
             if self.trajectory is not None:

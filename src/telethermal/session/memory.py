@@ -1,0 +1,98 @@
+"""What the slave has identified, kept per object.
+
+A telepresence operator touches the same objects again and again. Once the
+slave has decided what an object is made of, it remembers it under the
+object's name (the scene names its objects; on hardware the operator or a
+fiducial names them) and announces it when it moves to that object, so the
+master renders the right material from the first instant of a repeated
+touch, whatever the network's delay.
+
+The rules:
+
+* Only a decision for one material is learned: not a pair (``"a|b"``),
+  not ``"unknown"``, not an estimate that is itself a recollection.
+* A fresh decision that disagrees with what is remembered wins; the change
+  is logged and counted (``overruled``). The slave's sensing of *this*
+  touch is better evidence than an older touch of what may have been
+  another object under the same name.
+* It lives in the slave's memory only: a restarted slave has forgotten
+  everything (its first touch of each object is a first touch again).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict, dataclass
+
+from telethermal.ident.anytime import UNKNOWN, Estimate
+
+log = logging.getLogger(__name__)
+
+#: The ``reason`` of an estimate made from memory rather than from sensing.
+FROM_MEMORY = "object memory"
+
+
+@dataclass(frozen=True)
+class Remembered:
+    material: str
+    confidence: float
+    t_s: float               # when the deciding touch was made (the slave's clock)
+    touches: int             # touches that decided this material in a row
+
+
+class ObjectMemory:
+    """object name -> :class:`Remembered`."""
+
+    def __init__(self):
+        self._known: dict[str, Remembered] = {}
+        self.counters = {"learned": 0, "confirmed": 0, "overruled": 0}
+
+    def __len__(self) -> int:
+        return len(self._known)
+
+    def recall(self, object_id: str | None) -> Remembered | None:
+        return None if object_id is None else self._known.get(object_id)
+
+    def learn(self, object_id: str | None, estimate: Estimate | None, t_s: float) -> str:
+        """Take the decision of a touch of ``object_id``; returns what was
+        done: "ignored", "learned", "confirmed" or "overruled"."""
+        if object_id is None or not learnable(estimate):
+            return "ignored"
+        old = self._known.get(object_id)
+        if old is not None and old.material == estimate.label:
+            self._known[object_id] = Remembered(old.material, float(estimate.confidence), t_s,
+                                                old.touches + 1)
+            self.counters["confirmed"] += 1
+            return "confirmed"
+        self._known[object_id] = Remembered(estimate.label, float(estimate.confidence), t_s, 1)
+        if old is None:
+            self.counters["learned"] += 1
+            log.info("object %s remembered as %s (confidence %.3f)", object_id,
+                     estimate.label, estimate.confidence)
+            return "learned"
+        self.counters["overruled"] += 1
+        log.warning("object %s: remembered as %s, the fresh touch says %s (confidence %.3f): "
+                    "the fresh identification wins", object_id, old.material, estimate.label,
+                    estimate.confidence)
+        return "overruled"
+
+    def forget(self, object_id: str | None = None) -> None:
+        """One object, or everything (``None``)."""
+        if object_id is None:
+            self._known.clear()
+        else:
+            self._known.pop(object_id, None)
+
+    def to_dict(self) -> dict:
+        return {name: asdict(r) for name, r in sorted(self._known.items())}
+
+
+def learnable(estimate: Estimate | None) -> bool:
+    return (estimate is not None and estimate.final and estimate.label != UNKNOWN and
+            "|" not in estimate.label and estimate.reason != FROM_MEMORY)
+
+
+def remembered_estimate(material: str, confidence: float, classes) -> Estimate:
+    """The estimate the master renders from an announcement, at t = 0."""
+    return Estimate(0.0, tuple(1.0 if c == material else 0.0 for c in classes), material,
+                    float(confidence), True, FROM_MEMORY)

@@ -1,0 +1,124 @@
+"""Issue 15's rules for what the master makes of the slave's estimates and
+object memory (``SlaveLink``), with the messages handed over in the order
+a faulty network delivers them, and the slave's :class:`ObjectMemory`."""
+
+from telethermal.ident.anytime import Estimate
+from telethermal.session.link import SlaveLink
+from telethermal.session.memory import FROM_MEMORY, ObjectMemory
+
+from test_link import CLASSES, OBJECT_C, config_msg, drive, estimate, fresh_link
+
+
+def posterior(cid, t, **kw):
+    return estimate(cid, t, **kw) | {"kind": "posterior_estimate"}
+
+
+def announce(object_id, material=None, confidence=None):
+    return {"kind": "contact_event", "contact_id": 0, "touching": False, "t_s": 0.0,
+            "force_n": 0.0, "object_temp_c": OBJECT_C, "object_id": object_id,
+            "object_material": material, "object_confidence": confidence}
+
+
+def test_a_late_decision_is_not_replaced_by_newer_posteriors():
+    link = fresh_link()
+    link.begin(1)
+    for t in (0.01, 0.02, 0.03):
+        link.on_message(posterior(1, t), 0.0)
+    # The decision at 0.02 was lost and arrives resent after newer posteriors.
+    link.on_message(estimate(1, 0.02, decided=True, p_steel=0.99), 0.0)
+    assert link.estimate.decided and link.estimate.label == "steel"
+    link.on_message(posterior(1, 0.04), 0.0)              # undecided, newer
+    assert link.estimate.decided
+    assert link.counters["older_estimate"] == 0
+    link.on_message(posterior(1, 0.015), 0.0)             # older posterior: dropped
+    assert link.counters["older_estimate"] == 1
+
+
+def test_a_repeated_touch_renders_the_remembered_material_from_t0():
+    link = fresh_link()
+    link.on_message(announce("plate", "steel", 0.98), 0.0)
+    link.begin(1)
+    _, steps = drive(link, {}, seconds=0.2)
+    during = [s for s in steps if s.t_s >= 0.03]
+    assert during and all(s.phase == "render" for s in during)
+    assert link.estimate.reason == FROM_MEMORY and link.counters["memory_used"] == 1
+
+
+def test_fresh_identification_wins_over_memory_and_is_counted():
+    link = fresh_link()
+    link.on_message(announce("plate", "steel", 0.98), 0.0)
+    link.begin(1)
+    assert link.estimate.label == "steel"
+    link.on_message(posterior(1, 0.05, label="plexiglass", p_steel=0.3), 0.0)
+    assert link.estimate.label == "steel"              # an undecided posterior: memory holds
+    link.on_message(estimate(1, 0.1, label="plexiglass", decided=True, p_steel=0.01), 0.0)
+    assert link.estimate.label == "plexiglass" and link.counters["memory_overruled"] == 1
+
+
+def test_an_unknown_decision_does_not_erase_the_memory():
+    link = fresh_link()
+    link.on_message(announce("plate", "steel", 0.98), 0.0)
+    link.begin(1)
+    link.on_message(estimate(1, 1.0, label="unknown", decided=True, p_steel=0.5), 0.0)
+    assert link.estimate.label == "steel" and link.counters["memory_overruled"] == 0
+
+
+def test_a_touch_on_another_object_drops_the_memory():
+    link = fresh_link()
+    link.on_message(announce("plate", "steel", 0.98), 0.0)
+    link.begin(3)
+    touching = announce("cup") | {"contact_id": 3, "touching": True}
+    link.on_message(touching, 0.0)
+    assert link.estimate is None and link.counters["memory_mismatch"] == 1
+    # ...and the announcement of the other object (reordered after it) does
+    # not bring the old one back for this contact, but serves the next.
+    link.on_message(announce("cup", None), 0.0)
+    assert link.estimate is None
+    link.begin(4)
+    assert link.estimate is None
+
+
+def test_announcements_in_order_last_one_holds():
+    link = fresh_link()
+    link.on_message(announce("plate", "steel", 0.98), 0.0)
+    link.on_message(announce("cup", "plexiglass", 0.97), 0.0)
+    link.begin(1)
+    assert link.estimate.label == "plexiglass"
+    link.on_message(announce("new", None), 0.0)         # unknown object: nothing remembered
+    link.begin(2)
+    assert link.estimate is None
+
+
+def test_a_restarted_slave_announces_nothing_remembered():
+    link = fresh_link()
+    link.on_message(announce("plate", "steel", 0.98), 0.0)
+    link.on_message(config_msg(), 0.0)                     # the slave restarted
+    link.on_message(announce("plate", None), 0.0)          # its memory is empty
+    link.begin(1)
+    assert link.estimate is None
+
+
+def decided(label, reason="confident", t_s=0.5, confidence=0.99):
+    return Estimate(t_s, (0.0,) * len(CLASSES), label, confidence, True, reason)
+
+
+def test_object_memory_learns_single_final_decisions_only():
+    memory = ObjectMemory()
+    assert memory.learn("plate", decided("steel|plexiglass", "confident group"), 1.0) == "ignored"
+    assert memory.learn("plate", decided("unknown", "gap too small"), 1.0) == "ignored"
+    assert memory.learn("plate", decided("steel", FROM_MEMORY), 1.0) == "ignored"
+    assert memory.learn(None, decided("steel"), 1.0) == "ignored"
+    assert memory.recall("plate") is None
+    assert memory.learn("plate", decided("steel"), 1.0) == "learned"
+    assert memory.learn("plate", decided("steel", confidence=0.95), 2.0) == "confirmed"
+    r = memory.recall("plate")
+    assert (r.material, r.confidence, r.touches) == ("steel", 0.95, 2)
+    assert memory.learn("plate", decided("plexiglass"), 3.0) == "overruled"
+    assert memory.recall("plate").material == "plexiglass" and memory.recall("plate").touches == 1
+    assert memory.counters == {"learned": 1, "confirmed": 1, "overruled": 1}
+    memory.forget()
+    assert len(memory) == 0 and memory.to_dict() == {}
+
+
+def test_link_estimate_empty_link():
+    assert SlaveLink().estimate is None
