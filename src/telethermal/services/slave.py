@@ -24,6 +24,7 @@ from telethermal.record.session import open_recorder
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
+from telethermal.session.memory import ObjectMemory
 from telethermal.session.run import slave_rng, with_finger
 from telethermal.session.slave import Slave
 
@@ -67,7 +68,12 @@ class SlaveService:
         #: The service's own error counters, reported with the transport's
         #: (status messages and the admin socket).
         self.counters = self.endpoint.extra_counters
-        self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0)
+        self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
+                             memory_overruled=0)
+        #: What this slave decided per object (in this process only: a
+        #: restarted slave has forgotten; PROTOCOL.md section 6b).
+        self.memory = ObjectMemory()
+        self.object_id: str | None = None
         self.contact_id = 0
         self.contact_owner: str | None = None      # the master session that opened it
         self.touch_t0: float | None = None
@@ -117,7 +123,7 @@ class SlaveService:
         self.sensors = dc_replace(self.sensors, calibration=cal)
         self.calibration_error = None
         if self.pad is not None and self.touch_t0 is None:
-            self.place(self.material, self._seed)   # measure the object anew, tell the master
+            self.place(self.material, self._seed, self.object_id)   # measured anew, announced
         log.info("object thermometer (%s) calibrated: offset %+.3f K, gain %.4f, residual %.3f K, "
                  "offset standard error %.3f K", self.scene.sensors.object_thermometer,
                  cal.offset_k, cal.gain, cal.residual_k, cal.offset_sd_k)
@@ -126,21 +132,33 @@ class SlaveService:
         return cal.to_dict()
 
     # ------------------------------------------------------------ the object
-    def place(self, material: str, seed: int) -> None:
-        """Put ``material`` under the pad and measure it (IR) before contact."""
+    def place(self, material: str, seed: int, object_id: str | None = None) -> None:
+        """Put ``material`` under the pad and measure it (IR) before contact.
+        ``object_id``: the object's name (its object memory's key); by default
+        the name of the scene object holding ``material`` (the scene names
+        its objects by their material)."""
         self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
                          session=self.sensors)
+        self.object_id = object_id or material
         self.material = material
         self._seed = seed
         self._sent = 0
-        log.info("object placed material=%s object_ir_c=%.2f", material, self.pad.object_ir_c)
+        log.info("object placed material=%s object_id=%s object_ir_c=%.2f", material,
+                 self.object_id, self.pad.object_ir_c)
         if self.endpoint.peer_version is not None:
             self._announce_object()
 
     def _announce_object(self):
         self.endpoint.send("contact_event", contact_id=0, touching=False,
                            t_s=time.monotonic(), force_n=0.0,
-                           object_temp_c=self.pad.object_ir_c)
+                           object_temp_c=self.pad.object_ir_c, **self._object_fields())
+
+    def _object_fields(self) -> dict:
+        """The object under the pad and what the memory holds for it (6b)."""
+        known = self.memory.recall(self.object_id)
+        return {"object_id": self.object_id,
+                "object_material": None if known is None else known.material,
+                "object_confidence": None if known is None else known.confidence}
 
     # ------------------------------------------------------------ loop
     def _on_message(self, m: dict, now: float) -> None:
@@ -192,7 +210,7 @@ class SlaveService:
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
         self.touch_t0, self.state, self.contact_owner = None, "idle", None
-        self.place(self.material, self._seed + 1)        # the next touch: a fresh trial
+        self.place(self.material, self._seed + 1, self.object_id)   # the next: a fresh trial
 
     def _master_lost(self, now: float) -> None:
         """The master went silent mid-contact (crashed, or the link is down
@@ -219,7 +237,8 @@ class SlaveService:
         if before is None and pad.onset_s is not None:
             self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
                                t_s=self.touch_t0 + pad.onset_s, force_n=float(pad.force_n[
-                                   pad.onset_index]), object_temp_c=pad.object_ir_c)
+                                   pad.onset_index]), object_temp_c=pad.object_ir_c,
+                               **self._object_fields())
         for ev in events:
             e = ev.estimate
             self._send_estimate(e, final=ev is events[-1] and pad.stream.finished)
@@ -268,6 +287,10 @@ class SlaveService:
         self._decision_sent = e
         if e.decided:
             self._decided_label = e.label
+        # A single material decided (not a pair, not "unknown"): remembered
+        # for this object; a disagreeing fresh decision wins (logged, counted).
+        if self.memory.learn(self.object_id, e, time.monotonic()) == "overruled":
+            self.counters["memory_overruled"] += 1
 
     def _stream_setpoint(self, now: float) -> None:
         """The naive path: the display flux for "now", sample by sample, from
@@ -305,23 +328,35 @@ class SlaveService:
 
     def _on_admin(self, request: dict) -> None:
         def place(r):
-            self.place(str(r["material"]), int(r.get("seed", self._seed + 1)))
+            object_id = r.get("object_id")
+            if object_id is not None and (not isinstance(object_id, str) or not object_id or
+                                          len(object_id.encode()) > 256):
+                raise ValueError(f"object_id must be a non-empty string of at most 256 bytes, "
+                                 f"got {object_id!r}")
+            self.place(str(r["material"]), int(r.get("seed", self._seed + 1)), object_id)
             # object_true_c: the simulator's truth, for comparing with direct contact
-            return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c}
+            return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c,
+                    "object_id": self.object_id, **self._object_fields()}
 
         def calibrate(r):
             if self.touch_t0 is not None:
                 raise ValueError("cannot calibrate during a contact: lift first")
             return self.calibrate_thermometer(float(r.get("drift_k_per_reading", 0.0)))
 
+        def forget(r):
+            self.memory.forget(r.get("object_id"))
+            log.info("object memory: forgot %s", r.get("object_id") or "every object")
+            return {"memory": self.memory.to_dict()}
+
         self.admin.handle(request, self, {
             "place": place, "report": lambda r: dict(getattr(self, "last_touch", {})),
-            "calibrate_thermometer": calibrate})
+            "calibrate_thermometer": calibrate, "forget": forget})
 
     def status(self) -> dict:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
+                "object_id": self.object_id, "memory": self.memory.to_dict(),
                 "object_true_c": self.pad.object_true_c, "object_ir_c": self.pad.object_ir_c,
                 "last_rejected_key": e.last_rejected_key,
                 "masters_lost": self.masters_lost,
