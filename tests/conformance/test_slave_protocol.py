@@ -14,7 +14,7 @@ import pytest
 import protocol_doc as doc
 from conftest import DEAD_AFTER_S, HEARTBEAT_S
 from doc_peer import pack
-from touch import assert_pad_safe, place, touch
+from touch import announcement, assert_pad_safe, place, touch
 
 
 # ---------------------------------------------------------------- section 8
@@ -107,6 +107,48 @@ def test_a_touch_message_by_message(slave, masters):
         "status"}
     assert m.deviations == []
     assert_pad_safe(slave)
+
+
+def test_object_memory_on_the_wire(slave, masters):
+    # Section 6b: announcements and the touching contact event name the
+    # object and what the slave decided on it before; the fields are the
+    # document's (the document master checks every message against them).
+    m = masters("a")
+    for contact_id, seed in enumerate(range(2, 8), start=30):
+        cup = f"doc-cup-{seed}"
+        first = announcement(m, place(slave, "wood", seed, object_id=cup), cup)
+        assert first["object_id"] == cup and first["object_material"] is None
+        assert first["object_confidence"] is None
+        estimate = touch(m, contact_id)
+        echo = m.of("contact_event", contact_id=contact_id, touching=True)[0]
+        assert echo["object_id"] == cup and echo["object_material"] is None
+        single = estimate["decided"] and estimate["reason"] == "confident"
+        # After the lift the slave announces its object again, remembered
+        # if the touch decided one material (not a pair, not "unknown").
+        assert m.pump(2.0, until=lambda: m.of("contact_event", contact_id=0)[-1]["seq"] >
+                      first["seq"])
+        after = m.of("contact_event", contact_id=0)[-1]
+        assert after["object_id"] == cup
+        assert after["object_material"] == (estimate["label"] if single else None)
+        if single:
+            break
+    assert single, "no trial of wood was decided for one material"
+    other = announcement(m, place(slave, "steel", 2, object_id="doc-elsewhere"),
+                         "doc-elsewhere")
+    assert other["object_material"] is None
+    again = announcement(m, place(slave, "wood", seed + 1, object_id=cup), cup)
+    assert again["object_material"] == estimate["label"]
+    assert again["object_confidence"] == pytest.approx(estimate["confidence"])
+    m.touch(contact_id + 10)
+    assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id + 10,
+                                          touching=True))
+    echo = m.of("contact_event", contact_id=contact_id + 10, touching=True)[0]
+    assert echo["object_id"] == cup and echo["object_material"] == estimate["label"]
+    m.touch(contact_id + 10, touching=False)
+    assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id + 10,
+                                          touching=False))
+    assert slave.admin("status")["memory"][cup]["material"] == estimate["label"]
+    assert m.deviations == []
 
 
 def _envelope_off(message: dict) -> dict:

@@ -39,11 +39,27 @@ def touch(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
     return estimate
 
 
-def place(slave, material: str, seed: int = 0) -> float:
-    """Put ``material`` under the pad (the admin socket); its IR reading."""
-    reply = slave.admin("place", material=material, seed=seed)
+def place(slave, material: str, seed: int = 0, **args) -> float:
+    """Put ``material`` under the pad (the admin socket; ``object_id=``
+    names the object); its IR reading."""
+    reply = slave.admin("place", material=material, seed=seed, **args)
     assert reply["ok"], reply
     return reply["object_ir_c"]
+
+
+def announcement(master: DocMaster, object_c: float, object_id: str,
+                 timeout_s: float = 2.0) -> dict:
+    """The slave's announcement (contact_id 0) of the object just placed
+    (newer than any the master has read: call it right after placing)."""
+    seen = max((x["seq"] for x in master.of("contact_event", contact_id=0)), default=0)
+
+    def found():
+        return [x for x in master.of("contact_event", contact_id=0)
+                if abs((x.get("object_temp_c") or 1e9) - object_c) < 1e-9 and
+                x.get("object_id") == object_id and x["seq"] > seen]
+
+    assert master.pump(timeout_s, until=found), f"object {object_id} was never announced"
+    return found()[-1]
 
 
 def assert_pad_safe(slave) -> None:
