@@ -155,6 +155,22 @@ def test_posterior_estimates_are_delivered_newest_only_and_counted_when_lost(lin
     assert not [m for m in got if m["kind"] == "flux_setpoint"]     # not delivered: latest only
 
 
+def test_a_tail_the_sender_no_longer_holds_is_given_up_not_asked_for_forever(link):
+    # The master claims (heartbeat.last_seq) three lossless messages the
+    # slave never got and that it cannot resend: the slave asks, then gives
+    # them up after 5 dead_after_s like any gap, and the stream goes on.
+    slave, master = link
+    master._next_seq += 3
+    pump(slave, master, seconds=1.0, until=lambda: slave.counters["gaps"] >= 1)
+    assert slave.counters["gaps"] == 1
+    pump(slave, master, seconds=5 * PLAIN.dead_after_s + 1.0,
+         until=lambda: slave.counters["skipped"] == 3)
+    assert slave.counters["skipped"] == 3
+    master.send("contact_event", **contact(4))
+    s_got, _ = pump(slave, master, seconds=2.0, until=lambda: master.unacked == 0)
+    assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [4]
+
+
 def test_curve_admits_the_allowed_master_and_no_other(tmp_path):
     server_dir, allowed, client_dir, stranger_dir = (tmp_path / d for d in
                                                      ("slave", "allowed", "master", "other"))

@@ -19,7 +19,7 @@ _ENV = {"v": 1, "seq": 7, "sent_s": 1234.5625}
 EXAMPLES = {
     "hello": {"role": "master", "versions": [1], "software": "telethermal 0.1.0",
               "session_id": "4f2a9c1e", "resume_from": 1},
-    "heartbeat": {"ack": 6, "echo_sent_s": 1234.5, "echo_held_s": 0.00025},
+    "heartbeat": {"ack": 6, "echo_sent_s": 1234.5, "echo_held_s": 0.00025, "last_seq": 9},
     "resend": {"from_seq": 4},
     "session_config": {"scene": "fingertip-7", "sample_rate_hz": 100.0,
                        "classes": ["plexiglass", "steel"], "identifier": "effusivity-lda",

@@ -87,6 +87,9 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
               doc="sent_s of the last heartbeat received from the peer"),
         Field("echo_held_s", "float", "s", lo=0, nullable=True,
               doc="how long the sender held that heartbeat before this one"),
+        Field("last_seq", "uint", required=False,
+              doc="the highest lossless seq the sender has sent (0: none); a receiver "
+                  "that has not received it asks for a resend (a lost tail, section 4)"),
     ), "every heartbeat_s (default 0.1 s); acknowledges the lossless stream and carries "
        "the clock-offset exchange"),
     Kind("resend", "control", "both", (
