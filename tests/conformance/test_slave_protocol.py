@@ -60,6 +60,15 @@ def test_handshake_envelope_and_sequence_numbers(slave, masters):
         got = [x["seq"] for x in received if x["kind"] == kind]
         assert got and got == list(range(got[0], got[0] + len(got))) and got[0] >= 1, kind
     assert len([x for x in received if x["kind"] == "heartbeat"]) >= 3
+    # heartbeat.last_seq: the highest lossless seq sent before it (section 4;
+    # the connection is ordered and nothing is lost on loopback).
+    highest = 0
+    for x in received:
+        if x["kind"] == "heartbeat" and "last_seq" in x:
+            assert x["last_seq"] == highest, (x, highest)
+        elif doc.KINDS[x["kind"]].lossless and x["seq"]:
+            highest = max(highest, x["seq"])
+    assert any("last_seq" in x for x in received if x["kind"] == "heartbeat")
     # session_config's curves cover exactly its renderable classes.
     config = m.of("session_config")[0]
     assert set(config["curves"]) <= set(config["classes"])
