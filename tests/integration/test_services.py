@@ -197,14 +197,21 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         assert status["counters"]["memory_overruled"] == 1
         assert status["memory"]["cup-a"]["material"] == "steel"
         assert "the fresh identification wins" in (tmp_path / "slave.log").read_text()
-        # forget one object, then a restart forgets everything.
+        # forget: one object, or all (announced again: the master forgets too);
+        # then a restart forgets everything.
         assert "cup-b" not in call(ports[2], "forget", object_id="cup-b")["memory"]
+        assert call(ports[3], "status")["object_material"] == "steel"
+        assert call(ports[2], "forget")["memory"] == {}
+        _until(lambda: call(ports[3], "status")["object_material"] is None,
+               "the master was not told the memory was cleared")
+        _touch(ports, seed=5)                        # steel on cup-a, remembered again
+        assert slave_status()["memory"]["cup-a"]["material"] == "steel"
         services.kill("slave")
         services.start("slave")
         _until(lambda: (lambda s: s.get("ok") and s["peer_alive"])(slave_status()),
                "the restarted slave found no master", 90.0)
         assert slave_status()["memory"] == {}
-        assert _place(ports, "steel", "cup-a", seed=5)["object_material"] is None
+        assert _place(ports, "steel", "cup-a", seed=6)["object_material"] is None
         assert call(ports[3], "status")["object_material"] is None
     finally:
         codes = services.stop()

@@ -346,6 +346,8 @@ class SlaveService:
         def forget(r):
             self.memory.forget(r.get("object_id"))
             log.info("object memory: forgot %s", r.get("object_id") or "every object")
+            if self.endpoint.peer_version is not None and self.touch_t0 is None:
+                self._announce_object()          # the master forgets it too
             return {"memory": self.memory.to_dict()}
 
         self.admin.handle(request, self, {
