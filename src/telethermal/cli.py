@@ -262,34 +262,18 @@ def cmd_bench_transport(args) -> int:
 
 
 def cmd_bench_faults(args) -> int:
-    from telethermal.bench import faults
+    from telethermal.bench import faults, faults_sim
 
-    with _progress(len(faults.SETTINGS) + 1, "bench faults") as advance:
-        report = faults.run(progress=advance, quick=args.quick, only=args.only)
+    with _progress(len(faults_sim.ROWS) + len(faults.SETTINGS) + 1, "bench faults") as advance:
+        report = faults.run(progress=advance, quick=args.quick, only=args.only,
+                            seeds=args.seeds, processes=not args.no_processes, jobs=args.jobs)
     traces = report.pop("_traces")
     report["command"] = "telethermal " + " ".join(sys.argv[1:])
     png = faults.plot(report, traces, args.png or Path(args.json).with_suffix(".png"))
     report["png"] = str(png)
     _write_json(args.json, report)
-
-    def pct(v):
-        return "      -" if v is None else f"{100 * v:6.2f}%"
-
-    print(f"{'fault':38s} {'compensated':>11s} {'naive':>7s} safety  lossless (gaps/"
-          f"recovered/dup/resent/dropped)  recovery (bound)")
-    for r in report["rows"]:
-        lo = r["lossless"]
-        rec = "" if "recovery_s" not in r else (
-            "not back" if r["recovery_s"] is None else
-            f"{r['recovery_s']:.2f} s ({r['recovery_bound_s']:.2f} s)")
-        print(f"{r['fault']:38s} {pct(r['compensated_flux_rms_error_rel']):>11s} "
-              f"{pct(r['naive_flux_rms_error_rel'])} {r['safety_events']:6d}  "
-              f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
-              f"{lo['lossless_dropped']:<22} {rec}")
-    if report["summary"]:
-        s = report["summary"]
-        print(f"compensated at {s['ratio_setting']}: {s['compensated_ratio_200ms']:.2f}x its "
-              f"zero-delay error; naive {s['naive_ratio_200ms']:.2f}x")
+    for line in faults.text_report(report):
+        print(line)
     print(f"wrote {args.json} and {png}")
     return 0
 
@@ -851,9 +835,16 @@ def build_parser() -> argparse.ArgumentParser:
                                        "naive (processes and the fault proxy)")
     p.add_argument("--json", required=True)
     p.add_argument("--png", help="the Jepsen-style plot (default: next to the JSON)")
-    p.add_argument("--quick", action="store_true", help="two settings, one material")
+    p.add_argument("--quick", action="store_true",
+                   help="the zero-delay and 200 ms rows, 2 seeds; processes on one material")
     p.add_argument("--only", help="comma-separated parts of setting names to run "
                                   "(e.g. 'crash,partition'); 'delay 0 ms' is always run")
+    p.add_argument("--seeds", type=int, help="seeds per material on the simulated clock "
+                                             "(default 5; 2 with --quick)")
+    p.add_argument("--jobs", type=int, default=2,
+                   help="worker processes for the simulated rows (default 2)")
+    p.add_argument("--no-processes", action="store_true",
+                   help="the simulated part only (no services, no fault proxy)")
     p.set_defaults(func=cmd_bench_faults)
 
     p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "

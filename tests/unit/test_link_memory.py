@@ -102,22 +102,34 @@ def decided(label, reason="confident", t_s=0.5, confidence=0.99):
     return Estimate(t_s, (0.0,) * len(CLASSES), label, confidence, True, reason)
 
 
-def test_object_memory_learns_single_final_decisions_only():
+def test_object_memory_learns_decisions_and_sharpens_them():
     memory = ObjectMemory()
-    assert memory.learn("plate", decided("steel|plexiglass", "confident group"), 1.0) == "ignored"
     assert memory.learn("plate", decided("unknown", "gap too small"), 1.0) == "ignored"
     assert memory.learn("plate", decided("steel", FROM_MEMORY), 1.0) == "ignored"
     assert memory.learn(None, decided("steel"), 1.0) == "ignored"
+    assert memory.learn("plate", Estimate(0.1, (), "steel", 0.6, False, ""), 1.0) == "ignored"
     assert memory.recall("plate") is None
-    assert memory.learn("plate", decided("steel"), 1.0) == "learned"
+    assert memory.learn("plate", decided("plexiglass|steel", "confident group"), 1.0) == "learned"
+    assert memory.learn("plate", decided("steel"), 1.5) == "refined"
     assert memory.learn("plate", decided("steel", confidence=0.95), 2.0) == "confirmed"
+    assert memory.learn("plate", decided("plexiglass|steel", "confident group"), 2.5) == \
+        "confirmed"                                       # vaguer: the member stays
     r = memory.recall("plate")
-    assert (r.material, r.confidence, r.touches) == ("steel", 0.95, 2)
+    assert (r.material, r.confidence, r.touches) == ("steel", 0.95, 4)
     assert memory.learn("plate", decided("plexiglass"), 3.0) == "overruled"
     assert memory.recall("plate").material == "plexiglass" and memory.recall("plate").touches == 1
-    assert memory.counters == {"learned": 1, "confirmed": 1, "overruled": 1}
-    memory.forget()
+    assert memory.counters == {"learned": 1, "confirmed": 2, "refined": 1, "overruled": 1}
+    memory.forget("plate")
     assert len(memory) == 0 and memory.to_dict() == {}
+
+
+def test_a_remembered_pair_renders_its_mixture_and_a_member_refines_it():
+    link = fresh_link()
+    link.on_message(announce("plate", "plexiglass|steel", 0.97), 0.0)
+    link.begin(1)
+    assert link.estimate.label == "plexiglass|steel" and link.estimate.posteriors == (0.5, 0.5)
+    link.on_message(estimate(1, 0.1, label="steel", decided=True, p_steel=0.99), 0.0)
+    assert link.estimate.label == "steel" and link.counters["memory_overruled"] == 0
 
 
 def test_link_estimate_empty_link():

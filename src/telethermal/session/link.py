@@ -55,7 +55,7 @@ import numpy as np
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.sampled import SampledGenerator
 from telethermal.session.master import SlaveNews
-from telethermal.session.memory import remembered_estimate
+from telethermal.session.memory import agreement, remembered_estimate
 
 log = logging.getLogger(__name__)
 
@@ -97,7 +97,8 @@ class SlaveLink:
         self.contact_id, self.onset_s = contact_id, None
         self.estimates, self.trajectory = [], None
         self.latest = self.decision = self.memory = None
-        if self.remembered is not None and self.remembered[0] in self.classes:
+        if self.remembered is not None and \
+                all(m in self.classes for m in self.remembered[0].split("|")):
             self.memory = remembered_estimate(*self.remembered, self.classes)
             self._memory_object = self.object_id
             self.counters["memory_used"] += 1
@@ -162,15 +163,17 @@ class SlaveLink:
         if newest_decision:
             self.decision = e
             mem = self.memory
-            # "unknown", or a pair that holds the remembered material, does
-            # not contradict the memory: it stays until a single material.
-            if mem is not None and e.label != UNKNOWN and mem.label not in e.label.split("|"):
+            # "unknown", or a decision vaguer than the memory (a pair that
+            # holds the remembered material), leaves the memory in force.
+            verdict = None if mem is None or e.label == UNKNOWN else \
+                agreement(mem.label, e.label)
+            if verdict == "disagrees":
                 log.warning("contact %s: the slave decided %s, memory said %s: the fresh "
                             "decision wins", self.contact_id, e.label, mem.label)
                 self.counters["memory_overruled"] += 1
                 self.memory = None
-            elif mem is not None and e.label == mem.label:
-                self.memory = None             # confirmed: the decision takes over
+            elif verdict in ("same", "sharper"):
+                self.memory = None             # the decision takes over
 
     @property
     def estimate(self) -> Estimate | None:

@@ -9,8 +9,13 @@ touch, whatever the network's delay.
 
 The rules:
 
-* Only a decision for one material is learned: not a pair (``"a|b"``),
-  not ``"unknown"``, not an estimate that is itself a recollection.
+* A decision is learned: for one material, or for a pair (``"a|b"``, the
+  slave was sure it is one of the two; the master then renders the pair's
+  mixture from t = 0, as it would live). Not ``"unknown"``, not an
+  estimate that is itself a recollection.
+* A sharper decision that agrees replaces it (a pair refined to a member,
+  counted ``refined``); a vaguer one that agrees leaves it (a pair that
+  holds the remembered member, ``confirmed``).
 * A fresh decision that disagrees with what is remembered wins; the change
   is logged and counted (``overruled``). The slave's sensing of *this*
   touch is better evidence than an older touch of what may have been
@@ -45,7 +50,7 @@ class ObjectMemory:
 
     def __init__(self):
         self._known: dict[str, Remembered] = {}
-        self.counters = {"learned": 0, "confirmed": 0, "overruled": 0}
+        self.counters = {"learned": 0, "confirmed": 0, "refined": 0, "overruled": 0}
 
     def __len__(self) -> int:
         return len(self._known)
@@ -54,27 +59,38 @@ class ObjectMemory:
         return None if object_id is None else self._known.get(object_id)
 
     def learn(self, object_id: str | None, estimate: Estimate | None, t_s: float) -> str:
-        """Take the decision of a touch of ``object_id``; returns what was
-        done: "ignored", "learned", "confirmed" or "overruled"."""
+        """Take a decision of a touch of ``object_id``; returns what was done:
+        "ignored", "learned", "confirmed", "refined" or "overruled"."""
         if object_id is None or not learnable(estimate):
             return "ignored"
         old = self._known.get(object_id)
-        if old is not None and old.material == estimate.label:
-            self._known[object_id] = Remembered(old.material, float(estimate.confidence), t_s,
-                                                old.touches + 1)
-            self.counters["confirmed"] += 1
-            return "confirmed"
-        self._known[object_id] = Remembered(estimate.label, float(estimate.confidence), t_s, 1)
+        new = Remembered(estimate.label, float(estimate.confidence), t_s, 1)
         if old is None:
+            self._known[object_id] = new
             self.counters["learned"] += 1
             log.info("object %s remembered as %s (confidence %.3f)", object_id,
                      estimate.label, estimate.confidence)
             return "learned"
-        self.counters["overruled"] += 1
-        log.warning("object %s: remembered as %s, the fresh touch says %s (confidence %.3f): "
-                    "the fresh identification wins", object_id, old.material, estimate.label,
-                    estimate.confidence)
-        return "overruled"
+        verdict = agreement(old.material, estimate.label)
+        if verdict == "same":
+            self._known[object_id] = Remembered(old.material, new.confidence, t_s,
+                                                old.touches + 1)
+        elif verdict == "sharper":
+            self._known[object_id] = Remembered(new.material, new.confidence, t_s,
+                                                old.touches + 1)
+        elif verdict == "vaguer":
+            self._known[object_id] = Remembered(old.material, old.confidence, t_s,
+                                                old.touches + 1)
+        else:
+            self._known[object_id] = new
+            self.counters["overruled"] += 1
+            log.warning("object %s: remembered as %s, the fresh touch says %s (confidence "
+                        "%.3f): the fresh identification wins", object_id, old.material,
+                        estimate.label, estimate.confidence)
+            return "overruled"
+        what = "refined" if verdict == "sharper" else "confirmed"
+        self.counters[what] += 1
+        return what
 
     def forget(self, object_id: str | None = None) -> None:
         """One object, or everything (``None``)."""
@@ -88,11 +104,27 @@ class ObjectMemory:
 
 
 def learnable(estimate: Estimate | None) -> bool:
-    return (estimate is not None and estimate.final and estimate.label != UNKNOWN and
-            "|" not in estimate.label and estimate.reason != FROM_MEMORY)
+    return (estimate is not None and estimate.decided and estimate.label != UNKNOWN and
+            estimate.reason != FROM_MEMORY)
+
+
+def agreement(held: str, fresh: str) -> str:
+    """How a fresh decision ``fresh`` stands to ``held`` (each a material or
+    a pair "a|b"): "same", "sharper" (fewer materials, all held), "vaguer"
+    (more, holding all held) or "disagrees"."""
+    a, b = set(held.split("|")), set(fresh.split("|"))
+    if a == b:
+        return "same"
+    if b < a:
+        return "sharper"
+    if a < b:
+        return "vaguer"
+    return "disagrees"
 
 
 def remembered_estimate(material: str, confidence: float, classes) -> Estimate:
-    """The estimate the master renders from an announcement, at t = 0."""
-    return Estimate(0.0, tuple(1.0 if c == material else 0.0 for c in classes), material,
-                    float(confidence), True, FROM_MEMORY)
+    """The estimate the master renders from an announcement, at t = 0: one
+    material, or a pair's members weighted equally."""
+    members = material.split("|")
+    return Estimate(0.0, tuple(1.0 / len(members) if c in members else 0.0 for c in classes),
+                    material, float(confidence), True, FROM_MEMORY)

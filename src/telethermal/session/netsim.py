@@ -1,0 +1,460 @@
+"""A networked telepresence touch on the simulated clock: master and slave
+as the services run them, the network between them as the fault proxy
+makes it, every message of proto/PROTOCOL.md modelled with its delivery
+rule, and no process, socket or wall clock.
+
+It exists so that ``telethermal bench faults`` can compare rendering modes
+on many touches with the noise of the real clock gone: the same touch
+(operator, object, sensor noise, network draws) is replayed exactly under
+every mode and every delay.
+
+What is modelled, and how:
+
+* The master's contact onset (its own force sensor) sends ``contact_event``
+  to the slave; the slave's pad goes down on the object when it arrives
+  (as ``services/slave.py`` does), so the slave's contact starts one
+  master->slave delay after the master's.
+* The slave sends what the service sends, at the instants the service
+  would: its touching ``contact_event`` at its onset, every estimate as a
+  ``posterior_estimate`` on the lossy stream, each decision as a lossless
+  ``material_estimate``, a ``flux_trajectory`` per decided material, and
+  (for the naive baseline) a ``flux_setpoint`` per sample.
+* Lossy stream: each message through a :class:`~telethermal.faults.channel.Channel`
+  (loss, delay, jitter, reordering); a lost one is gone.
+* Lossless stream (PROTOCOL.md section 4): per direction, in ``seq`` order.
+  A lost message is recovered by the receiver's ``resend`` (sent when a
+  later message reveals the gap, repeated once per heartbeat period while
+  it is open, itself through the faulty reverse direction) or by the
+  sender's retransmission timer (``max(3 heartbeats, 2 round trips + 1
+  heartbeat)`` without the peer's ack); messages behind a gap wait for it.
+  ``estimates="lossless"`` sends every estimate this way (the protocol
+  before issue 15), so the cost of ordered estimates can be measured.
+* Clocks are the same on both sides (the clock-offset estimate of the real
+  transport is not modelled); heartbeats and liveness are not modelled
+  (a partition or a crash is measured on the real processes).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from telethermal.faults.channel import Channel, Direction
+from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.render.generator import mixture, posterior_weights
+from telethermal.render.sampled import SampledGenerator
+from telethermal.session.link import SlaveLink
+from telethermal.session.memory import ObjectMemory
+
+ESTIMATE_ROUTES = ("stream", "lossless")
+#: Bytes of a message on the wire, roughly (only a serialising link cares).
+MESSAGE_BYTES = {"flux_trajectory": 4200, "material_estimate": 160,
+                 "posterior_estimate": 160, "flux_setpoint": 60, "contact_event": 90,
+                 "resend": 30}
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """Both directions of the link, and how estimates travel."""
+
+    slave_to_master: Direction = Direction()
+    master_to_slave: Direction = Direction()
+    heartbeat_s: float = 0.1
+    estimates: str = "stream"
+    #: From this time (master clock) on, both directions behave as
+    #: ``then`` (e.g. a route change mid-contact); None: never.
+    change_at_s: float | None = None
+    then: Direction | None = None
+
+    def __post_init__(self):
+        if self.estimates not in ESTIMATE_ROUTES:
+            raise ValueError(f"estimates must be one of {ESTIMATE_ROUTES}, "
+                             f"got {self.estimates!r}")
+        if not self.heartbeat_s > 0:
+            raise ValueError(f"heartbeat_s must be > 0, got {self.heartbeat_s}")
+        if (self.change_at_s is None) != (self.then is None):
+            raise ValueError("change_at_s and then go together")
+
+    @classmethod
+    def symmetric(cls, direction: Direction, **kw) -> "NetworkSpec":
+        return cls(direction, direction, **kw)
+
+    @property
+    def round_trip_s(self) -> float:
+        return self.slave_to_master.delay_s + self.master_to_slave.delay_s
+
+
+@dataclass
+class _Lossless:
+    """One direction's lossless stream: the sender's kept messages and the
+    receiver's next expected ``seq`` and buffer."""
+
+    sent: dict = field(default_factory=dict)             # seq -> (message, first send time)
+    next_seq: int = 1
+    expected: int = 1
+    buffered: dict = field(default_factory=dict)
+    resend_asked_at: float = -math.inf
+    counters: dict = field(default_factory=lambda: dict.fromkeys(
+        ("sent", "resent", "gaps", "recovered"), 0))
+
+
+class SimNetwork:
+    """The two directions, on a clock the caller advances with :meth:`due`.
+    ``send(now, "s2m" | "m2s", message, lossless)``; ``due(now, direction)``
+    returns the messages the receiver's application gets up to ``now``, in
+    the order it gets them."""
+
+    def __init__(self, spec: NetworkSpec, rng: np.random.Generator):
+        self.spec = spec
+        self.channels = {"s2m": Channel(spec.slave_to_master, rng),
+                         "m2s": Channel(spec.master_to_slave, rng)}
+        self.streams = {"s2m": _Lossless(), "m2s": _Lossless()}
+        self._events: list = []          # (time, order, action, direction, payload)
+        self._order = itertools.count()
+        self._ready = {"s2m": [], "m2s": []}
+        self._retransmit_s = max(3 * spec.heartbeat_s, 2 * spec.round_trip_s + spec.heartbeat_s)
+
+    @staticmethod
+    def reverse(direction: str) -> str:
+        return "m2s" if direction == "s2m" else "s2m"
+
+    def _push(self, t: float, action: str, direction: str, payload) -> None:
+        heapq.heappush(self._events, (t, next(self._order), action, direction, payload))
+
+    def _transmit(self, now: float, direction: str, action: str, payload, kind: str) -> None:
+        spec = self.spec
+        if spec.change_at_s is not None and now >= spec.change_at_s and \
+                self.channels[direction].profile is not spec.then:
+            self.channels[direction].profile = spec.then
+            self._retransmit_s = max(3 * spec.heartbeat_s,
+                                     4 * spec.then.delay_s + spec.heartbeat_s)
+        for t in self.channels[direction].send(now, MESSAGE_BYTES.get(kind, 100)):
+            self._push(t, action, direction, payload)
+
+    def send(self, now: float, direction: str, message: dict, lossless: bool) -> None:
+        if not lossless:
+            self._transmit(now, direction, "lossy", message, message["kind"])
+            return
+        s = self.streams[direction]
+        seq = s.next_seq
+        s.next_seq += 1
+        s.sent[seq] = (message, now)
+        s.counters["sent"] += 1
+        self._transmit(now, direction, "lossless", (seq, message), message["kind"])
+        self._push(now + self._retransmit_s, "timer", direction, seq)
+
+    def _resend_from(self, now: float, direction: str, from_seq: int) -> None:
+        s = self.streams[direction]
+        for seq in sorted(q for q in s.sent if q >= from_seq):
+            s.counters["resent"] += 1
+            message = s.sent[seq][0]
+            self._transmit(now, direction, "lossless", (seq, message), message["kind"])
+
+    def _arrive(self, t: float, action: str, direction: str, payload) -> None:
+        s = self.streams[direction]
+        if action == "lossy":
+            self._ready[direction].append(payload)
+        elif action == "lossless":
+            seq, message = payload
+            if seq < s.expected or seq in s.buffered:
+                return                                      # a duplicate
+            if seq > s.expected:
+                if not s.buffered:
+                    s.counters["gaps"] += 1
+                s.buffered[seq] = message
+                self._ask_resend(t, direction)
+                return
+            self._ready[direction].append(message)
+            s.expected += 1
+            while s.expected in s.buffered:
+                self._ready[direction].append(s.buffered.pop(s.expected))
+                s.counters["recovered"] += 1
+                s.expected += 1
+            # The ack travels back in the next heartbeat; acknowledged
+            # messages are no longer kept (the ack's own loss is not modelled).
+            for q in [q for q in s.sent if q < s.expected]:
+                del s.sent[q]
+        elif action == "resend":                            # at the sender of `direction`
+            self._resend_from(t, direction, payload)
+        elif action == "timer":
+            if payload in s.sent:                           # still unacknowledged
+                self._resend_from(t, direction, payload)
+                self._push(t + self._retransmit_s, "timer", direction, payload)
+        elif action == "gap check":
+            if s.buffered:
+                self._ask_resend(t, direction)
+
+    def _ask_resend(self, t: float, direction: str) -> None:
+        """The receiver of ``direction`` asks for the first missing seq, at
+        most once per heartbeat period; it looks again a period later."""
+        s = self.streams[direction]
+        if t - s.resend_asked_at < self.spec.heartbeat_s:
+            return
+        s.resend_asked_at = t
+        for arrival in self.channels[self.reverse(direction)].send(t, MESSAGE_BYTES["resend"]):
+            self._push(arrival, "resend", direction, s.expected)
+        self._push(t + self.spec.heartbeat_s, "gap check", direction, None)
+
+    def due(self, now: float, direction: str) -> list[dict]:
+        while self._events and self._events[0][0] <= now:
+            t, _, action, d, payload = heapq.heappop(self._events)
+            self._arrive(t, action, d, payload)
+        out, self._ready[direction] = self._ready[direction], []
+        return out
+
+
+class SimSlaveService:
+    """What ``services/slave.py`` does with one touch, on the simulated
+    clock: the pad goes down when the master's touch arrives, and the
+    messages go out as the service sends them."""
+
+    def __init__(self, pad, curves: dict, estimates: str = "stream",
+                 object_id: str | None = None, memory: ObjectMemory | None = None):
+        if estimates not in ESTIMATE_ROUTES:
+            raise ValueError(f"estimates must be one of {ESTIMATE_ROUTES}, got {estimates!r}")
+        self.pad, self.curves = pad, curves
+        self.generator = SampledGenerator(curves)
+        self.estimates = estimates
+        self.object_id = object_id
+        self.memory = memory if memory is not None else ObjectMemory()
+        self.contact_id: int | None = None
+        self.touch_t0: float | None = None
+        self.finger_c: float | None = None
+        self._decided_label: str | None = None
+        self._sp_sample = -1
+
+    def announcement(self) -> dict:
+        """The object announcement (the service sends it on ``place``)."""
+        r = self.memory.recall(self.object_id)
+        return {"kind": "contact_event", "contact_id": 0, "touching": False, "t_s": 0.0,
+                "force_n": 0.0, "object_temp_c": float(self.pad.object_ir_c),
+                "object_id": self.object_id, "object_material": r and r.material,
+                "object_confidence": r and r.confidence}
+
+    def on_message(self, m: dict, now: float) -> None:
+        if m["kind"] == "contact_event" and m["touching"] and self.touch_t0 is None:
+            self.contact_id, self.touch_t0 = m["contact_id"], now
+            self.finger_c = m.get("finger_temp_c")
+
+    def step(self, now: float, send) -> None:
+        """Read the pad up to ``now``; ``send(t, message, lossless)``."""
+        if self.touch_t0 is None:
+            return
+        pad = self.pad
+        before = pad.onset_s
+        events = pad.advance_to(now - self.touch_t0)
+        at = lambda slave_t: self.touch_t0 + slave_t              # noqa: E731
+        if before is None and pad.onset_s is not None:
+            send(at(pad.onset_s), {"kind": "contact_event", "contact_id": self.contact_id,
+                                   "touching": True, "t_s": at(pad.onset_s),
+                                   "force_n": float(pad.force_n[pad.onset_index]),
+                                   "object_temp_c": float(pad.object_ir_c),
+                                   "object_id": self.object_id}, True)
+        for ev in events:
+            self._estimate(at(ev.t_s), ev.estimate, send)
+        if pad.onset_s is not None and (events or pad.samples_read > self._sp_sample):
+            self._setpoint(now, send)
+
+    def _estimate(self, t: float, e: Estimate, send) -> None:
+        pad = self.pad
+        m = {"kind": "posterior_estimate", "contact_id": self.contact_id,
+             "t_since_contact_s": float(e.t_s), "classes": list(pad.classes),
+             "posteriors": [float(p) for p in e.posteriors], "label": e.label,
+             "confidence": float(e.confidence), "decided": e.decided, "reason": e.reason,
+             "object_temp_c": float(pad.object_ir_c)}
+        decision = e.decided and (e.label != self._decided_label or e.final)
+        if self.estimates == "lossless":
+            send(t, m | {"kind": "material_estimate"}, True)
+        else:
+            send(t, m, False)
+            if decision:
+                send(t, m | {"kind": "material_estimate"}, True)
+        if e.decided and e.label != self._decided_label and e.label in self.curves:
+            c = self.curves[e.label]
+            send(t, {"kind": "flux_trajectory", "contact_id": self.contact_id,
+                     "material": e.label, "object_temp_c": float(pad.object_ir_c),
+                     "t_s": [0.0] + c["t_s"], "g_w_m2k": [0.0] + c["g_w_m2k"],
+                     "valid_s": 60.0, "t0_s": self.touch_t0 + float(pad.onset_s)}, True)
+        if e.decided:
+            self._decided_label = e.label
+        if e.decided:
+            self.memory.learn(self.object_id, e, t)
+
+    def _setpoint(self, now: float, send) -> None:
+        pad = self.pad
+        self._sp_sample = pad.samples_read
+        if self.finger_c is None:
+            return
+        est = pad.estimate
+        if est is not None and est.decided and est.label in self.curves:
+            weights = {est.label: 1.0}
+        else:
+            weights = posterior_weights(pad.classes, est.posteriors if est else None,
+                                        self.curves)
+        if not weights:
+            return
+        t = max(now - self.touch_t0 - pad.onset_s, 0.0)
+        names = list(weights)
+        g, _ = mixture(self.generator, names, [weights[n] for n in names], t)
+        send(now, {"kind": "flux_setpoint", "contact_id": self.contact_id,
+                   "t_since_contact_s": t,
+                   "flux_w_m2": g * (pad.object_ir_c - self.finger_c)}, False)
+
+
+@dataclass
+class MasterInbox:
+    """The master service's reading of the slave: the link, the naive
+    setpoint, and when the first news of the contact arrived."""
+
+    link: SlaveLink
+    setpoint_w_m2: float | None = None
+    setpoint_t_s: float = -math.inf
+    first_news_s: float | None = None
+
+    def on_message(self, m: dict, now: float) -> None:
+        if m["kind"] == "flux_setpoint":
+            if m["contact_id"] == self.link.contact_id and \
+                    m["t_since_contact_s"] >= self.setpoint_t_s:
+                self.setpoint_w_m2, self.setpoint_t_s = m["flux_w_m2"], m["t_since_contact_s"]
+            return
+        if m["kind"] in ("posterior_estimate", "material_estimate") and \
+                m["contact_id"] == self.link.contact_id and self.first_news_s is None:
+            self.first_news_s = now
+        self.link.on_message(m, now, offset_s=0.0)
+
+
+def first_decision(estimates: list[Estimate]) -> Estimate | None:
+    return next((e for e in estimates if e.decided and e.label != UNKNOWN), None)
+
+
+# ---------------------------------------------------------------- one touch
+MODES = ("compensated", "naive", "oracle")
+
+
+@dataclass
+class NetworkTouch:
+    summary: dict
+    trace: dict
+
+
+def run_network_touch(scene, material: str, identifier, curves: dict, config,
+                      network: NetworkSpec = NetworkSpec(), seed: int = 0,
+                      contact_s: float = 2.0, mode: str = "compensated",
+                      object_id: str | None = None, memory: ObjectMemory | None = None,
+                      network_seed: int | None = None) -> NetworkTouch:
+    """One touch of ``material`` through the simulated network.
+
+    ``mode``: "compensated" (the master renders from the slave's estimates
+    and trajectories, ``config.before`` until a decision), "naive" (the
+    master tracks the latest streamed flux setpoint) or "oracle" (no
+    network: the master knows the material at its contact onset; the floor
+    any compensation can reach). ``memory``: the slave's object memory
+    (shared across touches by the caller); ``object_id`` names the object.
+    The touch's physics and sensor noise depend only on ``seed``; the
+    network's draws on ``network_seed`` (default: ``seed``)."""
+    from dataclasses import replace
+
+    from telethermal.session.master import MasterDisplay, SlaveNews
+    from telethermal.session.run import (DisplayTouch, PRE_CONTACT_S, compare_with_direct,
+                                         draw_operator, master_rng, pad_resistance,
+                                         safety_summary, slave_rng, with_finger)
+    from telethermal.session.slave import Slave
+
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    scene = with_finger(scene)
+    config = replace(config, source="setpoints" if mode == "naive" else "trajectory")
+    pad = Slave(scene, material, identifier, slave_rng(seed), contact_s=contact_s + 1.0)
+    slave = SimSlaveService(pad, curves, network.estimates, object_id, memory)
+    rng = master_rng(seed)
+    operator = draw_operator(scene, rng)
+    generator = SampledGenerator(curves)
+    idle = MasterDisplay.standby_c_for(config.limits, pad.object_ir_c)
+    master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
+                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle)
+    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
+    net = SimNetwork(network, np.random.default_rng([seed if network_seed is None
+                                                     else network_seed, 15]))
+    inbox = MasterInbox(SlaveLink(generator=generator, classes=tuple(pad.classes)))
+    inbox.on_message(slave.announcement(), -PRE_CONTACT_S)      # placed long before
+    classes = tuple(pad.classes)
+    oracle = Estimate(0.0, tuple(float(c == material) for c in classes), material, 1.0, True,
+                      "oracle")
+    onset, release, contact_id = None, None, 0
+    dt = 1.0 / config.rate_hz
+
+    def send_s2m(t_msg, m, lossless):
+        net.send(t_msg, "s2m", m, lossless)
+
+    while not touch.done:
+        t = touch.k * dt - PRE_CONTACT_S
+        for m in net.due(t, "m2s"):
+            slave.on_message(m, t)
+        slave.step(t, send_s2m)
+        for m in net.due(t, "s2m"):
+            inbox.on_message(m, t)
+        sensors = touch.sense(t)
+        if mode == "oracle":
+            news = SlaveNews(pad.object_ir_c, oracle if onset is not None else None, classes)
+        else:
+            news = inbox.link.news(t, True, inbox.setpoint_w_m2)
+        step = master.step(t, dt, sensors, news)
+        touch.actuate(t, step, dt, sensors.force_n)
+        if master.last_onset_s != onset and master.last_onset_s is not None:
+            onset = master.last_onset_s
+            contact_id += 1
+            inbox.link.begin(contact_id)
+            inbox.link.onset(onset)
+            inbox.setpoint_w_m2, inbox.setpoint_t_s = None, -math.inf
+            net.send(t, "m2s", {"kind": "contact_event", "contact_id": contact_id,
+                                "touching": True, "t_s": t, "force_n": sensors.force_n,
+                                "finger_temp_c": operator.finger_ir_c}, True)
+        if master.last_release_s != release and master.last_release_s is not None:
+            release = master.last_release_s
+            inbox.link.end()                  # what comes for this contact now is stale
+            net.send(t, "m2s", {"kind": "contact_event", "contact_id": contact_id,
+                                "touching": False, "t_s": t, "force_n": 0.0}, True)
+    metrics = compare_with_direct(scene, material, pad.object_true_c, operator, touch.trace,
+                                  contact_s, master.rendered_from_s)
+    news_s = 0.0 if mode == "oracle" else inbox.first_news_s
+    est = inbox.link.estimate
+    summary = {
+        "material": material, "seed": seed, "mode": mode, "object_id": object_id,
+        "before_identification": config.before, "estimates": network.estimates,
+        "first_news_s": news_s, "master_onset_s": onset, "slave_onset_s": (
+            None if pad.onset_s is None or slave.touch_t0 is None
+            else slave.touch_t0 + pad.onset_s),
+        "identified": est.label if est is not None and est.decided else UNKNOWN,
+        "decision_reason": est.reason if est is not None else "no estimate",
+        "render_start_s": master.rendered_from_s,
+        "rendered": master.rendering,
+        **windowed_errors(touch.trace, contact_s, news_s),
+        "temp_rms_error_c": metrics["temp_rms_error_c"],
+        **safety_summary(master), "link_counters": dict(inbox.link.counters),
+        "lossless": {d: dict(s.counters) for d, s in net.streams.items()},
+        "channel": {d: dict(c.counters) for d, c in net.channels.items()},
+    }
+    return NetworkTouch(summary, touch.trace)
+
+
+def windowed_errors(trace: dict, contact_s: float, first_news_s: float | None) -> dict:
+    """Flux RMS error relative to the direct contact's peak over the blind
+    window (contact until the first news reached the master), after it,
+    and over the whole contact. No news at all: the whole contact is blind."""
+    t = trace["t_s"]
+    during = (t >= 0) & (t < contact_s)
+    err = trace["flux_w_m2"] - trace["direct_flux_w_m2"]
+    peak = float(np.max(np.abs(trace["direct_flux_w_m2"][during])))
+    news = contact_s if first_news_s is None else max(first_news_s, 0.0)
+
+    def rms(mask):
+        return float(np.sqrt(np.mean(err[mask] ** 2)) / peak) if mask.any() else math.nan
+
+    return {"flux_rms_error_rel_blind": rms(during & (t < news)),
+            "flux_rms_error_rel_after_news": rms(during & (t >= news)),
+            "flux_rms_error_rel_whole": rms(during),
+            "blind_s": news}
