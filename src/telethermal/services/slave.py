@@ -287,8 +287,8 @@ class SlaveService:
         self._decision_sent = e
         if e.decided:
             self._decided_label = e.label
-        # A single material decided (not a pair, not "unknown"): remembered
-        # for this object; a disagreeing fresh decision wins (logged, counted).
+        # A decision (a material or a pair; not "unknown"): remembered for
+        # this object; a disagreeing fresh decision wins (logged, counted).
         if self.memory.learn(self.object_id, e, time.monotonic()) == "overruled":
             self.counters["memory_overruled"] += 1
 

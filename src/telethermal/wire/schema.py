@@ -119,8 +119,8 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
                   "the object under the pad (named by the scene, the operator or a fiducial); "
                   "nil: not known"),
         Field("object_material", "str", required=False, nullable=True,
-              doc="slave, with object_id: the single material it decided on this object "
-                  "before (its object memory); nil: none remembered"),
+              doc="slave, with object_id: what it decided on this object before (its "
+                  "object memory): a material, or a pair 'a|b'; nil: none remembered"),
         Field("object_confidence", "float", lo=0, hi=1, required=False, nullable=True,
               doc="the confidence of that remembered decision; nil with object_material"),
     ), "the master's operator touched or lifted; the slave's pad touched or left"),
