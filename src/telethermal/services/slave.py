@@ -210,6 +210,11 @@ class SlaveService:
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
         self.touch_t0, self.state, self.contact_owner = None, "idle", None
+        # The touch's decision (a material or a pair; not "unknown"), once per
+        # touch: remembered for this object, announced with it just below; a
+        # disagreeing fresh decision wins (logged, counted).
+        if self.memory.learn(self.object_id, self.pad.estimate, now) == "overruled":
+            self.counters["memory_overruled"] += 1
         self.place(self.material, self._seed + 1, self.object_id)   # the next: a fresh trial
 
     def _master_lost(self, now: float) -> None:
@@ -287,10 +292,6 @@ class SlaveService:
         self._decision_sent = e
         if e.decided:
             self._decided_label = e.label
-        # A decision (a material or a pair; not "unknown"): remembered for
-        # this object; a disagreeing fresh decision wins (logged, counted).
-        if self.memory.learn(self.object_id, e, time.monotonic()) == "overruled":
-            self.counters["memory_overruled"] += 1
 
     def _stream_setpoint(self, now: float) -> None:
         """The naive path: the display flux for "now", sample by sample, from
