@@ -200,11 +200,11 @@ def test_a_burst_of_lost_estimates_does_not_delay_the_decision():
 @pytest.mark.parametrize("delay_s", [0.05, 0.2])
 def test_a_lost_tail_is_asked_for_at_the_next_heartbeat(delay_s):
     # A sparse lossless stream: the lift is the last message for a while, and
-    # it is lost (a 5 ms blackhole as it leaves). No successor shows a gap;
+    # it is lost (a 20 ms blackhole as it leaves). No successor shows a gap;
     # the slave's next heartbeat says what it sent last (last_seq) and the
     # master asks for it: a heartbeat and three crossings of the link, not the
     # slave's retransmission timer (two round trips and a heartbeat).
-    net = Net(Direction(delay_s=delay_s, partitions=((2.4975, 0.005),)),
+    net = Net(Direction(delay_s=delay_s, partitions=((2.4975, 0.02),)),
               Direction(delay_s=delay_s))
     try:
         net.run_to(2.25)
@@ -213,7 +213,7 @@ def test_a_lost_tail_is_asked_for_at_the_next_heartbeat(delay_s):
         seq, at = net.send("contact_event", contact_id=1, touching=False, t_s=2.5, force_n=0.0)
         net.run_until(lambda: net.delivered_at(seq, "contact_event") is not None, 5.0)
         took = net.delivered_at(seq, "contact_event") - at
-        assert net.proxy.counters["slave_to_master"]["partitioned"] >= 1
+        assert net.arrivals[seq][0] - at > delay_s + STEP_S        # the first copy was lost
         heartbeat = PLAIN.heartbeat_s
         assert took <= heartbeat + 3 * delay_s + 2 * STEP_S, took
         retransmission = max(3 * heartbeat, 2 * (2 * delay_s) + heartbeat) + delay_s
@@ -251,10 +251,11 @@ def test_under_random_loss_decisions_never_wait_for_an_estimate(loss):
     assert new_net.master.counters["stream_lost"] > 0
     assert new_waits["behind_estimate"] == 0
     assert old_waits["behind_estimate"] > 0
-    # (The figures of one run, new flow against old: at 5 % loss decisions
-    # on time 19/20 against 15/20, held 2 against 9; at 20 %: 16/20 against
-    # 7/20, held 7 against 21. What is still held waits for a lost decision,
-    # contact event or status of its own stream: see the lost-tail test.)
+    # (Figures: `figures()` below. One run, new flow against old: at 5 % loss
+    # decisions on time 19/20 against 15/20, held 2 against 9; at 20 %:
+    # 15/20 against 4/20, held 6 against 25. What is still held waits for a
+    # lost decision, contact event or status of its own stream: see the
+    # lost-tail test.)
 
 
 def _waits(net: Net, estimates_lossless: bool) -> dict:
@@ -272,3 +273,47 @@ def _waits(net: Net, estimates_lossless: bool) -> dict:
             if set(range(expected, seq)) & estimate_seqs:
                 out["behind_estimate"] += 1
     return out
+
+
+def figures() -> None:
+    """The figures quoted in README.md and PROTOCOL.md (one run; loopback
+    and the seeded channel make them vary a little from run to run):
+    ``PYTHONPATH=src python tests/faults/test_estimates_under_loss.py``."""
+    import statistics
+    from unittest import mock
+
+    for loss in (0.05, 0.2):
+        for lossless in (False, True):
+            net = Net(Direction(delay_s=DELAY_S, loss=loss), seed=11)
+            try:
+                sent = []
+                for contact_id in range(1, 21):
+                    sent.append(contact(net, contact_id, lossless))
+                    net.run_to(net.clock.t_s + 0.2)
+                net.run_until(lambda: net.slave.unacked == 0, 10.0)
+                d = [delays(net, c)["decision"] for c in sent]
+                print(f"loss {loss:.0%}, estimates {'lossless' if lossless else 'on the stream'}"
+                      f": decision delay mean {1e3 * statistics.mean(d):.0f} ms, on time "
+                      f"{sum(x <= DELAY_S + 3 * STEP_S for x in d)}/20; {_waits(net, lossless)}")
+            finally:
+                net.close()
+    for delay_s in (0.05, 0.2):
+        for tail_rule in (True, False):
+            with mock.patch.object(Endpoint, "_check_tail", Endpoint._check_tail if tail_rule
+                                   else lambda self, last_seq, now: None):
+                net = Net(Direction(delay_s=delay_s, partitions=((2.4975, 0.02),)),
+                          Direction(delay_s=delay_s))
+                try:
+                    net.run_to(2.5)
+                    seq, at = net.send("contact_event", contact_id=1, touching=False, t_s=2.5,
+                                       force_n=0.0)
+                    net.run_until(lambda: net.delivered_at(seq, "contact_event") is not None, 5)
+                    print(f"{1e3 * delay_s:.0f} ms one way, a lost lift: delivered after "
+                          f"{net.delivered_at(seq, 'contact_event') - at:.3f} s "
+                          f"({'with' if tail_rule else 'without'} heartbeat.last_seq)")
+                finally:
+                    net.close()
+
+
+if __name__ == "__main__":
+    figures()
