@@ -76,6 +76,11 @@ def kinds() -> tuple[dict[str, DocField], dict[str, DocKind]]:
     return envelope, out
 
 
+def golden_vectors() -> list[str]:
+    """Section 8: ``<kind>`` or ``<kind>.<variant>``, one pair of files each."""
+    return sorted(p.name[:-len(".msgpack")] for p in GOLDEN.glob("*.msgpack"))
+
+
 def limits() -> dict[str, int]:
     """Section 3's size limits, as the document words them."""
     text = _text()
@@ -160,13 +165,15 @@ def _check(t: str, value, where: str, f: DocField | None) -> list[str]:
 #: tied to the document's words (a test fails if the wording goes).
 ACROSS = {
     "material_estimate": "same order and length as classes",
+    "posterior_estimate": "same order and length as classes",
     "flux_trajectory": "strictly ascending; as many as g_w_m2k, at least 2",
     "measurement_batch": "the three channels hold one value per sample (equal lengths)",
 }
 
 
 def _across_fields(kind: str, m: dict) -> list[str]:
-    if kind == "material_estimate" and len(m["classes"]) != len(m["posteriors"]):
+    if kind in ("material_estimate", "posterior_estimate") and \
+            len(m["classes"]) != len(m["posteriors"]):
         return [f"{kind}: {ACROSS[kind]}"]
     if kind == "flux_trajectory":
         t, g = m["t_s"], m["g_w_m2k"]

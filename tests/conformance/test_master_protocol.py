@@ -222,3 +222,75 @@ def _admin(ctx, port: int, cmd: str, **args) -> dict:
         return msgpack.unpackb(sock.recv(), raw=False)
     finally:
         sock.close(linger=0)
+
+
+def test_the_master_reads_posteriors_from_the_stream_and_the_object_memory(master_setup):
+    # Section 6a and 6b from the slave's side: the document slave announces
+    # an object with a remembered material, answers the master's touch with
+    # its own contact event (the same object), posteriors on the stream
+    # (some lost: their seq skips) and one decision on the lossless stream.
+    import threading
+
+    slave, proc, admin, ctx = master_setup
+    assert slave.pump(60.0, until=lambda: slave.master is not None), "no hello"
+    slave.received.clear()
+    slave.pump(0.6)                                       # silence: the master says hello
+    slave.hello()
+    classes = ["steel", "wood"]
+    slave.send(pack({**slave.envelope("session_config"), "scene": SCENE,
+                     "sample_rate_hz": 100.0, "classes": classes,
+                     "identifier": "doc", "threshold": 0.99,
+                     "curves": {"steel": {"t_s": [0.01, 1.0], "g_w_m2k": [900.0, 500.0]},
+                                "wood": {"t_s": [0.01, 1.0], "g_w_m2k": [200.0, 100.0]}}}))
+    memory = {"object_id": "doc-cup", "object_material": "wood", "object_confidence": 0.995}
+    slave.send(pack({**slave.envelope("contact_event"), "contact_id": 0, "touching": False,
+                     "t_s": time.monotonic(), "force_n": 0.0, "object_temp_c": 22.0, **memory}))
+    assert slave.pump(5.0, heartbeats=True, until=lambda: admin_status(ctx, admin).get(
+        "object_material") == "wood")
+    before = admin_status(ctx, admin)["counters"]
+    assert admin_status(ctx, admin)["object_id"] == "doc-cup"
+    # (The previous test's contact events may come again: resent until acknowledged.)
+    old = {m["contact_id"] for m in slave.of("contact_event")}
+    touches = lambda: [m for m in slave.of("contact_event")                 # noqa: E731
+                       if m["touching"] and m["contact_id"] not in old]
+    reply = []
+    thread = threading.Thread(target=lambda: reply.append(_admin(ctx, admin, "touch",
+                                                                 contact_s=1.5, seed=1)))
+    thread.start()
+    try:
+        assert slave.pump(20.0, heartbeats=True, until=touches)
+        contact_id = touches()[0]["contact_id"]
+        slave.send(pack({**slave.envelope("contact_event"), "contact_id": contact_id,
+                         "touching": True, "t_s": time.monotonic(), "force_n": 5.0,
+                         "object_temp_c": 22.0, **memory}))
+        for i in range(1, 13):
+            p = min(0.5 + 0.04 * i, 0.995)
+            estimate = {"contact_id": contact_id, "t_since_contact_s": 0.02 * i,
+                        "classes": classes, "posteriors": [1.0 - p, p], "label": "wood",
+                        "confidence": p, "decided": i == 12,
+                        "reason": "confident" if i == 12 else "", "object_temp_c": 22.0}
+            if i % 4 == 0:           # the one before was lost on the wire: seq skips one
+                slave.kind_seq["posterior_estimate"] = slave.kind_seq.get(
+                    "posterior_estimate", 0) + 1
+            message = {**slave.envelope("posterior_estimate"), **estimate}
+            if i == 12:
+                slave.send(pack({**slave.envelope("material_estimate"), **estimate}))
+            slave.stream.send(pack(message))
+            slave.pump(0.02, heartbeats=True)
+        assert slave.pump(20.0, heartbeats=True, until=lambda: any(
+            m["kind"] == "contact_event" and not m["touching"] and
+            m["contact_id"] == contact_id for m in slave.received))
+    finally:
+        thread.join(20)
+    assert reply and reply[0]["ok"], reply
+    result = reply[0]
+    assert result["identified"] == "wood" and result["decision_time_s"] == pytest.approx(0.24)
+    assert result["estimates"] == 13                 # 12 posteriors and the decision
+    links = result["link_counters"]
+    assert links["memory_used"] >= 1 and links["memory_overruled"] == 0
+    assert links["memory_mismatch"] == 0
+    after = admin_status(ctx, admin)["counters"]
+    assert after["unknown_kind"] == before["unknown_kind"]    # a kind this master knows
+    assert after["invalid"] == before["invalid"]
+    assert after["stream_lost"] - before["stream_lost"] == 3
+    assert slave.deviations == []

@@ -14,19 +14,24 @@ import pytest
 import protocol_doc as doc
 from conftest import DEAD_AFTER_S, HEARTBEAT_S
 from doc_peer import pack
-from touch import assert_pad_safe, place, touch
+from touch import announcement, assert_pad_safe, place, touch
 
 
 # ---------------------------------------------------------------- section 8
-@pytest.mark.parametrize("kind", sorted(doc.KINDS))
-def test_golden_vector_decodes_to_its_json_and_back_byte_for_byte(kind):
-    data = (doc.GOLDEN / f"{kind}.msgpack").read_bytes()
-    value = json.loads((doc.GOLDEN / f"{kind}.json").read_text())
+@pytest.mark.parametrize("name", doc.golden_vectors())
+def test_golden_vector_decodes_to_its_json_and_back_byte_for_byte(name):
+    data = (doc.GOLDEN / f"{name}.msgpack").read_bytes()
+    value = json.loads((doc.GOLDEN / f"{name}.json").read_text())
     assert msgpack.unpackb(data, raw=False) == value
     assert msgpack.packb(value, use_bin_type=True) == data        # canonical writing
     assert doc.deviations(value) == []
-    if kind == "status":                      # section 4 names the counters
+    assert value["kind"] == name.split(".")[0]
+    if name == "status":                      # section 4 names the counters
         assert set(value["counters"]) <= set(doc.counters())
+
+
+def test_every_kind_of_section_7_has_a_golden_vector():
+    assert {name.split(".")[0] for name in doc.golden_vectors()} == set(doc.KINDS)
 
 
 def test_every_counter_of_section_4_is_reported_by_the_slave(slave):
@@ -55,6 +60,15 @@ def test_handshake_envelope_and_sequence_numbers(slave, masters):
         got = [x["seq"] for x in received if x["kind"] == kind]
         assert got and got == list(range(got[0], got[0] + len(got))) and got[0] >= 1, kind
     assert len([x for x in received if x["kind"] == "heartbeat"]) >= 3
+    # heartbeat.last_seq: the highest lossless seq sent before it (section 4;
+    # the connection is ordered and nothing is lost on loopback).
+    highest = 0
+    for x in received:
+        if x["kind"] == "heartbeat" and "last_seq" in x:
+            assert x["last_seq"] == highest, (x, highest)
+        elif doc.KINDS[x["kind"]].lossless and x["seq"]:
+            highest = max(highest, x["seq"])
+    assert any("last_seq" in x for x in received if x["kind"] == "heartbeat")
     # session_config's curves cover exactly its renderable classes.
     config = m.of("session_config")[0]
     assert set(config["curves"]) <= set(config["classes"])
@@ -98,33 +112,93 @@ def test_a_touch_message_by_message(slave, masters):
     # table (resend and fault: the gap and version tests).
     assert {x["kind"] for _, x in m.received} >= {
         "hello", "heartbeat", "session_config", "contact_event", "material_estimate",
-        "flux_trajectory", "flux_setpoint", "measurement_batch", "status"}
+        "posterior_estimate", "flux_trajectory", "flux_setpoint", "measurement_batch",
+        "status"}
     assert m.deviations == []
     assert_pad_safe(slave)
+
+
+def test_object_memory_on_the_wire(slave, masters):
+    # Section 6b: announcements and the touching contact event name the
+    # object and what the slave decided on it before; the fields are the
+    # document's (the document master checks every message against them).
+    m = masters("a")
+    for contact_id, seed in enumerate(range(2, 8), start=30):
+        cup = f"doc-cup-{seed}"
+        first = announcement(m, place(slave, "wood", seed, object_id=cup), cup)
+        assert first["object_id"] == cup and first["object_material"] is None
+        assert first["object_confidence"] is None
+        estimate = touch(m, contact_id)
+        echo = m.of("contact_event", contact_id=contact_id, touching=True)[0]
+        assert echo["object_id"] == cup and echo["object_material"] is None
+        single = estimate["decided"] and estimate["reason"] == "confident"
+        decided = estimate["decided"] and estimate["label"] != "unknown"
+        # After the lift the slave announces its object again, remembered
+        # if the touch decided (a material or a pair; not "unknown").
+        assert m.pump(2.0, until=lambda: m.of("contact_event", contact_id=0)[-1]["seq"] >
+                      first["seq"])
+        after = m.of("contact_event", contact_id=0)[-1]
+        assert after["object_id"] == cup
+        assert after["object_material"] == (estimate["label"] if decided else None)
+        if single:
+            break
+    assert single, "no trial of wood was decided for one material"
+    other = announcement(m, place(slave, "steel", 2, object_id="doc-elsewhere"),
+                         "doc-elsewhere")
+    assert other["object_material"] is None
+    again = announcement(m, place(slave, "wood", seed + 1, object_id=cup), cup)
+    assert again["object_material"] == estimate["label"]
+    assert again["object_confidence"] == pytest.approx(estimate["confidence"])
+    m.touch(contact_id + 10)
+    assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id + 10,
+                                          touching=True))
+    echo = m.of("contact_event", contact_id=contact_id + 10, touching=True)[0]
+    assert echo["object_id"] == cup and echo["object_material"] == estimate["label"]
+    m.touch(contact_id + 10, touching=False)
+    assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id + 10,
+                                          touching=False))
+    assert slave.admin("status")["memory"][cup]["material"] == estimate["label"]
+    assert m.deviations == []
+
+
+def _envelope_off(message: dict) -> dict:
+    return {k: v for k, v in message.items() if k not in ("kind", "seq", "sent_s")}
 
 
 def _check_touch(m, contact_id: int, estimate: dict, object_c: float) -> None:
     echo = m.of("contact_event", contact_id=contact_id, touching=True)
     assert len(echo) == 1 and echo[0]["object_temp_c"] == pytest.approx(object_c)
-    estimates = m.of("material_estimate", contact_id=contact_id)
-    times = [x["t_since_contact_s"] for x in estimates]
-    # Section 6: estimates until a final decision; a pair ("confident group")
-    # keeps streaming, decided, until a member passes alone or the last window.
-    decided = [x["decided"] for x in estimates]
-    first = decided.index(True)
-    assert times == sorted(times) and all(decided[first:])
-    assert all(x["reason"] == "confident group" for x in estimates[first:-1])
-    assert estimates[-1]["reason"] != "confident group" or len(estimates) > first
-    assert estimates[-1] is estimate and all(x["classes"] == estimate["classes"]
-                                             for x in estimates)
-    assert all(abs(sum(x["posteriors"]) - 1.0) < 1e-6 for x in estimates)
     stream = [x for s, x in m.received if s == "stream"]
-    assert {x["kind"] for x in stream} <= {"flux_setpoint", "measurement_batch"}
+    # Section 6a: every estimate as a posterior_estimate on the stream...
+    posts = [x for x in stream if x["kind"] == "posterior_estimate" and
+             x["contact_id"] == contact_id]
+    times = [x["t_since_contact_s"] for x in posts]
+    decided = [x["decided"] for x in posts]
+    assert posts and times == sorted(times) and all(decided[decided.index(True):])
+    # ... and material_estimate, lossless, for each change of the decided
+    # label and the contact's final estimate (nothing is lost on loopback,
+    # so the decisions are exactly those of the posteriors).
+    expected, label = [], None
+    for x in posts:
+        if x["decided"] and x["label"] != label:
+            expected.append(x)
+            label = x["label"]
+    if expected[-1] is not posts[-1]:
+        expected.append(posts[-1])
+    decisions = m.of("material_estimate", contact_id=contact_id)
+    assert [_envelope_off(x) for x in decisions] == [_envelope_off(x) for x in expected]
+    assert decisions[-1] is estimate and all(x["decided"] for x in decisions)
+    # Only a group ("confident group") is followed by another decision.
+    assert all(x["reason"] == "confident group" for x in decisions[:-1])
+    assert all(x["classes"] == estimate["classes"] for x in posts + decisions)
+    assert all(abs(sum(x["posteriors"]) - 1.0) < 1e-6 for x in posts)
+    assert {x["kind"] for x in stream} <= {"posterior_estimate", "flux_setpoint",
+                                           "measurement_batch"}
     batches = [x for x in stream if x["kind"] == "measurement_batch" and
                x["contact_id"] == contact_id]
     assert batches and all(len(b["flux_w_m2"]) == len(b["temp_c"]) == len(b["force_n"])
                            for b in batches)
-    for kind in ("measurement_batch", "flux_setpoint"):
+    for kind in ("measurement_batch", "flux_setpoint", "posterior_estimate"):
         seqs = [x["seq"] for x in stream if x["kind"] == kind]
         assert seqs == sorted(set(seqs)), kind               # per kind, increasing
     assert m.of("contact_event", contact_id=contact_id, touching=False)

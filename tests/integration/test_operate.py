@@ -88,6 +88,15 @@ def test_admin_operates_a_session_and_reports_the_touch(tmp_path, models, capsys
         assert code == 0 and json.loads(out)["material"] == "wood"
         code, out = admin(ports, "send", "master", "nonsense", capsys=capsys)
         assert code == 2 and "unknown command 'nonsense'" in " ".join(out.split())
+        # Object memory: the first touch decided wood on the scene's object "wood".
+        code, out = admin(ports, "place", "wood", "--seed", "2", capsys=capsys)
+        assert code == 0 and "object wood: remembered as wood" in out
+        code, out = admin(ports, "place", "wood", "--object-id", "cup-9", capsys=capsys)
+        assert code == 0 and "object cup-9: nothing remembered of it" in out
+        code, out = admin(ports, "status", "slave", capsys=capsys)
+        assert code == 0 and "object cup-9; memory: wood: wood (" in out
+        code, out = admin(ports, "send", "slave", "forget", capsys=capsys)
+        assert code == 0 and json.loads(out)["memory"] == {}
     finally:
         codes = services.stop()
     assert codes == {"slave": 0, "master": 0}

@@ -130,3 +130,99 @@ def test_master_and_slave_in_two_network_namespaces(tmp_path, models):
     import subprocess
     left = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
     assert all(name not in left for name in ns.names)
+
+
+def _place(ports, material: str, object_id: str, seed: int) -> dict:
+    """Put ``material`` under the slave pad as object ``object_id``; return
+    the slave's reply once the master has the announcement (its status)."""
+    from telethermal.services.admin import call
+    placed = call(ports[2], "place", material=material, object_id=object_id, seed=seed)
+    assert placed["ok"], placed
+    _until(lambda: (lambda s: s["object_id"] == object_id and
+                    s["object_temp_c"] == placed["object_ir_c"])(call(ports[3], "status")),
+           f"the master never heard of object {object_id}")
+    return placed
+
+
+def _touch(ports, seed: int) -> dict:
+    from telethermal.services.admin import call
+    result = call(ports[3], "touch", timeout_s=40, contact_s=1.0, seed=seed)
+    assert result["ok"] and result["safety_events"] == 0, result
+    return result
+
+
+def _until(done, what: str, timeout_s: float = 20.0) -> None:
+    """Wait for ``done()`` (a service that does not answer yet: not done)."""
+    import time
+
+    from telethermal.errors import TransportError
+    end = time.monotonic() + timeout_s
+    while True:
+        try:
+            if done():
+                return
+        except TransportError:
+            pass
+        assert time.monotonic() < end, what
+        time.sleep(0.05)
+
+
+def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, models):
+    # Item 2 of issue 15 on the wire: place object A, touch, identify;
+    # place B, touch; place A again: its announcement carries what the slave
+    # identified on A, and the master renders it from the touch's start.
+    # Then another material under A's name (the fresh identification wins,
+    # logged and counted) and a restarted slave (its memory is gone).
+    from telethermal.services.admin import call
+    ident_path, gen_path, _, _ = models
+    ports = free_ports(4)
+    slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports, 0)
+    services = Services(tmp_path, slave_cfg, master_cfg)
+    slave_status = lambda: call(ports[2], "status")                      # noqa: E731
+    try:
+        wait_connected(services, ports[3])
+        # (Seeds on which the in-process session decides the true material.)
+        assert _place(ports, "wood", "cup-a", seed=1)["object_material"] is None
+        first = _touch(ports, seed=1)
+        assert first["identified"] == "wood" and first["link_counters"]["memory_used"] == 0
+        assert _place(ports, "steel", "cup-b", seed=1)["object_material"] is None
+        assert _touch(ports, seed=2)["identified"] == "steel"
+        again = _place(ports, "wood", "cup-a", seed=2)
+        assert again["object_material"] == "wood" and 0 < again["object_confidence"] <= 1
+        assert call(ports[3], "status")["object_material"] == "wood"          # as announced
+        repeated = _touch(ports, seed=3)
+        assert repeated["link_counters"]["memory_used"] == 1
+        assert repeated["identified"] == "wood"
+        assert repeated["link_counters"]["memory_overruled"] == 0
+        memory = slave_status()["memory"]
+        assert {k: v["material"] for k, v in memory.items()} == {"cup-a": "wood",
+                                                                "cup-b": "steel"}
+        assert memory["cup-a"]["touches"] == 2
+        # Steel under the name cup-a: announced as wood, identified steel.
+        assert _place(ports, "steel", "cup-a", seed=3)["object_material"] == "wood"
+        fresh = _touch(ports, seed=4)
+        assert fresh["identified"] == "steel"
+        assert fresh["link_counters"]["memory_overruled"] == 1
+        status = slave_status()
+        assert status["counters"]["memory_overruled"] == 1
+        assert status["memory"]["cup-a"]["material"] == "steel"
+        assert "the fresh identification wins" in (tmp_path / "slave.log").read_text()
+        # forget: one object, or all (announced again: the master forgets too);
+        # then a restart forgets everything.
+        assert "cup-b" not in call(ports[2], "forget", object_id="cup-b")["memory"]
+        assert call(ports[3], "status")["object_material"] == "steel"
+        assert call(ports[2], "forget")["memory"] == {}
+        _until(lambda: call(ports[3], "status")["object_material"] is None,
+               "the master was not told the memory was cleared")
+        _touch(ports, seed=5)                        # steel on cup-a, remembered again
+        assert slave_status()["memory"]["cup-a"]["material"] == "steel"
+        services.kill("slave")
+        services.start("slave")
+        _until(lambda: (lambda s: s.get("ok") and s["peer_alive"])(slave_status()),
+               "the restarted slave found no master", 90.0)
+        assert slave_status()["memory"] == {}
+        assert _place(ports, "steel", "cup-a", seed=6)["object_material"] is None
+        assert call(ports[3], "status")["object_material"] is None
+    finally:
+        codes = services.stop()
+    assert codes == {"slave": 0, "master": 0}

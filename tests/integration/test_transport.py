@@ -133,6 +133,44 @@ def test_the_lossy_stream_keeps_the_latest_and_counts_gaps(link):
     assert master.counters["stream_lost"] >= 5
 
 
+def estimate(i, contact_id=1):
+    return dict(contact_id=contact_id, t_since_contact_s=i * 0.01, classes=["steel", "wood"],
+                posteriors=[0.5, 0.5], label="steel", confidence=0.5, decided=False, reason="",
+                object_temp_c=24.0)
+
+
+def test_posterior_estimates_are_delivered_newest_only_and_counted_when_lost(link):
+    slave, master = link
+    master.deliver_stream = frozenset({"posterior_estimate"})
+    for i in range(1, 31):
+        slave.send("posterior_estimate", **estimate(i))
+        if i == 10:
+            slave._kind_seq["posterior_estimate"] += 3                # three lost on the wire
+    slave.send("flux_setpoint", contact_id=1, t_since_contact_s=0.3, flux_w_m2=-1.0)
+    _, got = pump(slave, master, seconds=2.0, until=lambda: master.latest.get(
+        "posterior_estimate", {}).get("t_since_contact_s") == 0.3)
+    times = [m["t_since_contact_s"] for m in got if m["kind"] == "posterior_estimate"]
+    assert times == sorted(times) and times[-1] == 0.3 and len(times) == 30
+    assert master.counters["stream_lost"] == 3
+    assert not [m for m in got if m["kind"] == "flux_setpoint"]     # not delivered: latest only
+
+
+def test_a_tail_the_sender_no_longer_holds_is_given_up_not_asked_for_forever(link):
+    # The master claims (heartbeat.last_seq) three lossless messages the
+    # slave never got and that it cannot resend: the slave asks, then gives
+    # them up after 5 dead_after_s like any gap, and the stream goes on.
+    slave, master = link
+    master._next_seq += 3
+    pump(slave, master, seconds=1.0, until=lambda: slave.counters["gaps"] >= 1)
+    assert slave.counters["gaps"] == 1
+    pump(slave, master, seconds=5 * PLAIN.dead_after_s + 1.0,
+         until=lambda: slave.counters["skipped"] == 3)
+    assert slave.counters["skipped"] == 3
+    master.send("contact_event", **contact(4))
+    s_got, _ = pump(slave, master, seconds=2.0, until=lambda: master.unacked == 0)
+    assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [4]
+
+
 def test_curve_admits_the_allowed_master_and_no_other(tmp_path):
     server_dir, allowed, client_dir, stranger_dir = (tmp_path / d for d in
                                                      ("slave", "allowed", "master", "other"))
@@ -178,7 +216,10 @@ def test_a_restarted_slave_is_found_again_and_the_session_starts_afresh(link):
     slave, master = link
     ports = slave.ports
     master.send("contact_event", **contact(1))
-    pump(slave, master, seconds=1.0, until=lambda: master.unacked == 0)
+    for i in range(1, 21):
+        slave.send("posterior_estimate", **estimate(i))
+    pump(slave, master, seconds=1.0, until=lambda: master.unacked == 0 and master.latest.get(
+        "posterior_estimate", {}).get("t_since_contact_s") == 0.2)
     old_session = slave.session_id
     slave.close()
     pump(master, seconds=0.5)                                 # silence: the peer is dead
@@ -192,6 +233,13 @@ def test_a_restarted_slave_is_found_again_and_the_session_starts_afresh(link):
         _, m_got = pump(reborn, master, seconds=2.0, until=lambda: reborn.unacked == 0)
         assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == [7]
         assert master.counters["heartbeats_missed"] >= 1
+        # The new run's lossy kinds count from 1 again: its first estimate is
+        # news, not older than the previous run's twentieth.
+        assert "posterior_estimate" not in master.latest          # the old run's, gone
+        reborn.send("posterior_estimate", **estimate(1, contact_id=2))
+        pump(reborn, master, seconds=2.0, until=lambda: master.latest.get(
+            "posterior_estimate", {}).get("contact_id") == 2)
+        assert master.latest["posterior_estimate"]["contact_id"] == 2
     finally:
         reborn.close()
 

@@ -17,18 +17,30 @@ from telethermal.wire.golden import messages
 PROTO = Path(__file__).resolve().parents[2] / "proto"
 
 
-@pytest.mark.parametrize("kind", sorted(schema.KINDS))
-def test_golden_vectors_both_ways(kind):
-    wire = (PROTO / "golden" / f"{kind}.msgpack").read_bytes()
-    value = json.loads((PROTO / "golden" / f"{kind}.json").read_text())
+@pytest.mark.parametrize("name", sorted(messages()))
+def test_golden_vectors_both_ways(name):
+    wire = (PROTO / "golden" / f"{name}.msgpack").read_bytes()
+    value = json.loads((PROTO / "golden" / f"{name}.json").read_text())
     assert decode(wire) == value
     assert encode(value) == wire
 
 
 def test_every_kind_has_a_golden_vector_and_the_examples_are_the_files():
-    assert set(messages()) == set(schema.KINDS)
-    for kind, message in messages().items():
-        assert json.loads((PROTO / "golden" / f"{kind}.json").read_text()) == message
+    assert {m["kind"] for m in messages().values()} == set(schema.KINDS)
+    assert {p.name[:-len(".msgpack")] for p in (PROTO / "golden").glob("*.msgpack")} == \
+        set(messages())
+    for name, message in messages().items():
+        assert json.loads((PROTO / "golden" / f"{name}.json").read_text()) == message
+
+
+def test_the_object_announcement_vector_carries_the_object_memory():
+    announcement = messages()["contact_event.object"]
+    assert announcement["contact_id"] == 0 and not announcement["touching"]
+    assert {"object_id", "object_material", "object_confidence"} <= set(announcement)
+    estimate, decision = messages()["posterior_estimate"], messages()["material_estimate"]
+    assert set(estimate) == set(decision)            # the same fields, another stream
+    assert schema.KINDS["posterior_estimate"].stream == "stream"
+    assert "posterior_estimate" not in schema.LOSSLESS
 
 
 def test_the_protocol_document_holds_the_codecs_tables():
@@ -111,14 +123,16 @@ def _strategy(f: schema.Field):
 
 
 @st.composite
-def valid_messages(draw):
-    kind = draw(st.sampled_from(sorted(schema.KINDS)))
+def valid_messages(draw, kind=None, every_field=False):
+    """A schema-valid message (of ``kind``; with ``every_field``, its
+    optional fields too)."""
+    kind = kind or draw(st.sampled_from(sorted(schema.KINDS)))
     message = {"kind": kind, "v": 1, "seq": draw(st.integers(0, 2 ** 64 - 1)),
                "sent_s": draw(_finite)}
     for f in schema.KINDS[kind].fields:
-        if f.required or draw(st.booleans()):
+        if f.required or every_field or draw(st.booleans()):
             message[f.name] = draw(_strategy(f))
-    if kind == "material_estimate":
+    if kind in ("material_estimate", "posterior_estimate"):
         message["posteriors"] = message["posteriors"][:len(message["classes"])]
         message["classes"] = message["classes"][:len(message["posteriors"])]
     if kind == "flux_trajectory":
@@ -145,6 +159,38 @@ def test_any_valid_message_round_trips(message):
     assert encode(back) == wire
     for key, value in message.items():
         assert back[key] == value
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.one_of(valid_messages("posterior_estimate"),
+                 valid_messages("contact_event", every_field=True)))
+def test_estimates_and_object_memory_fields_round_trip(message):
+    wire = encode(message)
+    back = decode(wire)
+    assert back == message and encode(back) == wire
+    if message["kind"] == "posterior_estimate":
+        with pytest.raises(ProtocolError, match="posterior_estimate: classes and posteriors"):
+            encode({**message, "posteriors": message["posteriors"] + [0.5]})
+
+
+def test_an_old_reader_skips_the_object_memory_fields():
+    # A reader of the revision before object memory: contact_event without
+    # the three fields. It ignores them (section 3) and reads the rest.
+    import dataclasses
+    from unittest import mock
+
+    from telethermal.wire import codec
+    event = schema.KINDS["contact_event"]
+    old = dataclasses.replace(event, fields=tuple(
+        f for f in event.fields if f.name not in ("object_id", "object_material",
+                                                  "object_confidence")))
+    wire = encode(messages()["contact_event.object"])
+    with mock.patch.dict(schema.KINDS, {"contact_event": old}), \
+            mock.patch.dict(codec._NAMES, {"contact_event": {
+                f.name for f in schema.ENVELOPE + old.fields}}):
+        value, ignored = decode_verbose(wire)
+    assert sorted(ignored) == ["object_confidence", "object_id", "object_material"]
+    assert value["object_temp_c"] == 23.75 and "object_id" not in value
 
 
 @settings(max_examples=500, deadline=None)

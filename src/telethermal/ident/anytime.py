@@ -162,6 +162,12 @@ class StreamingIdentifier:
         last window)."""
         return self.estimate.final
 
+    @property
+    def finished(self) -> bool:
+        """No estimate will follow: committed for good, or the model's last
+        window is past (a group then stands as the contact's answer)."""
+        return self.decided or self._window == len(self.model.windows_s_) - 1
+
     def push(self, sample, force_n: float | None = None) -> Estimate | None:
         """One sample (the model's channels); ``force_n``, the pressing force
         with it, lets the decision refuse a touch unlike the trained ones."""

@@ -96,6 +96,10 @@ def describe_status(status: dict) -> list[str]:
              + (f", slave at {status['slave']}" if status.get("slave") else "")
              + (f", object {status['material']}" if status.get("material") else ""),
              f"  counters: {moved or 'all zero'}"]
+    if "memory" in status:                  # the slave's object memory
+        known = ", ".join(f"{name}: {m['material']} ({m['confidence']:.3f})"
+                          for name, m in status["memory"].items())
+        lines.append(f"  object {status.get('object_id')}; memory: {known or 'empty'}")
     d = status.get("diagnosis")
     if d:
         lines += [f"  problem: {d['problem']}", f"  likely: {d['fix']}"]

@@ -81,6 +81,9 @@ class MasterService:
         self.scene = with_finger(load_scene(config.scene))
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before)
         self.endpoint, self.admin = open_service_sockets("master", config)
+        # The slave's estimates come on the lossy stream, newest wins; the
+        # link reads them as it reads the lossless kinds (PROTOCOL.md 6a).
+        self.endpoint.deliver_stream = frozenset({"posterior_estimate"})
         self.link = SlaveLink()
         self.hardware = None
         self.view = None
@@ -330,6 +333,9 @@ class MasterService:
                 "diagnosis": None if e.peer_alive else e.diagnosis,
                 "session": self.link.generator is not None,
                 "object_temp_c": self.link.object_temp_c,
+                # The object the slave announced and its memory of it (6b).
+                "object_id": self.link.object_id,
+                "object_material": (self.link.remembered or (None,))[0],
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
                 "counters": dict(e.counters), "devices": self.config.devices,
                 **({"device_counters": self.hardware.counters(),

@@ -50,6 +50,8 @@ def _admin_parser(sub) -> None:
     q = asub.add_parser("place", help="put an object under the slave pad (simulation)")
     q.add_argument("material")
     q.add_argument("--seed", type=int)
+    q.add_argument("--object-id", help="the object's name, its key in the slave's object "
+                                       "memory (default: the scene object of MATERIAL)")
     q = asub.add_parser("touch", help="the simulated operator touches the master's pad; "
                                       "prints the touch's figures")
     q.add_argument("--contact-s", type=float, default=5.0)
@@ -106,9 +108,14 @@ def _status(args, where) -> int:
 
 def _place(args, where) -> int:
     extra = {} if args.seed is None else {"seed": args.seed}
+    if args.object_id:
+        extra["object_id"] = args.object_id
     r = ac.request(where["slave"], "slave", "place", material=args.material, **extra)
+    known = f"remembered as {r['object_material']}" if r.get("object_material") else \
+        "nothing remembered of it"
     _show(args, r, [f"placed {args.material} under the slave pad: {r['object_true_c']:.2f} C "
-                    f"(true), {r['object_ir_c']:.2f} C by IR"])
+                    f"(true), {r['object_ir_c']:.2f} C by IR; object "
+                    f"{r.get('object_id')}: {known}"])
     return 0
 
 

@@ -25,6 +25,7 @@ from telethermal.record.session import open_recorder
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
+from telethermal.session.memory import ObjectMemory
 from telethermal.session.run import slave_rng, with_finger
 from telethermal.session.slave import BOARD_LOST, Slave
 
@@ -68,10 +69,17 @@ class SlaveService:
         #: The service's own error counters, reported with the transport's
         #: (status messages and the admin socket).
         self.counters = self.endpoint.extra_counters
-        self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0)
+        self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
+                             memory_overruled=0)
+        #: What this slave decided per object (in this process only: a
+        #: restarted slave has forgotten; PROTOCOL.md section 6b).
+        self.memory = ObjectMemory()
+        self.object_id: str | None = None
         self.contact_id = 0
         self.contact_owner: str | None = None      # the master session that opened it
         self.touch_t0: float | None = None
+        self._decided_label: str | None = None      # this contact's, as last sent
+        self._decision_sent = None                  # the last estimate sent lossless
         self._sent = 0
         self._seed = config.seed
         self.calibration_error: str | None = None
@@ -155,7 +163,7 @@ class SlaveService:
         self.sensors = dc_replace(self.sensors, calibration=cal)
         self.calibration_error = None
         if self.pad is not None and self.touch_t0 is None:
-            self.place(self.material, self._seed)   # measure the object anew, tell the master
+            self.place(self.material, self._seed, self.object_id)   # measured anew, announced
         log.info("object thermometer (%s) calibrated: offset %+.3f K, gain %.4f, residual %.3f K, "
                  "offset standard error %.3f K", self.scene.sensors.object_thermometer,
                  cal.offset_k, cal.gain, cal.residual_k, cal.offset_sd_k)
@@ -164,8 +172,11 @@ class SlaveService:
         return cal.to_dict()
 
     # ------------------------------------------------------------ the object
-    def place(self, material: str, seed: int) -> None:
-        """Put ``material`` under the pad and measure it (IR) before contact."""
+    def place(self, material: str, seed: int, object_id: str | None = None) -> None:
+        """Put ``material`` under the pad and measure it (IR) before contact.
+        ``object_id``: the object's name (its object memory's key); by default
+        the name of the scene object holding ``material`` (the scene names
+        its objects by their material)."""
         if self.devices is not None:
             self._touch_counters = _flat(self.devices.all_counters())
         if self.devices is not None and self.devices.kind == "hardware":
@@ -174,10 +185,12 @@ class SlaveService:
         else:
             self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
                              session=self.sensors, devices=self.devices)
+        self.object_id = object_id or material
         self.material = material
         self._seed = seed
         self._sent = 0
-        log.info("object placed material=%s object_ir_c=%.2f", material, self.pad.object_ir_c)
+        log.info("object placed material=%s object_id=%s object_ir_c=%.2f", material,
+                 self.object_id, self.pad.object_ir_c)
         if self.endpoint.peer_version is not None:
             self._announce_object()
 
@@ -189,7 +202,14 @@ class SlaveService:
     def _announce_object(self):
         self.endpoint.send("contact_event", contact_id=0, touching=False,
                            t_s=time.monotonic(), force_n=0.0,
-                           object_temp_c=self._object_temp_c())
+                           object_temp_c=self._object_temp_c(), **self._object_fields())
+
+    def _object_fields(self) -> dict:
+        """The object under the pad and what the memory holds for it (6b)."""
+        known = self.memory.recall(self.object_id)
+        return {"object_id": self.object_id,
+                "object_material": None if known is None else known.material,
+                "object_confidence": None if known is None else known.confidence}
 
     # ------------------------------------------------------------ loop
     def _on_message(self, m: dict, now: float) -> None:
@@ -224,6 +244,7 @@ class SlaveService:
             self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
             self.contact_owner = self.endpoint.peer_session
             self.finger_c = m.get("finger_temp_c")
+            self._decided_label = self._decision_sent = None
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
         elif not m["touching"] and m["contact_id"] == self.contact_id and \
                 self.touch_t0 is not None and self.endpoint.peer_session == self.contact_owner:
@@ -237,6 +258,8 @@ class SlaveService:
     def _lift(self, now: float) -> None:
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
+        if self.pad.estimate is not None and self.pad.estimate is not self._decision_sent:
+            self._send_decision(self.pad.estimate)   # the contact's final estimate (6a)
         self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
                            t_s=now, force_n=0.0, object_temp_c=self._object_temp_c())
         if self.devices is not None:
@@ -247,8 +270,13 @@ class SlaveService:
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
         self.touch_t0, self.state, self.contact_owner = None, "idle", None
+        # The touch's decision (a material or a pair; not "unknown"), once per
+        # touch: remembered for this object, announced with it just below; a
+        # disagreeing fresh decision wins (logged, counted).
+        if self.memory.learn(self.object_id, self.pad.estimate, now) == "overruled":
+            self.counters["memory_overruled"] += 1
         try:
-            self.place(self.material, self._seed + 1)    # the next touch: a fresh trial
+            self.place(self.material, self._seed + 1, self.object_id)   # a fresh trial
         except TelethermalError as exc:
             # The devices could not prepare the next touch (the pad did not
             # settle, the board is away): the pad is safe; an admin place or
@@ -280,18 +308,15 @@ class SlaveService:
         if before is None and pad.onset_s is not None:
             self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
                                t_s=self.touch_t0 + pad.onset_s, force_n=float(pad.force_n[
-                                   pad.onset_index]), object_temp_c=pad.object_ir_c)
+                                   pad.onset_index]), object_temp_c=pad.object_ir_c,
+                               **self._object_fields())
         if self._object_temp_c() is None:
             # No object temperature (the IR reading was refused): nothing is
             # identified or rendered from this touch; the report says why.
             return
         for ev in events:
             e = ev.estimate
-            self.endpoint.send("material_estimate", contact_id=self.contact_id,
-                               t_since_contact_s=float(e.t_s), classes=list(pad.classes),
-                               posteriors=[float(p) for p in e.posteriors], label=e.label,
-                               confidence=float(e.confidence), decided=e.decided,
-                               reason=e.reason, object_temp_c=pad.object_ir_c)
+            self._send_estimate(e, final=ev is events[-1] and pad.stream.finished)
             if e.decided and e.label != UNKNOWN and e.label in self.curves:
                 curve = self.curves[e.label]
                 self.endpoint.send("flux_trajectory", contact_id=self.contact_id,
@@ -314,6 +339,29 @@ class SlaveService:
                                temp_c=[float(v) for v in ch["temperature_C"][i]],
                                force_n=[float(v) for v in ch["force_N"][i]])
             self._sent = read
+
+    def _estimate_fields(self, e) -> dict:
+        return dict(contact_id=self.contact_id, t_since_contact_s=float(e.t_s),
+                    classes=list(self.pad.classes), posteriors=[float(p) for p in e.posteriors],
+                    label=e.label, confidence=float(e.confidence), decided=e.decided,
+                    reason=e.reason, object_temp_c=self.pad.object_ir_c)
+
+    def _send_estimate(self, e, final: bool) -> None:
+        """Every estimate on the stream (``posterior_estimate``: newest wins,
+        a lost one costs nothing); lossless ``material_estimate`` only for a
+        change of the decided label and the contact's final estimate, so
+        that contact events and decisions never queue behind estimates
+        (``proto/PROTOCOL.md`` section 6a)."""
+        fields = self._estimate_fields(e)
+        self.endpoint.send("posterior_estimate", **fields)
+        if (e.decided and e.label != self._decided_label) or final:
+            self._send_decision(e, fields)
+
+    def _send_decision(self, e, fields: dict | None = None) -> None:
+        self.endpoint.send("material_estimate", **(fields or self._estimate_fields(e)))
+        self._decision_sent = e
+        if e.decided:
+            self._decided_label = e.label
 
     def _stream_setpoint(self, now: float) -> None:
         """The naive path: the display flux for "now", sample by sample, from
@@ -367,18 +415,31 @@ class SlaveService:
 
     def _on_admin(self, request: dict) -> None:
         def place(r):
-            self.place(str(r["material"]), int(r.get("seed", self._seed + 1)))
+            object_id = r.get("object_id")
+            if object_id is not None and (not isinstance(object_id, str) or not object_id or
+                                          len(object_id.encode()) > 256):
+                raise ValueError(f"object_id must be a non-empty string of at most 256 bytes, "
+                                 f"got {object_id!r}")
+            self.place(str(r["material"]), int(r.get("seed", self._seed + 1)), object_id)
             # object_true_c: the simulator's truth, for comparing with direct contact
-            return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c}
+            return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c,
+                    "object_id": self.object_id, **self._object_fields()}
 
         def calibrate(r):
             if self.touch_t0 is not None:
                 raise ValueError("cannot calibrate during a contact: lift first")
             return self.calibrate_thermometer(float(r.get("drift_k_per_reading", 0.0)))
 
+        def forget(r):
+            self.memory.forget(r.get("object_id"))
+            log.info("object memory: forgot %s", r.get("object_id") or "every object")
+            if self.endpoint.peer_version is not None and self.touch_t0 is None:
+                self._announce_object()          # the master forgets it too
+            return {"memory": self.memory.to_dict()}
+
         self.admin.handle(request, self, {
             "place": place, "report": lambda r: dict(getattr(self, "last_touch", {})),
-            "calibrate_thermometer": calibrate})
+            "calibrate_thermometer": calibrate, "forget": forget})
 
     def _close_devices(self) -> None:
         """The active pad to its safe state, the devices released."""
@@ -393,6 +454,7 @@ class SlaveService:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
                 "material": self.material, "rtt_s": e.offset.rtt_s,
+                "object_id": self.object_id, "memory": self.memory.to_dict(),
                 "object_true_c": self.pad.object_true_c, "object_ir_c": self.pad.object_ir_c,
                 "last_rejected_key": e.last_rejected_key,
                 "masters_lost": self.masters_lost,

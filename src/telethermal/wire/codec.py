@@ -167,8 +167,9 @@ def validate(message: dict) -> tuple[dict, list[str]]:
     if out["v"] != PROTOCOL_VERSION and kind_name != "hello":
         raise ProtocolError(f"{kind_name}: protocol version {out['v']}, this side speaks "
                             f"{PROTOCOL_VERSION}")
-    if kind_name == "material_estimate" and len(out["classes"]) != len(out["posteriors"]):
-        raise ProtocolError("material_estimate: classes and posteriors differ in length")
+    if kind_name in ("material_estimate", "posterior_estimate") and \
+            len(out["classes"]) != len(out["posteriors"]):
+        raise ProtocolError(f"{kind_name}: classes and posteriors differ in length")
     if kind_name == "flux_trajectory":
         if len(out["t_s"]) != len(out["g_w_m2k"]) or len(out["t_s"]) < 2:
             raise ProtocolError("flux_trajectory: t_s and g_w_m2k need the same length >= 2")

@@ -1,7 +1,8 @@
 """Golden vectors: one example message per kind, encoded, beside its JSON.
 
-``python -m telethermal.wire.golden DIR`` (re)writes ``DIR/<kind>.msgpack``
-and ``DIR/<kind>.json``; the committed files in ``proto/golden/`` are what the
+``python -m telethermal.wire.golden DIR`` (re)writes ``DIR/<name>.msgpack``
+and ``DIR/<name>.json`` (the name is the kind, or ``<kind>.<variant>`` for a
+further example of a kind); the committed files in ``proto/golden/`` are what the
 codec is tested against, both ways, so a change of encoding shows up as a
 failing test rather than as a silent incompatibility.
 """
@@ -18,7 +19,7 @@ _ENV = {"v": 1, "seq": 7, "sent_s": 1234.5625}
 EXAMPLES = {
     "hello": {"role": "master", "versions": [1], "software": "telethermal 0.1.0",
               "session_id": "4f2a9c1e", "resume_from": 1},
-    "heartbeat": {"ack": 6, "echo_sent_s": 1234.5, "echo_held_s": 0.00025},
+    "heartbeat": {"ack": 6, "echo_sent_s": 1234.5, "echo_held_s": 0.00025, "last_seq": 9},
     "resend": {"from_seq": 4},
     "session_config": {"scene": "fingertip-7", "sample_rate_hz": 100.0,
                        "classes": ["plexiglass", "steel"], "identifier": "effusivity-lda",
@@ -29,6 +30,11 @@ EXAMPLES = {
                                             "g_w_m2k": [350.0, 1200.5, 640.0]}}},
     "contact_event": {"contact_id": 3, "touching": True, "t_s": 1234.25, "force_n": 2.125,
                       "finger_temp_c": 33.25},
+    # The slave's object announcement (contact_id 0) with what its object
+    # memory holds for that object.
+    "contact_event.object": {"contact_id": 0, "touching": False, "t_s": 1230.5,
+                             "force_n": 0.0, "object_temp_c": 23.75, "object_id": "cup-2",
+                             "object_material": "steel", "object_confidence": 0.9921875},
     "material_estimate": {"contact_id": 3, "t_since_contact_s": 0.25,
                           "classes": ["plexiglass", "steel"], "posteriors": [0.125, 0.875],
                           "label": "steel", "confidence": 0.875, "decided": False,
@@ -37,6 +43,10 @@ EXAMPLES = {
                         "t_s": [0.0, 0.5, 1.0], "g_w_m2k": [0.0, 900.0, 640.0],
                         "valid_s": 60.0},
     "flux_setpoint": {"contact_id": 3, "t_since_contact_s": 0.5, "flux_w_m2": -7650.0},
+    "posterior_estimate": {"contact_id": 3, "t_since_contact_s": 0.125,
+                           "classes": ["plexiglass", "steel"], "posteriors": [0.25, 0.75],
+                           "label": "steel", "confidence": 0.75, "decided": False,
+                           "reason": "", "object_temp_c": 24.5},
     # A master's batch on its view stream, with the optional fields (a
     # slave's batch is the same without them).
     "measurement_batch": {"contact_id": 3, "t0_s": 1234.0, "rate_hz": 100.0,
@@ -54,17 +64,20 @@ EXAMPLES = {
 
 
 def messages() -> dict[str, dict]:
-    return {kind: {"kind": kind, **_ENV, **fields} for kind, fields in EXAMPLES.items()}
+    """Vector name -> message. A name is its kind, or ``kind.variant`` for a
+    further example of a kind (its optional fields, say)."""
+    return {name: {"kind": name.split(".")[0], **_ENV, **fields}
+            for name, fields in EXAMPLES.items()}
 
 
 def write(folder: str | Path) -> list[Path]:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     written = []
-    for kind, message in messages().items():
-        (folder / f"{kind}.msgpack").write_bytes(encode(message))
-        (folder / f"{kind}.json").write_text(json.dumps(message, indent=2) + "\n")
-        written.append(folder / f"{kind}.msgpack")
+    for name, message in messages().items():
+        (folder / f"{name}.msgpack").write_bytes(encode(message))
+        (folder / f"{name}.json").write_text(json.dumps(message, indent=2) + "\n")
+        written.append(folder / f"{name}.msgpack")
     return written
 
 

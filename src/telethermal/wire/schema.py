@@ -53,6 +53,24 @@ ENVELOPE = (
 )
 
 _T = dict(unit="s")
+#: An estimate's fields: ``material_estimate`` (decisions, lossless) and
+#: ``posterior_estimate`` (every window, latest value) carry the same.
+ESTIMATE_FIELDS = (
+    Field("contact_id", "uint"),
+    Field("t_since_contact_s", "float", "s", lo=0),
+    Field("classes", "list[str]"),
+    Field("posteriors", "list[float]", lo=0, hi=1,
+          doc="same order and length as classes"),
+    Field("label", "str", doc="best class, 'unknown', or a group of two classes "
+                              "'a|b' (sorted) while committed to the pair"),
+    Field("confidence", "float", lo=0, hi=1),
+    Field("decided", "bool", doc="true once committed (to a class, a group or "
+                                 "'unknown'); never false again in the contact"),
+    Field("reason", "str", doc="confident | confident group | outside classes | "
+                               "gap too small | not confident | force outside trained "
+                               "range | sensor board lost | '' while undecided"),
+    Field("object_temp_c", "float", "degC", lo=-50, hi=200),
+)
 KINDS: dict[str, Kind] = {k.name: k for k in (
     Kind("hello", "control", "both", (
         Field("role", "str", doc="'master' or 'slave'"),
@@ -69,6 +87,9 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
               doc="sent_s of the last heartbeat received from the peer"),
         Field("echo_held_s", "float", "s", lo=0, nullable=True,
               doc="how long the sender held that heartbeat before this one"),
+        Field("last_seq", "uint", required=False,
+              doc="the highest lossless seq the sender has sent (0: none); a receiver "
+                  "that has not received it asks for a resend (a lost tail, section 4)"),
     ), "every heartbeat_s (default 0.1 s); acknowledges the lossless stream and carries "
        "the clock-offset exchange"),
     Kind("resend", "control", "both", (
@@ -95,25 +116,21 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
                                  "master then holds neutral)"),
         Field("finger_temp_c", "float", "degC", lo=0, hi=50, required=False,
               nullable=True, doc="master: the finger's temperature measured before contact"),
+        Field("object_id", "str", required=False, nullable=True,
+              doc="slave, in its object announcement (contact_id 0) and its touching event: "
+                  "the object under the pad (named by the scene, the operator or a fiducial); "
+                  "nil: not known"),
+        Field("object_material", "str", required=False, nullable=True,
+              doc="slave, with object_id: what it decided on this object before (its "
+                  "object memory): a material, or a pair 'a|b'; nil: none remembered"),
+        Field("object_confidence", "float", lo=0, hi=1, required=False, nullable=True,
+              doc="the confidence of that remembered decision; nil with object_material"),
     ), "the master's operator touched or lifted; the slave's pad touched or left"),
-    Kind("material_estimate", "control", "slave->master", (
-        Field("contact_id", "uint"),
-        Field("t_since_contact_s", "float", "s", lo=0),
-        Field("classes", "list[str]"),
-        Field("posteriors", "list[float]", lo=0, hi=1,
-              doc="same order and length as classes"),
-        Field("label", "str", doc="best class, 'unknown', or a group of two classes "
-                                  "'a|b' (sorted) while committed to the pair"),
-        Field("confidence", "float", lo=0, hi=1),
-        Field("decided", "bool", doc="true once committed (to a class, a group or "
-                                     "'unknown'); never false again in the contact"),
-        Field("reason", "str", doc="confident | confident group | outside classes | "
-                                   "gap too small | not confident | force outside trained "
-                                   "range | sensor board lost | '' while undecided"),
-        Field("object_temp_c", "float", "degC", lo=-50, hi=200),
-    ), "streamed at every identification window until a final decision (decided = true "
-       "with any reason but 'confident group'; a group keeps streaming, decided, until a "
-       "member passes alone or the contact's last window)"),
+    Kind("material_estimate", "control", "slave->master", ESTIMATE_FIELDS,
+         "decisions only: sent each time the decided label changes (a commitment to a class, "
+         "to a group 'a|b', a group's refinement to a member, a change of mind) and once "
+         "for the contact's final estimate (decided, or 'unknown'); every estimate also "
+         "goes as posterior_estimate"),
     Kind("flux_trajectory", "control", "slave->master", (
         Field("contact_id", "uint"),
         Field("material", "str"),
@@ -134,6 +151,10 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("t_since_contact_s", "float", "s", lo=0),
         Field("flux_w_m2", "float", "W/m^2", lo=-1e5, hi=1e5),
     ), "latest-value setpoint, sample by sample (the naive, uncompensated path)"),
+    Kind("posterior_estimate", "stream", "slave->master", ESTIMATE_FIELDS,
+         "every estimate the slave computes (each identification window), the whole "
+         "posterior and its time: newest wins, a lost one costs nothing; the same fields "
+         "as material_estimate"),
     Kind("measurement_batch", "stream", "both", (
         Field("contact_id", "uint"),
         Field("t0_s", "float", "s", doc="sender-clock time of the first sample"),

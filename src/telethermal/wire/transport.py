@@ -206,6 +206,10 @@ class Endpoint:
         self._kind_seq: dict[str, int] = {}
         self._stream_seen: dict[str, int] = {}
         self.latest: dict[str, dict] = {}             # newest message per lossy kind
+        #: Lossy kinds that :meth:`poll` also returns, each newer message once
+        #: as it arrives (the master's ``posterior_estimate``); the others
+        #: are only kept in ``latest``.
+        self.deliver_stream: frozenset[str] = frozenset()
         self.peer_session: str | None = None
         self.peer_identity: bytes | None = None
         self.peer_version: int | None = None
@@ -213,6 +217,7 @@ class Endpoint:
         self._last_heartbeat_sent = -1e9
         self._last_peer_hb: tuple[float, float] | None = None   # (its sent_s, our receipt)
         self._resend_asked_at = -1e9
+        self._tail_since: float | None = None       # when a lost tail was first seen
         self._ack_moved_at = -1e9
         self._retransmitted_at = -1e9
         self._was_alive = False
@@ -455,7 +460,7 @@ class Endpoint:
             held = max(now - received, 0.0)
         self._raw_send(self.control, self._unordered(
             "heartbeat", now, ack=self.receiver.expected - 1, echo_sent_s=echo,
-            echo_held_s=held))
+            echo_held_s=held, last_seq=self._next_seq - 1))
         self._last_heartbeat_sent = now
 
     def _ask_resend(self, now: float) -> None:
@@ -566,7 +571,7 @@ class Endpoint:
                     data = self.stream.recv(flags=zmq.NOBLOCK)
                 except zmq.Again:
                     break
-                self._on_stream(data)
+                out += self._on_stream(data)
         return out
 
     def _drop(self, key: str, now: float, fmt: str, *args) -> None:
@@ -588,21 +593,26 @@ class Endpoint:
             self._drop("invalid", now, "%s", exc)
         return None, _lossless_seq(data)
 
-    def _on_stream(self, data):
+    def _on_stream(self, data) -> list[dict]:
+        """Keep the newest message of each lossy kind; count the gaps in its
+        ``seq`` (``stream_lost``); return it if its kind is delivered."""
         now = self.clock()
         message, _ = self._decode(data, now)
         if message is None:
-            return
+            return []
         kind = message["kind"]
         if KINDS[kind].stream != "stream":
             self._drop("wrong_direction", now, "%s on the stream socket", kind)
-            return
+            return []
         last = self._stream_seen.get(kind)
         if last is not None and message["seq"] > last + 1:
             self.counters["stream_lost"] += message["seq"] - last - 1
         if last is None or message["seq"] > last:
             self._stream_seen[kind] = message["seq"]
             self.latest[kind] = message
+            if kind in self.deliver_stream:
+                return [message]
+        return []
 
     def _from_peer(self, identity) -> bool:
         return self.peer_version is not None and (identity is None or
@@ -679,6 +689,29 @@ class Endpoint:
         if message["echo_sent_s"] is not None and message["echo_held_s"] is not None:
             rtt = (now - message["echo_sent_s"]) - message["echo_held_s"]
             self.offset.add(rtt, message["sent_s"] - now + rtt / 2)
+        self._check_tail(message.get("last_seq"), now)
+
+    def _check_tail(self, last_seq: int | None, now: float) -> None:
+        """A lost *tail*: the peer says it sent up to ``last_seq`` and nothing
+        after our next expected seq arrived to show a gap (the lossless
+        stream is sparse: contact events and decisions, seconds apart). Ask
+        for it now rather than wait for the peer's retransmission timer (two
+        round trips and a heartbeat); given up like a gap."""
+        rx = self.receiver
+        if last_seq is None or last_seq < rx.expected or rx.buffer:
+            self._tail_since = None
+            return
+        if self._tail_since is None:
+            self._tail_since = now
+            self.counters["gaps"] += 1
+        give_up = max(GAP_GIVE_UP_DEAD * self.config.dead_after_s, 4 * (self.offset.rtt_s or 0))
+        if now - self._tail_since >= give_up:
+            self.counters["skipped"] += last_seq - rx.expected + 1
+            self._limited.warn("skipped", now, "%s: lossless seq %d-%d never arrived in %.1f s: "
+                               "skipped", self.role, rx.expected, last_seq, give_up)
+            rx.expected, self._tail_since = last_seq + 1, None
+        elif now - self._resend_asked_at >= self.config.heartbeat_s:
+            self._ask_resend(now)
 
     def _on_hello(self, message, identity, now) -> list[dict]:
         common = set(message["versions"]) & set(SUPPORTED_VERSIONS)
@@ -716,7 +749,13 @@ class Endpoint:
             # A new run of the peer: both directions start again from 1.
             log.info("%s: peer session %s (new run)", self.role, message["session_id"][:32])
             self.receiver.reset()
+            self._tail_since = None
             self._next_seq, self._outbox = 1, OrderedDict()
+            # Its lossy kinds count from 1 again too: without this, every
+            # stream message of the new run would look older than the last
+            # one of the previous run and be ignored until its seq caught up.
+            self._stream_seen.clear()
+            self.latest.clear()
         if self.peer_session is not None:
             self.counters["reconnects"] += 1
         self.peer_session = message["session_id"]
