@@ -166,6 +166,12 @@ def cmd_bench_render(args) -> int:
               f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
               f"{r['mean_temp_rms_error_c']:.2f} K, CPU {r['mean_cpu_s_per_simulated_s']:.3f} s/s, "
               f"safety events {r['safety_events']}")
+    for c in report["controller"]:
+        print(f"controller {c['feedforward_model']} (mean/worst): " + ", ".join(
+            f"{m} flux {100 * v['mean_flux_rms_error_rel']:.2f}/"
+            f"{100 * v['max_flux_rms_error_rel']:.2f} % skin "
+            f"{v['mean_temp_rms_error_c']:.2f}/{v['max_temp_rms_error_c']:.2f} K"
+            for m, v in c["per_material"].items()))
     for r in report["gains"]:
         print(f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
               f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin {r['mean_temp_rms_error_c']:.2f} K")

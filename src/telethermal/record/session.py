@@ -295,6 +295,11 @@ def _replay_master(rec, params, cid, generator, gains, attached):
         else:
             generator = attached("generator.npz", load_generator)
     d = params["display"]
+    if gains is not None and d.get("feedforward_model", "static") != "static":
+        raise RecordingError(f"{rec.path}: this touch was rendered by the "
+                             f"{d['feedforward_model']!r} controller, which does not use the "
+                             "flux PID's gains; replay with other gains needs a touch "
+                             "recorded with feedforward_model 'static'")
     recorded_gains = PidGains(**d["gains"])
     config = DisplayConfig(rate_hz=d["rate_hz"], before=d["before"], source=d["source"],
                            gains=gains or recorded_gains, feedforward=d["feedforward"],

@@ -81,7 +81,7 @@ class DisplayConfig:
     #: "impedance": the pad's surface made to behave as the rendered object's
     #: (control/feedforward.py; needs the pad's layers, else "static");
     #: "static": ``T_pad + q R_pad`` plus the flux PID on the generator's flux.
-    feedforward_model: str = "static"
+    feedforward_model: str = "impedance"
     #: The impedance controller's prediction horizon.
     skin_horizon_s: float = 0.1
     before: str = "prior"
