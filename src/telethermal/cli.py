@@ -172,6 +172,13 @@ def cmd_bench_render(args) -> int:
             f"{100 * v['max_flux_rms_error_rel']:.2f} % skin "
             f"{v['mean_temp_rms_error_c']:.2f}/{v['max_temp_rms_error_c']:.2f} K"
             for m, v in c["per_material"].items()))
+    floor = report["skin_floor"]
+    print(f"skin floor (seed {floor['seed']}, junction in {floor['band_c']} C), default controller "
+          "/ any controller with the pad at the object's temperature / at the band's bottom: "
+          + ", ".join(f"{m} {v['impedance_temp_rms_error_c']:.2f}/"
+                      f"{v['floor_idle_at_object']['temp_rms_error_c']:.2f}/"
+                      f"{v['floor_idle_at_band_bottom']['temp_rms_error_c']:.2f} K"
+                      for m, v in floor.items() if isinstance(v, dict)))
     for r in report["gains"]:
         print(f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
               f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin {r['mean_temp_rms_error_c']:.2f} K")

@@ -28,6 +28,7 @@ import numpy as np
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.physics.scene import load_scene
+from telethermal.bench.skin_floor import skin_floor
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
 from telethermal.session.master import DEFAULT_GAINS, DisplayConfig
 from telethermal.session.models import train_generator, train_identifier
@@ -91,6 +92,24 @@ def _per_material(rows) -> dict:
     return out
 
 
+def skin_floors(scene, materials, identifier, generator, seed: int) -> dict:
+    """Per material, one touch (``seed``): the default controller's skin error
+    beside the floor no controller can beat (bench/skin_floor.py), with the
+    pad at the object's temperature at contact (as it idles) and at the
+    bottom of the skin band."""
+    limits = DisplayConfig().limits
+    band = (limits.skin_min_c, limits.skin_max_c)
+    out = {"seed": seed, "band_c": list(band)}
+    for material in materials:
+        result = run_session(scene, material, identifier, generator, DisplayConfig(),
+                             contact_s=CONTACT_S, seed=seed)
+        out[material] = {"impedance_temp_rms_error_c": result.summary["temp_rms_error_c"],
+                         "floor_idle_at_object": skin_floor(scene, result, band),
+                         "floor_idle_at_band_bottom": skin_floor(scene, result, band,
+                                                                 idle_c=band[0])}
+    return out
+
+
 def generator_comparison(scene) -> dict:
     """Network against fitted closed form, leave one person out of database 2."""
     trials = finger_database(scene, np.random.default_rng(1000))
@@ -134,6 +153,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
         rows = sweep(DisplayConfig(feedforward_model=model), sds=seeds5)
         report["controller"].append({"feedforward_model": model, **_aggregate(rows),
                                      "per_material": _per_material(rows), "rows": rows})
+    report["skin_floor"] = skin_floors(scene, materials, identifier, generator, seeds5[0])
     step("PID gains")
     report["gains"] = []
     for name, gains in GAIN_SETS.items():
@@ -179,13 +199,18 @@ def _plot_skin(ax, report: dict) -> None:
                color=f"C{i}", label=f"{c['feedforward_model']} (mean)")
         ax.plot(x + off, [pm[m]["max_temp_rms_error_c"] for m in materials], "v", color="k",
                 ms=4, label="worst seed" if i == 0 else None)
+    floor = report.get("skin_floor") or {}
+    if all(m in floor for m in materials):
+        ax.plot(x, [floor[m]["floor_idle_at_object"]["temp_rms_error_c"] for m in materials],
+                "_", color="k", ms=18, mew=2,
+                label=f"floor, any controller (seed {floor['seed']})")
     ax.axhline(0.3, color="r", lw=0.8, ls=":", label="target 0.3 K")
     ax.set_xticks(x, materials, rotation=20, fontsize=8)
     ax.set_ylabel("skin temperature RMS error (K), 1 kHz")
     ax.set_title("display controller, per material", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     ax.grid(alpha=0.3, axis="y")
-    inset = ax.inset_axes([0.42, 0.5, 0.3, 0.35])
+    inset = ax.inset_axes([0.3, 0.55, 0.26, 0.3])
     inset.plot([r["rate_hz"] for r in report["rate"]],
                [r["mean_temp_rms_error_c"] for r in report["rate"]], "o-", ms=3, color="C3")
     inset.set_xscale("log")
