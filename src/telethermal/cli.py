@@ -544,7 +544,8 @@ def cmd_session(args) -> int:
                       "fingertip (33 C, nominal skin)")
     scene = with_finger(scene)
     identifier, generator = _session_models(scene, args.identifier, args.generator, args.seed)
-    config = DisplayConfig(rate_hz=args.rate_hz, before=args.before)
+    config = DisplayConfig(rate_hz=args.rate_hz, before=args.before,
+                           feedforward_model=args.controller)
     result = run_session(scene, args.material, identifier, generator, config,
                          contact_s=args.contact_s, seed=args.seed, realtime=args.realtime,
                          devices=args.devices, record=args.record)
@@ -914,6 +915,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--before", choices=("prior", "hold"), default="prior",
                    help="before identification: track the posterior-weighted flux (prior) "
                         "or hold the pad at the object temperature (hold, the paper's)")
+    p.add_argument("--controller", choices=("impedance", "static"), default="impedance",
+                   help="impedance: the pad's surface behaves as the object's (default); "
+                        "static: the flux PID on the generator's flux")
     p.add_argument("--contact-s", type=_positive(), default=5.0)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--realtime", action="store_true",
