@@ -34,6 +34,10 @@ generator was trained on sensor readings, so both carry the same lag). The
 feed-forward inverts the sensor lag (``q + tau dq/dt``) and the pad's layers
 (``T_junction = T_pad_surface + q R_pad``); the PID on the measured flux
 removes what the model misses (the operator's own skin, contact, drift).
+That is the ``"static"`` controller; the default, ``"impedance"``
+(:mod:`telethermal.control.feedforward`), renders the object instead: the
+pad's surface is steered to the object's surface temperature under the
+measured flux, and the flux PID is not used.
 """
 
 from __future__ import annotations
