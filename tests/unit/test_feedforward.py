@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from telethermal.control.feedforward import SkinFeedforward, half_integral_modes
+from telethermal.control.feedforward import ImpedanceController, half_integral_modes
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import ControlError
-from telethermal.physics.contact import contact_flux_w_m2, contact_surface_temps_c
+from telethermal.physics.contact import contact_surface_temps_c
 from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.materials import get_material as mat
 
@@ -41,7 +41,7 @@ def test_model_follows_the_pad_exactly_with_the_junction_held():
     model = LayeredContact(PAD, [Layer(mat("skin"), math.inf)], Boundary("isothermal"),
                            Boundary("adiabatic"), DT, 120.0)
     plant = DisplayPlant(model, 24.0, 33.0, H, DT)
-    ff = SkinFeedforward(PAD, H, TAU, DT)
+    ff = ImpedanceController(PAD, H, TAU, DT)
     ff.start(24.0, 33.0, 0.0, 24.0)
     for _ in range(500):
         ff.advance(20.0)
@@ -59,7 +59,7 @@ def run_impedance(object_name, skin_scale=1.2, conductance=3500.0, seconds=2.0,
     finger_c, object_c, e_obj = 33.0, 24.0, mat(object_name).effusivity
     plant = DisplayPlant(model, object_c, finger_c, conductance, DT, sensor_lag_s=TAU,
                          skin_k_scale=skin_scale, skin_heat_scale=skin_scale)
-    ff = SkinFeedforward(PAD, H, TAU, DT)        # believes nominal skin and H
+    ff = ImpedanceController(PAD, H, TAU, DT)        # believes nominal skin and H
     ff.observe(0.0, DT)
     ff.start(object_c, finger_c, 0.0, object_c)
     reading, skin = plant.read(), []

@@ -79,7 +79,7 @@ def half_integral_modes(t_min_s: float, t_max_s: float, per_decade: int = 6):
     return rates, weights
 
 
-class SkinFeedforward:
+class ImpedanceController:
     """The display's impedance controller: :meth:`observe` every period,
     :meth:`start` at contact, :meth:`command_impedance` while rendering and
     :meth:`advance` with the junction temperature applied.
@@ -103,7 +103,7 @@ class SkinFeedforward:
     def __init__(self, layers, conductance_w_m2k: float, sensor_lag_s: float, dt_s: float,
                  horizon_s: float = 0.05, t_max_s: float = 120.0):
         if not (dt_s > 0 and horizon_s > 0 and conductance_w_m2k > 0 and sensor_lag_s >= 0):
-            raise ControlError("SkinFeedforward needs dt_s, horizon_s, conductance > 0 and "
+            raise ControlError("ImpedanceController needs dt_s, horizon_s, conductance > 0 and "
                                f"sensor_lag_s >= 0 (got {dt_s}, {horizon_s}, "
                                f"{conductance_w_m2k}, {sensor_lag_s})")
         self.dt_s, self.tau_s = dt_s, sensor_lag_s
@@ -215,7 +215,7 @@ class SkinFeedforward:
         ahead by the model, anchored on the thermocouple and the flux sensor.
         """
         if self._w is None:
-            raise ControlError("SkinFeedforward.command_impedance before start()")
+            raise ControlError("ImpedanceController.command_impedance before start()")
         bias_q = self.true_flux_w_m2 - self.model_flux_w_m2()
         bias_s = pad_temp_c - (self._ref_c + float(self._m_surface @ self._w))
         memory = float(self._past_decay @ self._flux_memory) + \

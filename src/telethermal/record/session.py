@@ -101,7 +101,7 @@ def display_params(scene, config, operator, idle_c) -> dict:
                         "handover_k_s": config.handover_k_s, "blend_s": config.blend_s,
                         "r_pad_belief": config.r_pad_belief,
                         "feedforward_model": config.feedforward_model,
-                        "skin_horizon_s": config.skin_horizon_s},
+                        "impedance_horizon_s": config.impedance_horizon_s},
             "pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
             "pad_layers": [[layer.material.name, layer.thickness_m] for layer in scene.pad.layers],
             "contact_conductance_w_m2k": (scene.finger.contact_conductance_w_m2k
@@ -307,7 +307,7 @@ def _replay_master(rec, params, cid, generator, gains, attached):
                            blend_s=d["blend_s"], r_pad_belief=d["r_pad_belief"],
                            # Recordings from before the skin-side controllers: "static".
                            feedforward_model=d.get("feedforward_model", "static"),
-                           skin_horizon_s=d.get("skin_horizon_s", 0.1))
+                           impedance_horizon_s=d.get("impedance_horizon_s", 0.1))
     master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
                            params["sensor_lag_s"], params["finger_ir_c"],
                            idle_c=params["idle_c"], **_replay_pad(params))

@@ -48,11 +48,11 @@ from dataclasses import dataclass, field, replace
 
 
 from telethermal.control.contact import ContactDetector
-from telethermal.control.feedforward import SkinFeedforward
+from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
                                         supervise)
-from telethermal.errors import ControlError
+from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.physics.materials import get_material
 from telethermal.render.generator import mixture, posterior_weights
@@ -87,7 +87,7 @@ class DisplayConfig:
     #: "static": ``T_pad + q R_pad`` plus the flux PID on the generator's flux.
     feedforward_model: str = "impedance"
     #: The impedance controller's prediction horizon.
-    skin_horizon_s: float = 0.1
+    impedance_horizon_s: float = 0.1
     before: str = "prior"
     source: str = "trajectory"
     #: The controller's own slew limit on the junction command; the
@@ -117,8 +117,9 @@ class DisplayConfig:
         if self.feedforward_model not in FEEDFORWARD_MODELS:
             raise ControlError(f"feedforward_model must be one of {FEEDFORWARD_MODELS}, "
                                f"got {self.feedforward_model!r}")
-        if not self.skin_horizon_s > 0:
-            raise ControlError(f"skin_horizon_s must be > 0, got {self.skin_horizon_s}")
+        if not self.impedance_horizon_s > 0:
+            raise ControlError("impedance_horizon_s must be > 0, got "
+                               f"{self.impedance_horizon_s}")
         if self.before not in BEFORE_MODES:
             raise ControlError(f"before must be one of {BEFORE_MODES}, got {self.before!r}")
 
@@ -190,8 +191,9 @@ class MasterDisplay:
         self.rendered_from_s: float | None = None
         self._pid_running = False
         # The impedance controller, when the pad's layers are known.
-        self.skin = SkinFeedforward(pad_layers, contact_conductance_w_m2k, sensor_lag_s,
-                                    self.dt_nominal, config.skin_horizon_s) \
+        self.impedance = ImpedanceController(pad_layers, contact_conductance_w_m2k,
+                                             sensor_lag_s, self.dt_nominal,
+                                             config.impedance_horizon_s) \
             if (config.feedforward and config.feedforward_model != "static" and pad_layers
                 and contact_conductance_w_m2k) else None
 
@@ -231,18 +233,22 @@ class MasterDisplay:
         q = g * gap
         return q, q + self.tau * dg * gap
 
-    def _inverse_effusivity(self, news: SlaveNews) -> float:
-        """1/e of what is rendered: the decided material's, or the posteriors' mean."""
+    def _inverse_effusivity(self, news: SlaveNews) -> float | None:
+        """1/e of what is rendered: the decided material's, or the posteriors'
+        mean; None when a material is not in the materials table."""
         weights = {self.rendering: 1.0} if self.rendering is not None else \
             self._mixture_weights(news)
-        return sum(w / get_material(n).effusivity for n, w in weights.items())
+        try:
+            return sum(w / get_material(n).effusivity for n, w in weights.items())
+        except UnknownMaterialError:
+            return None
 
     # ------------------------------------------------------------ the period
     def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:
         cfg, lim = self.config, self.config.limits
         event = None
-        if self.skin is not None:
-            self.skin.observe(sensors.flux_w_m2, dt_s)
+        if self.impedance is not None:
+            self.impedance.observe(sensors.flux_w_m2, dt_s)
         if math.isfinite(sensors.force_n):
             event = self.detector.update(t_s, sensors.force_n)
         if event is not None and event.touching:
@@ -250,15 +256,15 @@ class MasterDisplay:
             self.onset_s, self.phase, self.rendering = event.t_s, "contact", None
             self.last_onset_s, self.rendered_from_s = event.t_s, None
             self._pid_running = False
-            if self.skin is not None:
+            if self.impedance is not None:
                 applied = self.safety.applied_temp_c
-                self.skin.start(applied, self.finger_c, t_s - event.t_s, applied)
+                self.impedance.start(applied, self.finger_c, t_s - event.t_s, applied)
         elif event is not None:
             self.onset_s, self.phase, self.rendering = None, "idle", None
             self.last_release_s = event.t_s
             self._pid_running = False
-            if self.skin is not None:
-                self.skin.reset()
+            if self.impedance is not None:
+                self.impedance.reset()
 
         est = news.estimate
         naive = cfg.source == "setpoints"
@@ -314,11 +320,13 @@ class MasterDisplay:
             else:
                 desired, ff_flux = self._desired(t_s, t_contact, news, gap)
             measured = sensors.flux_w_m2
-            if self.skin is not None and self.skin.running and not naive:
+            inverse_e = self._inverse_effusivity(news) if self.impedance is not None and \
+                self.impedance.running and not naive else None
+            if inverse_e is not None:
                 # The pad's surface behaves as the object's would; the loop is
                 # closed on the measured flux and surface inside the controller.
-                ff = self.skin.command_impedance(sensors.pad_temp_c, obj_c,
-                                                 self._inverse_effusivity(news)) - standby
+                ff = self.impedance.command_impedance(sensors.pad_temp_c, obj_c,
+                                                      inverse_e) - standby
                 desired_for_pid = measured
             else:
                 ff = (sensors.pad_temp_c + ff_flux * self.r_pad - standby) \
@@ -360,8 +368,8 @@ class MasterDisplay:
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
         applied, self.safety = supervise(self.safety, reading, request, lim, dt_s)
-        if self.skin is not None:
-            self.skin.advance(applied.temp_c, dt_s)
+        if self.impedance is not None:
+            self.impedance.advance(applied.temp_c, dt_s)
         if self._pid_running:
             self.pid.limited_downstream(wanted, applied.temp_c)
         return MasterStep(t_s, self.phase, self.detector.touching, desired, command,
