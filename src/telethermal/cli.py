@@ -166,6 +166,19 @@ def cmd_bench_render(args) -> int:
               f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
               f"{r['mean_temp_rms_error_c']:.2f} K, CPU {r['mean_cpu_s_per_simulated_s']:.3f} s/s, "
               f"safety events {r['safety_events']}")
+    for c in report["controller"]:
+        print(f"controller {c['feedforward_model']} (mean/worst): " + ", ".join(
+            f"{m} flux {100 * v['mean_flux_rms_error_rel']:.2f}/"
+            f"{100 * v['max_flux_rms_error_rel']:.2f} % skin "
+            f"{v['mean_temp_rms_error_c']:.2f}/{v['max_temp_rms_error_c']:.2f} K"
+            for m, v in c["per_material"].items()))
+    floor = report["skin_floor"]
+    print(f"skin floor (seed {floor['seed']}, junction in {floor['band_c']} C), default controller "
+          "/ any controller with the pad at the object's temperature / at the band's bottom: "
+          + ", ".join(f"{m} {v['impedance_temp_rms_error_c']:.2f}/"
+                      f"{v['floor_idle_at_object']['temp_rms_error_c']:.2f}/"
+                      f"{v['floor_idle_at_band_bottom']['temp_rms_error_c']:.2f} K"
+                      for m, v in floor.items() if isinstance(v, dict)))
     for r in report["gains"]:
         print(f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
               f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin {r['mean_temp_rms_error_c']:.2f} K")
@@ -517,7 +530,8 @@ def cmd_session(args) -> int:
                       "fingertip (33 C, nominal skin)")
     scene = with_finger(scene)
     identifier, generator = _session_models(scene, args.identifier, args.generator, args.seed)
-    config = DisplayConfig(rate_hz=args.rate_hz, before=args.before)
+    config = DisplayConfig(rate_hz=args.rate_hz, before=args.before,
+                           feedforward_model=args.controller)
     result = run_session(scene, args.material, identifier, generator, config,
                          contact_s=args.contact_s, seed=args.seed, realtime=args.realtime,
                          devices=args.devices, record=args.record)
@@ -897,6 +911,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--before", choices=("prior", "hold"), default="prior",
                    help="before identification: track the posterior-weighted flux (prior) "
                         "or hold the pad at the object temperature (hold, the paper's)")
+    p.add_argument("--controller", choices=("impedance", "static"), default="impedance",
+                   help="impedance: the pad's surface behaves as the object's (default); "
+                        "static: the flux PID on the generator's flux")
     p.add_argument("--contact-s", type=_positive(), default=5.0)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--realtime", action="store_true",

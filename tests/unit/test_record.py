@@ -15,6 +15,7 @@ from telethermal.record.importer import import_recordings
 from telethermal.record.recording import Recorder, RecordingError, read_recording
 from telethermal.record.session import periods, replay
 from telethermal.session.models import train_generator, train_identifier
+from telethermal.session.master import DisplayConfig
 from telethermal.session.run import run_session, with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
@@ -28,8 +29,21 @@ def models():
 @pytest.fixture(scope="module")
 def recorded(models, tmp_path_factory):
     path = tmp_path_factory.mktemp("rec") / "session.mcap"
-    result = run_session(SCENE, "plexiglass", *models, contact_s=1.0, seed=2, record=path)
+    # The flux PID's loop ("static"): the replay below varies its gains.
+    result = run_session(SCENE, "plexiglass", *models, DisplayConfig(feedforward_model="static"),
+                         contact_s=1.0, seed=2, record=path)
     return path, result
+
+
+def test_an_impedance_touch_replays_sample_for_sample_and_refuses_gains(models, tmp_path):
+    path = tmp_path / "impedance.mcap"
+    run_session(SCENE, "aluminium", *models, DisplayConfig(feedforward_model="impedance"),
+                contact_s=0.5, seed=1, record=path)
+    same = replay(path)["summary"]
+    assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
+    from telethermal.session.master import DEFAULT_GAINS
+    with pytest.raises(RecordingError, match="does not use the flux PID"):
+        replay(path, gains=DEFAULT_GAINS)
 
 
 def test_a_session_recording_holds_every_period_the_models_and_the_config(recorded):

@@ -1,6 +1,7 @@
-"""``telethermal bench render``: rendering error against control rate, PID
-gains, the before-identification strategy and the flux generator, and the
-display loop's timing on the real clock.
+"""``telethermal bench render``: rendering error against control rate, the
+display controller (impedance rendering against the flux PID with its static
+feed-forward, every material), PID gains, the before-identification strategy
+and the flux generator, and the display loop's timing on the real clock.
 
 Every session is the in-process session of ``telethermal session`` on
 ``fingertip-7`` (identifier and generator trained once on the scene's own
@@ -9,7 +10,9 @@ session seeds, so that every configuration sees the very same touches.
 Errors are those of the session JSON: ``flux_rms_error_rel`` (after the
 identification decision), ``flux_rms_error_rel_first_s`` and
 ``temp_rms_error_c`` (skin surface, the whole contact), against the same
-operator's finger touching the object directly.
+operator's finger touching the object directly. The rate and controller
+sections run 5 seeds per material; the gain section varies the flux PID, so
+it runs the "static" controller, the one that uses it.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy as np
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.physics.scene import load_scene
+from telethermal.bench.skin_floor import skin_floor
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
 from telethermal.session.master import DEFAULT_GAINS, DisplayConfig
 from telethermal.session.models import train_generator, train_identifier
@@ -32,6 +36,8 @@ from telethermal.session.run import run_session, with_finger
 
 RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
 SEEDS = (1, 2)
+SEEDS_5 = (1, 2, 3, 4, 5)
+FEEDFORWARD_MODELS = ("static", "impedance")
 CONTACT_S = 3.0
 _SAT = dict(output_min=-25.0, output_max=25.0)
 GAIN_SETS = {
@@ -68,8 +74,39 @@ def _mean(rows, key):
 def _aggregate(rows):
     out = {f"mean_{k}": _mean(rows, k) for k in KEYS[:3]}
     out["max_flux_rms_error_rel"] = float(max(r["flux_rms_error_rel"] for r in rows))
+    out["max_temp_rms_error_c"] = float(max(r["temp_rms_error_c"] for r in rows))
     out["safety_events"] = int(sum(r["safety_events"] for r in rows))
     out["mean_cpu_s_per_simulated_s"] = _mean(rows, "cpu_s_per_simulated_s")
+    return out
+
+
+def _per_material(rows) -> dict:
+    """Mean and worst over seeds, per material, of the flux and skin errors."""
+    out = {}
+    for material in dict.fromkeys(r["material"] for r in rows):
+        mine = [r for r in rows if r["material"] == material]
+        out[material] = {f"{how}_{key}": float(fn([r[key] for r in mine]))
+                         for key in ("flux_rms_error_rel", "temp_rms_error_c")
+                         for how, fn in (("mean", np.mean), ("max", np.max))}
+        out[material]["safety_events"] = int(sum(r["safety_events"] for r in mine))
+    return out
+
+
+def skin_floors(scene, materials, identifier, generator, seed: int) -> dict:
+    """Per material, one touch (``seed``): the default controller's skin error
+    beside the floor no controller can beat (bench/skin_floor.py), with the
+    pad at the object's temperature at contact (as it idles) and at the
+    bottom of the skin band."""
+    limits = DisplayConfig().limits
+    band = (limits.skin_min_c, limits.skin_max_c)
+    out = {"seed": seed, "band_c": list(band)}
+    for material in materials:
+        result = run_session(scene, material, identifier, generator, DisplayConfig(),
+                             contact_s=CONTACT_S, seed=seed)
+        out[material] = {"impedance_temp_rms_error_c": result.summary["temp_rms_error_c"],
+                         "floor_idle_at_object": skin_floor(scene, result, band),
+                         "floor_idle_at_band_bottom": skin_floor(scene, result, band,
+                                                                 idle_c=band[0])}
     return out
 
 
@@ -104,16 +141,25 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
 
     report = {"scene": scene.name, "contact_s": CONTACT_S, "seeds": list(seeds),
               "materials": list(materials), "training_s": training_s}
+    seeds5 = SEEDS_5[:1] if quick else SEEDS_5
+    report["seeds_rate_and_controller"] = list(seeds5)
     step("control rate")
     report["rate"] = []
     for rate in rates:
-        rows = sweep(DisplayConfig(rate_hz=rate))
+        rows = sweep(DisplayConfig(rate_hz=rate), sds=seeds5)
         report["rate"].append({"rate_hz": rate, **_aggregate(rows), "rows": rows})
+    report["controller"] = []
+    for model in FEEDFORWARD_MODELS:
+        rows = sweep(DisplayConfig(feedforward_model=model), sds=seeds5)
+        report["controller"].append({"feedforward_model": model, **_aggregate(rows),
+                                     "per_material": _per_material(rows), "rows": rows})
+    report["skin_floor"] = skin_floors(scene, materials, identifier, generator, seeds5[0])
     step("PID gains")
     report["gains"] = []
     for name, gains in GAIN_SETS.items():
         for belief in (1.0, 1.3):
-            rows = sweep(DisplayConfig(gains=gains, r_pad_belief=belief))
+            rows = sweep(DisplayConfig(gains=gains, r_pad_belief=belief,
+                                       feedforward_model="static"))
             report["gains"].append({"gains": name, "kp": gains.kp, "ki": gains.ki,
                                     "kd": gains.kd, "pad_resistance_belief": belief,
                                     **_aggregate(rows), "rows": rows})
@@ -139,12 +185,47 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
     return report
 
 
+def _plot_skin(ax, report: dict) -> None:
+    """Skin temperature RMS per material for each controller (bars: mean over
+    seeds, triangles: worst), and the mean over materials against the loop
+    rate (inset)."""
+    materials = report["materials"]
+    x = np.arange(len(materials))
+    controllers = report.get("controller") or []
+    for i, c in enumerate(controllers):
+        pm = c["per_material"]
+        off = (i - (len(controllers) - 1) / 2) * 0.38
+        ax.bar(x + off, [pm[m]["mean_temp_rms_error_c"] for m in materials], 0.38,
+               color=f"C{i}", label=f"{c['feedforward_model']} (mean)")
+        ax.plot(x + off, [pm[m]["max_temp_rms_error_c"] for m in materials], "v", color="k",
+                ms=4, label="worst seed" if i == 0 else None)
+    floor = report.get("skin_floor") or {}
+    if all(m in floor for m in materials):
+        ax.plot(x, [floor[m]["floor_idle_at_object"]["temp_rms_error_c"] for m in materials],
+                "_", color="k", ms=18, mew=2,
+                label=f"floor, any controller (seed {floor['seed']})")
+    ax.axhline(0.3, color="r", lw=0.8, ls=":", label="target 0.3 K")
+    ax.set_xticks(x, materials, rotation=20, fontsize=8)
+    ax.set_ylabel("skin temperature RMS error (K), 1 kHz")
+    ax.set_title("display controller, per material", fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    ax.grid(alpha=0.3, axis="y")
+    inset = ax.inset_axes([0.3, 0.55, 0.26, 0.3])
+    inset.plot([r["rate_hz"] for r in report["rate"]],
+               [r["mean_temp_rms_error_c"] for r in report["rate"]], "o-", ms=3, color="C3")
+    inset.set_xscale("log")
+    inset.set_xlabel("loop rate (Hz)", fontsize=7)
+    inset.set_ylabel("mean skin RMS (K)", fontsize=7)
+    inset.tick_params(labelsize=6)
+
+
 def plot(report: dict, out_png: str | Path) -> Path:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
+    fig, axes = plt.subplots(2, 2, figsize=(14, 9.5))
+    axes = axes.ravel()
     ax = axes[0]
     rates = [r["rate_hz"] for r in report["rate"]]
     for material in report["materials"]:
@@ -159,7 +240,8 @@ def plot(report: dict, out_png: str | Path) -> Path:
     ax2 = ax.twinx()
     ax2.plot(rates, [r["mean_cpu_s_per_simulated_s"] for r in report["rate"]], "k--", lw=1)
     ax2.set_ylabel("CPU s per simulated s (dashed)")
-    ax = axes[1]
+    _plot_skin(axes[1], report)
+    ax = axes[2]
     labels, nominal, wrong = [], [], []
     for r in report["gains"]:
         if r["pad_resistance_belief"] == 1.0:
@@ -174,7 +256,8 @@ def plot(report: dict, out_png: str | Path) -> Path:
     ax.set_ylabel("mean flux RMS error after identification (%)")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3, axis="y")
-    ax = axes[2]
+    ax.set_title("flux PID gains (static controller)", fontsize=9)
+    ax = axes[3]
     for i, r in enumerate(report["before"]):
         ax.bar(i - 0.2, 100 * r["mean_flux_rms_error_rel_first_s"], 0.4, color="C0",
                label="flux, first second (%)" if i == 0 else None)
@@ -185,7 +268,8 @@ def plot(report: dict, out_png: str | Path) -> Path:
     ax.legend(fontsize=7)
     fig.suptitle(f"telethermal bench render - {report['date']} - {report['machine']}\n"
                  f"{report['scene']}, {report['contact_s']:g} s contacts, seeds "
-                 f"{report['seeds']}", fontsize=9)
+                 f"{report.get('seeds_rate_and_controller', report['seeds'])} (rate, "
+                 f"controller), {report['seeds']} (gains, before)", fontsize=9)
     fig.tight_layout()
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)

@@ -79,6 +79,19 @@ def open_recorder(config, role: str, identifier=None, generator=None):
                                     model_bytes(identifier, generator)))
 
 
+def _replay_pad(params: dict) -> dict:
+    """The pad's layers and contact conductance a recording names (none in
+    recordings older than the skin-side controllers)."""
+    from telethermal.physics.layered import Layer
+    from telethermal.physics.materials import get_material
+
+    if not (params.get("pad_layers") and params.get("contact_conductance_w_m2k")):
+        return {}
+    return {"pad_layers": tuple(Layer(get_material(name), float(thickness))
+                                for name, thickness in params["pad_layers"]),
+            "contact_conductance_w_m2k": params["contact_conductance_w_m2k"]}
+
+
 def display_params(scene, config, operator, idle_c) -> dict:
     """What a replay needs to rebuild the display of one touch."""
     from telethermal.session.run import pad_resistance
@@ -86,8 +99,13 @@ def display_params(scene, config, operator, idle_c) -> dict:
                         "source": config.source, "gains": asdict(config.gains),
                         "feedforward": config.feedforward, "slew_k_s": config.slew_k_s,
                         "handover_k_s": config.handover_k_s, "blend_s": config.blend_s,
-                        "r_pad_belief": config.r_pad_belief},
+                        "r_pad_belief": config.r_pad_belief,
+                        "feedforward_model": config.feedforward_model,
+                        "impedance_horizon_s": config.impedance_horizon_s},
             "pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
+            "pad_layers": [[layer.material.name, layer.thickness_m] for layer in scene.pad.layers],
+            "contact_conductance_w_m2k": (scene.finger.contact_conductance_w_m2k
+                                          if scene.finger is not None else None),
             "sensor_lag_s": scene.sensors.flux_lag_s,
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
             "operator": asdict(operator)}
@@ -277,14 +295,22 @@ def _replay_master(rec, params, cid, generator, gains, attached):
         else:
             generator = attached("generator.npz", load_generator)
     d = params["display"]
+    if gains is not None and d.get("feedforward_model", "static") != "static":
+        raise RecordingError(f"{rec.path}: this touch was rendered by the "
+                             f"{d['feedforward_model']!r} controller, which does not use the "
+                             "flux PID's gains; replay with other gains needs a touch "
+                             "recorded with feedforward_model 'static'")
     recorded_gains = PidGains(**d["gains"])
     config = DisplayConfig(rate_hz=d["rate_hz"], before=d["before"], source=d["source"],
                            gains=gains or recorded_gains, feedforward=d["feedforward"],
                            slew_k_s=d["slew_k_s"], handover_k_s=d["handover_k_s"],
-                           blend_s=d["blend_s"], r_pad_belief=d["r_pad_belief"])
+                           blend_s=d["blend_s"], r_pad_belief=d["r_pad_belief"],
+                           # Recordings from before the skin-side controllers: "static".
+                           feedforward_model=d.get("feedforward_model", "static"),
+                           impedance_horizon_s=d.get("impedance_horizon_s", 0.1))
     master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
                            params["sensor_lag_s"], params["finger_ir_c"],
-                           idle_c=params["idle_c"])
+                           idle_c=params["idle_c"], **_replay_pad(params))
     rows = periods(rec, cid)
     news_at = {n["k"]: n for n in rec.messages("/master/news")
                if n.get("contact_id", 0) == cid}

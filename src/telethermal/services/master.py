@@ -28,8 +28,9 @@ from telethermal.services.config import MasterConfig
 from telethermal.services.viewstream import ViewPublisher
 from telethermal.session.link import SlaveLink
 from telethermal.session.master import DisplayConfig, MasterDisplay
-from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
-                                     pad_resistance, safety_summary, with_finger)
+from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
+                                     draw_operator, master_rng, pad_resistance,
+                                     safety_summary, with_finger)
 
 log = logging.getLogger("telethermal.master")
 
@@ -47,7 +48,7 @@ class Touch:
         self.display = MasterDisplay(cfg, service.link.generator,
                                      pad_resistance(scene.pad.layers),
                                      scene.sensors.flux_lag_s, self.operator.finger_ir_c,
-                                     idle_c=self.idle_c)
+                                     idle_c=self.idle_c, **display_model_args(scene))
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed)
         self.start = now

@@ -34,6 +34,10 @@ generator was trained on sensor readings, so both carry the same lag). The
 feed-forward inverts the sensor lag (``q + tau dq/dt``) and the pad's layers
 (``T_junction = T_pad_surface + q R_pad``); the PID on the measured flux
 removes what the model misses (the operator's own skin, contact, drift).
+That is the ``"static"`` controller; the default, ``"impedance"``
+(:mod:`telethermal.control.feedforward`), renders the object instead: the
+pad's surface is steered to the object's surface temperature under the
+measured flux, and the flux PID is not used.
 """
 
 from __future__ import annotations
@@ -44,11 +48,13 @@ from dataclasses import dataclass, field, replace
 
 
 from telethermal.control.contact import ContactDetector
+from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
                                         supervise)
-from telethermal.errors import ControlError
+from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.physics.materials import get_material
 from telethermal.render.generator import mixture, posterior_weights
 
 log = logging.getLogger(__name__)
@@ -58,6 +64,7 @@ BEFORE_MODES = ("hold", "prior")
 #: compensated path); "setpoints": track the latest flux setpoint streamed
 #: by the slave sample by sample (the naive baseline of the fault benchmark).
 SOURCES = ("trajectory", "setpoints")
+FEEDFORWARD_MODELS = ("static", "impedance")
 
 #: PID gains of the flux loop: K of junction per W/m^2 of flux error. Chosen
 #: by ``telethermal bench render`` (bench/results/render.json): the lowest
@@ -75,6 +82,12 @@ class DisplayConfig:
     rate_hz: float = 1000.0
     gains: PidGains = DEFAULT_GAINS
     feedforward: bool = True
+    #: "impedance": the pad's surface made to behave as the rendered object's
+    #: (control/feedforward.py; needs the pad's layers, else "static");
+    #: "static": ``T_pad + q R_pad`` plus the flux PID on the generator's flux.
+    feedforward_model: str = "impedance"
+    #: The impedance controller's prediction horizon.
+    impedance_horizon_s: float = 0.1
     before: str = "prior"
     source: str = "trajectory"
     #: The controller's own slew limit on the junction command; the
@@ -101,6 +114,12 @@ class DisplayConfig:
             raise ControlError("slew_k_s, handover_k_s and blend_s must be > 0")
         if self.source not in SOURCES:
             raise ControlError(f"source must be one of {SOURCES}, got {self.source!r}")
+        if self.feedforward_model not in FEEDFORWARD_MODELS:
+            raise ControlError(f"feedforward_model must be one of {FEEDFORWARD_MODELS}, "
+                               f"got {self.feedforward_model!r}")
+        if not self.impedance_horizon_s > 0:
+            raise ControlError("impedance_horizon_s must be > 0, got "
+                               f"{self.impedance_horizon_s}")
         if self.before not in BEFORE_MODES:
             raise ControlError(f"before must be one of {BEFORE_MODES}, got {self.before!r}")
 
@@ -143,7 +162,8 @@ class MasterDisplay:
     """The display's control logic, one period per :meth:`step`."""
 
     def __init__(self, config: DisplayConfig, generator, pad_resistance_m2k_w: float,
-                 sensor_lag_s: float, finger_temp_c: float, idle_c: float | None = None):
+                 sensor_lag_s: float, finger_temp_c: float, idle_c: float | None = None,
+                 pad_layers=None, contact_conductance_w_m2k: float | None = None):
         self.config = config
         self.generator = generator
         self.r_pad = pad_resistance_m2k_w * config.r_pad_belief
@@ -170,6 +190,12 @@ class MasterDisplay:
         self.rendering: str | None = None       # material being rendered
         self.rendered_from_s: float | None = None
         self._pid_running = False
+        # The impedance controller, when the pad's layers are known.
+        self.impedance = ImpedanceController(pad_layers, contact_conductance_w_m2k,
+                                             sensor_lag_s, self.dt_nominal,
+                                             config.impedance_horizon_s) \
+            if (config.feedforward and config.feedforward_model != "static" and pad_layers
+                and contact_conductance_w_m2k) else None
 
     # ------------------------------------------------------------ pieces
     @staticmethod
@@ -207,10 +233,22 @@ class MasterDisplay:
         q = g * gap
         return q, q + self.tau * dg * gap
 
+    def _inverse_effusivity(self, news: SlaveNews) -> float | None:
+        """1/e of what is rendered: the decided material's, or the posteriors'
+        mean; None when a material is not in the materials table."""
+        weights = {self.rendering: 1.0} if self.rendering is not None else \
+            self._mixture_weights(news)
+        try:
+            return sum(w / get_material(n).effusivity for n, w in weights.items())
+        except UnknownMaterialError:
+            return None
+
     # ------------------------------------------------------------ the period
     def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:
         cfg, lim = self.config, self.config.limits
         event = None
+        if self.impedance is not None:
+            self.impedance.observe(sensors.flux_w_m2, dt_s)
         if math.isfinite(sensors.force_n):
             event = self.detector.update(t_s, sensors.force_n)
         if event is not None and event.touching:
@@ -218,10 +256,15 @@ class MasterDisplay:
             self.onset_s, self.phase, self.rendering = event.t_s, "contact", None
             self.last_onset_s, self.rendered_from_s = event.t_s, None
             self._pid_running = False
+            if self.impedance is not None:
+                applied = self.safety.applied_temp_c
+                self.impedance.start(applied, self.finger_c, t_s - event.t_s, applied)
         elif event is not None:
             self.onset_s, self.phase, self.rendering = None, "idle", None
             self.last_release_s = event.t_s
             self._pid_running = False
+            if self.impedance is not None:
+                self.impedance.reset()
 
         est = news.estimate
         naive = cfg.source == "setpoints"
@@ -276,7 +319,19 @@ class MasterDisplay:
                 desired = ff_flux = float(news.setpoint_w_m2)
             else:
                 desired, ff_flux = self._desired(t_s, t_contact, news, gap)
-            ff = (sensors.pad_temp_c + ff_flux * self.r_pad - standby) if cfg.feedforward else 0.0
+            measured = sensors.flux_w_m2
+            inverse_e = self._inverse_effusivity(news) if self.impedance is not None and \
+                self.impedance.running and not naive else None
+            if inverse_e is not None:
+                # The pad's surface behaves as the object's would; the loop is
+                # closed on the measured flux and surface inside the controller.
+                ff = self.impedance.command_impedance(sensors.pad_temp_c, obj_c,
+                                                      inverse_e) - standby
+                desired_for_pid = measured
+            else:
+                ff = (sensors.pad_temp_c + ff_flux * self.r_pad - standby) \
+                    if cfg.feedforward else 0.0
+                desired_for_pid = desired
             if not self._pid_running:
                 # Saturate where the junction would leave the skin band, so the
                 # integral does not wind up against the supervisor.
@@ -284,7 +339,7 @@ class MasterDisplay:
                 self.pid.gains = replace(g, output_min=max(g.output_min, lim.skin_min_c - standby),
                                          output_max=min(g.output_max, lim.skin_max_c - standby))
                 self.pid.reset(sensors.flux_w_m2)
-            out = self.pid.update(desired, sensors.flux_w_m2, dt_s, feedforward=ff)
+            out = self.pid.update(desired_for_pid, measured, dt_s, feedforward=ff)
             command = standby + out.output
             if out.saturated and not self._band_limited:
                 # The flux asked for would take the pad past the skin band:
@@ -313,6 +368,8 @@ class MasterDisplay:
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
         applied, self.safety = supervise(self.safety, reading, request, lim, dt_s)
+        if self.impedance is not None:
+            self.impedance.advance(applied.temp_c, dt_s)
         if self._pid_running:
             self.pid.limited_downstream(wanted, applied.temp_c)
         return MasterStep(t_s, self.phase, self.detector.touching, desired, command,

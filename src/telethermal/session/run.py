@@ -69,6 +69,13 @@ def display_model(pad_layers: tuple[Layer, ...], t_max_s: float, t_min_s: float)
                           Boundary("isothermal"), Boundary("adiabatic"), t_min_s, t_max_s)
 
 
+def display_model_args(scene: Scene) -> dict:
+    """What the display's skin controller knows of the display: the pad's
+    layers and the nominal pad-fingertip contact conductance."""
+    return {"pad_layers": tuple(scene.pad.layers),
+            "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k}
+
+
 def pad_resistance(layers) -> float:
     return sum(layer.thickness_m / layer.material.conductivity_w_mk for layer in layers)
 
@@ -209,7 +216,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # The master has idled at the standby temperature before this touch.
     idle = MasterDisplay.standby_c_for(config.limits, slave.object_ir_c)
     master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
-                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle)
+                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
+                           **display_model_args(scene))
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=realtime, seed=seed)
