@@ -87,14 +87,32 @@ def test_a_lost_estimate_holds_back_a_decision_only_when_ordered(lossless_estima
         assert [m["i"] for _, m in got] == [1]                 # the lost estimate is gone
 
 
-def test_a_lost_tail_is_recovered_by_the_retransmission_timer():
+def test_a_lost_tail_is_found_by_the_next_heartbeat():
     net = SimNetwork(NetworkSpec.symmetric(Direction(delay_s=0.05)), np.random.default_rng(0))
     net.channels["s2m"] = DropFirst(0.05)
     net.send(0.0, "s2m", msg(0), lossless=True)                # alone: no gap to see
     got = drain(net, 2.0, 0.001)
     assert [m["i"] for _, m in got] == [0]
+    # PROTOCOL.md section 4: the heartbeat at 0.1 s carries last_seq (0.15 s
+    # there), the resend goes back (0.2 s), the message comes again (0.25 s).
+    assert got[0][0] == pytest.approx(0.25, abs=1.5e-3)
+    assert net.streams["s2m"].counters["gaps"] == 1
+
+
+def test_a_lost_tail_without_heartbeats_waits_for_the_retransmission_timer():
+    net = SimNetwork(NetworkSpec.symmetric(Direction(delay_s=0.05)), np.random.default_rng(0))
+    net.channels["s2m"] = DropFirst(0.05)
+    net.channels["s2m"].drop_kinds = None
+    original = net._transmit
+
+    def no_heartbeats(now, direction, action, payload, kind):
+        if action != "heartbeat":
+            original(now, direction, action, payload, kind)
+    net._transmit = no_heartbeats
+    net.send(0.0, "s2m", msg(0), lossless=True)
+    got = drain(net, 2.0, 0.001)
     # max(3 heartbeats, 2 round trips + 1 heartbeat) = 0.3 s, then 0.05 s delay.
-    assert got[0][0] == pytest.approx(0.35, abs=1.5e-3)
+    assert [m["i"] for _, m in got] == [0] and got[0][0] == pytest.approx(0.35, abs=1.5e-3)
 
 
 def test_two_objects_announced_in_quick_succession_are_read_in_order():

@@ -23,10 +23,13 @@ What is modelled, and how:
   (loss, delay, jitter, reordering); a lost one is gone.
 * Lossless stream (PROTOCOL.md section 4): per direction, in ``seq`` order.
   A lost message is recovered by the receiver's ``resend`` (sent when a
-  later message reveals the gap, repeated once per heartbeat period while
-  it is open, itself through the faulty reverse direction) or by the
-  sender's retransmission timer (``max(3 heartbeats, 2 round trips + 1
-  heartbeat)`` without the peer's ack); messages behind a gap wait for it.
+  later message, or a heartbeat's ``last_seq``, reveals the gap; repeated
+  once per heartbeat period while it is open; itself through the faulty
+  reverse direction) or by the sender's retransmission timer (``max(3
+  heartbeats, 2 round trips + 1 heartbeat)`` without the peer's ack);
+  messages behind a gap wait for it. Heartbeats (every ``heartbeat_s``,
+  through the channel, lossy) are modelled while the sender holds
+  unacknowledged messages.
   ``estimates="lossless"`` sends every estimate this way (the protocol
   before issue 15), so the cost of ordered estimates can be measured.
 * Clocks are the same on both sides (the clock-offset estimate of the real
@@ -54,7 +57,7 @@ ESTIMATE_ROUTES = ("stream", "lossless")
 #: Bytes of a message on the wire, roughly (only a serialising link cares).
 MESSAGE_BYTES = {"flux_trajectory": 4200, "material_estimate": 160,
                  "posterior_estimate": 160, "flux_setpoint": 60, "contact_event": 90,
-                 "resend": 30}
+                 "resend": 30, "heartbeat": 60}
 
 
 @dataclass(frozen=True)
@@ -98,6 +101,8 @@ class _Lossless:
     expected: int = 1
     buffered: dict = field(default_factory=dict)
     resend_asked_at: float = -math.inf
+    heartbeat_due: bool = False
+    tail_gap: int = 0                  # the expected seq a heartbeat showed missing
     counters: dict = field(default_factory=lambda: dict.fromkeys(
         ("sent", "resent", "gaps", "recovered"), 0))
 
@@ -146,6 +151,10 @@ class SimNetwork:
         s.counters["sent"] += 1
         self._transmit(now, direction, "lossless", (seq, message), message["kind"])
         self._push(now + self._retransmit_s, "timer", direction, seq)
+        if not s.heartbeat_due:
+            hb = self.spec.heartbeat_s
+            s.heartbeat_due = True
+            self._push((math.floor(now / hb) + 1) * hb, "heartbeat tick", direction, None)
 
     def _resend_from(self, now: float, direction: str, from_seq: int) -> None:
         s = self.streams[direction]
@@ -187,6 +196,17 @@ class SimNetwork:
         elif action == "gap check":
             if s.buffered:
                 self._ask_resend(t, direction)
+        elif action == "heartbeat tick":                    # at the sender
+            s.heartbeat_due = bool(s.sent)
+            if s.sent:
+                self._transmit(t, direction, "heartbeat", s.next_seq - 1, "heartbeat")
+                self._push(t + self.spec.heartbeat_s, "heartbeat tick", direction, None)
+        elif action == "heartbeat":                         # at the receiver
+            if s.expected <= payload:                       # last_seq: a lost tail
+                if not s.buffered and s.tail_gap != s.expected:
+                    s.counters["gaps"] += 1                 # once per gap
+                    s.tail_gap = s.expected
+                self._ask_resend(t, direction)
 
     def _ask_resend(self, t: float, direction: str) -> None:
         """The receiver of ``direction`` asks for the first missing seq, at
@@ -197,7 +217,8 @@ class SimNetwork:
         s.resend_asked_at = t
         for arrival in self.channels[self.reverse(direction)].send(t, MESSAGE_BYTES["resend"]):
             self._push(arrival, "resend", direction, s.expected)
-        self._push(t + self.spec.heartbeat_s, "gap check", direction, None)
+        if s.buffered:
+            self._push(t + self.spec.heartbeat_s, "gap check", direction, None)
 
     def due(self, now: float, direction: str) -> list[dict]:
         while self._events and self._events[0][0] <= now:
@@ -365,7 +386,8 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
 
     from telethermal.session.master import MasterDisplay, SlaveNews
     from telethermal.session.run import (DisplayTouch, PRE_CONTACT_S, compare_with_direct,
-                                         draw_operator, master_rng, pad_resistance,
+                                         display_model_args, draw_operator, master_rng,
+                                         pad_resistance,
                                          safety_summary, slave_rng, with_finger)
     from telethermal.session.slave import Slave
 
@@ -380,7 +402,8 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     generator = SampledGenerator(curves)
     idle = MasterDisplay.standby_c_for(config.limits, pad.object_ir_c)
     master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
-                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle)
+                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
+                           **display_model_args(scene))
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     net = SimNetwork(network, np.random.default_rng([seed if network_seed is None
                                                      else network_seed, 15]))
