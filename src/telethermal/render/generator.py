@@ -238,6 +238,22 @@ def mixture(generator, materials, weights, t_s: float, step_s: float = 1e-4):
     return float(g[0]), float((g[2] - g[1]) / (hi - lo))
 
 
+def naive_setpoint(generator, classes, estimate, t_s: float, gap_k: float) -> float | None:
+    """The naive baseline's display flux at ``t_s`` since the slave's onset:
+    the decided material's curve, else the posterior mixture, times the
+    gap (object - finger). None when no material of ``classes`` is known."""
+    known = generator.materials
+    if estimate is not None and estimate.decided and estimate.label in known:
+        weights = {estimate.label: 1.0}
+    else:
+        weights = posterior_weights(classes, estimate.posteriors if estimate else None, known)
+    if not weights:
+        return None
+    names = list(weights)
+    g, _ = mixture(generator, names, [weights[n] for n in names], t_s)
+    return g * gap_k
+
+
 # ---------------------------------------------------------------- files
 GENERATOR_FORMAT_VERSION = 1
 GENERATORS = {"network": NetworkGenerator, "contact": ContactGenerator}

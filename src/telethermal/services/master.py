@@ -258,7 +258,9 @@ class MasterService:
         devices = touch.devices.counters()
         touch.devices.close()
         link = self.link
-        est = link.estimate
+        # What the slave itself decided on this touch (not the recollection
+        # the display may have rendered from; that is reported apart).
+        est = link.decision or link.latest
         loop = stats.summary(last=stats.count - touch.loop_count0)
         loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
         result = {
@@ -268,6 +270,7 @@ class MasterService:
             "master_onset_s": touch.display.last_onset_s,
             "identified": est.label if est is not None and est.decided else "unknown",
             "decision_time_s": est.t_s if est is not None and est.decided else None,
+            "object_memory": None if link.recalled is None else link.recalled.label,
             "estimates": len(link.estimates), "trajectory_at_s": touch.trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,
             "link_counters": dict(link.counters), "devices": self.config.devices,

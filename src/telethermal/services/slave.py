@@ -20,7 +20,7 @@ import zmq
 from telethermal.errors import ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import mixture, posterior_weights
+from telethermal.render.generator import naive_setpoint
 from telethermal.record.session import open_recorder
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import open_service_sockets
@@ -370,19 +370,12 @@ class SlaveService:
         self._sp_sample = pad.samples_read
         if self.finger_c is None or pad.onset_s is None:
             return
-        est = pad.estimate
-        if est is not None and est.decided and est.label in self.curves:
-            weights = {est.label: 1.0}
-        else:
-            weights = posterior_weights(pad.classes, est.posteriors if est else None,
-                                        self.curves)
-        if not weights:
-            return
         t = max(now - self.touch_t0 - pad.onset_s, 0.0)
-        names = list(weights)
-        g, _ = mixture(self.wire_generator, names, [weights[n] for n in names], t)
-        self.endpoint.send("flux_setpoint", contact_id=self.contact_id, t_since_contact_s=t,
-                           flux_w_m2=g * (pad.object_ir_c - self.finger_c))
+        flux = naive_setpoint(self.wire_generator, pad.classes, pad.estimate, t,
+                              pad.object_ir_c - self.finger_c)
+        if flux is not None:
+            self.endpoint.send("flux_setpoint", contact_id=self.contact_id,
+                               t_since_contact_s=t, flux_w_m2=flux)
 
     def _report(self) -> dict:
         pad = self.pad

@@ -87,6 +87,7 @@ class SlaveLink:
     object_id: str | None = None
     remembered: tuple[str, float] | None = None      # (material, confidence)
     memory: Estimate | None = None          # the recollection this contact renders
+    recalled: Estimate | None = None        # what this contact began with, for reports
     counters: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("stale", "older_estimate", "duplicate_trajectory", "replaced_trajectory",
          "anchor_in_future", "memory_used", "memory_overruled", "memory_mismatch"), 0))
@@ -96,10 +97,11 @@ class SlaveLink:
         """A new contact is going on (the master's onset is not yet known)."""
         self.contact_id, self.onset_s = contact_id, None
         self.estimates, self.trajectory = [], None
-        self.latest = self.decision = self.memory = None
+        self.latest = self.decision = self.memory = self.recalled = None
         if self.remembered is not None and \
                 all(m in self.classes for m in self.remembered[0].split("|")):
             self.memory = remembered_estimate(*self.remembered, self.classes)
+            self.recalled = self.memory          # kept for the report, never cleared
             self._memory_object = self.object_id
             self.counters["memory_used"] += 1
 

@@ -48,7 +48,7 @@ import numpy as np
 
 from telethermal.faults.channel import Channel, Direction
 from telethermal.ident.anytime import UNKNOWN, Estimate
-from telethermal.render.generator import mixture, posterior_weights
+from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
 from telethermal.session.link import SlaveLink
 from telethermal.session.memory import ObjectMemory
@@ -315,20 +315,12 @@ class SimSlaveService:
         self._sp_sample = pad.samples_read
         if self.finger_c is None:
             return
-        est = pad.estimate
-        if est is not None and est.decided and est.label in self.curves:
-            weights = {est.label: 1.0}
-        else:
-            weights = posterior_weights(pad.classes, est.posteriors if est else None,
-                                        self.curves)
-        if not weights:
-            return
         t = max(now - self.touch_t0 - pad.onset_s, 0.0)
-        names = list(weights)
-        g, _ = mixture(self.generator, names, [weights[n] for n in names], t)
-        send(now, {"kind": "flux_setpoint", "contact_id": self.contact_id,
-                   "t_since_contact_s": t,
-                   "flux_w_m2": g * (pad.object_ir_c - self.finger_c)}, False)
+        flux = naive_setpoint(self.generator, pad.classes, pad.estimate, t,
+                              pad.object_ir_c - self.finger_c)
+        if flux is not None:
+            send(now, {"kind": "flux_setpoint", "contact_id": self.contact_id,
+                       "t_since_contact_s": t, "flux_w_m2": flux}, False)
 
 
 @dataclass
