@@ -191,6 +191,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     summary = {"scene": scene.name, "material": material, "seed": seed,
                "identified": report["identified"], "decision_time_s": report["decision_time_s"],
                "decision_reason": report["reason"], "render_start_s": render_from,
+               "object_memory": result.get("object_memory"),
                "rate_hz": 1.0 / float(np.median(np.diff(trace["t_s"]))),
                "contact_s": contact_s, **metrics,
                **{k: result[k] for k in ("safety_events", "safety_event_counts",
@@ -219,6 +220,46 @@ def master_device_summary(result: dict) -> dict | None:
             "peltier_statuses": c.get("peltier", {}).get("statuses")}
 
 
+def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, generator,
+                again: bool, echo) -> dict:
+    """One touch of the demo over the network, beside the same touch in one
+    process; prints its line and returns its summary."""
+    from telethermal.session.run import run_session
+
+    result = networked_touch(scene, material, ports[:4], seed, contact_s)
+    s = result.summary
+    name = f"{material}-again" if again else material
+    plot_session(result, out / f"touch-{name}.png",
+                 f"{scene.name}: {material}{' again' if again else ''} over the network (two "
+                 f"processes); flux error {100 * s['flux_rms_error_rel']:.2f} % of peak after "
+                 f"identification, skin {s['temp_rms_error_c']:.2f} K RMS")
+    local = run_session(scene, material, identifier, generator, contact_s=contact_s,
+                        seed=seed).summary
+    when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
+    start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
+    memory = "" if s["object_memory"] is None else \
+        f"announced from memory as {s['object_memory']}, rendered from {start}; "
+    echo(f"touch on {material + (' again' if again else ''):16s}: {memory}slave said "
+         f"{s['identified']} {when}; rendered flux "
+         f"{100 * s['flux_rms_error_rel']:.2f} % of peak from then on, "
+         f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second, "
+         f"{100 * s['flux_rms_error_rel_whole']:.2f} % over the whole contact; skin "
+         f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}; "
+         f"master loop p99 {s['loop_period_p99_us']:.0f} us, "
+         f"{s['loop']['deadline_misses']} missed deadlines; in one process "
+         f"{100 * local['flux_rms_error_rel']:.2f} %")
+    return {k: s[k] for k in (
+        "material", "identified", "decision_time_s", "render_start_s", "object_memory",
+        "flux_rms_error_rel", "flux_rms_error_rel_first_s", "flux_rms_error_rel_whole",
+        "temp_rms_error_c", "time_to_correct_flux_s", "safety_events", "loop_period_p99_us")} | \
+        {"again": again, "deadline_misses": s["loop"]["deadline_misses"],
+         "loop_steps": s["loop"]["steps"], "transport": s["transport"],
+         "devices": s["devices_per_side"],
+         "in_process_identified": local["identified"],
+         "in_process_flux_rms_error_rel": local["flux_rms_error_rel"],
+         "network_over_in_process": s["flux_rms_error_rel"] / local["flux_rms_error_rel"]}
+
+
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
              realtime_priority: int = 20, record_dir: Path | None = None,
@@ -231,7 +272,6 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
 
     from telethermal.ident.registry import load_model
     from telethermal.render.generator import load_generator
-    from telethermal.session.run import run_session
 
     scene = with_finger(load_scene(scene_name))
     identifier, generator = load_model(identifier_path), load_generator(generator_path)
@@ -260,34 +300,13 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
             from telethermal.view.command import open_view
             view = open_view(master_cfg, record_dir, view_port)
             echo(f"view: {view.url}")
-        for i, material in enumerate(materials):
-            result = networked_touch(scene, material, ports[:4], seed + 1 + i, contact_s)
-            s = result.summary
-            plot_session(result, out / f"touch-{material}.png",
-                         f"{scene.name}: {material} over the network (two processes); flux "
-                         f"error {100 * s['flux_rms_error_rel']:.2f} % of peak after "
-                         f"identification, skin {s['temp_rms_error_c']:.2f} K RMS")
-            local = run_session(scene, material, identifier, generator, contact_s=contact_s,
-                                seed=seed + 1 + i).summary
-            touches.append({k: s[k] for k in (
-                "material", "identified", "decision_time_s", "flux_rms_error_rel",
-                "flux_rms_error_rel_first_s", "temp_rms_error_c", "time_to_correct_flux_s",
-                "safety_events", "loop_period_p99_us")} |
-                {"deadline_misses": s["loop"]["deadline_misses"],
-                 "loop_steps": s["loop"]["steps"], "transport": s["transport"],
-                 "devices": s["devices_per_side"],
-                 "in_process_identified": local["identified"],
-                 "in_process_flux_rms_error_rel": local["flux_rms_error_rel"],
-                 "network_over_in_process": s["flux_rms_error_rel"] /
-                 local["flux_rms_error_rel"]})
-            when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
-            echo(f"touch on {material:10s}: slave said {s['identified']} {when}; rendered flux "
-                 f"{100 * s['flux_rms_error_rel']:.2f} % of peak from then on, "
-                 f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second; skin "
-                 f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}; "
-                 f"master loop p99 {s['loop_period_p99_us']:.0f} us, "
-                 f"{s['loop']['deadline_misses']} missed deadlines; in one process "
-                 f"{100 * local['flux_rms_error_rel']:.2f} %")
+        # Each material once, then the first again: the slave remembers what it
+        # decided on that object and announces it, so the master renders the
+        # repeated touch from its onset (object memory).
+        plan = [(m, False) for m in materials] + [(materials[0], True)] if materials else []
+        for i, (material, again) in enumerate(plan):
+            touches.append(_demo_touch(scene, material, ports, seed + 1 + i, contact_s, out,
+                                       identifier, generator, again, echo))
     except BaseException:
         if view is not None:
             view.close()
