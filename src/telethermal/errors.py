@@ -55,3 +55,7 @@ class TransportError(TelethermalError):
 class CalibrationError(TelethermalError, RuntimeError):
     """A sensor calibration that could not be trusted (a drifting target, a
     fit that does not hold); the previous calibration stays in force."""
+
+
+class BenchError(TelethermalError, ValueError):
+    """A benchmark that cannot run as asked (names the option or the worker)."""

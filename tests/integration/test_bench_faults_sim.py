@@ -7,6 +7,7 @@ import json
 import pytest
 
 from telethermal.bench import faults_sim
+from telethermal.errors import BenchError
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.session.master import DisplayConfig
@@ -51,6 +52,6 @@ def test_simulated_rows_in_two_workers(tmp_path):
 
 def test_a_failing_worker_is_reported(tmp_path):
     scene = with_finger(load_scene("fingertip-7"))
-    with pytest.raises(RuntimeError, match="worker job0.json failed"):
+    with pytest.raises(BenchError, match="worker job0.json failed"):
         faults_sim.run(scene, tmp_path / "missing.npz", tmp_path / "missing-gen.npz",
                        DisplayConfig(), ["wood"], [1], 1.0, faults_sim.ROWS[:1], jobs=1)

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.errors import TransportError
+from telethermal.errors import BenchError, TransportError
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.services.admin import call
@@ -225,12 +225,13 @@ def run(progress=None, quick: bool = False, only: str | None = None,
     sim_rows = [r for r in faults_sim.ROWS if not quick or r[0] in faults_sim.ABLATION_ROWS]
     sim_rows = _select(sim_rows, only)
     settings = _select([SETTINGS[0], SETTINGS[2]] if quick else SETTINGS, only)
-    if only and len(sim_rows) <= 1 and len(settings) <= 1:
-        raise ValueError(f"--only {only!r} matches no setting; settings: " + "; ".join(
-            dict.fromkeys([n for n, _ in faults_sim.ROWS] + [n for n, _ in SETTINGS])))
-    n_seeds = seeds or (2 if quick else SIM_SEEDS)
+    names = list(dict.fromkeys([n for n, _ in faults_sim.ROWS] + [n for n, _ in SETTINGS]))
+    parts = [q.strip() for q in (only or "").split(",") if q.strip()]
+    if only and not any(q in n for q in parts for n in names):
+        raise BenchError(f"--only {only!r} matches no setting; settings: " + "; ".join(names))
+    n_seeds = seeds if seeds is not None else (2 if quick else SIM_SEEDS)
     if n_seeds < 1:
-        raise ValueError(f"--seeds must be >= 1, got {n_seeds}")
+        raise BenchError(f"--seeds must be >= 1, got {n_seeds}")
     materials = MATERIALS[:1] if quick else MATERIALS
     rows, traces = [], {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -556,13 +557,18 @@ def text_report(report: dict) -> list[str]:
     lines.append(f"{'oracle floor':38s} {'':12s} {'':>10s} {'':>10s} "
                  f"{pct(o['whole']['mean']):>10s}")
     s = report["summary"]
+
+    def x(key, digits=2):
+        v = s.get(key)
+        return "-" if v is None else f"{v:.{digits}f}x"
+
     lines.append(
         f"at {s['ratio_setting']}: first touch after the news "
-        f"{s['first_touch_after_news_ratio_200ms']:.2f}x zero delay (target <= 1.2), naive "
-        f"{s['naive_after_news_ratio_200ms']:.2f}x the compensated zero-delay error on that "
-        f"window (target >= 2; {s['naive_after_news_ratio_200ms_own_zero']:.2f}x its own), whole "
-        f"contact {s['first_touch_whole_ratio_200ms']:.2f}x (target <= 1.3); repeated touch "
-        f"<= {s['repeat_touch_ratio_to_oracle_max']:.3f}x the oracle floor at every row "
+        f"{x('first_touch_after_news_ratio_200ms')} zero delay (target <= 1.2), naive "
+        f"{x('naive_after_news_ratio_200ms')} the compensated zero-delay error on that "
+        f"window (target >= 2; {x('naive_after_news_ratio_200ms_own_zero')} its own), whole "
+        f"contact {x('first_touch_whole_ratio_200ms')} (target <= 1.3); repeated touch "
+        f"<= {x('repeat_touch_ratio_to_oracle_max', 3)} the oracle floor at every row "
         f"(target <= 1.05)")
     if report["rows"]:
         lines.append(f"{'processes: fault':38s} {'compensated':>11s} {'naive':>7s} safety  "

@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from telethermal.errors import BenchError
 from telethermal.faults.channel import Direction
 from telethermal.session.memory import ObjectMemory
 from telethermal.session.netsim import NetworkSpec, run_network_touch
@@ -160,7 +161,7 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
                     other.kill()
                     other.wait()
                 err = path.with_suffix(".err").read_text()
-                raise RuntimeError(f"simulated fault worker {path.name} failed: {err[-2000:]}")
+                raise BenchError(f"simulated fault worker {path.name} failed: {err[-2000:]}")
             part = json.loads(path.with_suffix(".out.json").read_text())
             out["rows"].update(part["rows"])
             if "oracle" in part:
