@@ -42,7 +42,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -51,7 +51,12 @@ from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
 from telethermal.session.link import SlaveLink
+from telethermal.session.master import MasterDisplay, SlaveNews
 from telethermal.session.memory import ObjectMemory
+from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
+                                     display_model_args, draw_operator, master_rng,
+                                     pad_resistance, safety_summary, slave_rng, with_finger)
+from telethermal.session.slave import Slave
 
 ESTIMATE_ROUTES = ("stream", "lossless")
 #: Bytes of a message on the wire, roughly (only a serialising link cares).
@@ -276,18 +281,22 @@ class SimSlaveService:
                                    "object_temp_c": float(pad.object_ir_c),
                                    "object_id": self.object_id}, True)
         for ev in events:
-            self._estimate(at(ev.t_s), ev.estimate, send)
+            # The contact's final estimate, as the service marks it (6a).
+            final = ev is events[-1] and pad.stream is not None and pad.stream.finished
+            self._estimate(at(ev.t_s), ev.estimate, send, final)
         if pad.onset_s is not None and (events or pad.samples_read > self._sp_sample):
             self._setpoint(now, send)
 
-    def _estimate(self, t: float, e: Estimate, send) -> None:
+    def _estimate(self, t: float, e: Estimate, send, final: bool) -> None:
         pad = self.pad
         m = {"kind": "posterior_estimate", "contact_id": self.contact_id,
              "t_since_contact_s": float(e.t_s), "classes": list(pad.classes),
              "posteriors": [float(p) for p in e.posteriors], "label": e.label,
              "confidence": float(e.confidence), "decided": e.decided, "reason": e.reason,
              "object_temp_c": float(pad.object_ir_c)}
-        decision = e.decided and (e.label != self._decided_label or e.final)
+        # The service's rule (services/slave.py, _send_estimate): a change of
+        # the decided label, or the contact's final estimate.
+        decision = (e.decided and e.label != self._decided_label) or final
         if self.estimates == "lossless":
             send(t, m | {"kind": "material_estimate"}, True)
         else:
@@ -345,10 +354,6 @@ class MasterInbox:
         self.link.on_message(m, now, offset_s=0.0)
 
 
-def first_decision(estimates: list[Estimate]) -> Estimate | None:
-    return next((e for e in estimates if e.decided and e.label != UNKNOWN), None)
-
-
 # ---------------------------------------------------------------- one touch
 MODES = ("compensated", "naive", "oracle")
 
@@ -374,15 +379,6 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     (shared across touches by the caller); ``object_id`` names the object.
     The touch's physics and sensor noise depend only on ``seed``; the
     network's draws on ``network_seed`` (default: ``seed``)."""
-    from dataclasses import replace
-
-    from telethermal.session.master import MasterDisplay, SlaveNews
-    from telethermal.session.run import (DisplayTouch, PRE_CONTACT_S, compare_with_direct,
-                                         display_model_args, draw_operator, master_rng,
-                                         pad_resistance,
-                                         safety_summary, slave_rng, with_finger)
-    from telethermal.session.slave import Slave
-
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     scene = with_finger(scene)
