@@ -428,7 +428,7 @@ def cmd_demo(args) -> int:
     from telethermal.physics.scene import describe_models, load_scene
     from telethermal.render.generator import NetworkGenerator, save_generator
     from telethermal.services.demo import run_demo
-    from telethermal.session.run import with_finger
+    from telethermal.teleop.run import with_finger
 
     out = Path(args.out)
     scene = with_finger(load_scene(args.scene))
@@ -504,7 +504,7 @@ def _session_models(scene, identifier_path, generator_path, seed):
     databases (simulated in memory with ``seed``)."""
     from telethermal.ident.registry import load_model
     from telethermal.render.generator import load_generator
-    from telethermal.session.models import train_generator, train_identifier
+    from telethermal.teleop.models import train_generator, train_identifier
 
     with console.status("identifier: " + ("loading" if identifier_path else
                                           f"training on {scene.name}'s pad database")):
@@ -520,9 +520,9 @@ def _session_models(scene, identifier_path, generator_path, seed):
 def cmd_session(args) -> int:
     """One touch, slave and master in one process; JSON and Fig. 3 plot."""
     from telethermal.physics.scene import load_scene
-    from telethermal.session.master import DisplayConfig
-    from telethermal.session.plots import plot_session
-    from telethermal.session.run import run_session, with_finger
+    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.plots import plot_session
+    from telethermal.teleop.run import run_session, with_finger
 
     scene = load_scene(args.scene)
     if scene.finger is None:
@@ -562,7 +562,7 @@ def cmd_replay(args) -> int:
     """Re-run the rendering and the identifier on a recording, and plot it."""
     from dataclasses import replace
 
-    from telethermal.record.session import plot_replay, replay
+    from telethermal.teleop.replay import plot_replay, replay
 
     identifier = generator = gains = None
     if args.identifier:
@@ -576,7 +576,7 @@ def cmd_replay(args) -> int:
             kp, ki, kd = (float(x) for x in args.gains.split(","))
         except ValueError:
             raise TelethermalError(f"--gains {args.gains!r}: give kp,ki,kd") from None
-        from telethermal.session.master import DEFAULT_GAINS
+        from telethermal.teleop.master import DEFAULT_GAINS
         gains = replace(DEFAULT_GAINS, kp=kp, ki=ki, kd=kd)
     result = replay(args.file, identifier, generator, gains, touch=args.touch)
     out = Path(args.out)

@@ -52,8 +52,8 @@ def slave_models(tmp_path_factory):
     from telethermal.ident.registry import make
     from telethermal.physics.scene import load_scene
     from telethermal.render.generator import save_generator
-    from telethermal.session.models import train_generator
-    from telethermal.session.run import with_finger
+    from telethermal.teleop.models import train_generator
+    from telethermal.teleop.run import with_finger
 
     scene = with_finger(load_scene(SCENE))
     folder = tmp_path_factory.mktemp("conformance-models")

@@ -10,9 +10,9 @@ from telethermal.bench import faults_sim
 from telethermal.errors import BenchError
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
-from telethermal.session.master import DisplayConfig
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import with_finger
+from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import with_finger
 
 
 def test_simulated_rows_in_two_workers(tmp_path):

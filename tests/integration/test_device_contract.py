@@ -16,8 +16,8 @@ import pytest
 
 from telethermal.devices.display import EmulatedDisplay, HardwareDisplay, SimDisplay
 from telethermal.physics.scene import load_scene
-from telethermal.session.master import MasterStep
-from telethermal.session.run import DisplayTouch, Operator, run_session, with_finger
+from telethermal.teleop.master import MasterStep
+from telethermal.teleop.run import DisplayTouch, Operator, run_session, with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat_scale=1.0,
@@ -111,7 +111,7 @@ def test_emulated_devices_read_what_the_simulator_reads():
 
 
 def test_a_session_through_emulated_devices_writes_the_same_json_as_with_sim():
-    from telethermal.session.models import train_generator, train_identifier
+    from telethermal.teleop.models import train_generator, train_identifier
     ident, gen = train_identifier(SCENE, 0), train_generator(SCENE, 0)
     sim = run_session(SCENE, "plexiglass", ident, gen, contact_s=1.0, seed=3).summary
     emu = run_session(SCENE, "plexiglass", ident, gen, contact_s=1.0, seed=3,
@@ -125,8 +125,8 @@ def test_a_session_through_emulated_devices_writes_the_same_json_as_with_sim():
 
 
 def test_a_missing_reading_or_an_over_temperature_driver_is_the_safe_state_that_period():
-    from telethermal.session.master import DisplayConfig, MasterDisplay, SlaveNews
-    from telethermal.session.run import pad_resistance
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from telethermal.teleop.run import pad_resistance
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
     clock = Clock()
     d = EmulatedDisplay(touch, clock=clock)

@@ -16,8 +16,8 @@ from telethermal.physics.scene import load_scene
 from telethermal.services.config import ConfigError, MasterConfig
 from telethermal.services.demo import free_ports
 from telethermal.services.master import MasterService
-from telethermal.session.master import MasterStep
-from telethermal.session.run import DisplayTouch, Operator, with_finger
+from telethermal.teleop.master import MasterStep
+from telethermal.teleop.run import DisplayTouch, Operator, with_finger
 from telethermal.wire.transport import TransportConfig
 
 SCENE = with_finger(load_scene("fingertip-7"))
@@ -90,8 +90,8 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path):
     from telethermal.render.generator import save_generator
     from telethermal.services.admin import call
     from telethermal.services.demo import write_configs
-    from telethermal.session.models import train_generator, train_identifier
-    from telethermal.session.run import compare_with_direct
+    from telethermal.teleop.models import train_generator, train_identifier
+    from telethermal.teleop.run import compare_with_direct
 
     ident = train_identifier(SCENE, 0).save(tmp_path / "identifier.npz")
     gen = save_generator(train_generator(SCENE, 0), tmp_path / "generator.npz")

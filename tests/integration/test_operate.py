@@ -15,8 +15,8 @@ from telethermal.cli import main
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import call
 from telethermal.services.demo import Services, free_ports, wait_connected, write_configs
-from telethermal.session.models import write_models
-from telethermal.session.run import with_finger
+from telethermal.teleop.models import write_models
+from telethermal.teleop.run import with_finger
 from telethermal.wire.handshake import key_file_fingerprint
 from telethermal.wire.transport import DIAGNOSE_AFTER_S
 

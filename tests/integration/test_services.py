@@ -11,8 +11,8 @@ from telethermal.render.generator import save_generator
 from telethermal.services.config import ConfigError, load_config
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import run_session, with_finger
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import run_session, with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -68,7 +68,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
         text = (tmp_path / f"{role}.log").read_text()
         assert "stopped cleanly" in text and "safe state" in text
     # Each host recorded the touch; each replays to the same commands and estimates.
-    from telethermal.record.session import replay
+    from telethermal.teleop.replay import replay
     (master_rec,) = (tmp_path / "rec").glob("master-*.mcap")
     (slave_rec,) = (tmp_path / "rec").glob("slave-*.mcap")
     assert replay(master_rec)["summary"]["identical"]

@@ -13,10 +13,10 @@ from telethermal.ident.anytime import decide
 from telethermal.ident.prepare import FLUX
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
-from telethermal.session.master import DisplayConfig
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import run_session
-from telethermal.session.slave import Slave
+from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import run_session
+from telethermal.teleop.slave import Slave
 
 SCENE = load_scene("fingertip-7")
 KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",

@@ -5,9 +5,9 @@ feed-forward, on the same touches, a metal and an insulator."""
 import pytest
 
 from telethermal.physics.scene import load_scene
-from telethermal.session.master import DisplayConfig
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import run_session
+from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import run_session
 
 SCENE = load_scene("fingertip-7")
 SEEDS = (1, 2)

@@ -8,8 +8,8 @@ from telethermal.render.generator import save_generator
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import with_finger
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -19,9 +19,9 @@ from telethermal.errors import CalibrationError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.services.config import ConfigError, SlaveConfig
-from telethermal.session.models import train_identifier
-from telethermal.session.run import slave_rng, with_finger
-from telethermal.session.slave import BOARD_LOST, NO_OBJECT_TEMPERATURE, Slave
+from telethermal.teleop.models import train_identifier
+from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.teleop.slave import BOARD_LOST, NO_OBJECT_TEMPERATURE, Slave
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -293,7 +293,7 @@ def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
         tmp_path, identifier, session):
     from telethermal.services.demo import free_ports
     from telethermal.services.slave import SlaveService
-    from telethermal.session.models import train_generator
+    from telethermal.teleop.models import train_generator
     from telethermal.wire.transport import TransportConfig
 
     bus = "virtual:slave-service-hardware-test"

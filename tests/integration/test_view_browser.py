@@ -20,8 +20,8 @@ from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import with_finger
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import with_finger
 from telethermal.view.browser import BrowserUnavailable, find_chromium, launch
 from telethermal.view.command import open_view
 

@@ -11,9 +11,9 @@ from telethermal.errors import ModelFileError
 from telethermal.ident.anytime import StreamingIdentifier, decide, members
 from telethermal.ident.registry import check_scene, load_model
 from telethermal.physics.scene import load_scene
-from telethermal.session.models import train_identifier
-from telethermal.session.run import slave_rng
-from telethermal.session.slave import Slave
+from telethermal.teleop.models import train_identifier
+from telethermal.teleop.run import slave_rng
+from telethermal.teleop.slave import Slave
 
 SCENE = load_scene("fingertip-7")
 

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from telethermal.render.sampled import sample_curves
-from telethermal.session.link import SlaveLink
-from telethermal.session.master import DisplayConfig, MasterDisplay, PadSensors
-from telethermal.session.run import pad_resistance
+from telethermal.teleop.link import SlaveLink
+from telethermal.devices.readings import PadSensors
+from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.run import pad_resistance
 
 from test_master import FINGER_C, OBJECT_C, SCENE, TAU, closed_form_generator
 

@@ -3,8 +3,8 @@ object memory (``SlaveLink``), with the messages handed over in the order
 a faulty network delivers them, and the slave's :class:`ObjectMemory`."""
 
 from telethermal.ident.anytime import Estimate
-from telethermal.session.link import SlaveLink
-from telethermal.session.memory import FROM_MEMORY, ObjectMemory
+from telethermal.teleop.link import SlaveLink
+from telethermal.teleop.memory import FROM_MEMORY, ObjectMemory
 
 from test_link import CLASSES, OBJECT_C, config_msg, drive, estimate, fresh_link
 

@@ -13,8 +13,9 @@ from telethermal.errors import ControlError
 from telethermal.ident.anytime import Estimate
 from telethermal.physics.scene import finger_contact_model, load_scene
 from telethermal.render.generator import NetworkGenerator
-from telethermal.session.master import DisplayConfig, MasterDisplay, PadSensors, SlaveNews
-from telethermal.session.run import display_model, pad_resistance
+from telethermal.devices.readings import PadSensors
+from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.teleop.run import display_model, pad_resistance
 from telethermal.devices.sim_plant import DisplayPlant
 
 SCENE = load_scene("fingertip-7")

@@ -1,4 +1,4 @@
-"""The simulated network of ``bench faults`` (session/netsim.py) and issue
+"""The simulated network of ``bench faults`` (teleop/netsim.py) and issue
 15's hard cases on it, all on the simulated clock.
 
 The network model is checked against the protocol's conservation laws:
@@ -17,12 +17,12 @@ from hypothesis import given, settings, strategies as st
 from telethermal.faults.channel import Direction
 from telethermal.physics.scene import load_scene
 from telethermal.render.sampled import sample_curves
-from telethermal.session.link import SlaveLink
-from telethermal.session.master import DisplayConfig
-from telethermal.session.memory import ObjectMemory
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.netsim import NetworkSpec, SimNetwork, run_network_touch
-from telethermal.session.run import with_finger
+from telethermal.teleop.link import SlaveLink
+from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.netsim import NetworkSpec, SimNetwork, run_network_touch
+from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -13,10 +13,11 @@ from telethermal.physics.scene import load_scene
 from telethermal.record import recording
 from telethermal.record.importer import import_recordings
 from telethermal.record.recording import Recorder, RecordingError, read_recording
-from telethermal.record.session import periods, replay
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.master import DisplayConfig
-from telethermal.session.run import run_session, with_finger
+from telethermal.record.recorder import periods
+from telethermal.teleop.replay import replay
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.run import run_session, with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -41,7 +42,7 @@ def test_an_impedance_touch_replays_sample_for_sample_and_refuses_gains(models, 
                 contact_s=0.5, seed=1, record=path)
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
-    from telethermal.session.master import DEFAULT_GAINS
+    from telethermal.teleop.master import DEFAULT_GAINS
     with pytest.raises(RecordingError, match="does not use the flux PID"):
         replay(path, gains=DEFAULT_GAINS)
 
@@ -65,7 +66,7 @@ def test_the_same_models_replay_the_same_commands_sample_for_sample(recorded):
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
     assert same["slave"]["same_estimates"]
-    from telethermal.session.master import DEFAULT_GAINS
+    from telethermal.teleop.master import DEFAULT_GAINS
     from dataclasses import replace
     other = replay(path, gains=replace(DEFAULT_GAINS, kp=3e-3))["summary"]
     assert not other["identical"] and other["junction_max_abs_diff_c"] > 0.01

@@ -13,9 +13,10 @@ import pytest
 import zmq
 
 from telethermal.record.recording import Recorder
-from telethermal.record.session import SessionRecorder
-from telethermal.services.viewstream import BATCH, ViewPublisher, skin_estimate_c
-from telethermal.session.master import MasterStep, PadSensors, SlaveNews
+from telethermal.record.recorder import SessionRecorder
+from telethermal.view.stream import BATCH, ViewPublisher, skin_estimate_c
+from telethermal.devices.readings import PadSensors
+from telethermal.teleop.master import MasterStep, SlaveNews
 from telethermal.view.feed import CLIENT_QUEUE, MAX_RATE_HZ, Frames, LiveFeed, _decimated
 from telethermal.view.playback import RecordingError, load_playback
 from telethermal.view.server import ViewServer

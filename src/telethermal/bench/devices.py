@@ -34,8 +34,8 @@ import numpy as np
 
 from telethermal.devices.display import EmulatedDisplay, SimDisplay
 from telethermal.physics.scene import load_scene
-from telethermal.session.master import MasterStep
-from telethermal.session.run import DisplayTouch, Operator, with_finger
+from telethermal.teleop.master import MasterStep
+from telethermal.teleop.run import DisplayTouch, Operator, with_finger
 
 OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat_scale=1.0,
                     force_n=4.0, conductance_w_m2k=5000.0)
@@ -90,8 +90,8 @@ def _paths(n: int) -> dict:
 
 
 def _sessions(contact_s: float) -> dict:
-    from telethermal.session.models import train_generator, train_identifier
-    from telethermal.session.run import run_session
+    from telethermal.teleop.models import train_generator, train_identifier
+    from telethermal.teleop.run import run_session
     scene = with_finger(load_scene("fingertip-7"))
     ident, gen = train_identifier(scene, 0), train_generator(scene, 0)
     out = {}
@@ -112,9 +112,9 @@ def _sessions(contact_s: float) -> dict:
 def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int = 0) -> dict:
     from telethermal.data.generate import sensor_session
     from telethermal.devices.slave_pad import EmulatedSlavePad
-    from telethermal.session.models import train_identifier
-    from telethermal.session.run import slave_rng
-    from telethermal.session.slave import Slave
+    from telethermal.teleop.models import train_identifier
+    from telethermal.teleop.run import slave_rng
+    from telethermal.teleop.slave import Slave
 
     scene = with_finger(load_scene(scene_name))
     ident = train_identifier(scene, seed)

@@ -44,8 +44,8 @@ from telethermal.render.generator import save_generator
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import PRE_CONTACT_S, with_finger
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import PRE_CONTACT_S, with_finger
 from telethermal.wire.transport import TransportConfig
 
 MATERIALS = ("wood", "steel")
@@ -218,7 +218,7 @@ def run(progress=None, quick: bool = False, only: str | None = None,
     processes on one material; ``only``: parts of row names (the zero-delay
     row is always run, every ratio needs it)."""
     from telethermal.bench import faults_sim
-    from telethermal.session.master import DisplayConfig
+    from telethermal.teleop.master import DisplayConfig
 
     step = progress or (lambda _m: None)
     scene = with_finger(load_scene("fingertip-7"))

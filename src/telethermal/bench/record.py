@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from telethermal.physics.scene import load_scene
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import run_session, with_finger
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import run_session, with_finger
 
 
 def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
@@ -44,8 +44,9 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
         # The recorder's call alone, as the loop makes it once per period
         # (the news unchanged, as in most periods).
         from telethermal.record.recording import Recorder
-        from telethermal.record.session import SessionRecorder
-        from telethermal.session.master import MasterStep, PadSensors, SlaveNews
+        from telethermal.record.recorder import SessionRecorder
+        from telethermal.devices.readings import PadSensors
+        from telethermal.teleop.master import MasterStep, SlaveNews
         rec = SessionRecorder(Recorder(Path(tmp) / "calls.mcap", "bench"))
         news = SlaveNews(24.0)
         for k in range(5000):

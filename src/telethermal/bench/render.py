@@ -30,9 +30,9 @@ from telethermal.data.generate import finger_database
 from telethermal.physics.scene import load_scene
 from telethermal.bench.skin_floor import skin_floor
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
-from telethermal.session.master import DEFAULT_GAINS, DisplayConfig
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import run_session, with_finger
+from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import run_session, with_finger
 
 RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
 SEEDS = (1, 2)

@@ -21,7 +21,7 @@ from scipy.linalg import toeplitz
 from scipy.optimize import lsq_linear
 
 from telethermal.devices.sim_plant import DisplayPlant
-from telethermal.session.run import display_model
+from telethermal.teleop.run import display_model
 
 GRID_S = 0.005
 
@@ -30,7 +30,7 @@ def skin_floor(scene, session_result, band_c: tuple[float, float], idle_c: float
                grid_s: float = GRID_S) -> dict:
     """Skin RMS (K) and flux RMS (fraction of the direct peak) of the best
     bounded junction trajectory for the touch of ``session_result`` (a
-    :class:`~telethermal.session.run.SessionResult`)."""
+    :class:`~telethermal.teleop.run.SessionResult`)."""
     tr, s = session_result.trace, session_result.summary
     op, contact_s = s["operator"], s["contact_s"]
     t = tr["t_s"]

@@ -27,8 +27,8 @@ from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.session.models import train_generator, train_identifier
-from telethermal.session.run import with_finger
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.run import with_finger
 from telethermal.view.browser import launch
 from telethermal.view.command import open_view
 
@@ -44,7 +44,7 @@ def publisher_call_us(n: int = 5000) -> dict:
     subscriber connected."""
     import zmq
 
-    from telethermal.services.viewstream import ViewPublisher
+    from telethermal.view.stream import ViewPublisher
     state = {"contact_id": 3, "touching": True, "phase": "render", "safe": False,
              "setpoint_w_m2": -3500.0, "events": {}, "rtt_s": 0.0003,
              "link": dict.fromkeys(("lossless_sent", "stream_lost", "resent", "gaps",

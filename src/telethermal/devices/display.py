@@ -29,7 +29,7 @@ from pathlib import Path
 from telethermal.devices.board import Calibration, SensorBoard
 from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
 from telethermal.devices.peltier import PeltierDriver
-from telethermal.session.master import PadSensors
+from telethermal.devices.readings import PadSensors
 
 DEVICE_KINDS = ("sim", "emulated")
 _bus_names = itertools.count()

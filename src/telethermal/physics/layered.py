@@ -432,3 +432,8 @@ def crank_nicolson(model: LayeredContact, dt_s: float, n_steps: int, temp_a_c: f
             temp = solve_banded((1, 1), cn, rhs)
         flux[step] = g_link[na - 1] * (temp[na - 1] - temp[na])
     return dt_s * np.arange(1, n_steps + 1), flux
+
+
+def pad_resistance(layers) -> float:
+    """The conduction resistance (m^2 K / W) of a stack of layers."""
+    return sum(layer.thickness_m / layer.material.conductivity_w_mk for layer in layers)

@@ -14,8 +14,8 @@ from pathlib import Path
 
 from telethermal.errors import TelethermalError, TransportError
 from telethermal.services.admin import call
-from telethermal.session.plots import plot_session
-from telethermal.session.run import SessionResult, compare_with_direct, with_finger
+from telethermal.teleop.plots import plot_session
+from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
 from telethermal.wire.transport import generate_link_keys
 
 
@@ -178,7 +178,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                   "decision_time_s": None, "onset_s": None, "reason": "slave restarted"}
     import numpy as np
 
-    from telethermal.session.run import Operator
+    from telethermal.teleop.run import Operator
     trace = {k: np.array(v, dtype=object if k == "phase" else float)
              for k, v in result["trace"].items()}
     operator = Operator(**result["operator"])
@@ -224,7 +224,7 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
                 again: bool, echo) -> dict:
     """One touch of the demo over the network, beside the same touch in one
     process; prints its line and returns its summary."""
-    from telethermal.session.run import run_session
+    from telethermal.teleop.run import run_session
 
     result = networked_touch(scene, material, ports[:4], seed, contact_s)
     s = result.summary

@@ -4,7 +4,7 @@ Owns: the transport's master end (control DEALER and stream SUB,
 connecting), the simulated display pad, operator and force sensor, and
 the display loop at ``rate_hz`` on the real clock. Each period it reads the
 network and the admin socket and, during a touch, runs one period of
-:class:`~telethermal.session.master.MasterDisplay` with what the slave has
+:class:`~telethermal.teleop.master.MasterDisplay` with what the slave has
 said so far. Rendering is timed from the master's own contact onset, so
 the network's delay shifts nothing once the trajectory is here.
 """
@@ -20,15 +20,15 @@ from dataclasses import dataclass, replace
 
 from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.devices.display import open_display
-from telethermal.record.session import display_params, open_recorder
+from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
-from telethermal.services.viewstream import ViewPublisher
-from telethermal.session.link import SlaveLink
-from telethermal.session.master import DisplayConfig, MasterDisplay
-from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
+from telethermal.view.stream import ViewPublisher
+from telethermal.teleop.link import SlaveLink
+from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
                                      draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
 
@@ -402,10 +402,10 @@ class MasterService:
 def touch_figures(scene, touch: Touch, result: dict) -> dict:
     """The touch against the same finger touching the object directly, when
     the touch request named the placed object (a simulated scene holding it):
-    flux and skin-temperature errors (``session/run.py``'s metrics)."""
+    flux and skin-temperature errors (``teleop/run.py``'s metrics)."""
     import numpy as np
 
-    from telethermal.session.run import compare_with_direct
+    from telethermal.teleop.run import compare_with_direct
 
     n = touch.sim.n_total
     result["trace"] = {k: v[:n] for k, v in touch.sim.trace.items()}

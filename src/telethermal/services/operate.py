@@ -177,7 +177,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_models(args) -> int:
-    from telethermal.session.models import write_models
+    from telethermal.teleop.models import write_models
 
     paths = write_models(args.out, args.scene, args.data, args.seed)
     for path in paths:

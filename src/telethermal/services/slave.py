@@ -21,13 +21,13 @@ from telethermal.errors import ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import naive_setpoint
-from telethermal.record.session import open_recorder
+from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
-from telethermal.session.memory import ObjectMemory
-from telethermal.session.run import slave_rng, with_finger
-from telethermal.session.slave import BOARD_LOST, Slave
+from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.teleop.slave import BOARD_LOST, Slave
 
 log = logging.getLogger("telethermal.slave")
 BATCH = 10            # samples per measurement_batch
@@ -36,7 +36,7 @@ TRAJECTORY_VALID_S = 60.0
 
 class SlaveService:
     def __init__(self, config: SlaveConfig, identifier=None, generator=None):
-        from telethermal.session.models import train_generator, train_identifier
+        from telethermal.teleop.models import train_generator, train_identifier
         from telethermal.ident.registry import load_model
         from telethermal.render.generator import load_generator
 

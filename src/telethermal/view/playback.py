@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 
 from telethermal.record.recording import RecordingError, read_recording
-from telethermal.services.viewstream import skin_estimate_c
+from telethermal.view.stream import skin_estimate_c
 from telethermal.view.feed import MAX_RATE_HZ
 
 CONTACT_PHASES = ("contact", "render", "link lost")
@@ -35,7 +35,7 @@ def _touch_starts(rec) -> dict[int, float]:
 
 def _conductance(rec) -> float:
     from telethermal.physics.scene import load_scene
-    from telethermal.session.run import with_finger
+    from telethermal.teleop.run import with_finger
     scene = rec.config.get("scene", "fingertip-7")
     try:
         return with_finger(load_scene(scene)).finger.contact_conductance_w_m2k

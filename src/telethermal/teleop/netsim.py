@@ -50,13 +50,13 @@ from telethermal.faults.channel import Channel, Direction
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
-from telethermal.session.link import SlaveLink
-from telethermal.session.master import MasterDisplay, SlaveNews
-from telethermal.session.memory import ObjectMemory
-from telethermal.session.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
+from telethermal.teleop.link import SlaveLink
+from telethermal.teleop.master import MasterDisplay, SlaveNews
+from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
                                      display_model_args, draw_operator, master_rng,
                                      pad_resistance, safety_summary, slave_rng, with_finger)
-from telethermal.session.slave import Slave
+from telethermal.teleop.slave import Slave
 
 ESTIMATE_ROUTES = ("stream", "lossless")
 #: Bytes of a message on the wire, roughly (only a serialising link cares).

@@ -28,12 +28,13 @@ from telethermal.control.loop import FixedRateLoop, RealClock, SimClock
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN
-from telethermal.physics.layered import Boundary, Layer, LayeredContact
+from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_resistance
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene, finger_contact_model
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
-from telethermal.session.master import DisplayConfig, MasterDisplay, PadSensors, SlaveNews
-from telethermal.session.slave import Slave
+from telethermal.devices.readings import PadSensors
+from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.teleop.slave import Slave
 
 #: The fingertip used where a scene has none (the gripper scenes): the
 #: first paper's operator, nominal skin.
@@ -74,10 +75,6 @@ def display_model_args(scene: Scene) -> dict:
     layers and the nominal pad-fingertip contact conductance."""
     return {"pad_layers": tuple(scene.pad.layers),
             "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k}
-
-
-def pad_resistance(layers) -> float:
-    return sum(layer.thickness_m / layer.material.conductivity_w_mk for layer in layers)
 
 
 @dataclass
@@ -205,7 +202,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
     read through the real drivers). ``record``: an MCAP file to record the
     session to (:mod:`telethermal.record.recording`)."""
     from telethermal.devices.display import open_display
-    from telethermal.record.session import SessionRecorder
+    from telethermal.record.recorder import SessionRecorder
 
     if not (contact_s > 0 and math.isfinite(contact_s)):
         raise SceneError(f"contact_s must be > 0, got {contact_s}")

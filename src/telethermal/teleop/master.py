@@ -56,6 +56,7 @@ from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.physics.materials import get_material
 from telethermal.render.generator import mixture, posterior_weights
+from telethermal.devices.readings import PadSensors
 
 log = logging.getLogger(__name__)
 
@@ -122,15 +123,6 @@ class DisplayConfig:
                                f"{self.impedance_horizon_s}")
         if self.before not in BEFORE_MODES:
             raise ControlError(f"before must be one of {BEFORE_MODES}, got {self.before!r}")
-
-
-@dataclass(frozen=True, slots=True)
-class PadSensors:
-    """One period's readings of the master's own sensors."""
-
-    flux_w_m2: float        # pad -> finger, as the film sensor reads it
-    pad_temp_c: float       # the sensor's thermocouple, at the contact surface
-    force_n: float
 
 
 @dataclass(frozen=True, slots=True)

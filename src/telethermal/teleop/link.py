@@ -54,8 +54,8 @@ import numpy as np
 
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.sampled import SampledGenerator
-from telethermal.session.master import SlaveNews
-from telethermal.session.memory import agreement, remembered_estimate
+from telethermal.teleop.master import SlaveNews
+from telethermal.teleop.memory import agreement, remembered_estimate
 
 log = logging.getLogger(__name__)
 

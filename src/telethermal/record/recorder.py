@@ -1,0 +1,197 @@
+"""What a session records: :class:`SessionRecorder`.
+
+Every control period of the master (its sensors, what it knew of the slave
+when that changed, what it commanded), the slave pad's samples and its
+estimates, the models as attachments, the parameters to rebuild the display,
+and at the end the session's summary and (simulation only) the simulator's
+trace, which holds the truth a lab cannot measure. Replaying a recording is
+:mod:`telethermal.teleop.replay` (it re-runs the master's and slave's logic).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from telethermal.physics.layered import pad_resistance
+from telethermal.record.recording import Recorder
+
+
+#: Control periods per recorded message (columns): 20 ms at 1 kHz, the most a
+#: recording cut mid-write loses of them.
+PERIOD_BATCH = 20
+PERIOD_FIELDS = ("t_s", "dt_s", "flux_w_m2", "pad_temp_c", "force_n", "phase",
+                 "desired_flux_w_m2", "junction_cmd_c", "junction_applied_c", "safe")
+
+
+def periods(rec, contact_id: int | None = None) -> list[dict]:
+    """The recorded control periods, one dict each (from their batches)."""
+    out = []
+    for batch in rec.messages("/master/periods"):
+        cid = batch.get("contact_id", 0)
+        if contact_id is not None and cid != contact_id:
+            continue
+        n = len(batch["t_s"])
+        for i in range(n):
+            row = {k: batch[k][i] for k in PERIOD_FIELDS}
+            row["k"], row["contact_id"] = batch["k0"] + i, cid
+            out.append(row)
+    return out
+
+
+def model_bytes(identifier, generator) -> dict[str, bytes]:
+    from telethermal.render.generator import save_generator
+    with tempfile.TemporaryDirectory() as tmp:
+        out = {}
+        if identifier is not None:
+            out["identifier.npz"] = identifier.save(Path(tmp) / "identifier.npz").read_bytes()
+        if generator is not None and hasattr(generator, "materials") and \
+                not type(generator).__name__.startswith("Sampled"):
+            out["generator.npz"] = save_generator(generator,
+                                                  Path(tmp) / "generator.npz").read_bytes()
+        return out
+
+
+def _estimate(e):
+    return None if e is None else [float(e.t_s), [float(p) for p in e.posteriors], e.label,
+                                   float(e.confidence), bool(e.decided), e.reason]
+
+
+def open_recorder(config, role: str, identifier=None, generator=None):
+    """A service's recorder, if its config has a ``record_dir``: one file per
+    run, ``<role>-<UTC time>.mcap``."""
+    import datetime
+    from dataclasses import asdict as as_dict
+
+    if not getattr(config, "record_dir", ""):
+        return None
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%S")
+    path = Path(config.record_dir) / f"{role}-{stamp}.mcap"
+    return SessionRecorder(Recorder(path, role, as_dict(config),
+                                    model_bytes(identifier, generator)))
+
+
+def display_params(scene, config, operator, idle_c) -> dict:
+    """What a replay needs to rebuild the display of one touch."""
+    return {"display": {"rate_hz": config.rate_hz, "before": config.before,
+                        "source": config.source, "gains": asdict(config.gains),
+                        "feedforward": config.feedforward, "slew_k_s": config.slew_k_s,
+                        "handover_k_s": config.handover_k_s, "blend_s": config.blend_s,
+                        "r_pad_belief": config.r_pad_belief,
+                        "feedforward_model": config.feedforward_model,
+                        "impedance_horizon_s": config.impedance_horizon_s},
+            "pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
+            "pad_layers": [[layer.material.name, layer.thickness_m] for layer in scene.pad.layers],
+            "contact_conductance_w_m2k": (scene.finger.contact_conductance_w_m2k
+                                          if scene.finger is not None else None),
+            "sensor_lag_s": scene.sensors.flux_lag_s,
+            "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
+            "operator": asdict(operator)}
+
+
+class SessionRecorder:
+    """What the master's loop and the slave's pad record, on one
+    :class:`Recorder`: the in-process session (role ``session``, one touch)
+    or a service (many touches, each opened by ``touch_start``)."""
+
+    def __init__(self, recorder: Recorder):
+        self.rec = recorder
+        self._news = None
+        self._k = 0
+        self.contact_id = 0
+        self._cols = {k: [] for k in PERIOD_FIELDS}
+
+    @classmethod
+    def open(cls, path, scene, material, identifier, generator, config, operator, idle_c,
+             seed, contact_s, devices) -> "SessionRecorder":
+        params = {"scene": scene.name, "material": material, "seed": seed,
+                  "contact_s": contact_s, "devices": devices,
+                  **display_params(scene, config, operator, idle_c)}
+        return cls(Recorder(path, "session", params, model_bytes(identifier, generator)))
+
+    def touch_start(self, t_s: float, contact_id: int, params: dict) -> None:
+        self._flush_periods()
+        self.contact_id, self._news, self._k = contact_id, None, 0
+        self.rec.log("/master/touch_start", t_s, {"contact_id": contact_id, **params})
+
+    def period(self, t_s, dt_s, sensors, news, step) -> None:
+        """One control period. Periods are sent to the writer in batches of
+        ``PERIOD_BATCH`` (columns, one message), which costs the loop a few
+        list appends per period and the writer one record per batch."""
+        if news != self._news:
+            self._news = news
+            self.rec.log("/master/news", t_s, {
+                "contact_id": self.contact_id, "k": self._k, "t_s": t_s,
+                "object_temp_c": news.object_temp_c, "estimate": _estimate(news.estimate),
+                "classes": list(news.classes), "setpoint_w_m2": news.setpoint_w_m2,
+                "link_ok": news.link_ok})
+        cols = self._cols
+        if not cols["t_s"]:
+            self._k0, self._t0 = self._k, t_s
+        for key, value in (("t_s", t_s), ("dt_s", dt_s), ("flux_w_m2", sensors.flux_w_m2),
+                           ("pad_temp_c", sensors.pad_temp_c), ("force_n", sensors.force_n),
+                           ("phase", step.phase), ("desired_flux_w_m2", step.desired_flux_w_m2),
+                           ("junction_cmd_c", step.junction_cmd_c),
+                           ("junction_applied_c", step.junction_applied_c),
+                           ("safe", bool(step.safe))):
+            cols[key].append(value)
+        self._k += 1
+        if len(cols["t_s"]) >= PERIOD_BATCH:
+            self._flush_periods()
+
+    def _flush_periods(self) -> None:
+        cols = self._cols
+        if cols["t_s"]:
+            # The lists are handed over as they are (Python floats, str and
+            # bool, which msgpack takes); new ones start for the next batch.
+            self.rec.log("/master/periods", self._t0, {
+                "contact_id": self.contact_id, "k0": self._k0, **cols})
+        self._cols = {k: [] for k in PERIOD_FIELDS}
+
+    def note(self, what: str, fields: dict) -> None:
+        """A one-off record of the slave's instruments (e.g. its thermometer
+        calibration: ``/slave/thermometer_calibration``)."""
+        self.rec.log(f"/slave/{what}", 0.0, _plain(fields))
+
+    def wire(self, t_s: float, direction: str, message: dict) -> None:
+        self.rec.log(f"/wire/{direction}/{message['kind']}", t_s, _plain(message))
+
+    def slave(self, slave, contact_id: int = 0) -> None:
+        n = slave.samples_read
+        self.rec.log("/slave/samples", 0.0, {
+            **{k: [float(v) for v in np.asarray(c)[:n]] for k, c in slave.channels.items()},
+            "contact_id": contact_id, "object_ir_c": slave.object_ir_c,
+            "object_true_c": slave.object_true_c, "pad_before_c": slave.pad_before_c,
+            "gap_k": slave.gap_k})
+        for ev in slave.events:
+            self.rec.log("/slave/estimates", ev.t_s, {"contact_id": contact_id, "t_s": ev.t_s,
+                                                      "estimate": _estimate(ev.estimate)})
+
+    def touch_end(self, summary: dict, trace: dict) -> None:
+        self._flush_periods()
+        clean = {k: v for k, v in summary.items() if k != "recording"}
+        self.rec.log("/master/touch", 0.0, {"contact_id": self.contact_id,
+                                            "summary": _plain(clean)})
+        self.rec.log("/sim/trace", 0.0, {"contact_id": self.contact_id,
+                                         "trace": {k: [_plain(x) for x in v]
+                                                   for k, v in trace.items()}})
+
+    def close(self, summary: dict | None = None, trace: dict | None = None) -> dict:
+        if summary is not None:
+            self.touch_end(summary, trace or {})
+        self._flush_periods()
+        return self.rec.close()
+
+
+def _plain(value):
+    """msgpack-safe: numpy scalars to Python, NaN kept."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
