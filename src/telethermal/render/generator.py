@@ -20,7 +20,7 @@ gap and averaged per material; the desired flux is then
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,14 @@ from telethermal.physics.materials import get_material
 
 #: Curves are fitted on this many log-spaced times from the first sample to the end.
 N_KNOTS = 120
+
+
+def _learned(empty=None):
+    """A learned attribute of a generator: set by ``fit`` (or read from a
+    file), not a constructor argument, not in its repr or equality."""
+    if empty is None:
+        return field(default=None, init=False, repr=False, compare=False)
+    return field(default_factory=empty, init=False, repr=False, compare=False)
 
 
 def mean_normalised_curves(trials: list[Trial], t_knots: np.ndarray | None = None):
@@ -68,6 +76,15 @@ class NetworkGenerator:
     n_hidden: int = 8
     max_iter: int = 300
     seed: int = 0
+    #: Learned: the fitted times' range (s), the input's centre and spread
+    #: (log10 s), one network and one output scale per material.
+    t_range_s_: tuple[float, float] | None = _learned()
+    x_mean_: float | None = _learned()
+    x_scale_: float | None = _learned()
+    nets_: dict[str, MLP] = _learned(dict)
+    scale_: dict[str, float] = _learned(dict)
+    #: ``normalised_many``'s stacked weights per tuple of materials.
+    _stacked: dict[tuple, tuple] = _learned(dict)
 
     kind = "network"
 
@@ -88,7 +105,7 @@ class NetworkGenerator:
 
     @property
     def materials(self) -> list[str]:
-        return sorted(getattr(self, "nets_", {}))
+        return sorted(self.nets_)
 
     def normalised(self, material: str, t_s) -> np.ndarray:
         """flux / gap, W/m^2/K, at times since contact (0 before contact).
@@ -96,7 +113,7 @@ class NetworkGenerator:
         Below the first fitted time (one sample period of database 2) the
         network is not extrapolated: the curve ramps linearly from 0 at
         contact, which is what the recorded (sensor-lagged) flux does."""
-        if material not in getattr(self, "nets_", {}):
+        if material not in self.nets_:
             raise IdentificationError(f"no generator for {material!r}; it knows "
                                       f"{', '.join(self.materials)}")
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
@@ -108,7 +125,7 @@ class NetworkGenerator:
     def normalised_many(self, materials, t_s) -> np.ndarray:
         """``normalised`` for several materials at once, (n_materials, n_t)."""
         key = tuple(materials)
-        stacked = getattr(self, "_stacked", {}).get(key)
+        stacked = self._stacked.get(key)
         if stacked is None:
             for m in key:
                 if m not in self.nets_:
@@ -117,7 +134,7 @@ class NetworkGenerator:
             stacked = (np.stack([n.w1[:, 0] for n in nets]), np.stack([n.b1 for n in nets]),
                        np.stack([n.w2[0] for n in nets]), np.array([n.b2[0] for n in nets]),
                        np.array([self.scale_[m] for m in key]))
-            self.__dict__.setdefault("_stacked", {})[key] = stacked
+            self._stacked[key] = stacked
         w1, b1, w2, b2, scale = stacked
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         t_first = self.t_range_s_[0]
@@ -150,11 +167,15 @@ class NetworkGenerator:
 class ContactGenerator:
     """The finger-material closed form with fitted ``h`` and effusivity."""
 
+    #: Learned: per material, (h W/m^2/K, the material's effusivity, the
+    #: finger's effusivity), effusivities in W s^0.5/m^2/K.
+    params_: dict[str, tuple[float, float, float]] = _learned(dict)
+
     kind = "contact"
 
     @property
     def materials(self) -> list[str]:
-        return sorted(getattr(self, "params_", {}))
+        return sorted(self.params_)
 
     def _state(self):
         return {"params": self.params_}, {}
@@ -182,7 +203,7 @@ class ContactGenerator:
         return self
 
     def normalised(self, material: str, t_s) -> np.ndarray:
-        if material not in getattr(self, "params_", {}):
+        if material not in self.params_:
             raise IdentificationError(f"no generator for {material!r}; it knows "
                                       f"{', '.join(self.materials)}")
         h, e_m, e_f = self.params_[material]
