@@ -77,12 +77,13 @@ class NetworkGenerator:
     max_iter: int = 300
     seed: int = 0
     #: Learned: the fitted times' range (s), the input's centre and spread
-    #: (log10 s), one network and one output scale per material.
+    #: (log10 s), one network per material and the peak |flux / gap| it was
+    #: scaled by (stored as "scale" in the file).
     t_range_s_: tuple[float, float] | None = _learned()
     x_mean_: float | None = _learned()
     x_scale_: float | None = _learned()
     nets_: dict[str, MLP] = _learned(dict)
-    scale_: dict[str, float] = _learned(dict)
+    peak_w_m2k_: dict[str, float] = _learned(dict)
     #: ``normalised_many``'s stacked weights per tuple of materials.
     _stacked: dict[tuple, tuple] = _learned(dict)
 
@@ -93,14 +94,14 @@ class NetworkGenerator:
         self.t_range_s_ = (float(t[0]), float(t[-1]))
         x = np.log10(t)[:, None]
         self.x_mean_, self.x_scale_ = float(x.mean()), float(x.std())
-        self.nets_, self.scale_ = {}, {}
+        self.nets_, self.peak_w_m2k_ = {}, {}
         rng = np.random.default_rng(self.seed)
         for material, curve in curves.items():
             scale = float(np.max(np.abs(curve))) or 1.0
             net, _ = train_lm(MLP.init(1, self.n_hidden, 1, rng, output="linear"),
                               (x - self.x_mean_) / self.x_scale_, curve[:, None] / scale,
                               max_iter=self.max_iter, l2=1e-8)
-            self.nets_[material], self.scale_[material] = net, scale
+            self.nets_[material], self.peak_w_m2k_[material] = net, scale
         return self
 
     @property
@@ -119,7 +120,7 @@ class NetworkGenerator:
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         t_first = self.t_range_s_[0]
         x = (np.log10(np.clip(t, t_first, None))[:, None] - self.x_mean_) / self.x_scale_
-        q = self.nets_[material](x)[:, 0] * self.scale_[material]
+        q = self.nets_[material](x)[:, 0] * self.peak_w_m2k_[material]
         return np.where(t >= t_first, q, np.clip(t, 0, None) / t_first * q)
 
     def normalised_many(self, materials, t_s) -> np.ndarray:
@@ -133,7 +134,7 @@ class NetworkGenerator:
             nets = [self.nets_[m] for m in key]
             stacked = (np.stack([n.w1[:, 0] for n in nets]), np.stack([n.b1 for n in nets]),
                        np.stack([n.w2[0] for n in nets]), np.array([n.b2[0] for n in nets]),
-                       np.array([self.scale_[m] for m in key]))
+                       np.array([self.peak_w_m2k_[m] for m in key]))
             self._stacked[key] = stacked
         w1, b1, w2, b2, scale = stacked
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
@@ -145,7 +146,7 @@ class NetworkGenerator:
 
     def _state(self):
         header = {"x_mean": self.x_mean_, "x_scale": self.x_scale_,
-                  "t_range_s": list(self.t_range_s_), "scale": self.scale_,
+                  "t_range_s": list(self.t_range_s_), "scale": self.peak_w_m2k_,
                   "hyper": {"n_hidden": self.n_hidden, "max_iter": self.max_iter,
                             "seed": self.seed}}
         arrays = {f"{m}.{k}": getattr(net, k) for m, net in self.nets_.items()
@@ -157,9 +158,9 @@ class NetworkGenerator:
         gen = cls(**header["hyper"])
         gen.x_mean_, gen.x_scale_ = float(header["x_mean"]), float(header["x_scale"])
         gen.t_range_s_ = tuple(header["t_range_s"])
-        gen.scale_ = {m: float(v) for m, v in header["scale"].items()}
+        gen.peak_w_m2k_ = {m: float(v) for m, v in header["scale"].items()}
         gen.nets_ = {m: MLP(*(arrays[f"{m}.{k}"] for k in ("w1", "b1", "w2", "b2")),
-                            output="linear") for m in gen.scale_}
+                            output="linear") for m in gen.peak_w_m2k_}
         return gen
 
 
