@@ -86,7 +86,7 @@ def test_a_model_of_another_scene_is_refused(model, tmp_path):
 
 def test_model_file_keeps_calibration_and_force_range(model, tmp_path):
     loaded = load_model(model.save(tmp_path / "m.npz"))
-    np.testing.assert_array_equal(loaded.temperature_, model.temperature_)
+    np.testing.assert_array_equal(loaded.softmax_temperature_, model.softmax_temperature_)
     assert loaded.shrinkage_ == model.shrinkage_ and loaded.force_range_n_ == model.force_range_n_
     lo, hi = loaded.force_range_n_[-1]
     assert 5.0 < lo < 10.0 < hi < 15.0       # trained at 10 +- 1.5 N

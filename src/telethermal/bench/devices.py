@@ -34,7 +34,7 @@ import numpy as np
 
 from telethermal.devices.display import EmulatedDisplay, SimDisplay
 from telethermal.physics.scene import load_scene
-from telethermal.teleop.master import MasterStep
+from telethermal.teleop.master import MasterStep, Phase
 from telethermal.teleop.run import DisplayTouch, Operator, with_finger
 
 OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat_scale=1.0,
@@ -68,7 +68,7 @@ def _paths(n: int) -> dict:
                 t0 = time.perf_counter()
                 s = d.read(t)
                 read.append(time.perf_counter() - t0)
-                step = MasterStep(t, "contact", True, float("nan"), 34.0, 34.0, False)
+                step = MasterStep(t, Phase.CONTACT, True, float("nan"), 34.0, 34.0, False)
                 t0 = time.perf_counter()
                 if kind == "emulated":
                     d.hardware.peltier.command(34.0)

@@ -46,12 +46,12 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
         from telethermal.record.recording import Recorder
         from telethermal.record.recorder import SessionRecorder
         from telethermal.devices.readings import PadSensors
-        from telethermal.teleop.master import MasterStep, SlaveNews
+        from telethermal.teleop.master import MasterStep, Phase, SlaveNews
         rec = SessionRecorder(Recorder(Path(tmp) / "calls.mcap", "bench"))
         news = SlaveNews(24.0)
         for k in range(5000):
             sensors = PadSensors(-1234.5 + k, 30.1, 4.0)
-            step_ = MasterStep(k * 1e-3, "render", True, -1200.0, 25.0, 25.0, False)
+            step_ = MasterStep(k * 1e-3, Phase.RENDER, True, -1200.0, 25.0, 25.0, False)
             t0 = time.perf_counter()
             rec.period(k * 1e-3, 1e-3, sensors, news, step_)
             log_calls.append(time.perf_counter() - t0)

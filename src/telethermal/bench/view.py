@@ -28,6 +28,7 @@ from telethermal.render.generator import save_generator
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
 from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.master import Phase
 from telethermal.teleop.run import with_finger
 from telethermal.view.browser import launch
 from telethermal.view.command import open_view
@@ -45,7 +46,7 @@ def publisher_call_us(n: int = 5000) -> dict:
     import zmq
 
     from telethermal.view.stream import ViewPublisher
-    state = {"contact_id": 3, "touching": True, "phase": "render", "safe": False,
+    state = {"contact_id": 3, "touching": True, "phase": Phase.RENDER, "safe": False,
              "setpoint_w_m2": -3500.0, "events": {}, "rtt_s": 0.0003,
              "link": dict.fromkeys(("lossless_sent", "stream_lost", "resent", "gaps",
                                     "heartbeats_missed", "reconnects", "invalid"), 0),

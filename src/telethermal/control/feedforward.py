@@ -145,7 +145,7 @@ class ImpedanceController:
         self._future_sum = float(self._future.sum())
         self._future_gain = float(self._future @ self._gain)
         self._recent: deque[float] = deque(maxlen=int(round(1.0 / dt_s)) + 1)
-        self._last_sensed: float | None = None
+        self._last_sensed_w_m2: float | None = None
         self.true_flux_w_m2 = 0.0
         self.reset()
 
@@ -165,8 +165,8 @@ class ImpedanceController:
         true flux is recovered by inverting the sensor's lag."""
         if not math.isfinite(sensed_flux_w_m2):
             return
-        last = self._last_sensed
-        self._last_sensed = sensed_flux_w_m2
+        last = self._last_sensed_w_m2
+        self._last_sensed_w_m2 = sensed_flux_w_m2
         slope = (sensed_flux_w_m2 - last) / dt_s if last is not None and dt_s > 0 else 0.0
         self.true_flux_w_m2 = sensed_flux_w_m2 + self.tau_s * slope
         self._recent.append(self.true_flux_w_m2)

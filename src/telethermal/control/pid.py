@@ -65,7 +65,10 @@ class Pid:
 
     def reset(self, measurement: float | None = None, output: float = 0.0,
               setpoint: float | None = None) -> None:
-        """Start (again) so that the next output continues from ``output``."""
+        """Start (again) so that the next output continues from ``output``.
+
+        Every piece of state is set here: nothing from before a reset comes
+        back, not even through :meth:`limited_downstream`."""
         self._integral = 0.0
         self._derivative = 0.0
         self._last_measurement = measurement
@@ -74,6 +77,10 @@ class Pid:
             self._integral = output - proportional        # bumpless hand-over
         elif self.gains.ki:
             self._integral = output
+        # What the last update would undo, and the error it saw: no update
+        # since the reset, so there is nothing to undo (error 0 pushes nowhere).
+        self._before_update = self._integral
+        self._last_error = 0.0
 
     def update(self, setpoint: float, measurement: float, dt_s: float,
                feedforward: float = 0.0) -> PidOutput:
@@ -116,6 +123,6 @@ class Pid:
         a safety supervisor): when what was applied differs from what the
         last :meth:`update` asked for in the direction its error pushes, that
         step's integration is undone."""
-        error = getattr(self, "_last_error", 0.0)
+        error = self._last_error
         if (applied < requested and error > 0) or (applied > requested and error < 0):
             self._integral = self._before_update

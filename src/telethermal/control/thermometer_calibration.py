@@ -162,9 +162,9 @@ class SimulatedPadTarget:
         self.instruments, self.rng = instruments, rng
         self.tc = Thermocouple(noise_uv_rms=thermocouple_noise_uv, cold_junction_c=room_c,
                                bias_k=instruments.pad_tc_bias_k)
-        self.drift = drift_k_per_reading
-        self.thermometer_drift = thermometer_drift_k_per_reading
-        self._thermometer_offset = 0.0
+        self.drift_k_per_reading = drift_k_per_reading
+        self.thermometer_drift_k_per_reading = thermometer_drift_k_per_reading
+        self._thermometer_offset_k = 0.0
         self.pad_true_c = room_c
 
     def set_pad_c(self, temp_c: float) -> None:
@@ -172,13 +172,13 @@ class SimulatedPadTarget:
         self.pad_true_c = temp_c - self.instruments.pad_tc_bias_k + hold
 
     def read_pad_c(self) -> float:
-        self.pad_true_c += self.drift
+        self.pad_true_c += self.drift_k_per_reading
         return float(self.tc.read_c(np.array([self.pad_true_c]), self.rng)[0])
 
     def read_thermometer_c(self) -> float:
-        self._thermometer_offset += self.thermometer_drift
+        self._thermometer_offset_k += self.thermometer_drift_k_per_reading
         return float(self.instruments.thermometer.read_c(np.array([self.pad_true_c]),
-                                                         self.rng)[0]) + self._thermometer_offset
+                                                         self.rng)[0]) + self._thermometer_offset_k
 
 
 def calibrate_simulated(instruments: Instruments, room_c: float, rng: np.random.Generator,

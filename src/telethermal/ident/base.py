@@ -131,6 +131,18 @@ class Identifier:
         self.threshold = threshold
         self.calibrate = calibrate
         self.seed = seed
+        # Learned by fit() (or read from a model file); None until then.
+        self.classes_: list[str] | None = None
+        self.sample_rate_hz_: float | None = None
+        self.windows_s_: list[float] | None = None
+        self.params_: list[dict] | None = None
+        #: Per window, the range of pressing forces the training touches had.
+        self.force_range_n_: list | None = None
+        #: Per window, the softmax temperature of the calibration (Guo et al.
+        #: 2017): logits are divided by it. Stored as "temperature" in files.
+        self.softmax_temperature_: np.ndarray | None = None
+        #: The scene the model was trained on, when known.
+        self.scene_: str | None = None
 
     # ------------------------------------------------------------ fitting
     def hyper(self) -> dict:
@@ -159,7 +171,7 @@ class Identifier:
         self.windows_s_ = [round(w, 6) for w in np.arange(1, int(top / step + 1e-9) + 1) * step]
         self.params_ = [self._fit_window(self._window(contacts.x, w), y) for w in self.windows_s_]
         self.force_range_n_ = force_ranges(self, contacts)
-        self.temperature_ = np.ones(len(self.windows_s_))
+        self.softmax_temperature_ = np.ones(len(self.windows_s_))
         if self.calibrate and not self.streaming:
             self._calibrate(contacts, y)
         return self
@@ -175,7 +187,7 @@ class Identifier:
         logits = self._held_out_logits(contacts, y)
         if logits is None:
             return
-        self.temperature_ = fit_temperatures(logits, y)
+        self.softmax_temperature_ = fit_temperatures(logits, y)
 
     def _held_out_logits(self, contacts: Contacts, y: np.ndarray):
         """Logits of every trial at every window from models that did not
@@ -196,7 +208,7 @@ class Identifier:
 
     # ------------------------------------------------------------ predicting
     def _require_fitted(self):
-        if not hasattr(self, "classes_"):
+        if self.classes_ is None:
             raise IdentificationError(f"this {self.method} identifier is not fitted; call fit()")
 
     def window_index(self, n_samples: int) -> int | None:
@@ -209,7 +221,7 @@ class Identifier:
         """Posteriors (N, n_classes) for normalised contacts x (N, >= n_w, C)."""
         w = self.windows_s_[window_index]
         z = self._logits(self.params_[window_index], self._window(x, w))
-        z = z / self.temperature_[window_index]
+        z = z / self.softmax_temperature_[window_index]
         z = z - z.max(axis=1, keepdims=True)          # a softmax without scipy's overhead
         e = np.exp(z)
         return e / e.sum(axis=1, keepdims=True)
@@ -280,7 +292,7 @@ class Identifier:
         """Learned values (names ending in ``_``, JSON-able) kept in the
         model file's header beside the weights; subclasses add theirs
         (an attribute a model file from before it lacks is saved as None)."""
-        return {"force_range_n_": getattr(self, "force_range_n_", None)}
+        return {"force_range_n_": self.force_range_n_}
 
     # ------------------------------------------------------------ subclass hooks
     def _fit_window(self, x: np.ndarray, y: np.ndarray) -> dict:
@@ -301,8 +313,8 @@ class Identifier:
         header = {"method": self.method,
                   "classes": self.classes_, "channels": list(self.channels),
                   "sample_rate_hz": self.sample_rate_hz_, "windows_s": self.windows_s_,
-                  "temperature": self.temperature_.tolist(), "hyper": self.hyper(),
-                  "min_gap_k": MIN_GAP_K, "scene": getattr(self, "scene_", None),
+                  "temperature": self.softmax_temperature_.tolist(), "hyper": self.hyper(),
+                  "min_gap_k": MIN_GAP_K, "scene": self.scene_,
                   "learned": self.learned()}
         arrays = {f"w{i}.{name}": value for i, params in enumerate(self.params_)
                   for name, value in params.items()}
@@ -314,7 +326,7 @@ class Identifier:
         model.classes_ = list(header["classes"])
         model.sample_rate_hz_ = float(header["sample_rate_hz"])
         model.windows_s_ = list(header["windows_s"])
-        model.temperature_ = np.asarray(header["temperature"], dtype=np.float64)
+        model.softmax_temperature_ = np.asarray(header["temperature"], dtype=np.float64)
         if header.get("scene") is not None:
             model.scene_ = header["scene"]
         for key, value in (header.get("learned") or {}).items():

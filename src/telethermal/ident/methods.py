@@ -94,6 +94,7 @@ class EffusivityLda(Identifier):
         self.n_boxes = n_boxes
         self.shrinkage = shrinkage
         self.outlier_p = outlier_p
+        self.shrinkage_: float | None = None        # learned (or given) by fit()
 
     def hyper(self) -> dict:
         return {**super().hyper(), "n_boxes": self.n_boxes, "shrinkage": self.shrinkage,
@@ -130,7 +131,7 @@ class EffusivityLda(Identifier):
         return super().fit(contacts)
 
     def learned(self) -> dict:
-        return {**super().learned(), "shrinkage_": getattr(self, "shrinkage_", None)}
+        return {**super().learned(), "shrinkage_": self.shrinkage_}
 
     def _cv_shrinkage(self, contacts) -> float:
         """The grid value with the lowest held-out log loss, pooled over

@@ -24,6 +24,10 @@ class SnapshotPCA:
     def __init__(self, max_components: int = 20, rank_tol: float = 1e-10):
         self.max_components = max_components
         self.rank_tol = rank_tol
+        # Learned by fit(); None until then.
+        self.mean_: np.ndarray | None = None
+        self.components_: np.ndarray | None = None
+        self.eigenvalues_: np.ndarray | None = None
 
     def fit(self, x: np.ndarray) -> "SnapshotPCA":
         """Parameters: x, shape (N, M), one recording per row."""
@@ -49,6 +53,6 @@ class SnapshotPCA:
 
     def transform(self, x: np.ndarray) -> np.ndarray:
         """Projections u = (x - mean) . phi, shape (N, k)."""
-        if not hasattr(self, "components_"):
+        if self.components_ is None:
             raise IdentificationError("SnapshotPCA is not fitted")
         return (np.asarray(x, dtype=np.float64) - self.mean_) @ self.components_.T

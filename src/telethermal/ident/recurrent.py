@@ -56,6 +56,11 @@ class Recurrent(Identifier):
         self.lr = lr
         self.input_rate_hz = input_rate_hz
         self.loss_from_s = loss_from_s
+        # Learned by fit(): the inputs' scale per channel, the last loss.
+        self.scale_: np.ndarray | None = None
+        self.final_loss_: float | None = None
+        self._module: _Net | None = None           # the network, built on first use
+        self._probe_state = None                   # update_probe's carried state
 
     def hyper(self) -> dict:
         return {**super().hyper(), "n_hidden": self.n_hidden, "epochs": self.epochs,
@@ -75,7 +80,7 @@ class Recurrent(Identifier):
         return torch.as_tensor(boxed / self.scale_, dtype=torch.float32)
 
     def _net(self) -> _Net:
-        if not hasattr(self, "_module"):
+        if self._module is None:
             self._module = _Net(len(self.channels), self.n_hidden, len(self.classes_), self.cell)
             self._module.load_state_dict({k: torch.as_tensor(v) for k, v in
                                           self.params_[0].items() if k != "scale"})
@@ -92,7 +97,7 @@ class Recurrent(Identifier):
             temperatures = self._held_out_temperatures(contacts)
         self._train(contacts)
         if temperatures is not None:
-            self.temperature_ = temperatures
+            self.softmax_temperature_ = temperatures
         return self
 
     def _held_out_temperatures(self, contacts: Contacts):
@@ -153,7 +158,7 @@ class Recurrent(Identifier):
         self.params_[0]["scale"] = self.scale_
         from telethermal.ident.base import force_ranges
         self.force_range_n_ = force_ranges(self, contacts)
-        self.temperature_ = np.ones(len(self.windows_s_))
+        self.softmax_temperature_ = np.ones(len(self.windows_s_))
         net.eval()
         self._module = net
 
@@ -175,7 +180,7 @@ class Recurrent(Identifier):
     def _temperatures(self, steps: int) -> np.ndarray:
         """The softmax temperature of each of the first ``steps`` steps (a
         model file from before calibration holds a single 1)."""
-        t = np.asarray(self.temperature_, dtype=np.float64)
+        t = np.asarray(self.softmax_temperature_, dtype=np.float64)
         if len(t) >= steps:
             return t[:steps]
         return np.concatenate([t, np.full(steps - len(t), t[-1] if len(t) else 1.0)])
@@ -184,7 +189,7 @@ class Recurrent(Identifier):
         """One streaming update: a single step from a carried state."""
         net = self._net()
         with torch.no_grad():
-            if not hasattr(self, "_probe_state"):
+            if self._probe_state is None:
                 _, self._probe_state = net(self._steps(row[:, :self._factor]))
             step = self._steps(row[:, :self._factor])
             logits, self._probe_state = net(step, self._probe_state)

@@ -103,39 +103,42 @@ class WaterPad:
         self._mats = {on: _discretise(params, params.r_g_pump_on_k_w if on else
                                       params.r_g_pump_off_k_w, dt_s) for on in (False, True)}
         self.retarget(target_pad_c)
-        start = np.full_like(self.target, room_c) if start_c is None else \
-            np.broadcast_to(np.asarray(start_c, dtype=np.float64), self.target.shape)
-        self.x = np.stack([start, start, start], axis=1).astype(np.float64)
-        self.integral = np.zeros_like(self.target)
-        self.pump = np.zeros(self.target.shape, dtype=bool)
-        self.u = np.zeros_like(self.target)
+        start = np.full_like(self.target_c, room_c) if start_c is None else \
+            np.broadcast_to(np.asarray(start_c, dtype=np.float64), self.target_c.shape)
+        #: (B, 3): the Peltier's, the water's and the pad's temperatures.
+        self.temps_c = np.stack([start, start, start], axis=1).astype(np.float64)
+        self.integral_ks = np.zeros_like(self.target_c)    # the PI's integral, K s
+        self.pump = np.zeros(self.target_c.shape, dtype=bool)
+        self.u_w = np.zeros_like(self.target_c)            # the Peltier's heat, W
 
     def retarget(self, target_pad_c) -> None:
         """A new pad command ``T_object + gap`` (e.g. a new IR reading)."""
         target = np.atleast_1d(np.asarray(target_pad_c, dtype=np.float64))
         if not np.all(np.isfinite(target)):
             raise ModelError(f"water pad command must be finite, got {target}")
-        self.target = target
-        self.peltier_cmd = target + self.params.peltier_overdrive_k * np.sign(target - self.room_c)
+        self.target_c = target
+        self.peltier_cmd_c = target + self.params.peltier_overdrive_k * \
+            np.sign(target - self.room_c)
 
     @property
     def pad_c(self) -> np.ndarray:
-        return self.x[:, 2]
+        return self.temps_c[:, 2]
 
     @property
     def water_c(self) -> np.ndarray:
-        return self.x[:, 1]
+        return self.temps_c[:, 1]
 
     def step(self, pump_allowed: bool = True) -> None:
         """One period: PI on the Peltier, pump on/off on the pad's lag."""
-        p, dt, x = self.params, self.dt_s, self.x
-        err_p = self.peltier_cmd - x[:, 0]
-        u_raw = p.kp_w_k * err_p + p.ki_w_ks * (self.integral + err_p * dt)
+        p, dt, x = self.params, self.dt_s, self.temps_c
+        err_p = self.peltier_cmd_c - x[:, 0]
+        u_raw = p.kp_w_k * err_p + p.ki_w_ks * (self.integral_ks + err_p * dt)
         u = np.clip(u_raw, -p.u_max_w, p.u_max_w)
-        self.integral = np.where(u == u_raw, self.integral + err_p * dt, self.integral)  # anti-windup
+        self.integral_ks = np.where(u == u_raw, self.integral_ks + err_p * dt,  # anti-windup
+                                    self.integral_ks)
         # Pump on while the pad lags its command (towards the Peltier side),
         # off once it is within pump_off_error_k of it or past it.
-        lag = (self.target - x[:, 2]) * np.sign(self.target - self.room_c)
+        lag = (self.target_c - x[:, 2]) * np.sign(self.target_c - self.room_c)
         pump = np.where(lag > p.pump_on_error_k, True,
                         np.where(lag < p.pump_off_error_k, False, self.pump))
         if not pump_allowed:
@@ -147,7 +150,7 @@ class WaterPad:
                 ad, bd = self._mats[on]
                 inputs = np.stack([u[sel], np.full(sel.sum(), self.room_c)], axis=1)
                 x_next[sel] = x[sel] @ ad.T + inputs @ bd.T
-        self.x, self.pump, self.u = x_next, pump, u
+        self.temps_c, self.pump, self.u_w = x_next, pump, u
 
 
 def precondition(target_pad_c, room_c: float, duration_s: float, dt_s: float = 0.05,
@@ -174,9 +177,9 @@ def precondition(target_pad_c, room_c: float, duration_s: float, dt_s: float = 0
         raise ModelError(f"need 0 < dt_s <= duration_s, got {dt_s}, {duration_s}")
     pad = WaterPad(target_pad_c, room_c, dt_s, params, start_c)
     n = int(round(duration_s / dt_s))
-    hist = np.empty((n, 5, len(pad.target)))
+    hist = np.empty((n, 5, len(pad.target_c)))
     for k in range(n):
         pad.step(pump_allowed=k < n - 1)
-        hist[k, :3], hist[k, 3], hist[k, 4] = pad.x.T, pad.pump, pad.u
+        hist[k, :3], hist[k, 3], hist[k, 4] = pad.temps_c.T, pad.pump, pad.u_w
     return WaterPadRun(dt_s * np.arange(1, n + 1), hist[:, 0], hist[:, 1], hist[:, 2],
                        hist[:, 3].astype(bool), hist[:, 4])

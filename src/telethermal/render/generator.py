@@ -20,7 +20,7 @@ gap and averaged per material; the desired flux is then
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,14 @@ from telethermal.physics.materials import get_material
 
 #: Curves are fitted on this many log-spaced times from the first sample to the end.
 N_KNOTS = 120
+
+
+def _learned(empty=None):
+    """A learned attribute of a generator: set by ``fit`` (or read from a
+    file), not a constructor argument, not in its repr or equality."""
+    if empty is None:
+        return field(default=None, init=False, repr=False, compare=False)
+    return field(default_factory=empty, init=False, repr=False, compare=False)
 
 
 def mean_normalised_curves(trials: list[Trial], t_knots: np.ndarray | None = None):
@@ -68,6 +76,16 @@ class NetworkGenerator:
     n_hidden: int = 8
     max_iter: int = 300
     seed: int = 0
+    #: Learned: the fitted times' range (s), the input's centre and spread
+    #: (log10 s), one network per material and the peak |flux / gap| it was
+    #: scaled by (stored as "scale" in the file).
+    t_range_s_: tuple[float, float] | None = _learned()
+    x_mean_: float | None = _learned()
+    x_scale_: float | None = _learned()
+    nets_: dict[str, MLP] = _learned(dict)
+    peak_w_m2k_: dict[str, float] = _learned(dict)
+    #: ``normalised_many``'s stacked weights per tuple of materials.
+    _stacked: dict[tuple, tuple] = _learned(dict)
 
     kind = "network"
 
@@ -76,19 +94,19 @@ class NetworkGenerator:
         self.t_range_s_ = (float(t[0]), float(t[-1]))
         x = np.log10(t)[:, None]
         self.x_mean_, self.x_scale_ = float(x.mean()), float(x.std())
-        self.nets_, self.scale_ = {}, {}
+        self.nets_, self.peak_w_m2k_ = {}, {}
         rng = np.random.default_rng(self.seed)
         for material, curve in curves.items():
             scale = float(np.max(np.abs(curve))) or 1.0
             net, _ = train_lm(MLP.init(1, self.n_hidden, 1, rng, output="linear"),
                               (x - self.x_mean_) / self.x_scale_, curve[:, None] / scale,
                               max_iter=self.max_iter, l2=1e-8)
-            self.nets_[material], self.scale_[material] = net, scale
+            self.nets_[material], self.peak_w_m2k_[material] = net, scale
         return self
 
     @property
     def materials(self) -> list[str]:
-        return sorted(getattr(self, "nets_", {}))
+        return sorted(self.nets_)
 
     def normalised(self, material: str, t_s) -> np.ndarray:
         """flux / gap, W/m^2/K, at times since contact (0 before contact).
@@ -96,19 +114,19 @@ class NetworkGenerator:
         Below the first fitted time (one sample period of database 2) the
         network is not extrapolated: the curve ramps linearly from 0 at
         contact, which is what the recorded (sensor-lagged) flux does."""
-        if material not in getattr(self, "nets_", {}):
+        if material not in self.nets_:
             raise IdentificationError(f"no generator for {material!r}; it knows "
                                       f"{', '.join(self.materials)}")
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         t_first = self.t_range_s_[0]
         x = (np.log10(np.clip(t, t_first, None))[:, None] - self.x_mean_) / self.x_scale_
-        q = self.nets_[material](x)[:, 0] * self.scale_[material]
+        q = self.nets_[material](x)[:, 0] * self.peak_w_m2k_[material]
         return np.where(t >= t_first, q, np.clip(t, 0, None) / t_first * q)
 
     def normalised_many(self, materials, t_s) -> np.ndarray:
         """``normalised`` for several materials at once, (n_materials, n_t)."""
         key = tuple(materials)
-        stacked = getattr(self, "_stacked", {}).get(key)
+        stacked = self._stacked.get(key)
         if stacked is None:
             for m in key:
                 if m not in self.nets_:
@@ -116,8 +134,8 @@ class NetworkGenerator:
             nets = [self.nets_[m] for m in key]
             stacked = (np.stack([n.w1[:, 0] for n in nets]), np.stack([n.b1 for n in nets]),
                        np.stack([n.w2[0] for n in nets]), np.array([n.b2[0] for n in nets]),
-                       np.array([self.scale_[m] for m in key]))
-            self.__dict__.setdefault("_stacked", {})[key] = stacked
+                       np.array([self.peak_w_m2k_[m] for m in key]))
+            self._stacked[key] = stacked
         w1, b1, w2, b2, scale = stacked
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         t_first = self.t_range_s_[0]
@@ -128,7 +146,7 @@ class NetworkGenerator:
 
     def _state(self):
         header = {"x_mean": self.x_mean_, "x_scale": self.x_scale_,
-                  "t_range_s": list(self.t_range_s_), "scale": self.scale_,
+                  "t_range_s": list(self.t_range_s_), "scale": self.peak_w_m2k_,
                   "hyper": {"n_hidden": self.n_hidden, "max_iter": self.max_iter,
                             "seed": self.seed}}
         arrays = {f"{m}.{k}": getattr(net, k) for m, net in self.nets_.items()
@@ -140,9 +158,9 @@ class NetworkGenerator:
         gen = cls(**header["hyper"])
         gen.x_mean_, gen.x_scale_ = float(header["x_mean"]), float(header["x_scale"])
         gen.t_range_s_ = tuple(header["t_range_s"])
-        gen.scale_ = {m: float(v) for m, v in header["scale"].items()}
+        gen.peak_w_m2k_ = {m: float(v) for m, v in header["scale"].items()}
         gen.nets_ = {m: MLP(*(arrays[f"{m}.{k}"] for k in ("w1", "b1", "w2", "b2")),
-                            output="linear") for m in gen.scale_}
+                            output="linear") for m in gen.peak_w_m2k_}
         return gen
 
 
@@ -150,11 +168,15 @@ class NetworkGenerator:
 class ContactGenerator:
     """The finger-material closed form with fitted ``h`` and effusivity."""
 
+    #: Learned: per material, (h W/m^2/K, the material's effusivity, the
+    #: finger's effusivity), effusivities in W s^0.5/m^2/K.
+    params_: dict[str, tuple[float, float, float]] = _learned(dict)
+
     kind = "contact"
 
     @property
     def materials(self) -> list[str]:
-        return sorted(getattr(self, "params_", {}))
+        return sorted(self.params_)
 
     def _state(self):
         return {"params": self.params_}, {}
@@ -182,7 +204,7 @@ class ContactGenerator:
         return self
 
     def normalised(self, material: str, t_s) -> np.ndarray:
-        if material not in getattr(self, "params_", {}):
+        if material not in self.params_:
             raise IdentificationError(f"no generator for {material!r}; it knows "
                                       f"{', '.join(self.materials)}")
         h, e_m, e_f = self.params_[material]

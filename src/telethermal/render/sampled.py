@@ -19,8 +19,9 @@ N_KNOTS = 256
 def sample_curves(generator, materials=None, n_knots: int = N_KNOTS,
                   t_last_s: float = 60.0) -> dict[str, dict[str, list[float]]]:
     """``{material: {"t_s": [...], "g_w_m2k": [...]}}`` for the wire."""
-    t_first = getattr(generator, "t_range_s_", (1e-3, t_last_s))[0]
-    t_last = max(getattr(generator, "t_range_s_", (t_first, t_last_s))[1], t_first * 10)
+    fitted = getattr(generator, "t_range_s_", None)     # a network's; the others have none
+    t_first = fitted[0] if fitted else 1e-3
+    t_last = max(fitted[1] if fitted else t_last_s, t_first * 10)
     t = np.geomspace(t_first, t_last, n_knots)
     names = list(materials) if materials is not None else generator.materials
     return {m: {"t_s": t.tolist(), "g_w_m2k": generator.normalised(m, t).tolist()}

@@ -27,7 +27,7 @@ from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
                                      draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
@@ -168,7 +168,7 @@ class MasterService:
                     display), "device_counters": self.hardware.counters()}, {})
             self.link.end()
             self.contact_id, self.state = None, "idle"
-        elif display.phase == "render":
+        elif display.phase == Phase.RENDER:
             self.state = "rendering"
 
     # ------------------------------------------------------------ network
@@ -248,7 +248,7 @@ class MasterService:
             self.endpoint.send("contact_event", contact_id=touch.contact_id, touching=False,
                                t_s=touch.start + PRE_CONTACT_S + touch.display.last_release_s,
                                force_n=0.0, finger_temp_c=touch.operator.finger_ir_c)
-        if touch.display.phase == "render":
+        if touch.display.phase == Phase.RENDER:
             self.state = "rendering"
         if touch.sim.done:
             self._finish_touch()

@@ -8,7 +8,8 @@ Peltier junction temperature the supervisor let through. It never touches a
 device or a clock, so the same object runs in the in-process session, in the
 master service and under test.
 
-Phases of a touch:
+Phases of a touch (:class:`Phase`, a ``str`` enum: the names below are its
+values, which recordings, the view stream and the status hold):
 
 ``idle``
     No contact. The junction is held at the standby temperature: the
@@ -31,7 +32,7 @@ Phases of a touch:
 
 The controller: the flux setpoint is what the pad's sensor should read (the
 generator was trained on sensor readings, so both carry the same lag). The
-feed-forward inverts the sensor lag (``q + tau dq/dt``) and the pad's layers
+feed-forward inverts the sensor lag (``q + sensor_lag_s dq/dt``) and the pad's layers
 (``T_junction = T_pad_surface + q R_pad``); the PID on the measured flux
 removes what the model misses (the operator's own skin, contact, drift).
 That is the ``"static"`` controller; the default, ``"impedance"``
@@ -45,7 +46,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field, replace
-
+from enum import StrEnum
 
 from telethermal.control.contact import ContactDetector
 from telethermal.control.feedforward import ImpedanceController
@@ -59,6 +60,17 @@ from telethermal.render.generator import mixture, posterior_weights
 from telethermal.devices.readings import PadSensors
 
 log = logging.getLogger(__name__)
+
+
+class Phase(StrEnum):
+    """The display's phase (see the module's docstring). A ``str``: its
+    value is what recordings, the view's state and the status hold."""
+
+    IDLE = "idle"
+    CONTACT = "contact"
+    RENDER = "render"
+    LINK_LOST = "link lost"
+
 
 BEFORE_MODES = ("hold", "prior")
 #: "trajectory": render the slave's curves from the master's own onset (the
@@ -142,12 +154,36 @@ class SlaveNews:
 @dataclass(frozen=True, slots=True)
 class MasterStep:
     t_s: float
-    phase: str
+    phase: str                      # a Phase; its value is what recordings hold
     touching: bool
     desired_flux_w_m2: float        # what the loop tracks (nan when holding)
     junction_cmd_c: float           # the controller's request
     junction_applied_c: float       # what the supervisor let through
     safe: bool
+
+
+@dataclass(slots=True)
+class Handover:
+    """What the display carries from one way of driving the pad to the next
+    (holding, tracking, the posterior mixture, the decided material, the
+    link lost and back), so none of these changes makes a step."""
+
+    #: The pad was held (not tracking) during this contact.
+    held: bool = False
+    #: The flux PID is running; False: the next tracking period restarts it
+    #: bumplessly from what the pad reads.
+    pid_running: bool = False
+    #: What is left of the step between what was applied and what the
+    #: controller asked for at the hand-over, closed at ``handover_k_s``.
+    offset_k: float = 0.0
+    #: (time it began, weights before it): the blend from the posterior
+    #: mixture (or a material the slave changed its mind about) to the
+    #: decided material, over ``blend_s``; None when no blend runs.
+    blend: tuple[float, dict[str, float]] | None = None
+    #: The posterior mixture's weights at the last tracked period.
+    last_weights: dict[str, float] | None = None
+    #: The phase to return to when a lost link comes back.
+    lost_from: Phase | None = None
 
 
 class MasterDisplay:
@@ -158,11 +194,12 @@ class MasterDisplay:
                  pad_layers=None, contact_conductance_w_m2k: float | None = None):
         self.config = config
         self.generator = generator
-        self.r_pad = pad_resistance_m2k_w * config.r_pad_belief
-        self.tau = sensor_lag_s
-        self.finger_c = finger_temp_c           # measured before contact
-        self.dt_nominal = 1.0 / config.rate_hz
-        self.pid = Pid(config.gains, self.dt_nominal)
+        #: The pad's resistance as the controller believes it.
+        self.r_pad_m2k_w = pad_resistance_m2k_w * config.r_pad_belief
+        self.sensor_lag_s = sensor_lag_s
+        self.finger_temp_c = finger_temp_c           # measured before contact
+        self.nominal_dt_s = 1.0 / config.rate_hz
+        self.pid = Pid(config.gains, self.nominal_dt_s)
         self.detector = ContactDetector(config.contact_on_n, config.contact_off_n,
                                         config.debounce_s)
         # Start in the safe state (neutral), or, when told the pad has been
@@ -170,21 +207,18 @@ class MasterDisplay:
         self.safety = initial_state(config.limits) if idle_c is None else \
             replace(initial_state(config.limits), applied_temp_c=idle_c, safe=False)
         self._command_c = self.safety.applied_temp_c
-        self._offset = 0.0
-        self._held = False      # the pad was held (not tracking) during this contact
-        self._band_limited = False
-        self._blend = None
+        self.handover = Handover()
+        self._band_limited = False      # the last PID output was saturated
         self.events: dict[str, int] = {}
         self.onset_s: float | None = None          # of the contact going on
         self.last_onset_s: float | None = None
         self.last_release_s: float | None = None
-        self.phase = "idle"
+        self.phase = Phase.IDLE
         self.rendering: str | None = None       # material being rendered
         self.rendered_from_s: float | None = None
-        self._pid_running = False
         # The impedance controller, when the pad's layers are known.
         self.impedance = ImpedanceController(pad_layers, contact_conductance_w_m2k,
-                                             sensor_lag_s, self.dt_nominal,
+                                             sensor_lag_s, self.nominal_dt_s,
                                              config.impedance_horizon_s) \
             if (config.feedforward and config.feedforward_model != "static" and pad_layers
                 and contact_conductance_w_m2k) else None
@@ -200,30 +234,38 @@ class MasterDisplay:
     def standby_c(self, news: SlaveNews) -> float:
         return self.standby_c_for(self.config.limits, news.object_temp_c)
 
+    def _count(self, event: str) -> None:
+        self.events[event] = self.events.get(event, 0) + 1
+
     def _mixture_weights(self, news: SlaveNews) -> dict[str, float]:
         return posterior_weights(news.classes, news.estimate.posteriors if news.estimate
                                  else None, self.generator.materials)
 
-    def _desired(self, t_s: float, t_contact: float, news: SlaveNews, gap: float):
+    def _weights(self, t_s: float, news: SlaveNews) -> dict[str, float]:
+        """The materials rendered now and their weights."""
+        h = self.handover
+        if self.rendering is None:
+            h.last_weights = self._mixture_weights(news)
+            return h.last_weights
+        weights = {self.rendering: 1.0}
+        if h.blend is not None:
+            # Hand-over from the posterior mixture to the decided material:
+            # a linear blend of the weights over blend_s, no setpoint step.
+            t_switch, before = h.blend
+            a = min(1.0, (t_s - t_switch) / self.config.blend_s)
+            weights = {n: (1 - a) * before.get(n, 0.0) + a * weights.get(n, 0.0)
+                       for n in sorted(set(before) | set(weights))}
+            if a >= 1.0:
+                h.blend = None
+        return weights
+
+    def _desired(self, t_s: float, t_contact_s: float, news: SlaveNews, gap_k: float):
         """(flux setpoint, flux for the feed-forward) at time since onset."""
-        if self.rendering is not None:
-            weights = {self.rendering: 1.0}
-            if self._blend is not None:
-                # Hand-over from the posterior mixture to the decided material:
-                # a linear blend of the weights over blend_s, no setpoint step.
-                t_switch, before = self._blend
-                a = min(1.0, (t_s - t_switch) / self.config.blend_s)
-                weights = {n: (1 - a) * before.get(n, 0.0) + a * weights.get(n, 0.0)
-                           for n in sorted(set(before) | set(weights))}
-                if a >= 1.0:
-                    self._blend = None
-        else:
-            weights = self._mixture_weights(news)
-            self._last_weights = weights
+        weights = self._weights(t_s, news)
         names = list(weights)
-        g, dg = mixture(self.generator, names, [weights[n] for n in names], t_contact)
-        q = g * gap
-        return q, q + self.tau * dg * gap
+        g, dg = mixture(self.generator, names, [weights[n] for n in names], t_contact_s)
+        q = g * gap_k
+        return q, q + self.sensor_lag_s * dg * gap_k
 
     def _inverse_effusivity(self, news: SlaveNews) -> float | None:
         """1/e of what is rendered: the decided material's, or the posteriors'
@@ -235,134 +277,173 @@ class MasterDisplay:
         except UnknownMaterialError:
             return None
 
-    # ------------------------------------------------------------ the period
-    def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:
-        cfg, lim = self.config, self.config.limits
-        event = None
-        if self.impedance is not None:
-            self.impedance.observe(sensors.flux_w_m2, dt_s)
-        if math.isfinite(sensors.force_n):
-            event = self.detector.update(t_s, sensors.force_n)
-        if event is not None and event.touching:
-            self._held = False
-            self.onset_s, self.phase, self.rendering = event.t_s, "contact", None
+    # ------------------------------------------------------------ the phases
+    def _on_contact(self, t_s: float, force_n: float) -> None:
+        """The contact detector's news: a touch begins or ends."""
+        if not math.isfinite(force_n):
+            return
+        event = self.detector.update(t_s, force_n)
+        if event is None:
+            return
+        self.handover.pid_running = False
+        if event.touching:
+            self.handover.held = False
+            self.onset_s, self.phase, self.rendering = event.t_s, Phase.CONTACT, None
             self.last_onset_s, self.rendered_from_s = event.t_s, None
-            self._pid_running = False
             if self.impedance is not None:
                 applied = self.safety.applied_temp_c
-                self.impedance.start(applied, self.finger_c, t_s - event.t_s, applied)
-        elif event is not None:
-            self.onset_s, self.phase, self.rendering = None, "idle", None
+                self.impedance.start(applied, self.finger_temp_c, t_s - event.t_s, applied)
+        else:
+            self.onset_s, self.phase, self.rendering = None, Phase.IDLE, None
             self.last_release_s = event.t_s
-            self._pid_running = False
             if self.impedance is not None:
                 self.impedance.reset()
 
-        est = news.estimate
-        naive = cfg.source == "setpoints"
-        if not naive and self.phase == "contact" and est is not None and est.decided and \
-                est.label != UNKNOWN and self.generator is not None and \
+    def _on_decision(self, t_s: float, est: Estimate | None) -> None:
+        """The slave's decision: render it, or blend to a changed one."""
+        if est is None or not est.decided:
+            return
+        h = self.handover
+        if self.phase == Phase.CONTACT and est.label != UNKNOWN and \
+                self.generator is not None and est.label in self.generator.materials:
+            self.phase, self.rendering, self.rendered_from_s = Phase.RENDER, est.label, t_s
+            h.blend = (t_s, h.last_weights) if h.pid_running and h.last_weights else None
+        elif self.phase == Phase.RENDER and est.label not in (UNKNOWN, self.rendering) and \
                 est.label in self.generator.materials:
-            self.phase, self.rendering, self.rendered_from_s = "render", est.label, t_s
-            last = getattr(self, "_last_weights", None)
-            self._blend = (t_s, last) if self._pid_running and last else None
-        elif not naive and self.phase == "render" and est is not None and est.decided and \
-                est.label not in (UNKNOWN, self.rendering) and est.label in self.generator.materials:
             # The slave changed its mind: blend to the new material, no step.
             log.info("rendering changes from %s to %s at t=%.3f s", self.rendering, est.label, t_s)
-            self.events["decision changed"] = self.events.get("decision changed", 0) + 1
-            self._blend = (t_s, {self.rendering: 1.0})
+            self._count("decision changed")
+            h.blend = (t_s, {self.rendering: 1.0})
             self.rendering = est.label
 
-        if self.phase in ("contact", "render") and not news.link_ok:
-            self._lost_from = self.phase
-            self.phase = "link lost"
-            self.events["link lost"] = self.events.get("link lost", 0) + 1
+    def _on_link(self, t_s: float, link_ok: bool) -> None:
+        """The link lost mid-contact (to neutral), or back (rendering resumes)."""
+        if self.phase in (Phase.CONTACT, Phase.RENDER) and not link_ok:
+            self.handover.lost_from = self.phase
+            self.phase = Phase.LINK_LOST
+            self._count("link lost")
             log.warning("link lost mid-contact at t=%.3f s: display to neutral", t_s)
-        elif self.phase == "link lost" and news.link_ok:
-            self.phase = self._lost_from
+        elif self.phase == Phase.LINK_LOST and link_ok:
+            self.phase = self.handover.lost_from
             log.info("link back at t=%.3f s: rendering resumes", t_s)
 
-        standby = self.standby_c(news)
-        desired = math.nan
-        command = lim.neutral_c if self.phase == "link lost" else standby
-        obj_c = news.object_temp_c
+    def _tracking(self, news: SlaveNews, naive: bool) -> bool:
+        """Whether the pad tracks a flux this period (else it holds)."""
         if naive:
-            tracking = self.phase == "contact" and news.setpoint_w_m2 is not None
-        else:
-            # The prior starts with the slave's first posterior: until then the
-            # pad's own contact carries the touch (a uniform prior over the
-            # scene measured worse than holding when posteriors come late).
-            tracking = self.phase == "render" or (self.phase == "contact" and
-                                                  cfg.before == "prior" and news.classes and
-                                                  self.generator is not None and
-                                                  news.estimate is not None)
-        readings_ok = math.isfinite(sensors.flux_w_m2) and math.isfinite(sensors.pad_temp_c)
-        if self.phase != "idle" and not (tracking and readings_ok):
-            self._held = True
-        if tracking and not readings_ok:
-            # The supervisor puts the pad in its safe state this very period;
-            # the controller stands still and restarts bumplessly afterwards.
-            self._pid_running = False
-        elif tracking and obj_c is not None and math.isfinite(obj_c):
-            gap = obj_c - self.finger_c        # display flux = g(t) (T_object - T_finger)
-            t_contact = max(t_s - self.onset_s, 0.0)
-            if naive:
-                desired = ff_flux = float(news.setpoint_w_m2)
-            else:
-                desired, ff_flux = self._desired(t_s, t_contact, news, gap)
-            measured = sensors.flux_w_m2
-            inverse_e = self._inverse_effusivity(news) if self.impedance is not None and \
-                self.impedance.running and not naive else None
-            if inverse_e is not None:
-                # The pad's surface behaves as the object's would; the loop is
-                # closed on the measured flux and surface inside the controller.
-                ff = self.impedance.command_impedance(sensors.pad_temp_c, obj_c,
-                                                      inverse_e) - standby
-                desired_for_pid = measured
-            else:
-                ff = (sensors.pad_temp_c + ff_flux * self.r_pad - standby) \
-                    if cfg.feedforward else 0.0
-                desired_for_pid = desired
-            if not self._pid_running:
-                # Saturate where the junction would leave the skin band, so the
-                # integral does not wind up against the supervisor.
-                g = cfg.gains
-                self.pid.gains = replace(g, output_min=max(g.output_min, lim.skin_min_c - standby),
-                                         output_max=min(g.output_max, lim.skin_max_c - standby))
-                self.pid.reset(sensors.flux_w_m2)
-            out = self.pid.update(desired_for_pid, measured, dt_s, feedforward=ff)
-            command = standby + out.output
-            if out.saturated and not self._band_limited:
-                # The flux asked for would take the pad past the skin band:
-                # the controller stops at the band; counted and logged.
-                self.events["rendering limited by the skin band"] = \
-                    self.events.get("rendering limited by the skin band", 0) + 1
-                log.info("rendering limited by the skin band at t=%.3f s (junction %.1f C)",
-                         t_s, command)
-            self._band_limited = out.saturated
-            if not self._pid_running:
-                # Hand-over from holding (or from the safe state) during a
-                # contact: start from what is applied and close the step at a
-                # bounded slope (no jump, no offset left in the integral). At
-                # the start of a contact the pad should move at once: no offset.
-                self._offset = self.safety.applied_temp_c - command if self._held else 0.0
-                self._pid_running = True
-            step = cfg.handover_k_s * dt_s
-            self._offset -= min(max(self._offset, -step), step)
-            command += self._offset
+            return self.phase == Phase.CONTACT and news.setpoint_w_m2 is not None
+        # The prior starts with the slave's first posterior: until then the
+        # pad's own contact carries the touch (a uniform prior over the
+        # scene measured worse than holding when posteriors come late).
+        return self.phase == Phase.RENDER or bool(
+            self.phase == Phase.CONTACT and self.config.before == "prior" and news.classes
+            and self.generator is not None and news.estimate is not None)
 
-        # The controller's own slew limit (the supervisor's is looser).
-        step = cfg.slew_k_s * min(dt_s, 2 * self.dt_nominal)   # a stall buys no bigger jump
+    # ------------------------------------------------------------ tracking
+    def _feedforward(self, sensors: PadSensors, news: SlaveNews, standby: float,
+                     desired: float, ff_flux: float, naive: bool) -> tuple[float, float]:
+        """(feed-forward, what the PID tracks) of the junction, K above standby."""
+        inverse_e = self._inverse_effusivity(news) if self.impedance is not None and \
+            self.impedance.running and not naive else None
+        if inverse_e is not None:
+            # The pad's surface behaves as the object's would; the loop is
+            # closed on the measured flux and surface inside the controller.
+            ff = self.impedance.command_impedance(sensors.pad_temp_c, news.object_temp_c,
+                                                  inverse_e) - standby
+            return ff, sensors.flux_w_m2
+        ff = (sensors.pad_temp_c + ff_flux * self.r_pad_m2k_w - standby) \
+            if self.config.feedforward else 0.0
+        return ff, desired
+
+    def _pid_output(self, t_s: float, dt_s: float, measured: float, target: float,
+                    standby: float, ff: float) -> float:
+        """The flux PID's output, K above standby; started bumplessly."""
+        cfg, lim = self.config, self.config.limits
+        if not self.handover.pid_running:
+            # Saturate where the junction would leave the skin band, so the
+            # integral does not wind up against the supervisor.
+            g = cfg.gains
+            self.pid.gains = replace(g, output_min=max(g.output_min, lim.skin_min_c - standby),
+                                     output_max=min(g.output_max, lim.skin_max_c - standby))
+            self.pid.reset(measured)
+        out = self.pid.update(target, measured, dt_s, feedforward=ff)
+        if out.saturated and not self._band_limited:
+            # The flux asked for would take the pad past the skin band:
+            # the controller stops at the band; counted and logged.
+            self._count("rendering limited by the skin band")
+            log.info("rendering limited by the skin band at t=%.3f s (junction %.1f C)",
+                     t_s, standby + out.output)
+        self._band_limited = out.saturated
+        return out.output
+
+    def _handover_offset(self, dt_s: float, command: float) -> float:
+        """What is added to the command: at a hand-over from holding (or from
+        the safe state) during a contact, start from what is applied and
+        close the step at a bounded slope (no jump, no offset left in the
+        integral). At the start of a contact the pad moves at once: none."""
+        h = self.handover
+        if not h.pid_running:
+            h.offset_k = self.safety.applied_temp_c - command if h.held else 0.0
+            h.pid_running = True
+        step = self.config.handover_k_s * dt_s
+        h.offset_k -= min(max(h.offset_k, -step), step)
+        return h.offset_k
+
+    def _track(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews,
+               standby: float, naive: bool) -> tuple[float, float]:
+        """(flux setpoint, junction command) while tracking."""
+        gap_k = news.object_temp_c - self.finger_temp_c   # display flux = g(t) (T_obj - T_fing)
+        t_contact_s = max(t_s - self.onset_s, 0.0)
+        if naive:
+            desired = ff_flux = float(news.setpoint_w_m2)
+        else:
+            desired, ff_flux = self._desired(t_s, t_contact_s, news, gap_k)
+        ff, target = self._feedforward(sensors, news, standby, desired, ff_flux, naive)
+        command = standby + self._pid_output(t_s, dt_s, sensors.flux_w_m2, target, standby, ff)
+        command += self._handover_offset(dt_s, command)
+        return desired, command
+
+    def _apply(self, t_s: float, dt_s: float, sensors: PadSensors, desired: float,
+               command: float) -> MasterStep:
+        """The controller's own slew limit (the supervisor's is looser), then
+        the supervisor; what it let through."""
+        # A stall buys no bigger jump.
+        step = self.config.slew_k_s * min(dt_s, 2 * self.nominal_dt_s)
         wanted = command
         command = min(max(command, self._command_c - step), self._command_c + step)
         self._command_c = command
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
-        applied, self.safety = supervise(self.safety, reading, request, lim, dt_s)
+        applied, self.safety = supervise(self.safety, reading, request, self.config.limits, dt_s)
         if self.impedance is not None:
             self.impedance.advance(applied.temp_c, dt_s)
-        if self._pid_running:
+        if self.handover.pid_running:
             self.pid.limited_downstream(wanted, applied.temp_c)
         return MasterStep(t_s, self.phase, self.detector.touching, desired, command,
                           applied.temp_c, applied.safe)
+
+    # ------------------------------------------------------------ the period
+    def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:
+        """One control period: the phase from the contact, the slave's
+        decision and the link; then track or hold; then the limits."""
+        if self.impedance is not None:
+            self.impedance.observe(sensors.flux_w_m2, dt_s)
+        self._on_contact(t_s, sensors.force_n)
+        naive = self.config.source == "setpoints"
+        if not naive:
+            self._on_decision(t_s, news.estimate)
+        self._on_link(t_s, news.link_ok)
+        standby = self.standby_c(news)
+        desired = math.nan
+        command = self.config.limits.neutral_c if self.phase == Phase.LINK_LOST else standby
+        tracking = self._tracking(news, naive)
+        readings_ok = math.isfinite(sensors.flux_w_m2) and math.isfinite(sensors.pad_temp_c)
+        if self.phase != Phase.IDLE and not (tracking and readings_ok):
+            self.handover.held = True
+        obj_c = news.object_temp_c
+        if tracking and not readings_ok:
+            # The supervisor puts the pad in its safe state this very period;
+            # the controller stands still and restarts bumplessly afterwards.
+            self.handover.pid_running = False
+        elif tracking and obj_c is not None and math.isfinite(obj_c):
+            desired, command = self._track(t_s, dt_s, sensors, news, standby, naive)
+        return self._apply(t_s, dt_s, sensors, desired, command)

@@ -105,9 +105,9 @@ class _Lossless:
     next_seq: int = 1
     expected: int = 1
     buffered: dict = field(default_factory=dict)
-    resend_asked_at: float = -math.inf
+    resend_asked_at_s: float = -math.inf
     heartbeat_due: bool = False
-    tail_gap: int = 0                  # the expected seq a heartbeat showed missing
+    tail_gap_seq: int = 0                  # the expected seq a heartbeat showed missing
     counters: dict = field(default_factory=lambda: dict.fromkeys(
         ("sent", "resent", "gaps", "recovered"), 0))
 
@@ -208,18 +208,18 @@ class SimNetwork:
                 self._push(t + self.spec.heartbeat_s, "heartbeat tick", direction, None)
         elif action == "heartbeat":                         # at the receiver
             if s.expected <= payload:                       # last_seq: a lost tail
-                if not s.buffered and s.tail_gap != s.expected:
+                if not s.buffered and s.tail_gap_seq != s.expected:
                     s.counters["gaps"] += 1                 # once per gap
-                    s.tail_gap = s.expected
+                    s.tail_gap_seq = s.expected
                 self._ask_resend(t, direction)
 
     def _ask_resend(self, t: float, direction: str) -> None:
         """The receiver of ``direction`` asks for the first missing seq, at
         most once per heartbeat period; it looks again a period later."""
         s = self.streams[direction]
-        if t - s.resend_asked_at < self.spec.heartbeat_s:
+        if t - s.resend_asked_at_s < self.spec.heartbeat_s:
             return
-        s.resend_asked_at = t
+        s.resend_asked_at_s = t
         for arrival in self.channels[self.reverse(direction)].send(t, MESSAGE_BYTES["resend"]):
             self._push(arrival, "resend", direction, s.expected)
         if s.buffered:

@@ -18,6 +18,7 @@ import numpy as np
 
 from telethermal.record.recorder import periods
 from telethermal.record.recording import RecordingError, read_recording
+from telethermal.teleop.master import Phase
 
 
 def _replay_pad(params: dict) -> dict:
@@ -234,7 +235,7 @@ def plot_replay(result: dict, path: str | Path) -> Path:
     ax_t.plot(rep["t_s"], rep["junction_applied_c"], "m--", lw=1, label="junction (replayed)")
     phases = np.asarray(rec["phase"], dtype=object)
     for ax in (ax_q, ax_t):
-        for bad, color in (("link lost", "C3"),):
+        for bad, color in ((Phase.LINK_LOST, "C3"),):
             mask = phases == bad
             if mask.any():
                 ax.fill_between(t, 0, 1, where=mask, color=color, alpha=0.15,

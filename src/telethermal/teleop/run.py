@@ -108,7 +108,7 @@ class DisplayTouch:
     and pressing force, the display pad under it, and the pad's sensors.
 
     Session time 0 is the finger's true contact; it lasts ``contact_s``.
-    ``sense(t)`` reads the sensors, ``actuate(t, junction, dt)`` holds the
+    ``sense(t)`` reads the sensors, ``actuate(t, step, dt_loop, force_n)`` holds the
     junction for the period (stepping the physics through a stall of the
     loop), and every period is recorded in ``trace``.
     """
@@ -116,9 +116,9 @@ class DisplayTouch:
     def __init__(self, scene: Scene, operator: Operator, rate_hz: float, contact_s: float,
                  idle_c: float, rng: np.random.Generator):
         self.scene, self.operator, self.contact_s = scene, operator, contact_s
-        self.dt = 1.0 / rate_hz
+        self.dt_s = 1.0 / rate_hz
         self.layers = tuple(scene.pad.layers)
-        self.model = display_model(self.layers, round(contact_s + 1.0, 3), min(self.dt, 1e-3))
+        self.model = display_model(self.layers, round(contact_s + 1.0, 3), min(self.dt_s, 1e-3))
         sens = scene.sensors
         self.flux_sensor = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
         self.force_sensor = ForceSensor()
@@ -130,7 +130,7 @@ class DisplayTouch:
         self.trace["phase"] = np.empty(self.n_total, dtype=object)
         self.k = 0
         self.plant = None
-        self.junction = idle_c
+        self.junction_c = idle_c
         self._reading = None
 
     @property
@@ -144,21 +144,21 @@ class DisplayTouch:
         """The operator lifts the finger at ``t`` (s), before the planned end."""
         if t < self.contact_s:
             self.contact_s = max(t, 0.0)
-            self.n_total = min(self.n_total, self.k + int(round(AFTER_RELEASE_S / self.dt)))
+            self.n_total = min(self.n_total, self.k + int(round(AFTER_RELEASE_S / self.dt_s)))
 
     def sense(self, t: float) -> PadSensors:
         op, sens = self.operator, self.scene.sensors
         touching = self.touching(t)
         if touching and self.plant is None:
             # Contact: the pad, held at the junction temperature, meets the finger.
-            self.plant = DisplayPlant(self.model, self.junction, op.finger_c,
-                                      op.conductance_w_m2k, self.dt, sens.flux_lag_s,
+            self.plant = DisplayPlant(self.model, self.junction_c, op.finger_c,
+                                      op.conductance_w_m2k, self.dt_s, sens.flux_lag_s,
                                       op.skin_k_scale, op.skin_heat_scale)
         if touching:
             r = self.plant.read()
             reading = (r.contact_flux_w_m2, r.flux_w_m2, r.pad_surface_c, r.skin_surface_c)
         else:
-            reading = (0.0, 0.0, self.junction, math.nan)
+            reading = (0.0, 0.0, self.junction_c, math.nan)
         self._reading = reading
         fs, noise = self.flux_sensor, self.noise[min(self.k, self.n_total)]
         flux = quantise(reading[1] * fs.sensitivity_uv_per_w_m2 + fs.noise_uv_rms * noise[0],
@@ -169,9 +169,9 @@ class DisplayTouch:
         return PadSensors(float(flux), float(pad), float(force))
 
     def actuate(self, t: float, step, dt_loop: float, force_n: float) -> None:
-        self.junction = step.junction_applied_c
+        self.junction_c = step.junction_applied_c
         if self.touching(t):
-            for _ in range(max(1, round(dt_loop / self.dt))):
+            for _ in range(max(1, round(dt_loop / self.dt_s))):
                 self.plant.step(step.junction_applied_c)
         if self.k < self.n_total:
             true_flux, sensed, pad_c, skin_c = self._reading

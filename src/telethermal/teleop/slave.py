@@ -75,6 +75,7 @@ class Slave:
         # ``session``: the slave's instruments and thermometer calibration,
         # kept across touches by a service; drawn for this touch if not given.
         self.devices = devices
+        contact = None
         if devices is None:
             self.trial = pad_database(one, rng, session)[0]
             channels = self.trial.channels
@@ -95,10 +96,9 @@ class Slave:
             # The identifier reads these, filled as the board's frames arrive.
             channels = {"t_s": ch["t_s"], "heat_flux_W_m2": contact.flux_w_m2,
                         "temperature_C": contact.temp_c, "force_N": contact.force_n}
-            self._contact = contact
         self._load(channels, identifier, self.trial.T_object_C,
                    float(self.trial.extra["T_object_true_C"]), self.trial.T_pad_C,
-                   self.trial.gap_k, on_n, off_n, debounce_s)
+                   self.trial.gap_k, on_n, off_n, debounce_s, contact=contact)
 
     @classmethod
     def on_hardware(cls, scene: Scene, identifier, devices, session, contact_s: float | None = None,
@@ -126,13 +126,12 @@ class Slave:
             ONSET_MARGIN_S
         n = int(round(duration * devices.rate_hz)) + 1
         contact = devices.contact(n)
-        self._contact = contact
         channels = {"t_s": np.arange(n) / devices.rate_hz,
                     "heat_flux_W_m2": contact.flux_w_m2, "temperature_C": contact.temp_c,
                     "force_N": contact.force_n}
         pad_c = float(loop["reading_c"])
         self._load(channels, identifier, object_c, float("nan"), pad_c, pad_c - object_c,
-                   on_n, off_n, debounce_s)
+                   on_n, off_n, debounce_s, contact=contact)
         return self
 
     @staticmethod
@@ -172,12 +171,17 @@ class Slave:
         return self
 
     def _load(self, ch, identifier, object_ir_c, object_true_c, pad_before_c, gap_k, on_n,
-              off_n, debounce_s):
+              off_n, debounce_s, contact=None):
+        """Every piece of the slave's state (each constructor sets ``trial``
+        and ``devices`` first); ``contact``: the devices' contact being read."""
         self.channels = ch
         self.t_s = ch["t_s"]
         self._sample_channels = [ch[c] for c in identifier.channels]
-        if getattr(self, "devices", None) is None:
-            self.samples = np.stack(self._sample_channels, axis=1)
+        #: All samples at once (simulated or recorded); None on devices,
+        #: whose samples are read as the board's frames arrive.
+        self.samples = np.stack(self._sample_channels, axis=1) if self.devices is None \
+            else None
+        self._contact = contact
         self.force_n = ch["force_N"]
         self.object_ir_c = object_ir_c
         self.object_true_c = object_true_c
@@ -191,6 +195,8 @@ class Slave:
         self._next = 0
         self.events: list[SlaveEvent] = []
         self.fault: str | None = None
+        #: False while a fault's event is still to be returned by advance_to.
+        self._fault_sent = True
         self.detected_index: int | None = None
         #: perf_counter when each sample was pushed into the identifier.
         self.pushed_s = np.full(len(self.t_s), np.nan)
@@ -232,7 +238,7 @@ class Slave:
 
     def advance_to(self, t_s: float) -> list[SlaveEvent]:
         if self.fault is not None:
-            if not getattr(self, "_fault_sent", True):
+            if not self._fault_sent:
                 self._fault_sent = True
                 return [self.events[-1]]
             return []
@@ -268,7 +274,7 @@ class Slave:
     def _board_lost(self, t_s: float) -> list[SlaveEvent]:
         """The board went silent mid-contact: the devices made the pad safe;
         the touch ends unknown, whatever was estimated before."""
-        self.fault = self._fault_sent = BOARD_LOST
+        self.fault, self._fault_sent = BOARD_LOST, True
         n = len(self.identifier.classes_)
         t = max(0.0, t_s - (self.onset_s or 0.0))
         ev = SlaveEvent(t_s, Estimate(t, (1.0 / n,) * n, UNKNOWN, 0.0, True, BOARD_LOST))

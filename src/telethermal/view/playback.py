@@ -15,10 +15,12 @@ import math
 from pathlib import Path
 
 from telethermal.record.recording import RecordingError, read_recording
+from telethermal.teleop.master import Phase
 from telethermal.view.stream import skin_estimate_c
 from telethermal.view.feed import MAX_RATE_HZ
 
-CONTACT_PHASES = ("contact", "render", "link lost")
+#: The phases of a touch (the recordings hold their values, plain strings).
+CONTACT_PHASES = (Phase.CONTACT, Phase.RENDER, Phase.LINK_LOST)
 
 __all__ = ["load_playback", "RecordingError"]
 
