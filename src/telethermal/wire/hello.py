@@ -21,8 +21,10 @@ log = logging.getLogger("telethermal.wire.transport")
 class HelloExchange:
     """The hello half of :class:`~telethermal.wire.transport.Endpoint` (a
     base class of it). Uses the endpoint's ``role``, ``config``, ``clock``,
-    ``counters``, ``peer_*``, ``_next_seq``, ``_raw_send``, ``_send_to``,
-    ``_drop`` and ``_unordered``."""
+    ``counters``, ``session_id``, ``peer_*``, ``latest``, ``_stream_seen``,
+    ``_last_heard``, the lossless stream's ``receiver``, ``_next_seq``,
+    ``_restart_lossless`` and ``_resend_from``, and ``_raw_send``,
+    ``_send_to``, ``_drop`` and ``_unordered``."""
 
     def _init_hello(self) -> None:
         self._last_hello: tuple[str, int, float] | None = None

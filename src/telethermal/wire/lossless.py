@@ -25,9 +25,9 @@ GAP_GIVE_UP_DEAD = 5
 
 class LosslessStream:
     """The lossless half of :class:`~telethermal.wire.transport.Endpoint`
-    (a base class of it). Uses the endpoint's ``config``, ``clock``,
-    ``counters``, ``offset``, ``control``, ``_limited``, ``_raw_send`` and
-    ``_unordered``."""
+    (a base class of it). Uses the endpoint's ``role``, ``config``,
+    ``clock``, ``counters``, ``offset``, ``control``, ``peer_version``,
+    ``_limited``, ``_drop``, ``_raw_send`` and ``_unordered``."""
 
     def _init_lossless(self) -> None:
         self._next_seq = 1
