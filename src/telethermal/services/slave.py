@@ -358,7 +358,8 @@ class SlaveService:
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else "no estimate",
-                **({"devices": device_report(self.devices, self._touch_counters)} if self.devices is not None else {})}
+                **({"devices": device_report(self.devices, self._touch_counters)}
+                   if self.devices is not None else {})}
 
     def _on_admin(self, request: dict) -> None:
         def place(r):
@@ -461,4 +462,3 @@ class SlaveService:
                 closed = self.recorder.close()
                 log.info("recording %s closed: %d messages%s", closed["path"], closed["written"],
                          f"; {closed['error']}" if closed["error"] else "")
-

@@ -100,7 +100,8 @@ class EndpointSockets:
             raise
         except zmq.ZMQError as exc:
             self.close()
-            raise TransportError(f"{self.role}: cannot open sockets on {cfg.bind_host if self.role == 'slave' else cfg.host}:"
+            host = cfg.bind_host if self.role == "slave" else cfg.host
+            raise TransportError(f"{self.role}: cannot open sockets on {host}:"
                                  f"{cfg.control_port}/{cfg.stream_port}: {exc}") from exc
         self.poller = zmq.Poller()
         self.poller.register(self.control, zmq.POLLIN)
