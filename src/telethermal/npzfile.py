@@ -41,11 +41,11 @@ def read_npz(path: str | Path, fmt: str, version: int, what: str) -> tuple[dict,
             arrays = {k: data[k] for k in data.files}
     except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError) as exc:
         raise ModelFileError(f"{path}: not a readable {what} file (truncated or not "
-                             f"a telethermal {what}): {exc}") from None
+                             f"a telethermal {what}): {exc}") from exc
     try:
         header = json.loads(arrays.pop("header").tobytes().decode())
-    except (KeyError, UnicodeDecodeError, json.JSONDecodeError):
-        raise ModelFileError(f"{path}: no valid header; not a telethermal {what}") from None
+    except (KeyError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"{path}: no valid header; not a telethermal {what}") from exc
     if header.get("format") != fmt:
         raise ModelFileError(f"{path}: not a {fmt.replace('-', ' ')} file")
     if header.get("format_version") != version:

@@ -18,7 +18,7 @@ def read_toml(path: str | Path, what: str, error=TelethermalError) -> dict:
     try:
         return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
-        raise error(f"{path}: not valid TOML: {exc}") from None
+        raise error(f"{path}: not valid TOML: {exc}") from exc
 
 
 _KINDS = {"int": int, "float": (int, float), "str": str, "bool": bool}

@@ -101,9 +101,9 @@ def _manifest_trial(row: dict, path: Path, line: int, root: Path) -> Trial:
         if col in NUMERIC_COLUMNS:
             try:
                 values[col] = float(cell)
-            except ValueError:
+            except ValueError as exc:
                 raise DatasetError(f"{path} row {line}, column '{col}': "
-                                   f"{cell!r} is not a number") from None
+                                   f"{cell!r} is not a number") from exc
             if not math.isfinite(values[col]):
                 raise DatasetError(f"{path} row {line}, column '{col}': {cell!r} is not finite")
         else:
@@ -133,7 +133,7 @@ def read_trial_file(path: str | Path, sample_rate_hz: float | None = None) -> di
         table = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
     except ValueError as exc:
         _locate_bad_cell(path, lines, header)
-        raise DatasetError(f"{path}: cannot read the numbers ({exc})") from None
+        raise DatasetError(f"{path}: cannot read the numbers ({exc})") from exc
     if table.shape[0] == 0:
         raise DatasetError(f"{path}: no data rows")
     if table.shape[1] != len(header):
@@ -157,9 +157,9 @@ def _locate_bad_cell(path: Path, lines: list[str], header: list[str]):
         for name, cell in zip(header, cells):
             try:
                 float(cell)
-            except ValueError:
+            except ValueError as exc:
                 raise DatasetError(f"{path} line {number}, column '{name}': "
-                                   f"{cell.strip()!r} is not a number") from None
+                                   f"{cell.strip()!r} is not a number") from exc
 
 
 def _check_time(path: Path, t_s: np.ndarray, sample_rate_hz: float | None):

@@ -157,7 +157,7 @@ class SensorBoard:
             self._ser = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0)
         except (serial.SerialException, OSError, ValueError) as exc:
             if first:
-                raise DeviceError(f"sensor board: cannot open {self.url!r}: {exc}") from None
+                raise DeviceError(f"sensor board: cannot open {self.url!r}: {exc}") from exc
             self.counters["open_failed"] += 1
             self._next_open = self.clock() + self.reopen_s
             return False

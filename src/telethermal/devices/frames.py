@@ -114,7 +114,7 @@ def decode(packet: bytes, versions=VERSIONS) -> BoardFrame:
     try:
         raw = cobs.decode(packet)
     except cobs.DecodeError as exc:
-        raise FrameError("garbage", f"not a COBS packet ({exc}); {len(packet)} bytes") from None
+        raise FrameError("garbage", f"not a COBS packet ({exc}); {len(packet)} bytes") from exc
     layout = _LAYOUTS.get(len(raw))
     if layout is None:
         raise FrameError("garbage", f"a frame is {RECORD_BYTES} (version 1) or "

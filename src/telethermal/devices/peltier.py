@@ -61,7 +61,7 @@ def open_bus(spec: str) -> can.BusABC:
     try:
         return can.Bus(interface=interface, channel=channel, receive_own_messages=False)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
-        raise DeviceError(f"CAN bus {spec!r}: {exc}") from None
+        raise DeviceError(f"CAN bus {spec!r}: {exc}") from exc
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,6 +120,9 @@ class PeltierDriver:
 
     def _bus_failed(self, exc: Exception) -> None:
         self.counters["send_failed"] += 1
+        # python-can has no bus-off class: CanOperationError is its nearest,
+        # and a backend that raises the plain CanError says bus-off only in
+        # its text (a third party's message, not one of ours).
         text = str(exc).lower()
         if "bus-off" in text or "bus off" in text or isinstance(exc, can.CanOperationError):
             self.counters["bus_off"] += 1

@@ -56,7 +56,7 @@ def _table(cls, data: dict, where: str):
     try:
         return cls(**values)
     except (TypeError, ValueError, FaultProfileError) as exc:
-        raise FaultProfileError(f"{where}: {exc}") from None
+        raise FaultProfileError(f"{where}: {exc}") from exc
 
 
 def load_profile(path: str | Path, overrides: dict | None = None) -> FaultProfile:
@@ -111,7 +111,7 @@ class FaultProxy:
         except zmq.ZMQError as exc:
             for s in socks:
                 s.close(linger=0)
-            raise TransportError(f"fault proxy: {exc}") from None
+            raise TransportError(f"fault proxy: {exc}") from exc
         self._socks = socks
         self.poller = zmq.Poller()
         for s in (self.front, self.back, self.back_stream):

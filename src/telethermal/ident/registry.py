@@ -16,9 +16,9 @@ METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, Effusivity
 def make(method: str, **kw) -> Identifier:
     try:
         return METHODS[method](**kw)
-    except KeyError:
+    except KeyError as exc:
         raise IdentificationError(f"unknown method {method!r}; methods: "
-                                  f"{', '.join(sorted(METHODS))}") from None
+                                  f"{', '.join(sorted(METHODS))}") from exc
 
 
 def load_model(path: str | Path) -> Identifier:

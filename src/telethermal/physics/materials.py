@@ -72,10 +72,10 @@ def get_material(name: str) -> Material:
     table = load_materials()
     try:
         return table[name]
-    except KeyError:
+    except KeyError as exc:
         known = ", ".join(sorted(table))
         raise UnknownMaterialError(
-            f"unknown material {name!r}; known materials: {known}") from None
+            f"unknown material {name!r}; known materials: {known}") from exc
 
 
 def object_materials() -> list[str]:

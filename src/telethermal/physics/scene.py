@@ -310,7 +310,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{source}: not valid TOML: {exc}") from None
+        raise SceneError(f"{source}: not valid TOML: {exc}") from exc
     return parse_scene(data, source)
 
 

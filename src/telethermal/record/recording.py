@@ -119,7 +119,7 @@ class Recorder:
                 self._writer.add_attachment(0, 0, name, "application/octet-stream", data)
             self._file.flush()
         except OSError as exc:
-            raise RecordingError(f"cannot record to {self.path}: {exc}") from None
+            raise RecordingError(f"cannot record to {self.path}: {exc}") from exc
         self._thread = threading.Thread(target=self._run, name=f"recorder-{role}",
                                         daemon=True)
         self._thread.start()
@@ -243,7 +243,7 @@ def read_recording(path: str | Path) -> Recording:
     try:
         stream = open(path, "rb")
     except OSError as exc:
-        raise RecordingError(f"cannot read {path}: {exc}") from None
+        raise RecordingError(f"cannot read {path}: {exc}") from exc
     with stream:
         try:
             for record in StreamReader(stream).records:
@@ -265,7 +265,7 @@ def read_recording(path: str | Path) -> Recording:
             raise
         except Exception as exc:                # noqa: BLE001 - any damage: stop at the cut
             if "telethermal" not in rec.metadata:
-                raise RecordingError(f"{path} is not a telethermal recording: {exc}") from None
+                raise RecordingError(f"{path} is not a telethermal recording: {exc}") from exc
             rec.truncated = f"{type(exc).__name__}: {exc}"
     if "telethermal" not in rec.metadata:
         raise RecordingError(f"{path} is not a telethermal recording (no telethermal metadata)")
@@ -278,8 +278,8 @@ def _check_version(path: Path, meta: dict) -> list[str]:
     try:
         version = int(meta.get("recording_version", ""))
         protocol = int(meta.get("protocol_version", ""))
-    except ValueError:
-        raise RecordingError(f"{path}: unreadable version metadata {dict(meta)}") from None
+    except ValueError as exc:
+        raise RecordingError(f"{path}: unreadable version metadata {dict(meta)}") from exc
     if version != RECORDING_VERSION:
         raise RecordingError(f"{path}: recording version {version}; this telethermal reads "
                              f"version {RECORDING_VERSION}")

@@ -300,4 +300,4 @@ def load_generator(path: str | Path):
     try:
         return cls._restore(header, arrays)
     except (KeyError, TypeError, ValueError) as exc:
-        raise ModelFileError(f"{path}: generator file is incomplete: {exc}") from None
+        raise ModelFileError(f"{path}: generator file is incomplete: {exc}") from exc

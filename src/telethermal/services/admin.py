@@ -55,7 +55,7 @@ class AdminServer:
                 self.port = where
         except zmq.ZMQError as exc:
             self.sock.close()
-            raise TransportError(f"admin socket {address}: {exc}") from None
+            raise TransportError(f"admin socket {address}: {exc}") from exc
         self.pending = False
 
     def receive(self) -> dict | None:

@@ -46,7 +46,7 @@ def request(where, role: str, cmd: str, timeout_s: float = 5.0, **args) -> dict:
     except TransportError as exc:
         raise TransportError(f"{role} admin at {where}: no reply to {cmd!r} in {timeout_s} s: "
                              f"is `telethermal {role}` running on this host with this "
-                             f"admin_port/admin_ipc? ({exc})") from None
+                             f"admin_port/admin_ipc? ({exc})") from exc
     if not reply.get("ok", False):
         raise AdminError(f"{role}: {reply.get('error', 'failed')}")
     return reply

@@ -96,13 +96,14 @@ def load_config(path: str | Path, role: str):
         raise ConfigError(f"{path}: unknown section(s) {', '.join(sorted(extra))}; expected "
                           f"[{role}] and [transport]")
     cls = SlaveConfig if role == "slave" else MasterConfig
+    # table_values names the file and the table itself; the class's own
+    # checks do not know them: only their errors get the prefix.
+    values = table_values(cls, data.get(role, {}), f"{path} [{role}]", ConfigError,
+                          exclude=("transport",))
     try:
-        config = cls(**table_values(cls, data.get(role, {}), f"{path} [{role}]", ConfigError,
-                                    exclude=("transport",)))
+        config = cls(**values)
     except ConfigError as exc:
-        if str(path) in str(exc):
-            raise
-        raise ConfigError(f"{path} [{role}]: {exc}") from None
+        raise ConfigError(f"{path} [{role}]: {exc}") from exc
     transport = TransportConfig(**table_values(TransportConfig, data.get("transport", {}),
                                         f"{path} [transport]"))
     base = path.resolve().parent
@@ -118,5 +119,5 @@ def load_config(path: str | Path, role: str):
     try:
         transport.validate(role)
     except TelethermalError as exc:
-        raise ConfigError(f"{path} [transport]: {exc}") from None
+        raise ConfigError(f"{path} [transport]: {exc}") from exc
     return config

@@ -231,14 +231,14 @@ def _tcp(host: str, port: int, timeout_s: float) -> Finding:
 
 def _handshake(t, timeout_s: float) -> Finding:
     """A CURVE handshake on the control port, no message sent."""
-    from telethermal.wire.transport import _load_public, _load_secret
+    from telethermal.wire.keys import load_public, load_secret
 
     ctx = zmq.Context.instance()
     sock = ctx.socket(zmq.DEALER)
     sock.linger = 0
-    public, secret = _load_secret(t.keys_dir, t.client_key)
+    public, secret = load_secret(t.keys_dir, t.client_key)
     sock.curve_publickey, sock.curve_secretkey = public, secret
-    sock.curve_serverkey = _load_public(t.keys_dir, t.server_key)
+    sock.curve_serverkey = load_public(t.keys_dir, t.server_key)
     where = f"tcp://{t.host}:{t.control_port}"
     watch = HandshakeWatch.on(sock, where)
     sock.connect(where)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import zmq
 
-from telethermal.errors import ModelFileError, TelethermalError
+from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import naive_setpoint
@@ -25,6 +25,8 @@ from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
+from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
+                                                open_devices)
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.run import slave_rng, with_finger
 from telethermal.teleop.slave import BOARD_LOST, Slave
@@ -81,6 +83,7 @@ class SlaveService:
         self._decided_label: str | None = None      # this contact's, as last sent
         self._decision_sent = None                  # the last estimate sent lossless
         self._sent = 0
+        self._sp_sample = -1                        # the sample of the last flux_setpoint
         self._seed = config.seed
         self.calibration_error: str | None = None
         self.pad: Slave | None = None
@@ -105,22 +108,8 @@ class SlaveService:
 
         self._session_rng = np.random.default_rng((seed, 0xCA1))
         self.sensors = SensorSession(draw_instruments(self.scene.sensors, self._session_rng))
-        if self.config.devices == "emulated":
-            from telethermal.devices.slave_pad import EmulatedSlavePad
-            self.devices = EmulatedSlavePad(self.scene, self.sensors.instruments, seed=seed)
-        elif self.config.devices == "hardware":
-            from telethermal.devices.board import Calibration
-            from telethermal.devices.slave_pad import SlavePadDrivers
-            cfg = self.config
-            calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
-            # Each period waits (up to two sample periods) for the board's next
-            # frame: the pad's loop runs at the board's own rate.
-            self.devices = SlavePadDrivers(cfg.board_url, cfg.can_bus, self.rate_hz,
-                                           calibration, wait_s=2.0 / self.rate_hz)
-        if self.devices is not None:
-            log.info("sensing pad on %s devices: board %s (frame version 2), active pad "
-                     "driver on %s", self.devices.kind, self.devices.board.url,
-                     self.devices.pad.spec)
+        self.devices = open_devices(self.config, self.scene, self.sensors.instruments, seed,
+                                    self.rate_hz)
         self.calibrate_thermometer()
 
     def calibrate_thermometer(self, drift_k_per_reading: float = 0.0) -> dict:
@@ -130,29 +119,9 @@ class SlaveService:
         as they are, and status says so); the error is logged and returned."""
         from dataclasses import replace as dc_replace
 
-        from telethermal.control.thermometer_calibration import calibrate_simulated
-        from telethermal.errors import CalibrationError
-
         try:
-            if self.devices is not None:
-                from telethermal.devices.slave_pad import calibrate_on_devices
-                if drift_k_per_reading:
-                    raise CalibrationError("a drifting pad is a simulator-only hard case "
-                                           "(devices = 'sim')")
-                emulated = self.devices.kind == "emulated"
-                if emulated:
-                    self.devices.aim_at_pad(self._session_rng)
-                # On hardware the lab aims the thermometer at the pad for this.
-                try:
-                    cal = calibrate_on_devices(self.devices, self.scene.room_temp_c)
-                finally:
-                    if emulated:
-                        self.devices.show_object(float("nan"))
-            else:
-                cal = calibrate_simulated(self.sensors.instruments, self.scene.room_temp_c,
-                                          self._session_rng,
-                                          self.scene.sensors.thermocouple_noise_uv,
-                                          drift_k_per_reading=drift_k_per_reading)
+            cal = calibrate(self.devices, self.sensors, self.scene, self._session_rng,
+                            drift_k_per_reading)
         except CalibrationError as exc:
             self.calibration_error = str(exc)
             log.error("object thermometer calibration failed: %s (%s in force)", exc,
@@ -178,7 +147,7 @@ class SlaveService:
         the name of the scene object holding ``material`` (the scene names
         its objects by their material)."""
         if self.devices is not None:
-            self._touch_counters = _flat(self.devices.all_counters())
+            self._touch_counters = flat_counters(self.devices.all_counters())
         if self.devices is not None and self.devices.kind == "hardware":
             self.pad = Slave.on_hardware(self.scene, self.identifier, self.devices,
                                          self.sensors)
@@ -326,7 +295,7 @@ class SlaveService:
                                    t0_s=self.touch_t0 + float(pad.onset_s))
                 log.info("decided contact_id=%d material=%s t=%.2f s", self.contact_id,
                          e.label, e.t_s)
-        if events or (pad.onset_s is not None and pad.samples_read > getattr(self, "_sp_sample", -1)):
+        if events or (pad.onset_s is not None and pad.samples_read > self._sp_sample):
             self._stream_setpoint(now)
         read = pad.samples_read
         if read - self._sent >= BATCH:
@@ -389,22 +358,8 @@ class SlaveService:
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else "no estimate",
-                **({"devices": self._device_report()} if self.devices is not None else {})}
-
-    def _device_report(self) -> dict:
-        """The devices' counters over this touch (since it was placed: its
-        object measurement, pre-conditioning and contact)."""
-        now = _flat(self.devices.all_counters())
-        d = {k: v - self._touch_counters.get(k, 0) for k, v in now.items()}
-        return {"kind": self.devices.kind, "frames": d["board.frames"],
-                "crc_errors": d["board.crc"], "gaps": d["board.seq_gaps"],
-                "lost_frames": d["board.lost_frames"], "garbage": d["board.garbage"],
-                "stale_readings": d["stale_readings"], "held_samples": d["held_samples"],
-                "boards_lost": d["boards_lost"], "ir_refused": d["ir_refused"],
-                "ir_out_of_range": d["board.ir_out_of_range"],
-                "pad_commands": d["pad.sent"], "pad_statuses": d["pad.statuses"],
-                "pad_faults_reported": d["pad.faults_reported"],
-                "precondition": dict(self.devices.last_precondition), "counters": d}
+                **({"devices": device_report(self.devices, self._touch_counters)}
+                   if self.devices is not None else {})}
 
     def _on_admin(self, request: dict) -> None:
         def place(r):
@@ -431,7 +386,7 @@ class SlaveService:
             return {"memory": self.memory.to_dict()}
 
         self.admin.handle(request, self, {
-            "place": place, "report": lambda r: dict(getattr(self, "last_touch", {})),
+            "place": place, "report": lambda r: dict(self.last_touch),
             "calibrate_thermometer": calibrate, "forget": forget})
 
     def _close_devices(self) -> None:
@@ -507,13 +462,3 @@ class SlaveService:
                 closed = self.recorder.close()
                 log.info("recording %s closed: %d messages%s", closed["path"], closed["written"],
                          f"; {closed['error']}" if closed["error"] else "")
-
-
-def _flat(counters: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in counters.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        elif isinstance(v, (int, float)) and not isinstance(v, bool):
-            out[f"{prefix}{k}"] = v
-    return out

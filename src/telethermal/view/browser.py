@@ -31,9 +31,9 @@ def find_chromium() -> str:
                                  "TELETHERMAL_CHROMIUM to its path)")
     try:
         import playwright.sync_api  # noqa: F401
-    except ImportError:
+    except ImportError as exc:
         raise BrowserUnavailable("the playwright package is not installed (pip install "
-                                 "'telethermal[test]')") from None
+                                 "'telethermal[test]')") from exc
     return path
 
 

@@ -43,7 +43,7 @@ def _conductance(rec) -> float:
         return with_finger(load_scene(scene)).finger.contact_conductance_w_m2k
     except Exception as exc:        # noqa: BLE001 - a scene file not on this machine
         raise RecordingError(f"{rec.path}: its scene {scene!r} cannot be loaded here "
-                             f"({exc})") from None
+                             f"({exc})") from exc
 
 
 def _master_series(rec, offset, out, h_w_m2k) -> int:

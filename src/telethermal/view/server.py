@@ -52,7 +52,7 @@ class ViewServer:
         try:
             self.httpd = ThreadingHTTPServer(("127.0.0.1", port), _handler(self))
         except OSError as exc:
-            raise TelethermalError(f"view: cannot listen on 127.0.0.1:{port}: {exc}") from None
+            raise TelethermalError(f"view: cannot listen on 127.0.0.1:{port}: {exc}") from exc
         self.httpd.daemon_threads = True
         self.port = self.httpd.server_address[1]
         self.url = f"http://127.0.0.1:{self.port}/"

@@ -51,7 +51,7 @@ class ViewPublisher:
                 self.sock.bind(f"tcp://127.0.0.1:{port}")
         except zmq.ZMQError as exc:
             self.sock.close(linger=0)
-            raise TransportError(f"view stream tcp://127.0.0.1:{port}: {exc}") from None
+            raise TransportError(f"view stream tcp://127.0.0.1:{port}: {exc}") from exc
         self.port = port
         self.h_w_m2k = conductance_w_m2k
         self.counters = {"sent": 0, "dropped": 0, "nonfinite": 0}

@@ -208,5 +208,5 @@ def decode_verbose(data: bytes) -> tuple[dict, list[str]]:
         raw = msgpack.unpackb(data, raw=False, strict_map_key=True, use_list=True)
     except (msgpack.exceptions.ExtraData, msgpack.exceptions.FormatError,
             msgpack.exceptions.StackError, ValueError, TypeError) as exc:
-        raise ProtocolError(f"not a msgpack message: {exc}") from None
+        raise ProtocolError(f"not a msgpack message: {exc}") from exc
     return validate(raw)

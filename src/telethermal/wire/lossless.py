@@ -1,0 +1,191 @@
+"""The lossless stream of an :class:`~telethermal.wire.transport.Endpoint`
+(``proto/PROTOCOL.md`` section 3): numbered messages kept until the peer
+acknowledges them in its heartbeats and sent again when they are not;
+heartbeats that carry the acknowledgement and time the round trip; gaps and
+lost tails asked for (``resend``), and given up when they never arrive.
+The receiving order itself is :class:`~telethermal.wire.ordering.OrderedReceiver`.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import msgpack
+
+from telethermal.wire.codec import encode
+from telethermal.wire.ordering import OrderedReceiver
+from telethermal.wire.schema import LOSSLESS, PROTOCOL_VERSION
+
+MAX_UNACKED = 4096
+#: Heartbeat periods a message may wait unacknowledged before it is sent again.
+RETRANSMIT_AFTER = 3
+#: A lossless gap still open after this many ``dead_after_s`` is given up.
+GAP_GIVE_UP_DEAD = 5
+
+
+class LosslessStream:
+    """The lossless half of :class:`~telethermal.wire.transport.Endpoint`
+    (a base class of it). Uses the endpoint's ``role``, ``config``,
+    ``clock``, ``counters``, ``offset``, ``control``, ``peer_version``,
+    ``_limited``, ``_drop``, ``_raw_send`` and ``_unordered``."""
+
+    def _init_lossless(self) -> None:
+        self._next_seq = 1
+        self._outbox: OrderedDict[int, dict] = OrderedDict()
+        self.receiver = OrderedReceiver(self.counters)
+        self._last_heartbeat_sent = -1e9
+        self._last_peer_hb: tuple[float, float] | None = None   # (its sent_s, our receipt)
+        self._resend_asked_at = -1e9
+        self._resend_served_at = -1e9
+        self._tail_since: float | None = None       # when a lost tail was first seen
+        self._ack_moved_at = -1e9
+        self._retransmitted_at = -1e9
+
+    @property
+    def unacked(self) -> int:
+        return len(self._outbox)
+
+    def _send_lossless(self, kind: str, now: float, fields: dict) -> int:
+        """Number ``kind`` in the lossless stream, keep it until acknowledged,
+        and send it if a session is up; returns its seq."""
+        seq = self._next_seq
+        self._next_seq += 1
+        message = {"kind": kind, "v": PROTOCOL_VERSION, "seq": seq, "sent_s": now, **fields}
+        data = encode(message)              # bad content is refused before it is kept
+        self._outbox[seq] = message
+        if len(self._outbox) > MAX_UNACKED:
+            self._outbox.popitem(last=False)
+            self.counters["lossless_dropped"] += 1
+        self.counters["lossless_sent"] += 1
+        if self.peer_version is not None:
+            self._raw_send(self.control, message, data)
+        return seq
+
+    def _restart_lossless(self) -> None:
+        """A new run of the peer: both directions start again from 1."""
+        self.receiver.reset()
+        self._tail_since = None
+        self._next_seq, self._outbox = 1, OrderedDict()
+
+    def _heartbeat(self, now):
+        echo = held = None
+        if self._last_peer_hb is not None:
+            echo, received = self._last_peer_hb
+            held = max(now - received, 0.0)
+        self._raw_send(self.control, self._unordered(
+            "heartbeat", now, ack=self.receiver.expected - 1, echo_sent_s=echo,
+            echo_held_s=held, last_seq=self._next_seq - 1))
+        self._last_heartbeat_sent = now
+
+    def _ask_resend(self, now: float) -> None:
+        self._raw_send(self.control, self._unordered("resend", now,
+                                                     from_seq=self.receiver.expected))
+        self._resend_asked_at = now
+
+    def _repair(self, now: float) -> list[dict]:
+        """Once per heartbeat. As receiver: a gap still open is asked for
+        again (the first ``resend`` may itself have been lost), and given up
+        after ``gap_give_up_s`` (its seqs counted as ``skipped``). As sender:
+        messages kept unacknowledged for ``RETRANSMIT_AFTER`` heartbeats with
+        the peer's ack standing still are sent again from the first one (a
+        lost *tail* leaves the receiver no gap to see)."""
+        out = []
+        rx = self.receiver
+        if rx.buffer:
+            rtt = self.offset.rtt_s or 0.0
+            give_up = max(GAP_GIVE_UP_DEAD * self.config.dead_after_s, 4 * rtt)
+            if now - rx.gap_since_s >= give_up:
+                first = rx.expected
+                out = rx.skip_gap(now)
+                self._limited.warn("skipped", now, "%s: lossless seq %d-%d never arrived in "
+                                   "%.1f s: skipped", self.role, first, rx.expected - 1, give_up)
+            if rx.buffer:
+                self._ask_resend(now)
+        if self._outbox:
+            first = next(iter(self._outbox))
+            waited = now - max(self._outbox[first]["sent_s"], self._ack_moved_at)
+            # Never sooner than two round trips: on a long link the ack is on its way.
+            timeout = max(RETRANSMIT_AFTER * self.config.heartbeat_s,
+                          2 * (self.offset.rtt_s or 0.0) + self.config.heartbeat_s)
+            if waited >= timeout and now - self._retransmitted_at >= timeout:
+                self._retransmitted_at = now
+                self._resend_from(first)
+        return out
+
+    def _resend_from(self, first: int):
+        for seq, message in list(self._outbox.items()):
+            if seq >= first:
+                self._raw_send(self.control, {**message, "sent_s": self.clock()})
+                self.counters["resent"] += 1
+
+    def _serve_resend(self, message: dict, now: float) -> None:
+        """The peer's ``resend``: at most one served per heartbeat period."""
+        if now - self._resend_served_at < self.config.heartbeat_s:
+            self._drop("resend_throttled", now, "a second resend within %.3f s",
+                       self.config.heartbeat_s)
+            return
+        self._resend_served_at = now
+        self._resend_from(message["from_seq"])
+
+    def _receive_lossless(self, message: dict, now: float) -> list[dict]:
+        """A lossless message from the peer, through the ordering; a gap it
+        opens is asked for at once (at most once per heartbeat period)."""
+        out = self.receiver.push(message["seq"], message, now)
+        if self.receiver.buffer and now - self._resend_asked_at >= self.config.heartbeat_s:
+            self.counters["gaps"] += 1
+            self._ask_resend(now)
+        return out
+
+    def _on_heartbeat(self, message, now) -> None:
+        ack = message["ack"]
+        acked = [s for s in self._outbox if s <= ack]
+        for seq in acked:
+            del self._outbox[seq]
+        if acked:
+            self._ack_moved_at = now
+        self._last_peer_hb = (message["sent_s"], now)
+        # Both echo fields or neither: with one of them nil there is no
+        # exchange to time (a peer that sent that crashed the slave: fuzzing).
+        if message["echo_sent_s"] is not None and message["echo_held_s"] is not None:
+            rtt = (now - message["echo_sent_s"]) - message["echo_held_s"]
+            self.offset.add(rtt, message["sent_s"] - now + rtt / 2)
+        self._check_tail(message.get("last_seq"), now)
+
+    def _check_tail(self, last_seq: int | None, now: float) -> None:
+        """A lost *tail*: the peer says it sent up to ``last_seq`` and nothing
+        after our next expected seq arrived to show a gap (the lossless
+        stream is sparse: contact events and decisions, seconds apart). Ask
+        for it now rather than wait for the peer's retransmission timer (two
+        round trips and a heartbeat); given up like a gap."""
+        rx = self.receiver
+        if last_seq is None or last_seq < rx.expected or rx.buffer:
+            self._tail_since = None
+            return
+        if self._tail_since is None:
+            self._tail_since = now
+            self.counters["gaps"] += 1
+        give_up = max(GAP_GIVE_UP_DEAD * self.config.dead_after_s, 4 * (self.offset.rtt_s or 0))
+        if now - self._tail_since >= give_up:
+            self.counters["skipped"] += last_seq - rx.expected + 1
+            self._limited.warn("skipped", now, "%s: lossless seq %d-%d never arrived in %.1f s: "
+                               "skipped", self.role, rx.expected, last_seq, give_up)
+            rx.expected, self._tail_since = last_seq + 1, None
+        elif now - self._resend_asked_at >= self.config.heartbeat_s:
+            self._ask_resend(now)
+
+
+def lossless_seq(data: bytes) -> int | None:
+    """The seq of a lossless message that failed validation, if its envelope
+    (a lossless kind and an unsigned seq >= 1) can still be read."""
+    try:
+        # A bad string elsewhere (not UTF-8) must not hide a good envelope.
+        raw = msgpack.unpackb(data, raw=False, strict_map_key=False, unicode_errors="replace")
+    except Exception:                          # noqa: BLE001 - any garbage: no envelope
+        return None
+    if not isinstance(raw, dict):
+        return None
+    seq = raw.get("seq")
+    kind = raw.get("kind")
+    if isinstance(kind, str) and kind in LOSSLESS and type(seq) is int and 1 <= seq < 2 ** 64:
+        return seq
+    return None
