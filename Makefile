@@ -33,7 +33,7 @@ test: $(STAMP)
 # The view bench needs Chromium (apt-get install chromium).
 BENCHES := physics identify render transport faults devices record view
 
-BENCH_physics   := --repeats 1
+BENCH_physics   :=
 BENCH_identify  :=
 BENCH_render    :=
 BENCH_transport :=
