@@ -22,19 +22,24 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest tests
 
-# The benches, in the report's order. Three sizes, the same code paths (each
-# bench's own options: fewer seeds, trials, rounds or settings; each JSON
-# keeps its command and the report names every reduced run):
+# The benches, in the report's order, in three sizes (each bench's own
+# options: fewer methods, seeds, trials, rounds or settings; each JSON keeps
+# its command and the report names every reduced run):
 #   bench-full   every bench at its defaults into bench/results/ and
 #                bench/report.md: the committed figures
 #   bench        reduced, into $(OUT)/bench/ and $(OUT)/bench/report.md:
-#                <= 15 minutes on the 2-core machine
+#                <= 15 minutes on the 2-core machine with one core taken by
+#                something else (about 11 minutes alone); identify without
+#                rnn (the lstm runs the same recurrent code), faults on 2 seeds
 #   bench-quick  reduced further, into $(OUT)/bench-quick/: <= 3 minutes
+#                (about 2.5 alone); every bench and every section of each,
+#                bar render's generator comparison and identify's methods
+#                other than effusivity-lda (identify has no smaller knob)
 # The view bench needs Chromium (apt-get install chromium).
 BENCHES := physics identify render transport faults devices record view
 
 BENCH_physics   :=
-BENCH_identify  :=
+BENCH_identify  := --methods effusivity-lda,lstm,pca-fnn
 BENCH_render    :=
 BENCH_transport :=
 BENCH_faults    := --seeds 2
