@@ -26,15 +26,17 @@ test: $(STAMP)
 # options: fewer methods, seeds, trials, rounds or settings; each JSON keeps
 # its command and the report names every reduced run):
 #   bench-full   every bench at its defaults into bench/results/ and
-#                bench/report.md: the committed figures
+#                bench/report.md: the committed figures (about 10.5 minutes)
 #   bench        reduced, into $(OUT)/bench/ and $(OUT)/bench/report.md:
-#                <= 15 minutes on the 2-core machine with one core taken by
-#                something else (about 11 minutes alone); identify without
-#                rnn (the lstm runs the same recurrent code), faults on 2 seeds
+#                <= 15 minutes (about 9.5 on the 2-core machine, 8.5 CPU
+#                minutes: room for a neighbour's load); identify without rnn
+#                (the lstm runs the same recurrent code), faults on 2 seeds
 #   bench-quick  reduced further, into $(OUT)/bench-quick/: <= 3 minutes
-#                (about 2.5 alone); every bench and every section of each,
-#                bar render's generator comparison and identify's methods
-#                other than effusivity-lda (identify has no smaller knob)
+#                (about 2.2); every bench and every section of each, bar
+#                render's generator comparison and identify's methods other
+#                than effusivity-lda (identify has no smaller knob)
+# Wall times include bench transport's 22 s, or 80 s when its plain
+# end-to-end burst stalls on the receiver's 60 s time-out.
 # The view bench needs Chromium (apt-get install chromium).
 BENCHES := physics identify render transport faults devices record view
 
