@@ -17,6 +17,7 @@ from rich.table import Table
 
 from telethermal import __version__
 from telethermal.errors import TelethermalError
+from telethermal.jsonfile import write_json as _write_json
 
 log = logging.getLogger("telethermal")
 console = Console(stderr=True)
@@ -35,25 +36,19 @@ def _progress(total: int, what: str):
         yield advance
 
 
-def _json_safe(value):
-    """NaN and infinities become null (JSON has neither): "not measured"."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    return value
+def _command() -> str:
+    """The command line as typed, for the reports."""
+    return "telethermal " + " ".join(sys.argv[1:])
 
 
-def _write_json(path: str | Path, payload: dict) -> Path:
-    """Write JSON through a temporary file so a failure leaves no half file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(_json_safe(payload), indent=2, allow_nan=False) + "\n")
-    tmp.replace(path)
-    return path
+def _png(args) -> Path:
+    """``--png``, or the JSON's path with ``.png``."""
+    return args.png or Path(args.json).with_suffix(".png")
+
+
+def _print_lines(lines: list[str]) -> None:
+    for line in lines:
+        print(line)
 
 
 # ------------------------------------------------------------------ commands
@@ -130,23 +125,9 @@ def cmd_bench_physics(args) -> int:
     from telethermal.bench import physics
 
     with _progress(6, "bench physics") as advance:
-        report = physics.run(repeats=args.repeats, progress=advance)
-    report["command"] = "telethermal " + " ".join(sys.argv[1:])
-    png = physics.plot(report, args.png or Path(args.json).with_suffix(".png"))
-    report["png"] = str(png)
-    _write_json(args.json, report)
-    d = report["default"]
-    print(f"default model: max relative flux error {d['max_rel_error']:.2e} over "
-          f"{d['window_s'][0]}-{d['window_s'][1]:g} s, "
-          f"{d['runtime_s_per_simulated_s'] * 1e3:.3f} ms per simulated second")
-    b = report["batch_70x1s_1khz"]
-    print(f"batch of {b['trials']} one-second trials at 1 kHz: {b['runtime_s']:.3f} s "
-          f"(+ {b['model_choice_s']:.3f} s choosing the models, once per scene)")
-    db = report["databases_fingertip_7"]
-    print(f"fingertip-7 databases: simulation {db['simulation_s']:.2f} s, "
-          f"with CSV files {db['with_csv_files_s']:.2f} s")
-    print(f"heat balance over 60 s: {report['heat_balance_60s']['relative_error']:.1e} relative")
-    print(f"wrote {args.json} and {png}")
+        report = physics.run_and_save(args.json, _png(args), repeats=args.repeats,
+                                      command=_command(), progress=advance)
+    _print_lines(physics.text_report(report, args.json))
     return 0
 
 
@@ -154,47 +135,9 @@ def cmd_bench_render(args) -> int:
     from telethermal.bench import render
 
     with _progress(7, "bench render") as advance:
-        report = render.run(progress=advance, quick=args.quick)
-    report["command"] = "telethermal " + " ".join(sys.argv[1:])
-    png = render.plot(report, args.png or Path(args.json).with_suffix(".png"))
-    report["png"] = str(png)
-    _write_json(args.json, report)
-    for r in report["rate"]:
-        print(f"{r['rate_hz']:6.0f} Hz: flux error after identification "
-              f"{100 * r['mean_flux_rms_error_rel']:.2f} % (max "
-              f"{100 * r['max_flux_rms_error_rel']:.2f} %), first second "
-              f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
-              f"{r['mean_temp_rms_error_c']:.2f} K, CPU {r['mean_cpu_s_per_simulated_s']:.3f} s/s, "
-              f"safety events {r['safety_events']}")
-    for c in report["controller"]:
-        print(f"controller {c['feedforward_model']} (mean/worst): " + ", ".join(
-            f"{m} flux {100 * v['mean_flux_rms_error_rel']:.2f}/"
-            f"{100 * v['max_flux_rms_error_rel']:.2f} % skin "
-            f"{v['mean_temp_rms_error_c']:.2f}/{v['max_temp_rms_error_c']:.2f} K"
-            for m, v in c["per_material"].items()))
-    floor = report["skin_floor"]
-    print(f"skin floor (seed {floor['seed']}, junction in {floor['band_c']} C), default controller "
-          "/ any controller with the pad at the object's temperature / at the band's bottom: "
-          + ", ".join(f"{m} {v['impedance_temp_rms_error_c']:.2f}/"
-                      f"{v['floor_idle_at_object']['temp_rms_error_c']:.2f}/"
-                      f"{v['floor_idle_at_band_bottom']['temp_rms_error_c']:.2f} K"
-                      for m, v in floor.items() if isinstance(v, dict)))
-    for r in report["gains"]:
-        print(f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
-              f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin {r['mean_temp_rms_error_c']:.2f} K")
-    for r in report["before"]:
-        print(f"before identification {r['before']:5s}: first second "
-              f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
-              f"{r['mean_temp_rms_error_c']:.2f} K")
-    if report["generator"]:
-        g = report["generator"]["rms_error_rel_of_peak"]
-        print(f"generators on held-out persons: network {100 * g['network']:.2f} %, "
-              f"closed form {100 * g['contact']:.2f} % RMS of peak")
-    for r in report["real_clock"]:
-        print(f"real clock {r['rate_hz']:6.0f} Hz: period p50 {r['period_p50_us']:.0f} us, p99 "
-              f"{r['period_p99_us']:.0f} us, max {r['period_max_us']:.0f} us, deadline misses "
-              f"{r['deadline_misses']} of {r['steps']}, stalls {r['stalls']}")
-    print(f"wrote {args.json} and {png}")
+        report = render.run_and_save(args.json, _png(args), quick=args.quick,
+                                     command=_command(), progress=advance)
+    _print_lines(render.text_report(report, args.json))
     return 0
 
 
@@ -202,24 +145,10 @@ def cmd_bench_devices(args) -> int:
     from telethermal.bench import devices
 
     with _progress(3, "bench devices") as advance:
-        report = devices.run(n=args.samples, contact_s=args.contact_s, progress=advance,
-                             slave_trials=args.slave_trials)
-    report["command"] = "telethermal " + " ".join(sys.argv[1:])
-    _write_json(args.json, report)
-    for kind, r in report["paths"].items():
-        print(f"{kind:9s} read p50 {r['read']['p50_us']:6.1f} us p99 {r['read']['p99_us']:6.1f} us;"
-              f" apply p50 {r['apply']['p50_us']:6.1f} us p99 {r['apply']['p99_us']:6.1f} us")
-    emu = report["paths"]["emulated"]
-    for name in ("serial_sensor_to_controller", "can_controller_to_actuator"):
-        r = emu[name]
-        print(f"emulated {name}: p50 {r['p50_us']:.1f} us, p99 {r['p99_us']:.1f} us, "
-              f"max {r['max_us']:.0f} us")
-    for kind, r in report["sessions_1khz_real_clock"].items():
-        print(f"1 kHz real-clock session, {kind:8s}: period p99 {r['loop_period_p99_us']:.0f} us,"
-              f" busy p99 {r['busy_p99_us']:.0f} us, {r['deadline_misses']} missed deadlines of "
-              f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %")
-    print("\n".join(devices.slave_lines(report)))
-    print(f"wrote {args.json}")
+        report = devices.run_and_save(args.json, n=args.samples, contact_s=args.contact_s,
+                                      slave_trials=args.slave_trials, command=_command(),
+                                      progress=advance)
+    _print_lines(devices.text_report(report, args.json))
     return 0
 
 
@@ -227,24 +156,16 @@ def cmd_bench_record(args) -> int:
     from telethermal.bench import record
 
     with _progress(2 * args.rounds, "bench record") as advance:
-        report = record.run(rounds=args.rounds, contact_s=args.contact_s, progress=advance)
-    report["command"] = "telethermal " + " ".join(sys.argv[1:])
-    _write_json(args.json, report)
-    b, m = report["busy_mean_us"], report["deadline_misses"]
-    print(f"master loop busy per period: {b['without']:.0f} us without recording, "
-          f"{b['with']:.0f} us with: +{report['extra_busy_per_period_us']:.1f} us = "
-          f"{100 * report['cost_of_period_budget']:.1f} % of the 1 ms budget")
-    print(f"recorder call per period: p50 {report['log_call_p50_us']:.1f} us, p99 "
-          f"{report['log_call_p99_us']:.1f} us; deadline misses {m['without']} of "
-          f"{report['steps']['without']} without, {m['with']} of {report['steps']['with']} with")
-    print(f"wrote {args.json}")
+        report = record.run_and_save(args.json, rounds=args.rounds, contact_s=args.contact_s,
+                                     command=_command(), progress=advance)
+    _print_lines(record.text_report(report, args.json))
     return 0
 
 
 def cmd_bench_report(args) -> int:
     from telethermal.bench.report import write_report
 
-    path = write_report(args.results, args.out, "telethermal " + " ".join(sys.argv[1:]))
+    path = write_report(args.results, args.out, _command())
     print(f"wrote {path}")
     return 0
 
@@ -253,26 +174,8 @@ def cmd_bench_transport(args) -> int:
     from telethermal.bench import transport
 
     with _progress(2, "bench transport") as advance:
-        report = transport.run(progress=advance)
-    report["command"] = "telethermal " + " ".join(sys.argv[1:])
-    _write_json(args.json, report)
-    worst = max(report["codec"].items(), key=lambda kv: kv[1]["encode_us"] + kv[1]["decode_us"])
-    print(f"codec: slowest kind {worst[0]} ({worst[1]['bytes']} B) encode "
-          f"{worst[1]['encode_us']:.1f} us, decode {worst[1]['decode_us']:.1f} us")
-    for where in ("loopback", "namespaces"):
-        block = report[where]
-        if "skipped" in block:
-            print(f"{where}: skipped ({block['skipped']})")
-            continue
-        for name, r in block.items():
-            if isinstance(r, dict):
-                extra = f", {r['messages_per_s']:.0f} msg/s" if "messages_per_s" in r else ""
-                print(f"{where:10s} {name:10s} one-way p50 {r['p50_us']:6.0f} us, p99 "
-                      f"{r['p99_us']:6.0f} us, max {r['max_us']:6.0f} us{extra}")
-    print(f"end to end on loopback: p50 {report['e2e_p50_us']:.0f} us, p99 "
-          f"{report['e2e_p99_us']:.0f} us; {report['ratio_to_raw_zmq_p50']:.2f}x raw pyzmq "
-          f"(plain), {report['curve_ratio_to_raw_zmq_p50']:.2f}x with CURVE")
-    print(f"wrote {args.json}")
+        report = transport.run_and_save(args.json, command=_command(), progress=advance)
+    _print_lines(transport.text_report(report, args.json))
     return 0
 
 
@@ -365,56 +268,11 @@ def cmd_bench_identify(args) -> int:
     from telethermal.bench import identify
 
     methods = args.methods.split(",") if args.methods else None
+    png = _png(args)
     with _progress(5 * len(methods or identify.METHODS) + 3, "bench identify") as advance:
-        report = identify.run(seed=args.seed, methods=methods, progress=advance)
-    report["command"] = "telethermal " + " ".join(sys.argv[1:])
-    png = args.png or Path(args.json).with_suffix(".png")
-    identify.plot(report, png)
-    _write_json(args.json, report)
-    for method, rep in report["methods"].items():
-        t1 = rep["table1"]
-        print(f"{method}: Table 1, 7 classes " + ", ".join(
-            f"{k} s {100 * v:.0f} %" for k, v in t1["accuracy_7"].items()))
-        print(f"{' ' * len(method)}  5 classes " + ", ".join(
-            f"{k} s {100 * v:.0f} % (paper {100 * t1['paper_accuracy_5'][k]:.0f} %)"
-            if k in t1["paper_accuracy_5"] else f"{k} s {100 * v:.0f} %"
-            for k, v in t1["accuracy_5"].items()))
-        print(f"{' ' * len(method)}  train {t1['train_s_full_database']:.1f} s; inference "
-              f"p99 {t1['inference_ms_p99']:.3f} ms")
-        ap = rep["active_passive"]
-        print(f"{' ' * len(method)}  active pad: " + ", ".join(
-            f"{k} s {100 * v:.0f} %" for k, v in ap["active_accuracy_by_window_s"].items())
-            + f"; passive pad unknown {100 * ap['passive_unknown_rate']:.0f} %")
-        if "temperature" in rep:
-            tr = rep["temperature"]
-            print(f"{' ' * len(method)}  temperature channel, active pad: " + ", ".join(
-                f"{k} s {100 * v:.0f} %" for k, v in tr["active_accuracy_by_window_s"].items())
-                + f"; passive unknown {100 * tr['passive_unknown_rate']:.0f} %")
-        for name, row in rep["cross_temperature"].items():
-            print(f"{' ' * len(method)}  {name}: >= 99 % from "
-                  f"{row['first_window_at_99pct_s']} s (paper 100 % within "
-                  f"{row['paper_100pct_within_s']} s)")
-        t1 = rep["table1"]
-        dec = t1["decision"]
-        print(f"{' ' * len(method)}  calibration error {t1['calibration_ece']:.3f}; decisions "
-              f"within 1 s: {100 * dec['commit_rate']:.0f} % committed, "
-              + ("-" if dec["accuracy"] is None else f"{100 * dec['accuracy']:.0f} %")
-              + " of them right")
-        for mode, row in rep["session_shift"].items():
-            print(f"{' ' * len(method)}  session shift (1 K), thermometer {mode}: " + ", ".join(
-                f"{k} s {100 * v:.0f} %" for k, v in row["accuracy_5"].items()))
-    print("object-thermometer ablation (effusivity-lda, 0.2 / 0.5 / 1 s): " + "; ".join(
-        f"{k}: " + " / ".join(f"{100 * x:.0f}" for x in v.values()) + " %"
-        for k, v in report["thermometer_ablation"]["accuracy"].items()))
-    if "lm_vs_adam" in report:
-        print("LM against Adam: " + "; ".join(
-            f"{k} loss {v['final_loss']:.4f} after {v['iterations']} iterations, "
-            f"{v['runtime_s']:.2f} s" for k, v in report["lm_vs_adam"].items()))
-    if "lstm_hidden_sweep" in report:
-        print("LSTM width sweep (0.4 s / 1 s): " + "; ".join(
-            f"{k}: {100 * v['0.4']:.0f} / {100 * v['1']:.0f} %"
-            for k, v in report["lstm_hidden_sweep"]["accuracy"].items()))
-    print(f"wrote {args.json} and {png}")
+        report = identify.run_and_save(args.json, png, seed=args.seed, methods=methods,
+                                       command=_command(), progress=advance)
+    _print_lines(identify.text_report(report, args.json, png))
     return 0
 
 

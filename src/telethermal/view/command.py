@@ -70,26 +70,13 @@ def cmd_view(args) -> int:
 
 
 def cmd_bench_view(args) -> int:
-    from telethermal.bench.view import run_view_bench
-    from telethermal.cli import _write_json
+    from telethermal.bench import view
 
-    report = run_view_bench(touches=args.touches, contact_s=args.contact_s,
-                            progress=lambda m: print(m, flush=True),
-                            realtime_priority=args.realtime_priority)
-    _write_json(args.json, report)
-    loop = report["loop"]
-    print(f"first paint {report['first_paint_s']:.2f} s after the server started; view lag "
-          f"p99 {1000 * report['lag_p99_s']:.0f} ms at {report['rate_hz']:.0f} Hz; master "
-          f"loop at SCHED_FIFO priority {report['realtime_priority']} (0: normal)")
-    for mode, text in (("no_view", "no view stream"), ("stream_no_page", "stream, no page"),
-                       ("page_open", "page open")):
-        m = loop[mode]
-        print(f"  master loop, {text:15s}: busy {m['busy_mean_us']:.0f} us mean, "
-              f"{m['busy_p99_us']:.0f} us p99; period p99 {m['period_p99_us']:.0f} us; "
-              f"{m['deadline_misses']} of {m['steps']} deadlines missed")
-    call = report["publisher_call"]
-    print(f"  the view stream's call per period alone: {call['mean_us']:.1f} us mean, "
-          f"{call['p99_us']:.1f} us p99; wrote {args.json}")
+    report = view.run_and_save(args.json, touches=args.touches, contact_s=args.contact_s,
+                               progress=lambda m: print(m, flush=True),
+                               realtime_priority=args.realtime_priority)
+    for line in view.text_report(report, args.json):
+        print(line)
     return 0
 
 
