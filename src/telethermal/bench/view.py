@@ -28,11 +28,11 @@ from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
+from telethermal.services.viewer import open_view
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.master import Phase
 from telethermal.teleop.run import with_finger
 from telethermal.view.browser import launch
-from telethermal.view.command import open_view
 
 MATERIAL = "graphite"
 MODES = ("no_view", "stream_no_page", "page_open")
