@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from telethermal.services.viewer import DEFAULT_PORT
+from telethermal.view.server import DEFAULT_PORT
 
 
 def cmd_view(args) -> int:

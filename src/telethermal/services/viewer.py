@@ -12,8 +12,6 @@ from telethermal.view.feed import LiveFeed
 from telethermal.view.server import ViewServer
 from telethermal.wire.keys import load_public, load_secret
 
-DEFAULT_PORT = 8050
-
 
 def live_feed(config) -> tuple[LiveFeed, str]:
     """A feed on the streams a master config names: its view stream and the
