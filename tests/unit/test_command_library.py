@@ -320,6 +320,9 @@ def test_a_status_poll_names_a_role_that_does_not_answer(monkeypatch):
     assert poll.lines == admin_client.describe_status(SLAVE) + [
         "master: not reachable here (no reply)"]
     assert isinstance(poll.error, TransportError)
+    # The slave answered, the master did not: the session is not live
+    # ('admin status --wait' exits 1), however the slave's reply looks.
+    assert not poll.live
 
 
 def test_a_status_poll_asks_again_until_the_session_is_live(monkeypatch):

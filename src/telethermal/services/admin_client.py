@@ -84,7 +84,6 @@ def truth_for_touch(slave, material: str | None, object_c: float | None) -> dict
     return {"material": status["material"], "object_true_c": status["object_true_c"]}
 
 
-
 @dataclass
 class StatusPoll:
     """What :func:`poll_status` saw: each answering role's status reply,
@@ -106,6 +105,7 @@ def _poll_once(where: dict, roles) -> StatusPoll:
             poll.live &= role == "slave" or (bool(s["peer_alive"]) and bool(s.get("session")))
         except TelethermalError as exc:
             poll.error = exc
+            poll.live = False               # a role that does not answer is not live
             poll.lines.append(f"{role}: not reachable here ({exc})")
     poll.live &= bool(poll.replies)
     return poll
@@ -121,6 +121,7 @@ def poll_status(where: dict, roles, wait_s: float = 0.0, every_s: float = 0.2) -
         if poll.live or time.monotonic() >= end:
             return poll
         time.sleep(every_s)
+
 
 def _ms(value) -> str:
     return "-" if value is None else f"{1e3 * value:.2f} ms"
