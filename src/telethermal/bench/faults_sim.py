@@ -29,6 +29,7 @@ direct contact's peak; ``sd`` its spread over touches.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -87,46 +88,100 @@ def _keep(summary: dict) -> dict:
     return {k: summary[k] for k in keys}
 
 
-def run_rows(scene, identifier, curves, config, materials, seeds, contact_s: float,
-             rows=ROWS, oracle: bool = True, progress=None) -> dict:
-    """Every row x material x seed x mode in this process; returns the
-    ``rows`` by name and, if asked, the ``oracle`` statistics."""
-    step = progress or (lambda _m: None)
-    touch = lambda m, seed, spec, **kw: run_network_touch(               # noqa: E731
-        scene, m, identifier, curves, kw.pop("config", config), spec, seed=seed,
-        contact_s=contact_s, **kw).summary
-    out: dict = {"rows": {}}
-    if oracle:
-        out["oracle"] = _mode_stats([touch(m, s + REPEAT_SEED_OFFSET, NetworkSpec(),
-                                           mode="oracle") for m in materials for s in seeds])
+#: A unit of work: (kind, row name or None for the oracle, material). Kinds:
+#: "modes" (the compensated, naive and repeat touches), "before" (the other
+#: pre-decision rendering), "lossless" (the estimates sent lossless),
+#: "oracle". Weights: touches per seed (every touch costs about the same).
+UNIT_WEIGHTS = {"modes": 3, "before": 1, "lossless": 1, "oracle": 1}
+
+
+def units(names, materials) -> list[tuple[str, str | None, str]]:
+    """Every unit of the simulated part: the oracle, then per row its modes
+    and (the zero-delay and WAN rows) its ablations, each per material."""
+    out = [("oracle", None, m) for m in materials]
+    for name in names:
+        out += [("modes", name, m) for m in materials]
+        if name in ABLATION_ROWS:
+            out += [("before", name, m) for m in materials]
+            if name != ZERO:
+                out += [("lossless", name, m) for m in materials]
+    return out
+
+
+def balance(work: list, jobs: int) -> list[list]:
+    """``work`` split into at most ``jobs`` parts of nearly equal weight:
+    the heaviest unit first, each to the lightest part so far (the lowest
+    index on a tie); within a part the units keep their order in ``work``.
+    Deterministic; no empty part."""
+    load = [0] * jobs
+    owner = {}
+    for i in sorted(range(len(work)), key=lambda i: -UNIT_WEIGHTS[work[i][0]]):
+        j = min(range(jobs), key=lambda k: (load[k], k))
+        owner[i] = j
+        load[j] += UNIT_WEIGHTS[work[i][0]]
+    parts = [[u for i, u in enumerate(work) if owner[i] == j] for j in range(jobs)]
+    return [p for p in parts if p]
+
+
+def run_unit(touch, unit, link: dict | None, config, seeds) -> dict:
+    """The touches of one unit in this process (``touch`` makes one and
+    returns its summary): the kept fields of each touch by mode and, for
+    "modes", how many repeat touches found the object remembered."""
+    kind, _, m = unit
+    if kind == "oracle":
+        return {"touches": {"oracle": [_keep(touch(m, s + REPEAT_SEED_OFFSET, NetworkSpec(),
+                                                   mode="oracle")) for s in seeds]}}
+    spec = NetworkSpec.symmetric(Direction(**link))
+    if kind == "before":
+        other = "prior" if config.before == "hold" else "hold"
+        return {"touches": {f"before {other}": [
+            _keep(touch(m, s, spec, config=replace(config, before=other))) for s in seeds]}}
+    if kind == "lossless":
+        ordered = NetworkSpec(spec.slave_to_master, spec.master_to_slave, estimates="lossless")
+        return {"touches": {"estimates lossless": [_keep(touch(m, s, ordered))
+                                                   for s in seeds]}}
+    modes: dict[str, list] = {"compensated": [], "naive": [], "repeat": []}
+    remembered = 0
+    for s in seeds:
+        memory = ObjectMemory()
+        modes["compensated"].append(_keep(touch(m, s, spec, object_id=m, memory=memory)))
+        modes["naive"].append(_keep(touch(m, s, spec, mode="naive")))
+        remembered += memory.recall(m) is not None
+        modes["repeat"].append(_keep(touch(m, s + REPEAT_SEED_OFFSET, spec, object_id=m,
+                                           memory=memory, network_seed=s)))
+    return {"touches": modes, "remembered": remembered}
+
+
+def assemble(results: dict, rows, materials, seeds) -> dict:
+    """The oracle and the rows from every unit's touches (``results`` keyed
+    by unit), gathered material by material, seed by seed: the order one
+    process makes them in, so that every mean is summed in the same order."""
+    def gather(kind, name, mode):
+        return [t for m in materials for t in results[(kind, name, m)]["touches"][mode]]
+
+    out: dict = {"rows": {}, "oracle": _mode_stats(gather("oracle", None, "oracle"))}
     for name, link in rows:
-        step(f"simulated: {name}")
-        spec = NetworkSpec.symmetric(Direction(**link))
-        modes: dict[str, list] = {"compensated": [], "naive": [], "repeat": []}
-        remembered = 0
-        for m in materials:
-            for s in seeds:
-                memory = ObjectMemory()
-                modes["compensated"].append(touch(m, s, spec, object_id=m, memory=memory))
-                modes["naive"].append(touch(m, s, spec, mode="naive"))
-                remembered += memory.recall(m) is not None
-                modes["repeat"].append(touch(m, s + REPEAT_SEED_OFFSET, spec, object_id=m,
-                                             memory=memory, network_seed=s))
+        modes = {k: gather("modes", name, k) for k in ("compensated", "naive", "repeat")}
+        remembered = sum(results[("modes", name, m)]["remembered"] for m in materials)
         row = {"profile": link, "modes": {k: _mode_stats(v) for k, v in modes.items()},
                "repeat_with_memory": remembered / (len(materials) * len(seeds)),
-               "touches": {k: [_keep(t) for t in v] for k, v in modes.items()}}
+               "touches": modes}
         if name in ABLATION_ROWS:
-            row["ablations"] = _ablations(touch, spec, config, materials, seeds,
-                                          lossless=name != ZERO)
+            before = next(iter(results[("before", name, materials[0])]["touches"]))
+            row["ablations"] = {before: _mode_stats(gather("before", name, before))}
+            if name != ZERO:
+                row["ablations"]["estimates lossless"] = _mode_stats(
+                    gather("lossless", name, "estimates lossless"))
         out["rows"][name] = row
     return out
 
 
 def run(scene, identifier_path, generator_path, config, materials, seeds, contact_s: float,
         rows=ROWS, jobs: int = 2, progress=None) -> dict:
-    """The simulated section of the report: the rows split over ``jobs``
-    worker processes (each loads the model files; jobs and results cross
-    the process boundary as JSON), then the summary."""
+    """The simulated section of the report: its units (row, part, material)
+    balanced over ``jobs`` worker processes (each loads the model files;
+    jobs and results cross the process boundary as JSON), then the rows,
+    the oracle and the summary."""
     import json
     import subprocess
     import sys
@@ -134,16 +189,17 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
     from pathlib import Path
 
     step = progress or (lambda _m: None)
-    names = [n for n, _ in rows]
-    jobs = max(1, min(jobs, len(names)))
-    parts = [names[i::jobs] for i in range(jobs)]
+    rows, materials = list(rows), list(materials)
+    parts = balance(units([n for n, _ in rows], materials), max(1, jobs))
+    results: dict = {}
+    announced: set = set()
     with tempfile.TemporaryDirectory() as tmp:
         procs = []
         for i, part in enumerate(parts):
             job = {"scene": scene.name, "identifier": str(identifier_path),
-                   "generator": str(generator_path), "materials": list(materials),
-                   "seeds": list(seeds), "contact_s": contact_s, "rows": part,
-                   "oracle": i == 0, "rate_hz": config.rate_hz, "before": config.before}
+                   "generator": str(generator_path), "seeds": list(seeds),
+                   "contact_s": contact_s, "units": part, "links": dict(rows),
+                   "rate_hz": config.rate_hz, "before": config.before}
             path = Path(tmp) / f"job{i}.json"
             path.write_text(json.dumps(job))
             with open(path.with_suffix(".err"), "w") as err:
@@ -151,24 +207,24 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
                     [sys.executable, "-m", "telethermal.bench.faults_sim", str(path),
                      str(path.with_suffix(".out.json"))],
                     stdout=subprocess.PIPE, stderr=err, text=True), path))
-        out: dict = {"rows": {}}
         for proc, path in procs:
             with proc.stdout:
                 for line in proc.stdout:
-                    step(line.strip())
+                    name = line.strip()
+                    if name and name not in announced:      # one step per row
+                        announced.add(name)
+                        step(f"simulated: {name}")
             if proc.wait() != 0:
                 for other, _ in procs:
                     other.kill()
                     other.wait()
                 err = path.with_suffix(".err").read_text()
                 raise BenchError(f"simulated fault worker {path.name} failed: {err[-2000:]}")
-            part = json.loads(path.with_suffix(".out.json").read_text())
-            out["rows"].update(part["rows"])
-            if "oracle" in part:
-                out["oracle"] = part["oracle"]
-    out["rows"] = {n: out["rows"][n] for n in names}
-    out.update({"materials": list(materials), "seeds": list(seeds), "contact_s": contact_s,
-                "rate_hz": config.rate_hz, "before": config.before, "jobs": jobs})
+            for unit, result in json.loads(path.with_suffix(".out.json").read_text()):
+                results[tuple(unit)] = result
+    out = assemble(results, rows, materials, seeds)
+    out.update({"materials": materials, "seeds": list(seeds), "contact_s": contact_s,
+                "rate_hz": config.rate_hz, "before": config.before, "jobs": len(parts)})
     out["summary"] = summary(out)
     return out
 
@@ -192,30 +248,19 @@ def _worker(job_path: str, out_path: str) -> None:
     curves = sample_curves(generator, [m for m in generator.materials
                                        if m in identifier.classes_])
     config = DisplayConfig(rate_hz=job["rate_hz"], before=job["before"])
-    rows = [r for r in ROWS if r[0] in job["rows"]]
-    out = run_rows(scene, identifier, curves, config, job["materials"], job["seeds"],
-                   job["contact_s"], rows, job["oracle"],
-                   progress=lambda m: print(m, flush=True))
+    touch = lambda m, seed, spec, **kw: run_network_touch(               # noqa: E731
+        scene, m, identifier, curves, kw.pop("config", config), spec, seed=seed,
+        contact_s=job["contact_s"], **kw).summary
+    out = []
+    for unit in job["units"]:
+        kind, name, _ = unit
+        if kind == "modes":
+            print(name, flush=True)                 # progress: the row under way
+        out.append((unit, run_unit(touch, unit, job["links"].get(name), config,
+                                   job["seeds"])))
     tmp = Path(out_path).with_suffix(".tmp")
     tmp.write_text(json.dumps(out))
     os.replace(tmp, out_path)
-
-
-def _ablations(touch, spec, config, materials, seeds, lossless: bool) -> dict:
-    """The other pre-decision rendering (hold vs prior) and, where there is
-    loss, the estimates sent lossless and ordered (the protocol before
-    issue 15)."""
-    from dataclasses import replace
-
-    other = "prior" if config.before == "hold" else "hold"
-    out = {f"before {other}": _mode_stats([touch(m, s, spec,
-                                                 config=replace(config, before=other))
-                                           for m in materials for s in seeds])}
-    if lossless:
-        ordered = NetworkSpec(spec.slave_to_master, spec.master_to_slave, estimates="lossless")
-        out["estimates lossless"] = _mode_stats([touch(m, s, ordered)
-                                                 for m in materials for s in seeds])
-    return out
 
 
 def _mean(out: dict, row: str, mode: str, window: str) -> float | None:

@@ -18,6 +18,7 @@ recurrent ones on 5 s sequences are listed under ``not_run`` (cost).
 from __future__ import annotations
 
 import datetime
+import functools
 import platform
 import time
 from typing import Callable
@@ -46,7 +47,22 @@ ECE_MAX_S = 1.0
 
 
 def _trials(scene_name: str, seed: int):
-    return pad_database(load_scene(scene_name), np.random.default_rng(seed))
+    """The pad database of ``scene_name`` drawn with ``seed``: simulated once
+    per run (every method, and several sections, use the same trials); a
+    fresh list each call, the trials read-only."""
+    return list(_database(scene_name, seed))
+
+
+@functools.lru_cache(maxsize=None)
+def _database(scene_name: str, seed: int, contact_s: float | None = None) -> tuple:
+    """``pad_database`` of the scene (its contacts ``contact_s`` long when
+    given), kept for the run; :func:`run` empties the cache when done."""
+    scene = load_scene(scene_name)
+    if contact_s is not None:
+        import dataclasses
+        scene = dataclasses.replace(scene, pad=dataclasses.replace(
+            scene.pad, contact_duration_s=contact_s))
+    return tuple(pad_database(scene, np.random.default_rng(seed)))
 
 
 def _accuracy(model, contacts, w, merge=None):
@@ -208,14 +224,8 @@ def temperature_rows(method: str, seed: int) -> dict:
     the active (I-pro) and passive (I-cnv) pads, windows 1..5 s, 5-fold
     leave-trials-out on the active pad; the passive pad is scored by the
     model trained on the active one."""
-    import dataclasses
-
-    def long(name):
-        scene = load_scene(name)
-        return dataclasses.replace(scene, pad=dataclasses.replace(scene.pad,
-                                                                  contact_duration_s=5.0))
     channels = ("temperature_C",)
-    active, _ = from_trials(pad_database(long("gripper-case-I-pro"), np.random.default_rng(seed)),
+    active, _ = from_trials(list(_database("gripper-case-I-pro", seed, 5.0)),
                             channels=channels, max_s=5.0)
     hits = {w: [] for w in (1.0, 2.0, 3.0, 4.0, 5.0)}
     for test in group_folds(active.groups, 5):
@@ -224,8 +234,7 @@ def temperature_rows(method: str, seed: int) -> dict:
         for w in hits:
             hits[w] += _accuracy(model, active.subset(test), w)
     model = make(method, channels=channels, max_window_s=5.0).fit(active)
-    passive = evaluate(model, pad_database(long("gripper-case-I-cnv"),
-                                           np.random.default_rng(seed + 1)))
+    passive = evaluate(model, list(_database("gripper-case-I-cnv", seed + 1, 5.0)))
     return {"active_accuracy_by_window_s": {f"{w:.1f}": float(np.mean(v)) for w, v in hits.items()},
             "passive_unknown_rate": passive["decision_unknown_rate"],
             "paper": "temperature sensing needed 4 s and reached 75 % (glass and acrylic alike)"}
@@ -248,6 +257,14 @@ def _session_trials(scene, seed: int, bias_k: float | None, calibrate: bool):
     return pad_database(scene, rng, session), session
 
 
+@functools.lru_cache(maxsize=None)
+def _shift_session(seed: int, bias_k: float, calibrate: bool):
+    """A fingertip-7 session of the session-shift case, its trials as a
+    tuple: drawn once per run, whichever method uses it."""
+    trials, session = _session_trials(load_scene("fingertip-7"), seed, bias_k, calibrate)
+    return tuple(trials), session
+
+
 #: The session-shift case: the training session's thermometer reads this much
 #: high, the test session's this much low (the datasheet limit both ways: a
 #: 1 K shift between sessions).
@@ -258,11 +275,10 @@ def session_shift(method: str, seed: int) -> dict:
     """Train on one session of fingertip-7, test on another whose object
     thermometer's bias differs by 1 K; both sessions self-calibrated, and
     both not. Accuracy keyed like table 1."""
-    scene = load_scene("fingertip-7")
     out = {}
     for mode, calibrate in (("calibrated", True), ("uncalibrated", False)):
-        train, s_a = _session_trials(scene, seed, SHIFT_BIAS_K[0], calibrate)
-        test, s_b = _session_trials(scene, seed + 100, SHIFT_BIAS_K[1], calibrate)
+        train, s_a = _shift_session(seed, SHIFT_BIAS_K[0], calibrate)
+        test, s_b = _shift_session(seed + 100, SHIFT_BIAS_K[1], calibrate)
         model = make(method).fit(from_trials(train, max_s=1.0)[0])
         held, _ = from_trials(test, max_s=1.0)
         decisions = decide_all(model, held)
@@ -314,6 +330,15 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
               "seed": seed, "methods": {},
               "not_run": ["lstm and rnn on the temperature channel (5 s sequences: "
                           "minutes of training per fold on this machine)"]}
+    try:
+        _run_methods(report, seed, methods, step)
+    finally:
+        _database.cache_clear()              # the trials are kept for one run only
+        _shift_session.cache_clear()
+    return report
+
+
+def _run_methods(report: dict, seed: int, methods, step) -> None:
     for method in methods:
         step(f"{method}: table 1")
         t1 = table1(method, seed)
@@ -335,7 +360,6 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
     if "lstm" in methods:
         step("LSTM width sweep")
         report["lstm_hidden_sweep"] = lstm_hidden_sweep(seed)
-    return report
 
 
 def plot(report: dict, out_png) -> None:

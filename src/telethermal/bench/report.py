@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 from pathlib import Path
 
 import matplotlib
@@ -20,9 +21,40 @@ def _load(results: Path, name: str) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
+#: Options that say where a bench writes or how many workers it uses, not
+#: what it measures.
+OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs"})
+
+
+def reduced_options(command: str) -> list[str]:
+    """The options of a bench's ``command`` (as stored in its JSON) that
+    change what it measures (``--quick``, ``--seeds 2``, ``--methods a,b``):
+    none for a run at the bench's defaults."""
+    try:
+        words = shlex.split(command)
+    except ValueError:                  # an unbalanced quote: read it word by word
+        words = command.split()
+    out = []
+    for i, word in enumerate(words):
+        if not word.startswith("--"):
+            continue
+        name = word.split("=", 1)[0]
+        if name in OUTPUT_OPTIONS:
+            continue
+        value = words[i + 1] if "=" not in word and i + 1 < len(words) else ""
+        out.append(word if "=" in word or not value or value.startswith("--")
+                   else f"{word} {value}")
+    return out
+
+
 def _provenance(d: dict) -> str:
+    reduced = reduced_options(d.get("command", ""))
+    note = "" if not reduced else (
+        f" **Reduced run** (`{' '.join(reduced)}`): fewer seeds, trials or settings than the "
+        "bench's defaults, the same code path; the committed figures (`make bench-full`) run "
+        "the defaults.")
     return (f"*Machine {d.get('machine', '?')}; {d.get('date', '?')}; "
-            f"`{d.get('command', '?')}`.*")
+            f"`{d.get('command', '?')}`.*{note}")
 
 
 def _save(fig, path: Path) -> str:
@@ -38,20 +70,37 @@ def _pct(x) -> str:
     return "-" if x is None else f"{100 * x:.2f} %"
 
 
-def _figure(out: Path, d: dict, name: str) -> str:
-    """The bench's own PNG (named in its JSON, or beside it), copied beside
-    the report."""
-    beside = Path(d.get("_results", Path("."))) / f"{name}.png"
-    png = d.get("png") if d.get("png") and Path(d["png"]).is_file() else beside
-    if not Path(png).is_file():
-        return ""
-    dest = out / f"{name}.png"
-    if Path(png).resolve() != dest.resolve():
-        dest.write_bytes(Path(png).read_bytes())
-    return f"![{name}]({dest.name})\n"
+def _bench_png(d: dict, name: str, suffix: str = "") -> Path | None:
+    """Where the bench wrote its figure ``<name><suffix>.png``: beside its
+    JSON (the default of every bench's ``--png``), else beside the path its
+    JSON names (``faults`` writes ``<stem>-traces.png`` next to its PNG), if
+    either is there."""
+    beside = Path(d.get("_results", Path("."))) / f"{name}{suffix}.png"
+    if beside.is_file():
+        return beside
+    if not d.get("png"):
+        return None
+    named = Path(d["png"])
+    named = named.with_name(f"{named.stem}{suffix}{named.suffix}")
+    return named if named.is_file() else None
 
 
-def physics(out: Path, d: dict) -> list[str]:
+def _link(out: Path, png: Path, alt: str) -> str:
+    """A Markdown image of ``png`` as it lies, relative to the report's
+    folder ``out``: no copy."""
+    rel = os.path.relpath(Path(png).resolve(), Path(out).resolve())
+    return f"![{alt}]({Path(rel).as_posix()})\n"
+
+
+def _figure(out: Path, d: dict, name: str, suffix: str = "") -> str:
+    """The bench's own PNG, linked where the bench wrote it ("" if none)."""
+    png = _bench_png(d, name, suffix)
+    return "" if png is None else _link(out, png, name + suffix)
+
+
+def _physics_plot(out: Path, d: dict) -> str:
+    """Error against runtime, drawn beside the report when the bench's own
+    figure (which holds the same points) is not found."""
     rows = d["rows"]
     fig, ax = plt.subplots(figsize=(6.5, 4))
     for model in sorted({r["model"] for r in rows}):
@@ -63,14 +112,18 @@ def physics(out: Path, d: dict) -> list[str]:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
     ax.set_title("physics: error against runtime", fontsize=9)
-    png = _save(fig, out / "physics_speed_error.png")
+    return _save(fig, out / "physics_speed_error.png")
+
+
+def physics(out: Path, d: dict) -> list[str]:
+    figure = _figure(out, d, "physics") or f"![physics]({_physics_plot(out, d)})\n"
     dft = d["default"]
     return ["## Physics: error against runtime", "",
             f"The default solver: max relative error {dft['max_rel_error']:.2g} "
             f"(tolerance {dft['tolerance_rel']:g}) at {dft['runtime_s_per_simulated_s']:.2g} s "
             f"of CPU per simulated second; heat balance over 60 s: relative error "
             f"{d['heat_balance_60s']['relative_error']:.2g}.", "",
-            f"![physics]({png})", "", _figure(out, d, "physics"), _provenance(d), ""]
+            figure, _provenance(d), ""]
 
 
 def identify(out: Path, d: dict) -> list[str]:
@@ -184,8 +237,9 @@ def _identify_ablation(d: dict) -> list[str]:
     return lines + [""]
 
 
-def render(out: Path, d: dict) -> list[str]:
-    rate = d["rate"]
+def _render_plot(out: Path, rate: list[dict]) -> str:
+    """Error and CPU against loop rate, drawn beside the report when the
+    bench's own figure (whose first panel shows both) is not found."""
     fig, ax = plt.subplots(figsize=(6.5, 4))
     ax.semilogx([r["rate_hz"] for r in rate], [100 * r["mean_flux_rms_error_rel"] for r in rate],
                 "o-", label="flux error after identification (% of peak)")
@@ -197,7 +251,12 @@ def render(out: Path, d: dict) -> list[str]:
     ax2.set_ylabel("CPU s per simulated s")
     ax.grid(alpha=0.3)
     fig.legend(fontsize=7, loc="upper center")
-    png = _save(fig, out / "render_rate.png")
+    return _save(fig, out / "render_rate.png")
+
+
+def render(out: Path, d: dict) -> list[str]:
+    rate = d["rate"]
+    figure = _figure(out, d, "render") or f"![render rate]({_render_plot(out, rate)})\n"
     lines = ["## Rendering: error against loop rate", "",
              "| rate | mean flux error | worst | skin RMS | CPU s / simulated s |",
              "|---|---|---|---|---|"]
@@ -209,7 +268,7 @@ def render(out: Path, d: dict) -> list[str]:
         lines.append(f"\nReal clock at {rc['rate_hz']:g} Hz: period p99 "
                      f"{rc['period_p99_us']:.0f} us, {rc['deadline_misses']} deadline misses "
                      f"of {rc['steps']}, {rc['stalls']} stalls.")
-    lines += ["", f"![render rate]({png})", "", _figure(out, d, "render"), _provenance(d), ""]
+    lines += ["", figure, _provenance(d), ""]
     return lines
 
 
@@ -285,7 +344,7 @@ def faults(out: Path, d: dict) -> list[str]:
         lines += ["", f"The processes' whole-contact errors within the simulated mean +- 2 sd "
                   f"of the same material: {s.get('processes_within_simulated_spread', '-')}.",
                   ""]
-    lines += [_figure(out, d, "faults"), "", _provenance(d), ""]
+    lines += [_figure(out, d, "faults"), _figure(out, d, "faults", "-traces"), _provenance(d), ""]
     return lines
 
 
@@ -361,18 +420,27 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
     results, out_md = Path(results), Path(out_md)
     out = out_md.parent
     out.mkdir(parents=True, exist_ok=True)
+    where = Path(os.path.relpath(results.resolve(), out.resolve())).as_posix()
     lines = ["# telethermal: speed against error", "",
              "Every figure below comes from a `telethermal bench ...` command run on the "
-             "machine and at the date stated under it; the JSON it was read from is beside "
-             f"this file. Report written by `{command or 'telethermal bench report'}`.", ""]
-    missing = []
+             "machine and at the date stated under it; the JSON it was read from and the "
+             f"bench's own figures are in `{where}/`. Report written by "
+             f"`{command or 'telethermal bench report'}`.", ""]
+    missing, reduced, sections = [], [], []
     for name, section in SECTIONS:
         d = _load(results, name)
         if d is None:
             missing.append(name)
             continue
         d["_results"] = results
-        lines += section(out, d)
+        options = reduced_options(d.get("command", ""))
+        if options:
+            reduced.append(f"{name} `{' '.join(options)}`")
+        sections += section(out, d)
+    if reduced:
+        lines += ["Reduced runs (options other than the bench's defaults; fewer seeds, trials "
+                  "or settings, the same code path): " + "; ".join(reduced) + ".", ""]
+    lines += sections
     if missing:
         lines += [f"Not run: {', '.join(missing)} (no JSON in {results})."]
     tmp = out_md.with_name(f".{out_md.name}.tmp")
