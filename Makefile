@@ -4,8 +4,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out
+TT := $(VENV)/bin/telethermal
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench bench-quick bench-full clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -21,16 +22,60 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest tests
 
+# The benches, in the report's order, in three sizes (each bench's own
+# options: fewer methods, seeds, trials, rounds or settings; each JSON keeps
+# its command and the report names every reduced run):
+#   bench-full   every bench at its defaults into bench/results/ and
+#                bench/report.md: the committed figures
+#   bench        reduced, into $(OUT)/bench/ and $(OUT)/bench/report.md:
+#                <= 15 minutes on the 2-core machine with one core taken by
+#                something else (about 11 minutes alone); identify without
+#                rnn (the lstm runs the same recurrent code), faults on 2 seeds
+#   bench-quick  reduced further, into $(OUT)/bench-quick/: <= 3 minutes
+#                (about 2.5 alone); every bench and every section of each,
+#                bar render's generator comparison and identify's methods
+#                other than effusivity-lda (identify has no smaller knob)
+# The view bench needs Chromium (apt-get install chromium).
+BENCHES := physics identify render transport faults devices record view
+
+BENCH_physics   :=
+BENCH_identify  := --methods effusivity-lda,lstm,pca-fnn
+BENCH_render    :=
+BENCH_transport :=
+BENCH_faults    := --seeds 2
+BENCH_devices   :=
+BENCH_record    :=
+BENCH_view      :=
+
+QUICK_physics   := --repeats 1
+QUICK_identify  := --methods effusivity-lda
+QUICK_render    := --quick
+QUICK_transport :=
+QUICK_faults    := --quick --seeds 1
+QUICK_devices   := --samples 500 --slave-trials 2 --contact-s 1
+QUICK_record    := --rounds 1 --contact-s 1
+QUICK_view      := --touches 1 --contact-s 1
+
+# $(call bench-run,NAME,FOLDER,OPTIONS): one bench, its JSON and figure in FOLDER.
+define bench-run
+	$(TT) bench $(1) --json $(2)/$(1).json $(3)
+
+endef
+
+bench-full: $(STAMP)
+	mkdir -p bench/results
+	$(foreach b,$(BENCHES),$(call bench-run,$(b),bench/results,))
+	$(TT) bench report --results bench/results --out bench/report.md
+
 bench: $(STAMP)
-	$(VENV)/bin/telethermal bench physics --json $(OUT)/bench/physics.json --png $(OUT)/bench/physics.png
-	$(VENV)/bin/telethermal bench identify --json $(OUT)/bench/identify.json --png $(OUT)/bench/identify.png
-	$(VENV)/bin/telethermal bench render --json $(OUT)/bench/render.json --png $(OUT)/bench/render.png
-	$(VENV)/bin/telethermal bench transport --json $(OUT)/bench/transport.json
-	$(VENV)/bin/telethermal bench faults --json $(OUT)/bench/faults.json
-	$(VENV)/bin/telethermal bench devices --json $(OUT)/bench/devices.json
-	$(VENV)/bin/telethermal bench record --json $(OUT)/bench/record.json
-	$(VENV)/bin/telethermal bench view --json $(OUT)/bench/view.json
-	$(VENV)/bin/telethermal bench report --results $(OUT)/bench --out bench/report.md
+	mkdir -p $(OUT)/bench
+	$(foreach b,$(BENCHES),$(call bench-run,$(b),$(OUT)/bench,$(BENCH_$(b))))
+	$(TT) bench report --results $(OUT)/bench --out $(OUT)/bench/report.md
+
+bench-quick: $(STAMP)
+	mkdir -p $(OUT)/bench-quick
+	$(foreach b,$(BENCHES),$(call bench-run,$(b),$(OUT)/bench-quick,$(QUICK_$(b))))
+	$(TT) bench report --results $(OUT)/bench-quick --out $(OUT)/bench-quick/report.md
 
 clean:
 	rm -rf $(VENV) $(OUT)

@@ -70,3 +70,15 @@ def test_a_reduced_run_is_named_in_the_report(tmp_path):
     assert text.count("**Reduced run**") == 1
     full = write_report(RESULTS, tmp_path / "full.md").read_text()
     assert "Reduced run" not in full
+
+
+def test_a_bench_whose_command_is_fixed_is_read_from_its_fields(tmp_path):
+    # bench view stores its default command whatever it ran with.
+    results = tmp_path / "results"
+    results.mkdir()
+    d = json.loads((RESULTS / "view.json").read_text())
+    d.update(touches_per_mode=1, contact_s=1.0)
+    (results / "view.json").write_text(json.dumps(d))
+    text = write_report(results, results / "report.md").read_text()
+    assert "view `--touches 1 --contact-s 1`" in text
+    assert "are beside this file" in text

@@ -65,6 +65,24 @@ def _database(scene_name: str, seed: int, contact_s: float | None = None) -> tup
     return tuple(pad_database(scene, np.random.default_rng(seed)))
 
 
+#: Models fitted in this run, by method, hyper-parameters and training data
+#: (a key naming them): a fit that two sections share (the active pad's LSTM
+#: folds and the width sweep's default width; cross-temperature I-pro for
+#: case II and for case III, the same materials) is made once. Training is
+#: seeded by the model, so a fit does not depend on what ran before it.
+_FITS: dict = {}
+
+
+def _fit(method: str, data_key: tuple, contacts, **kw):
+    """``make(method, **kw).fit(contacts)``, once per run for the same
+    ``data_key`` and hyper-parameters; :func:`run` empties the store."""
+    model = make(method, **kw)
+    key = (method, repr(sorted(model.hyper().items())), data_key)
+    if key not in _FITS:
+        _FITS[key] = model.fit(contacts)
+    return _FITS[key]
+
+
 def _accuracy(model, contacts, w, merge=None):
     merge = merge or {}
     index = model.window_index(int(round(w * model.sample_rate_hz_)) + 1)
@@ -128,9 +146,9 @@ def active_passive(method: str, seed: int) -> dict:
     accuracy = {}
     decisions = []
     probas, truth = [], []
-    for test in group_folds(active.groups, 5):
+    for fold, test in enumerate(group_folds(active.groups, 5)):
         train = np.setdiff1d(np.arange(len(active)), test)
-        model = make(method).fit(active.subset(train))
+        model = _fit(method, ("gripper-case-I-pro", seed, "fold", fold), active.subset(train))
         held = active.subset(test)
         for w in [round(0.1 * k, 1) for k in range(1, 11)]:
             accuracy.setdefault(f"{w:.1f}", []).extend(_accuracy(model, held, w))
@@ -163,7 +181,8 @@ def cross_temperature(method: str, seed: int) -> dict:
         # also holds acrylic, which cases II-V do not).
         materials = {t.material for t in test}
         train = [t for t in _trials(f"gripper-case-{train_case}", seed) if t.material in materials]
-        model = make(method).fit(from_trials(train, max_s=1.0)[0])
+        model = _fit(method, (f"gripper-case-{train_case}", seed, tuple(sorted(materials))),
+                     from_trials(train, max_s=1.0)[0])
         report = evaluate(model, test)
         rows[f"train {train_case}, test {test_case}"] = {
             "accuracy_by_window_s": report["accuracy_by_window_s"],
@@ -210,9 +229,10 @@ def lstm_hidden_sweep(seed: int, sizes=(16, 32, 64)) -> dict:
     rows = {}
     for size in sizes:
         hits = {0.4: [], 1.0: []}
-        for test in group_folds(contacts.groups, 5):
+        for fold, test in enumerate(group_folds(contacts.groups, 5)):
             train = np.setdiff1d(np.arange(len(contacts)), test)
-            model = make("lstm", n_hidden=size).fit(contacts.subset(train))
+            model = _fit("lstm", ("gripper-case-I-pro", seed, "fold", fold),
+                         contacts.subset(train), n_hidden=size)
             for w in hits:
                 hits[w] += _accuracy(model, contacts.subset(test), w)
         rows[str(size)] = {f"{w:g}": float(np.mean(v)) for w, v in hits.items()}
@@ -333,8 +353,9 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
     try:
         _run_methods(report, seed, methods, step)
     finally:
-        _database.cache_clear()              # the trials are kept for one run only
+        _database.cache_clear()              # trials and models are kept for one run only
         _shift_session.cache_clear()
+        _FITS.clear()
     return report
 
 

@@ -47,12 +47,28 @@ def reduced_options(command: str) -> list[str]:
     return out
 
 
+#: Benches whose JSON keeps a fixed command (``bench view`` writes its
+#: default command whatever it was run with): their sample size read from
+#: the JSON's own fields instead, against the bench's defaults.
+FIELD_OPTIONS = {"view": (("touches_per_mode", "--touches", 3), ("contact_s", "--contact-s", 3.0))}
+
+
+def _reduced(name: str, d: dict) -> list[str]:
+    """What made this run smaller than the bench's defaults: the options of
+    its command, or for a bench in FIELD_OPTIONS its fields."""
+    out = reduced_options(d.get("command", ""))
+    for field, option, default in FIELD_OPTIONS.get(name, ()):
+        if option not in " ".join(out) and d.get(field, default) != default:
+            out.append(f"{option} {d[field]:g}")
+    return out
+
+
 def _provenance(d: dict) -> str:
-    reduced = reduced_options(d.get("command", ""))
+    reduced = d.get("_reduced", [])
     note = "" if not reduced else (
-        f" **Reduced run** (`{' '.join(reduced)}`): fewer seeds, trials or settings than the "
-        "bench's defaults, the same code path; the committed figures (`make bench-full`) run "
-        "the defaults.")
+        f" **Reduced run** (`{' '.join(reduced)}`): fewer methods, seeds, trials, rounds or "
+        "settings than the bench's defaults, so its figures are not those of the committed "
+        "run (`make bench-full`, every bench at its defaults).")
     return (f"*Machine {d.get('machine', '?')}; {d.get('date', '?')}; "
             f"`{d.get('command', '?')}`.*{note}")
 
@@ -400,7 +416,8 @@ def view(out: Path, d: dict) -> list[str]:
              f"view lag behind the 1 kHz session p50 {1000 * d['lag_p50_s']:.0f} ms, p99 "
              f"{1000 * d['lag_p99_s']:.0f} ms over {d['lag_frames']} frames (target 200 ms). "
              f"The view stream's call per display period alone: "
-             f"{d['publisher_call']['mean_us']:.1f} us mean.", "",
+             f"{d['publisher_call']['mean_us']:.1f} us mean. {d.get('touches_per_mode', '?')} "
+             f"touches of {d.get('contact_s', '?')} s per mode.", "",
              "| master loop | busy mean | busy p99 | period p99 | deadline misses |",
              "|---|---|---|---|---|"]
     for mode, text in (("no_view", "no view stream"), ("stream_no_page", "view stream, no page"),
@@ -421,10 +438,11 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
     out = out_md.parent
     out.mkdir(parents=True, exist_ok=True)
     where = Path(os.path.relpath(results.resolve(), out.resolve())).as_posix()
+    where = "beside this file" if where == "." else f"in `{where}/`"
     lines = ["# telethermal: speed against error", "",
              "Every figure below comes from a `telethermal bench ...` command run on the "
              "machine and at the date stated under it; the JSON it was read from and the "
-             f"bench's own figures are in `{where}/`. Report written by "
+             f"bench's own figures are {where}. Report written by "
              f"`{command or 'telethermal bench report'}`.", ""]
     missing, reduced, sections = [], [], []
     for name, section in SECTIONS:
@@ -433,13 +451,14 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
             missing.append(name)
             continue
         d["_results"] = results
-        options = reduced_options(d.get("command", ""))
-        if options:
-            reduced.append(f"{name} `{' '.join(options)}`")
+        d["_reduced"] = _reduced(name, d)
+        if d["_reduced"]:
+            reduced.append(f"{name} `{' '.join(d['_reduced'])}`")
         sections += section(out, d)
     if reduced:
-        lines += ["Reduced runs (options other than the bench's defaults; fewer seeds, trials "
-                  "or settings, the same code path): " + "; ".join(reduced) + ".", ""]
+        lines += ["Reduced runs (options other than the bench's defaults: fewer methods, "
+                  "seeds, trials, rounds or settings; their figures are not the committed "
+                  "ones): " + "; ".join(reduced) + ".", ""]
     lines += sections
     if missing:
         lines += [f"Not run: {', '.join(missing)} (no JSON in {results})."]

@@ -1,0 +1,43 @@
+"""The Makefile's bench targets (read with ``make -n``, nothing run): each
+runs every bench the report has a section for, into one folder, and writes
+its report from that folder; only bench-full writes the committed files."""
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from telethermal.bench.report import SECTIONS
+
+ROOT = Path(__file__).parents[2]
+
+pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="no make")
+
+
+def _commands(target: str) -> list[list[str]]:
+    out = subprocess.run(["make", "-n", "-C", str(ROOT), target, "OUT=outdir"],
+                         capture_output=True, text=True, check=True).stdout
+    return [line.split()[1:] for line in out.splitlines()
+            if line.split()[:1] and line.split()[0].endswith("/telethermal")]
+
+
+@pytest.mark.parametrize("target, folder, report", [
+    ("bench-full", "bench/results", "bench/report.md"),
+    ("bench", "outdir/bench", "outdir/bench/report.md"),
+    ("bench-quick", "outdir/bench-quick", "outdir/bench-quick/report.md")])
+def test_every_bench_into_one_folder_then_its_report(target, folder, report):
+    commands = _commands(target)
+    benches = [c for c in commands if c[1] != "report"]
+    assert [c[1] for c in benches] == [name for name, _ in SECTIONS]
+    for c in benches:
+        assert c[:4] == ["bench", c[1], "--json", f"{folder}/{c[1]}.json"]
+        assert "--png" not in c                     # the figure beside its JSON
+    assert commands[-1] == ["bench", "report", "--results", folder, "--out", report]
+
+
+def test_bench_full_runs_the_defaults_and_the_others_reduce():
+    full = _commands("bench-full")
+    assert all(len(c) == 4 for c in full[:-1])      # bench NAME --json PATH, no option
+    for target in ("bench", "bench-quick"):
+        assert any(len(c) > 4 for c in _commands(target)[:-1]), target
