@@ -23,7 +23,7 @@ from telethermal.services.demo import (Services, free_ports, networked_touch, wa
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import with_finger
 from telethermal.view.browser import BrowserUnavailable, find_chromium, launch
-from telethermal.view.command import open_view
+from telethermal.services.viewer import open_view
 
 pytestmark = pytest.mark.browser
 SCENE = with_finger(load_scene("fingertip-7"))

@@ -33,6 +33,7 @@ import time
 import numpy as np
 
 from telethermal.devices.display import EmulatedDisplay, SimDisplay
+from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.master import MasterStep, Phase
 from telethermal.teleop.run import DisplayTouch, Operator, with_finger
@@ -232,3 +233,30 @@ def slave_lines(report: dict) -> list[str]:
         out.append(f"slave {name}: p50 {r['p50_us']:.1f} us, p99 {r['p99_us']:.1f} us, "
                    f"max {r['max_us']:.0f} us (n {r['n']})")
     return out
+
+
+def run_and_save(json_path, n: int = 3000, contact_s: float = 3.0, slave_trials: int = 10,
+                 command: str = "", progress=None) -> dict:
+    """Run the benchmark and write the JSON report (with ``command``);
+    returns the report."""
+    report = run(n=n, contact_s=contact_s, progress=progress, slave_trials=slave_trials)
+    report["command"] = command
+    write_json(json_path, report)
+    return report
+
+
+def text_report(report: dict, json_path) -> list[str]:
+    """What ``telethermal bench devices`` prints of ``report``."""
+    lines = [f"{kind:9s} read p50 {r['read']['p50_us']:6.1f} us p99 {r['read']['p99_us']:6.1f} us;"
+             f" apply p50 {r['apply']['p50_us']:6.1f} us p99 {r['apply']['p99_us']:6.1f} us"
+             for kind, r in report["paths"].items()]
+    emu = report["paths"]["emulated"]
+    lines += [f"emulated {name}: p50 {emu[name]['p50_us']:.1f} us, p99 "
+              f"{emu[name]['p99_us']:.1f} us, max {emu[name]['max_us']:.0f} us"
+              for name in ("serial_sensor_to_controller", "can_controller_to_actuator")]
+    lines += [f"1 kHz real-clock session, {kind:8s}: period p99 {r['loop_period_p99_us']:.0f} us,"
+              f" busy p99 {r['busy_p99_us']:.0f} us, {r['deadline_misses']} missed deadlines of "
+              f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %"
+              for kind, r in report["sessions_1khz_real_clock"].items()]
+    # An empty line where there is no slave part, as the command always printed.
+    return lines + (slave_lines(report) or [""]) + [f"wrote {json_path}"]

@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from telethermal.jsonfile import write_json
 from telethermal.physics.contact import contact_flux_w_m2
 from telethermal.physics.layered import Boundary, Layer, LayeredContact, crank_nicolson
 from telethermal.physics.materials import get_material
@@ -253,3 +254,30 @@ def plot(report: dict, out_png: str | Path) -> Path:
     fig.savefig(out_png, dpi=110)
     plt.close(fig)
     return out_png
+
+
+def run_and_save(json_path: str | Path, png_path: str | Path, repeats: int = 3,
+                 command: str = "", progress: Callable[[str], None] | None = None) -> dict:
+    """Run the benchmark, plot it to ``png_path`` and write the JSON report
+    (with ``command`` and the plot's path); returns the report."""
+    report = run(repeats=repeats, progress=progress)
+    report["command"] = command
+    report["png"] = str(plot(report, png_path))
+    write_json(json_path, report)
+    return report
+
+
+def text_report(report: dict, json_path: str | Path) -> list[str]:
+    """What ``telethermal bench physics`` prints of ``report``."""
+    d = report["default"]
+    b = report["batch_70x1s_1khz"]
+    db = report["databases_fingertip_7"]
+    return [f"default model: max relative flux error {d['max_rel_error']:.2e} over "
+            f"{d['window_s'][0]}-{d['window_s'][1]:g} s, "
+            f"{d['runtime_s_per_simulated_s'] * 1e3:.3f} ms per simulated second",
+            f"batch of {b['trials']} one-second trials at 1 kHz: {b['runtime_s']:.3f} s "
+            f"(+ {b['model_choice_s']:.3f} s choosing the models, once per scene)",
+            f"fingertip-7 databases: simulation {db['simulation_s']:.2f} s, "
+            f"with CSV files {db['with_csv_files_s']:.2f} s",
+            f"heat balance over 60 s: {report['heat_balance_60s']['relative_error']:.1e} relative",
+            f"wrote {json_path} and {report['png']}"]

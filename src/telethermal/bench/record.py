@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import run_session, with_finger
@@ -79,3 +80,25 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
                    f"{platform.python_implementation()} {platform.python_version()})",
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def run_and_save(json_path, rounds: int = 3, contact_s: float = 3.0, command: str = "",
+                 progress=None) -> dict:
+    """Run the benchmark and write the JSON report (with ``command``);
+    returns the report."""
+    report = run(rounds=rounds, contact_s=contact_s, progress=progress)
+    report["command"] = command
+    write_json(json_path, report)
+    return report
+
+
+def text_report(report: dict, json_path) -> list[str]:
+    """What ``telethermal bench record`` prints of ``report``."""
+    b, m = report["busy_mean_us"], report["deadline_misses"]
+    return [f"master loop busy per period: {b['without']:.0f} us without recording, "
+            f"{b['with']:.0f} us with: +{report['extra_busy_per_period_us']:.1f} us = "
+            f"{100 * report['cost_of_period_budget']:.1f} % of the 1 ms budget",
+            f"recorder call per period: p50 {report['log_call_p50_us']:.1f} us, p99 "
+            f"{report['log_call_p99_us']:.1f} us; deadline misses {m['without']} of "
+            f"{report['steps']['without']} without, {m['with']} of {report['steps']['with']} with",
+            f"wrote {json_path}"]

@@ -27,6 +27,7 @@ import numpy as np
 
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
+from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.bench.skin_floor import skin_floor
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
@@ -276,3 +277,59 @@ def plot(report: dict, out_png: str | Path) -> Path:
     fig.savefig(out_png, dpi=110)
     plt.close(fig)
     return out_png
+
+
+def run_and_save(json_path: str | Path, png_path: str | Path, quick: bool = False,
+                 command: str = "", progress: Callable[[str], None] | None = None) -> dict:
+    """Run the benchmark, plot it to ``png_path`` and write the JSON report
+    (with ``command`` and the plot's path); returns the report."""
+    report = run(progress=progress, quick=quick)
+    report["command"] = command
+    report["png"] = str(plot(report, png_path))
+    write_json(json_path, report)
+    return report
+
+
+def _skin_floor_line(floor: dict) -> str:
+    return (f"skin floor (seed {floor['seed']}, junction in {floor['band_c']} C), default "
+            "controller / any controller with the pad at the object's temperature / at the "
+            "band's bottom: "
+            + ", ".join(f"{m} {v['impedance_temp_rms_error_c']:.2f}/"
+                        f"{v['floor_idle_at_object']['temp_rms_error_c']:.2f}/"
+                        f"{v['floor_idle_at_band_bottom']['temp_rms_error_c']:.2f} K"
+                        for m, v in floor.items() if isinstance(v, dict)))
+
+
+def _controller_line(c: dict) -> str:
+    return f"controller {c['feedforward_model']} (mean/worst): " + ", ".join(
+        f"{m} flux {100 * v['mean_flux_rms_error_rel']:.2f}/"
+        f"{100 * v['max_flux_rms_error_rel']:.2f} % skin "
+        f"{v['mean_temp_rms_error_c']:.2f}/{v['max_temp_rms_error_c']:.2f} K"
+        for m, v in c["per_material"].items())
+
+
+def text_report(report: dict, json_path: str | Path) -> list[str]:
+    """What ``telethermal bench render`` prints of ``report``."""
+    lines = [f"{r['rate_hz']:6.0f} Hz: flux error after identification "
+             f"{100 * r['mean_flux_rms_error_rel']:.2f} % (max "
+             f"{100 * r['max_flux_rms_error_rel']:.2f} %), first second "
+             f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
+             f"{r['mean_temp_rms_error_c']:.2f} K, CPU {r['mean_cpu_s_per_simulated_s']:.3f} s/s, "
+             f"safety events {r['safety_events']}" for r in report["rate"]]
+    lines += [_controller_line(c) for c in report["controller"]]
+    lines.append(_skin_floor_line(report["skin_floor"]))
+    lines += [f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
+              f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin "
+              f"{r['mean_temp_rms_error_c']:.2f} K" for r in report["gains"]]
+    lines += [f"before identification {r['before']:5s}: first second "
+              f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
+              f"{r['mean_temp_rms_error_c']:.2f} K" for r in report["before"]]
+    if report["generator"]:
+        g = report["generator"]["rms_error_rel_of_peak"]
+        lines.append(f"generators on held-out persons: network {100 * g['network']:.2f} %, "
+                     f"closed form {100 * g['contact']:.2f} % RMS of peak")
+    lines += [f"real clock {r['rate_hz']:6.0f} Hz: period p50 {r['period_p50_us']:.0f} us, p99 "
+              f"{r['period_p99_us']:.0f} us, max {r['period_max_us']:.0f} us, deadline misses "
+              f"{r['deadline_misses']} of {r['steps']}, stalls {r['stalls']}"
+              for r in report["real_clock"]]
+    return lines + [f"wrote {json_path} and {report['png']}"]

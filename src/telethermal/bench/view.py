@@ -23,15 +23,16 @@ from pathlib import Path
 
 import numpy as np
 
+from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
+from telethermal.services.viewer import open_view
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.master import Phase
 from telethermal.teleop.run import with_finger
 from telethermal.view.browser import launch
-from telethermal.view.command import open_view
 
 MATERIAL = "graphite"
 MODES = ("no_view", "stream_no_page", "page_open")
@@ -176,3 +177,28 @@ def run_view_bench(touches: int = 3, contact_s: float = 3.0, progress=print,
                    f"{platform.python_implementation()} {platform.python_version()})",
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def run_and_save(json_path, touches: int = 3, contact_s: float = 3.0, progress=print,
+                 realtime_priority: int = REALTIME_PRIORITY) -> dict:
+    """:func:`run_view_bench`, its report written to ``json_path``."""
+    report = run_view_bench(touches=touches, contact_s=contact_s, progress=progress,
+                            realtime_priority=realtime_priority)
+    write_json(json_path, report)
+    return report
+
+
+def text_report(report: dict, json_path) -> list[str]:
+    """What ``telethermal bench view`` prints of ``report``."""
+    lines = [f"first paint {report['first_paint_s']:.2f} s after the server started; view lag "
+             f"p99 {1000 * report['lag_p99_s']:.0f} ms at {report['rate_hz']:.0f} Hz; master "
+             f"loop at SCHED_FIFO priority {report['realtime_priority']} (0: normal)"]
+    for mode, text in (("no_view", "no view stream"), ("stream_no_page", "stream, no page"),
+                       ("page_open", "page open")):
+        m = report["loop"][mode]
+        lines.append(f"  master loop, {text:15s}: busy {m['busy_mean_us']:.0f} us mean, "
+                     f"{m['busy_p99_us']:.0f} us p99; period p99 {m['period_p99_us']:.0f} us; "
+                     f"{m['deadline_misses']} of {m['steps']} deadlines missed")
+    call = report["publisher_call"]
+    return lines + [f"  the view stream's call per period alone: {call['mean_us']:.1f} us mean, "
+                    f"{call['p99_us']:.1f} us p99; wrote {json_path}"]

@@ -5,13 +5,17 @@ decisions and the cost of one decision."""
 from __future__ import annotations
 
 import time
+from contextlib import nullcontext
+from pathlib import Path
 
 import numpy as np
 
-from telethermal.data.dataset import Trial
+from telethermal.data.dataset import Trial, load_dataset
 from telethermal.ident.anytime import UNKNOWN, decide, decide_all
 from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials
+from telethermal.ident.registry import check_scene, dataset_scene, load_model
+from telethermal.jsonfile import write_json
 
 #: The first paper's merged classes (Table 1): metals, and graphite with rubber.
 FIRST_PAPER_MERGE = {"aluminium": "aluminium-steel", "steel": "aluminium-steel",
@@ -200,3 +204,35 @@ def plot_accuracy(reports: dict[str, dict], out_png, title: str = "") -> None:
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)
     plt.close(fig)
+
+
+def evaluate_saved(model_path: str | Path, data: str | Path, json_path: str | Path,
+                   png_path: str | Path, command: str = "", status=nullcontext) -> dict:
+    """Score the saved model ``model_path`` on the dataset folder ``data``
+    (refused when the dataset names another scene than the model's); the
+    report, with ``command``, goes to ``json_path``, the accuracy plot to
+    ``png_path``. ``status(text)``: a context manager held while evaluating."""
+    model = load_model(model_path)
+    scene_name = dataset_scene(data)
+    if scene_name is not None:
+        check_scene(model, scene_name, str(model_path))
+    with status(f"evaluating on {data}"):
+        report = evaluate(model, load_dataset(data))
+    report["command"] = command
+    write_json(json_path, report)
+    plot_accuracy({model.method: report}, png_path, f"{model_path} on {data}")
+    return report
+
+
+def text_report(report: dict, json_path, png_path) -> list[str]:
+    """What ``telethermal identify eval`` prints of ``report``."""
+    acc = ", ".join(f"{k} s {100 * v:.0f} %" for k, v in report["accuracy_by_window_s"].items())
+    lines = [f"accuracy: {acc}"]
+    d = report["decision_time_s"]
+    if d["n"]:
+        lines.append(f"decisions: {d['n']} committed, median {d['p50']:.2f} s, accuracy "
+                     f"{100 * report['decision_accuracy']:.1f} %; unknown "
+                     f"{100 * report['decision_unknown_rate']:.0f} %")
+    return lines + [f"inference p50 {report['inference_ms_p50']:.3f} ms, p99 "
+                    f"{report['inference_ms_p99']:.3f} ms",
+                    f"wrote {json_path} and {png_path}"]

@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import logging
+import time
+from contextlib import nullcontext
+from dataclasses import dataclass
 from pathlib import Path
 
+from telethermal.data.dataset import load_dataset
 from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.base import Identifier, read_model_file
 from telethermal.ident.methods import EffusivityLda, PcaFnn
+from telethermal.ident.prepare import MIN_GAP_K, from_trials
 from telethermal.ident.recurrent import Lstm, Rnn
 
+log = logging.getLogger(__name__)
 METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, EffusivityLda, Lstm,
                                                                 Rnn)}
 
@@ -53,3 +60,36 @@ def check_scene(model: Identifier, scene_name: str, where: str = "the identifier
         raise ModelFileError(f"{where} was trained and calibrated on scene {trained!r}; this "
                              f"runs scene {scene_name!r}. Train one on {scene_name!r} "
                              "(telethermal identify train) or run the scene it was made for")
+
+
+@dataclass(frozen=True)
+class Trained:
+    """A model fitted and saved by :func:`train_on_dataset`."""
+
+    model: Identifier
+    path: Path
+    skipped: list         # trials left out: a gap under MIN_GAP_K
+    train_s: float        # fitting and saving
+
+
+def train_on_dataset(data: str | Path, method: str, channels, max_window_s: float,
+                     out: str | Path, status=nullcontext, logger=log) -> Trained:
+    """Fit a ``method`` identifier on the dataset folder ``data`` and save it
+    to ``out``, with the dataset's scene (when it has a record of one).
+    ``status(text)``: a context manager held while reading and fitting;
+    ``logger`` warns of trials left out."""
+    with status(f"reading {data}"):
+        trials = load_dataset(data)
+    model = make(method, channels=channels, max_window_s=max_window_s)
+    contacts, skipped = from_trials(trials, model.channels, max_s=max_window_s)
+    if skipped:
+        logger.warning("%d trial(s) with a gap under %g K left out of training", len(skipped),
+                       MIN_GAP_K)
+    start = time.perf_counter()
+    with status(f"training {method} on {len(contacts)} trials"):
+        model.fit(contacts)
+    scene_name = dataset_scene(data)
+    if scene_name is not None:
+        model.scene_ = scene_name
+    path = model.save(out)
+    return Trained(model, Path(path), skipped, time.perf_counter() - start)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import json
 import math
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from telethermal.errors import TelethermalError, TransportError
@@ -80,6 +82,45 @@ def truth_for_touch(slave, material: str | None, object_c: float | None) -> dict
     if status.get("object_true_c") is None:
         return None
     return {"material": status["material"], "object_true_c": status["object_true_c"]}
+
+
+@dataclass
+class StatusPoll:
+    """What :func:`poll_status` saw: each answering role's status reply,
+    the lines describing them, whether the session is live, and the last
+    error of a role that did not answer."""
+
+    replies: dict = field(default_factory=dict)
+    lines: list = field(default_factory=list)
+    live: bool = True
+    error: TelethermalError | None = None
+
+
+def _poll_once(where: dict, roles) -> StatusPoll:
+    poll = StatusPoll()
+    for role in roles:
+        try:
+            poll.replies[role] = s = request(where[role], role, "status", timeout_s=1.0)
+            poll.lines += describe_status(s)
+            poll.live &= role == "slave" or (bool(s["peer_alive"]) and bool(s.get("session")))
+        except TelethermalError as exc:
+            poll.error = exc
+            poll.live = False               # a role that does not answer is not live
+            poll.lines.append(f"{role}: not reachable here ({exc})")
+    poll.live &= bool(poll.replies)
+    return poll
+
+
+def poll_status(where: dict, roles, wait_s: float = 0.0, every_s: float = 0.2) -> StatusPoll:
+    """Ask each of ``roles`` (at ``where[role]``) for its status, again every
+    ``every_s`` until the session is live (every role answered; the master
+    with a live peer and a session) or ``wait_s`` has passed."""
+    end = time.monotonic() + wait_s
+    while True:
+        poll = _poll_once(where, roles)
+        if poll.live or time.monotonic() >= end:
+            return poll
+        time.sleep(every_s)
 
 
 def _ms(value) -> str:

@@ -10,12 +10,17 @@ import socket
 import subprocess
 import sys
 import time
+from contextlib import nullcontext
+from dataclasses import dataclass
 from pathlib import Path
 
 from telethermal.errors import TelethermalError, TransportError
+from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
+from telethermal.services.viewer import open_view
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
+from telethermal.view.server import ViewServer
 from telethermal.wire.transport import generate_link_keys
 
 
@@ -297,7 +302,6 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         else:
             echo(f"slave's object thermometer NOT calibrated: {cal.get('error')}")
         if view_port is not None:
-            from telethermal.view.command import open_view
             view = open_view(master_cfg, record_dir, view_port)
             echo(f"view: {view.url}")
         # Each material once, then the first again: the slave remembers what it
@@ -318,3 +322,114 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
             "slave_thermometer_calibration": cal,
             "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports)),
             **({"view": view} if view is not None else {})}
+
+
+#: The demo's materials when none are named (those of them the scene has).
+DEMO_MATERIALS = ("aluminium", "plexiglass", "wood")
+
+
+@dataclass
+class DemoResult:
+    """What :func:`demo` leaves: its summary (as written to ``demo.json``)
+    and the live view, still running, if one was asked for."""
+
+    report: dict
+    view: ViewServer | None = None
+
+    @property
+    def ok(self) -> bool:
+        """Both services stopped with exit code 0."""
+        return all(c == 0 for c in self.report["exit_codes"].values())
+
+
+def demo_materials(scene, materials=None) -> list[str]:
+    """``materials`` as given, or those of :data:`DEMO_MATERIALS` the scene
+    has (its first three if none)."""
+    if materials is not None:
+        return list(materials)
+    return [m for m in DEMO_MATERIALS if m in scene.materials] or scene.materials[:3]
+
+
+def demo_identify(scene, out: Path, seed: int, echo=print):
+    """Train telethermal's identifier on ``out/databases/pad`` and score it
+    on fresh trials of the same scene (seed ``seed + 1``): writes
+    ``identifier.npz``, ``identify.json`` and ``identify.png`` in ``out``,
+    echoes one line; returns the model."""
+    import numpy as np
+
+    from telethermal.data.dataset import load_dataset
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.evaluate import evaluate, plot_accuracy
+    from telethermal.ident.prepare import from_trials
+    from telethermal.ident.registry import make
+
+    model = make("effusivity-lda").fit(from_trials(load_dataset(out / "databases" / "pad"))[0])
+    model.scene_ = scene.name
+    model.save(out / "identifier.npz")
+    report = evaluate(model, pad_database(scene, np.random.default_rng(seed + 1)))
+    write_json(out / "identify.json", report)
+    plot_accuracy({model.method: report}, out / "identify.png",
+                  f"{scene.name}: trained on seed {seed}, tested on seed {seed + 1}")
+    acc = report["accuracy_by_window_s"]
+    echo(f"identification ({model.method}, fresh trials): "
+         + ", ".join(f"{k} s {100 * v:.0f} %" for k, v in acc.items() if k in ("0.2", "0.5", "1.0"))
+         + f"; 5 merged classes at 1 s {100 * report.get('accuracy_5_at_end', float('nan')):.0f} %"
+         + f"; decisions {report['decision_time_s']['n']}/{report['trials']} committed")
+    return model
+
+
+def _no_progress(_total: int, _what: str):
+    return nullcontext(None)
+
+
+def _demo_models(scene, out: Path, seed: int, echo, progress, status) -> None:
+    """The demo's databases (and their plot), identifier and generator in ``out``."""
+    from telethermal.data.dataset import load_dataset
+    from telethermal.data.generate import generate_databases
+    from telethermal.data.plots import plot_datasets
+    from telethermal.render.generator import NetworkGenerator, save_generator
+
+    start = time.perf_counter()
+    with progress(2, "generating") as advance:
+        summary = generate_databases(scene, out / "databases", seed=seed, overwrite=True,
+                                     progress=advance)
+    echo(f"databases in {time.perf_counter() - start:.1f} s: "
+         + ", ".join(f"{k} {v['trials']} trials" for k, v in summary["datasets"].items()))
+    echo(f"plot: {plot_datasets(out / 'databases', out / 'databases.png')}")
+    demo_identify(scene, out, seed, echo)
+    with status("training the flux generator on database 2"):
+        save_generator(NetworkGenerator().fit(load_dataset(out / "databases" / "finger")),
+                       out / "generator.npz")
+
+
+def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed: int = 0,
+         contact_s: float = 5.0, record_dir: str | Path | None = None,
+         view_port: int | None = None, devices: str = "sim", json_path=None, echo=print,
+         progress=_no_progress, status=nullcontext) -> DemoResult:
+    """``telethermal demo``: the scene's databases, an identifier and a flux
+    generator trained on them, then slave and master as two processes on
+    loopback and a touch on each material (:func:`run_demo`); the summary
+    goes to ``json_path`` (default ``out/demo.json``). ``echo`` takes each
+    line to show; ``progress(total, what)`` and ``status(text)`` are context
+    managers held around the long steps (the first yields a callable taking
+    a step's label)."""
+    from telethermal.physics.scene import describe_models, load_scene
+
+    out = Path(out)
+    scene = with_finger(load_scene(scene_name))
+    echo(f"scene {scene.name}: {scene.description.splitlines()[0]}")
+    for side, material, choice in describe_models(scene):
+        echo(f"  {side:6s} on {material:10s} {choice.describe()}")
+    _demo_models(scene, out, seed, echo, progress, status)
+    report = run_demo(out, scene_name, out / "identifier.npz", out / "generator.npz",
+                      demo_materials(scene, materials), seed=seed, contact_s=contact_s,
+                      echo=echo, record_dir=Path(record_dir) if record_dir else None,
+                      view_port=view_port, devices=devices)
+    view = report.pop("view", None)
+    path = write_json(json_path or out / "demo.json", report)
+    echo(f"touch plots: {out}/touch-*.png; summary: {path}")
+    if record_dir:
+        files = sorted(Path(record_dir).glob("*.mcap"))
+        echo(f"recordings: {', '.join(str(f) for f in files)} "
+             f"(telethermal replay FILE --out DIR [--touch N])")
+    return DemoResult(report, view)

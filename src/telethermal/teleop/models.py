@@ -3,13 +3,15 @@ memory), when no saved identifier or generator is given."""
 
 from __future__ import annotations
 
+from contextlib import nullcontext
+
 import numpy as np
 
 from telethermal.data.generate import finger_database, pad_database
 from telethermal.ident.prepare import from_trials
-from telethermal.ident.registry import make
+from telethermal.ident.registry import load_model, make
 from telethermal.physics.scene import Scene
-from telethermal.render.generator import NetworkGenerator
+from telethermal.render.generator import NetworkGenerator, load_generator
 
 
 def train_identifier(scene: Scene, seed: int = 0, method: str = "effusivity-lda"):
@@ -28,6 +30,23 @@ def train_generator(scene: Scene, seed: int = 0):
     ``telethermal bench render``, ``generator`` section)."""
     trials = finger_database(scene, np.random.default_rng(seed + 1000))
     return NetworkGenerator().fit(trials)
+
+
+def session_models(scene: Scene, identifier_path=None, generator_path=None, seed: int = 0,
+                   status=nullcontext):
+    """The saved identifier and generator, or, where no path is given, one
+    trained on ``scene``'s databases (simulated in memory with ``seed``).
+    ``status(text)``: a context manager held while each loads or trains (a
+    console's spinner, say)."""
+    with status("identifier: " + ("loading" if identifier_path else
+                                  f"training on {scene.name}'s pad database")):
+        identifier = load_model(identifier_path) if identifier_path else \
+            train_identifier(scene, seed)
+    with status("generator: " + ("loading" if generator_path else
+                                 f"training on {scene.name}'s finger database")):
+        generator = load_generator(generator_path) if generator_path else \
+            train_generator(scene, seed)
+    return identifier, generator
 
 
 def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0) -> list:

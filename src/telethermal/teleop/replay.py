@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import math
 import tempfile
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
+from telethermal.jsonfile import write_json
 from telethermal.record.recorder import periods
 from telethermal.record.recording import RecordingError, read_recording
 from telethermal.teleop.master import Phase
@@ -306,3 +307,27 @@ def _plot_slave(result: dict, path) -> Path:
     fig.suptitle(f"replay of {Path(result['summary']['file']).name}, contact "
                  f"{result['summary']['contact_id']} (slave)", fontsize=10)
     return _save(fig, path)
+
+
+def replay_to_folder(path, out: str | Path, identifier_path=None, generator_path=None,
+                     gains_kp_ki_kd: tuple[float, float, float] | None = None,
+                     touch: int = 0) -> tuple[dict, Path]:
+    """:func:`replay` with models loaded from files and new PID gains (the
+    recorded ones where None); writes ``out/replay.json`` (the summary) and
+    the plot. Returns the summary and the plot's path."""
+    from telethermal.ident.registry import load_model
+    from telethermal.render.generator import load_generator
+    from telethermal.teleop.master import DEFAULT_GAINS
+
+    identifier = load_model(identifier_path) if identifier_path else None
+    generator = load_generator(generator_path) if generator_path else None
+    gains = None
+    if gains_kp_ki_kd is not None:
+        kp, ki, kd = gains_kp_ki_kd
+        gains = replace(DEFAULT_GAINS, kp=kp, ki=ki, kd=kd)
+    result = replay(path, identifier, generator, gains, touch=touch)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    png = plot_replay(result, out / "replay.png")
+    write_json(out / "replay.json", result["summary"])
+    return result["summary"], png

@@ -32,6 +32,8 @@ STATIC = {"index.html": "text/html; charset=utf-8", "view.js": "text/javascript;
           "view.css": "text/css; charset=utf-8"}
 #: Seconds between SSE comments on an idle stream (finds closed tabs).
 KEEPALIVE_S = 1.0
+#: The view's HTTP port on 127.0.0.1 unless one is given.
+DEFAULT_PORT = 8050
 
 
 def _static(name: str) -> bytes:

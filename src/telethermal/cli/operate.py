@@ -1,18 +1,18 @@
 """The operator's subcommands of ``telethermal``: ``admin`` (operate a
 session), ``check`` (preflight of a service's set-up) and ``models`` (the
-slave host's identifier and generator). ``cli.py`` registers them with
-:func:`register`; printing is here, the work in the modules they call."""
+slave host's identifier and generator); printing is here, the work in the
+modules they call."""
 
 from __future__ import annotations
 
 import json
-import time
 
 from telethermal.errors import TelethermalError
 from telethermal.services import admin_client as ac
 
 
-def register(sub) -> None:
+def add_parsers(sub) -> None:
+    """admin, check, models."""
     _admin_parser(sub)
     p = sub.add_parser("check", help="preflight: a service's config, keys, allowed folder, "
                                      "model files and the peer's reachability")
@@ -85,25 +85,11 @@ def cmd_admin(args) -> int:
 
 def _status(args, where) -> int:
     roles = ("slave", "master") if args.role == "both" else (args.role,)
-    end = time.monotonic() + args.wait
-    while True:
-        replies, lines, live, error = {}, [], True, None
-        for role in roles:
-            try:
-                replies[role] = s = ac.request(where[role], role, "status", timeout_s=1.0)
-                lines += ac.describe_status(s)
-                live &= role == "slave" or (bool(s["peer_alive"]) and bool(s.get("session")))
-            except TelethermalError as exc:
-                error = exc
-                lines.append(f"{role}: not reachable here ({exc})")
-        live &= bool(replies)
-        if live or time.monotonic() >= end:
-            break
-        time.sleep(0.2)
-    if error is not None and args.role != "both":
-        raise error
-    _show(args, replies, lines)
-    return 0 if live or not args.wait else 1
+    poll = ac.poll_status(where, roles, args.wait)
+    if poll.error is not None and args.role != "both":
+        raise poll.error
+    _show(args, poll.replies, poll.lines)
+    return 0 if poll.live or not args.wait else 1
 
 
 def _place(args, where) -> int:

@@ -1,0 +1,50 @@
+"""The ``telethermal`` command."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from telethermal import __version__
+from telethermal.cli import bench, data, identify, operate, run, services, view
+from telethermal.cli._common import console
+from telethermal.errors import TelethermalError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Every command, each group's from its module (in the order ``--help``
+    lists them)."""
+    parser = argparse.ArgumentParser(prog="telethermal", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"telethermal {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = parser.add_subparsers(dest="command", required=True)
+    data.add_scenes(sub)
+    data.add_dataset(sub)
+    services.add_peltier_emulator(sub)
+    run.add_replay(sub)
+    data.add_simulate(sub)
+    bench.add_parser(sub)
+    identify.add_parser(sub)
+    run.add_session(sub)
+    services.add_parsers(sub)                # slave, master, faults, keys
+    operate.add_parsers(sub)                 # admin, check, models
+    run.add_demo(sub)
+    view.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    service = args.command in ("slave", "master")
+    logging.basicConfig(level=logging.INFO if args.verbose or service else logging.WARNING,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s" if service
+                        else "%(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except TelethermalError as exc:
+        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        return 2
+    except KeyboardInterrupt:
+        console.print("interrupted")
+        return 130
+

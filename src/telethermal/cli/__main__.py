@@ -1,0 +1,5 @@
+import sys
+
+from telethermal.cli import main
+
+sys.exit(main())

@@ -1,0 +1,69 @@
+"""What the command groups share: the console and logger, the progress bar,
+the command line as typed, and the argument types."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+log = logging.getLogger("telethermal")
+console = Console(stderr=True)
+
+
+@contextmanager
+def _progress(total: int, what: str):
+    """A rich progress bar on stderr; ``advance(label)`` moves it on."""
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(),
+                  console=console, transient=True, disable=not console.is_terminal) as bar:
+        task = bar.add_task(what, total=total)
+
+        def advance(label: str):
+            bar.update(task, advance=1, description=f"{what}: {label}")
+        yield advance
+
+
+def _command() -> str:
+    """The command line as typed, for the reports."""
+    return "telethermal " + " ".join(sys.argv[1:])
+
+
+def _png(args) -> Path:
+    """``--png``, or the JSON's path with ``.png``."""
+    return args.png or Path(args.json).with_suffix(".png")
+
+
+def _print_lines(lines: list[str]) -> None:
+    for line in lines:
+        print(line)
+
+
+def _positive(kind=float):
+    """An argument type: a positive, finite ``kind``."""
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from exc
+        if not (value > 0 and math.isfinite(value)):
+            raise argparse.ArgumentTypeError(f"{text!r} must be positive and finite")
+        return value
+    return parse
+
+
+def _finite(text):
+    """An argument type: a finite float."""
+    try:
+        value = float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from exc
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} must be finite")
+    return value

@@ -1,0 +1,193 @@
+"""``telethermal bench ...``: each benchmark runs, writes its report and
+prints its figures (the work is in ``telethermal.bench``)."""
+
+from __future__ import annotations
+
+from telethermal.cli._common import _command, _png, _positive, _print_lines, _progress
+
+
+def cmd_bench_physics(args) -> int:
+    from telethermal.bench import physics
+
+    with _progress(6, "bench physics") as advance:
+        report = physics.run_and_save(args.json, _png(args), repeats=args.repeats,
+                                      command=_command(), progress=advance)
+    _print_lines(physics.text_report(report, args.json))
+    return 0
+
+
+def cmd_bench_render(args) -> int:
+    from telethermal.bench import render
+
+    with _progress(7, "bench render") as advance:
+        report = render.run_and_save(args.json, _png(args), quick=args.quick,
+                                     command=_command(), progress=advance)
+    _print_lines(render.text_report(report, args.json))
+    return 0
+
+
+def cmd_bench_devices(args) -> int:
+    from telethermal.bench import devices
+
+    with _progress(3, "bench devices") as advance:
+        report = devices.run_and_save(args.json, n=args.samples, contact_s=args.contact_s,
+                                      slave_trials=args.slave_trials, command=_command(),
+                                      progress=advance)
+    _print_lines(devices.text_report(report, args.json))
+    return 0
+
+
+def cmd_bench_record(args) -> int:
+    from telethermal.bench import record
+
+    with _progress(2 * args.rounds, "bench record") as advance:
+        report = record.run_and_save(args.json, rounds=args.rounds, contact_s=args.contact_s,
+                                     command=_command(), progress=advance)
+    _print_lines(record.text_report(report, args.json))
+    return 0
+
+
+def cmd_bench_report(args) -> int:
+    from telethermal.bench.report import write_report
+
+    path = write_report(args.results, args.out, _command())
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_bench_transport(args) -> int:
+    from telethermal.bench import transport
+
+    with _progress(2, "bench transport") as advance:
+        report = transport.run_and_save(args.json, command=_command(), progress=advance)
+    _print_lines(transport.text_report(report, args.json))
+    return 0
+
+
+def cmd_bench_faults(args) -> int:
+    from telethermal.bench import faults, faults_sim
+    from telethermal.jsonfile import write_json
+
+    with _progress(len(faults_sim.ROWS) + len(faults.SETTINGS) + 1, "bench faults") as advance:
+        report = faults.run(progress=advance, quick=args.quick, only=args.only,
+                            seeds=args.seeds, processes=not args.no_processes, jobs=args.jobs)
+    traces = report.pop("_traces")
+    report["command"] = _command()
+    png = faults.plot(report, traces, _png(args))
+    report["png"] = str(png)
+    write_json(args.json, report)
+    _print_lines(faults.text_report(report))
+    print(f"wrote {args.json} and {png}")
+    return 0
+
+
+def cmd_bench_identify(args) -> int:
+    from telethermal.bench import identify
+
+    methods = args.methods.split(",") if args.methods else None
+    png = _png(args)
+    with _progress(5 * len(methods or identify.METHODS) + 3, "bench identify") as advance:
+        report = identify.run_and_save(args.json, png, seed=args.seed, methods=methods,
+                                       command=_command(), progress=advance)
+    _print_lines(identify.text_report(report, args.json, png))
+    return 0
+
+
+def cmd_bench_view(args) -> int:
+    from telethermal.bench import view
+
+    report = view.run_and_save(args.json, touches=args.touches, contact_s=args.contact_s,
+                               progress=lambda m: print(m, flush=True),
+                               realtime_priority=args.realtime_priority)
+    _print_lines(view.text_report(report, args.json))
+    return 0
+
+
+def _add_speed(bsub) -> None:
+    """physics, transport, report, record, devices."""
+    p = bsub.add_parser("physics", help="contact models: error against runtime")
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--png", help="plot (default: beside the JSON)")
+    p.add_argument("--repeats", type=_positive(int), default=3)
+    p.set_defaults(func=cmd_bench_physics)
+
+    p = bsub.add_parser("transport", help="codec cost; one-way latency beside raw pyzmq on "
+                                          "loopback and across network namespaces")
+    p.add_argument("--json", required=True)
+    p.set_defaults(func=cmd_bench_transport)
+
+    p = bsub.add_parser("report", help="every benchmark's JSON in one Markdown report with "
+                                       "its figures")
+    p.add_argument("--results", required=True, help="folder of the benches' JSON files")
+    p.add_argument("--out", required=True, help="report.md (its PNGs are written beside it)")
+    p.set_defaults(func=cmd_bench_report)
+
+    p = bsub.add_parser("record", help="what recording costs the master's 1 kHz loop")
+    p.add_argument("--json", required=True)
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--contact-s", type=_positive(), default=3.0)
+    p.set_defaults(func=cmd_bench_record)
+
+    p = bsub.add_parser("devices", help="both sides' latencies through the emulated serial "
+                                        "and CAN paths beside the direct simulator, and the "
+                                        "slave's identification through its drivers")
+    p.add_argument("--json", required=True)
+    p.add_argument("--samples", type=int, default=3000)
+    p.add_argument("--contact-s", type=_positive(), default=3.0)
+    p.add_argument("--slave-trials", type=int, default=10,
+                   help="touches per material on the slave's side (simulated and through the "
+                        "emulated drivers, the same trials)")
+    p.set_defaults(func=cmd_bench_devices)
+
+
+def _add_faults(bsub) -> None:
+    p = bsub.add_parser("faults", help="rendering under network faults, compensated beside "
+                                       "naive (processes and the fault proxy)")
+    p.add_argument("--json", required=True)
+    p.add_argument("--png", help="the Jepsen-style plot (default: next to the JSON)")
+    p.add_argument("--quick", action="store_true",
+                   help="the zero-delay and 200 ms rows, 2 seeds; processes on one material")
+    p.add_argument("--only", help="comma-separated parts of setting names to run "
+                                  "(e.g. 'crash,partition'); 'delay 0 ms' is always run")
+    p.add_argument("--seeds", type=int, help="seeds per material on the simulated clock "
+                                             "(default 5; 2 with --quick)")
+    p.add_argument("--jobs", type=int, default=2,
+                   help="worker processes for the simulated rows (default 2)")
+    p.add_argument("--no-processes", action="store_true",
+                   help="the simulated part only (no services, no fault proxy)")
+    p.set_defaults(func=cmd_bench_faults)
+
+
+def _add_error(bsub) -> None:
+    """render, identify, view."""
+    p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "
+                                       "the loop on the real clock")
+    p.add_argument("--json", required=True)
+    p.add_argument("--png")
+    p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
+    p.set_defaults(func=cmd_bench_render)
+
+    p = bsub.add_parser("identify", help="the papers' identification tables, ours beside")
+    p.add_argument("--json", required=True)
+    p.add_argument("--png")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--methods", help="comma-separated (default: all)")
+    p.set_defaults(func=cmd_bench_identify)
+
+    p = bsub.add_parser("view", help="the view's first paint, its lag at 1 kHz, and the "
+                                     "master's loop timing with and without the page")
+    p.add_argument("--json", required=True)
+    p.add_argument("--touches", type=int, default=3)
+    p.add_argument("--contact-s", type=float, default=3.0)
+    p.add_argument("--realtime-priority", type=int, default=20,
+                   help="the master loop's SCHED_FIFO priority, as in the demo (0: normal "
+                        "scheduling, where the browser competes with the loop for the CPU)")
+    p.set_defaults(func=cmd_bench_view)
+
+
+def add_parser(sub) -> None:
+    bench = sub.add_parser("bench", help="benchmarks: speed against error")
+    bsub = bench.add_subparsers(dest="bench_command", required=True)
+    _add_speed(bsub)
+    _add_faults(bsub)
+    _add_error(bsub)

@@ -1,0 +1,138 @@
+"""``telethermal scenes``, ``dataset generate|show|validate|import`` and
+``simulate``."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from telethermal.cli._common import _finite, _positive, _progress, console, log
+
+
+def cmd_scenes(args) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from telethermal.physics.scene import describe_models, list_scenes, load_scene
+
+    table = Table(title="shipped scenes")
+    for col in ("name", "pad", "rate (Hz)", "objects", "finger"):
+        table.add_column(col)
+    for name in list_scenes():
+        scene = load_scene(name)
+        table.add_row(name, scene.pad.kind, f"{scene.sample_rate_hz:g}",
+                      ", ".join(scene.materials), "yes" if scene.finger else "no")
+        if args.verbose:
+            for side, material, choice in describe_models(scene):
+                table.add_row("", side, "", material, choice.describe())
+    Console().print(table)
+    return 0
+
+
+def cmd_dataset_generate(args) -> int:
+    from telethermal.data.generate import generate_databases
+    from telethermal.physics.scene import describe_models, load_scene
+
+    scene = load_scene(args.scene)
+    for side, material, choice in describe_models(scene):
+        log.info("%s on %s: %s", side, material, choice.describe())
+    parts = 2 if scene.finger is not None else 1
+    start = time.perf_counter()
+    with _progress(parts, f"generating {scene.name}") as advance:
+        summary = generate_databases(scene, args.out, seed=args.seed, overwrite=args.force,
+                                     progress=advance)
+    for name, info in summary["datasets"].items():
+        print(f"{Path(args.out) / name}: {info['trials']} trials of "
+              f"{', '.join(info['materials'])}")
+    print(f"done in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def cmd_dataset_show(args) -> int:
+    from telethermal.data.plots import plot_datasets
+
+    with console.status(f"reading and plotting {args.dir}"):
+        png = plot_datasets(args.dir, args.out)
+    print(png)
+    return 0
+
+
+def cmd_dataset_validate(args) -> int:
+    from telethermal.data.dataset import load_dataset
+
+    with console.status(f"reading {args.dir}"):
+        trials = load_dataset(args.dir)
+    materials = sorted({t.material for t in trials})
+    channels = sorted({c for t in trials for c in t.channels})
+    print(f"{args.dir}: {len(trials)} trials, materials {', '.join(materials)}; "
+          f"channels {', '.join(channels)}")
+    return 0
+
+
+def cmd_dataset_import(args) -> int:
+    from telethermal.record.importer import import_recordings
+
+    before, after = import_recordings(args.recordings, args.into, args.material, args.group)
+    print(f"{args.into}: {before} trials before, {after} now")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    from telethermal.data.dataset import write_dataset
+    from telethermal.data.generate import single_contact
+
+    trial = single_contact(args.pad, args.object, args.pad_temp_c, args.object_temp_c,
+                           args.seconds, args.rate_hz, ideal=args.ideal, seed=args.seed,
+                           contact_conductance_w_m2k=args.contact_conductance_w_m2k)
+    write_dataset(args.out, [trial], overwrite=args.force)
+    print(f"{Path(args.out) / trial.file}: {len(trial.channels['t_s'])} samples")
+    return 0
+
+
+def add_scenes(sub) -> None:
+    p = sub.add_parser("scenes", help="list the shipped scenes")
+    p.add_argument("--verbose", "-v", action="store_true", help="show each contact's model")
+    p.set_defaults(func=cmd_scenes)
+
+
+def add_dataset(sub) -> None:
+    ds = sub.add_parser("dataset", help="generate, show or validate datasets")
+    dsub = ds.add_subparsers(dest="dataset_command", required=True)
+    p = dsub.add_parser("generate", help="write a scene's databases (pad/ and finger/)")
+    p.add_argument("--scene", required=True, help="shipped scene name or TOML path")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    p.set_defaults(func=cmd_dataset_generate)
+    p = dsub.add_parser("show", help="plot a dataset (or a folder of datasets)")
+    p.add_argument("dir")
+    p.add_argument("--out", required=True, help="PNG to write")
+    p.set_defaults(func=cmd_dataset_show)
+    p = dsub.add_parser("validate", help="read and check every file of a dataset")
+    p.add_argument("dir")
+    p.set_defaults(func=cmd_dataset_validate)
+
+    p = dsub.add_parser("import", help="add recorded slave contacts to a dataset "
+                                       "(identification database)")
+    p.add_argument("recordings", nargs="+", help="MCAP recordings (session or slave)")
+    p.add_argument("--into", required=True, help="dataset folder (created if absent)")
+    p.add_argument("--material", help="the material touched (required for lab recordings)")
+    p.add_argument("--group", default="recorded")
+    p.set_defaults(func=cmd_dataset_import)
+
+
+def add_simulate(sub) -> None:
+    p = sub.add_parser("simulate", help="one contact between two semi-infinite bodies")
+    p.add_argument("--pad", required=True, help="material of the pad (or finger: skin)")
+    p.add_argument("--object", required=True, help="material of the object")
+    p.add_argument("--pad-temp-c", type=_finite, required=True)
+    p.add_argument("--object-temp-c", type=_finite, required=True)
+    p.add_argument("--seconds", type=_positive(), required=True)
+    p.add_argument("--rate-hz", type=_positive(), required=True)
+    p.add_argument("--out", required=True, help="output dataset folder")
+    p.add_argument("--ideal", action="store_true",
+                   help="perfect contact, no sensor, no noise: the closed form")
+    p.add_argument("--contact-conductance-w-m2k", type=_positive(), default=3000.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    p.set_defaults(func=cmd_simulate)

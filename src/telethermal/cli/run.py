@@ -1,0 +1,168 @@
+"""``telethermal demo``, ``session`` and ``replay``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from telethermal.cli._common import _positive, _progress, console
+from telethermal.errors import TelethermalError
+from telethermal.jsonfile import write_json
+
+
+def cmd_demo(args) -> int:
+    """The main job on the default scene: databases, identifier and generator
+    trained on them, then slave and master as two processes on loopback and
+    a touch on each of several materials."""
+    from telethermal.services.demo import demo
+    from telethermal.services.viewer import serve_until_signal
+
+    result = demo(args.out, args.scene,
+                  [m for m in args.materials.split(",") if m] if args.materials else None,
+                  seed=args.seed, contact_s=args.contact_s, record_dir=args.record,
+                  view_port=args.view, devices=args.devices, json_path=args.json,
+                  progress=_progress, status=console.status)
+    if result.view is not None:
+        print(f"the view stays up at {result.view.url} (recordings play there); Ctrl-C to "
+              "stop", flush=True)
+        serve_until_signal(result.view)
+    return 0 if result.ok else 1
+
+
+def _session_lines(s: dict, scene_name: str, args) -> list[str]:
+    decided = (f"{s['identified']} at {s['decision_time_s']:.2f} s ({s['decision_reason']})"
+               if s["decision_time_s"] is not None else "no decision")
+    lines = [f"{s['material']} on {scene_name}: slave identified {decided}; rendered flux error "
+             f"{100 * s['flux_rms_error_rel']:.2f} % of peak after identification, "
+             f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second; skin "
+             f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}"]
+    if args.realtime:
+        loop = s["loop"]
+        lines.append(f"real clock at {args.rate_hz:g} Hz: period p50 "
+                     f"{loop['period_p50_us']:.0f} us, p99 {loop['period_p99_us']:.0f} us, max "
+                     f"{loop['period_max_us']:.0f} us, {loop['deadline_misses']} deadline "
+                     f"misses, {loop['stalls']} stalls")
+    if args.record:
+        r = s["recording"]
+        lines.append(f"recorded {r['written']} messages to {r['path']}"
+                     + (f"; {r['error']}" if r["error"] else ""))
+    return lines + [f"wrote {args.json}" + (f" and {args.plot}" if args.plot else "")]
+
+
+def cmd_session(args) -> int:
+    """One touch, slave and master in one process; JSON and Fig. 3 plot."""
+    from telethermal.physics.scene import load_scene
+    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.models import session_models
+    from telethermal.teleop.plots import plot_session
+    from telethermal.teleop.run import run_session, with_finger
+
+    scene = load_scene(args.scene)
+    if scene.finger is None:
+        console.print(f"scene {scene.name} has no [finger]: the operator is the default "
+                      "fingertip (33 C, nominal skin)")
+    scene = with_finger(scene)
+    identifier, generator = session_models(scene, args.identifier, args.generator, args.seed,
+                                           status=console.status)
+    config = DisplayConfig(rate_hz=args.rate_hz, before=args.before,
+                           feedforward_model=args.controller)
+    result = run_session(scene, args.material, identifier, generator, config,
+                         contact_s=args.contact_s, seed=args.seed, realtime=args.realtime,
+                         devices=args.devices, record=args.record)
+    write_json(args.json, result.summary)
+    if args.plot:
+        plot_session(result, args.plot)
+    for line in _session_lines(result.summary, scene.name, args):
+        print(line)
+    return 0
+
+
+def _gains(text: str | None) -> tuple[float, float, float] | None:
+    if not text:
+        return None
+    try:
+        kp, ki, kd = (float(x) for x in text.split(","))
+    except ValueError as exc:
+        raise TelethermalError(f"--gains {text!r}: give kp,ki,kd") from exc
+    return kp, ki, kd
+
+
+def cmd_replay(args) -> int:
+    """Re-run the rendering and the identifier on a recording, and plot it."""
+    from telethermal.teleop.replay import replay_to_folder
+
+    s, png = replay_to_folder(args.file, args.out, args.identifier, args.generator,
+                              _gains(args.gains), touch=args.touch)
+    if "periods" in s:
+        verdict = "identical to the recording, sample for sample" if s["identical"] else \
+            f"junction differs from the recording by up to {s['junction_max_abs_diff_c']:.3g} K"
+        print(f"{s['periods']} periods replayed: {verdict}")
+    if s.get("slave"):
+        sl = s["slave"]
+        print(f"slave: now {sl['identified']} at {sl['decision_time_s']}, recorded "
+              f"{sl['recorded_identified']} at {sl['recorded_decision_time_s']}")
+    if s["truncated"]:
+        print(f"the recording was cut: read up to the cut ({s['truncated']})")
+    for note in s["notes"]:
+        print(f"note: {note}")
+    print(f"wrote {Path(args.out) / 'replay.json'} and {png}")
+    return 0
+
+
+def add_replay(sub) -> None:
+    p = sub.add_parser("replay", help="re-run the rendering and the identifier on a recording "
+                                      "(new models or gains) and plot the session")
+    p.add_argument("file")
+    p.add_argument("--out", required=True)
+    p.add_argument("--identifier", help="identifier model instead of the recorded one")
+    p.add_argument("--generator", help="generator model instead of the recorded one")
+    p.add_argument("--gains", help="kp,ki,kd instead of the recorded gains")
+    p.add_argument("--touch", type=int, default=0, help="which touch of a service's "
+                                                        "recording (0: the first)")
+    p.set_defaults(func=cmd_replay)
+
+
+def add_session(sub) -> None:
+    p = sub.add_parser("session", help="one telepresence touch, slave and master in one "
+                                       "process on the simulator")
+    p.add_argument("--scene", default="fingertip-7", help="shipped scene name or TOML path")
+    p.add_argument("--material", required=True, help="the remote object's material")
+    p.add_argument("--json", required=True, help="summary to write")
+    p.add_argument("--plot", help="PNG of flux and temperature against direct contact")
+    p.add_argument("--identifier", help="saved identifier (.npz); default: train one")
+    p.add_argument("--generator", help="saved flux generator (.npz); default: train one")
+    p.add_argument("--rate-hz", type=_positive(), default=1000.0, help="display loop rate")
+    p.add_argument("--before", choices=("prior", "hold"), default="prior",
+                   help="before identification: track the posterior-weighted flux (prior) "
+                        "or hold the pad at the object temperature (hold, the paper's)")
+    p.add_argument("--controller", choices=("impedance", "static"), default="impedance",
+                   help="impedance: the pad's surface behaves as the object's (default); "
+                        "static: the flux PID on the generator's flux")
+    p.add_argument("--contact-s", type=_positive(), default=5.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--realtime", action="store_true",
+                   help="run the master loop on the real clock and report its timing")
+    p.add_argument("--record", help="record the session to this MCAP file")
+    p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
+                   help="sim: the simulator directly; emulated: the display's sensor board on "
+                        "a pty and its Peltier driver on a virtual CAN bus, through the drivers")
+    p.set_defaults(func=cmd_session)
+
+
+def add_demo(sub) -> None:
+    p = sub.add_parser("demo", help="run the main job on the default scene: master and slave "
+                                    "as two processes on loopback, a touch per material")
+    p.add_argument("--scene", default="fingertip-7")
+    p.add_argument("--out", default="out/demo")
+    p.add_argument("--json", help="per-touch summary (default: OUT/demo.json)")
+    p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
+    p.add_argument("--contact-s", type=_positive(), default=5.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
+                   help="emulated: master and slave each on emulated boards (ptys) and CAN "
+                        "drivers (virtual buses), read through the drivers")
+    p.add_argument("--record", metavar="DIR", help="both services record every touch here "
+                                                   "(one MCAP file per host; see replay)")
+    p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
+                   help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
+                        "(default 8050); it stays up after the touches until Ctrl-C")
+    p.set_defaults(func=cmd_demo)

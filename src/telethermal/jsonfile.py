@@ -1,0 +1,30 @@
+"""JSON reports (benchmarks, evaluations, sessions): NaN and infinities
+written as null, written through a temporary file (a failure leaves the old
+file or none, never half of one)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+
+def json_safe(value):
+    """NaN and infinities become null (JSON has neither): "not measured"."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
+def write_json(path: str | Path, payload: dict) -> Path:
+    """Write ``payload`` (indented, one trailing newline) to ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
+    tmp.replace(path)
+    return path
