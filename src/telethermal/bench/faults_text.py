@@ -3,6 +3,16 @@
 from __future__ import annotations
 
 
+def recovery_text(row: dict) -> str:
+    """A process row's recovery: '' when it has none to show, 'not back', or
+    the seconds it took and their bound."""
+    if "recovery_s" not in row:
+        return ""
+    if row["recovery_s"] is None:
+        return "not back"
+    return f"{row['recovery_s']:.2f} s ({row['recovery_bound_s']:.2f} s)"
+
+
 def text_report(report: dict) -> list[str]:
     """What ``telethermal bench faults`` prints."""
     from telethermal.bench.faults_sim import WINDOWS
@@ -42,9 +52,7 @@ def text_report(report: dict) -> list[str]:
                      "lossless (gaps/recovered/dup/resent/dropped)  recovery (bound)")
         for r in report["rows"]:
             lo = r["lossless"]
-            rec = "" if "recovery_s" not in r else (
-                "not back" if r["recovery_s"] is None else
-                f"{r['recovery_s']:.2f} s ({r['recovery_bound_s']:.2f} s)")
+            rec = recovery_text(r)
             lines.append(f"{r['fault']:38s} {pct(r['compensated_flux_rms_error_rel']):>11s} "
                          f"{pct(r['naive_flux_rms_error_rel'])} {r['safety_events']:6d}  "
                          f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"

@@ -15,6 +15,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from telethermal.bench.faults_text import recovery_text  # noqa: E402
+
 
 def _load(results: Path, name: str) -> dict | None:
     path = results / f"{name}.json"
@@ -350,9 +352,7 @@ def faults(out: Path, d: dict) -> list[str]:
                   "|---|---|---|---|---|---|---|"]
         for r in rows:
             lo = r["lossless"]
-            rec = "" if "recovery_s" not in r else (
-                "not back" if r["recovery_s"] is None else
-                f"{r['recovery_s']:.2f} s ({r['recovery_bound_s']:.2f} s)")
+            rec = recovery_text(r)
             lines.append(f"| {r['fault']} | {_pct(r['compensated_flux_rms_error_rel'])} | "
                          f"{_pct(r['naive_flux_rms_error_rel'])} | {r['safety_events']} | "
                          f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
