@@ -332,3 +332,14 @@ def test_a_status_poll_asks_again_until_the_session_is_live(monkeypatch):
     poll = admin_client.poll_status({"master": 2}, ("master",), wait_s=3600.0, every_s=0.0)
     assert poll.live and poll.replies == {"master": live} and poll.error is None
     assert asked == [("master", "status")] * 3
+
+
+def test_bench_view_keeps_the_command_it_ran_with(tmp_path, monkeypatch):
+    monkeypatch.setattr(view, "run_view_bench",
+                        lambda **kw: {"command": "telethermal bench view --json default.json"})
+    cmd = "telethermal bench view --json v.json --touches 1"
+    view.run_and_save(tmp_path / "v.json", touches=1, command=cmd)
+    assert json.loads((tmp_path / "v.json").read_text())["command"] == cmd
+    view.run_and_save(tmp_path / "d.json")                  # no command given: the bench's own
+    assert json.loads((tmp_path / "d.json").read_text())["command"] == \
+        "telethermal bench view --json default.json"

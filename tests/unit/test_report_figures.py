@@ -72,12 +72,12 @@ def test_a_reduced_run_is_named_in_the_report(tmp_path):
     assert "Reduced run" not in full
 
 
-def test_a_bench_whose_command_is_fixed_is_read_from_its_fields(tmp_path):
-    # bench view stores its default command whatever it ran with.
+def test_a_reduced_view_run_is_named_from_its_command(tmp_path):
     results = tmp_path / "results"
     results.mkdir()
     d = json.loads((RESULTS / "view.json").read_text())
-    d.update(touches_per_mode=1, contact_s=1.0)
+    d.update(touches_per_mode=1, contact_s=1.0,
+             command="telethermal bench view --json x/view.json --touches 1 --contact-s 1")
     (results / "view.json").write_text(json.dumps(d))
     text = write_report(results, results / "report.md").read_text()
     assert "view `--touches 1 --contact-s 1`" in text

@@ -49,22 +49,6 @@ def reduced_options(command: str) -> list[str]:
     return out
 
 
-#: Benches whose JSON keeps a fixed command (``bench view`` writes its
-#: default command whatever it was run with): their sample size read from
-#: the JSON's own fields instead, against the bench's defaults.
-FIELD_OPTIONS = {"view": (("touches_per_mode", "--touches", 3), ("contact_s", "--contact-s", 3.0))}
-
-
-def _reduced(name: str, d: dict) -> list[str]:
-    """What made this run smaller than the bench's defaults: the options of
-    its command, or for a bench in FIELD_OPTIONS its fields."""
-    out = reduced_options(d.get("command", ""))
-    for field, option, default in FIELD_OPTIONS.get(name, ()):
-        if option not in " ".join(out) and d.get(field, default) != default:
-            out.append(f"{option} {d[field]:g}")
-    return out
-
-
 def _provenance(d: dict) -> str:
     reduced = d.get("_reduced", [])
     note = "" if not reduced else (
@@ -451,7 +435,7 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
             missing.append(name)
             continue
         d["_results"] = results
-        d["_reduced"] = _reduced(name, d)
+        d["_reduced"] = reduced_options(d.get("command", ""))
         if d["_reduced"]:
             reduced.append(f"{name} `{' '.join(d['_reduced'])}`")
         sections += section(out, d)

@@ -180,10 +180,13 @@ def run_view_bench(touches: int = 3, contact_s: float = 3.0, progress=print,
 
 
 def run_and_save(json_path, touches: int = 3, contact_s: float = 3.0, progress=print,
-                 realtime_priority: int = REALTIME_PRIORITY) -> dict:
-    """:func:`run_view_bench`, its report written to ``json_path``."""
+                 realtime_priority: int = REALTIME_PRIORITY, command: str = "") -> dict:
+    """:func:`run_view_bench`, its report written to ``json_path`` with
+    ``command`` (the command line as typed; the bench's default when empty)."""
     report = run_view_bench(touches=touches, contact_s=contact_s, progress=progress,
                             realtime_priority=realtime_priority)
+    if command:
+        report["command"] = command
     write_json(json_path, report)
     return report
 

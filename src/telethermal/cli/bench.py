@@ -98,7 +98,7 @@ def cmd_bench_view(args) -> int:
 
     report = view.run_and_save(args.json, touches=args.touches, contact_s=args.contact_s,
                                progress=lambda m: print(m, flush=True),
-                               realtime_priority=args.realtime_priority)
+                               realtime_priority=args.realtime_priority, command=_command())
     _print_lines(view.text_report(report, args.json))
     return 0
 
