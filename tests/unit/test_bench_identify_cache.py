@@ -29,10 +29,11 @@ def test_a_database_is_simulated_once_and_each_caller_gets_its_own_list():
 
 def test_a_fit_is_shared_only_for_the_same_data_and_hyper_parameters():
     contacts, _ = from_trials(identify._trials("fingertip-7", 0), max_s=1.0)
-    one = identify._fit("effusivity-lda", ("fingertip-7", 0), contacts)
-    assert identify._fit("effusivity-lda", ("fingertip-7", 0), contacts) is one
-    assert identify._fit("effusivity-lda", ("fingertip-7", 1), contacts) is not one
-    other = identify._fit("effusivity-lda", ("fingertip-7", 0), contacts, threshold=0.5)
+    one = identify._fit("effusivity-lda", contacts)
+    again, _ = from_trials(identify._trials("fingertip-7", 0), max_s=1.0)   # equal, not the same
+    assert identify._fit("effusivity-lda", again) is one
+    assert identify._fit("effusivity-lda", contacts.subset(range(len(contacts) - 1))) is not one
+    other = identify._fit("effusivity-lda", contacts, threshold=0.5)
     assert other is not one and other.threshold == 0.5
 
 

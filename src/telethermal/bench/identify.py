@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import datetime
 import functools
+import hashlib
 import platform
 import time
 from typing import Callable
@@ -65,19 +66,29 @@ def _database(scene_name: str, seed: int, contact_s: float | None = None) -> tup
     return tuple(pad_database(scene, np.random.default_rng(seed)))
 
 
-#: Models fitted in this run, by method, hyper-parameters and training data
-#: (a key naming them): a fit that two sections share (the active pad's LSTM
+#: Models fitted in this run, by method, hyper-parameters and a digest of
+#: the training contacts: a fit that two sections share (the active pad's LSTM
 #: folds and the width sweep's default width; cross-temperature I-pro for
 #: case II and for case III, the same materials) is made once. Training is
 #: seeded by the model, so a fit does not depend on what ran before it.
 _FITS: dict = {}
 
 
-def _fit(method: str, data_key: tuple, contacts, **kw):
+def _digest(contacts) -> str:
+    """A digest of everything a fit reads from ``contacts``."""
+    h = hashlib.sha256()
+    for array in (contacts.x, contacts.lengths, contacts.gap_k, contacts.force_n):
+        h.update(b"-" if array is None else np.ascontiguousarray(array).tobytes())
+    h.update(repr((contacts.labels, contacts.groups, contacts.sample_rate_hz,
+                   contacts.channels)).encode())
+    return h.hexdigest()
+
+
+def _fit(method: str, contacts, **kw):
     """``make(method, **kw).fit(contacts)``, once per run for the same
-    ``data_key`` and hyper-parameters; :func:`run` empties the store."""
+    training contacts and hyper-parameters; :func:`run` empties the store."""
     model = make(method, **kw)
-    key = (method, repr(sorted(model.hyper().items())), data_key)
+    key = (method, repr(sorted(model.hyper().items())), _digest(contacts))
     if key not in _FITS:
         _FITS[key] = model.fit(contacts)
     return _FITS[key]
@@ -148,7 +159,7 @@ def active_passive(method: str, seed: int) -> dict:
     probas, truth = [], []
     for fold, test in enumerate(group_folds(active.groups, 5)):
         train = np.setdiff1d(np.arange(len(active)), test)
-        model = _fit(method, ("gripper-case-I-pro", seed, "fold", fold), active.subset(train))
+        model = _fit(method, active.subset(train))
         held = active.subset(test)
         for w in [round(0.1 * k, 1) for k in range(1, 11)]:
             accuracy.setdefault(f"{w:.1f}", []).extend(_accuracy(model, held, w))
@@ -181,8 +192,7 @@ def cross_temperature(method: str, seed: int) -> dict:
         # also holds acrylic, which cases II-V do not).
         materials = {t.material for t in test}
         train = [t for t in _trials(f"gripper-case-{train_case}", seed) if t.material in materials]
-        model = _fit(method, (f"gripper-case-{train_case}", seed, tuple(sorted(materials))),
-                     from_trials(train, max_s=1.0)[0])
+        model = _fit(method, from_trials(train, max_s=1.0)[0])
         report = evaluate(model, test)
         rows[f"train {train_case}, test {test_case}"] = {
             "accuracy_by_window_s": report["accuracy_by_window_s"],
@@ -231,8 +241,7 @@ def lstm_hidden_sweep(seed: int, sizes=(16, 32, 64)) -> dict:
         hits = {0.4: [], 1.0: []}
         for fold, test in enumerate(group_folds(contacts.groups, 5)):
             train = np.setdiff1d(np.arange(len(contacts)), test)
-            model = _fit("lstm", ("gripper-case-I-pro", seed, "fold", fold),
-                         contacts.subset(train), n_hidden=size)
+            model = _fit("lstm", contacts.subset(train), n_hidden=size)
             for w in hits:
                 hits[w] += _accuracy(model, contacts.subset(test), w)
         rows[str(size)] = {f"{w:g}": float(np.mean(v)) for w, v in hits.items()}
