@@ -51,16 +51,26 @@ GAIN_SETS = {
     "PI 1e-3/3e-2": PidGains(1e-3, 3e-2, 0.0, **_SAT),
 }
 KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
-        "time_to_correct_flux_s", "safety_events")
+        "time_to_correct_flux_s", "safety_events", "flux_rms_error_rel_whole")
+#: Every session's module limits, summed over the whole bench (must stay 0).
+_LIMITS = {"current_exceeded": 0, "hot_side_exceeded": 0, "sessions": 0}
 
 
-def _session_row(scene, material, identifier, generator, config, seed, realtime=False):
+def _session_row(scene, material, identifier, generator, config, seed, realtime=False,
+                 expected_material=None):
     start = time.process_time()
     s = run_session(scene, material, identifier, generator, config, contact_s=CONTACT_S,
-                    seed=seed, realtime=realtime).summary
+                    seed=seed, realtime=realtime, expected_material=expected_material).summary
     cpu = time.process_time() - start
+    module = s["module"]
+    for key in ("current_exceeded", "hot_side_exceeded"):
+        _LIMITS[key] += int(module[key])
+    _LIMITS["sessions"] += 1
     row = {"material": material, "seed": seed, "identified": s["identified"],
-           **{k: s[k] for k in KEYS},
+           **{k: s[k] for k in KEYS}, "decision_from_s": s["decision_from_s"],
+           "display_idle_c": s["display_idle_c"], "object_ir_c": s["object_ir_c"],
+           "module_max_current_a": module["max_current_a"],
+           "module_saturated_periods": module["saturated_periods"],
            "cpu_s_per_simulated_s": cpu / (CONTACT_S + 0.4)}
     if realtime:
         row["loop"] = s["loop"]
@@ -90,6 +100,33 @@ def _per_material(rows) -> dict:
                          for key in ("flux_rms_error_rel", "temp_rms_error_c")
                          for how, fn in (("mean", np.mean), ("max", np.max))}
         out[material]["safety_events"] = int(sum(r["safety_events"] for r in mine))
+    return out
+
+
+def _materials(first: list[dict], repeat: list[dict]) -> dict:
+    """Per material, the default display's mean over seeds: a first touch
+    (the idle policy's pad for an unknown object) and a repeated one (the
+    pad pre-conditioned for the material object memory announces). Flux
+    errors from the slave's first decision and over the first second, as
+    fractions of the direct-contact peak; skin RMS over the whole contact."""
+    out = {}
+    for material in dict.fromkeys(r["material"] for r in first):
+        mine = [r for r in first if r["material"] == material]
+        again = [r for r in repeat if r["material"] == material]
+        out[material] = {
+            "skin_rms_k": _mean(mine, "temp_rms_error_c"),
+            "skin_rms_max_k": float(max(r["temp_rms_error_c"] for r in mine)),
+            "skin_rms_repeat_k": _mean(again, "temp_rms_error_c"),
+            "flux_rms_from_decision_rel": _mean(mine, "flux_rms_error_rel"),
+            "flux_rms_first_second_rel": _mean(mine, "flux_rms_error_rel_first_s"),
+            "flux_rms_whole_rel": _mean(mine, "flux_rms_error_rel_whole"),
+            "flux_rms_from_decision_repeat_rel": _mean(again, "flux_rms_error_rel"),
+            "display_idle_minus_object_k": _mean(
+                [{"d": r["display_idle_c"] - r["object_ir_c"]} for r in mine], "d"),
+            "display_idle_minus_object_repeat_k": _mean(
+                [{"d": r["display_idle_c"] - r["object_ir_c"]} for r in again], "d"),
+            "safety_events": int(sum(r["safety_events"] for r in mine + again)),
+            "seeds": len(mine)}
     return out
 
 
@@ -140,8 +177,10 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
     def sweep(config, mats=materials, sds=seeds):
         return [_session_row(scene, m, identifier, generator, config, s) for m in mats for s in sds]
 
+    for key in _LIMITS:
+        _LIMITS[key] = 0
     report = {"scene": scene.name, "contact_s": CONTACT_S, "seeds": list(seeds),
-              "materials": list(materials), "training_s": training_s}
+              "materials": {m: {} for m in materials}, "training_s": training_s}
     seeds5 = SEEDS_5[:1] if quick else SEEDS_5
     report["seeds_rate_and_controller"] = list(seeds5)
     step("control rate")
@@ -154,6 +193,12 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
         rows = sweep(DisplayConfig(feedforward_model=model), sds=seeds5)
         report["controller"].append({"feedforward_model": model, **_aggregate(rows),
                                      "per_material": _per_material(rows), "rows": rows})
+    step("repeated touches (pre-conditioned from memory)")
+    first = next(c["rows"] for c in report["controller"]
+                 if c["feedforward_model"] == DisplayConfig().feedforward_model)
+    repeat = [_session_row(scene, m, identifier, generator, DisplayConfig(), s,
+                           expected_material=m) for m in materials for s in seeds5]
+    report["materials"] = _materials(first, repeat)
     report["skin_floor"] = skin_floors(scene, materials, identifier, generator, seeds5[0])
     step("PID gains")
     report["gains"] = []
@@ -178,6 +223,10 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
                            DisplayConfig(rate_hz=rate), seeds[0], realtime=True)
         report["real_clock"].append({"rate_hz": rate, **row["loop"],
                                      "flux_rms_error_rel": row["flux_rms_error_rel"]})
+    report["limits"] = dict(_LIMITS)
+    report["safety_events"] = int(sum(r["safety_events"] for sec in ("rate", "controller",
+                                                                      "gains", "before")
+                                       for row in report[sec] for r in row["rows"]))
     report["default_gains"] = {"kp": DEFAULT_GAINS.kp, "ki": DEFAULT_GAINS.ki,
                                "kd": DEFAULT_GAINS.kd}
     report["machine"] = (f"{platform.node()} ({platform.machine()}, "

@@ -187,15 +187,17 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     trace = {k: np.array(v, dtype=object if k == "phase" else float)
              for k, v in result["trace"].items()}
     operator = Operator(**result["operator"])
+    # Errors "after identification" run from the slave's decision, never
+    # from where the master began to render (that would hide the transient).
     render_from = result["render_start_s"]
-    if render_from is None and report.get("decision_time_s") is not None and \
-            report.get("onset_s") is not None:
+    if report.get("decision_time_s") is not None and report.get("onset_s") is not None:
         render_from = report["onset_s"] + report["decision_time_s"]
     metrics = compare_with_direct(scene, material, report["object_true_c"], operator, trace,
                                   contact_s, render_from)
     summary = {"scene": scene.name, "material": material, "seed": seed,
                "identified": report["identified"], "decision_time_s": report["decision_time_s"],
-               "decision_reason": report["reason"], "render_start_s": render_from,
+               "decision_reason": report["reason"], "decision_from_s": render_from,
+               "render_start_s": result["render_start_s"],
                "object_memory": result.get("object_memory"),
                "rate_hz": 1.0 / float(np.median(np.diff(trace["t_s"]))),
                "contact_s": contact_s, **metrics,
@@ -246,7 +248,7 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
         f"announced from memory as {s['object_memory']}, rendered from {start}; "
     echo(f"touch on {material + (' again' if again else ''):16s}: {memory}slave said "
          f"{s['identified']} {when}; rendered flux "
-         f"{100 * s['flux_rms_error_rel']:.2f} % of peak from then on, "
+         f"{100 * s['flux_rms_error_rel']:.2f} % of peak from the decision on, "
          f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second, "
          f"{100 * s['flux_rms_error_rel_whole']:.2f} % over the whole contact; skin "
          f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}; "

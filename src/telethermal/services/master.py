@@ -414,7 +414,11 @@ def touch_figures(scene, touch: Touch, result: dict) -> dict:
     if material not in [o.material for o in scene.objects] or \
             truth.get("object_true_c") is None:
         return {"direct": None}
+    # From the slave's decision (its time after the master's onset), not
+    # from the master's own render start.
     render_from = result["render_start_s"]
+    if result.get("decision_time_s") is not None and result.get("master_onset_s") is not None:
+        render_from = result["master_onset_s"] + result["decision_time_s"]
     trace = {k: np.asarray(v, dtype=object if k == "phase" else float)
              for k, v in result["trace"].items()}
     metrics = compare_with_direct(scene, material, float(truth["object_true_c"]),

@@ -151,6 +151,10 @@ class SlaveNews:
     #: more: the display decays to its safe state (neutral) at its slew limit
     #: and resumes, bumplessly, when this is True again.
     link_ok: bool = True
+    #: The material the slave expects this object to be before the touch
+    #: (its object memory, or the slave's own earlier touch): the display
+    #: pre-conditions its pad for it; None: unknown, the idle policy's choice.
+    expected_material: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,7 +201,7 @@ class MasterDisplay:
     def __init__(self, config: DisplayConfig, generator, pad_resistance_m2k_w: float,
                  sensor_lag_s: float, finger_temp_c: float, idle_c: float | None = None,
                  pad_layers=None, contact_conductance_w_m2k: float | None = None,
-                 module: ModuleParams | None = None):
+                 module: ModuleParams | None = None, precondition=None):
         self.config = config
         self.generator = generator
         #: The inner loop from the junction's target to the module's current
@@ -205,6 +209,10 @@ class MasterDisplay:
         self.junction_loop = JunctionLoop(module, default_driver(module)) \
             if module is not None else None
         self._module_area_m2 = module.spec.area_m2 if module is not None else 0.0
+        #: ``precondition(material or None, object_temp_c) -> idle offset, K``:
+        #: where the pad idles relative to the object before (and, holding,
+        #: during) a touch (control/preconditioning.py); None: at the object.
+        self.precondition = precondition
         #: The pad's resistance as the controller believes it.
         self.r_pad_m2k_w = pad_resistance_m2k_w * config.r_pad_belief
         self.sensor_lag_s = sensor_lag_s
@@ -243,7 +251,13 @@ class MasterDisplay:
         return min(max(object_temp_c, limits.skin_min_c), limits.skin_max_c)
 
     def standby_c(self, news: SlaveNews) -> float:
-        return self.standby_c_for(self.config.limits, news.object_temp_c)
+        """Where the pad idles: the object's temperature, shifted by the
+        pre-conditioning for the material expected (or the idle policy's
+        choice for an unknown object), inside the skin band."""
+        obj = news.object_temp_c
+        if self.precondition is not None and obj is not None and math.isfinite(obj):
+            obj = obj + self.precondition(news.expected_material, obj)
+        return self.standby_c_for(self.config.limits, obj)
 
     def _count(self, event: str) -> None:
         self.events[event] = self.events.get(event, 0) + 1

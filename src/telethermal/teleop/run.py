@@ -170,7 +170,7 @@ class DisplayTouch:
         self.max_current_a = 0.0
         self.max_hot_c = self.stack.state.hot_c
         self.max_sink_c = self.stack.state.sink_c
-        for key in ("current_a", "hot_c", "sink_c"):
+        for key in ("current_a", "hot_c", "sink_c", "junction_true_c"):
             self.trace[key] = np.full(self.n_total, np.nan)
 
     @property
@@ -236,14 +236,14 @@ class DisplayTouch:
         if self.k < self.n_total:
             st = self.stack.state
             for key, value in (("current_a", current), ("hot_c", st.hot_c),
-                               ("sink_c", st.sink_c)):
+                               ("sink_c", st.sink_c), ("junction_true_c", st.cold_c)):
                 self.trace[key][self.k] = value
             true_flux, sensed, pad_c, skin_c = self._reading
             for key, value in (("t_s", t), ("desired_flux_w_m2", step.desired_flux_w_m2),
                                ("flux_w_m2", true_flux), ("flux_sensed_w_m2", sensed),
                                ("pad_surface_c", pad_c), ("skin_surface_c", skin_c),
-                               ("junction_cmd_c", step.junction_applied_c),
-                               ("junction_c", self.junction_c), ("safe", step.safe),
+                               ("junction_cmd_c", step.junction_cmd_c),
+                               ("junction_c", step.junction_applied_c), ("safe", step.safe),
                                ("force_n", force_n)):
                 self.trace[key][self.k] = value
             self.trace["phase"][self.k] = step.phase
@@ -259,7 +259,8 @@ class SessionResult:
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
                 realtime: bool = False, devices: str = "sim",
-                record: str | Path | None = None) -> SessionResult:
+                record: str | Path | None = None, expected_material: str | None = None,
+                precondition: bool = True) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -274,11 +275,16 @@ def run_session(scene: Scene, material: str, identifier, generator,
     slave = Slave(scene, material, identifier, slave_rng(seed))
     rng = master_rng(seed)
     operator = draw_operator(scene, rng)
-    # The master has idled at the standby temperature before this touch.
-    idle = MasterDisplay.standby_c_for(config.limits, slave.object_ir_c)
+    # The master has idled at its standby before this touch: the object's
+    # temperature, pre-conditioned for the material the slave expects
+    # (``expected_material``: object memory) or, for an unknown object, by
+    # the idle policy (control/preconditioning.py).
+    shift = precondition_for(scene, operator.finger_ir_c) if precondition else None
+    idle = MasterDisplay.standby_c_for(config.limits, slave.object_ir_c + (
+        shift(expected_material, slave.object_ir_c) if shift else 0.0))
     master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
                            scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
-                           **display_model_args(scene))
+                           precondition=shift, **display_model_args(scene))
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=realtime, seed=seed)
@@ -293,7 +299,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         t = now[0] = t_loop - PRE_CONTACT_S
         slave.advance_to(t)
         sensors = display.read(t)
-        news = SlaveNews(slave.object_ir_c, slave.estimate, slave.classes)
+        news = SlaveNews(slave.object_ir_c, slave.estimate, slave.classes,
+                         expected_material=expected_material)
         step = master.step(t, dt_loop, sensors, news)
         display.apply(t, step, dt_loop, sensors.force_n)
         if recorder is not None:
@@ -310,10 +317,14 @@ def run_session(scene: Scene, material: str, identifier, generator,
             recorder.slave(slave)
     est = slave.estimate
     decided = est is not None and est.decided
-    # The error "after identification" starts where the master began to
-    # render the material, or, when the slave said "unknown", where it said so.
-    render_from = master.rendered_from_s
-    if render_from is None and decided and slave.onset_s is not None:
+    # The error "after identification" starts at the slave's first decision
+    # (a material or a pair it is sure of), never where the master began to
+    # render one material (that hides the transient between the two); when
+    # the slave said only "unknown", where it said so.
+    render_from = None
+    if slave.onset_s is not None and slave.committed_at_s is not None:
+        render_from = slave.onset_s + slave.committed_at_s
+    elif decided and slave.onset_s is not None:
         render_from = slave.onset_s + est.t_s
     metrics = compare_with_direct(scene, material, slave.object_true_c, operator, touch.trace,
                                   contact_s, render_from)
@@ -325,11 +336,13 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "decision_time_s": ((slave.committed_at_s if est.label != UNKNOWN else est.t_s)
                             if decided else None),
         "slave_onset_s": slave.onset_s, "master_onset_s": master.last_onset_s,
-        "master_release_s": master.last_release_s, "render_start_s": render_from,
+        "master_release_s": master.last_release_s, "decision_from_s": render_from,
+        "render_start_s": master.rendered_from_s,
         "before_identification": config.before, "rate_hz": config.rate_hz,
         "gains": asdict(config.gains), "contact_s": contact_s,
         "operator": asdict(operator), "object_true_c": slave.object_true_c,
         "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
+        "display_idle_c": idle, "expected_material": expected_material,
         **metrics, **safety_summary(master),
         "clock": "real" if realtime else "simulated", "loop": stats.summary(),
         "devices": devices, "device_counters": device_counters,
@@ -340,6 +353,16 @@ def run_session(scene: Scene, material: str, identifier, generator,
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
     return SessionResult(summary, touch.trace)
+
+
+def precondition_for(scene: Scene, finger_c: float):
+    """The display's pre-conditioning for this scene and operator:
+    ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
+    from telethermal.control.preconditioning import idle_for
+
+    def offset(material, object_temp_c):
+        return idle_for(scene, material, object_temp_c, finger_c) - object_temp_c
+    return offset
 
 
 def module_summary(touch: DisplayTouch, master: MasterDisplay) -> dict:
