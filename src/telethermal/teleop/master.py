@@ -160,6 +160,7 @@ class MasterStep:
     junction_cmd_c: float           # the controller's request
     junction_applied_c: float       # what the supervisor let through
     safe: bool
+    current_a: float = 0.0          # the module current commanded, A, after its limits
 
 
 @dataclass(slots=True)
