@@ -125,7 +125,7 @@ static struct {
 } rx[RX_QUEUE];
 static unsigned rx_head, rx_count;
 static bool measure_fixed;
-static int16_t element_cc = 3300;
+static int16_t element_ma;
 static tt_peltier_measure fixed;
 
 void host_peltier_setup(FILE *out)
@@ -185,12 +185,12 @@ int hal_can_receive(uint16_t *id, uint8_t *data, uint8_t *dlc)
     return 1;
 }
 
-void hal_peltier_set(bool enabled, int16_t junction_cc)
+void hal_peltier_set(bool enabled, int16_t current_ma)
 {
-    element_cc = junction_cc;
+    element_ma = current_ma;
     if (trace) {
         fprintf(trace, "set %lu %d %d\n", (unsigned long)hal_millis(), enabled ? 1 : 0,
-                junction_cc);
+                current_ma);
     }
 }
 
@@ -208,15 +208,14 @@ void hal_peltier_measure(tt_peltier_measure *out)
         *out = fixed;
         return;
     }
-    /* An ideal element: the junction at its target; the current a rough
-     * Peltier's (0.4 A per kelvin pumped from the heat sink at 25 degC), as
-     * the project's emulator reports it. */
-    out->junction_cc = element_cc;
+    /* An ideal element: the current as driven; the heat sink at 25 degC and
+     * the junction 2 K per ampere below it (a module under a pad's load;
+     * unloaded, the TM-31-1.4-8.5 would pull about 21 K/A). */
+    out->current_ma = element_ma;
     out->heatsink_cc = 2500;
-    out->current_ma = (int16_t)(4 * (2500 - element_cc));
-    /* The active pad's drive as the project's emulator reports it: 0.05 of
-     * full scale per kelvin above the heat sink, within -1..1. */
-    int drive = (element_cc - 2500) / 2;
-    out->drive_milli = (int16_t)(drive > 1000 ? 1000 : drive < -1000 ? -1000 : drive);
+    out->junction_cc = (int16_t)(2500 - element_ma / 5);
+    /* The active pad's drive as the project's emulator reports it: the
+     * current as a fraction of the 8.5 A limit, 0.001. */
+    out->drive_milli = (int16_t)(element_ma * 1000 / 8500);
     out->sensors_ok = true;
 }

@@ -19,10 +19,10 @@ void host_board_setup(FILE *in, int uart_fd, unsigned corrupt_every);
 
 /* Peltier driver: received frames are queued by host_can_inject; sent
  * frames and the element's settings are printed to `out` as lines
- * "tx <ms> <id> <hex>", "set <ms> <enabled> <junction_cc>" and (the active
+ * "tx <ms> <id> <hex>", "set <ms> <enabled> <current_ma>" and (the active
  * pad) "water <ms> <pump_on> <heater_duty_raw>". The
- * measurement is the ideal element (junction at its target, heat sink at
- * 25 degC) unless host_set_measure overrides it. */
+ * measurement is the ideal element (the current as driven, heat sink at
+ * 25 degC, junction 2 K per ampere below it) unless host_set_measure overrides it. */
 void host_peltier_setup(FILE *out);
 int host_can_inject(uint16_t id, const uint8_t *data, uint8_t dlc);
 void host_set_measure(int16_t junction_cc, int16_t heatsink_cc, int16_t current_ma,

@@ -19,7 +19,7 @@
  *                            frame, "t <ms>" sets the clock and polls,
  *                            "meas <junction_cc> <heatsink_cc> <current_ma>
  *                            <sensors_ok>" fixes the measurement; stdout
- *                            gets "tx <ms> <id> <hex>", "set <ms> <en> <cc>",
+ *                            gets "tx <ms> <id> <hex>", "set <ms> <en> <ma>",
  *                            "water <ms> <pump> <duty_raw>" (--pad) and
  *                            "done <ms>" after each poll
  *
@@ -195,17 +195,18 @@ static int can_decode(unsigned id, const uint8_t *data, int dlc)
         if (tt_peltier_cmd_decode(data, (uint8_t)dlc, &c) != 0) {
             return -1;
         }
-        printf("PELTIER_CMD enable=%u counter=%u setpoint_c=%d version=%u\n", c.enable,
-               c.counter, c.setpoint_cc, c.version);
+        printf("PELTIER_CMD enable=%u counter=%u current_a=%d version=%u\n", c.enable,
+               c.counter, c.current_ma, c.version);
     } else if (id == TT_PELTIER_STATUS_ID) {
         tt_peltier_status s;
         if (tt_peltier_status_decode(data, (uint8_t)dlc, &s) != 0) {
             return -1;
         }
         printf("PELTIER_STATUS enabled=%u over_temp=%u over_current=%u sensor_fault=%u "
-               "watchdog=%u counter=%u junction_c=%d current_a=%d heatsink_c=%d\n",
-               s.enabled, s.over_temp, s.over_current, s.sensor_fault, s.watchdog, s.counter,
-               s.junction_cc, s.current_ma, s.heatsink_cc);
+               "watchdog=%u sink_saturated=%u counter=%u junction_c=%d current_a=%d "
+               "heatsink_c=%d\n",
+               s.enabled, s.over_temp, s.over_current, s.sensor_fault, s.watchdog,
+               s.sink_saturated, s.counter, s.junction_cc, s.current_ma, s.heatsink_cc);
     } else if (id == TT_PELTIER_HEARTBEAT_ID || id == TT_PAD_HEARTBEAT_ID) {
         tt_peltier_heartbeat h;
         if (tt_peltier_heartbeat_decode(data, (uint8_t)dlc, &h) != 0) {
@@ -219,8 +220,8 @@ static int can_decode(unsigned id, const uint8_t *data, int dlc)
         if (tt_pad_cmd_decode(data, (uint8_t)dlc, &c) != 0) {
             return -1;
         }
-        printf("PAD_CMD enable=%u pump=%u counter=%u setpoint_c=%d heater_duty=%u version=%u\n",
-               c.enable, c.pump, c.counter, c.setpoint_cc, c.heater_duty_raw, c.version);
+        printf("PAD_CMD enable=%u pump=%u counter=%u current_a=%d heater_duty=%u version=%u\n",
+               c.enable, c.pump, c.counter, c.current_ma, c.heater_duty_raw, c.version);
     } else if (id == TT_PAD_STATUS_ID) {
         tt_pad_status s;
         if (tt_pad_status_decode(data, (uint8_t)dlc, &s) != 0) {
@@ -245,10 +246,11 @@ static int can_encode(unsigned id, const long *v, int n)
         const tt_peltier_cmd c = {(uint8_t)v[0], (uint8_t)v[1], (int16_t)v[2], (uint8_t)v[3]};
         tt_peltier_cmd_encode(&c, data);
         print_hex(data, TT_PELTIER_CMD_DLC);
-    } else if (id == TT_PELTIER_STATUS_ID && n == 9) {
+    } else if (id == TT_PELTIER_STATUS_ID && n == 10) {
         const tt_peltier_status s = {(uint8_t)v[0], (uint8_t)v[1], (uint8_t)v[2],
                                      (uint8_t)v[3], (uint8_t)v[4], (uint8_t)v[5],
-                                     (int16_t)v[6], (int16_t)v[7], (int16_t)v[8]};
+                                     (uint8_t)v[6], (int16_t)v[7], (int16_t)v[8],
+                                     (int16_t)v[9]};
         tt_peltier_status_encode(&s, data);
         print_hex(data, TT_PELTIER_STATUS_DLC);
     } else if (id == TT_PAD_CMD_ID && n == 6) {

@@ -50,12 +50,11 @@ int hal_can_send(uint16_t id, const uint8_t *data, uint8_t dlc);
  * only TT_PELTIER_CMD_ID; others are ignored anyway. */
 int hal_can_receive(uint16_t *id, uint8_t *data, uint8_t *dlc);
 
-/* Drive the element: enabled, regulate the junction to `junction_cc`
- * (0.01 degC) with the lab's own loop; disabled, hold it at `junction_cc`
- * (the neutral temperature), or switch the H-bridge off if the element
- * cannot hold it unpowered. Called on every change, from tt_peltier_init
- * on. */
-void hal_peltier_set(bool enabled, int16_t junction_cc);
+/* Drive the element: enabled, the H-bridge's current loop to `current_ma`
+ * (mA, positive cools the pad side, already within the configured limit);
+ * disabled, `current_ma` is 0: the bridge off (the module passive, no
+ * current). Called on every change, from tt_peltier_init on. */
+void hal_peltier_set(bool enabled, int16_t current_ma);
 
 /* Measure the junction (the active pad: the actuator, junction or water)
  * and heat-sink temperatures, the current, and for the active pad its drive

@@ -10,7 +10,7 @@ int tt_pad_cmd_decode(const uint8_t *data, uint8_t dlc, tt_pad_cmd *out)
     out->enable = data[0] & 0x01u;
     out->pump = (data[0] >> 1) & 0x01u;
     out->counter = (uint8_t)(data[0] >> 4);
-    out->setpoint_cc = tt_get_i16(data + 1);
+    out->current_ma = tt_get_i16(data + 1);
     out->heater_duty_raw = data[3];
     out->version = data[4];
     return 0;
@@ -20,7 +20,7 @@ void tt_pad_cmd_encode(const tt_pad_cmd *cmd, uint8_t out[TT_PAD_CMD_DLC])
 {
     out[0] = (uint8_t)((cmd->enable & 0x01u) | ((cmd->pump & 0x01u) << 1) |
                        ((cmd->counter & 0x0Fu) << 4));
-    tt_put_i16(out + 1, cmd->setpoint_cc);
+    tt_put_i16(out + 1, cmd->current_ma);
     out[3] = cmd->heater_duty_raw;
     out[4] = cmd->version;
 }

@@ -1,9 +1,9 @@
 /* The slave's active pad on CAN, node 2 (proto/CAN.md, "The slave's active
- * pad"; proto/peltier.dbc):
+ * pad"; proto/peltier.dbc), version 2:
  *
  *   0x102 PAD_CMD        slave -> pad driver, 5 bytes: byte 0 bit 0 enable,
- *                        bit 1 pump, bits 4-7 counter; bytes 1-2 setpoint
- *                        (int16 LE, 0.01 degC: a Peltier pad's junction);
+ *                        bit 1 pump, bits 4-7 counter; bytes 1-2 current
+ *                        (int16 LE, 1 mA: a Peltier pad's module current);
  *                        byte 3 heater duty (u8, 0.004: a water pad's heater);
  *                        byte 4 version
  *   0x182 PAD_STATUS     pad driver -> slave after each command, 8 bytes:
@@ -30,7 +30,7 @@ typedef struct {
     uint8_t enable;          /* 0 or 1 */
     uint8_t pump;            /* 0 or 1 */
     uint8_t counter;         /* 0..15 */
-    int16_t setpoint_cc;     /* 0.01 degC */
+    int16_t current_ma;      /* 1 mA, positive cools the pad side */
     uint8_t heater_duty_raw; /* duty = raw * 0.004 (250 = 1) */
     uint8_t version;
 } tt_pad_cmd;

@@ -24,7 +24,7 @@ int tt_peltier_cmd_decode(const uint8_t *data, uint8_t dlc, tt_peltier_cmd *out)
     }
     out->enable = data[0] & 0x01u;
     out->counter = (uint8_t)(data[0] >> 4);
-    out->setpoint_cc = tt_get_i16(data + 1);
+    out->current_ma = tt_get_i16(data + 1);
     out->version = data[3];
     return 0;
 }
@@ -32,7 +32,7 @@ int tt_peltier_cmd_decode(const uint8_t *data, uint8_t dlc, tt_peltier_cmd *out)
 void tt_peltier_cmd_encode(const tt_peltier_cmd *cmd, uint8_t out[TT_PELTIER_CMD_DLC])
 {
     out[0] = (uint8_t)((cmd->enable & 0x01u) | ((cmd->counter & 0x0Fu) << 4));
-    tt_put_i16(out + 1, cmd->setpoint_cc);
+    tt_put_i16(out + 1, cmd->current_ma);
     out[3] = cmd->version;
 }
 
@@ -46,6 +46,7 @@ int tt_peltier_status_decode(const uint8_t *data, uint8_t dlc, tt_peltier_status
     out->over_current = (data[0] >> 2) & 0x01u;
     out->sensor_fault = (data[0] >> 3) & 0x01u;
     out->watchdog = (data[0] >> 4) & 0x01u;
+    out->sink_saturated = (data[0] >> 5) & 0x01u;
     out->counter = data[1];
     out->junction_cc = tt_get_i16(data + 2);
     out->current_ma = tt_get_i16(data + 4);
@@ -57,7 +58,7 @@ void tt_peltier_status_encode(const tt_peltier_status *st, uint8_t out[TT_PELTIE
 {
     out[0] = (uint8_t)((st->enabled & 1u) | ((st->over_temp & 1u) << 1) |
                        ((st->over_current & 1u) << 2) | ((st->sensor_fault & 1u) << 3) |
-                       ((st->watchdog & 1u) << 4));
+                       ((st->watchdog & 1u) << 4) | ((st->sink_saturated & 1u) << 5));
     out[1] = st->counter;
     tt_put_i16(out + 2, st->junction_cc);
     tt_put_i16(out + 4, st->current_ma);
@@ -86,11 +87,10 @@ void tt_peltier_heartbeat_encode(const tt_peltier_heartbeat *hb,
 void tt_peltier_default_config(tt_peltier_config *cfg)
 {
     cfg->active_pad = false;
-    cfg->neutral_cc = 3300;
-    cfg->max_junction_cc = 6000;
-    cfg->min_junction_cc = -5000;
+    cfg->current_limit_ma = 8500;
     cfg->over_temp_cc = 7000;
-    cfg->over_current_ma = 29000;
+    cfg->sink_saturated_cc = 6000;
+    cfg->over_current_ma = 9350;
     cfg->watchdog_ms = 100;
     cfg->heartbeat_ms = 100;
     cfg->max_frames_per_poll = 64;
@@ -102,12 +102,12 @@ void tt_pad_default_config(tt_peltier_config *cfg)
     cfg->active_pad = true;
 }
 
-static void apply(tt_peltier_driver *drv, bool enabled, int16_t target_cc, bool pump,
+static void apply(tt_peltier_driver *drv, bool enabled, int16_t current_ma, bool pump,
                   uint8_t heater_duty_raw)
 {
     drv->enabled = enabled;
-    drv->target_cc = target_cc;
-    hal_peltier_set(enabled, target_cc);
+    drv->current_ma = current_ma;
+    hal_peltier_set(enabled, current_ma);
     if (drv->cfg.active_pad) {
         drv->pump_on = enabled && pump;
         drv->heater_duty_raw = enabled ? heater_duty_raw : 0u;
@@ -117,7 +117,7 @@ static void apply(tt_peltier_driver *drv, bool enabled, int16_t target_cc, bool 
 
 static void disable(tt_peltier_driver *drv)
 {
-    apply(drv, false, drv->cfg.neutral_cc, false, 0);
+    apply(drv, false, 0, false, 0); /* the safe state: no current */
 }
 
 static void send(tt_peltier_driver *drv, uint16_t id, const uint8_t *data, uint8_t dlc)
@@ -132,7 +132,7 @@ static void send_pad_status(tt_peltier_driver *drv)
     const tt_pad_status st = {
         drv->enabled ? 1u : 0u,
         (drv->faults & TT_FAULT_OVER_TEMP) ? 1u : 0u,
-        (drv->faults & TT_FAULT_SENSOR) ? 1u : 0u,
+        (drv->faults & (TT_FAULT_SENSOR | TT_FAULT_OVER_CURRENT)) ? 1u : 0u,
         (drv->faults & TT_FAULT_WATCHDOG) ? 1u : 0u,
         drv->pump_on ? 1u : 0u,
         drv->heater_duty_raw > 0 ? 1u : 0u,
@@ -160,6 +160,7 @@ static void send_status(tt_peltier_driver *drv)
         (drv->faults & TT_FAULT_OVER_CURRENT) ? 1u : 0u,
         (drv->faults & TT_FAULT_SENSOR) ? 1u : 0u,
         (drv->faults & TT_FAULT_WATCHDOG) ? 1u : 0u,
+        drv->measured.heatsink_cc > drv->cfg.sink_saturated_cc ? 1u : 0u,
         drv->status_counter,
         drv->measured.junction_cc,
         drv->measured.current_ma,
@@ -191,8 +192,8 @@ void tt_peltier_init(tt_peltier_driver *drv, const tt_peltier_config *cfg)
     drv->commanded = false;
     drv->last_cmd_ms = 0;
     drv->last_heartbeat_ms = 0;
-    drv->measured.junction_cc = cfg->neutral_cc;
-    drv->measured.heatsink_cc = cfg->neutral_cc;
+    drv->measured.junction_cc = 2500;
+    drv->measured.heatsink_cc = 2500;
     drv->measured.current_ma = 0;
     drv->measured.drive_milli = 0;
     drv->measured.sensors_ok = true;
@@ -212,11 +213,10 @@ static uint8_t protection_faults(const tt_peltier_driver *drv)
     if (!m->sensors_ok) {
         f |= TT_FAULT_SENSOR;
     }
-    if (m->heatsink_cc > drv->cfg.over_temp_cc || m->junction_cc > drv->cfg.over_temp_cc) {
-        f |= TT_FAULT_OVER_TEMP;
+    if (m->heatsink_cc > drv->cfg.over_temp_cc) {
+        f |= TT_FAULT_OVER_TEMP; /* the hot side */
     }
-    if (!drv->cfg.active_pad &&
-        (current_ma > drv->cfg.over_current_ma || -current_ma > drv->cfg.over_current_ma)) {
+    if (current_ma > drv->cfg.over_current_ma || -current_ma > drv->cfg.over_current_ma) {
         f |= TT_FAULT_OVER_CURRENT;
     }
     return f;
@@ -230,7 +230,7 @@ static int16_t clamp(int16_t v, int16_t lo, int16_t hi)
 /* A command of either kind, decoded. */
 typedef struct {
     uint8_t enable, pump, heater_duty_raw, version;
-    int16_t setpoint_cc;
+    int16_t current_ma;
 } command;
 
 static int decode_command(const tt_peltier_driver *drv, const uint8_t *data, uint8_t dlc,
@@ -245,7 +245,7 @@ static int decode_command(const tt_peltier_driver *drv, const uint8_t *data, uin
         out->pump = c.pump;
         out->heater_duty_raw = c.heater_duty_raw;
         out->version = c.version;
-        out->setpoint_cc = c.setpoint_cc;
+        out->current_ma = c.current_ma;
         return 0;
     }
     tt_peltier_cmd c;
@@ -256,7 +256,7 @@ static int decode_command(const tt_peltier_driver *drv, const uint8_t *data, uin
     out->pump = 0;
     out->heater_duty_raw = 0;
     out->version = c.version;
-    out->setpoint_cc = c.setpoint_cc;
+    out->current_ma = c.current_ma;
     return 0;
 }
 
@@ -282,8 +282,8 @@ static void handle_command(tt_peltier_driver *drv, const uint8_t *data, uint8_t 
         drv->faults &= (uint8_t)(TT_FAULT_WATCHDOG | protection_faults(drv));
     }
     if (cmd.enable && drv->faults == 0) {
-        apply(drv, true, clamp(cmd.setpoint_cc, drv->cfg.min_junction_cc,
-                               drv->cfg.max_junction_cc),
+        apply(drv, true, clamp(cmd.current_ma, (int16_t)-drv->cfg.current_limit_ma,
+                               drv->cfg.current_limit_ma),
               cmd.pump != 0, cmd.heater_duty_raw);
     } else if (drv->enabled || !cmd.enable) {
         disable(drv);

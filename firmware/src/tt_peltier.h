@@ -1,12 +1,16 @@
-/* The Peltier driver's side of its CAN protocol, version 1 (proto/CAN.md,
- * proto/peltier.dbc): classic CAN, 11-bit identifiers, node 1.
+/* The Peltier driver's side of its CAN protocol, version 2 (proto/CAN.md,
+ * proto/peltier.dbc): classic CAN, 11-bit identifiers, node 1. The module
+ * is driven by current.
  *
  *   0x101 PELTIER_CMD       master -> driver, 4 bytes: byte 0 bit 0 enable,
- *                           bits 4-7 counter; bytes 1-2 setpoint (int16 LE,
- *                           0.01 degC); byte 3 version
+ *                           bits 4-7 counter; bytes 1-2 module current
+ *                           (int16 LE, 1 mA, positive cools the pad side);
+ *                           byte 3 version (2; version 1 had a junction
+ *                           set point in bytes 1-2)
  *   0x181 PELTIER_STATUS    driver -> master after each command, 8 bytes:
- *                           byte 0 bits 0-4 enabled, over_temp, over_current,
- *                           sensor_fault, watchdog; byte 1 counter; bytes 2-3
+ *                           byte 0 bits 0-5 enabled, over_temp (hot side),
+ *                           over_current, sensor_fault, watchdog,
+ *                           sink_saturated (a warning); byte 1 counter; bytes 2-3
  *                           junction (0.01 degC), 4-5 current (1 mA), 6-7
  *                           heat sink (0.01 degC), all int16 LE
  *   0x701 PELTIER_HEARTBEAT driver -> master every 100 ms, 2 bytes: state
@@ -21,7 +25,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#define TT_CAN_VERSION 1u
+#define TT_CAN_VERSION 2u
 #define TT_CAN_NODE 1u
 #define TT_PELTIER_CMD_ID (0x100u + TT_CAN_NODE)
 #define TT_PELTIER_STATUS_ID (0x180u + TT_CAN_NODE)
@@ -40,16 +44,19 @@
 #define TT_FAULT_OVER_CURRENT 0x04u
 #define TT_FAULT_SENSOR 0x08u
 #define TT_FAULT_WATCHDOG 0x10u
+/* A warning, not a fault: the heat sink is above sink_saturated_cc; the
+ * driver keeps driving. */
+#define TT_WARN_SINK_SATURATED 0x20u
 
 typedef struct {
     uint8_t enable;       /* 0 or 1 */
     uint8_t counter;      /* 0..15 */
-    int16_t setpoint_cc;  /* junction setpoint, 0.01 degC */
+    int16_t current_ma;   /* module current, mA, positive cools the pad side */
     uint8_t version;
 } tt_peltier_cmd;
 
 typedef struct {
-    uint8_t enabled, over_temp, over_current, sensor_fault, watchdog; /* 0 or 1 each */
+    uint8_t enabled, over_temp, over_current, sensor_fault, watchdog, sink_saturated;
     uint8_t counter;
     int16_t junction_cc;
     int16_t current_ma;
@@ -92,12 +99,13 @@ typedef struct {
      * same rules, plus a water pad's pump and heater (hal_pad_water_set),
      * off whenever the pad is disabled. */
     bool active_pad;
-    int16_t neutral_cc;        /* where a disabled element is held (33.00 degC) */
-    int16_t max_junction_cc;   /* setpoints above are clamped (60.00 degC) */
-    int16_t min_junction_cc;   /* setpoints below are clamped (-50.00 degC: none) */
-    int16_t over_temp_cc;      /* heat sink above: over_temp (70.00 degC) */
-    int16_t over_current_ma;   /* |current| above: over_current (29000 mA; the
-                                  display's driver only: PAD_STATUS has no flag) */
+    int16_t current_limit_ma;  /* commands are clamped to +-this (8500 mA: the
+                                  module's Imax) */
+    int16_t over_temp_cc;      /* heat sink (hot side) above: over_temp (70.00 degC) */
+    int16_t sink_saturated_cc; /* heat sink above: sink_saturated warning (60.00 degC) */
+    int16_t over_current_ma;   /* measured |current| above: over_current (9350 mA,
+                                  10 % above the limit; the active pad reports
+                                  it as sensor_fault: PAD_STATUS has no flag) */
     uint16_t watchdog_ms;      /* no command for longer: disabled (100 ms) */
     uint16_t heartbeat_ms;     /* heartbeat period (100 ms) */
     uint8_t max_frames_per_poll; /* a flood cannot starve the watchdog (64) */
@@ -113,7 +121,7 @@ typedef struct {
     bool booted;           /* the boot heartbeat has been sent */
     bool enabled;
     uint8_t faults;        /* TT_FAULT_* */
-    int16_t target_cc;     /* what the element is driven to (neutral when disabled) */
+    int16_t current_ma;    /* what the element is driven with (0 when disabled) */
     bool pump_on;          /* the active pad only */
     uint8_t heater_duty_raw; /* the active pad only, 0.004 per unit */
     uint8_t status_counter;
@@ -125,7 +133,7 @@ typedef struct {
     uint32_t commands, bad_commands, watchdog_trips, send_failed;
 } tt_peltier_driver;
 
-/* Start (after a restart): disabled, the element to neutral. */
+/* Start (after a restart): disabled, 0 A. */
 void tt_peltier_init(tt_peltier_driver *drv, const tt_peltier_config *cfg);
 
 /* Call at least once a millisecond: measures, handles the commands that

@@ -40,7 +40,7 @@ DRIVER = textwrap.dedent("""
     start = next_t = time.monotonic()
     healthy = periods = 0
     while next_t < start + 1.5:                 # a 1 kHz control loop
-        d.command(31.25)
+        d.command(1.25)
         d.poll(0.0)
         if next_t > start + 0.3:
             periods += 1
@@ -49,7 +49,7 @@ DRIVER = textwrap.dedent("""
         time.sleep(max(0.0, next_t - time.monotonic()))
     s = d.status
     print(json.dumps({"healthy_fraction": healthy / periods,
-                      "junction_c": s and s.junction_c, "counters": d.counters}))
+                      "current_a": s and s.current_a, "counters": d.counters}))
     d.close()
 """)
 
@@ -72,5 +72,5 @@ def test_driver_and_emulator_in_two_processes_on_udp_multicast(namespace):
     # period once started; a stall of either process on this shared machine
     # may cost a few.
     assert result["healthy_fraction"] > 0.9, result
-    assert result["junction_c"] == pytest.approx(31.25)
+    assert result["current_a"] == pytest.approx(1.25)   # reported as driven, 1 mA steps
     assert result["counters"]["heartbeats"] >= 5 and result["counters"]["send_failed"] == 0

@@ -161,13 +161,13 @@ def test_every_can_golden_vector_both_ways(tt_host):
 
 
 def test_a_corrupted_can_vector_is_detected(tt_host):
-    data, fields = vectors("can")["cmd_setpoint"]
+    data, fields = vectors("can")["cmd_cool"]
     bad = bytearray(data)
     bad[1] ^= 0x01
     line = run(tt_host, "can-codec", stdin=f"decode 101 {bytes(bad).hex()}\n")
     decoded = {k: int(v) for k, v in (p.split("=") for p in line.split()[1:])}
     assert decoded != fields["raw"]
-    assert decoded["setpoint_c"] == fields["raw"]["setpoint_c"] ^ 1
+    assert decoded["current_a"] == fields["raw"]["current_a"] ^ 1
 
 
 # ------------------------------------------------------------------ the pty round trip
@@ -311,23 +311,23 @@ def test_the_round_trip_catches_a_corrupted_line(tt_host, tmp_path):
 
 
 # ------------------------------------------------------------------ the Peltier driver
-def pad_cmd(counter: int, setpoint_c: float, enable: int = 1, pump: int = 0,
+def pad_cmd(counter: int, current_a: float, enable: int = 1, pump: int = 0,
             heater_duty: float = 0.0) -> str:
     message = DB.get_message_by_name("PAD_CMD")
     data = message.encode({"enable": enable, "pump": pump, "counter": counter & 0xF,
-                           "setpoint_c": setpoint_c, "heater_duty": heater_duty,
-                           "version": 1})
+                           "current_a": current_a, "heater_duty": heater_duty,
+                           "version": 2})
     return f"rx {message.frame_id:x} {data.hex()}\n"
 
 
-def cmd(counter: int, setpoint_c: float, enable: int = 1, version: int = 1) -> str:
-    data = CMD.encode({"enable": enable, "counter": counter & 0xF, "setpoint_c": setpoint_c,
+def cmd(counter: int, current_a: float, enable: int = 1, version: int = 2) -> str:
+    data = CMD.encode({"enable": enable, "counter": counter & 0xF, "current_a": current_a,
                        "version": version})
     return f"rx {CMD.frame_id:x} {data.hex()}\n"
 
 
 def peltier_trace(exe: Path, script: str, *args: str) -> list[tuple]:
-    """The firmware's output as (ms, 'set', enabled, cc), (ms, 'water', pump,
+    """The firmware's output as (ms, 'set', enabled, ma), (ms, 'water', pump,
     duty_raw) and (ms, 'tx', name, signals decoded by cantools from the DBC)."""
     events = []
     for line in run(exe, "peltier", *args, stdin=script).splitlines():
@@ -348,21 +348,21 @@ def test_watchdog_disables_the_element_after_the_documented_time_not_before(tt_h
     last_cmd_ms = 500
     script = "t 0\n"
     for i, ms in enumerate(range(10, last_cmd_ms + 1, 10)):
-        script += cmd(i, 35.25) + f"t {ms}\n"
+        script += cmd(i, 1.25) + f"t {ms}\n"
     script += "".join(f"t {ms}\n" for ms in range(last_cmd_ms + 1, 800))
-    script += cmd(0, 36.0) + "t 800\n"                   # commands resume
+    script += cmd(0, 1.5) + "t 800\n"                    # commands resume
     events = peltier_trace(tt_host, script)
     sets = [e for e in events if e[1] == "set"]
-    assert sets[0] == (0, "set", 0, 3300)                # starts disabled, neutral
-    assert sets[1] == (10, "set", 1, 3525)               # the first command enables it
+    assert sets[0] == (0, "set", 0, 0)                   # starts disabled, no current
+    assert sets[1] == (10, "set", 1, 1250)               # the first command enables it
     off = [e for e in sets if e[0] > 0 and e[2] == 0]
     trip_ms = last_cmd_ms + WATCHDOG_MS + 1              # the first ms *after* 100 ms of silence
-    assert off[0] == (trip_ms, "set", 0, 3300), sets     # not before
+    assert off[0] == (trip_ms, "set", 0, 0), sets        # not before
     assert all(e[2] == 1 for e in sets if 0 < e[0] < trip_ms)
     statuses = [e for e in events if e[2] == "PELTIER_STATUS"]
     trip = next(s for s in statuses if s[0] == trip_ms)
     assert trip[3]["watchdog"] == 1 and trip[3]["enabled"] == 0
-    assert trip[3]["junction_c"] == 33.0
+    assert trip[3]["current_a"] == 0.0 and trip[3]["junction_c"] == 25.0   # passive: the sink's
     assert all(s[3]["watchdog"] == 0 for s in statuses if s[0] < trip_ms)
     beats = [e for e in events if e[2] == "PELTIER_HEARTBEAT"]
     assert beats[0][:2] == (0, "tx") and beats[0][3]["state"] == 0       # boot, once
@@ -370,31 +370,32 @@ def test_watchdog_disables_the_element_after_the_documented_time_not_before(tt_h
     assert all(b[3]["state"] == 128 for b in beats if trip_ms < b[0] < 800)
     assert all(b[0] - a[0] == 100 for a, b in zip(beats, beats[1:]))
     # Resumed: the flag clears and the new setpoint is applied at once.
-    assert sets[-1] == (800, "set", 1, 3600)
+    assert sets[-1] == (800, "set", 1, 1500)
     assert statuses[-1][3]["watchdog"] == 0 and statuses[-1][3]["enabled"] == 1
 
 
-def test_each_command_is_answered_and_setpoints_are_clamped(tt_host):
-    script = "t 0\n" + cmd(1, 80.0) + "t 1\n" + cmd(2, 20.0, enable=0) + "t 2\n" + \
-        cmd(3, 40.0, version=2) + "t 3\n" + "rx 101 0100\n" + "t 4\n" + \
-        "rx 123 0102030405060708\n" + "t 5\n"
+def test_each_command_is_answered_and_currents_are_clamped(tt_host):
+    script = "t 0\n" + cmd(1, 20.0) + "t 1\n" + cmd(2, 2.0, enable=0) + "t 2\n" + \
+        cmd(3, 4.0, version=1) + "t 3\n" + "rx 101 0100\n" + "t 4\n" + \
+        "rx 123 0102030405060708\n" + "t 5\n" + cmd(4, -20.0) + "t 6\n"
     events = peltier_trace(tt_host, script)
     sets = [e for e in events if e[1] == "set"]
-    assert sets[1:] == [(1, "set", 1, 6000), (2, "set", 0, 3300)]   # max 60 C; neutral
+    # +-8.5 A (Imax); disabled: 0 A.
+    assert sets[1:] == [(1, "set", 1, 8500), (2, "set", 0, 0), (6, "set", 1, -8500)]
     statuses = [e for e in events if e[2] == "PELTIER_STATUS"]
-    assert [s[0] for s in statuses] == [1, 2]        # version 2, short and foreign: no answer
-    assert [s[3]["counter"] for s in statuses] == [0, 1]
-    assert statuses[0][3]["junction_c"] == 60.0 and statuses[0][3]["current_a"] == -14.0
+    assert [s[0] for s in statuses] == [1, 2, 6]     # version 1, short and foreign: no answer
+    assert [s[3]["counter"] for s in statuses] == [0, 1, 2]
+    assert statuses[0][3]["current_a"] == 8.5 and statuses[0][3]["junction_c"] == 8.0
 
 
 def test_over_temperature_disables_until_acknowledged(tt_host):
-    script = "t 0\n" + cmd(1, 35.0) + "t 1\n" + "meas 3500 7100 -4000 1\n" + "t 2\n" + \
-        cmd(2, 35.0) + "t 3\n" + cmd(3, 35.0, enable=0) + "t 4\n" + \
-        "meas 3300 2500 0 1\n" + cmd(4, 35.0, enable=0) + "t 5\n" + cmd(5, 35.0) + "t 6\n"
+    script = "t 0\n" + cmd(1, 1.0) + "t 1\n" + "meas 3500 7100 -4000 1\n" + "t 2\n" + \
+        cmd(2, 1.0) + "t 3\n" + cmd(3, 1.0, enable=0) + "t 4\n" + \
+        "meas 3300 2500 0 1\n" + cmd(4, 1.0, enable=0) + "t 5\n" + cmd(5, 1.0) + "t 6\n"
     events = peltier_trace(tt_host, script)
     sets = [e for e in events if e[1] == "set"]
-    assert sets[1:] == [(1, "set", 1, 3500), (2, "set", 0, 3300), (4, "set", 0, 3300),
-                        (5, "set", 0, 3300), (6, "set", 1, 3500)]
+    assert sets[1:] == [(1, "set", 1, 1000), (2, "set", 0, 0), (4, "set", 0, 0),
+                        (5, "set", 0, 0), (6, "set", 1, 1000)]
     status = {e[0]: e[3] for e in events if e[2] == "PELTIER_STATUS"}
     assert status[2]["over_temp"] == 1 and status[2]["enabled"] == 0
     assert status[3]["over_temp"] == 1 and status[3]["enabled"] == 0   # still hot: refused
@@ -444,8 +445,8 @@ def test_the_projects_driver_trusts_the_firmware_and_sees_its_watchdog(tt_host, 
     try:
         for ms in range(0, 700):
             if 10 <= ms <= last_cmd_ms and ms % 10 == 0:
-                assert driver.command(35.5, pump=True, heater_duty=0.5) if pad else \
-                    driver.command(35.5)
+                assert driver.command(-0.5, pump=True, heater_duty=0.5) if pad else \
+                    driver.command(1.25)
             step(ms)
             healthy[ms] = driver.healthy
         c = dict(driver.counters)              # before close() sends its disable
@@ -459,11 +460,13 @@ def test_the_projects_driver_trusts_the_firmware_and_sees_its_watchdog(tt_host, 
     assert not healthy[5] and all(healthy[ms] for ms in range(10, trip_ms)), healthy
     assert not any(healthy[ms] for ms in range(trip_ms, 700))
     assert driver.status.faults == ("watchdog",) and not driver.status.enabled
-    assert (driver.status.actuator_c if pad else driver.status.junction_c) == 33.0
+    assert (driver.status.actuator_c if pad else driver.status.junction_c) == 25.0   # 0 A
+    assert driver.peer_version == 2 and driver.version_error is None
     assert driver.state == 128                           # the heartbeat says fault
     assert c["sent"] == 30 and c["statuses"] == 31       # each command answered + the trip
     assert c["heartbeats"] == 7 and c["undecodable"] == c["error_frames"] == c["reboots"] == 0
-    assert applied[1] == (10, 1, 3550) and applied[-1] == (trip_ms, 0, 3300)
+    assert applied[1] == ((10, 1, -500) if pad else (10, 1, 1250))
+    assert applied[-1] == (trip_ms, 0, 0)
     if pad:
         assert water[1] == (10, 1, 125) and water[-1] == (trip_ms, 0, 0)
         assert not driver.status.pump_on and not driver.status.heater_on
@@ -472,9 +475,9 @@ def test_the_projects_driver_trusts_the_firmware_and_sees_its_watchdog(tt_host, 
 def test_the_active_pad_variant_drives_pump_and_heater_and_its_watchdog_stops_them(tt_host):
     """The slave's active pad (node 2, PAD_* frames): the same rules as the
     display's driver, and pump and heater off whenever the pad is disabled."""
-    script = "t 0\n" + cmd(1, 40.0) + "t 5\n"             # the display's frame: not ours
+    script = "t 0\n" + cmd(1, 4.0) + "t 5\n"              # the display's frame: not ours
     for i, ms in enumerate(range(10, 201, 10)):
-        script += pad_cmd(i, 34.0, pump=1, heater_duty=0.748) + f"t {ms}\n"
+        script += pad_cmd(i, -0.5, pump=1, heater_duty=0.748) + f"t {ms}\n"
     script += "".join(f"t {ms}\n" for ms in range(201, 450))
     events = peltier_trace(tt_host, script, "--pad")
     assert not [e for e in events if e[0] == 5 and e[1] != "tx"]
@@ -484,28 +487,50 @@ def test_the_active_pad_variant_drives_pump_and_heater_and_its_watchdog_stops_th
     trip_ms = 200 + WATCHDOG_MS + 1
     assert [e for e in water if e[2] == 0 and e[0] > 0] == [(trip_ms, "water", 0, 0)]
     assert [e for e in events if e[1] == "set" and e[2] == 0 and e[0] > 0] == \
-        [(trip_ms, "set", 0, 3300)]
+        [(trip_ms, "set", 0, 0)]
     names = {e[2] for e in events if e[1] == "tx"}
     assert names == {"PAD_STATUS", "PAD_HEARTBEAT"}
     statuses = [e for e in events if e[2] == "PAD_STATUS"]
     assert len(statuses) == 21                            # 20 commands + the trip
     assert statuses[0][3]["pump_on"] == statuses[0][3]["heater_on"] == 1
-    assert statuses[0][3]["actuator_c"] == 34.0 and statuses[0][3]["drive"] == 0.45
+    # -0.5 A: the ideal element's junction 1 K above the sink; drive -0.5 / 8.5.
+    assert statuses[0][3]["actuator_c"] == 26.0 and statuses[0][3]["drive"] == -0.058
     assert statuses[-1][0] == trip_ms and statuses[-1][3]["watchdog"] == 1
     assert statuses[-1][3]["pump_on"] == statuses[-1][3]["heater_on"] == 0
     beats = [e[3]["state"] for e in events if e[2] == "PAD_HEARTBEAT"]
     assert beats == [0, 5, 5, 5, 128]              # boot; 100, 200, 300 ms; 400 ms: fault
 
 
-@pytest.mark.parametrize("measure, flag", [("3500 2500 -29500 1", "over_current"),
+@pytest.mark.parametrize("measure, flag", [("3500 2500 -9351 1", "over_current"),
                                            ("3500 2500 -4000 0", "sensor_fault")])
 def test_over_current_and_a_failed_sensor_disable_the_element(tt_host, measure, flag):
-    script = "t 0\n" + cmd(1, 35.0) + "t 1\n" + f"meas {measure}\n" + "t 2\n" + \
-        cmd(2, 35.0) + "t 3\n"
+    script = "t 0\n" + cmd(1, 3.5) + "t 1\n" + f"meas {measure}\n" + "t 2\n" + \
+        cmd(2, 3.5) + "t 3\n"
     events = peltier_trace(tt_host, script)
     assert [e for e in events if e[1] == "set"][1:] == [(1, "set", 1, 3500),
-                                                         (2, "set", 0, 3300)]
+                                                         (2, "set", 0, 0)]
     status = {e[0]: e[3] for e in events if e[2] == "PELTIER_STATUS"}
     assert status[2][flag] == 1 and status[2]["enabled"] == 0
     assert status[3][flag] == 1 and status[3]["enabled"] == 0          # still refused
     assert sum(status[2][f] for f in ("over_temp", "over_current", "sensor_fault")) == 1
+
+
+def test_the_firmware_refuses_a_version_1_command_and_says_version_2(tt_host):
+    """A version-1 master's frame (bytes 1-2 a set point of 40.00 C) is
+    counted and not answered; the heartbeat says version 2 (the master's
+    driver refuses a board whose heartbeat says otherwise)."""
+    old = "rx 101 11a00f01\n"               # enable, counter 1, 4000, version 1
+    events = peltier_trace(tt_host, "t 0\n" + old + "t 1\n" + "t 100\n")
+    assert not [e for e in events if e[2] == "PELTIER_STATUS"]
+    assert [e for e in events if e[1] == "set"] == [(0, "set", 0, 0)]   # never driven
+    assert {e[3]["version"] for e in events if e[2] == "PELTIER_HEARTBEAT"} == {2}
+
+
+def test_the_sink_saturated_warning_keeps_the_element_driven(tt_host):
+    script = "t 0\n" + cmd(1, 8.5) + "t 1\n" + "meas 1800 6150 8500 1\n" + cmd(2, 8.5) + \
+        "t 2\n"
+    events = peltier_trace(tt_host, script)
+    status = {e[0]: e[3] for e in events if e[2] == "PELTIER_STATUS"}
+    assert status[1]["sink_saturated"] == 0
+    assert status[2]["sink_saturated"] == 1 and status[2]["enabled"] == 1
+    assert not any(status[2][f] for f in ("over_temp", "over_current", "sensor_fault"))

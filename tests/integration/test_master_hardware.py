@@ -25,6 +25,19 @@ OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat
                     force_n=4.0, conductance_w_m2k=5000.0)
 
 
+def record_steps(service) -> list:
+    """The steps the service applies to its hardware display (the touch
+    follows their junction until the simulated plant is driven by current)."""
+    steps, apply = [], service.hardware.apply
+
+    def recording(t, step, dt_s, force_n):
+        steps.append(step)
+        apply(t, step, dt_s, force_n)
+
+    service.hardware.apply = recording
+    return steps
+
+
 def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tmp_path):
     board = SensorBoardEmulator(tmp_path / "board")
     applied = []
@@ -35,6 +48,7 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
                           admin_port=admin, transport=TransportConfig(
                               security="plain", control_port=control, stream_port=stream))
     service = MasterService(config)
+    steps = record_steps(service)
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 0.6, 33.0, np.random.default_rng(0))
     phases, safe, events_sent = {}, {}, []
     try:
@@ -47,9 +61,9 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
                 peltier.over_temperature()
             service.step(t, 1e-3)
             peltier.poll()
-            junction = applied[-1] if applied else 33.0
-            touch.actuate(t, MasterStep(t, "", True, math.nan, junction, junction, False),
-                          1e-3, s.force_n)
+            junction = steps[-1].junction_applied_c if steps else 33.0
+            touch.actuate(t, MasterStep(t, "", True, math.nan, junction, junction, False,
+                                        applied[-1] if applied else 0.0), 1e-3, s.force_n)
             phases[k] = service.display.phase
             safe[k] = service.display.safety.safe
             events_sent.append(service.endpoint.counters["lossless_sent"])
@@ -65,7 +79,8 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
     # No slave, so nothing to render: the display says the link is lost and
     # holds the pad at neutral.
     assert {phases[k] for k in range(300, 600)} == {"link lost"}
-    assert applied[-1] == pytest.approx(33.0)
+    assert steps[-1].junction_applied_c == pytest.approx(33.0)
+    assert applied[-1] == 0.0                      # the master's current (0 A until it sets one)
     # Until the driver's over-temperature the loop was trusted; after it, safe.
     assert not any(safe[k] for k in range(100, 600))
     assert all(safe[k] for k in range(605, 1200))
@@ -124,6 +139,7 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path):
                    service.link.object_temp_c is not None) and time.monotonic() < end:
             service.step(0.0, 1e-3)
             time.sleep(1e-3)
+        steps = record_steps(service)
         idle = service.link.object_temp_c
         touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.5, idle, np.random.default_rng(1))
         phases = []
@@ -134,9 +150,9 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path):
             deadline = time.monotonic() + 1e-3
             service.step(t, 1e-3)
             peltier.poll()
-            junction = applied[-1] if applied else idle
-            touch.actuate(t, MasterStep(t, "", True, math.nan, junction, junction, False),
-                          1e-3, s.force_n)
+            junction = steps[-1].junction_applied_c if steps else idle
+            touch.actuate(t, MasterStep(t, "", True, math.nan, junction, junction, False,
+                                        applied[-1] if applied else 0.0), 1e-3, s.force_n)
             phases.append(service.display.phase)
             time.sleep(max(0.0, deadline - time.monotonic()))
         metrics = compare_with_direct(SCENE, "plexiglass", placed["object_true_c"], OPERATOR,

@@ -243,7 +243,7 @@ def test_on_hardware_a_silent_board_ends_the_touch_unknown(identifier, session, 
 class FreeRunningRig:
     """A slave pad that lives on its own: a version-2 board streaming at the
     scene's rate from a thread, the active pad's driver board on a CAN bus,
-    a Peltier pad following its junction, the thermometer seeing the pad
+    a Peltier pad following the junction its module current holds, the thermometer seeing the pad
     (``aim = "pad"``) or an object at ``object_c``."""
 
     def __init__(self, tmp_path, instruments, bus):
@@ -255,7 +255,9 @@ class FreeRunningRig:
 
         self.board = SensorBoardEmulator(tmp_path / "slave-board", SCENE.room_temp_c,
                                          version=2)
-        self.pad = ActivePadEmulator(bus, self._junction, heatsink_c=SCENE.room_temp_c)
+        self.pad = ActivePadEmulator(bus, self._on_current, heatsink_c=SCENE.room_temp_c,
+                                     state=lambda: (self.junction_c, SCENE.room_temp_c,
+                                                    self.pad.current_a))
         self.instruments, self.rng = instruments, np.random.default_rng(5)
         self.tc = Thermocouple(cold_junction_c=SCENE.room_temp_c,
                                bias_k=instruments.pad_tc_bias_k)
@@ -265,8 +267,9 @@ class FreeRunningRig:
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
 
-    def _junction(self, c):
-        self.junction_c = c
+    def _on_current(self, current_a):
+        from telethermal.devices.active_pad import current_junction_c
+        self.junction_c = current_junction_c(current_a, SCENE.room_temp_c)
 
     def _run(self):
         import time

@@ -9,16 +9,17 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from telethermal.devices.active_pad import (PAD_CMD, PAD_STATUS, ActivePadDriver,
-                                            ActivePadEmulator)
+                                            ActivePadEmulator, amps_per_kelvin,
+                                            current_junction_c, junction_current_a)
 
 _names = itertools.count()
 
 
 @given(enable=st.integers(0, 1), pump=st.integers(0, 1), counter=st.integers(0, 15),
-       setpoint=st.integers(-5000, 15000), duty=st.integers(0, 250))
-def test_a_pad_command_round_trips_on_its_raw_grid(enable, pump, counter, setpoint, duty):
-    raw = {"enable": enable, "pump": pump, "counter": counter, "setpoint_c": setpoint,
-           "heater_duty": duty, "version": 1}
+       current=st.integers(-32768, 32767), duty=st.integers(0, 250))
+def test_a_pad_command_round_trips_on_its_raw_grid(enable, pump, counter, current, duty):
+    raw = {"enable": enable, "pump": pump, "counter": counter, "current_a": current,
+           "heater_duty": duty, "version": 2}
     data = PAD_CMD.encode(raw, scaling=False)
     assert len(data) == PAD_CMD.length
     assert PAD_CMD.decode(data, scaling=False, decode_choices=False) == raw
@@ -49,26 +50,36 @@ def pad():
 
 def test_the_driver_commands_the_pad_and_reads_its_status(pad):
     clock, applied, emulator, driver = pad
-    assert driver.command(31.5, pump=True, heater_duty=0.5)
+    assert driver.command(-0.35, pump=True, heater_duty=0.5)
     emulator.poll()
     driver.poll()
-    assert applied[-1] == pytest.approx(31.5)
+    assert applied[-1] == pytest.approx(-0.35)
     s = driver.status
-    assert s.enabled and s.actuator_c == pytest.approx(31.5) and s.pump_on and s.heater_on
-    assert driver.healthy and not s.faults
+    # drive: the current as a fraction of the 8.5 A limit, 0.001 steps.
+    assert s.enabled and s.drive == pytest.approx(-0.35 / 8.5, abs=5e-4)
+    assert s.pump_on and s.heater_on and driver.healthy and not s.faults
+
+
+def test_the_pads_module_map_is_its_own_inverse():
+    # g = K / (S Tc): about 0.047 A/K for the default module on a 25 C sink.
+    assert amps_per_kelvin(25.0) == pytest.approx(0.0466, rel=0.01)
+    for junction_c in (10.0, 24.0, 45.0):
+        current = junction_current_a(junction_c, 24.0)
+        assert (current > 0) == (junction_c < 24.0)          # cooling below the sink
+        assert current_junction_c(current, 24.0) == pytest.approx(junction_c)
 
 
 def test_silence_trips_the_pads_watchdog_and_safe_disables_it(pad):
     clock, applied, emulator, driver = pad
-    driver.command(36.0)
+    driver.command(-0.5)
     emulator.poll()
     clock[0] = 0.2                                      # no command for 200 ms
     emulator.poll()
     driver.poll()
     assert not emulator.enabled and "watchdog" in driver.status.faults
-    assert applied[-1] == pytest.approx(emulator.neutral_c)
+    assert applied[-1] == 0.0                           # the safe state: no current
     assert driver.counters["faults_reported"] == 1 and not driver.healthy
-    driver.command(36.0)                                # commands resume: the flag clears
+    driver.command(-0.5)                                # commands resume: the flag clears
     emulator.poll()
     driver.poll()
     assert emulator.enabled and not driver.status.faults

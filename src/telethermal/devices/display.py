@@ -1,7 +1,11 @@
 """The master's display devices behind one interface, whichever they are.
 
 ``read(t_s) -> PadSensors`` and ``apply(t_s, step, dt_s, force_n)`` each
-control period; ``counters()``; ``close()``.
+control period (``step.current_a``: the module current the master commands,
+after its limits); ``counters()``; ``close()``. The hardware displays also
+give ``module_readings() -> (junction_c, heatsink_c, current_a)``, the
+Peltier driver's last status (NaN when it cannot be trusted), for the
+master's junction loop.
 
 * :class:`SimDisplay` (``devices = "sim"``): the simulator directly.
 * :class:`HardwareDisplay`: the sensor board on a serial port and the
@@ -26,6 +30,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from telethermal.control.safety import SafetyLimits
 from telethermal.devices.board import Calibration, SensorBoard
 from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
 from telethermal.devices.peltier import PeltierDriver
@@ -91,9 +96,16 @@ class HardwareDisplay:
         return PadSensors(flux, temp, force)
 
     def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        """Send ``step.current_a`` (clamped to the driver's limit; a NaN is
+        the driver's :class:`DeviceError`, the caller's safe state)."""
         if self._first_command_s is None:
             self._first_command_s = self.clock()
-        self.peltier.command(step.junction_applied_c)
+        self.peltier.command(step.current_a)
+
+    def module_readings(self) -> tuple[float, float, float]:
+        """(junction_c, heatsink_c, current_a) the Peltier driver last
+        reported; NaN when it is not healthy."""
+        return self.peltier.readings()
 
     def counters(self) -> dict:
         return {"board": self.board.all_counters, "peltier": dict(self.peltier.counters),
@@ -120,15 +132,31 @@ class EmulatedDisplay:
         self.board_emulator = SensorBoardEmulator(Path(self._dir.name) / "sensor-board",
                                                   seed=seed)
         bus = f"virtual:telethermal-display-{next(_bus_names)}"
-        self._applied: float | None = None
-        self.peltier_emulator = PeltierEmulator(bus, self._on_junction, clock=clock)
+        self._applied_a: float | None = None
+        self._junction_c = getattr(touch, "junction_c", SafetyLimits().neutral_c)
+        self.peltier_emulator = PeltierEmulator(bus, self._on_current, clock=clock,
+                                                state=self._module_state)
         # In lockstep on the simulated clock, wait for each frame; on the real
         # clock, a board streams on its own and the loop takes what is there.
         self.hardware = HardwareDisplay(self.board_emulator.path, bus, clock=clock,
                                         wait_s=5e-4 if realtime else 0.05)
 
-    def _on_junction(self, junction_c: float) -> None:
-        self._applied = junction_c
+    def _on_current(self, current_a: float) -> None:
+        self._applied_a = current_a
+
+    def _module_state(self) -> tuple[float, float, float]:
+        """What the emulated board measures: the touch's ``module_state()``
+        (junction_c, heatsink_c, current_a) once the physics side gives the
+        touch one; until then the junction the touch was last driven to, the
+        heat sink at 25 C and the current the board drives."""
+        module_state = getattr(self.touch, "module_state", None)
+        if module_state is not None:
+            return module_state()
+        return self._junction_c, self.peltier_emulator.heatsink_c, \
+            self.peltier_emulator.current_a
+
+    def module_readings(self) -> tuple[float, float, float]:
+        return self.hardware.module_readings()
 
     def read(self, t_s: float) -> PadSensors:
         s = self.touch.sense(t_s)          # the physics and the sensors' own noise and ADC
@@ -137,12 +165,16 @@ class EmulatedDisplay:
         return self.hardware.read(t_s)
 
     def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        """The master's current through the driver and the emulated board to
+        the touch: ``touch.actuate`` gets ``step`` with ``current_a`` = the
+        current the board drives (0 A when it is disabled or faulted)."""
         self.hardware.apply(t_s, step, dt_s, force_n)
-        self._applied = None
-        self.peltier_emulator.poll()       # the command arrives, the junction moves
-        junction = self._applied if self._applied is not None else \
-            self.peltier_emulator.junction_c
-        self.touch.actuate(t_s, replace(step, junction_applied_c=junction), dt_s, force_n)
+        self._applied_a = None
+        self.peltier_emulator.poll()       # the command arrives, the board drives
+        current = self._applied_a if self._applied_a is not None else \
+            self.peltier_emulator.current_a
+        self._junction_c = step.junction_applied_c
+        self.touch.actuate(t_s, replace(step, current_a=current), dt_s, force_n)
 
     def counters(self) -> dict:
         return self.hardware.counters()

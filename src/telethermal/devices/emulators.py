@@ -7,13 +7,15 @@ it would open ``/dev/ttyUSB0``. Given ``link_path``, that path is a symlink
 that the emulator re-points when the "port" comes back after
 :meth:`~SensorBoardEmulator.disappear`.
 
-:class:`PeltierEmulator` is a Peltier driver on a python-can bus: it
-applies the setpoints it receives (through a callback into the simulator),
-answers with its status, sends its heartbeat, and disables itself when no
-setpoint arrives for ``watchdog_s``.
+:class:`PeltierEmulator` is a Peltier driver board on a python-can bus:
+it drives the module current it receives (through a callback into the
+simulator), answers with the simulated module's state as its status, sends
+its heartbeat, trips on over-current and hot-side over-temperature, and
+drives 0 A when no command arrives for ``watchdog_s``.
 
 Both take faults at run time: noise, a stuck value, dropouts, bit flips,
-garbage between frames, a reboot; error frames and over-temperature on CAN.
+garbage between frames, a reboot; error frames, over-temperature and
+over-current on CAN.
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ from telethermal.devices.board import Calibration
 from telethermal.devices.frames import (FRAME_VERSION, STATUS_ALL, STATUS_FLUX, STATUS_FORCE,
                                         STATUS_HEATER, STATUS_IR, STATUS_PUMP, STATUS_TC,
                                         TYPE_BOOT, TYPE_SAMPLE, BoardFrame, encode)
-from telethermal.devices.peltier import (CAN_VERSION, CMD, HEARTBEAT, STATE_BOOT,
+from telethermal.devices.peltier import (CAN_VERSION, CMD, DEFAULT_CURRENT_LIMIT_A,
+                                         FRAME_CURRENT_A, HEARTBEAT, STATE_BOOT,
                                          STATE_DISABLED, STATE_FAULT, STATE_OPERATIONAL,
                                          STATUS, open_bus)
 
@@ -180,29 +183,65 @@ MAX_FRAMES_PER_POLL = 64
 
 
 class PeltierEmulator:
-    """A Peltier driver on ``bus``: ``apply(junction_c)`` is called with what
-    it drives the junction to (the setpoint, or neutral when disabled)."""
+    """A Peltier driver board on ``bus`` (protocol ``version``, default
+    :data:`~telethermal.devices.peltier.CAN_VERSION`).
+
+    ``on_current(current_a)`` is called with the current the board drives
+    (the command clamped to ``current_limit_a``; 0 A when disabled, faulted
+    or its watchdog has tripped). ``state()`` gives the simulated module's
+    ``(junction_c, heatsink_c, current_a)``; the status frames report it
+    with the board's quantisation (0.01 C, 1 mA). Without ``state``, an
+    element that is not simulated: the junction at neutral, the heat sink at
+    ``heatsink_c``, the current as driven.
+
+    Safe state: 0 A, not a hold current toward neutral. With no current the
+    module is passive (it conducts between sink and pad, no Joule heat), and
+    it needs nothing the board may have lost: a faulted board cannot trust
+    its own sensors to regulate a hold, and the junction loop lives on the
+    master, which commands a hold current itself while it trusts the board.
+
+    Protections (latched; cleared by :meth:`clear_faults`, or by a command
+    with enable 0 once the measured cause has gone, as the firmware does):
+    ``over_current`` when the measured |current| exceeds ``over_current_a``
+    (default 10 % above the limit the bridge regulates to: past it the bridge
+    or the module has failed, the command cannot do it), ``over_temp`` when
+    the hot side (heat sink) exceeds ``max_heatsink_c``, ``sensor_fault``
+    when a reading is not finite. ``sink_saturated`` is a warning, not a
+    fault: the sink is above ``sink_saturated_c``, the board keeps driving.
+    """
 
     CMD, STATUS, HEARTBEAT = CMD, STATUS, HEARTBEAT
+    #: Protections the board checks on its measurements.
+    PROTECTIONS = ("over_temp", "over_current", "sensor_fault")
 
-    def __init__(self, bus: str, apply, watchdog_s: float = 0.1, heartbeat_s: float = 0.1,
-                 clock=time.monotonic, max_junction_c: float = 60.0,
-                 heatsink_c: float = 25.0):
+    def __init__(self, bus: str, on_current, clock=time.monotonic, state=None,
+                 watchdog_s: float = 0.1, heartbeat_s: float = 0.1,
+                 current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
+                 over_current_a: float | None = None, max_heatsink_c: float = 70.0,
+                 sink_saturated_c: float = 60.0, heatsink_c: float = 25.0,
+                 version: int = CAN_VERSION):
         self.bus = open_bus(bus)
-        self.apply = apply
+        self.on_current = on_current
+        self.state_fn = state
         self.clock = clock
         self.watchdog_s, self.heartbeat_s = watchdog_s, heartbeat_s
-        self.max_junction_c = max_junction_c
+        self.current_limit_a = float(current_limit_a)
+        self.over_current_a = 1.1 * self.current_limit_a if over_current_a is None \
+            else float(over_current_a)
+        self.max_heatsink_c, self.sink_saturated_c = max_heatsink_c, sink_saturated_c
         self.heatsink_c = heatsink_c
+        self.version = version
         self.neutral_c = SafetyLimits().neutral_c
         self.enabled = False
-        self.junction_c = self.neutral_c
+        self.current_a = 0.0                    # what the board drives
         self.faults: set[str] = set()
+        self._forced: set[str] = set()          # faults injected by a test (over_temperature)
         self.state = STATE_BOOT
         self._last_cmd_s: float | None = None
         self._next_heartbeat = -math.inf
         self._counter = 0
-        self.counters = dict.fromkeys(("commands", "bad_commands", "watchdog_trips"), 0)
+        self.counters = dict.fromkeys(("commands", "bad_commands", "watchdog_trips",
+                                       "protection_trips"), 0)
         self.offline_until_s = -math.inf       # a reboot: silent meanwhile
 
     def _send(self, message, data) -> None:
@@ -213,53 +252,107 @@ class PeltierEmulator:
         self.bus.send(can.Message(arbitration_id=0, is_error_frame=True, data=b"\x00" * 8,
                                   is_extended_id=False))
 
+    # ------------------------------------------------------------ the module
+    def measured(self) -> tuple[float, float, float]:
+        """(junction_c, heatsink_c, current_a) as the board measures them."""
+        if self.state_fn is None:
+            return self.neutral_c, self.heatsink_c, self.current_a
+        junction_c, heatsink_c, current_a = self.state_fn()
+        return float(junction_c), float(heatsink_c), float(current_a)
+
+    def _protection_faults(self) -> set[str]:
+        junction_c, heatsink_c, current_a = self.measured()
+        tripped = set(self._forced)
+        if not all(math.isfinite(v) for v in (junction_c, heatsink_c, current_a)):
+            tripped.add("sensor_fault")
+        if heatsink_c > self.max_heatsink_c:
+            tripped.add("over_temp")
+        if abs(current_a) > self.over_current_a:
+            tripped.add("over_current")
+        return tripped
+
+    def _protect(self) -> None:
+        """Trip on what the board measures: the current to 0 A, flagged."""
+        tripped = self._protection_faults() - self.faults
+        if tripped:
+            self.counters["protection_trips"] += 1
+            self.faults |= tripped
+            self._disable()
+            self._status()
+
     def over_temperature(self) -> None:
-        """The driver's own protection trips: disabled, junction to neutral,
-        flagged until a command with enable after :meth:`clear_faults`."""
-        self.faults.add("over_temp")
+        """The hot side's protection trips (as if the sink read hot):
+        disabled, 0 A, flagged until :meth:`clear_faults`."""
+        self.trip("over_temp")
+
+    def trip(self, fault: str) -> None:
+        """Inject one of :attr:`PROTECTIONS`, latched until :meth:`clear_faults`;
+        reported at once in a status frame, as the firmware does."""
+        if fault not in self.PROTECTIONS:
+            raise ValueError(f"fault must be one of {', '.join(self.PROTECTIONS)}, got {fault!r}")
+        self._forced.add(fault)
+        self.faults.add(fault)
         self._disable()
+        self._status()
 
     def clear_faults(self) -> None:
+        self._forced.clear()
         self.faults.clear()
 
     def reboot(self, offline_s: float = 0.2) -> None:
         self.offline_until_s = self.clock() + offline_s
         self._disable()
         self.state = STATE_BOOT
-        self.faults.clear()
+        self.clear_faults()
 
     def _disable(self) -> None:
         self.enabled = False
-        self.junction_c = self.neutral_c
-        self.apply(self.junction_c)
+        self._drive(0.0)
 
+    def _drive(self, current_a: float) -> None:
+        self.current_a = current_a
+        self.on_current(current_a)
+
+    # ------------------------------------------------------------ frames
     def _status(self) -> None:
         data = self.STATUS.encode(self._status_signals(), strict=False)
         self._counter = (self._counter + 1) & 0xFF
         self._send(self.STATUS, data)
 
+    @staticmethod
+    def _frame_c(value: float) -> float:
+        """A temperature within what the frame carries (a NaN as -50 C: the
+        sensor_fault flag says it is not a reading)."""
+        return min(max(value, -50.0), 150.0) if math.isfinite(value) else -50.0
+
     def _status_signals(self) -> dict:
+        junction_c, heatsink_c, current_a = self.measured()
+        current_a = min(max(current_a, -FRAME_CURRENT_A), FRAME_CURRENT_A) \
+            if math.isfinite(current_a) else 0.0
         return {
             "enabled": int(self.enabled), "over_temp": int("over_temp" in self.faults),
             "over_current": int("over_current" in self.faults),
             "sensor_fault": int("sensor_fault" in self.faults),
-            "watchdog": int("watchdog" in self.faults), "counter": self._counter,
-            "junction_c": self.junction_c,
-            # A rough Peltier: current to pump the junction away from the heat sink.
-            "current_a": max(-30.0, min(30.0, 0.4 * (self.heatsink_c - self.junction_c))),
-            "heatsink_c": self.heatsink_c}
+            "watchdog": int("watchdog" in self.faults),
+            "sink_saturated": int(math.isfinite(heatsink_c) and
+                                  heatsink_c > self.sink_saturated_c),
+            "counter": self._counter, "junction_c": self._frame_c(junction_c),
+            "current_a": current_a, "heatsink_c": self._frame_c(heatsink_c)}
 
     def _command(self, cmd: dict) -> None:
-        """An accepted command (right version): apply or disable."""
+        """An accepted command (right version): drive or disable."""
+        if not cmd["enable"]:
+            # The master acknowledges: protections whose cause has gone clear.
+            self.faults &= {"watchdog"} | self._protection_faults()
         if cmd["enable"] and not self.faults:
             self.enabled = True
-            self.junction_c = min(float(cmd["setpoint_c"]), self.max_junction_c)
-            self.apply(self.junction_c)
+            limit = self.current_limit_a
+            self._drive(min(max(float(cmd["current_a"]), -limit), limit))
         elif self.enabled or not cmd["enable"]:
             self._disable()
 
     def poll(self) -> None:
-        """Handle the commands that arrived; heartbeat and watchdog."""
+        """Handle the commands that arrived; protections, heartbeat and watchdog."""
         now = self.clock()
         if now < self.offline_until_s:
             while self.bus.recv(0.0) is not None:        # rebooting: deaf
@@ -268,7 +361,8 @@ class PeltierEmulator:
         if self.state == STATE_BOOT and now >= self.offline_until_s:
             self.state = STATE_DISABLED
             self._send(self.HEARTBEAT, self.HEARTBEAT.encode({"state": STATE_BOOT,
-                                                              "version": CAN_VERSION}))
+                                                              "version": self.version}))
+        self._protect()
         for _ in range(MAX_FRAMES_PER_POLL):      # a flood cannot starve the heartbeat
             msg = self.bus.recv(0.0)
             if msg is None:
@@ -283,10 +377,11 @@ class PeltierEmulator:
             self.counters["commands"] += 1
             self._last_cmd_s = now
             self.faults.discard("watchdog")
-            if cmd["version"] != CAN_VERSION:
-                self.counters["bad_commands"] += 1
+            if cmd["version"] != self.version:
+                self.counters["bad_commands"] += 1     # another protocol: not answered
                 continue
             self._command(cmd)
+            self._protect()
             self._status()
         if self.enabled and self._last_cmd_s is not None and \
                 now - self._last_cmd_s > self.watchdog_s:
@@ -300,7 +395,7 @@ class PeltierEmulator:
                 STATE_OPERATIONAL if self.enabled else STATE_DISABLED
             self.state = state
             self._send(self.HEARTBEAT, self.HEARTBEAT.encode({"state": state,
-                                                              "version": CAN_VERSION}))
+                                                              "version": self.version}))
 
     def close(self) -> None:
         self.bus.shutdown()

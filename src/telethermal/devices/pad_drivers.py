@@ -8,14 +8,15 @@ line and the active pad's driver on CAN (``PAD_*`` frames).
   the object, as the board reports it (NaN when the board flags it or it is
   outside what the sensor can report; the slave then identifies nothing);
 * :meth:`~SlavePadDrivers.precondition`: the pad to a temperature, as a
-  closed loop (a PI on the pad's thermocouple read on the board, commanding
-  the Peltier junction's set point on CAN) until the reading has settled;
+  closed loop (a PI on the pad's thermocouple read on the board, its junction
+  demand sent on CAN as the module current that holds it) until the reading
+  has settled;
 * :meth:`~SlavePadDrivers.contact`: during a contact, every sample the board
   sends, in order, on the sample grid: a frame lost on the line is filled
   with the previous sample (``held_samples``), a channel the board flagged
   likewise (``stale_readings``); the board going silent for ``lost_after_s``
   (unplugged, crashed) ends the contact (``boards_lost``);
-* :meth:`~SlavePadDrivers.safe`: the pad's safe state (disabled).
+* :meth:`~SlavePadDrivers.safe`: the pad's safe state (disabled, 0 A).
 
 The simulator behind emulated devices is
 :class:`~telethermal.devices.slave_pad.EmulatedSlavePad`.
@@ -30,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from telethermal.devices.active_pad import ActivePadDriver
+from telethermal.devices.active_pad import ActivePadDriver, junction_current_a
 from telethermal.devices.board import Calibration, DeviceError, SensorBoard
 from telethermal.devices.frames import FRAME_VERSION_SLAVE
 
@@ -123,7 +124,7 @@ class SlavePadDrivers:
         if self._loop is not None and math.isfinite(reading):
             self._loop_step(reading)
         setpoint = self._loop["setpoint"] if self._loop is not None else self._neutral_c()
-        self.pad.command(setpoint)
+        self._command_junction(setpoint)
         self._after_command()
         return r
 
@@ -183,7 +184,7 @@ class SlavePadDrivers:
                 self._loop_step(reading)
                 window = (window + [reading])[-n_settle:]
             setpoint = self._loop["setpoint"]
-            self.pad.command(setpoint)
+            self._command_junction(setpoint)
             self._after_command()
             half = n_settle // 2
             if k >= n_min and len(window) == n_settle and \
@@ -198,6 +199,16 @@ class SlavePadDrivers:
         raise DeviceError(f"active pad did not settle at {target_c:.2f} C within "
                           f"{g.timeout_s:g} s (last reading {window[-1] if window else 'none'}); "
                           f"board {self.board.url}, pad driver on {self.pad.spec}: pad made safe")
+
+    def _command_junction(self, junction_c: float) -> None:
+        """The loop asks for a junction temperature; the pad's module is driven
+        by current (``PAD_CMD`` version 2): the module's small-signal steady
+        state at the heat sink the driver last reported (before any report,
+        the demand itself, 0 A). The loop's integral on the pad's reading
+        takes up what the map leaves out (Joule heat, the pad's load)."""
+        s = self.pad.status
+        sink_c = s.heatsink_c if s is not None and math.isfinite(s.heatsink_c) else junction_c
+        self.pad.command(junction_current_a(junction_c, sink_c))
 
     def _after_command(self) -> None:
         """Hook: an emulated pad applies the command here."""
@@ -265,8 +276,8 @@ class SlavePadDrivers:
             return self._lost(f"{missing} samples due have not come")
         # During the contact the junction stays where the loop left it (the
         # pad's thermocouple now reads the contact, not the set point).
-        self.pad.command(self._loop["setpoint"] if self._loop is not None
-                         else self._neutral_c())
+        self._command_junction(self._loop["setpoint"] if self._loop is not None
+                               else self._neutral_c())
         self._after_command()
         return True
 

@@ -1,16 +1,27 @@
 """The display pad's Peltier driver on a CAN bus (python-can; frames in
 ``peltier.dbc``, read with cantools, documented in ``proto/CAN.md``).
 
-:class:`PeltierDriver` is the master's side: it sends the junction setpoint
-every period (``PELTIER_CMD``), and reads the driver's status (applied
-junction temperature, current, fault flags) and its heartbeat. It never
-raises on what the bus brings: error frames, undecodable frames, a driver
-that reboots or reports over-temperature are counted and logged; a send
-that fails (bus-off, a controller in error) counts, shuts the bus and
-reopens it after ``reopen_s``. :attr:`PeltierDriver.healthy` says whether
-the actuator can be trusted this period (heartbeat alive, enabled, no
-fault flag); the display treats "not healthy" as a missing reading, so the
-safety supervisor holds the safe state.
+Protocol version 2: the module is driven by CURRENT. :class:`PeltierDriver`
+is the master's side: every period it sends the module current (A, signed,
+positive cools the pad side; 1 mA steps) and enable (``PELTIER_CMD``), and
+reads the driver's status (junction and heat-sink temperatures, the measured
+current, fault flags, the ``sink_saturated`` warning) and its heartbeat. It
+never raises on what the bus brings: error frames, undecodable frames, a
+driver that reboots, reports a fault or speaks another protocol version are
+counted and logged; a send that fails (bus-off, a controller in error)
+counts, shuts the bus and reopens it after ``reopen_s``.
+:attr:`PeltierDriver.healthy` says whether the actuator can be trusted this
+period (heartbeat alive and of this version, enabled, no fault flag); the
+display treats "not healthy" as a missing reading, so the safety supervisor
+holds the safe state.
+
+Versions: both sides put the version in the same place (``PELTIER_CMD``
+byte 3, ``PELTIER_HEARTBEAT`` byte 1). A driver ignores, counts and does not
+answer a command of another version (a version-1 board, which reads bytes
+1-2 as a junction set point, never sees a current as a set point); this
+driver reads the board's version from its heartbeat and, if it is not
+:data:`CAN_VERSION`, logs an error naming both, ignores that board's status
+frames and is never healthy (:attr:`PeltierDriver.version_error`).
 
 The bus is given by interface and channel: ``socketcan:can0`` in a lab,
 ``virtual:<name>`` (one process) or ``udp_multicast:<group>`` here.
@@ -27,14 +38,34 @@ from importlib import resources
 import can
 import cantools
 
-from telethermal.control.safety import SafetyLimits
 from telethermal.devices.board import DeviceError
+from telethermal.physics.thermoelectric import DEFAULT_MODULE, get_module
 
 log = logging.getLogger(__name__)
 
-CAN_VERSION = 1
+#: Version 2: PELTIER_CMD and PAD_CMD carry the module current (version 1: a
+#: junction set point, in the same bytes).
+CAN_VERSION = 2
 STATE_BOOT, STATE_OPERATIONAL, STATE_DISABLED, STATE_FAULT = 0, 5, 127, 128
+#: Flags that make the driver untrustworthy (it has cut the current itself).
 FAULTS = ("over_temp", "over_current", "sensor_fault", "watchdog")
+#: Flags the driver reports while it keeps driving.
+WARNINGS = ("sink_saturated",)
+#: The display module's datasheet Imax (TM-31-1.4-8.5: 8.5 A): the driver's
+#: default current limit.
+DEFAULT_CURRENT_LIMIT_A = get_module(DEFAULT_MODULE).imax_a
+#: What the frames can carry: int16 in mA.
+FRAME_CURRENT_A = 32.767
+
+
+def clamp_current_a(current_a: float, limit_a: float) -> float:
+    """``current_a`` within +-``limit_a`` (and what the frame can carry);
+    :class:`DeviceError` naming the value if it is NaN or infinite."""
+    if not math.isfinite(current_a):
+        raise DeviceError(f"Peltier current must be finite, got current_a={current_a!r}: "
+                          "nothing sent (the caller's safe state takes over)")
+    limit = min(abs(limit_a), FRAME_CURRENT_A)
+    return min(max(float(current_a), -limit), limit)
 
 
 def database() -> cantools.database.Database:
@@ -72,15 +103,23 @@ class DriverStatus:
     heatsink_c: float
     faults: tuple[str, ...]
     received_s: float
+    warnings: tuple[str, ...] = ()
 
 
 class PeltierDriver:
     CMD, STATUS, HEARTBEAT = CMD, STATUS, HEARTBEAT
-    FAULTS = FAULTS
+    FAULTS, WARNINGS = FAULTS, WARNINGS
     what = "Peltier driver"
 
     def __init__(self, bus: str, heartbeat_timeout_s: float = 0.5, reopen_s: float = 0.2,
-                 clock=time.monotonic):
+                 clock=time.monotonic, current_limit_a: float = DEFAULT_CURRENT_LIMIT_A):
+        if not (current_limit_a > 0 and math.isfinite(current_limit_a)):
+            raise DeviceError(f"{self.what}: current_limit_a must be > 0 A, got "
+                              f"{current_limit_a!r}")
+        self.current_limit_a = float(current_limit_a)
+        self.commanded_a = 0.0           # the last current sent, after the limit
+        self.peer_version: int | None = None
+        self.version_error: str | None = None
         self.spec = bus
         self.bus = open_bus(bus)
         self.clock = clock
@@ -92,17 +131,19 @@ class PeltierDriver:
         self._next_open = 0.0
         self.counters = dict.fromkeys(("sent", "send_failed", "bus_off", "reopened",
                                        "error_frames", "undecodable", "statuses", "heartbeats",
-                                       "reboots", "faults_reported"), 0)
+                                       "reboots", "faults_reported", "version_mismatch"), 0)
         self._faults_seen: tuple[str, ...] = ()
 
     # ------------------------------------------------------------ sending
-    def command(self, junction_c: float, enable: bool = True) -> bool:
-        """Send the setpoint; False if it could not be sent this period."""
-        if not math.isfinite(junction_c):
-            raise DeviceError(f"Peltier setpoint must be finite, got {junction_c}")
+    def command(self, current_a: float, enable: bool = True) -> bool:
+        """Send the module current (A, positive cools the pad side), clamped
+        to ``current_limit_a`` (:attr:`commanded_a` holds what was sent);
+        False if it could not be sent this period. :class:`DeviceError` for
+        a NaN or infinite current (nothing is sent)."""
+        applied = clamp_current_a(current_a, self.current_limit_a)
+        self.commanded_a = applied
         return self._send_command({"enable": int(enable), "counter": self._counter,
-                                   "setpoint_c": min(max(junction_c, -50.0), 150.0),
-                                   "version": CAN_VERSION})       # clamped above
+                                   "current_a": applied, "version": CAN_VERSION})
 
     def _send_command(self, signals: dict) -> bool:
         if self.bus is None and not self._reopen():
@@ -176,6 +217,9 @@ class PeltierDriver:
             return
         try:
             if msg.arbitration_id == self.STATUS.frame_id:
+                if self.peer_version not in (None, CAN_VERSION):
+                    self.counters["version_mismatch"] += 1     # not read as ours
+                    return
                 s = self.STATUS.decode(bytes(msg.data))
                 faults = tuple(f for f in self.FAULTS if s[f])
                 self.status = self._status_of(s, faults)
@@ -193,14 +237,40 @@ class PeltierDriver:
                 self.state = int(h["state"])
                 self.last_heartbeat_s = self.clock()
                 self.counters["heartbeats"] += 1
+                self._peer_version(int(h["version"]))
         except (cantools.database.DecodeError, ValueError, KeyError) as exc:
             self.counters["undecodable"] += 1
             log.warning("CAN %s: undecodable frame id %#x (%s)", self.spec, msg.arbitration_id,
                         exc)
 
+    def _peer_version(self, version: int) -> None:
+        if version == CAN_VERSION:
+            self.peer_version, self.version_error = version, None
+            return
+        self.counters["version_mismatch"] += 1
+        if version != self.peer_version:
+            self.version_error = (
+                f"{self.what} on {self.spec} speaks CAN protocol version {version}, this "
+                f"master version {CAN_VERSION} (module current in PELTIER_CMD/PAD_CMD; "
+                "version 1 carried a junction set point): it refuses our commands and we "
+                "ignore its status; update its firmware")
+            log.error("%s", self.version_error)
+        self.peer_version = version
+        self.status = None
+
     def _status_of(self, s: dict, faults: tuple[str, ...]) -> DriverStatus:
         return DriverStatus(bool(s["enabled"]), float(s["junction_c"]), float(s["current_a"]),
-                            float(s["heatsink_c"]), faults, self.clock())
+                            float(s["heatsink_c"]), faults, self.clock(),
+                            tuple(w for w in self.WARNINGS if s[w]))
+
+    def readings(self) -> tuple[float, float, float]:
+        """(junction_c, heatsink_c, current_a) of the last status, NaN when
+        the driver is not healthy (no status, stale, faulted, another
+        version): what the master's junction loop reads."""
+        s = self.status
+        if s is None or not self.healthy:
+            return math.nan, math.nan, math.nan
+        return s.junction_c, s.heatsink_c, s.current_a
 
     @property
     def alive(self) -> bool:
@@ -212,14 +282,15 @@ class PeltierDriver:
         """The actuator can be trusted: heartbeat alive, a status within the
         heartbeat timeout, enabled, no fault flag."""
         s = self.status
-        return self.bus is not None and self.alive and s is not None and s.enabled and \
-            not s.faults and self.clock() - s.received_s <= self.heartbeat_timeout_s
+        return self.bus is not None and self.alive and self.peer_version == CAN_VERSION and \
+            s is not None and s.enabled and not s.faults and \
+            self.clock() - s.received_s <= self.heartbeat_timeout_s
 
     def close(self) -> None:
-        """Disable the driver (its own watchdog would, once commands stop),
-        then release the bus."""
+        """Disable the driver, 0 A (its own watchdog would, once commands
+        stop), then release the bus."""
         if self.bus is not None:
-            self.command(SafetyLimits().neutral_c, enable=False)
+            self.command(0.0, enable=False)
         if self.bus is not None:
             self.bus.shutdown()
             self.bus = None

@@ -9,7 +9,8 @@ reading, the pad's pre-conditioning loop, a contact's samples, the safe state.
 :class:`EmulatedSlavePad` puts the simulator behind emulated devices (the
 board on a pty, the pad's driver on a python-can virtual bus) and steps
 them in lockstep with the slave: the pad's temperature is a first-order
-plant driven by the junction set point the emulated driver receives, its
+plant driven by the junction the module current the emulated driver
+receives holds (:func:`~telethermal.devices.active_pad.current_junction_c`), its
 thermocouple and the object thermometer are the session's instruments (bias,
 noise, resolution), and during a contact the simulator's samples are written
 as the board's frames. The identifier sees the bytes a board would send.
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.devices.active_pad import ActivePadEmulator
+from telethermal.devices.active_pad import ActivePadEmulator, current_junction_c
 from telethermal.devices.board import DeviceError
 from telethermal.devices.emulators import SensorBoardEmulator
 from telethermal.devices.frames import FRAME_VERSION_SLAVE
@@ -80,8 +81,10 @@ class EmulatedSlavePad(SlavePadDrivers):
         bus = f"virtual:telethermal-slave-pad-{next(_bus_names)}"
         # The pad's driver board keeps the rig's time (its watchdog counts
         # periods the slave let pass, not the simulator's own computing).
-        self.pad_emulator = ActivePadEmulator(bus, self._on_junction, heatsink_c=self.room_c,
-                                              clock=lambda: self.t_s)
+        self.pad_emulator = ActivePadEmulator(bus, self._on_current, heatsink_c=self.room_c,
+                                              clock=lambda: self.t_s,
+                                              state=lambda: (self.junction_c, self.room_c,
+                                                             self.pad_emulator.current_a))
         try:
             super().__init__(self.board_emulator.path, bus, scene.sample_rate_hz,
                              wait_s=wait_s)
@@ -96,8 +99,11 @@ class EmulatedSlavePad(SlavePadDrivers):
         self._sent = 0
 
     # ------------------------------------------------------------ the simulator side
-    def _on_junction(self, junction_c: float) -> None:
-        self.junction_c = junction_c
+    def _on_current(self, current_a: float) -> None:
+        """The board drives ``current_a``: the junction goes to the module's
+        small-signal steady state on a sink at room temperature (0 A: the
+        room's)."""
+        self.junction_c = current_junction_c(current_a, self.room_c)
 
     def _after_command(self) -> None:
         self.pad_emulator.poll()
@@ -190,7 +196,7 @@ class EmulatedSlavePad(SlavePadDrivers):
             if self._loop is not None:
                 # A period of the rig: the slave's pad command of that period
                 # (a batch of late samples must not look like a silent slave).
-                self.pad.command(self._loop["setpoint"])
+                self._command_junction(self._loop["setpoint"])
                 self.pad_emulator.poll()
             ir, ok = self._ir_c()
             self.write_s[i] = time.perf_counter()
