@@ -203,17 +203,18 @@ def test_a_step_of_desired_flux_at_onset_gives_no_kick_and_stays_in_the_band():
 
 def test_a_hot_object_is_limited_at_the_band_counted_and_logged(caplog):
     # An 80 C object: the flux asked for would heat the skin past 43 C. The
-    # supervisor's barrier on the junction (from the surface's margin to the
-    # band) limits it, counts it and logs it; the pad surface stays under
-    # 43 C and no safe state is needed.
+    # controller keeps the surface barrier on the junction (from the
+    # surface's margin to the band) itself and counts it; the supervisor
+    # never has to clamp, the pad surface stays under 43 C and no safe state
+    # is needed.
     import logging
     with caplog.at_level(logging.INFO):
         master, rows = run(closed_form_generator(), lambda t: SlaveNews(
             80.0, decided("steel"), ("plexiglass", "steel")), seconds=2.0)
     surface = np.array([r[5] for r in rows])
     assert surface.max() <= 43.0 + 0.05
-    assert master.safety.events["clamped: surface band"] >= 1
-    assert "setpoint limited (surface band)" in caplog.text
+    assert master.events["rendering limited by the surface band"] >= 1
+    assert master.safety.events.get("clamped: surface band", 0) == 0   # kept by the controller
     assert master.safety.count("surface out of band") == 0
 
 

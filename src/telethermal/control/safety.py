@@ -56,7 +56,7 @@ class SafetyLimits:
     surface_margin_k: float = 1.0
     #: K the junction may go past a band edge per K of the surface's margin
     #: to it (see ``_limit``).
-    barrier_gain: float = 2.0
+    barrier_gain: float = 0.5
 
     def __post_init__(self):
         if not self.skin_min_c <= self.neutral_c <= self.skin_max_c:
@@ -128,6 +128,16 @@ def _faults(state: SafetyState, reading: Reading, request: Request | None,
     return faults
 
 
+def surface_barrier(limits: SafetyLimits, surface_c: float) -> tuple[float, float]:
+    """(lowest, highest) junction allowed with the pad's surface at
+    ``surface_c``: past a band edge by ``barrier_gain`` K per K of the
+    surface's margin to it, at the edge not past it. The display's
+    controller stays inside it itself; the supervisor enforces it."""
+    g = limits.barrier_gain
+    return (limits.skin_min_c - g * max(surface_c - limits.skin_min_c, 0.0),
+            limits.skin_max_c + g * max(limits.skin_max_c - surface_c, 0.0))
+
+
 def _limit(state, reading, request, limits, dt_s):
     """Band, rate and flux limits on a healthy request: (temp, flux, clamps)."""
     clamps = []
@@ -135,10 +145,7 @@ def _limit(state, reading, request, limits, dt_s):
     # junction may go past an edge by barrier_gain K per K the surface still
     # has, so the film's lag cannot carry the surface past the edge; at the
     # edge, no further.
-    surface = reading.pad_temp_c
-    g = limits.barrier_gain
-    lo = limits.skin_min_c - g * max(surface - limits.skin_min_c, 0.0)
-    hi = limits.skin_max_c + g * max(limits.skin_max_c - surface, 0.0)
+    lo, hi = surface_barrier(limits, reading.pad_temp_c)
     temp = min(max(request.temp_c, lo), hi)
     if temp != request.temp_c:
         clamps.append("surface band")

@@ -93,7 +93,8 @@ class HardwareDisplay:
         if not self._actuator_trusted():
             self.untrusted_periods += 1
             flux = math.nan
-        return PadSensors(flux, temp, force)
+        junction, sink, _ = self.peltier.readings()
+        return PadSensors(flux, temp, force, junction, sink)
 
     def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
         """Send ``step.current_a`` (clamped to the driver's limit; a NaN is

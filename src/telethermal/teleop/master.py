@@ -53,7 +53,7 @@ from telethermal.control.junction import JunctionLoop
 from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
-                                        supervise)
+                                        supervise, surface_barrier)
 from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.physics.materials import get_material
@@ -428,6 +428,13 @@ class MasterDisplay:
         # A stall buys no bigger jump.
         step = self.config.slew_k_s * min(dt_s, 2 * self.nominal_dt_s)
         wanted = command
+        if math.isfinite(sensors.pad_temp_c):
+            # The surface barrier, kept by the controller itself (the
+            # supervisor's copy of it is the backstop).
+            lo, hi = surface_barrier(self.config.limits, sensors.pad_temp_c)
+            if not lo <= command <= hi:
+                command = min(max(command, lo), hi)
+                self._count("rendering limited by the surface band")
         command = min(max(command, self._command_c - step), self._command_c + step)
         self._command_c = command
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)

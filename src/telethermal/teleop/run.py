@@ -153,6 +153,8 @@ class DisplayTouch:
         self.plant = None
         self.junction_c = idle_c
         self._reading = None
+        self._module_reading = (idle_c, scene.room_temp_c)
+        self._current_a = 0.0
         # The module, idling at ``idle_c`` on a sink at the room's temperature.
         self.module, sink = scene.pad.module_params()
         self.area_m2 = self.module.spec.area_m2
@@ -211,7 +213,14 @@ class DisplayTouch:
         junction, sink = (round((true + bias + self.THERMISTOR_NOISE_K * n) / self.THERMISTOR_LSB_K)
                           * self.THERMISTOR_LSB_K for true, bias, n in
                           zip((st.cold_c, st.sink_c), self.thermistor_bias_k, tn))
+        self._module_reading = (float(junction), float(sink))
         return PadSensors(float(flux), float(pad), float(force), float(junction), float(sink))
+
+    def module_state(self) -> tuple[float, float, float]:
+        """(junction_c, heatsink_c, current_a) as the module's driver board
+        measures them (its thermistors, last read; the current it drives)."""
+        junction, sink = self._module_reading
+        return junction, sink, self._current_a
 
     def _drive(self, current_a: float) -> None:
         """One physics period of the module at ``current_a``."""
@@ -229,7 +238,7 @@ class DisplayTouch:
         self.max_sink_c = max(self.max_sink_c, float(st.sink_c))
 
     def actuate(self, t: float, step, dt_loop: float, force_n: float) -> None:
-        current = float(step.current_a)
+        current = self._current_a = float(step.current_a)
         for _ in range(max(1, round(dt_loop / self.dt_s))):
             self._drive(current)
         self.junction_c = self.stack.state.cold_c
@@ -260,7 +269,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
                 realtime: bool = False, devices: str = "sim",
                 record: str | Path | None = None, expected_material: str | None = None,
-                precondition: bool = True) -> SessionResult:
+                precondition: bool = False) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
