@@ -2,18 +2,28 @@
 
 ``supervise(state, reading, request, limits, dt_s)`` returns what was
 actually applied and the next state; it never touches a device and never
-reads a clock. It keeps the skin-contact pad temperature inside a band
-(default 15-43 C), limits the rate of change of the temperature setpoint,
-clamps the flux setpoint (and refuses flux that would drive the pad further
-past either end of the band), and enters a **safe state** — hold the pad at a
-neutral 33 C, since "off" is not neutral for a Peltier — within the same
-control period on:
+reads a clock. It guards what the skin touches: the pad's **surface**, as the
+sensor's thermocouple at the contact face reads it, inside a band (default
+15-43 C: ISO 13732-1 gives 43 C as the burn threshold of a contact of 8 h,
+41-43 C for shorter ones being painless; ISO 13732-3 gives 15 C as the pain
+threshold of a long fingertip contact with a cold conductive surface). The
+junction behind the pad's layers may go past the band to move the surface
+faster; it is bounded by the module's own limits (current, voltage, hot
+side), not by a temperature band. While the surface is at an end of the
+band, no request drives the junction past it (it is held at the
+edge; short of it, the junction's excursion past the edge
+shrinks with the surface's margin). It limits the rate of change of the junction's
+setpoint, clamps the flux setpoint (and refuses flux that would drive the
+pad further past either end of the band), and enters a **safe state** —
+hold the pad at a neutral 33 C, since "off" is not neutral for a Peltier —
+within the same control period on:
 
 - a temperature or flux reading that is NaN, infinite or outside the
   plausible range;
 - a stuck sensor: readings bit-for-bit unchanged for ``stuck_after_s`` (a
   live sensor always shows noise);
-- no setpoint, a non-finite one, or one older than ``setpoint_lifetime_s``.
+- no setpoint, a non-finite one, or one older than ``setpoint_lifetime_s``;
+- the surface past the band by more than ``surface_margin_k``.
 
 It leaves the safe state when every condition has cleared, logs entering
 and leaving, and counts every event.
@@ -41,6 +51,12 @@ class SafetyLimits:
     stuck_after_s: float = 0.5
     reading_min_c: float = -20.0
     reading_max_c: float = 80.0
+    #: The surface this far past the band is a fault (the safe state), not
+    #: only a limit: the controller failed to hold it.
+    surface_margin_k: float = 1.0
+    #: K the junction may go past a band edge per K of the surface's margin
+    #: to it (see ``_limit``).
+    barrier_gain: float = 2.0
 
     def __post_init__(self):
         if not self.skin_min_c <= self.neutral_c <= self.skin_max_c:
@@ -96,6 +112,9 @@ def _faults(state: SafetyState, reading: Reading, request: Request | None,
         limits.reading_min_c <= reading.pad_temp_c <= limits.reading_max_c
     if not temp_ok:
         faults.append("temperature reading out of range")
+    elif not (limits.skin_min_c - limits.surface_margin_k <= reading.pad_temp_c
+              <= limits.skin_max_c + limits.surface_margin_k):
+        faults.append("surface out of band")
     if not math.isfinite(reading.flux_w_m2):
         faults.append("flux reading not finite")
     if reading.t_s - state.unchanged_since_s >= limits.stuck_after_s:
@@ -112,9 +131,17 @@ def _faults(state: SafetyState, reading: Reading, request: Request | None,
 def _limit(state, reading, request, limits, dt_s):
     """Band, rate and flux limits on a healthy request: (temp, flux, clamps)."""
     clamps = []
-    temp = min(max(request.temp_c, limits.skin_min_c), limits.skin_max_c)
+    # A barrier on the junction from the surface's margin to the band: the
+    # junction may go past an edge by barrier_gain K per K the surface still
+    # has, so the film's lag cannot carry the surface past the edge; at the
+    # edge, no further.
+    surface = reading.pad_temp_c
+    g = limits.barrier_gain
+    lo = limits.skin_min_c - g * max(surface - limits.skin_min_c, 0.0)
+    hi = limits.skin_max_c + g * max(limits.skin_max_c - surface, 0.0)
+    temp = min(max(request.temp_c, lo), hi)
     if temp != request.temp_c:
-        clamps.append("temperature band")
+        clamps.append("surface band")
     step = limits.max_rate_k_s * dt_s
     limited = min(max(temp, state.applied_temp_c - step), state.applied_temp_c + step)
     if limited != temp:

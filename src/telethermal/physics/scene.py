@@ -39,6 +39,18 @@ class PadSpec:
     trials_per_material: int
     contact_conductance_w_m2k: float   # at reference_force_n
     back_h_w_m2k: float                # water pad: natural convection to the water
+    #: The Peltier module behind the layers and its heat sink (names in
+    #: physics/modules.toml); a scene that names none gets the first paper's
+    #: stand-in (thermoelectric.DEFAULT_MODULE / DEFAULT_HEAT_SINK).
+    module: str = "TM-31-1.4-8.5"
+    heat_sink: str = "fan-40"
+
+    def module_params(self):
+        """(ModuleParams, SinkParams) of this pad's module and heat sink."""
+        from telethermal.physics.thermoelectric import (derive, get_heat_sink, get_module,
+                                                        sink_params)
+        params = derive(get_module(self.module))
+        return params, sink_params(get_heat_sink(self.heat_sink), params.spec)
 
 
 @dataclass(frozen=True)
@@ -181,6 +193,9 @@ def _layers(raw, reader: _Reader) -> tuple[Layer, ...]:
 
 
 def _parse_pad(table, source) -> PadSpec:
+    from telethermal.physics.thermoelectric import (DEFAULT_HEAT_SINK, DEFAULT_MODULE,
+                                                    heat_sink_names, module_names)
+
     r = _Reader(table, "[pad]", source)
     kind = r.text("kind", choices=PAD_KINDS)
     layers = _layers(table.get("layers"), r)
@@ -196,6 +211,8 @@ def _parse_pad(table, source) -> PadSpec:
         trials_per_material=r.num("trials_per_material", 10, 1, 10000, integer=True),
         contact_conductance_w_m2k=r.num("contact_conductance_w_m2k", 3000.0, 1.0, 1e7),
         back_h_w_m2k=r.num("back_h_w_m2k", 300.0, 1e-3, 1e7),
+        module=r.text("module", DEFAULT_MODULE, choices=module_names()),
+        heat_sink=r.text("heat_sink", DEFAULT_HEAT_SINK, choices=heat_sink_names()),
     )
     r.done()
     return spec

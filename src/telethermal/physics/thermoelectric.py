@@ -290,7 +290,7 @@ class ThermoelectricStack:
         rhs = np.array([cc * tc0 + a_k + joule, ch * th0 + joule,
                         cs * ts0 + ga * (self.room_c + KELVIN)])
         tc, th, ts = np.linalg.solve(m, rhs)
-        self.state = ModuleState(tc - KELVIN, th - KELVIN, ts - KELVIN)
+        self.state = ModuleState(float(tc - KELVIN), float(th - KELVIN), float(ts - KELVIN))
         qc, qh, power = p.heat_w(i, tc - KELVIN, th - KELVIN)
         return ModuleStep(i, float(p.voltage_v(i, tc - KELVIN, th - KELVIN)), float(qc),
                           float(qh), float(power), float(ga * (ts - self.room_c - KELVIN)))

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 from telethermal.control.contact import ContactDetector
+from telethermal.control.junction import JunctionLoop
 from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
@@ -56,6 +57,7 @@ from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_
 from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.physics.materials import get_material
+from telethermal.physics.thermoelectric import ModuleParams, default_driver
 from telethermal.render.generator import mixture, posterior_weights
 from telethermal.devices.readings import PadSensors
 
@@ -160,6 +162,9 @@ class MasterStep:
     junction_cmd_c: float           # the controller's request
     junction_applied_c: float       # what the supervisor let through
     safe: bool
+    #: The module's current the junction loop asks for (inside the driver's
+    #: limits); 0 when the display has no module model or no junction reading.
+    current_a: float = 0.0
 
 
 @dataclass(slots=True)
@@ -191,9 +196,15 @@ class MasterDisplay:
 
     def __init__(self, config: DisplayConfig, generator, pad_resistance_m2k_w: float,
                  sensor_lag_s: float, finger_temp_c: float, idle_c: float | None = None,
-                 pad_layers=None, contact_conductance_w_m2k: float | None = None):
+                 pad_layers=None, contact_conductance_w_m2k: float | None = None,
+                 module: ModuleParams | None = None):
         self.config = config
         self.generator = generator
+        #: The inner loop from the junction's target to the module's current
+        #: (control/junction.py); None without a module model.
+        self.junction_loop = JunctionLoop(module, default_driver(module)) \
+            if module is not None else None
+        self._module_area_m2 = module.spec.area_m2 if module is not None else 0.0
         #: The pad's resistance as the controller believes it.
         self.r_pad_m2k_w = pad_resistance_m2k_w * config.r_pad_belief
         self.sensor_lag_s = sensor_lag_s
@@ -357,20 +368,14 @@ class MasterDisplay:
     def _pid_output(self, t_s: float, dt_s: float, measured: float, target: float,
                     standby: float, ff: float) -> float:
         """The flux PID's output, K above standby; started bumplessly."""
-        cfg, lim = self.config, self.config.limits
         if not self.handover.pid_running:
-            # Saturate where the junction would leave the skin band, so the
-            # integral does not wind up against the supervisor.
-            g = cfg.gains
-            self.pid.gains = replace(g, output_min=max(g.output_min, lim.skin_min_c - standby),
-                                     output_max=min(g.output_max, lim.skin_max_c - standby))
             self.pid.reset(measured)
         out = self.pid.update(target, measured, dt_s, feedforward=ff)
         if out.saturated and not self._band_limited:
-            # The flux asked for would take the pad past the skin band:
-            # the controller stops at the band; counted and logged.
-            self._count("rendering limited by the skin band")
-            log.info("rendering limited by the skin band at t=%.3f s (junction %.1f C)",
+            # The junction asked for is past the PID's output range around
+            # the standby: the controller stops there; counted and logged.
+            self._count("rendering limited by the junction range")
+            log.info("rendering limited by the junction range at t=%.3f s (junction %.1f C)",
                      t_s, standby + out.output)
         self._band_limited = out.saturated
         return out.output
@@ -419,7 +424,23 @@ class MasterDisplay:
         if self.handover.pid_running:
             self.pid.limited_downstream(wanted, applied.temp_c)
         return MasterStep(t_s, self.phase, self.detector.touching, desired, command,
-                          applied.temp_c, applied.safe)
+                          applied.temp_c, applied.safe,
+                          self._current(applied.temp_c, sensors, dt_s))
+
+    def _current(self, junction_c: float, sensors: PadSensors, dt_s: float) -> float:
+        """The module's current that brings the junction to ``junction_c``
+        (the inner loop; 0 A without a module model or junction reading).
+        The pad's heat into the junction is estimated from the measured
+        flux (what the pad gives the finger, it takes from the junction)."""
+        if self.junction_loop is None:
+            return 0.0
+        load = -self._module_area_m2 * sensors.flux_w_m2 \
+            if math.isfinite(sensors.flux_w_m2) else 0.0
+        out = self.junction_loop.update(junction_c, sensors.junction_c, sensors.heatsink_c,
+                                        min(dt_s, 2 * self.nominal_dt_s), load)
+        if out.saturated:
+            self._count("module current limited")
+        return out.current_a
 
     # ------------------------------------------------------------ the period
     def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:

@@ -32,6 +32,7 @@ from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_res
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene, finger_contact_model
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
+from telethermal.physics.thermoelectric import ModuleState, ThermoelectricStack
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
 from telethermal.teleop.slave import Slave
@@ -74,7 +75,8 @@ def display_model_args(scene: Scene) -> dict:
     """What the display's skin controller knows of the display: the pad's
     layers and the nominal pad-fingertip contact conductance."""
     return {"pad_layers": tuple(scene.pad.layers),
-            "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k}
+            "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
+            "module": scene.pad.module_params()[0]}
 
 
 @dataclass
@@ -85,6 +87,9 @@ class Operator:
     skin_heat_scale: float
     force_n: float
     conductance_w_m2k: float
+    #: The master pad's thermocouple bias in this session (its reading is
+    #: the surface plus this; the finger thermometer is calibrated against it).
+    pad_tc_bias_k: float = 0.0
 
 
 def draw_operator(scene: Scene, rng: np.random.Generator, session=None) -> Operator:
@@ -100,7 +105,8 @@ def draw_operator(scene: Scene, rng: np.random.Generator, session=None) -> Opera
                           3 * var.force_n))
     h = finger.contact_conductance_w_m2k * (force / var.reference_force_n) ** var.conductance_force_exponent
     ir = float(session.measure_c(np.array([finger_c]), rng)[0])
-    return Operator(finger_c, ir, float(k), float(c), force, float(h))
+    return Operator(finger_c, ir, float(k), float(c), force, float(h),
+                    float(session.instruments.pad_tc_bias_k))
 
 
 class DisplayTouch:
@@ -108,10 +114,25 @@ class DisplayTouch:
     and pressing force, the display pad under it, and the pad's sensors.
 
     Session time 0 is the finger's true contact; it lasts ``contact_s``.
-    ``sense(t)`` reads the sensors, ``actuate(t, step, dt_loop, force_n)`` holds the
-    junction for the period (stepping the physics through a stall of the
-    loop), and every period is recorded in ``trace``.
+    ``sense(t)`` reads the sensors, ``actuate(t, step, dt_loop, force_n)``
+    drives the module with the step's current for the period (stepping the
+    physics through a stall of the loop), and every period is recorded in
+    ``trace``.
+
+    The pad's Peltier module (the scene's, on its heat sink) is a
+    :class:`~telethermal.physics.thermoelectric.ThermoelectricStack`. Before
+    contact the pad's layers sit in air (their front face taken as
+    adiabatic) and move with the junction as one lumped mass; at contact they
+    start uniform at the junction's temperature (the pad has idled there)
+    and the exact layered plant takes over, the module's state carried on.
     """
+
+    #: The module's thermistors (junction on the cold plate, heat sink):
+    #: NTC 10 kOhm, +-1 % at 25 C (TDK/EPCOS B57861S: about +-0.25 K, a bias
+    #: per instrument), read at 0.01 K with 0.01 K of noise per reading.
+    THERMISTOR_BIAS_LIMIT_K = 0.25
+    THERMISTOR_NOISE_K = 0.01
+    THERMISTOR_LSB_K = 0.01
 
     def __init__(self, scene: Scene, operator: Operator, rate_hz: float, contact_s: float,
                  idle_c: float, rng: np.random.Generator):
@@ -132,6 +153,25 @@ class DisplayTouch:
         self.plant = None
         self.junction_c = idle_c
         self._reading = None
+        # The module, idling at ``idle_c`` on a sink at the room's temperature.
+        self.module, sink = scene.pad.module_params()
+        self.area_m2 = self.module.spec.area_m2
+        self.stack = ThermoelectricStack(self.module, sink, scene.room_temp_c,
+                                         ModuleState(idle_c, scene.room_temp_c,
+                                                     scene.room_temp_c))
+        self._pad_heat_j_k = self.area_m2 * sum(
+            layer.material.volumetric_heat_j_m3k * layer.thickness_m for layer in self.layers)
+        self.thermistor_bias_k = rng.uniform(-1, 1, 2) * self.THERMISTOR_BIAS_LIMIT_K
+        self.thermistor_noise = rng.normal(size=(self.n_total + 1, 2))
+        #: Periods past the module's datasheet limits (current above Imax,
+        #: hot side above its rating): the driver bounds the current, so
+        #: these count what the physics would do if it did not.
+        self.limit_counts = {"current_exceeded": 0, "hot_side_exceeded": 0}
+        self.max_current_a = 0.0
+        self.max_hot_c = self.stack.state.hot_c
+        self.max_sink_c = self.stack.state.sink_c
+        for key in ("current_a", "hot_c", "sink_c"):
+            self.trace[key] = np.full(self.n_total, np.nan)
 
     @property
     def done(self) -> bool:
@@ -163,23 +203,47 @@ class DisplayTouch:
         fs, noise = self.flux_sensor, self.noise[min(self.k, self.n_total)]
         flux = quantise(reading[1] * fs.sensitivity_uv_per_w_m2 + fs.noise_uv_rms * noise[0],
                         fs.adc_lsb_uv) / fs.sensitivity_uv_per_w_m2
-        pad = reading[2] + 0.025 * noise[1]           # thermocouple noise, 1 uV ~ 0.025 K
+        # The thermocouple at the surface: its session's bias, 1 uV ~ 0.025 K of noise.
+        pad = reading[2] + op.pad_tc_bias_k + 0.025 * noise[1]
         force = (op.force_n * -math.expm1(-t / self.force_sensor.rise_s) if touching else 0.0) \
             + self.force_sensor.noise_n_rms * noise[2]
-        return PadSensors(float(flux), float(pad), float(force))
+        st, tn = self.stack.state, self.thermistor_noise[min(self.k, self.n_total)]
+        junction, sink = (round((true + bias + self.THERMISTOR_NOISE_K * n) / self.THERMISTOR_LSB_K)
+                          * self.THERMISTOR_LSB_K for true, bias, n in
+                          zip((st.cold_c, st.sink_c), self.thermistor_bias_k, tn))
+        return PadSensors(float(flux), float(pad), float(force), float(junction), float(sink))
+
+    def _drive(self, current_a: float) -> None:
+        """One physics period of the module at ``current_a``."""
+        if self.plant is not None:
+            _, heat = self.plant.step_current(self.stack, current_a, self.area_m2)
+        else:
+            # In air: the pad's layers move with the junction as one mass.
+            c = self._pad_heat_j_k / self.dt_s
+            heat = self.stack.step(current_a, self.dt_s, c * self.stack.state.cold_c, -c)
+        st = self.stack.state
+        self.limit_counts["current_exceeded"] += int(abs(heat.current_a) > self.module.spec.imax_a)
+        self.limit_counts["hot_side_exceeded"] += int(st.hot_c > self.module.spec.hot_side_max_c)
+        self.max_current_a = max(self.max_current_a, abs(heat.current_a))
+        self.max_hot_c = max(self.max_hot_c, float(st.hot_c))
+        self.max_sink_c = max(self.max_sink_c, float(st.sink_c))
 
     def actuate(self, t: float, step, dt_loop: float, force_n: float) -> None:
-        self.junction_c = step.junction_applied_c
-        if self.touching(t):
-            for _ in range(max(1, round(dt_loop / self.dt_s))):
-                self.plant.step(step.junction_applied_c)
+        current = float(step.current_a)
+        for _ in range(max(1, round(dt_loop / self.dt_s))):
+            self._drive(current)
+        self.junction_c = self.stack.state.cold_c
         if self.k < self.n_total:
+            st = self.stack.state
+            for key, value in (("current_a", current), ("hot_c", st.hot_c),
+                               ("sink_c", st.sink_c)):
+                self.trace[key][self.k] = value
             true_flux, sensed, pad_c, skin_c = self._reading
             for key, value in (("t_s", t), ("desired_flux_w_m2", step.desired_flux_w_m2),
                                ("flux_w_m2", true_flux), ("flux_sensed_w_m2", sensed),
                                ("pad_surface_c", pad_c), ("skin_surface_c", skin_c),
-                               ("junction_cmd_c", step.junction_cmd_c),
-                               ("junction_c", step.junction_applied_c), ("safe", step.safe),
+                               ("junction_cmd_c", step.junction_applied_c),
+                               ("junction_c", self.junction_c), ("safe", step.safe),
                                ("force_n", force_n)):
                 self.trace[key][self.k] = value
             self.trace["phase"][self.k] = step.phase
@@ -269,12 +333,25 @@ def run_session(scene: Scene, material: str, identifier, generator,
         **metrics, **safety_summary(master),
         "clock": "real" if realtime else "simulated", "loop": stats.summary(),
         "devices": devices, "device_counters": device_counters,
+        "module": module_summary(touch, master),
     }
     if recorder is not None:
         summary["recording"] = recorder.close(summary, touch.trace)
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
     return SessionResult(summary, touch.trace)
+
+
+def module_summary(touch: DisplayTouch, master: MasterDisplay) -> dict:
+    """The display's module over the touch: its datasheet limits never
+    exceeded (counted), how close it came, how often the current saturated."""
+    spec = touch.module.spec
+    loop = master.junction_loop
+    return {"name": spec.name, **touch.limit_counts,
+            "max_current_a": round(touch.max_current_a, 4), "imax_a": spec.imax_a,
+            "max_hot_c": round(touch.max_hot_c, 3), "hot_side_max_c": spec.hot_side_max_c,
+            "max_sink_c": round(touch.max_sink_c, 3),
+            "saturated_periods": loop.saturated_periods if loop is not None else 0}
 
 
 def safety_summary(master: MasterDisplay) -> dict:
