@@ -202,7 +202,7 @@ def test_fingertip_pad_database_stays_within_the_datasheet():
     assert max(current) <= PARAMS.spec.imax_a
 
 
-def _water_trials(name: str) -> str:
+def _water_trials(name: str) -> list:
     scene = load_scene(name)
     scene = dataclasses.replace(scene, pad=dataclasses.replace(scene.pad, trials_per_material=2),
                                 objects=scene.objects[:3])

@@ -20,6 +20,15 @@ finds in the recorded force (the first sample past its threshold), as a
 lab's recording made with that detector is cut and as the slave finds it
 live; ``onset_offset_s`` is the true contact instant on that axis.
 
+A Peltier pad's junction is a node of its module (the scene's module and
+heat sink, :mod:`telethermal.physics.held_pad`): the pad's 1 kHz loop holds
+the junction's reading at the set point, before contact the pad, the
+junction and the module's hot side and sink are in the steady state of that
+hold, and during contact the junction droops as the object pulls heat
+through the layers (``junction_droop_k`` and ``module_peak_current_a`` in
+the manifest). A water pad is pre-conditioned and then left to itself, as
+before.
+
 Trial-to-trial variability: pressing force and through it the contact
 conductance (``h ~ F^0.8``), the onset of contact relative to the recorded
 ``t_s = 0``, the object's true temperature and the thermometer's per-reading

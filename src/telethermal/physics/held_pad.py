@@ -169,29 +169,44 @@ def module_step_batch(params: ModuleParams, sink: SinkParams, room_c: float, sta
     to the room (B,) W), the power and loss at the end temperatures (so
     that stored heat change = (load + power - loss) dt exactly).
     """
-    s, r, g = params.seebeck_v_k, params.resistance_ohm, params.conductance_w_k
-    i = np.asarray(current_a, dtype=float)
-    cc, ch, cs = params.cold_heat_j_k / dt_s, params.hot_heat_j_k / dt_s, sink.heat_j_k / dt_s
-    gi, ga = 1.0 / sink.interface_k_w, 1.0 / sink.to_air_k_w
-    room_k = room_c + KELVIN
-    joule = 0.5 * i * i * r
     x0 = np.asarray(state_c, dtype=float) - room_c
-    # cc (xc - xc0) = a + b (xc + room) - (s i (xc + room_K) - joule - g (xh - xc))
-    # ch (xh - xh0) = s i (xh + room_K) + joule - g (xh - xc) - gi (xh - xs)
-    # cs (xs - xs0) = gi (xh - xs) - ga xs
-    d1 = cc - load_b_w_k + s * i + g
-    d2 = ch - s * i + g + gi
-    d3 = cs + gi + ga
-    r1 = cc * x0[:, 0] + load_a_w + load_b_w_k * room_c - s * i * room_k + joule
-    r2 = ch * x0[:, 1] + s * i * room_k + joule
-    r3 = cs * x0[:, 2]
-    # Eliminate xs (row 3) and xc (row 1) into row 2.
-    xh = (r2 + gi * r3 / d3 + g * r1 / d1) / (d2 - gi * gi / d3 - g * g / d1)
-    xc = (r1 + g * xh) / d1
-    xs = (r3 + gi * xh) / d3
-    end = np.stack([xc, xh, xs], axis=1) + room_c
-    _, _, power = params.heat_w(i, end[:, 0], end[:, 1])
-    return end, power, ga * xs
+    step = _ModuleStepper(params, sink, room_c, dt_s)
+    xc, xh, xs, power, air = step(x0[:, 0], x0[:, 1], x0[:, 2], np.asarray(current_a, float),
+                                  np.asarray(load_a_w, float), np.asarray(load_b_w_k, float))
+    return np.stack([xc, xh, xs], axis=1) + room_c, power, air
+
+
+class _ModuleStepper:
+    """:func:`module_step_batch` on deviations from the room, its constants
+    computed once (the pad's loop calls it every period)."""
+
+    def __init__(self, params: ModuleParams, sink: SinkParams, room_c: float, dt_s: float):
+        self.s, self.r, self.g = params.seebeck_v_k, params.resistance_ohm, params.conductance_w_k
+        self.cc, self.ch = params.cold_heat_j_k / dt_s, params.hot_heat_j_k / dt_s
+        self.cs = sink.heat_j_k / dt_s
+        self.gi, self.ga = 1.0 / sink.interface_k_w, 1.0 / sink.to_air_k_w
+        self.d3 = self.cs + self.gi + self.ga
+        self.room_c, self.room_k = room_c, room_c + KELVIN
+
+    def __call__(self, xc0, xh0, xs0, i, load_a, load_b):
+        s, r, g, gi = self.s, self.r, self.g, self.gi
+        # cc (xc - xc0) = a + b (xc + room) - (s i (xc + room_K) - joule - g (xh - xc))
+        # ch (xh - xh0) = s i (xh + room_K) + joule - g (xh - xc) - gi (xh - xs)
+        # cs (xs - xs0) = gi (xh - xs) - ga xs
+        si = s * i
+        joule = 0.5 * r * i * i
+        pumped = si * self.room_k
+        d1 = (self.cc + g) - load_b + si
+        d2 = (self.ch + g + gi) - si
+        r1 = self.cc * xc0 + load_a + load_b * self.room_c - pumped + joule
+        r2 = self.ch * xh0 + pumped + joule
+        r3 = self.cs * xs0
+        # Eliminate xs (row 3) and xc (row 1) into row 2.
+        xh = (r2 + (gi / self.d3) * r3 + g * r1 / d1) / (d2 - gi * gi / self.d3 - g * g / d1)
+        xc = (r1 + g * xh) / d1
+        xs = (r3 + gi * xh) / self.d3
+        power = i * (s * (xh - xc) + i * r)
+        return xc, xh, xs, power, self.ga * xs
 
 
 def module_stored_j(params: ModuleParams, sink: SinkParams, room_c: float, state_c):
@@ -356,42 +371,47 @@ class HeldPad:
     def _step(self, lay: _Layers, loop, target, state, periods: int, oracle_load: bool) -> dict:
         """Step every trial ``periods`` times; the history each output needs."""
         batch, n_modes = lay.w0.shape
-        dt, area = self.dt_s, self.area_m2
-        w, ref = lay.w0.copy(), lay.ref_c
+        dt, area, room = self.dt_s, self.area_m2, self.room_c
+        module = _ModuleStepper(self.params, self.sink, room, dt)
+        w = lay.w0.copy()
         hist = {"w": np.empty((periods, batch, n_modes)), "sensed": np.zeros((periods, batch)),
                 "state": np.empty((periods, batch, 3)), "current": np.empty((periods, batch)),
                 "saturated": np.zeros(batch, dtype=int)}
-        lag = None
+        e_tau = ge_m = gp_m = None
         if self.sensor_lag_s:
             ge, gp = lag_kernels(lay.lam, dt, self.sensor_lag_s)
-            lag = (np.exp(-dt / self.sensor_lag_s), ge * lay.m[:, 0],
-                   np.einsum("bn,bn->b", gp * lay.f_unit, lay.m[:, 0]))
+            e_tau, ge_m = np.exp(-dt / self.sensor_lag_s), ge * lay.m[:, 0]
+            gp_m = np.einsum("bn,bn->b", gp * lay.f_unit, lay.m[:, 0])
         sensed = np.zeros(batch)
-        electrical = np.zeros(batch)
-        to_air = np.zeros(batch)
-        stored0 = module_stored_j(self.params, self.sink, self.room_c, state)
+        electrical, to_air = np.zeros(batch), np.zeros(batch)
+        stored0 = module_stored_j(self.params, self.sink, room, state)
         layers0 = np.einsum("bn,bn->b", lay.m[:, 3], w)
+        xc, xh, xs = (state[:, k] - room for k in range(3))
+        # Heat into the junction from the layers over a period, W:
+        # -(area) (back_w . w + back_u (u - ref)) = a + b u, u the junction.
         load_b = -area * lay.back_u
+        load_a0 = area * lay.back_u * lay.ref_c
+        back_w = -area * lay.back_w
+        feed = 0.0
         for p in range(periods):
-            # Heat into the junction from the layers over this period, W:
-            # -(area) (back_w . w + back_u (u - ref)) = a + b u, u the junction.
-            load_a = -area * (np.einsum("bn,bn->b", lay.back_w, w) - lay.back_u * ref)
-            feed = load_a + load_b * target if oracle_load else 0.0
-            current, cut = loop.update(target, state[:, 0], state[:, 1], dt, feed)
-            hist["saturated"] += np.asarray(cut, dtype=bool)
-            state, power, air = module_step_batch(self.params, self.sink, self.room_c, state,
-                                                  current, dt, load_a, load_b)
-            electrical += power * dt
-            to_air += air * dt
-            hist["w"][p], hist["sensed"][p] = w, sensed
-            hist["state"][p], hist["current"][p] = state, current
-            u = state[:, 0] - ref
-            if lag is not None:
-                e_tau, ge_m, gp_m = lag
+            load_a = load_a0 + np.einsum("bn,bn->b", back_w, w)
+            if oracle_load:
+                feed = load_a + load_b * target
+            current, cut = loop.update(target, xc + room, xh + room, dt, feed)
+            hist["saturated"] += cut
+            xc, xh, xs, power, air = module(xc, xh, xs, current, load_a, load_b)
+            electrical += power
+            to_air += air
+            hist["w"][p], hist["sensed"][p], hist["current"][p] = w, sensed, current
+            hist["state"][p, :, 0], hist["state"][p, :, 1], hist["state"][p, :, 2] = xc, xh, xs
+            u = xc + (room - lay.ref_c)
+            if e_tau is not None:
                 sensed = e_tau * sensed + np.einsum("bn,bn->b", ge_m, w) + gp_m * u
             w = lay.decay * w + lay.drive * u[:, None]
-        hist["accounts"] = (electrical, to_air,
-                            module_stored_j(self.params, self.sink, self.room_c, state) - stored0,
+        hist["state"] += room
+        end = np.stack([xc, xh, xs], axis=1) + room
+        hist["accounts"] = (electrical * dt, to_air * dt,
+                            module_stored_j(self.params, self.sink, room, end) - stored0,
                             area * (np.einsum("bn,bn->b", lay.m[:, 3], w) - layers0))
         return hist
 
