@@ -20,6 +20,15 @@ finds in the recorded force (the first sample past its threshold), as a
 lab's recording made with that detector is cut and as the slave finds it
 live; ``onset_offset_s`` is the true contact instant on that axis.
 
+A Peltier pad's junction is a node of its module (the scene's module and
+heat sink, :mod:`telethermal.physics.held_pad`): the pad's 1 kHz loop holds
+the junction's reading at the set point, before contact the pad, the
+junction and the module's hot side and sink are in the steady state of that
+hold, and during contact the junction droops as the object pulls heat
+through the layers (``junction_droop_k`` and ``module_peak_current_a`` in
+the manifest). A water pad is pre-conditioned and then left to itself, as
+before.
+
 Trial-to-trial variability: pressing force and through it the contact
 conductance (``h ~ F^0.8``), the onset of contact relative to the recorded
 ``t_s = 0``, the object's true temperature and the thermometer's per-reading
@@ -39,12 +48,14 @@ from typing import Callable
 import numpy as np
 
 from telethermal.data.dataset import Trial, staged_dir, write_trials
-from telethermal.errors import ModelError
+from telethermal.errors import ModelError, SceneError
 from telethermal.physics.scene import (ONSET_MARGIN_S, Scene, SensorSpec,
                                        finger_contact_model, pad_contact_model)
 from telethermal.control.contact import ContactDetector
 from telethermal.control.thermometer_calibration import (UNCALIBRATED, ThermometerCalibration,
                                                         calibrate_simulated)
+from telethermal.physics.held_pad import HeldPad, HeldPadResult
+from telethermal.physics.thermoelectric import default_driver
 from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, Instruments,
                                          Thermocouple, draw_instruments)
 from telethermal.physics.waterpad import precondition
@@ -186,23 +197,52 @@ def pad_database(scene: Scene, rng: np.random.Generator,
         command = np.array([scene.pad_temp_c(t) for t in draws.object_ir_c])
         # The pad's loop holds its thermocouple's reading at the command: the
         # pad itself sits the thermocouple's bias below it.
+        t_s = times[None, :] - draws.onset_s[:, None]
+        extra = {}
         if scene.pad.kind == "peltier":
             pad_c = command - tc_bias + rng.normal(0.0, PELTIER_SETPOINT_SD_K, n)
             if pad_loop is not None:
                 pad_c = pad_loop(command)           # the loop's own error instead
-            back_c = pad_c                          # junction held at the set point
+            # The junction is a node of the module, held at the set point by
+            # the pad's 1 kHz loop; it droops when the object pulls heat.
+            result = _held_pad_contact(scene, obj, model, t_s, pad_c, draws)
+            extra = {"junction_droop_k": result.peak_droop_k,
+                     "module_peak_current_a": result.peak_current_a}
         else:
             run = precondition(command - tc_bias, scene.room_temp_c, PRECONDITION_S)
             pad_c, back_c = run.final_pad_c, run.final_water_c
-        result = model.solve(times[None, :] - draws.onset_s[:, None], pad_c,
-                             draws.object_true_c, draws.conductance_w_m2k,
-                             back_temp_a_c=back_c, sensor_lag_s=scene.sensors.flux_lag_s)
+            result = model.solve(t_s, pad_c, draws.object_true_c, draws.conductance_w_m2k,
+                                 back_temp_a_c=back_c, sensor_lag_s=scene.sensors.flux_lag_s)
         # T_pad_C is what the pad's thermocouple read just before contact.
         before = Thermocouple(cold_junction_c=scene.room_temp_c, bias_k=tc_bias).read_c(pad_c, rng)
         trials += _record(scene, result, times, draws, before, rng, None, obj.material,
-                          choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}"}, session,
-                          scene.pad.contact_duration_s)
+                          choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}",
+                                                  **{k: f"{v[i]:.4f}" for k, v in extra.items()}},
+                          session, scene.pad.contact_duration_s)
     return trials
+
+
+def _held_pad_contact(scene: Scene, obj, model, t_s, pad_c, draws) -> HeldPadResult:
+    """The scene's Peltier pad on its module and heat sink, its junction held
+    at ``pad_c`` by the pad's loop (:mod:`telethermal.physics.held_pad`),
+    touching ``obj``; settled at the set point before contact. A contact
+    that takes the module past its datasheet's limits is an error (the
+    database would hold touches the pad cannot make)."""
+    params, sink = _pad_module(scene)
+    plant = HeldPad(model, params, sink, default_driver(params), scene.room_temp_c,
+                    sensor_lag_s=scene.sensors.flux_lag_s)
+    result = plant.run(t_s, pad_c, draws.object_true_c, draws.conductance_w_m2k)
+    over_i, over_hot = int(result.over_current_periods.sum()), int(result.over_hot_periods.sum())
+    if over_i or over_hot:
+        raise SceneError(f"{scene.source}: the pad's module {params.spec.name} on "
+                         f"{obj.material}: {over_i} periods above Imax {params.spec.imax_a} A, "
+                         f"{over_hot} with the hot side above {params.spec.hot_side_max_c} C")
+    return result
+
+
+def _pad_module(scene: Scene):
+    """(ModuleParams, SinkParams) of the scene's pad."""
+    return scene.pad.module_params()
 
 
 def finger_database(scene: Scene, rng: np.random.Generator,
