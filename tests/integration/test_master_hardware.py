@@ -42,7 +42,10 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
     board = SensorBoardEmulator(tmp_path / "board")
     applied = []
     bus = "virtual:master-hardware-test"
-    peltier = PeltierEmulator(bus, applied.append)
+    touches = []          # the board measures the simulated module's state
+    peltier = PeltierEmulator(bus, applied.append,
+                              state=lambda: touches[-1].module_state() if touches
+                              else (33.0, 24.0, 0.0))
     control, stream, admin = free_ports(3)
     config = MasterConfig(devices="hardware", board_url=board.path, can_bus=bus,
                           admin_port=admin, transport=TransportConfig(
@@ -50,6 +53,7 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
     service = MasterService(config)
     steps = record_steps(service)
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 0.6, 33.0, np.random.default_rng(0))
+    touches.append(touch)
     phases, safe, events_sent = {}, {}, []
     try:
         for k in range(1200):                       # 0.2 s idle, 0.6 s touch, 0.4 s after
@@ -119,7 +123,10 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path):
     board = SensorBoardEmulator(tmp_path / "board")
     applied = []
     bus = "virtual:master-hardware-slave-test"
-    peltier = PeltierEmulator(bus, applied.append)
+    touches = []          # the board measures the simulated module's state
+    peltier = PeltierEmulator(bus, applied.append,
+                              state=lambda: touches[-1].module_state() if touches
+                              else (33.0, 24.0, 0.0))
     service = None
     try:
         placed = None
@@ -142,6 +149,7 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path):
         steps = record_steps(service)
         idle = service.link.object_temp_c
         touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.5, idle, np.random.default_rng(1))
+        touches.append(touch)
         phases = []
         for k in range(int((0.2 + 1.5 + 0.2) * 1000)):
             t = -0.2 + k * 1e-3

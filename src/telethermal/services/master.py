@@ -118,9 +118,11 @@ class MasterService:
         cfg = self.config
         calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
         self.hardware = HardwareDisplay(cfg.board_url, cfg.can_bus, calibration)
+        # The module behind the pad: the master commands its current.
         self.display = MasterDisplay(self.display_config, None,
                                      pad_resistance(self.scene.pad.layers),
-                                     self.scene.sensors.flux_lag_s, cfg.finger_temp_c)
+                                     self.scene.sensors.flux_lag_s, cfg.finger_temp_c,
+                                     module=self.scene.pad.module_params()[0])
         self.t0 = time.monotonic()
         self.contact_id: int | None = None
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
