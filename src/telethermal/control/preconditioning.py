@@ -74,7 +74,7 @@ class FloorSearch:
         return np.unique(np.r_[np.arange(lo, hi, step_k), hi, self.touch.object_c])
 
 
-def search_idles(search: FloorSearch, step_k: float = 2.0) -> dict:
+def search_idles(search: FloorSearch, step_k: float = 4.0) -> dict:
     """Per material the best uniform idle in the skin band (the state
     searched: pad and junction uniform at one temperature before contact,
     as the module holds it in air); and for an unknown object the idle
