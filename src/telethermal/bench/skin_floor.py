@@ -1,6 +1,15 @@
 """The skin-temperature floor of the display: the best any controller could
 do on a touch, to put the controllers' figures beside.
 
+``telethermal bench skin-floor`` (:func:`run`): the floor with the real
+Peltier module behind the pad (its pumping limits, the junction's heat
+capacity; ``control/preconditioning.py``), per material of fingertip-7,
+from three idles (the object's temperature, the best idle for the known
+material, the product's idle policy for an unknown object), and a sweep of
+the module's Qmax and the flux film's resistance.
+
+:func:`skin_floor` below is the earlier floor, kept for ``bench render``:
+
 For one session touch (its operator, object and direct-contact skin curve),
 the junction temperature is chosen on a 5 ms grid, knowing everything (the
 material from t = 0, the operator's skin, contact and temperature, the exact
@@ -16,11 +25,18 @@ what the pad's state at contact is worth.
 
 from __future__ import annotations
 
+import dataclasses
+import datetime
+import platform
+import time
+from pathlib import Path
+
 import numpy as np
 from scipy.linalg import toeplitz
 from scipy.optimize import lsq_linear
 
 from telethermal.devices.sim_plant import DisplayPlant
+from telethermal.jsonfile import write_json
 from telethermal.teleop.run import display_model
 
 GRID_S = 0.005
@@ -61,3 +77,210 @@ def skin_floor(scene, session_result, band_c: tuple[float, float], idle_c: float
             "temp_rms_error_c": float(np.sqrt(np.mean((skin - skin_direct) ** 2))),
             "flux_rms_error_rel": float(np.sqrt(np.mean((flux - flux_direct) ** 2))
                                         / np.max(np.abs(flux_direct)))}
+
+
+# ---------------------------------------------------------------- bench skin-floor
+SWEEP_QMAX = (0.5, 1.0, 2.0, 4.0, 8.0)
+SWEEP_FILM_R = (1.0, 0.5, 0.25)
+TARGET_K = 0.3
+SCENE = "fingertip-7"
+
+
+def _final(hw, touch, scene, material: str, idle_c: float, plants: dict) -> dict:
+    """The floor on 5 ms slots from ``idle_c``, bounds iterated on the
+    nonlinear module, which verifies it."""
+    from telethermal.control import preconditioning as pc
+
+    key = id(hw)
+    if key not in plants:
+        plants[key] = pc.JunctionPlant(hw, touch)
+    plant = plants[key]
+    target = pc.direct_skin_c(scene, material, touch, plant.n)
+    return pc.best_touch(hw, plant, target, idle_c).summary(target)
+
+
+def _module(hw) -> dict:
+    p = hw.params
+    spec = p.spec
+    return {"name": spec.name, "imax_a": spec.imax_a, "vmax_v": spec.vmax_v,
+            "qmax_w": spec.qmax_w, "dtmax_k": spec.dtmax_k, "source": spec.source,
+            "area_m2": spec.area_m2, "seebeck_v_k": p.seebeck_v_k,
+            "resistance_ohm": p.resistance_ohm, "conductance_w_k": p.conductance_w_k,
+            "cold_heat_j_k": p.cold_heat_j_k, "heat_sink": hw.sink.spec.name,
+            "driver": {"current_limit_a": hw.driver.current_limit_a,
+                       "supply_v": hw.driver.supply_v}}
+
+
+def _materials(scene, hw, touch, idles: dict, step) -> dict:
+    plants: dict = {}
+    policy_c = idles["minimax"]["idle_c"]
+    out = {}
+    for m in scene.materials:
+        step(f"floors: {m}")
+        at_object = _final(hw, touch, scene, m, touch.object_c, plants)
+        policy = _final(hw, touch, scene, m, policy_c, plants)
+        searched = _final(hw, touch, scene, m, idles["preconditioned"][m]["idle_c"], plants)
+        # The best known-material idle is at least as good as every idle tried.
+        best = min((searched, at_object, policy), key=lambda r: r["floor_k"])
+        out[m] = {"floor_k": policy["floor_k"], "floor_at_object_k": at_object["floor_k"],
+                  "floor_preconditioned_k": best["floor_k"],
+                  "idle_policy_c": policy_c, "idle_object_c": touch.object_c,
+                  "idle_preconditioned_c": best["idle_c"],
+                  "policy": policy, "at_object": at_object, "preconditioned": best}
+    return out
+
+
+def _sweep(scene, touch, qmax_scales, film_scales, step) -> list[dict]:
+    from telethermal.control import preconditioning as pc
+
+    rows = []
+    for film in film_scales:
+        for scale in qmax_scales:
+            step(f"sweep: Qmax x{scale:g}, film R x{film:g}")
+            hw = pc.hardware(scene, qmax_scale=scale, film_r_scale=film)
+            search = pc.FloorSearch(scene, hw, touch)
+            idle, subset = pc.minimax_idle(search)
+            final = _final(hw, touch, scene, "aluminium", idle, {})
+            film_layer = hw.pad_layers[0]
+            rows.append({"qmax_w": hw.params.spec.qmax_w, "imax_a": hw.params.spec.imax_a,
+                         "qmax_scale": scale, "film_r_scale": film,
+                         "film_r_m2k_w": film_layer.thickness_m /
+                         film_layer.material.conductivity_w_mk,
+                         "aluminium_floor_k": final["floor_k"], "idle_policy_c": idle,
+                         "minimax_decided_by": subset, "aluminium": final})
+    return rows
+
+
+def _verdict(rows) -> str:
+    met = [r for r in rows if r["aluminium_floor_k"] <= TARGET_K]
+    if not met:
+        return (f"no change in the sweep brings aluminium's first-touch floor to "
+                f"<= {TARGET_K} K (best {min(r['aluminium_floor_k'] for r in rows):.2f} K)")
+    return "aluminium's first-touch floor <= %.1f K with: " % TARGET_K + "; ".join(
+        f"Qmax {r['qmax_w']:.1f} W (x{r['qmax_scale']:g}) and film R x{r['film_r_scale']:g} "
+        f"({r['aluminium_floor_k']:.2f} K)" for r in met)
+
+
+def run(progress=None, quick: bool = False) -> dict:
+    from telethermal.control import preconditioning as pc
+    from telethermal.physics.scene import load_scene
+
+    step = progress or (lambda _msg: None)
+    t0 = time.perf_counter()
+    scene = load_scene(SCENE)
+    hw, touch = pc.hardware(scene), pc.nominal_touch(scene)
+    step("idle search")
+    search = pc.FloorSearch(scene, hw, touch)
+    idles = pc.search_idles(search, **({"step_k": 7.0} if quick else {}))
+    t_search = time.perf_counter()
+    materials = _materials(scene, hw, touch, idles, step)
+    t_floors = time.perf_counter()
+    qmax, film = ((1.0, 8.0), (1.0, 0.25)) if quick else (SWEEP_QMAX, SWEEP_FILM_R)
+    sweep = _sweep(scene, touch, qmax, film, step)
+    t_end = time.perf_counter()
+    mm, ex = idles["minimax"], idles["expected"]
+    policy = {
+        "criterion": "minimax: the worst floor over the scene's materials (equally likely)",
+        "rule": "idle_c = object_c + fraction * (finger_c - object_c), clipped to the skin band",
+        "fraction": mm["fraction_of_finger_minus_object"], "offset_k": mm["offset_k"],
+        "idle_c": mm["idle_c"], "worst_floor_k": max(v["floor_k"] for v in materials.values()),
+        "expected_choice": {**ex, "criterion": "the mean floor over the materials"},
+        "sentence": (f"For an unknown object the pad idles {abs(mm['offset_k']):.1f} K "
+                     f"{'below' if mm['offset_k'] < 0 else 'above'} the object's measured "
+                     f"temperature ({mm['fraction_of_finger_minus_object']:+.2f} of the "
+                     f"finger-object difference), which minimises the worst first-touch "
+                     f"floor over {', '.join(scene.materials)}; minimising the mean instead "
+                     f"gives {ex['offset_k']:+.1f} K.")}
+    return {
+        "scene": scene.name, "module": _module(hw), "touch": {
+            **dataclasses.asdict(touch),
+            "note": "the scene's nominal operator (mean finger temperature, nominal skin, "
+                    "nominal force's contact conductance), object at room temperature"},
+        "contact_s": pc.CONTACT_S, "grid_s": pc.GRID_S, "search_grid_s": pc.SEARCH_GRID_S,
+        "bound_margin": pc.BOUND_MARGIN, "quick": quick, "idle_policy": policy,
+        "method": {
+            "plant": "pad stack + junction node (cold_heat_j_k/area) on the fingertip, "
+                     "LayeredContact's cells, exact per 5 ms slot, input q_j = -Qc/area",
+            "bounds": "Qc over the driver's admissible current at the slot's junction and "
+                      "hot-side temperatures, less a margin of bound_margin of the range; "
+                      "iterated on the nonlinear module's temperatures (ThermoelectricStack "
+                      "on fan-40 driven by the realising current), which counts violations",
+            "idle_state_searched": "pad and junction uniform at one temperature in the "
+                                   "skin band 15-43 C, held by the module in air",
+            "searches": "10 ms slots, 3 bound rounds, lsq_linear trf (tol 1e-6), Th at the "
+                        "idle's steady hot side; floors reported on 5 ms slots with bvls"},
+        "materials": materials, "idle_search": idles, "sweep": sweep,
+        "sweep_verdict": _verdict(sweep),
+        "timings": {"idle_search_s": t_search - t0, "floors_s": t_floors - t_search,
+                    "sweep_s": t_end - t_floors, "total_s": t_end - t0},
+        "machine": f"{platform.node()} ({platform.machine()}, {platform.python_version()})",
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+
+def plot(report: dict, out_png) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 4.8))
+    mats = list(report["materials"])
+    x = np.arange(len(mats))
+    for i, (key, label) in enumerate((("floor_at_object_k", "idle at the object's temperature"),
+                                      ("floor_k", "idle policy (unknown object)"),
+                                      ("floor_preconditioned_k", "best idle, material known"))):
+        ax.bar(x + (i - 1) * 0.27, [report["materials"][m][key] for m in mats], 0.27,
+               label=label)
+    ax.axhline(TARGET_K, color="r", ls=":", lw=0.8, label=f"{TARGET_K} K")
+    ax.set_xticks(x, mats, rotation=20, fontsize=8)
+    ax.set_ylabel("skin temperature RMS error floor (K), 3 s")
+    ax.set_title(f"{report['module']['name']}: floor per material", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3, axis="y")
+    for film in sorted({r["film_r_scale"] for r in report["sweep"]}, reverse=True):
+        rows = [r for r in report["sweep"] if r["film_r_scale"] == film]
+        ax2.plot([r["qmax_w"] for r in rows], [r["aluminium_floor_k"] for r in rows], "o-",
+                 label=f"film R x{film:g} ({rows[0]['film_r_m2k_w']:.1e} m^2 K/W)")
+    ax2.axhline(TARGET_K, color="r", ls=":", lw=0.8)
+    ax2.set_xscale("log")
+    ax2.set_xlabel("module Qmax (W; Imax scaled with it)")
+    ax2.set_ylabel("aluminium first-touch floor (K)")
+    ax2.set_title("sweep: pumping and flux film", fontsize=9)
+    ax2.legend(fontsize=7)
+    ax2.grid(alpha=0.3, which="both")
+    fig.suptitle(f"telethermal bench skin-floor - {report['date']}", fontsize=9)
+    fig.tight_layout()
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+    return out_png
+
+
+def run_and_save(json_path, png_path, quick: bool = False, command: str = "",
+                 progress=None) -> dict:
+    """Run, plot to ``png_path``, write the JSON (with ``command`` and the plot)."""
+    report = run(progress=progress, quick=quick)
+    report["command"] = command
+    report["png"] = str(plot(report, png_path))
+    write_json(json_path, report)
+    return report
+
+
+def text_report(report: dict, json_path) -> list[str]:
+    mod, pol = report["module"], report["idle_policy"]
+    lines = [f"module {mod['name']}: Imax {mod['imax_a']} A, Qmax {mod['qmax_w']} W, "
+             f"dTmax {mod['dtmax_k']} K; idle policy: {pol['sentence']}"]
+    for m, v in report["materials"].items():
+        lines.append(f"{m:10s} floor {v['floor_k']:.3f} K (idle {v['idle_policy_c']:.1f} C), "
+                     f"at object {v['floor_at_object_k']:.3f} K, preconditioned "
+                     f"{v['floor_preconditioned_k']:.3f} K (idle {v['idle_preconditioned_c']:.1f}"
+                     f" C); peak |I| {v['policy']['peak_current_a']:.2f} A, violations "
+                     f"{v['policy']['violations'] + v['at_object']['violations'] + v['preconditioned']['violations']}")
+    lines += [f"sweep Qmax {r['qmax_w']:5.1f} W, film R {r['film_r_m2k_w']:.1e} m^2K/W: "
+              f"aluminium {r['aluminium_floor_k']:.3f} K (idle {r['idle_policy_c']:.1f} C)"
+              for r in report["sweep"]]
+    lines.append(report["sweep_verdict"])
+    t = report["timings"]
+    lines.append(f"timings: search {t['idle_search_s']:.0f} s, floors {t['floors_s']:.0f} s, "
+                 f"sweep {t['sweep_s']:.0f} s, total {t['total_s']:.0f} s")
+    return lines + [f"wrote {json_path} and {report['png']}"]

@@ -103,6 +103,17 @@ def cmd_bench_view(args) -> int:
     return 0
 
 
+def cmd_bench_skin_floor(args) -> int:
+    from telethermal.bench import skin_floor
+
+    steps = 12 if args.quick else 23
+    with _progress(steps, "bench skin-floor") as advance:
+        report = skin_floor.run_and_save(args.json, _png(args), quick=args.quick,
+                                         command=_command(), progress=advance)
+    _print_lines(skin_floor.text_report(report, args.json))
+    return 0
+
+
 def _add_speed(bsub) -> None:
     """physics, transport, report, record, devices."""
     p = bsub.add_parser("physics", help="contact models: error against runtime")
@@ -166,6 +177,15 @@ def _add_error(bsub) -> None:
     p.add_argument("--png")
     p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
     p.set_defaults(func=cmd_bench_render)
+
+    p = bsub.add_parser("skin-floor", help="the best any current trajectory within the "
+                                           "Peltier module's limits can do on the skin, per "
+                                           "material and idle; a Qmax and flux-film sweep")
+    p.add_argument("--json", required=True)
+    p.add_argument("--png")
+    p.add_argument("--quick", action="store_true",
+                   help="a coarser idle search and a 2 x 2 sweep")
+    p.set_defaults(func=cmd_bench_skin_floor)
 
     p = bsub.add_parser("identify", help="the papers' identification tables, ours beside")
     p.add_argument("--json", required=True)
