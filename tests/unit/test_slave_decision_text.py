@@ -38,3 +38,16 @@ def test_a_group_that_stands_is_decided_when_first_committed():
     pad = _pad(_est(0.06, "plexiglass|rubber", True, "confident group"),
                _est(1.0, "plexiglass|rubber", True, "confident group"))
     assert decision_text(pad, "plexiglass|rubber") == "decided at 0.06 s"
+
+
+def test_the_master_reports_the_same_time_for_a_group_that_stood():
+    from telethermal.services.master import decided_at_s
+    group = [_est(0.06, "plexiglass|rubber", True, "confident group"),
+             _est(0.5, "plexiglass|rubber", True, "confident group"),
+             _est(1.0, "plexiglass|rubber", True, "confident group")]
+    assert decided_at_s(group, group[-1]) == 0.06
+    refined = [_est(0.04, "aluminium|steel", True, "confident group"),
+               _est(0.22, "aluminium", True, "confident")]
+    assert decided_at_s(refined, refined[-1]) == 0.22
+    assert decided_at_s([], None) is None
+    assert decided_at_s([], _est(0.3, "wood", False)) is None
