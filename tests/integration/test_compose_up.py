@@ -50,7 +50,8 @@ def _unavailable(reason: str):
 
 
 def _run(argv, timeout_s: float, check: bool = True, **kw) -> subprocess.CompletedProcess:
-    r = subprocess.run(argv, capture_output=True, text=True, timeout=timeout_s, **kw)
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=timeout_s,
+                       stdin=subprocess.DEVNULL, **kw)
     if check and r.returncode != 0:
         raise AssertionError(f"{' '.join(map(str, argv))}: exit {r.returncode}\n"
                              f"{r.stdout[-4000:]}\n{r.stderr[-4000:]}")
@@ -104,6 +105,10 @@ def engine(tmp_path_factory, timings):
         compose = ["docker", "compose"]
     if compose is None:
         _unavailable("no compose client (apt-get install docker-compose)")
+    free_gb = shutil.disk_usage("/var/lib" if Path("/var/lib").is_dir() else "/").free / 1e9
+    if free_gb < 8:
+        _unavailable(f"{free_gb:.1f} GB free on the engine's disk; the images and their "
+                     "build need about 8")
     if _engine_answers():
         yield compose
         return
@@ -288,6 +293,7 @@ def test_up_waits_for_training_then_a_touch_through_exec(stack, timings):
     seen = []
     with timings.stage("up until both healthy"):
         up = subprocess.Popen([*stack.argv, "up", "-d", "--no-build"], cwd=stack.ctx,
+                              stdin=subprocess.DEVNULL,
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         while up.poll() is None:
             slave = _named(f"{PROJECT}.slave")
