@@ -59,3 +59,7 @@ class CalibrationError(TelethermalError, RuntimeError):
 
 class BenchError(TelethermalError, ValueError):
     """A benchmark that cannot run as asked (names the option or the worker)."""
+
+
+class OutputFolderError(TelethermalError, PermissionError):
+    """A folder for results that this process cannot create or write."""

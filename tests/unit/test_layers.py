@@ -23,7 +23,7 @@ ROOT = Path(telethermal.__file__).parent
 LAYERS = [
     {"__init__"},
     {"errors"},
-    {"threads", "tomltables", "npzfile", "jsonfile", "netns"},
+    {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder"},
     {"physics"},
     {"control", "wire", "faults"},
     {"devices", "data"},

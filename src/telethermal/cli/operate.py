@@ -46,7 +46,8 @@ def _admin_parser(sub) -> None:
     q.add_argument("role", nargs="?", choices=("slave", "master", "both"), default="both")
     q.add_argument("--wait", type=float, default=0.0, metavar="S",
                    help="wait up to S seconds for the services to answer and the "
-                        "master to have a live session (exit 1 if not)")
+                        "master to have a live session (exit 1 if not); without it, "
+                        "exit 1 if a role asked for does not answer (a healthcheck)")
     q = asub.add_parser("place", help="put an object under the slave pad (simulation)")
     q.add_argument("material")
     q.add_argument("--seed", type=int)
@@ -57,6 +58,9 @@ def _admin_parser(sub) -> None:
     q.add_argument("--contact-s", type=float, default=5.0)
     q.add_argument("--seed", type=int, default=0)
     q.add_argument("--no-wait", action="store_true", help="return at once (then lift, report)")
+    q.add_argument("--session-wait", type=float, default=30.0, metavar="S",
+                   help="wait up to S seconds for the master's session with the slave "
+                        "(right after start, the slave may still be training; default 30)")
     q.add_argument("--material", help="the placed object, if the slave's admin is not "
                                       "reachable from here (for the direct-contact figures)")
     q.add_argument("--object-c", type=float, help="its true temperature (C)")
@@ -89,7 +93,9 @@ def _status(args, where) -> int:
     if poll.error is not None and args.role != "both":
         raise poll.error
     _show(args, poll.replies, poll.lines)
-    return 0 if poll.live or not args.wait else 1
+    if args.wait:
+        return 0 if poll.live else 1
+    return 0 if poll.error is None else 1         # a role that did not answer
 
 
 def _place(args, where) -> int:
@@ -106,6 +112,7 @@ def _place(args, where) -> int:
 
 
 def _touch(args, where) -> int:
+    ac.wait_for_session(where["master"], args.session_wait)
     truth = ac.truth_for_touch(where["slave"], args.material, args.object_c)
     r = ac.request(where["master"], "master", "touch", timeout_s=args.contact_s + 30,
                    contact_s=args.contact_s, seed=args.seed, wait=not args.no_wait,

@@ -13,6 +13,9 @@ def cmd_demo(args) -> int:
     """The main job on the default scene: databases, identifier and generator
     trained on them, then slave and master as two processes on loopback and
     a touch on each of several materials."""
+    from telethermal.outputfolder import prepare_output_folder
+
+    prepare_output_folder(args.out)          # before anything is computed
     from telethermal.services.demo import demo
     from telethermal.services.viewer import serve_until_signal
 

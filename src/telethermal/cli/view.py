@@ -8,7 +8,7 @@ from telethermal.view.server import DEFAULT_PORT
 def cmd_view(args) -> int:
     from telethermal.services.viewer import open_view, serve_until_signal
 
-    server = open_view(args.config, args.recordings, args.port)
+    server = open_view(args.config, args.recordings, args.port, args.bind)
     print(f"view: {server.url}  (live: {'yes' if server.feed else 'no'}; recordings: "
           f"{server.recordings or 'none'}); Ctrl-C to stop", flush=True)
     serve_until_signal(server)
@@ -24,4 +24,8 @@ def add_parser(sub) -> None:
                                         "config's record_dir)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT,
                    help=f"HTTP port on 127.0.0.1 (default {DEFAULT_PORT}; 0: a free one)")
+    p.add_argument("--bind", default="127.0.0.1", metavar="ADDRESS",
+                   help="the address the page is served on (default 127.0.0.1; 0.0.0.0 "
+                        "only inside a container whose port the host publishes on its "
+                        "own loopback, as docker-compose.yml's view service does)")
     p.set_defaults(func=cmd_view)

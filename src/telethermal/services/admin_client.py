@@ -123,6 +123,19 @@ def poll_status(where: dict, roles, wait_s: float = 0.0, every_s: float = 0.2) -
         time.sleep(every_s)
 
 
+def wait_for_session(master, wait_s: float, every_s: float = 0.2) -> dict:
+    """The master's status once it has a live session with the slave, waiting
+    up to ``wait_s`` (a touch right after start, while the slave still trains
+    its models); raises :class:`AdminError` naming what it saw otherwise."""
+    poll = poll_status({"master": master}, ("master",), wait_s, every_s)
+    if poll.live:
+        return poll.replies["master"]
+    if "master" not in poll.replies:
+        raise poll.error
+    seen = "; ".join(line.strip() for line in poll.lines)
+    raise AdminError(f"master: no session with the slave after waiting {wait_s:g} s ({seen})")
+
+
 def _ms(value) -> str:
     return "-" if value is None else f"{1e3 * value:.2f} ms"
 

@@ -196,6 +196,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                                   contact_s, render_from)
     summary = {"scene": scene.name, "material": material, "seed": seed,
                "identified": report["identified"], "decision_time_s": report["decision_time_s"],
+               "identified_at_s": report.get("identified_at_s"),
                "decision_reason": report["reason"], "decision_from_s": render_from,
                "render_start_s": result["render_start_s"],
                "object_memory": result.get("object_memory"),
@@ -243,6 +244,8 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
     local = run_session(scene, material, identifier, generator, contact_s=contact_s,
                         seed=seed).summary
     when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
+    if s.get("identified_at_s") is not None and s["identified_at_s"] != s["decision_time_s"]:
+        when = f"at {s['identified_at_s']:.2f} s (first committed {when})"   # after a group
     start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
     memory = "" if s["object_memory"] is None else \
         f"announced from memory as {s['object_memory']}, rendered from {start}; "

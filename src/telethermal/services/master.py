@@ -35,6 +35,14 @@ from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_model_a
 log = logging.getLogger("telethermal.master")
 
 
+
+def decided_at_s(estimates, est) -> float | None:
+    """Time after contact of the first decided estimate with ``est``'s label
+    (``est`` itself if none is among ``estimates``); None if undecided."""
+    if est is None or not est.decided:
+        return None
+    return next((e.t_s for e in estimates if e.decided and e.label == est.label), est.t_s)
+
 class Touch:
     """One operator touch in progress."""
 
@@ -271,7 +279,10 @@ class MasterService:
             "render_start_s": touch.display.rendered_from_s,
             "master_onset_s": touch.display.last_onset_s,
             "identified": est.label if est is not None and est.decided else "unknown",
-            "decision_time_s": est.t_s if est is not None and est.decided else None,
+            # when the slave first decided this label (a group that stood
+            # until the last window was decided at its first commitment, as
+            # the slave reports it)
+            "decision_time_s": decided_at_s(link.estimates, est),
             "object_memory": None if link.recalled is None else link.recalled.label,
             "estimates": len(link.estimates), "trajectory_at_s": touch.trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,

@@ -36,6 +36,18 @@ BATCH = 10            # samples per measurement_batch
 TRAJECTORY_VALID_S = 60.0
 
 
+def decision_text(pad: Slave, label: str) -> str:
+    """When ``label`` was decided, and the group the pad committed to first
+    if there was one: the same words in the slave's "decided" and "touch
+    over" lines, so the two give the same time for the same touch."""
+    at_s = pad.decided_at_s(label)
+    first = pad.first_commitment
+    text = "decided at -" if at_s is None else f"decided at {at_s:.2f} s"
+    if first is not None and first.label != label:
+        text += f", after committing to {first.label} at {first.t_s:.2f} s"
+    return text
+
+
 class SlaveService:
     def __init__(self, config: SlaveConfig, identifier=None, generator=None):
         from telethermal.teleop.models import train_generator, train_identifier
@@ -237,7 +249,7 @@ class SlaveService:
         r = self.last_touch
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", self.contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
-                 if r["decision_time_s"] is None else f"decided at {r['decision_time_s']:.2f} s")
+                 if r["decision_time_s"] is None else decision_text(self.pad, r["identified"]))
         self.touch_t0, self.state, self.contact_owner = None, "idle", None
         # The touch's decision (a material or a pair; not "unknown"), once per
         # touch: remembered for this object, announced with it just below; a
@@ -293,8 +305,8 @@ class SlaveService:
                                    t_s=[0.0] + curve["t_s"], g_w_m2k=[0.0] + curve["g_w_m2k"],
                                    valid_s=TRAJECTORY_VALID_S,
                                    t0_s=self.touch_t0 + float(pad.onset_s))
-                log.info("decided contact_id=%d material=%s t=%.2f s", self.contact_id,
-                         e.label, e.t_s)
+                log.info("decided contact_id=%d material=%s (%s)", self.contact_id,
+                         e.label, decision_text(pad, e.label))
         if events or (pad.onset_s is not None and pad.samples_read > self._sp_sample):
             self._stream_setpoint(now)
         read = pad.samples_read
@@ -355,6 +367,9 @@ class SlaveService:
                 # the first commitment (a group's, when refined later)
                 "decision_time_s": (pad.committed_at_s if est is not None and est.decided
                                     and est.label != UNKNOWN else None),
+                # when the identified label itself was decided (later, after a group)
+                "identified_at_s": (pad.decided_at_s(est.label) if est is not None and
+                                    est.decided and est.label != UNKNOWN else None),
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else "no estimate",

@@ -29,9 +29,10 @@ def live_feed(config) -> tuple[LiveFeed, str]:
 
 
 def open_view(master_config: str | Path | None, recordings: str | Path | None,
-              port: int) -> ViewServer:
+              port: int, bind: str = "127.0.0.1") -> ViewServer:
     """The view server, started: live from the services of ``master_config``
-    (if given), playing the ``*.mcap`` files of ``recordings``."""
+    (if given), playing the ``*.mcap`` files of ``recordings``; its HTTP on
+    ``bind`` (loopback unless a container publishes it to its host)."""
     feed, note = None, ""
     if master_config:
         config = load_config(master_config, "master")
@@ -39,7 +40,7 @@ def open_view(master_config: str | Path | None, recordings: str | Path | None,
         if recordings is None and config.record_dir:
             recordings = config.record_dir
     try:
-        return ViewServer(port, feed, recordings, note).start()
+        return ViewServer(port, feed, recordings, note, bind).start()
     except Exception:
         if feed is not None:
             feed.close()

@@ -223,6 +223,19 @@ class Slave:
                      if ev.estimate.decided and ev.estimate.label != "unknown"), None)
 
     @property
+    def first_commitment(self) -> Estimate | None:
+        """The first committed estimate (a material, or a group later
+        refined), or None: :attr:`committed_at_s` is its time."""
+        return next((ev.estimate for ev in self.events
+                     if ev.estimate.decided and ev.estimate.label != "unknown"), None)
+
+    def decided_at_s(self, label: str) -> float | None:
+        """Time after contact at which ``label`` itself was first decided
+        (later than :attr:`committed_at_s` when a group came first)."""
+        return next((ev.estimate.t_s for ev in self.events
+                     if ev.estimate.decided and ev.estimate.label == label), None)
+
+    @property
     def estimate(self) -> Estimate | None:
         return self.events[-1].estimate if self.events else None
 

@@ -45,16 +45,17 @@ class ViewServer:
     only); ``recordings``: a folder of ``*.mcap`` files, or None."""
 
     def __init__(self, port: int = 0, feed: LiveFeed | None = None,
-                 recordings: str | Path | None = None, message: str = ""):
+                 recordings: str | Path | None = None, message: str = "",
+                 bind: str = "127.0.0.1"):
         self.feed = feed
         self.recordings = Path(recordings) if recordings else None
         self.message = message
         self.stopping = threading.Event()
         self.started_s = time.monotonic()
         try:
-            self.httpd = ThreadingHTTPServer(("127.0.0.1", port), _handler(self))
+            self.httpd = ThreadingHTTPServer((bind, port), _handler(self))
         except OSError as exc:
-            raise TelethermalError(f"view: cannot listen on 127.0.0.1:{port}: {exc}") from exc
+            raise TelethermalError(f"view: cannot listen on {bind}:{port}: {exc}") from exc
         self.httpd.daemon_threads = True
         self.port = self.httpd.server_address[1]
         self.url = f"http://127.0.0.1:{self.port}/"
