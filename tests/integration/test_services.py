@@ -147,7 +147,8 @@ def _place(ports, material: str, object_id: str, seed: int) -> dict:
 def _touch(ports, seed: int) -> dict:
     from telethermal.services.admin import call
     result = call(ports[3], "touch", timeout_s=40, contact_s=1.0, seed=seed)
-    assert result["ok"] and result["safety_events"] == 0, result
+    assert result["ok"] and result["safety_events"] == 0, \
+        (result.get("safety_event_counts"), result.get("display_event_counts"))
     return result
 
 
