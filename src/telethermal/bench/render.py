@@ -380,6 +380,18 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
         g = report["generator"]["rms_error_rel_of_peak"]
         lines.append(f"generators on held-out persons: network {100 * g['network']:.2f} %, "
                      f"closed form {100 * g['contact']:.2f} % RMS of peak")
+    per = report.get("materials")
+    if isinstance(per, dict):
+        lines += [f"{m:10s}: first touch skin {v['skin_rms_k']:.2f} K, repeated (pre-conditioned) "
+                  f"{v['skin_rms_repeat_k']:.2f} K; flux from the decision "
+                  f"{100 * v['flux_rms_from_decision_rel']:.2f} %, first second "
+                  f"{100 * v['flux_rms_first_second_rel']:.2f} % of peak"
+                  for m, v in per.items() if v]
+    if "limits" in report:
+        lim = report["limits"]
+        lines.append(f"module limits over {lim['sessions']} sessions: current exceeded "
+                     f"{lim['current_exceeded']}, hot side exceeded {lim['hot_side_exceeded']}; "
+                     f"safety events {report['safety_events']}")
     lines += [f"real clock {r['rate_hz']:6.0f} Hz: period p50 {r['period_p50_us']:.0f} us, p99 "
               f"{r['period_p99_us']:.0f} us, max {r['period_max_us']:.0f} us, deadline misses "
               f"{r['deadline_misses']} of {r['steps']}, stalls {r['stalls']}"
