@@ -428,14 +428,14 @@ class MasterDisplay:
         # A stall buys no bigger jump.
         step = self.config.slew_k_s * min(dt_s, 2 * self.nominal_dt_s)
         wanted = command
+        command = min(max(command, self._command_c - step), self._command_c + step)
         if math.isfinite(sensors.pad_temp_c):
-            # The surface barrier, kept by the controller itself (the
-            # supervisor's copy of it is the backstop).
+            # The surface barrier, kept by the controller itself over its own
+            # slew limit (the supervisor's copy of it is the backstop).
             lo, hi = surface_barrier(self.config.limits, sensors.pad_temp_c)
             if not lo <= command <= hi:
                 command = min(max(command, lo), hi)
                 self._count("rendering limited by the surface band")
-        command = min(max(command, self._command_c - step), self._command_c + step)
         self._command_c = command
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
