@@ -126,7 +126,8 @@ def test_render_lines_skip_what_the_report_does_not_hold():
     report = {"rate": [], "controller": [], "skin_floor": floor, "gains": [], "before": [],
               "generator": None, "real_clock": [], "png": "p.png"}
     assert render.text_report(report, "r.json") == [
-        "skin floor (seed 1, junction in [20, 40] C), default controller / any controller "
+        "ideal-junction bound (seed 1, junction in [20, 40] C, no pumping limit: not a floor of "
+        "the real module, see bench skin-floor), default controller / any controller "
         "with the pad at the object's temperature / at the band's bottom: wood 0.50/0.25/0.75 K",
         "wrote r.json and p.png"]
 

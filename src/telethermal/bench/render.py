@@ -343,7 +343,8 @@ def run_and_save(json_path: str | Path, png_path: str | Path, quick: bool = Fals
 
 
 def _skin_floor_line(floor: dict) -> str:
-    return (f"skin floor (seed {floor['seed']}, junction in {floor['band_c']} C), default "
+    return (f"ideal-junction bound (seed {floor['seed']}, junction in {floor['band_c']} C, no "
+            "pumping limit: not a floor of the real module, see bench skin-floor), default "
             "controller / any controller with the pad at the object's temperature / at the "
             "band's bottom: "
             + ", ".join(f"{m} {v['impedance_temp_rms_error_c']:.2f}/"
