@@ -78,7 +78,7 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
         peltier.close()
         board.close()
     # The touch began (force) and ended: one contact, its two events queued.
-    assert service.next_contact_id == 2 and service.contact_id is None
+    assert service.session.next_contact_id == 2 and service.session.contact_id is None
     assert events_sent[-1] >= 2
     # No slave, so nothing to render: the display says the link is lost and
     # holds the pad at neutral.

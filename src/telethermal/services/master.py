@@ -28,6 +28,7 @@ from telethermal.services.config import MasterConfig
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
+from telethermal.teleop.session import MasterSession
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
                                      draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
@@ -61,14 +62,13 @@ class Touch:
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed)
         self.start = now
         self.contact_s = contact_s
-        self.contact_id = service.next_contact_id
-        service.link.begin(self.contact_id)
+        # The id the session gives the contact at the display's onset.
+        self.contact_id = service.session.next_contact_id
         if service.recorder is not None:
             service.recorder.touch_start(now, self.contact_id,
                                          display_params(scene, cfg, self.operator, self.idle_c))
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
-        self.trajectory_at: float | None = None
         self.reply_when_done = True          # the admin "touch" request waits for the end
         self.truth: dict | None = None       # the placed object (simulation), for the figures
 
@@ -92,8 +92,10 @@ class MasterService:
         self.endpoint, self.admin = open_service_sockets("master", config)
         # The slave's estimates come on the lossy stream, newest wins; the
         # link reads them as it reads the lossless kinds (PROTOCOL.md 6a).
-        self.endpoint.deliver_stream = frozenset({"posterior_estimate"})
-        self.link = SlaveLink()
+        self.endpoint.deliver_stream = frozenset({"posterior_estimate", "flux_setpoint"})
+        #: The session's rules (what the master reads, what it tells the
+        #: slave): the simulated network of ``bench faults`` runs the same.
+        self.session = MasterSession()
         self.hardware = None
         self.view = None
         try:
@@ -111,10 +113,18 @@ class MasterService:
             raise
         self.recorder = open_recorder(config, "master")
         self.touch: Touch | None = None
-        self.next_contact_id = 1
         self.stop_requested = False
         self.state = "idle"
         self.last_touch: dict = {}
+
+    @property
+    def link(self) -> SlaveLink:
+        """What the master knows from the slave (the session's)."""
+        return self.session.link
+
+    def _send(self, sends) -> None:
+        for s in sends:
+            self.endpoint.send(s.kind, **s.fields)
 
     # ------------------------------------------------------------ hardware
     def _open_hardware(self) -> None:
@@ -132,52 +142,38 @@ class MasterService:
                                      self.scene.sensors.flux_lag_s, cfg.finger_temp_c,
                                      module=self.scene.pad.module_params()[0])
         self.t0 = time.monotonic()
-        self.contact_id: int | None = None
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
                  cfg.can_bus)
 
     def _hardware_period(self, now: float, dt_s: float) -> None:
-        display, t = self.display, now - self.t0
-        sp = self.endpoint.latest.get("flux_setpoint")
-        setpoint = sp["flux_w_m2"] if sp is not None and sp["contact_id"] == self.contact_id \
-            else None
-        news = self.link.news(now, self.endpoint.peer_alive, setpoint)
+        display, t, session = self.display, now - self.t0, self.session
+        news = session.news(now, self.endpoint.peer_alive)
         display.generator = self.link.generator
-        onset_before, release_before = display.last_onset_s, display.last_release_s
         sensors = self.hardware.read(t)
         step = display.step(t, dt_s, sensors, news)
         self.hardware.apply(t, step, dt_s, sensors.force_n)
         if self.view is not None:
             self.view.period(now, self.config.rate_hz, sensors.flux_w_m2, sensors.pad_temp_c,
-                             sensors.force_n, lambda: self._view_state(step, display,
-                                                                       self.contact_id or 0))
-        if display.last_onset_s != onset_before:
-            self.contact_id = self.next_contact_id
-            self.next_contact_id += 1
-            self.link.begin(self.contact_id)
-            self.link.onset(self.t0 + display.last_onset_s)
+                             sensors.force_n, lambda: self._view_state(
+                                 step, display, session.contact_id or 0))
+        contact_id = session.contact_id
+        self._send(session.period(step, self.t0, sensors.force_n, self.config.finger_temp_c))
+        if step.contact is not None and step.contact.touching:
             self.state = "touching"
-            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
-                               t_s=self.t0 + display.last_onset_s,
-                               force_n=max(float(sensors.force_n), 0.0),
-                               finger_temp_c=self.config.finger_temp_c)
             if self.recorder is not None:
                 # (A replay starts a fresh display at this touch; this one has
                 # run since the service started, so it may differ slightly.)
-                self.recorder.touch_start(now, self.contact_id, display_params(
+                self.recorder.touch_start(now, session.contact_id, display_params(
                     self.scene, self.display_config, _Finger(self.config.finger_temp_c),
                     display.safety.applied_temp_c))
-        if self.contact_id is not None and self.recorder is not None:
+        if (session.contact_id is not None or contact_id is not None) and \
+                self.recorder is not None:
             self.recorder.period(t, dt_s, sensors, news, step)
-        if display.last_release_s != release_before and self.contact_id is not None:
-            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
-                               t_s=self.t0 + display.last_release_s, force_n=0.0,
-                               finger_temp_c=self.config.finger_temp_c)
+        if step.contact is not None and not step.contact.touching and contact_id is not None:
             if self.recorder is not None:
-                self.recorder.touch_end({"contact_id": self.contact_id, **safety_summary(
+                self.recorder.touch_end({"contact_id": contact_id, **safety_summary(
                     display), "device_counters": self.hardware.counters()}, {})
-            self.link.end()
-            self.contact_id, self.state = None, "idle"
+            self.state = "idle"
         elif display.phase == Phase.RENDER:
             self.state = "rendering"
 
@@ -186,13 +182,9 @@ class MasterService:
         if m["kind"] == "session_config":
             log.info("session config from slave: %d classes, scene %s", len(m["classes"]),
                      m["scene"])
-        had = self.link.trajectory
         if self.recorder is not None:
             self.recorder.wire(now, "in", m)
-        self.link.on_message(m, now, self.endpoint.offset.offset_s)
-        if self.touch is not None and self.link.trajectory is not had and \
-                self.touch.trajectory_at is None:
-            self.touch.trajectory_at = now - self.touch.start - PRE_CONTACT_S
+        self.session.on_message(m, now, self.endpoint.offset.offset_s)
 
     # ------------------------------------------------------------ loop
     def step(self, t_loop: float, dt_s: float) -> bool:
@@ -229,15 +221,10 @@ class MasterService:
         return state
 
     def _touch_period(self, now: float, dt_s: float) -> None:
-        touch = self.touch
+        touch, session = self.touch, self.session
         t = now - touch.start - PRE_CONTACT_S
-        sp = self.endpoint.latest.get("flux_setpoint")
-        setpoint = sp["flux_w_m2"] if sp is not None and sp["contact_id"] == touch.contact_id \
-            else None
-        news = self.link.news(now, self.endpoint.peer_alive, setpoint)
+        news = session.news(now, self.endpoint.peer_alive)
         touch.display.generator = self.link.generator      # a restarted slave sends anew
-        onset_before = touch.display.last_onset_s
-        release_before = touch.display.last_release_s
         sensors = touch.devices.read(t)
         step = touch.display.step(t, dt_s, sensors, news)
         touch.devices.apply(t, step, dt_s, sensors.force_n)
@@ -247,17 +234,10 @@ class MasterService:
                                                                        touch.contact_id))
         if self.recorder is not None:
             self.recorder.period(t, dt_s, sensors, news, step)
-        if touch.display.last_onset_s != onset_before:
+        self._send(session.period(step, touch.start + PRE_CONTACT_S, sensors.force_n,
+                                  touch.operator.finger_ir_c))
+        if step.contact is not None and step.contact.touching:
             self.state = "touching"
-            self.link.onset(touch.start + PRE_CONTACT_S + touch.display.last_onset_s)
-            self.endpoint.send("contact_event", contact_id=touch.contact_id, touching=True,
-                               t_s=touch.start + PRE_CONTACT_S + touch.display.last_onset_s,
-                               force_n=max(float(sensors.force_n), 0.0),
-                               finger_temp_c=touch.operator.finger_ir_c)
-        if touch.display.last_release_s != release_before:
-            self.endpoint.send("contact_event", contact_id=touch.contact_id, touching=False,
-                               t_s=touch.start + PRE_CONTACT_S + touch.display.last_release_s,
-                               force_n=0.0, finger_temp_c=touch.operator.finger_ir_c)
         if touch.display.phase == Phase.RENDER:
             self.state = "rendering"
         if touch.sim.done:
@@ -267,7 +247,10 @@ class MasterService:
         touch, stats = self.touch, self.loop.stats
         devices = touch.devices.counters()
         touch.devices.close()
-        link = self.link
+        link, session = self.link, self.session
+        trajectory_at = None if session.trajectory_at_s is None else \
+            session.trajectory_at_s - touch.start - PRE_CONTACT_S
+        self._send(session.close_contact(time.monotonic(), touch.operator.finger_ir_c))
         # What the slave itself decided on this touch (not the recollection
         # the display may have rendered from; that is reported apart).
         est = link.decision or link.latest
@@ -284,7 +267,7 @@ class MasterService:
             # the slave reports it)
             "decision_time_s": decided_at_s(link.estimates, est),
             "object_memory": None if link.recalled is None else link.recalled.label,
-            "estimates": len(link.estimates), "trajectory_at_s": touch.trajectory_at,
+            "estimates": len(link.estimates), "trajectory_at_s": trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,
             "link_counters": dict(link.counters), "devices": self.config.devices,
             "device_counters": devices,
@@ -296,8 +279,6 @@ class MasterService:
             self.recorder.touch_end({k: v for k, v in result.items() if k != "trace"},
                                     touch.sim.trace)
         self.touch, self.state = None, "idle"
-        link.end()
-        self.next_contact_id += 1
         log_touch_figures(result)
         self.last_touch = result
         if touch.reply_when_done:
@@ -356,7 +337,7 @@ class MasterService:
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
                 "counters": dict(e.counters), "devices": self.config.devices,
                 **({"device_counters": self.hardware.counters(),
-                    "display_phase": self.display.phase, "contact_id": self.contact_id}
+                    "display_phase": self.display.phase, "contact_id": self.session.contact_id}
                    if self.hardware is not None else {})}
 
     def _realtime(self) -> None:

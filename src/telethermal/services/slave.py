@@ -11,7 +11,6 @@ trajectory (``proto/PROTOCOL.md`` section 6).
 from __future__ import annotations
 
 import logging
-import math
 import time
 from pathlib import Path
 
@@ -20,20 +19,18 @@ import zmq
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import naive_setpoint
 from telethermal.record.recorder import open_recorder
-from telethermal.render.sampled import SampledGenerator, sample_curves
+from telethermal.render.sampled import sample_curves
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.teleop.session import SlaveSession
 from telethermal.teleop.slave import BOARD_LOST, Slave
 
 log = logging.getLogger("telethermal.slave")
-BATCH = 10            # samples per measurement_batch
-TRAJECTORY_VALID_S = 60.0
 
 
 def decision_text(pad: Slave, label: str) -> str:
@@ -72,12 +69,13 @@ class SlaveService:
         self.identifier, self.generator = identifier, generator
         renderable = [c for c in identifier.classes_ if c in generator.materials]
         self.curves = sample_curves(generator, renderable)
-        self.wire_generator = SampledGenerator(self.curves)   # what the master renders
-        self.finger_c: float | None = None
         self.recorder = open_recorder(config, "slave", identifier, generator)
         self.rate_hz = self.scene.sample_rate_hz
         self.endpoint, self.admin = open_service_sockets("slave", config)
         self.stop_requested = False
+        #: The session's rules (what goes out, when): the simulated network
+        #: of ``bench faults`` runs the same object.
+        self.session = SlaveSession(self.curves, self.rate_hz)
         self.state = "idle"
         self.masters_lost = 0          # contacts ended because the master went silent
         #: The service's own error counters, reported with the transport's
@@ -85,17 +83,7 @@ class SlaveService:
         self.counters = self.endpoint.extra_counters
         self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
                              memory_overruled=0)
-        #: What this slave decided per object (in this process only: a
-        #: restarted slave has forgotten; PROTOCOL.md section 6b).
-        self.memory = ObjectMemory()
         self.object_id: str | None = None
-        self.contact_id = 0
-        self.contact_owner: str | None = None      # the master session that opened it
-        self.touch_t0: float | None = None
-        self._decided_label: str | None = None      # this contact's, as last sent
-        self._decision_sent = None                  # the last estimate sent lossless
-        self._sent = 0
-        self._sp_sample = -1                        # the sample of the last flux_setpoint
         self._seed = config.seed
         self.calibration_error: str | None = None
         self.pad: Slave | None = None
@@ -108,6 +96,29 @@ class SlaveService:
         except BaseException:
             self._close_devices()
             raise
+
+    # ------------------------------------------------------------ the session
+    @property
+    def memory(self) -> ObjectMemory:
+        """What this slave decided per object (in this process only: a
+        restarted slave has forgotten; PROTOCOL.md section 6b)."""
+        return self.session.memory
+
+    @property
+    def touch_t0(self) -> float | None:
+        """When the pad went down on the object (None: no contact)."""
+        return self.session.touch_t0
+
+    @property
+    def contact_id(self) -> int:
+        return self.session.contact_id
+
+    def _send(self, sends) -> None:
+        for s in sends:
+            self.endpoint.send(s.kind, **s.fields)
+            if s.kind == "flux_trajectory":
+                log.info("decided contact_id=%d material=%s (%s)", self.contact_id,
+                         s.fields["material"], decision_text(self.pad, s.fields["material"]))
 
     # ------------------------------------------------------------ instruments
     def _start_sensor_session(self, seed: int) -> None:
@@ -167,30 +178,16 @@ class SlaveService:
             self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
                              session=self.sensors, devices=self.devices)
         self.object_id = object_id or material
+        self.session.place(self.pad, self.object_id)
         self.material = material
         self._seed = seed
-        self._sent = 0
         log.info("object placed material=%s object_id=%s object_ir_c=%.2f", material,
                  self.object_id, self.pad.object_ir_c)
         if self.endpoint.peer_version is not None:
             self._announce_object()
 
-    def _object_temp_c(self) -> float | None:
-        """The object's measured temperature, None when the thermometer gave none."""
-        value = self.pad.object_ir_c
-        return float(value) if math.isfinite(value) else None
-
     def _announce_object(self):
-        self.endpoint.send("contact_event", contact_id=0, touching=False,
-                           t_s=time.monotonic(), force_n=0.0,
-                           object_temp_c=self._object_temp_c(), **self._object_fields())
-
-    def _object_fields(self) -> dict:
-        """The object under the pad and what the memory holds for it (6b)."""
-        known = self.memory.recall(self.object_id)
-        return {"object_id": self.object_id,
-                "object_material": None if known is None else known.material,
-                "object_confidence": None if known is None else known.confidence}
+        self._send([self.session.announcement(time.monotonic())])
 
     # ------------------------------------------------------------ loop
     def _on_message(self, m: dict, now: float) -> None:
@@ -202,7 +199,7 @@ class SlaveService:
                                sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
                                identifier=self.identifier.method,
                                threshold=float(self.identifier.threshold), curves=self.curves)
-            if self.touch_t0 is not None and m["session_id"] != self.contact_owner:
+            if self.touch_t0 is not None and m["session_id"] != self.session.owner:
                 self._superseded(now, m["session_id"])     # lifts; the new object announced
             else:
                 self._announce_object()
@@ -213,7 +210,8 @@ class SlaveService:
         """Only the session that opened a contact may lift it, and only by its
         id; a touch while a contact is going on, or a lift of another
         contact, changes nothing and is counted (``contact_ignored``)."""
-        if m["touching"] and self.touch_t0 is None:
+        verdict = self.session.classify(m, self.endpoint.peer_session)
+        if verdict == "touch":
             if self.pad.samples_read or self.pad.fault == BOARD_LOST:
                 # This trial was used (its touch ended without a lift that
                 # prepared the next, e.g. the board was away): a fresh one.
@@ -222,13 +220,11 @@ class SlaveService:
                 except TelethermalError as exc:
                     log.error("touch on an unprepared pad: %s", exc)
             # The operator touched: the slave's pad goes down on the object now.
-            self.contact_id, self.touch_t0, self.state = m["contact_id"], now, "touching"
-            self.contact_owner = self.endpoint.peer_session
-            self.finger_c = m.get("finger_temp_c")
-            self._decided_label = self._decision_sent = None
+            self.session.touch(m["contact_id"], now, m.get("finger_temp_c"),
+                               owner=self.endpoint.peer_session)
+            self.state = "touching"
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
-        elif not m["touching"] and m["contact_id"] == self.contact_id and \
-                self.touch_t0 is not None and self.endpoint.peer_session == self.contact_owner:
+        elif verdict == "lift":
             self._lift(now)
         else:
             self.counters["contact_ignored"] += 1
@@ -239,22 +235,21 @@ class SlaveService:
     def _lift(self, now: float) -> None:
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
-        if self.pad.estimate is not None and self.pad.estimate is not self._decision_sent:
-            self._send_decision(self.pad.estimate)   # the contact's final estimate (6a)
-        self.endpoint.send("contact_event", contact_id=self.contact_id, touching=False,
-                           t_s=now, force_n=0.0, object_temp_c=self._object_temp_c())
+        contact_id = self.contact_id
+        sends, learned = self.session.lift(now)
+        self._send(sends)       # the final estimate if unsent (6a), the lift event
         if self.devices is not None:
             self.devices.hold()                 # the pad leaves the object, held
         self.last_touch = self._report()
         r = self.last_touch
-        log.info("touch over contact_id=%d material=%s identified=%s (%s)", self.contact_id,
+        log.info("touch over contact_id=%d material=%s identified=%s (%s)", contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else decision_text(self.pad, r["identified"]))
-        self.touch_t0, self.state, self.contact_owner = None, "idle", None
+        self.state = "idle"
         # The touch's decision (a material or a pair; not "unknown"), once per
         # touch: remembered for this object, announced with it just below; a
         # disagreeing fresh decision wins (logged, counted).
-        if self.memory.learn(self.object_id, self.pad.estimate, now) == "overruled":
+        if learned == "overruled":
             self.counters["memory_overruled"] += 1
         try:
             self.place(self.material, self._seed + 1, self.object_id)   # a fresh trial
@@ -278,85 +273,12 @@ class SlaveService:
         """A new master session took over (the contact's owner is dead or
         restarted): the pad leaves the object at once, safe state."""
         log.warning("contact_id=%d of session %s superseded by session %s: pad lifted, "
-                    "safe state", self.contact_id, self.contact_owner, session[:32])
+                    "safe state", self.contact_id, self.session.owner, session[:32])
         self.counters["contacts_superseded"] += 1
         self._lift(now)
 
     def _sample(self, now: float) -> None:
-        pad = self.pad
-        before = pad.onset_s
-        events = pad.advance_to(now - self.touch_t0)
-        if before is None and pad.onset_s is not None:
-            self.endpoint.send("contact_event", contact_id=self.contact_id, touching=True,
-                               t_s=self.touch_t0 + pad.onset_s, force_n=float(pad.force_n[
-                                   pad.onset_index]), object_temp_c=pad.object_ir_c,
-                               **self._object_fields())
-        if self._object_temp_c() is None:
-            # No object temperature (the IR reading was refused): nothing is
-            # identified or rendered from this touch; the report says why.
-            return
-        for ev in events:
-            e = ev.estimate
-            self._send_estimate(e, final=ev is events[-1] and pad.stream.finished)
-            if e.decided and e.label != UNKNOWN and e.label in self.curves:
-                curve = self.curves[e.label]
-                self.endpoint.send("flux_trajectory", contact_id=self.contact_id,
-                                   material=e.label, object_temp_c=pad.object_ir_c,
-                                   t_s=[0.0] + curve["t_s"], g_w_m2k=[0.0] + curve["g_w_m2k"],
-                                   valid_s=TRAJECTORY_VALID_S,
-                                   t0_s=self.touch_t0 + float(pad.onset_s))
-                log.info("decided contact_id=%d material=%s (%s)", self.contact_id,
-                         e.label, decision_text(pad, e.label))
-        if events or (pad.onset_s is not None and pad.samples_read > self._sp_sample):
-            self._stream_setpoint(now)
-        read = pad.samples_read
-        if read - self._sent >= BATCH:
-            i = slice(self._sent, read)
-            ch = pad.channels
-            self.endpoint.send("measurement_batch", contact_id=self.contact_id,
-                               t0_s=self.touch_t0 + float(pad.t_s[self._sent]),
-                               rate_hz=self.rate_hz,
-                               flux_w_m2=[float(v) for v in ch["heat_flux_W_m2"][i]],
-                               temp_c=[float(v) for v in ch["temperature_C"][i]],
-                               force_n=[float(v) for v in ch["force_N"][i]])
-            self._sent = read
-
-    def _estimate_fields(self, e) -> dict:
-        return dict(contact_id=self.contact_id, t_since_contact_s=float(e.t_s),
-                    classes=list(self.pad.classes), posteriors=[float(p) for p in e.posteriors],
-                    label=e.label, confidence=float(e.confidence), decided=e.decided,
-                    reason=e.reason, object_temp_c=self.pad.object_ir_c)
-
-    def _send_estimate(self, e, final: bool) -> None:
-        """Every estimate on the stream (``posterior_estimate``: newest wins,
-        a lost one costs nothing); lossless ``material_estimate`` only for a
-        change of the decided label and the contact's final estimate, so
-        that contact events and decisions never queue behind estimates
-        (``proto/PROTOCOL.md`` section 6a)."""
-        fields = self._estimate_fields(e)
-        self.endpoint.send("posterior_estimate", **fields)
-        if (e.decided and e.label != self._decided_label) or final:
-            self._send_decision(e, fields)
-
-    def _send_decision(self, e, fields: dict | None = None) -> None:
-        self.endpoint.send("material_estimate", **(fields or self._estimate_fields(e)))
-        self._decision_sent = e
-        if e.decided:
-            self._decided_label = e.label
-
-    def _stream_setpoint(self, now: float) -> None:
-        """The naive path: the display flux for "now", sample by sample, from
-        what the slave believes at this instant (the fault benchmark's baseline)."""
-        pad = self.pad
-        self._sp_sample = pad.samples_read
-        if self.finger_c is None or pad.onset_s is None:
-            return
-        t = max(now - self.touch_t0 - pad.onset_s, 0.0)
-        flux = naive_setpoint(self.wire_generator, pad.classes, pad.estimate, t,
-                              pad.object_ir_c - self.finger_c)
-        if flux is not None:
-            self.endpoint.send("flux_setpoint", contact_id=self.contact_id,
-                               t_since_contact_s=t, flux_w_m2=flux)
+        self._send(self.session.step(now))
 
     def _report(self) -> dict:
         pad = self.pad
@@ -386,7 +308,7 @@ class SlaveService:
             self.place(str(r["material"]), int(r.get("seed", self._seed + 1)), object_id)
             # object_true_c: the simulator's truth, for comparing with direct contact
             return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c,
-                    "object_id": self.object_id, **self._object_fields()}
+                    "object_id": self.object_id, **self.session.object_fields()}
 
         def calibrate(r):
             if self.touch_t0 is not None:

@@ -48,7 +48,7 @@ import math
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
-from telethermal.control.contact import ContactDetector
+from telethermal.control.contact import ContactDetector, ContactEvent
 from telethermal.control.junction import JunctionLoop
 from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
@@ -169,6 +169,9 @@ class MasterStep:
     #: The module's current the junction loop asks for (inside the driver's
     #: limits); 0 when the display has no module model or no junction reading.
     current_a: float = 0.0
+    #: The contact detector's news this period: a touch began or ended
+    #: (its ``t_s`` the onset or release instant), else None.
+    contact: ContactEvent | None = None
 
 
 @dataclass(slots=True)
@@ -303,13 +306,13 @@ class MasterDisplay:
             return None
 
     # ------------------------------------------------------------ the phases
-    def _on_contact(self, t_s: float, force_n: float) -> None:
-        """The contact detector's news: a touch begins or ends."""
+    def _on_contact(self, t_s: float, force_n: float) -> ContactEvent | None:
+        """The contact detector's news: a touch begins or ends (returned)."""
         if not math.isfinite(force_n):
-            return
+            return None
         event = self.detector.update(t_s, force_n)
         if event is None:
-            return
+            return None
         self.handover.pid_running = False
         if event.touching:
             self.handover.held = False
@@ -323,6 +326,7 @@ class MasterDisplay:
             self.last_release_s = event.t_s
             if self.impedance is not None:
                 self.impedance.reset()
+        return event
 
     def _on_decision(self, t_s: float, est: Estimate | None) -> None:
         """The slave's decision: render it, or blend to a changed one."""
@@ -422,7 +426,7 @@ class MasterDisplay:
         return desired, command
 
     def _apply(self, t_s: float, dt_s: float, sensors: PadSensors, desired: float,
-               command: float) -> MasterStep:
+               command: float, contact: ContactEvent | None = None) -> MasterStep:
         """The controller's own slew limit (the supervisor's is looser), then
         the supervisor; what it let through."""
         # A stall buys no bigger jump.
@@ -446,7 +450,7 @@ class MasterDisplay:
             self.pid.limited_downstream(wanted, applied.temp_c)
         return MasterStep(t_s, self.phase, self.detector.touching, desired, command,
                           applied.temp_c, applied.safe,
-                          self._current(applied.temp_c, sensors, dt_s))
+                          self._current(applied.temp_c, sensors, dt_s), contact)
 
     def _current(self, junction_c: float, sensors: PadSensors, dt_s: float) -> float:
         """The module's current that brings the junction to ``junction_c``
@@ -469,7 +473,7 @@ class MasterDisplay:
         decision and the link; then track or hold; then the limits."""
         if self.impedance is not None:
             self.impedance.observe(sensors.flux_w_m2, dt_s)
-        self._on_contact(t_s, sensors.force_n)
+        contact = self._on_contact(t_s, sensors.force_n)
         naive = self.config.source == "setpoints"
         if not naive:
             self._on_decision(t_s, news.estimate)
@@ -488,4 +492,4 @@ class MasterDisplay:
             self.handover.pid_running = False
         elif tracking and obj_c is not None and math.isfinite(obj_c):
             desired, command = self._track(t_s, dt_s, sensors, news, standby, naive)
-        return self._apply(t_s, dt_s, sensors, desired, command)
+        return self._apply(t_s, dt_s, sensors, desired, command, contact)

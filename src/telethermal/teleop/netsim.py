@@ -48,17 +48,16 @@ import numpy as np
 
 from telethermal.faults.channel import Channel, Direction
 from telethermal.ident.anytime import UNKNOWN, Estimate
-from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import MasterDisplay, SlaveNews
 from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.session import ESTIMATE_ROUTES, MasterSession, SlaveSession
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
                                      display_model_args, draw_operator, master_rng,
                                      pad_resistance, safety_summary, slave_rng, with_finger)
 from telethermal.teleop.slave import Slave
 
-ESTIMATE_ROUTES = ("stream", "lossless")
 #: Bytes of a message on the wire, roughly (only a serialising link cares).
 MESSAGE_BYTES = {"flux_trajectory": 4200, "material_estimate": 160,
                  "posterior_estimate": 160, "flux_setpoint": 60, "contact_event": 90,
@@ -234,124 +233,44 @@ class SimNetwork:
 
 
 class SimSlaveService:
-    """What ``services/slave.py`` does with one touch, on the simulated
-    clock: the pad goes down when the master's touch arrives, and the
-    messages go out as the service sends them."""
+    """The slave service on the simulated clock: the same
+    :class:`~telethermal.teleop.session.SlaveSession` the service runs, its
+    pad going down when the master's touch arrives. Measurement batches are
+    left out (nothing on the master reads them)."""
 
     def __init__(self, pad, curves: dict, estimates: str = "stream",
-                 object_id: str | None = None, memory: ObjectMemory | None = None):
-        if estimates not in ESTIMATE_ROUTES:
-            raise ValueError(f"estimates must be one of {ESTIMATE_ROUTES}, got {estimates!r}")
-        self.pad, self.curves = pad, curves
-        self.generator = SampledGenerator(curves)
-        self.estimates = estimates
-        self.object_id = object_id
-        self.memory = memory if memory is not None else ObjectMemory()
-        self.contact_id: int | None = None
-        self.touch_t0: float | None = None
-        self.finger_c: float | None = None
-        self._decided_label: str | None = None
-        self._sp_sample = -1
+                 object_id: str | None = None, memory: ObjectMemory | None = None,
+                 rate_hz: float = 1000.0):
+        self.session = SlaveSession(curves, rate_hz, memory, estimates, measurements=False)
+        self.session.place(pad, object_id)
+        self.pad = pad
+        self._out: list = []
+        self.touch_t0: float | None = None     # when the pad went down (kept after the lift)
 
-    def announcement(self) -> dict:
+    def announcement(self, now: float) -> dict:
         """The object announcement (the service sends it on ``place``)."""
-        r = self.memory.recall(self.object_id)
-        return {"kind": "contact_event", "contact_id": 0, "touching": False, "t_s": 0.0,
-                "force_n": 0.0, "object_temp_c": float(self.pad.object_ir_c),
-                "object_id": self.object_id, "object_material": r and r.material,
-                "object_confidence": r and r.confidence}
+        return self.session.announcement(now).message
 
     def on_message(self, m: dict, now: float) -> None:
-        if m["kind"] == "contact_event" and m["touching"] and self.touch_t0 is None:
-            self.contact_id, self.touch_t0 = m["contact_id"], now
-            self.finger_c = m.get("finger_temp_c")
+        if m["kind"] != "contact_event":
+            return
+        verdict = self.session.classify(m)
+        if verdict == "touch":
+            self.session.touch(m["contact_id"], now, m.get("finger_temp_c"))
+            self.touch_t0 = now
+        elif verdict == "lift":
+            self._out += self.session.lift(now)[0]
 
     def step(self, now: float, send) -> None:
         """Read the pad up to ``now``; ``send(t, message, lossless)``."""
-        if self.touch_t0 is None:
-            return
-        pad = self.pad
-        before = pad.onset_s
-        events = pad.advance_to(now - self.touch_t0)
-        at = lambda slave_t: self.touch_t0 + slave_t              # noqa: E731
-        if before is None and pad.onset_s is not None:
-            send(at(pad.onset_s), {"kind": "contact_event", "contact_id": self.contact_id,
-                                   "touching": True, "t_s": at(pad.onset_s),
-                                   "force_n": float(pad.force_n[pad.onset_index]),
-                                   "object_temp_c": float(pad.object_ir_c),
-                                   "object_id": self.object_id}, True)
-        for ev in events:
-            # The contact's final estimate, as the service marks it (6a).
-            final = ev is events[-1] and pad.stream is not None and pad.stream.finished
-            self._estimate(at(ev.t_s), ev.estimate, send, final)
-        if pad.onset_s is not None and (events or pad.samples_read > self._sp_sample):
-            self._setpoint(now, send)
-
-    def _estimate(self, t: float, e: Estimate, send, final: bool) -> None:
-        pad = self.pad
-        m = {"kind": "posterior_estimate", "contact_id": self.contact_id,
-             "t_since_contact_s": float(e.t_s), "classes": list(pad.classes),
-             "posteriors": [float(p) for p in e.posteriors], "label": e.label,
-             "confidence": float(e.confidence), "decided": e.decided, "reason": e.reason,
-             "object_temp_c": float(pad.object_ir_c)}
-        # The service's rule (services/slave.py, _send_estimate): a change of
-        # the decided label, or the contact's final estimate.
-        decision = (e.decided and e.label != self._decided_label) or final
-        if self.estimates == "lossless":
-            send(t, m | {"kind": "material_estimate"}, True)
-        else:
-            send(t, m, False)
-            if decision:
-                send(t, m | {"kind": "material_estimate"}, True)
-        if e.decided and e.label != self._decided_label and e.label in self.curves:
-            c = self.curves[e.label]
-            send(t, {"kind": "flux_trajectory", "contact_id": self.contact_id,
-                     "material": e.label, "object_temp_c": float(pad.object_ir_c),
-                     "t_s": [0.0] + c["t_s"], "g_w_m2k": [0.0] + c["g_w_m2k"],
-                     "valid_s": 60.0, "t0_s": self.touch_t0 + float(pad.onset_s)}, True)
-        if e.decided:
-            self._decided_label = e.label
+        out, self._out = self._out + self.session.step(now), []
+        for s in out:
+            send(s.t_s, s.message, s.lossless)
 
     def lift(self, now: float) -> None:
-        """The touch is over: the memory learns the contact's last decision
-        (as the service does, once per touch)."""
-        est = self.pad.estimate
-        if self.touch_t0 is not None and est is not None and est.decided:
-            self.memory.learn(self.object_id, est, now)
-
-    def _setpoint(self, now: float, send) -> None:
-        pad = self.pad
-        self._sp_sample = pad.samples_read
-        if self.finger_c is None:
-            return
-        t = max(now - self.touch_t0 - pad.onset_s, 0.0)
-        flux = naive_setpoint(self.generator, pad.classes, pad.estimate, t,
-                              pad.object_ir_c - self.finger_c)
-        if flux is not None:
-            send(now, {"kind": "flux_setpoint", "contact_id": self.contact_id,
-                       "t_since_contact_s": t, "flux_w_m2": flux}, False)
-
-
-@dataclass
-class MasterInbox:
-    """The master service's reading of the slave: the link, the naive
-    setpoint, and when the first news of the contact arrived."""
-
-    link: SlaveLink
-    setpoint_w_m2: float | None = None
-    setpoint_t_s: float = -math.inf
-    first_news_s: float | None = None
-
-    def on_message(self, m: dict, now: float) -> None:
-        if m["kind"] == "flux_setpoint":
-            if m["contact_id"] == self.link.contact_id and \
-                    m["t_since_contact_s"] >= self.setpoint_t_s:
-                self.setpoint_w_m2, self.setpoint_t_s = m["flux_w_m2"], m["t_since_contact_s"]
-            return
-        if m["kind"] in ("posterior_estimate", "material_estimate") and \
-                m["contact_id"] == self.link.contact_id and self.first_news_s is None:
-            self.first_news_s = now
-        self.link.on_message(m, now, offset_s=0.0)
+        """The session ends with the pad still down (the master's lift had
+        not arrived): the pad leaves the object, the memory learns."""
+        self.session.lift(now)
 
 
 # ---------------------------------------------------------------- one touch
@@ -384,7 +303,8 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     scene = with_finger(scene)
     config = replace(config, source="setpoints" if mode == "naive" else "trajectory")
     pad = Slave(scene, material, identifier, slave_rng(seed), contact_s=contact_s + 1.0)
-    slave = SimSlaveService(pad, curves, network.estimates, object_id, memory)
+    slave = SimSlaveService(pad, curves, network.estimates, object_id, memory,
+                            scene.sample_rate_hz)
     rng = master_rng(seed)
     operator = draw_operator(scene, rng)
     generator = SampledGenerator(curves)
@@ -395,12 +315,12 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     net = SimNetwork(network, np.random.default_rng([seed if network_seed is None
                                                      else network_seed, 15]))
-    inbox = MasterInbox(SlaveLink(generator=generator, classes=tuple(pad.classes)))
-    inbox.on_message(slave.announcement(), -PRE_CONTACT_S)      # placed long before
+    session = MasterSession(SlaveLink(generator=generator, classes=tuple(pad.classes)))
+    session.on_message(slave.announcement(-PRE_CONTACT_S), -PRE_CONTACT_S)   # placed long before
     classes = tuple(pad.classes)
     oracle = Estimate(0.0, tuple(float(c == material) for c in classes), material, 1.0, True,
                       "oracle")
-    onset, release, contact_id = None, None, 0
+    onset = None
     dt = 1.0 / config.rate_hz
 
     def send_s2m(t_msg, m, lossless):
@@ -412,33 +332,23 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
             slave.on_message(m, t)
         slave.step(t, send_s2m)
         for m in net.due(t, "s2m"):
-            inbox.on_message(m, t)
+            session.on_message(m, t, 0.0)
         sensors = touch.sense(t)
         if mode == "oracle":
             news = SlaveNews(pad.object_ir_c, oracle if onset is not None else None, classes)
         else:
-            news = inbox.link.news(t, True, inbox.setpoint_w_m2)
+            news = session.news(t, True)
         step = master.step(t, dt, sensors, news)
         touch.actuate(t, step, dt, sensors.force_n)
-        if master.last_onset_s != onset and master.last_onset_s is not None:
-            onset = master.last_onset_s
-            contact_id += 1
-            inbox.link.begin(contact_id)
-            inbox.link.onset(onset)
-            inbox.setpoint_w_m2, inbox.setpoint_t_s = None, -math.inf
-            net.send(t, "m2s", {"kind": "contact_event", "contact_id": contact_id,
-                                "touching": True, "t_s": t, "force_n": sensors.force_n,
-                                "finger_temp_c": operator.finger_ir_c}, True)
-        if master.last_release_s != release and master.last_release_s is not None:
-            release = master.last_release_s
-            inbox.link.end()                  # what comes for this contact now is stale
-            net.send(t, "m2s", {"kind": "contact_event", "contact_id": contact_id,
-                                "touching": False, "t_s": t, "force_n": 0.0}, True)
+        if step.contact is not None and step.contact.touching:
+            onset = step.contact.t_s
+        for s in session.period(step, 0.0, sensors.force_n, operator.finger_ir_c):
+            net.send(t, "m2s", s.message, s.lossless)
     slave.lift(t)
     metrics = compare_with_direct(scene, material, pad.object_true_c, operator, touch.trace,
                                   contact_s, master.rendered_from_s)
-    news_s = 0.0 if mode == "oracle" else inbox.first_news_s
-    est = inbox.link.estimate
+    news_s = 0.0 if mode == "oracle" else session.first_news_s
+    est = session.link.estimate
     summary = {
         "material": material, "seed": seed, "mode": mode, "object_id": object_id,
         "before_identification": config.before, "estimates": network.estimates,
@@ -451,7 +361,7 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
         "rendered": master.rendering,
         **windowed_errors(touch.trace, contact_s, news_s),
         "temp_rms_error_c": metrics["temp_rms_error_c"],
-        **safety_summary(master), "link_counters": dict(inbox.link.counters),
+        **safety_summary(master), "link_counters": dict(session.link.counters),
         "lossless": {d: dict(s.counters) for d, s in net.streams.items()},
         "channel": {d: dict(c.counters) for d, c in net.channels.items()},
     }

@@ -1,0 +1,90 @@
+"""One set of session rules, two drivers (issue 26): the slave service (on
+its sockets) and the simulated network of ``bench faults`` run the same
+:class:`~telethermal.teleop.session.SlaveSession`, so the same touch fed the
+same contact events at the same instants gives the same messages, byte for
+byte (msgpack, as on the wire). Before the session core the two differed:
+the simulator sent a trajectory only on a label change and a fixed
+``valid_s``, its touching event left out ``object_material``, and it
+never lifted."""
+
+import msgpack
+import numpy as np
+import pytest
+
+from telethermal.physics.scene import load_scene
+from telethermal.services.config import SlaveConfig
+from telethermal.services.demo import free_ports
+from telethermal.services.slave import SlaveService
+from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.netsim import SimSlaveService
+from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.teleop.slave import Slave
+from telethermal.wire.transport import TransportConfig
+
+SCENE = with_finger(load_scene("fingertip-7"))
+
+
+@pytest.fixture(scope="module")
+def models():
+    return train_identifier(SCENE, 0), train_generator(SCENE, 0)
+
+
+def master_events(lift_at_s: float):
+    touch = {"kind": "contact_event", "contact_id": 1, "touching": True, "t_s": 0.0,
+             "force_n": 1.5, "finger_temp_c": 31.2}
+    lift = {"kind": "contact_event", "contact_id": 1, "touching": False, "t_s": lift_at_s,
+            "force_n": 0.0, "finger_temp_c": 31.2}
+    return {0: touch, int(round(lift_at_s * 1000)): lift}
+
+
+def wire(messages):
+    return [msgpack.packb([kind, fields], use_bin_type=True) for kind, fields in messages]
+
+
+@pytest.mark.parametrize("material, lift_at_s", [("aluminium", 1.0), ("wood", 0.03)])
+def test_the_service_and_the_simulated_network_send_the_same_messages(models, material,
+                                                                      lift_at_s):
+    identifier, generator = models
+    control, stream, admin = free_ports(3)
+    config = SlaveConfig(place=material, seed=5, admin_port=admin, transport=TransportConfig(
+        security="plain", control_port=control, stream_port=stream))
+    service = SlaveService(config, identifier, generator)
+    # The pad the service placed, made again for the simulator: the same
+    # trial (seed) read through the same calibrated instruments.
+    pad = Slave(SCENE, material, identifier, slave_rng(5), session=service.sensors)
+    sim = SimSlaveService(pad, service.curves, object_id=material, memory=ObjectMemory(),
+                          rate_hz=service.rate_hz)
+    from_service, from_sim = [], []
+    service.endpoint.send = lambda kind, **fields: from_service.append((kind, fields)) or 0
+    events = master_events(lift_at_s)
+    try:
+        for k in range(int(round(1000 * (lift_at_s + 0.2)))):
+            now = 100.0 + k / 1000          # the same clock for both drivers
+            if k in events:
+                service._on_message(events[k], now)
+                sim.on_message(events[k], now)
+            if service.touch_t0 is not None:
+                service._sample(now)
+            sim.step(now, lambda t, m, lossless: from_sim.append(
+                (m["kind"], {f: v for f, v in m.items() if f != "kind"})))
+    finally:
+        service.shutdown()
+    sent = [(kind, fields) for kind, fields in from_service
+            if kind not in ("measurement_batch", "status")]   # the simulator models no reader
+    assert [k for k, _ in sent] == [k for k, _ in from_sim]
+    assert wire(sent) == wire(from_sim)
+    kinds = [k for k, _ in sent]
+    # Both ends of the contact, and the slave's lift last.
+    assert kinds.count("contact_event") == 2 and kinds[-1] == "contact_event"
+    assert sent[-1][1]["touching"] is False
+    if lift_at_s > 0.5:
+        assert "flux_trajectory" in kinds and "material_estimate" in kinds
+        assert any(k == "measurement_batch" for k, _ in from_service)
+    else:
+        # A contact that ends before the identifier has decided: no
+        # trajectory, and the memory learns nothing from it.
+        assert "flux_trajectory" not in kinds
+        assert service.memory.recall(material) is None
+        assert sim.session.memory.recall(material) is None
+    np.testing.assert_equal(service.memory.to_dict(), sim.session.memory.to_dict())
