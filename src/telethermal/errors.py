@@ -44,6 +44,12 @@ class ProtocolError(TelethermalError):
     """A message that does not follow the wire protocol (says which field)."""
 
 
+class WindowFull(ProtocolError):
+    """The lossless stream's window is full: the peer has not acknowledged
+    ``WINDOW`` messages. The message was not accepted (nothing was lost: it
+    was never numbered); send it again once the peer acknowledges."""
+
+
 class UnknownKindError(ProtocolError):
     """A well-formed message whose ``kind`` is a string this side does not know."""
 

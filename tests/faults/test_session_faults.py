@@ -80,7 +80,7 @@ def test_200_ms_of_delay_renders_safely_and_loses_nothing(link):
     slow, counters = touch_through(out, services, ports, text, "delay_s = 0.2\n")
     assert slow["flux_rms_error_rel"] < 0.05
     assert slow["safety_events"] == 0
-    assert counters["lossless_dropped"] == 0 and counters["invalid"] == 0
+    assert counters["refused_by_window"] == 0 and counters["invalid"] == 0
 
 
 def test_a_partition_mid_contact_is_survived_and_counted(link):
@@ -90,7 +90,7 @@ def test_a_partition_mid_contact_is_survived_and_counted(link):
     result, counters = touch_through(out, services, ports, text,
                                      "delay_s = 0.005\npartitions = [[2.5, 2.0]]\n")
     assert result["safety_events"] == 0
-    assert counters["lossless_dropped"] == 0 and counters["invalid"] == 0
+    assert counters["refused_by_window"] == 0 and counters["invalid"] == 0
     # After the partition the link is back: a second touch renders normally.
     again, _ = touch_through(out, services, ports, text, "delay_s = 0.005\n", seed=6)
     assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0

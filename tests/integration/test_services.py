@@ -50,7 +50,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     # reaches it and the loop runs on the real clock; the rendering stays
     # within a few percent of peak, like the in-process session.
     assert s["flux_rms_error_rel"] < 0.05 and math.isfinite(local["flux_rms_error_rel"])
-    assert s["transport"]["invalid"] == 0 and s["transport"]["lossless_dropped"] == 0
+    assert s["transport"]["invalid"] == 0 and s["transport"]["refused_by_window"] == 0
     assert s["devices"] == devices
     if devices == "emulated":
         board = s["device_counters"]["board"]

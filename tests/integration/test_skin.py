@@ -25,11 +25,12 @@ def skin_rms(models, material, model, seed):
     return s["temp_rms_error_c"]
 
 
-@pytest.mark.parametrize("material", [
-    pytest.param("aluminium", marks=pytest.mark.xfail(
-        strict=True, reason="on the real module the pumping limit binds on aluminium: both "
-        "controllers saturate and impedance rendering is no better (1.36 against 1.32 K, seed 1)")),
-    "wood"])
+# Aluminium: with the slave's pad going down at the master's onset (the
+# session rules, issue 26) the static controller starts its flux 31 ms
+# later and loses more than impedance rendering (seed 1: 1.39 against
+# 1.49 K, seed 2: 1.77 against 1.83 K); with the slave touching at the
+# finger's contact the two tied at the pumping limit (1.32 against 1.32 K).
+@pytest.mark.parametrize("material", ["aluminium", "wood"])
 def test_impedance_rendering_brings_the_skin_closer_than_tracking_the_flux(models, material):
     # Same operator, object and slave trial for both controllers: the
     # impedance controller lets the operator's own skin and contact set the

@@ -293,3 +293,61 @@ def test_a_repeated_hello_is_neither_answered_nor_resent_for(link):
     # A hello from a new run of the master is acted on.
     fresh = dict(again, session_id="another-run", resume_from=1)
     assert slave._on_hello(fresh, slave.peer_identity, slave.clock()) == [fresh]
+
+
+def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monkeypatch):
+    # Issue 26: the stream dropped its oldest unacknowledged message past
+    # 4096 ("lossless" that loses). Now: the window refuses the new one, the
+    # application is told, and every accepted message arrives once, in order.
+    import telethermal.wire.lossless as lossless
+    from telethermal.errors import WindowFull
+
+    slave, master = link
+    monkeypatch.setattr(lossless, "WINDOW", 8)
+    monkeypatch.setattr("telethermal.wire.transport.WINDOW", 8)
+    accepted, refused = [], 0
+    for i in range(1, 21):                   # the master reads nothing meanwhile
+        try:
+            slave.send("contact_event", **contact(i))
+            accepted.append(i)
+        except WindowFull as exc:
+            refused += 1
+            assert "window is full" in str(exc) and "contact_event" in str(exc)
+    assert accepted == list(range(1, 9)) and refused == 12
+    assert slave.counters["refused_by_window"] == 12 and slave.unacked == 8
+    # The next seq is still 9: a refused send leaves no gap.
+    assert slave._next_seq == 9
+    _, m_got = pump(slave, master, seconds=3.0, until=lambda: slave.unacked == 0)
+    assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == accepted
+    # With a bound to wait, the send waits for the ack instead of refusing,
+    # and what the slave received meanwhile is not lost to its caller.
+    for i in range(21, 29):
+        slave.send("contact_event", **contact(i))
+    master.send("contact_event", **contact(500))
+    import threading
+    m_early = []
+    reader = threading.Thread(target=lambda: m_early.extend(
+        pump(master, seconds=3.0, until=lambda: slave.unacked < 8)[0]))
+    reader.start()                           # the master reads (acks) in its own thread
+    slave.send("contact_event", wait_s=3.0, **contact(29))
+    reader.join()
+    s_got, m_got = pump(slave, master, seconds=3.0, until=lambda: slave.unacked == 0)
+    assert [m["contact_id"] for m in m_early + m_got if m["kind"] == "contact_event"] == \
+        list(range(21, 30))
+    assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [500]
+
+
+def test_a_resend_sends_what_was_asked_at_most_a_burst(link):
+    from telethermal.wire.lossless import RESEND_BURST
+
+    slave, master = link
+    sent = []
+    real = master._raw_send
+    master._raw_send = lambda sock, message, data=None: (
+        sent.append(message.get("seq")) or real(sock, message, data))
+    for i in range(1, RESEND_BURST + 51):
+        master.send("contact_event", **contact(i))
+    sent.clear()
+    master._resend_from(40)
+    assert sent == list(range(40, 40 + RESEND_BURST))
+    master._raw_send = real

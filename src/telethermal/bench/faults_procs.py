@@ -334,9 +334,9 @@ def _row(name, both, results, counters, proxy_out, nemeses, after_fault, dead_af
         "safety_events": int(events),
         "display_events": [r.get("display_event_counts", {}) for r in runs["trajectory"]],
         "lossless": {k: counters[k] for k in ("gaps", "recovered", "duplicates", "resent",
-                                              "lossless_dropped", "invalid", "stream_lost",
+                                              "refused_by_window", "invalid", "stream_lost",
                                               "heartbeats_missed", "reconnects")},
-        "recovered": bool(counters["lossless_dropped"] == 0 and counters["invalid"] == 0),
+        "recovered": bool(counters["refused_by_window"] == 0 and counters["invalid"] == 0),
         "identified": [r["identified"] for r in runs["trajectory"]],
         "runs": {s: [{"material": r["material"], "seed": r["seed"],
                       "flux_rms_error_rel_whole": r["flux_rms_error_rel_whole"]}

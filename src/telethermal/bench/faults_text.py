@@ -49,14 +49,14 @@ def text_report(report: dict) -> list[str]:
         f"(target <= 1.05)")
     if report["rows"]:
         lines.append(f"{'processes: fault':38s} {'compensated':>11s} {'naive':>7s} safety  "
-                     "lossless (gaps/recovered/dup/resent/dropped)  recovery (bound)")
+                     "lossless (gaps/recovered/dup/resent/refused)  recovery (bound)")
         for r in report["rows"]:
             lo = r["lossless"]
             rec = recovery_text(r)
             lines.append(f"{r['fault']:38s} {pct(r['compensated_flux_rms_error_rel']):>11s} "
                          f"{pct(r['naive_flux_rms_error_rel'])} {r['safety_events']:6d}  "
                          f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
-                         f"{lo['lossless_dropped']:<22} {rec}")
+                         f"{lo.get('refused_by_window', lo.get('lossless_dropped')):<22} {rec}")
         lines.append(f"processes within the simulated spread (mean +- 2 sd): "
                      f"{s['processes_within_simulated_spread']}; fault matrix: "
                      f"{s['fault_matrix_safety_events']} safety events, all recovered: "

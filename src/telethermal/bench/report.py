@@ -332,7 +332,7 @@ def faults(out: Path, d: dict) -> list[str]:
         lines += ["Processes on loopback behind the fault proxy (the same services as a "
                   "session):", "",
                   "| fault | compensated | naive | safety events | lossless stream "
-                  "(gaps/recovered/dup/resent/dropped) | recovered | recovery (bound) |",
+                  "(gaps/recovered/dup/resent/refused) | recovered | recovery (bound) |",
                   "|---|---|---|---|---|---|---|"]
         for r in rows:
             lo = r["lossless"]
@@ -340,7 +340,8 @@ def faults(out: Path, d: dict) -> list[str]:
             lines.append(f"| {r['fault']} | {_pct(r['compensated_flux_rms_error_rel'])} | "
                          f"{_pct(r['naive_flux_rms_error_rel'])} | {r['safety_events']} | "
                          f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
-                         f"{lo['lossless_dropped']} | {r['recovered']} | {rec} |")
+                         f"{lo.get('refused_by_window', lo.get('lossless_dropped'))} | {r['recovered']} | "
+                         f"{rec} |")
         lines += ["", f"The processes' whole-contact errors within the simulated mean +- 2 sd "
                   f"of the same material: {s.get('processes_within_simulated_spread', '-')}.",
                   ""]

@@ -9,7 +9,13 @@
   network stacks; skipped with the reason where namespaces cannot be made).
   Plain and CURVE. The receiver waits in the socket poll, so the figure is
   the transport's; the master's 1 kHz loop adds up to one period on top.
-- Messages per second through the whole stack.
+- Messages per second through the whole stack (a burst of lossless
+  messages, each send waiting for room in the window).
+- A slow receiver: it stops reading for 2 s while the sender sends 10,000
+  lossless messages, then resumes. The window refuses what it cannot hold
+  (the application is told); everything it accepted is delivered
+  (``loopback.slow_receiver``: ``sent``, ``delivered``,
+  ``refused_by_window``, ``lost``).
 
 One-way latency needs one clock: both peers run on this host, and
 CLOCK_MONOTONIC is one clock for every process and namespace of a kernel.
@@ -37,6 +43,8 @@ from telethermal.wire.golden import messages
 N_LATENCY = 2000
 INTERVAL_S = 0.001
 N_THROUGHPUT = 20000
+N_SLOW = 10000
+SLOW_PAUSE_S = 2.0
 PAYLOAD = {"contact_id": 3, "t_since_contact_s": 0.25,
            "classes": ["aluminium", "steel", "marble", "plexiglass", "graphite", "rubber",
                        "wood"],
@@ -91,7 +99,7 @@ def _peer(args) -> None:
                 endpoint.poll(args.interval)
             t0 = time.monotonic()
             for i in range(args.burst):
-                endpoint.send("material_estimate", **PAYLOAD)
+                endpoint.send("material_estimate", wait_s=5.0, **PAYLOAD)
                 if i % 100 == 0:
                     endpoint.poll(0.0)
             end = time.monotonic() + 20
@@ -117,6 +125,8 @@ def _peer(args) -> None:
             for _ in range(5):
                 endpoint.poll(0.05)                 # acknowledge before leaving
         endpoint.close()
+    elif args.stack == "slow":
+        result = _slow_peer(args)
     else:
         ctx = zmq.Context.instance()
         wire = encode({"kind": "material_estimate", "v": 1, "seq": 1, "sent_s": 0.0, **PAYLOAD})
@@ -148,6 +158,83 @@ def _peer(args) -> None:
             sock.close()
     if args.out:
         Path(args.out).write_text(json.dumps(result))
+
+
+def _slow_peer(args) -> dict:
+    """The slow-receiver case: the sender (slave) sends ``args.burst``
+    lossless messages without waiting, counting the window's refusals; the
+    receiver (master) stops reading for ``SLOW_PAUSE_S`` at the first one,
+    then reads until the stream has been quiet for 3 s."""
+    from telethermal.errors import WindowFull
+    from telethermal.wire.transport import Endpoint
+
+    role = "slave" if args.role == "sender" else "master"
+    endpoint = Endpoint(role, _transport_config(args, role))
+    end = time.monotonic() + 30
+    while not endpoint.peer_alive and time.monotonic() < end:
+        endpoint.poll(0.01)
+    if args.role == "sender":
+        for _ in range(3):
+            endpoint.poll(0.05)
+        refused = 0
+        for i in range(args.burst):
+            try:
+                endpoint.send("material_estimate", **PAYLOAD)
+            except WindowFull:
+                refused += 1
+            if i % 100 == 0:
+                endpoint.poll(0.0)
+        end = time.monotonic() + 60
+        while endpoint.unacked and time.monotonic() < end:
+            endpoint.poll(0.01)
+        result = {"sent": args.burst, "refused_by_window": refused, "unacked": endpoint.unacked,
+                  "sender_counters": dict(endpoint.counters)}
+        endpoint.poll(0.3)
+    else:
+        got, paused, last = 0, False, time.monotonic()
+        end = time.monotonic() + 90
+        while time.monotonic() < end:
+            n = sum(m["kind"] == "material_estimate" for m in endpoint.poll(0.05))
+            if n:
+                got, last = got + n, time.monotonic()
+            if got and not paused:
+                time.sleep(SLOW_PAUSE_S)            # the application stops reading
+                paused = True
+            if paused and time.monotonic() - last > 3.0:
+                break
+        result = {"delivered": got, "receiver_counters": dict(endpoint.counters)}
+        for _ in range(5):
+            endpoint.poll(0.05)
+    endpoint.close()
+    return result
+
+
+def _run_slow(host, port, n=N_SLOW) -> dict:
+    """``loopback.slow_receiver``: the slow-receiver case in two processes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        procs = [subprocess.Popen(
+            [sys.executable, "-m", "telethermal.bench.transport", "--peer", role, "--stack",
+             "slow", "--security", "plain", "--host", host, "--port", str(port), "--n", "0",
+             "--burst", str(n), "--out", str(Path(tmp) / f"{role}.json")],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            for role in ("sender", "receiver")]
+        for p in procs:
+            try:
+                p.wait(180)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        errors = [p.stderr.read() for p in procs if p.returncode]
+        if errors:
+            raise RuntimeError(f"slow receiver peers failed: {errors[0][-800:]}")
+        sent = json.loads((Path(tmp) / "sender.json").read_text())
+        got = json.loads((Path(tmp) / "receiver.json").read_text())
+    accepted = sent["sent"] - sent["refused_by_window"]
+    return {"sent": sent["sent"], "delivered": got["delivered"],
+            "refused_by_window": sent["refused_by_window"],
+            "lost": accepted - got["delivered"], "unacked_at_end": sent["unacked"],
+            "pause_s": SLOW_PAUSE_S, "resent": sent["sender_counters"]["resent"],
+            "receiver": {k: got["receiver_counters"][k] for k in
+                         ("gaps", "recovered", "duplicates", "out_of_window", "skipped")}}
 
 
 def _raw_secure(sock, args, server):
@@ -213,6 +300,8 @@ def run(progress=None) -> dict:
             for security in ("plain", "curve"):
                 loop[f"{stack}_{security}"] = _run_pair(stack, security, "127.0.0.1",
                                                         free_ports(1)[0], keys)
+        step("slow receiver")
+        loop["slow_receiver"] = _run_slow("127.0.0.1", free_ports(1)[0])
         report["loopback"] = loop
         step("namespaces")
         reason = Namespaces.why_not()
@@ -260,7 +349,11 @@ def _pair_lines(where: str, block: dict) -> list[str]:
         return [f"{where}: skipped ({block['skipped']})"]
     lines = []
     for name, r in block.items():
-        if isinstance(r, dict):
+        if isinstance(r, dict) and name == "slow_receiver":
+            lines.append(f"{where:10s} slow receiver ({r['pause_s']:.0f} s without reading): "
+                         f"{r['sent']} sent, {r['delivered']} delivered, "
+                         f"{r['refused_by_window']} refused by the window, {r['lost']} lost")
+        elif isinstance(r, dict):
             extra = f", {r['messages_per_s']:.0f} msg/s" if "messages_per_s" in r else ""
             lines.append(f"{where:10s} {name:10s} one-way p50 {r['p50_us']:6.0f} us, p99 "
                          f"{r['p99_us']:6.0f} us, max {r['max_us']:6.0f} us{extra}")
@@ -284,7 +377,7 @@ def text_report(report: dict, json_path) -> list[str]:
 def main(argv=None):
     p = argparse.ArgumentParser()
     p.add_argument("--peer", choices=("sender", "receiver"), required=True, dest="role")
-    p.add_argument("--stack", choices=("e2e", "raw"), required=True)
+    p.add_argument("--stack", choices=("e2e", "raw", "slow"), required=True)
     p.add_argument("--security", choices=("plain", "curve"), default="plain")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, required=True)

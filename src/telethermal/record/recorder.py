@@ -106,10 +106,14 @@ class SessionRecorder:
 
     @classmethod
     def open(cls, path, scene, material, identifier, generator, config, operator, idle_c,
-             seed, contact_s, devices) -> "SessionRecorder":
+             seed, contact_s, devices, sampled: list | None = None) -> "SessionRecorder":
+        """``sampled``: the materials whose sampled curves the display
+        rendered (the in-process run renders what the slave's session
+        sends, as the services do), sampled from the attached generator."""
         params = {"scene": scene.name, "material": material, "seed": seed,
                   "contact_s": contact_s, "devices": devices,
-                  **display_params(scene, config, operator, idle_c)}
+                  **display_params(scene, config, operator, idle_c),
+                  **({"sampled_curves": sampled} if sampled is not None else {})}
         return cls(Recorder(path, "session", params, model_bytes(identifier, generator)))
 
     def touch_start(self, t_s: float, contact_id: int, params: dict) -> None:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.devices.display import open_display
 from telethermal.record.recorder import display_params, open_recorder
-from telethermal.errors import TelethermalError
+from telethermal.errors import TelethermalError, WindowFull
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
@@ -124,7 +124,12 @@ class MasterService:
 
     def _send(self, sends) -> None:
         for s in sends:
-            self.endpoint.send(s.kind, **s.fields)
+            try:
+                self.endpoint.send(s.kind, **s.fields)
+            except WindowFull as exc:
+                # The slave has acknowledged nothing for a whole window: the
+                # event is not sent (told, counted); the display goes on.
+                log.error("%s", exc)
 
     # ------------------------------------------------------------ hardware
     def _open_hardware(self) -> None:

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import zmq
 
-from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
+from telethermal.errors import (CalibrationError, ModelFileError, TelethermalError,
+                                WindowFull)
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
@@ -115,7 +116,13 @@ class SlaveService:
 
     def _send(self, sends) -> None:
         for s in sends:
-            self.endpoint.send(s.kind, **s.fields)
+            try:
+                self.endpoint.send(s.kind, **s.fields)
+            except WindowFull as exc:
+                # The master has acknowledged nothing for a whole window: the
+                # message is not sent (told, counted); the loop goes on.
+                log.error("%s", exc)
+                continue
             if s.kind == "flux_trajectory":
                 log.info("decided contact_id=%d material=%s (%s)", self.contact_id,
                          s.fields["material"], decision_text(self.pad, s.fields["material"]))

@@ -99,7 +99,15 @@ def _replay_master(rec, params, cid, generator, gains, attached):
     from telethermal.devices.readings import PadSensors
     from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
 
-    if generator is None:
+    if "sampled_curves" in params:
+        # An in-process session: the display rendered the curves the slave's
+        # session sent, sampled from the generator (the attached one, or the
+        # given one sampled the same way).
+        from telethermal.render.sampled import SampledGenerator, sample_curves
+        if generator is None:
+            generator = attached("generator.npz", load_generator)
+        generator = SampledGenerator(sample_curves(generator, list(params["sampled_curves"])))
+    elif generator is None:
         wire_configs = rec.messages("/wire/in/session_config")
         if "generator.npz" not in rec.attachments and wire_configs:
             # A master's recording: the curves the slave sent, and this

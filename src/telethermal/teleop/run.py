@@ -34,7 +34,7 @@ from telethermal.physics.scene import FingerSpec, Scene, finger_contact_model
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
 from telethermal.physics.thermoelectric import ModuleState, ThermoelectricStack
 from telethermal.devices.readings import PadSensors
-from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.teleop.master import DisplayConfig, MasterDisplay
 from telethermal.teleop.slave import Slave
 
 #: The fingertip used where a scene has none (the gripper scenes): the
@@ -291,14 +291,19 @@ def run_session(scene: Scene, material: str, identifier, generator,
     shift = precondition_for(scene, operator.finger_ir_c) if precondition else None
     idle = MasterDisplay.standby_c_for(config.limits, slave.object_ir_c + (
         shift(expected_material, slave.object_ir_c) if shift else 0.0))
-    master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
+    # The two sides' session rules, as the services run them, over a wire
+    # with no delay: the slave's pad goes down when the master's onset
+    # reaches it, the master renders what the slave sends (its sampled curves).
+    wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material)
+    master = MasterDisplay(config, wire.master.link.generator, pad_resistance(scene.pad.layers),
                            scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
                            precondition=shift, **display_model_args(scene))
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=realtime, seed=seed)
     recorder = SessionRecorder.open(record, scene, material, identifier, generator, config,
-                                    operator, idle, seed, contact_s, devices) if record else None
+                                    operator, idle, seed, contact_s, devices,
+                                    sampled=list(wire.curves)) if record else None
 
     def one_period(t_loop: float, dt_loop: float) -> bool:
         if touch.done:
@@ -306,12 +311,12 @@ def run_session(scene: Scene, material: str, identifier, generator,
         # Simulated time follows the loop: exact on the simulated clock, the
         # real elapsed time on the real one.
         t = now[0] = t_loop - PRE_CONTACT_S
-        slave.advance_to(t)
+        wire.slave_period(t)
         sensors = display.read(t)
-        news = SlaveNews(slave.object_ir_c, slave.estimate, slave.classes,
-                         expected_material=expected_material)
+        news = replace(wire.master.news(t, True), expected_material=expected_material)
         step = master.step(t, dt_loop, sensors, news)
         display.apply(t, step, dt_loop, sensors.force_n)
+        wire.master_period(step, sensors.force_n, operator.finger_ir_c)
         if recorder is not None:
             recorder.period(t, dt_loop, sensors, news, step)
         return True
@@ -322,9 +327,13 @@ def run_session(scene: Scene, material: str, identifier, generator,
     finally:
         device_counters = display.counters()
         display.close()
+        wire.end(t_end=now[0])
         if recorder is not None:
             recorder.slave(slave)
     est = slave.estimate
+    # The slave's trial times are from its pad going down (at the master's
+    # onset, as in the services); on the session's clock they are later by that.
+    slave_t0 = wire.slave_t0_s or 0.0
     decided = est is not None and est.decided
     # The error "after identification" starts at the slave's first decision
     # (a material or a pair it is sure of), never where the master began to
@@ -332,9 +341,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # the slave said only "unknown", where it said so.
     render_from = None
     if slave.onset_s is not None and slave.committed_at_s is not None:
-        render_from = slave.onset_s + slave.committed_at_s
+        render_from = slave_t0 + slave.onset_s + slave.committed_at_s
     elif decided and slave.onset_s is not None:
-        render_from = slave.onset_s + est.t_s
+        render_from = slave_t0 + slave.onset_s + est.t_s
     metrics = compare_with_direct(scene, material, slave.object_true_c, operator, touch.trace,
                                   contact_s, render_from)
     summary = {
@@ -344,7 +353,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "decision_reason": est.reason if decided else "no decision",
         "decision_time_s": ((slave.committed_at_s if est.label != UNKNOWN else est.t_s)
                             if decided else None),
-        "slave_onset_s": slave.onset_s, "master_onset_s": master.last_onset_s,
+        "slave_onset_s": None if slave.onset_s is None else slave_t0 + slave.onset_s,
+        "slave_touch_s": wire.slave_t0_s, "master_onset_s": master.last_onset_s,
         "master_release_s": master.last_release_s, "decision_from_s": render_from,
         "render_start_s": master.rendered_from_s,
         "before_identification": config.before, "rate_hz": config.rate_hz,
@@ -362,6 +372,49 @@ def run_session(scene: Scene, material: str, identifier, generator,
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
     return SessionResult(summary, touch.trace)
+
+
+class InProcessWire:
+    """Both sides' session rules (:mod:`telethermal.teleop.session`) joined
+    by a wire with no delay and no loss, for the in-process run: each
+    period the slave reads what the master sent and sends what its rules
+    say, which the master reads before its display step."""
+
+    def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str):
+        from telethermal.render.sampled import SampledGenerator, sample_curves
+        from telethermal.teleop.link import SlaveLink
+        from telethermal.teleop.session import MasterSession, SlaveSession
+
+        curves = self.curves = sample_curves(generator, [c for c in identifier.classes_
+                                                         if c in generator.materials])
+        self.slave = SlaveSession(curves, rate_hz, measurements=False)
+        self.slave.place(pad, object_id)
+        self.master = MasterSession(SlaveLink(generator=SampledGenerator(curves),
+                                              classes=tuple(pad.classes)))
+        self.master.on_message(self.slave.announcement(-PRE_CONTACT_S).message, -PRE_CONTACT_S)
+        self._to_slave: list[dict] = []
+        self.slave_t0_s: float | None = None
+
+    def slave_period(self, t: float) -> None:
+        out = []
+        for m in self._to_slave:
+            verdict = self.slave.classify(m)
+            if verdict == "touch":
+                self.slave.touch(m["contact_id"], t, m.get("finger_temp_c"))
+                self.slave_t0_s = t
+            elif verdict == "lift":
+                out += self.slave.lift(t)[0]
+        self._to_slave = []
+        for send in out + self.slave.step(t):
+            self.master.on_message(send.message, t, 0.0)
+
+    def master_period(self, step, force_n: float, finger_c: float) -> None:
+        self._to_slave += [s.message for s in self.master.period(step, 0.0, force_n, finger_c)]
+
+    def end(self, t_end: float) -> None:
+        """The session is over: a contact still open is lifted on both sides."""
+        self._to_slave += [s.message for s in self.master.close_contact(t_end, None)]
+        self.slave_period(t_end)
 
 
 def precondition_for(scene: Scene, finger_c: float):

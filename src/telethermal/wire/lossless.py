@@ -12,11 +12,21 @@ from collections import OrderedDict
 
 import msgpack
 
+from telethermal.errors import WindowFull
 from telethermal.wire.codec import encode
-from telethermal.wire.ordering import OrderedReceiver
+from telethermal.wire.ordering import MAX_BUFFERED, OrderedReceiver
 from telethermal.wire.schema import LOSSLESS, PROTOCOL_VERSION
 
-MAX_UNACKED = 4096
+#: The sender's window: at most this many messages kept unacknowledged; a
+#: send with the window full is refused (:class:`WindowFull`), never a kept
+#: message dropped. No larger than the receiver's buffer, so nothing the
+#: window lets out is ever out of the receiver's window.
+WINDOW = 4096
+assert WINDOW <= MAX_BUFFERED
+#: A ``resend`` or a retransmission sends at most this many messages from the
+#: first one asked for; the rest follow as the peer's ack moves (under the
+#: sockets' high-water mark of 1000, so a repair does not itself overflow them).
+RESEND_BURST = 256
 #: Heartbeat periods a message may wait unacknowledged before it is sent again.
 RETRANSMIT_AFTER = 3
 #: A lossless gap still open after this many ``dead_after_s`` is given up.
@@ -32,6 +42,7 @@ class LosslessStream:
     def _init_lossless(self) -> None:
         self._next_seq = 1
         self._outbox: OrderedDict[int, dict] = OrderedDict()
+        self._held_back: list[dict] = []            # arrived while a send waited for room
         self.receiver = OrderedReceiver(self.counters)
         self._last_heartbeat_sent = -1e9
         self._last_peer_hb: tuple[float, float] | None = None   # (its sent_s, our receipt)
@@ -48,14 +59,16 @@ class LosslessStream:
     def _send_lossless(self, kind: str, now: float, fields: dict) -> int:
         """Number ``kind`` in the lossless stream, keep it until acknowledged,
         and send it if a session is up; returns its seq."""
+        if len(self._outbox) >= WINDOW:
+            self.counters["refused_by_window"] += 1
+            raise WindowFull(f"{self.role}: {kind} refused: the lossless window is full "
+                             f"({len(self._outbox)} messages unacknowledged by the peer since "
+                             f"seq {next(iter(self._outbox))})")
         seq = self._next_seq
-        self._next_seq += 1
         message = {"kind": kind, "v": PROTOCOL_VERSION, "seq": seq, "sent_s": now, **fields}
         data = encode(message)              # bad content is refused before it is kept
+        self._next_seq += 1
         self._outbox[seq] = message
-        if len(self._outbox) > MAX_UNACKED:
-            self._outbox.popitem(last=False)
-            self.counters["lossless_dropped"] += 1
         self.counters["lossless_sent"] += 1
         if self.peer_version is not None:
             self._raw_send(self.control, message, data)
@@ -113,10 +126,16 @@ class LosslessStream:
         return out
 
     def _resend_from(self, first: int):
+        """What was asked: the kept messages from ``first``, at most
+        ``RESEND_BURST`` of them."""
+        sent = 0
         for seq, message in list(self._outbox.items()):
+            if sent >= RESEND_BURST:
+                break
             if seq >= first:
                 self._raw_send(self.control, {**message, "sent_s": self.clock()})
                 self.counters["resent"] += 1
+                sent += 1
 
     def _serve_resend(self, message: dict, now: float) -> None:
         """The peer's ``resend``: at most one served per heartbeat period."""

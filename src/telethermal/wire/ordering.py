@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 #: Largest number of out-of-order messages buffered, and how far ahead of
 #: the next expected seq a message may be (further is out of window).
-MAX_BUFFERED = 1024
+MAX_BUFFERED = 4096
 
 
 @dataclass

@@ -34,8 +34,8 @@ from telethermal.wire.hello import HelloExchange
 from telethermal.wire.keys import generate_keys, generate_link_keys  # noqa: F401
 from telethermal.wire.keys import load_public as _load_public  # noqa: F401
 from telethermal.wire.keys import load_secret as _load_secret  # noqa: F401
-from telethermal.wire.lossless import (GAP_GIVE_UP_DEAD, MAX_UNACKED,  # noqa: F401
-                                       RETRANSMIT_AFTER, LosslessStream, lossless_seq)
+from telethermal.wire.lossless import (GAP_GIVE_UP_DEAD, RESEND_BURST,  # noqa: F401
+                                       RETRANSMIT_AFTER, WINDOW, LosslessStream, lossless_seq)
 from telethermal.wire.loglimit import LogLimiter
 from telethermal.wire.ordering import MAX_BUFFERED, OrderedReceiver  # noqa: F401 (re-export)
 from telethermal.wire.schema import KINDS, LOSSLESS, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
@@ -50,7 +50,7 @@ STATUS_PERIOD_S = 1.0
 #: Every counter, in ``status.counters`` and on the admin socket
 #: (``proto/PROTOCOL.md`` section 4).
 COUNTERS = ("lossless_sent", "lossless_received", "duplicates", "gaps", "recovered", "resent",
-            "lossless_dropped", "stream_lost", "invalid", "unknown_kind", "heartbeats_missed",
+            "refused_by_window", "stream_lost", "invalid", "unknown_kind", "heartbeats_missed",
             "reconnects", "duplicate_hellos", "oversized", "version_mismatch", "before_hello",
             "not_peer", "wrong_direction", "out_of_window", "skipped", "resend_throttled",
             "refused", "curve_rejected", "sockets_recreated")
@@ -207,14 +207,24 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
         self._kind_seq[kind] = seq
         return {"kind": kind, "v": PROTOCOL_VERSION, "seq": seq, "sent_s": now, **fields}
 
-    def send(self, kind: str, **fields) -> int:
+    def send(self, kind: str, wait_s: float = 0.0, **fields) -> int:
         """Send one message; returns its seq. Lossless kinds are kept until
-        acknowledged; a lossy kind goes on the stream socket (slave only)."""
+        acknowledged; a lossy kind goes on the stream socket (slave only).
+        With the lossless window full (``WINDOW`` unacknowledged), a lossless
+        send polls for the peer's acknowledgement up to ``wait_s`` and then
+        raises :class:`~telethermal.errors.WindowFull` (counted
+        ``refused_by_window``): the message was not accepted, nothing kept
+        is dropped. What arrives while it waits, the next ``poll`` returns."""
         if kind not in KINDS:
             raise UnknownKindError(f"unknown message kind {kind!r}")
         now = self.clock()
         if kind in LOSSLESS:
-            return self._send_lossless(kind, now, fields)
+            deadline = now + max(wait_s, 0.0)
+            while self.unacked >= WINDOW and self.clock() < deadline:
+                # (poll hands back what was held back, then what is new)
+                self._held_back = self.poll(min(deadline - self.clock(),
+                                                self.config.heartbeat_s / 4))
+            return self._send_lossless(kind, self.clock(), fields)
         message = self._unordered(kind, now, **fields)
         sock = self.stream if KINDS[kind].stream == "stream" else self.control
         if sock is self.stream and self.role != "slave":
@@ -230,6 +240,10 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
         fields = {"state": self.state, "counters": self.all_counters()}
         if self.status_message:
             fields["message"] = self.status_message[:200]
+        if self.unacked >= WINDOW:
+            # No room: this status is refused (counted); the next carries the state.
+            self.counters["refused_by_window"] += 1
+            return
         self.send("status", **fields)
 
     def all_counters(self) -> dict[str, int]:
@@ -246,7 +260,7 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
             self.counters["heartbeats_missed"] += 1
             log.warning("%s: peer silent for %.2f s", self.role, self.config.dead_after_s)
         self._was_alive = alive
-        out = []
+        out, self._held_back = self._held_back, []
         if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
             if self.role == "master":
                 self._watch_handshakes(now, alive)
