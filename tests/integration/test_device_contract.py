@@ -140,7 +140,7 @@ def test_a_missing_reading_or_an_over_temperature_driver_is_the_safe_state_that_
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
     clock = Clock()
     d = EmulatedDisplay(touch, clock=clock)
-    master = MasterDisplay(DisplayConfig(before="hold"), None, pad_resistance(SCENE.pad.layers),
+    master = MasterDisplay(DisplayConfig(before="hold", feedforward_model="static"), None, pad_resistance(SCENE.pad.layers),
                            SCENE.sensors.flux_lag_s, 33.0, idle_c=IDLE_C)
     news = SlaveNews(object_temp_c=IDLE_C)
     safe = {}

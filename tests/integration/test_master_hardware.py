@@ -79,6 +79,8 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
         board.close()
     # The touch began (force) and ended: one contact, its two events queued.
     assert service.session.next_contact_id == 2 and service.session.contact_id is None
+    # The hardware display has the pad model: the documented default controller runs.
+    assert service.display.impedance is not None
     assert events_sent[-1] >= 2
     # No slave, so nothing to render: the display says the link is lost and
     # holds the pad at neutral.

@@ -23,6 +23,13 @@ FINGER_C, OBJECT_C, H = 33.0, 24.0, 5000.0
 TAU = SCENE.sensors.flux_lag_s
 
 
+def static(**kw) -> DisplayConfig:
+    """These tests drive the flux PID with its static feed-forward: they give
+    the display no pad model, which the impedance controller (the default)
+    refuses (issue 26: no silent fall back)."""
+    return DisplayConfig(feedforward_model="static", **kw)
+
+
 @pytest.fixture(scope="module")
 def exact():
     """A generator fitted on the exact direct-contact curves (nominal skin,
@@ -47,7 +54,7 @@ def decided(material, classes=("plexiglass", "steel")):
     return Estimate(0.0, p, material, 1.0, True, "confident")
 
 
-def run(gen, news_at, seconds=3.0, config=DisplayConfig(), fault_at=None, pre_s=0.1):
+def run(gen, news_at, seconds=3.0, config=static(), fault_at=None, pre_s=0.1):
     """Drive the master on the plant; ``news_at(t)`` gives the slave's news."""
     dt = 1.0 / config.rate_hz
     layers = tuple(SCENE.pad.layers)
@@ -96,7 +103,7 @@ def test_feed_forward_inverts_the_pad_exactly(exact, material):
     # pad surface + q R_pad) and the sensor film's own heat capacity (time
     # constant ~ L^2/alpha ~ 1 s) is what it misses; the first 0.2 s are out
     # of the pad's reach (a metal's h-limited spike; the junction at the band).
-    ff_only = DisplayConfig(gains=PidGains(0.0, 0.0, 0.0, output_min=-25, output_max=25))
+    ff_only = static(gains=PidGains(0.0, 0.0, 0.0, output_min=-25, output_max=25))
     assert _tracking_error(exact, material, ff_only, (1.0, 3.0))[0] < 0.005
     assert _tracking_error(exact, material, ff_only, (0.2, 3.0))[0] < 0.02
 
@@ -107,9 +114,9 @@ def test_default_loop_tracks_the_exact_direct_contact_flux(exact, material):
     # not deliver in the first instants, so the flux runs over for a while
     # (measured 1.1-1.4 % RMS of peak over 0.2-3 s) and then settles (0.07 %
     # and 0.09 % over 2-3 s); no safety event on the way.
-    err, master = _tracking_error(exact, material, DisplayConfig(), (0.2, 3.0))
+    err, master = _tracking_error(exact, material, static(), (0.2, 3.0))
     assert err < 0.03
-    late, _ = _tracking_error(exact, material, DisplayConfig(), (2.0, 3.0))
+    late, _ = _tracking_error(exact, material, static(), (2.0, 3.0))
     assert late < 0.003
     assert master.safety.events.get("entered safe state", 0) == 0
     assert not any(k.startswith("clamped") for k in master.safety.events)
@@ -119,7 +126,7 @@ def test_hand_over_is_slew_limited(exact):
     # Hold until 0.4 s, then render: the junction never moves faster than
     # the controller's slew limit, and the supervisor's rate limit is never hit.
     gen, _, _ = exact
-    config = DisplayConfig(before="hold")
+    config = static(before="hold")
     master, rows = run(gen, lambda t: SlaveNews(OBJECT_C, decided("steel") if t >= 0.4 else None,
                                                 ("plexiglass", "steel")), config=config)
     junction = np.array([r[2] for r in rows])
@@ -139,7 +146,7 @@ def test_an_impossible_request_keeps_the_surface_in_the_skin_band(exact, object_
     gen, _, _ = exact
     limits = SafetyLimits(max_rate_k_s=200.0, max_flux_w_m2=20_000.0)
     master, rows = run(gen, lambda t: SlaveNews(object_c, decided("steel"), ("plexiglass", "steel")),
-                       config=DisplayConfig(limits=limits), seconds=1.0)
+                       config=static(limits=limits), seconds=1.0)
     surface = np.array([r[5] for r in rows])
     assert surface.min() >= limits.skin_min_c - 0.05
     assert surface.max() <= limits.skin_max_c + 0.05
@@ -148,7 +155,7 @@ def test_an_impossible_request_keeps_the_surface_in_the_skin_band(exact, object_
 
 def test_a_dead_flux_sensor_is_the_safe_state_within_one_period(exact):
     gen, _, _ = exact
-    limits = DisplayConfig().limits
+    limits = static().limits
     master, rows = run(gen, lambda t: SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel")),
                        fault_at=(1.0, 1.2), seconds=2.0)
     for t, _, junction, safe, _, _ in rows:
@@ -162,7 +169,7 @@ def test_a_dead_flux_sensor_is_the_safe_state_within_one_period(exact):
 def test_release_returns_to_standby_and_bad_config_is_refused(exact):
     gen, _, _ = exact
     layers = tuple(SCENE.pad.layers)
-    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+    master = MasterDisplay(static(), gen, pad_resistance(layers), TAU, FINGER_C,
                            idle_c=OBJECT_C)
     news = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
     for k in range(200):                                     # touch for 0.2 s
@@ -172,9 +179,9 @@ def test_release_returns_to_standby_and_bad_config_is_refused(exact):
     assert step.phase == "idle" and master.last_release_s is not None
     assert step.junction_applied_c == pytest.approx(OBJECT_C)
     with pytest.raises(ControlError, match="before"):
-        DisplayConfig(before="guess")
+        static(before="guess")
     with pytest.raises(ControlError, match="rate_hz"):
-        DisplayConfig(rate_hz=0.0)
+        static(rate_hz=0.0)
 
 
 # ------------------------------------------------------------------ hard cases
@@ -191,7 +198,7 @@ def test_a_step_of_desired_flux_at_onset_gives_no_kick_and_stays_in_the_band():
     # The closed form steps from 0 to h*gap at contact; with a derivative
     # term in the gains the junction still moves at most one slew step per
     # period and the pad's surface never leaves the skin band.
-    config = DisplayConfig(gains=PidGains(1e-3, 1e-2, 5e-5, output_min=-25, output_max=25))
+    config = static(gains=PidGains(1e-3, 1e-2, 5e-5, output_min=-25, output_max=25))
     master, rows = run(closed_form_generator(), lambda t: SlaveNews(
         OBJECT_C, decided("steel"), ("plexiglass", "steel")), config=config, seconds=1.0)
     junction = np.array([r[2] for r in rows])
@@ -220,9 +227,9 @@ def test_a_hot_object_is_limited_at_the_band_counted_and_logged(caplog):
 
 def test_a_stuck_flux_sensor_mid_contact_is_the_safe_state():
     gen = closed_form_generator()
-    limits = DisplayConfig().limits
+    limits = static().limits
     layers = tuple(SCENE.pad.layers)
-    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+    master = MasterDisplay(static(), gen, pad_resistance(layers), TAU, FINGER_C,
                            idle_c=OBJECT_C)
     news = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
     safe_at = None
@@ -241,14 +248,14 @@ def test_a_stuck_flux_sensor_mid_contact_is_the_safe_state():
 
 @pytest.mark.parametrize("dt", [0.0, -1e-3])
 def test_a_non_positive_period_is_a_clear_error(dt):
-    master = MasterDisplay(DisplayConfig(), closed_form_generator(), 1e-3, TAU, FINGER_C,
+    master = MasterDisplay(static(), closed_form_generator(), 1e-3, TAU, FINGER_C,
                            idle_c=OBJECT_C)
     with pytest.raises(ControlError, match="period|dt"):
         master.step(0.0, dt, PadSensors(0.0, OBJECT_C, 0.0), SlaveNews(OBJECT_C))
 
 
 def test_a_period_100_times_nominal_makes_no_jump():
-    config = DisplayConfig()
+    config = static()
     master = MasterDisplay(config, closed_form_generator(), 1e-3, TAU, FINGER_C, idle_c=OBJECT_C)
     news = SlaveNews(OBJECT_C, decided("steel"), ("plexiglass", "steel"))
     last = None
@@ -288,7 +295,7 @@ def test_the_hand_over_from_the_mixture_to_the_decision_has_no_step():
 def _desired_trace(gen, news_at, seconds=0.8, pre_s=0.1, rate=1000.0):
     dt = 1.0 / rate
     layers = tuple(SCENE.pad.layers)
-    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+    master = MasterDisplay(static(), gen, pad_resistance(layers), TAU, FINGER_C,
                            idle_c=OBJECT_C)
     plant, junction, out = None, OBJECT_C, []
     for k in range(int(round((pre_s + seconds) * rate))):
@@ -331,7 +338,7 @@ def test_a_slave_that_changes_its_mind_is_followed_without_a_step():
 def test_an_estimate_after_the_finger_lifted_changes_nothing():
     gen = closed_form_generator()
     layers = tuple(SCENE.pad.layers)
-    master = MasterDisplay(DisplayConfig(), gen, pad_resistance(layers), TAU, FINGER_C,
+    master = MasterDisplay(static(), gen, pad_resistance(layers), TAU, FINGER_C,
                            idle_c=OBJECT_C)
     undecided = SlaveNews(OBJECT_C, None, ("plexiglass", "steel"))
     for k in range(300):                                       # touch, no decision yet
@@ -346,3 +353,16 @@ def test_an_estimate_after_the_finger_lifted_changes_nothing():
                                                       0.0), late)
     assert step.phase == "idle" and master.rendering is None
     assert step.junction_applied_c == pytest.approx(OBJECT_C)
+
+
+def test_the_impedance_controller_without_the_pad_model_is_a_clear_error():
+    # Issue 26: the display used to fall back to the static PID in silence
+    # (the hardware master built it without the pad model).
+    with pytest.raises(ControlError, match="pad_layers and contact_conductance_w_m2k"):
+        MasterDisplay(DisplayConfig(), closed_form_generator(), 1e-3, TAU, FINGER_C)
+    with pytest.raises(ControlError, match="pad model"):
+        MasterDisplay(DisplayConfig(), closed_form_generator(), 1e-3, TAU, FINGER_C,
+                      pad_layers=tuple(SCENE.pad.layers))
+    master = MasterDisplay(DisplayConfig(), closed_form_generator(), 1e-3, TAU, FINGER_C,
+                           pad_layers=tuple(SCENE.pad.layers), contact_conductance_w_m2k=H)
+    assert master.impedance is not None

@@ -27,21 +27,24 @@ import itertools
 import math
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Protocol
 
 from telethermal.control.safety import SafetyLimits
 from telethermal.devices.board import Calibration, SensorBoard
 from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
+from telethermal.devices.kinds import DeviceKind, device_kind
 from telethermal.devices.peltier import PeltierDriver
 from telethermal.devices.readings import PadSensors
 
-DEVICE_KINDS = ("sim", "emulated")
+DEVICE_KINDS = tuple(k.value for k in (DeviceKind.SIM, DeviceKind.EMULATED))
 _bus_names = itertools.count()
 
 
 class SimDisplay:
-    kind = "sim"
+    kind = DeviceKind.SIM
 
     def __init__(self, touch):
         self.touch = touch
@@ -60,7 +63,7 @@ class SimDisplay:
 
 
 class HardwareDisplay:
-    kind = "hardware"
+    kind = DeviceKind.HARDWARE
 
     def __init__(self, board_url: str, can_bus: str, calibration: Calibration = Calibration(),
                  clock=time.monotonic, wait_s: float = 0.0):
@@ -125,7 +128,7 @@ class EmulatedDisplay:
     lockstep with the control loop (each period the board's frame is written
     and waited for, and the Peltier driver's reply is read back)."""
 
-    kind = "emulated"
+    kind = DeviceKind.EMULATED
 
     def __init__(self, touch, clock=time.monotonic, realtime: bool = False, seed: int = 0):
         self.touch = touch
@@ -189,10 +192,29 @@ class EmulatedDisplay:
             self._dir.cleanup()
 
 
+class Display(Protocol):
+    """What the master's loop needs of its display's devices, whatever they are."""
+
+    def read(self, t_s: float) -> PadSensors: ...
+    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None: ...
+    def counters(self) -> dict: ...
+    def close(self) -> None: ...
+
+
+#: A simulated touch's display devices by kind (python-can's ``BACKENDS``
+#: shape): ``factory(touch, clock, realtime, seed)``. The hardware display
+#: has no simulated touch (``HardwareDisplay``, the master service opens it).
+DISPLAYS: dict[DeviceKind, Callable[..., Display]] = {
+    DeviceKind.SIM: lambda touch, clock, realtime, seed: SimDisplay(touch),
+    DeviceKind.EMULATED: EmulatedDisplay,
+}
+
+
 def open_display(kind: str, touch, clock=time.monotonic, realtime: bool = False,
-                 seed: int = 0):
-    if kind == "sim":
-        return SimDisplay(touch)
-    if kind == "emulated":
-        return EmulatedDisplay(touch, clock, realtime, seed)
-    raise ValueError(f"devices must be one of {', '.join(DEVICE_KINDS)}, got {kind!r}")
+                 seed: int = 0) -> Display:
+    """The display devices of ``kind`` around a simulated ``touch``."""
+    factory = DISPLAYS.get(device_kind(kind, "-", "-"))
+    if factory is None:
+        raise ValueError(f"devices = {kind!r} has no simulated touch (kinds with one: "
+                         f"{', '.join(DISPLAYS)}); the master service opens the hardware")
+    return factory(touch, clock, realtime, seed)

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from telethermal.devices.kinds import DeviceKind
 from telethermal.devices.active_pad import ActivePadDriver, junction_current_a
 from telethermal.devices.board import Calibration, DeviceError, SensorBoard
 from telethermal.devices.frames import FRAME_VERSION_SLAVE
@@ -77,7 +78,7 @@ class SlavePadDrivers:
     """The slave's board and active pad driver (``board_url``: a pyserial
     URL; ``can_bus``: ``interface:channel``)."""
 
-    kind = "hardware"
+    kind = DeviceKind.HARDWARE
 
     def __init__(self, board_url: str, can_bus: str, rate_hz: float,
                  calibration: Calibration = Calibration(), clock=time.monotonic,

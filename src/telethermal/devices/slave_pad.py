@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from telethermal.devices.kinds import DeviceKind
 from telethermal.devices.active_pad import ActivePadEmulator, current_junction_c
 from telethermal.devices.board import DeviceError
 from telethermal.devices.emulators import SensorBoardEmulator
@@ -49,7 +50,7 @@ class EmulatedSlavePad(SlavePadDrivers):
     (:meth:`show_object`) or the pad (:meth:`aim_at_pad`, calibration).
     """
 
-    kind = "emulated"
+    kind = DeviceKind.EMULATED
 
     def __init__(self, scene, instruments, seed: int = 0, wait_s: float = 0.05,
                  pad_tau_s: float = 0.5, board_noise_uv: float = 0.0):

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from telethermal.devices.kinds import DeviceKind, device_kind
 from telethermal.errors import TelethermalError
 from telethermal.tomltables import read_toml, table_values
 from telethermal.wire.transport import TransportConfig
@@ -13,6 +14,14 @@ from telethermal.wire.transport import TransportConfig
 
 class ConfigError(TelethermalError):
     """A service configuration file that cannot be used."""
+
+
+def _devices(config, example_tty: str) -> DeviceKind:
+    """The config's device kind, validated (the one place it is)."""
+    try:
+        return device_kind(config.devices, config.board_url, config.can_bus, example_tty)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 @dataclass
@@ -38,12 +47,7 @@ class SlaveConfig:
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):
-        if self.devices not in ("sim", "emulated", "hardware"):
-            raise ConfigError(f"devices must be 'sim', 'emulated' or 'hardware', got "
-                              f"{self.devices!r}")
-        if self.devices == "hardware" and not (self.board_url and self.can_bus):
-            raise ConfigError("devices = 'hardware' needs board_url (e.g. /dev/ttyUSB1) and "
-                              "can_bus (e.g. socketcan:can0)")
+        self.devices = _devices(self, "/dev/ttyUSB1")
 
 
 @dataclass
@@ -79,12 +83,7 @@ class MasterConfig:
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):
-        if self.devices not in ("sim", "emulated", "hardware"):
-            raise ConfigError(f"devices must be 'sim', 'emulated' or 'hardware', got "
-                              f"{self.devices!r}")
-        if self.devices == "hardware" and not (self.board_url and self.can_bus):
-            raise ConfigError("devices = 'hardware' needs board_url (e.g. /dev/ttyUSB0) and "
-                              "can_bus (e.g. socketcan:can0)")
+        self.devices = _devices(self, "/dev/ttyUSB0")
 
 
 def load_config(path: str | Path, role: str):

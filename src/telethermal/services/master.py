@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 
 from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.devices.display import open_display
+from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError, WindowFull
 from telethermal.physics.scene import load_scene
@@ -28,7 +29,7 @@ from telethermal.services.config import MasterConfig
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
-from telethermal.teleop.session import MasterSession
+from telethermal.teleop.session import MasterSession, ServiceState
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
                                      draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
@@ -103,7 +104,7 @@ class MasterService:
                 self.view = ViewPublisher(config.view_port,
                                           self.scene.finger.contact_conductance_w_m2k)
                 log.info("view stream on tcp://127.0.0.1:%d", self.view.port)
-            if config.devices == "hardware":
+            if config.devices == DeviceKind.HARDWARE:
                 self._open_hardware()
         except TelethermalError:
             self.endpoint.close()
@@ -114,7 +115,7 @@ class MasterService:
         self.recorder = open_recorder(config, "master")
         self.touch: Touch | None = None
         self.stop_requested = False
-        self.state = "idle"
+        self.state = ServiceState.IDLE
         self.last_touch: dict = {}
 
     @property
@@ -142,10 +143,12 @@ class MasterService:
         calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
         self.hardware = HardwareDisplay(cfg.board_url, cfg.can_bus, calibration)
         # The module behind the pad: the master commands its current.
+        # The pad model (the scene's layers, the finger's contact
+        # conductance) and the module behind the pad, as in simulation.
         self.display = MasterDisplay(self.display_config, None,
                                      pad_resistance(self.scene.pad.layers),
                                      self.scene.sensors.flux_lag_s, cfg.finger_temp_c,
-                                     module=self.scene.pad.module_params()[0])
+                                     **display_model_args(self.scene))
         self.t0 = time.monotonic()
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
                  cfg.can_bus)
@@ -164,7 +167,7 @@ class MasterService:
         contact_id = session.contact_id
         self._send(session.period(step, self.t0, sensors.force_n, self.config.finger_temp_c))
         if step.contact is not None and step.contact.touching:
-            self.state = "touching"
+            self.state = ServiceState.TOUCHING
             if self.recorder is not None:
                 # (A replay starts a fresh display at this touch; this one has
                 # run since the service started, so it may differ slightly.)
@@ -178,9 +181,9 @@ class MasterService:
             if self.recorder is not None:
                 self.recorder.touch_end({"contact_id": contact_id, **safety_summary(
                     display), "device_counters": self.hardware.counters()}, {})
-            self.state = "idle"
+            self.state = ServiceState.IDLE
         elif display.phase == Phase.RENDER:
-            self.state = "rendering"
+            self.state = ServiceState.RENDERING
 
     # ------------------------------------------------------------ network
     def _on_message(self, m: dict, now: float) -> None:
@@ -242,9 +245,9 @@ class MasterService:
         self._send(session.period(step, touch.start + PRE_CONTACT_S, sensors.force_n,
                                   touch.operator.finger_ir_c))
         if step.contact is not None and step.contact.touching:
-            self.state = "touching"
+            self.state = ServiceState.TOUCHING
         if touch.display.phase == Phase.RENDER:
-            self.state = "rendering"
+            self.state = ServiceState.RENDERING
         if touch.sim.done:
             self._finish_touch()
 
@@ -283,7 +286,7 @@ class MasterService:
         if self.recorder is not None:
             self.recorder.touch_end({k: v for k, v in result.items() if k != "trace"},
                                     touch.sim.trace)
-        self.touch, self.state = None, "idle"
+        self.touch, self.state = None, ServiceState.IDLE
         log_touch_figures(result)
         self.last_touch = result
         if touch.reply_when_done:
@@ -381,7 +384,7 @@ class MasterService:
                 self.admin.reply(ok=False, error="master stopping")
         try:
             if self.endpoint.peer_version is not None:
-                self.endpoint.send("status", state="stopping",
+                self.endpoint.send("status", state=ServiceState.STOPPING,
                                    counters=dict(self.endpoint.counters),
                                    message="master stopping; pad at neutral")
                 self.endpoint.poll(0.05)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import zmq
 
+from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import (CalibrationError, ModelFileError, TelethermalError,
                                 WindowFull)
 from telethermal.ident.anytime import UNKNOWN
@@ -26,9 +27,9 @@ from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
-from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.memory import ObjectMemory, Verdict
 from telethermal.teleop.run import slave_rng, with_finger
-from telethermal.teleop.session import SlaveSession
+from telethermal.teleop.session import ContactRequest, ServiceState, SlaveSession
 from telethermal.teleop.slave import BOARD_LOST, Slave
 
 log = logging.getLogger("telethermal.slave")
@@ -77,7 +78,7 @@ class SlaveService:
         #: The session's rules (what goes out, when): the simulated network
         #: of ``bench faults`` runs the same object.
         self.session = SlaveSession(self.curves, self.rate_hz)
-        self.state = "idle"
+        self.state = ServiceState.IDLE
         self.masters_lost = 0          # contacts ended because the master went silent
         #: The service's own error counters, reported with the transport's
         #: (status messages and the admin socket).
@@ -178,7 +179,7 @@ class SlaveService:
         its objects by their material)."""
         if self.devices is not None:
             self._touch_counters = flat_counters(self.devices.all_counters())
-        if self.devices is not None and self.devices.kind == "hardware":
+        if self.devices is not None and self.devices.kind == DeviceKind.HARDWARE:
             self.pad = Slave.on_hardware(self.scene, self.identifier, self.devices,
                                          self.sensors)
         else:
@@ -218,7 +219,7 @@ class SlaveService:
         id; a touch while a contact is going on, or a lift of another
         contact, changes nothing and is counted (``contact_ignored``)."""
         verdict = self.session.classify(m, self.endpoint.peer_session)
-        if verdict == "touch":
+        if verdict == ContactRequest.TOUCH:
             if self.pad.samples_read or self.pad.fault == BOARD_LOST:
                 # This trial was used (its touch ended without a lift that
                 # prepared the next, e.g. the board was away): a fresh one.
@@ -229,9 +230,9 @@ class SlaveService:
             # The operator touched: the slave's pad goes down on the object now.
             self.session.touch(m["contact_id"], now, m.get("finger_temp_c"),
                                owner=self.endpoint.peer_session)
-            self.state = "touching"
+            self.state = ServiceState.TOUCHING
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
-        elif verdict == "lift":
+        elif verdict == ContactRequest.LIFT:
             self._lift(now)
         else:
             self.counters["contact_ignored"] += 1
@@ -252,11 +253,11 @@ class SlaveService:
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else decision_text(self.pad, r["identified"]))
-        self.state = "idle"
+        self.state = ServiceState.IDLE
         # The touch's decision (a material or a pair; not "unknown"), once per
         # touch: remembered for this object, announced with it just below; a
         # disagreeing fresh decision wins (logged, counted).
-        if learned == "overruled":
+        if learned == Verdict.OVERRULED:
             self.counters["memory_overruled"] += 1
         try:
             self.place(self.material, self._seed + 1, self.object_id)   # a fresh trial
@@ -395,7 +396,7 @@ class SlaveService:
             if self.touch_t0 is not None:
                 self._lift(time.monotonic())        # the master hears the pad left
             if self.endpoint.peer_version is not None:
-                self.endpoint.send("status", state="stopping",
+                self.endpoint.send("status", state=ServiceState.STOPPING,
                                    counters=self.endpoint.all_counters(), message="slave stopping")
                 self.endpoint.poll(0.05)
         finally:

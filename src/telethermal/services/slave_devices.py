@@ -8,28 +8,39 @@ from __future__ import annotations
 
 import logging
 
+from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError
 
 # The service's one log, named as before this part was split out of it.
 log = logging.getLogger("telethermal.slave")
 
 
+def _emulated(config, scene, instruments, seed, rate_hz):
+    from telethermal.devices.slave_pad import EmulatedSlavePad
+    return EmulatedSlavePad(scene, instruments, seed=seed)
+
+
+def _hardware(config, scene, instruments, seed, rate_hz):
+    from telethermal.devices.board import Calibration
+    from telethermal.devices.slave_pad import SlavePadDrivers
+    calibration = Calibration.load(config.calibration) if config.calibration else \
+        Calibration()
+    # Each period waits (up to two sample periods) for the board's next
+    # frame: the pad's loop runs at the board's own rate.
+    return SlavePadDrivers(config.board_url, config.can_bus, rate_hz, calibration,
+                           wait_s=2.0 / rate_hz)
+
+
+#: The sensing pad's devices by kind (the simulator alone has none):
+#: ``factory(config, scene, instruments, seed, rate_hz)``.
+SLAVE_PADS = {DeviceKind.EMULATED: _emulated, DeviceKind.HARDWARE: _hardware}
+
+
 def open_devices(config, scene, instruments, seed: int, rate_hz: float):
-    """The sensing pad's devices ``config.devices`` names, or None (the
-    simulator alone)."""
-    devices = None
-    if config.devices == "emulated":
-        from telethermal.devices.slave_pad import EmulatedSlavePad
-        devices = EmulatedSlavePad(scene, instruments, seed=seed)
-    elif config.devices == "hardware":
-        from telethermal.devices.board import Calibration
-        from telethermal.devices.slave_pad import SlavePadDrivers
-        calibration = Calibration.load(config.calibration) if config.calibration else \
-            Calibration()
-        # Each period waits (up to two sample periods) for the board's next
-        # frame: the pad's loop runs at the board's own rate.
-        devices = SlavePadDrivers(config.board_url, config.can_bus, rate_hz, calibration,
-                                  wait_s=2.0 / rate_hz)
+    """The sensing pad's devices ``config.devices`` names (validated by the
+    config), or None (the simulator alone)."""
+    factory = SLAVE_PADS.get(config.devices)
+    devices = None if factory is None else factory(config, scene, instruments, seed, rate_hz)
     if devices is not None:
         log.info("sensing pad on %s devices: board %s (frame version 2), active pad "
                  "driver on %s", devices.kind, devices.board.url, devices.pad.spec)
@@ -51,7 +62,7 @@ def calibrate(devices, sensors, scene, rng, drift_k_per_reading: float = 0.0):
     if drift_k_per_reading:
         raise CalibrationError("a drifting pad is a simulator-only hard case "
                                "(devices = 'sim')")
-    emulated = devices.kind == "emulated"
+    emulated = devices.kind == DeviceKind.EMULATED
     if emulated:
         devices.aim_at_pad(rng)
     # On hardware the lab aims the thermometer at the pad for this.

@@ -55,7 +55,7 @@ import numpy as np
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.master import SlaveNews
-from telethermal.teleop.memory import agreement, remembered_estimate
+from telethermal.teleop.memory import Agreement, agreement, remembered_estimate
 
 log = logging.getLogger(__name__)
 
@@ -172,12 +172,12 @@ class SlaveLink:
             # holds the remembered material), leaves the memory in force.
             verdict = None if mem is None or e.label == UNKNOWN else \
                 agreement(mem.label, e.label)
-            if verdict == "disagrees":
+            if verdict == Agreement.DISAGREES:
                 log.warning("contact %s: the slave decided %s, memory said %s: the fresh "
                             "decision wins", self.contact_id, e.label, mem.label)
                 self.counters["memory_overruled"] += 1
                 self.memory = None
-            elif verdict in ("same", "sharper"):
+            elif verdict in (Agreement.SAME, Agreement.SHARPER):
                 self.memory = None             # the decision takes over
 
     @property

@@ -238,12 +238,17 @@ class MasterDisplay:
         self.phase = Phase.IDLE
         self.rendering: str | None = None       # material being rendered
         self.rendered_from_s: float | None = None
-        # The impedance controller, when the pad's layers are known.
+        # The impedance controller needs the pad model (no silent static PID).
+        wants_impedance = config.feedforward and config.feedforward_model == "impedance"
+        if wants_impedance and not (pad_layers and contact_conductance_w_m2k):
+            raise ControlError("the impedance controller (feedforward_model 'impedance', the "
+                               "default) needs the display's pad model: pad_layers and "
+                               "contact_conductance_w_m2k (the scene's [pad] layers and finger "
+                               "contact conductance); give both, or choose 'static'")
         self.impedance = ImpedanceController(pad_layers, contact_conductance_w_m2k,
                                              sensor_lag_s, self.nominal_dt_s,
                                              config.impedance_horizon_s) \
-            if (config.feedforward and config.feedforward_model != "static" and pad_layers
-                and contact_conductance_w_m2k) else None
+            if wants_impedance else None
 
     # ------------------------------------------------------------ pieces
     @staticmethod

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import asdict, dataclass
+from enum import StrEnum
 
 from telethermal.ident.anytime import UNKNOWN, Estimate
 
@@ -35,6 +36,23 @@ log = logging.getLogger(__name__)
 
 #: The ``reason`` of an estimate made from memory rather than from sensing.
 FROM_MEMORY = "object memory"
+
+
+class Agreement(StrEnum):
+    """How a fresh decision stands to the one held (each a material or a pair)."""
+    SAME = "same"
+    SHARPER = "sharper"          # fewer materials, all held
+    VAGUER = "vaguer"            # more, holding all held
+    DISAGREES = "disagrees"
+
+
+class Verdict(StrEnum):
+    """What the memory did with a touch's decision (its counters' names)."""
+    IGNORED = "ignored"
+    LEARNED = "learned"
+    CONFIRMED = "confirmed"
+    REFINED = "refined"
+    OVERRULED = "overruled"
 
 
 @dataclass(frozen=True)
@@ -50,7 +68,7 @@ class ObjectMemory:
 
     def __init__(self):
         self._known: dict[str, Remembered] = {}
-        self.counters = {"learned": 0, "confirmed": 0, "refined": 0, "overruled": 0}
+        self.counters = {str(v): 0 for v in Verdict if v != Verdict.IGNORED}
 
     def __len__(self) -> int:
         return len(self._known)
@@ -58,37 +76,36 @@ class ObjectMemory:
     def recall(self, object_id: str | None) -> Remembered | None:
         return None if object_id is None else self._known.get(object_id)
 
-    def learn(self, object_id: str | None, estimate: Estimate | None, t_s: float) -> str:
-        """Take a decision of a touch of ``object_id``; returns what was done:
-        "ignored", "learned", "confirmed", "refined" or "overruled"."""
+    def learn(self, object_id: str | None, estimate: Estimate | None, t_s: float) -> Verdict:
+        """Take a decision of a touch of ``object_id``; returns what was done."""
         if object_id is None or not learnable(estimate):
-            return "ignored"
+            return Verdict.IGNORED
         old = self._known.get(object_id)
         new = Remembered(estimate.label, float(estimate.confidence), t_s, 1)
         if old is None:
             self._known[object_id] = new
-            self.counters["learned"] += 1
+            self.counters[Verdict.LEARNED] += 1
             log.info("object %s remembered as %s (confidence %.3f)", object_id,
                      estimate.label, estimate.confidence)
-            return "learned"
+            return Verdict.LEARNED
         verdict = agreement(old.material, estimate.label)
-        if verdict == "same":
+        if verdict == Agreement.SAME:
             self._known[object_id] = Remembered(old.material, new.confidence, t_s,
                                                 old.touches + 1)
-        elif verdict == "sharper":
+        elif verdict == Agreement.SHARPER:
             self._known[object_id] = Remembered(new.material, new.confidence, t_s,
                                                 old.touches + 1)
-        elif verdict == "vaguer":
+        elif verdict == Agreement.VAGUER:
             self._known[object_id] = Remembered(old.material, old.confidence, t_s,
                                                 old.touches + 1)
         else:
             self._known[object_id] = new
-            self.counters["overruled"] += 1
+            self.counters[Verdict.OVERRULED] += 1
             log.warning("object %s: remembered as %s, the fresh touch says %s (confidence "
                         "%.3f): the fresh identification wins", object_id, old.material,
                         estimate.label, estimate.confidence)
-            return "overruled"
-        what = "refined" if verdict == "sharper" else "confirmed"
+            return Verdict.OVERRULED
+        what = Verdict.REFINED if verdict == Agreement.SHARPER else Verdict.CONFIRMED
         self.counters[what] += 1
         return what
 
@@ -108,18 +125,17 @@ def learnable(estimate: Estimate | None) -> bool:
             estimate.reason != FROM_MEMORY)
 
 
-def agreement(held: str, fresh: str) -> str:
+def agreement(held: str, fresh: str) -> Agreement:
     """How a fresh decision ``fresh`` stands to ``held`` (each a material or
-    a pair "a|b"): "same", "sharper" (fewer materials, all held), "vaguer"
-    (more, holding all held) or "disagrees"."""
+    a pair "a|b")."""
     a, b = set(held.split("|")), set(fresh.split("|"))
     if a == b:
-        return "same"
+        return Agreement.SAME
     if b < a:
-        return "sharper"
+        return Agreement.SHARPER
     if a < b:
-        return "vaguer"
-    return "disagrees"
+        return Agreement.VAGUER
+    return Agreement.DISAGREES
 
 
 def remembered_estimate(material: str, confidence: float, classes) -> Estimate:

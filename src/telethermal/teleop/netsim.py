@@ -52,7 +52,8 @@ from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import MasterDisplay, SlaveNews
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.session import ESTIMATE_ROUTES, MasterSession, SlaveSession
+from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession,
+                                        SlaveSession)
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
                                      display_model_args, draw_operator, master_rng,
                                      pad_resistance, safety_summary, slave_rng, with_finger)
@@ -255,10 +256,10 @@ class SimSlaveService:
         if m["kind"] != "contact_event":
             return
         verdict = self.session.classify(m)
-        if verdict == "touch":
+        if verdict == ContactRequest.TOUCH:
             self.session.touch(m["contact_id"], now, m.get("finger_temp_c"))
             self.touch_t0 = now
-        elif verdict == "lift":
+        elif verdict == ContactRequest.LIFT:
             self._out += self.session.lift(now)[0]
 
     def step(self, now: float, send) -> None:

@@ -398,11 +398,13 @@ class InProcessWire:
     def slave_period(self, t: float) -> None:
         out = []
         for m in self._to_slave:
+            from telethermal.teleop.session import ContactRequest
+
             verdict = self.slave.classify(m)
-            if verdict == "touch":
+            if verdict == ContactRequest.TOUCH:
                 self.slave.touch(m["contact_id"], t, m.get("finger_temp_c"))
                 self.slave_t0_s = t
-            elif verdict == "lift":
+            elif verdict == ContactRequest.LIFT:
                 out += self.slave.lift(t)[0]
         self._to_slave = []
         for send in out + self.slave.step(t):

@@ -36,13 +36,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import ESTIMATE_KINDS, SlaveLink
 from telethermal.teleop.master import SlaveNews
-from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.memory import ObjectMemory, Verdict
 from telethermal.wire.schema import LOSSLESS
 
 #: Samples per ``measurement_batch``.
@@ -50,6 +51,21 @@ BATCH = 10
 #: How long the master may render a trajectory with the link lost (s).
 TRAJECTORY_VALID_S = 60.0
 ESTIMATE_ROUTES = ("stream", "lossless")
+
+
+class ContactRequest(StrEnum):
+    """What a master's ``contact_event`` asks of the slave's session."""
+    TOUCH = "touch"              # the pad goes down
+    LIFT = "lift"                # of the contact going on, by its owner
+    IGNORED = "ignored"          # anything else (counted by the driver)
+
+
+class ServiceState(StrEnum):
+    """A service's state, as ``status.state`` carries it (PROTOCOL.md)."""
+    IDLE = "idle"
+    TOUCHING = "touching"
+    RENDERING = "rendering"
+    STOPPING = "stopping"
 
 
 @dataclass(frozen=True)
@@ -132,15 +148,14 @@ class SlaveSession:
                                                **self.object_fields()))
 
     # ------------------------------------------------------------ contacts
-    def classify(self, m: dict, peer_session: str | None = None) -> str:
-        """What a master's ``contact_event`` asks: "touch" (the pad goes
-        down), "lift" (of the contact going on, by its owner) or "ignored"."""
+    def classify(self, m: dict, peer_session: str | None = None) -> ContactRequest:
+        """What a master's ``contact_event`` asks of this session."""
         if m["touching"] and not self.touching:
-            return "touch"
+            return ContactRequest.TOUCH
         if not m["touching"] and self.touching and m["contact_id"] == self.contact_id and \
                 peer_session == self.owner:
-            return "lift"
-        return "ignored"
+            return ContactRequest.LIFT
+        return ContactRequest.IGNORED
 
     def touch(self, contact_id: int, now: float, finger_c: float | None,
               owner: str | None = None) -> None:
@@ -152,11 +167,11 @@ class SlaveSession:
         self._decided_label = self._decision_sent = None
         self._sp_sample = -1
 
-    def lift(self, now: float) -> tuple[list[Send], str]:
+    def lift(self, now: float) -> tuple[list[Send], Verdict]:
         """The pad leaves the object: the final estimate if unsent, the
         lift event; returns those and the memory's verdict on the touch."""
         if not self.touching:
-            return [], "ignored"
+            return [], Verdict.IGNORED
         out = []
         est = self.pad.estimate
         if est is not None and est is not self._decision_sent:

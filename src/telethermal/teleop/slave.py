@@ -220,14 +220,14 @@ class Slave:
         """Time after contact of the first commitment (to a material or a
         group, later refined), or None."""
         return next((ev.estimate.t_s for ev in self.events
-                     if ev.estimate.decided and ev.estimate.label != "unknown"), None)
+                     if ev.estimate.decided and ev.estimate.label != UNKNOWN), None)
 
     @property
     def first_commitment(self) -> Estimate | None:
         """The first committed estimate (a material, or a group later
         refined), or None: :attr:`committed_at_s` is its time."""
         return next((ev.estimate for ev in self.events
-                     if ev.estimate.decided and ev.estimate.label != "unknown"), None)
+                     if ev.estimate.decided and ev.estimate.label != UNKNOWN), None)
 
     def decided_at_s(self, label: str) -> float | None:
         """Time after contact at which ``label`` itself was first decided

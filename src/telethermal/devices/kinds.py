@@ -1,0 +1,30 @@
+"""The kinds of devices a service runs on, validated in one place."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class DeviceKind(StrEnum):
+    #: The simulator directly.
+    SIM = "sim"
+    #: The simulator behind emulated boards (a pty, a virtual CAN bus), read
+    #: and commanded through the real drivers.
+    EMULATED = "emulated"
+    #: The real boards at ``board_url`` and ``can_bus``.
+    HARDWARE = "hardware"
+
+
+def device_kind(value: str, board_url: str = "", can_bus: str = "",
+                example_tty: str = "/dev/ttyUSB0") -> DeviceKind:
+    """``value`` as a :class:`DeviceKind`; ``ValueError`` naming what is
+    wrong: an unknown kind, or hardware without its two ports."""
+    try:
+        kind = DeviceKind(value)
+    except ValueError:
+        *first, last = (repr(k.value) for k in DeviceKind)
+        raise ValueError(f"devices must be {', '.join(first)} or {last}, got {value!r}") from None
+    if kind == DeviceKind.HARDWARE and not (board_url and can_bus):
+        raise ValueError(f"devices = 'hardware' needs board_url (e.g. {example_tty}) and "
+                         "can_bus (e.g. socketcan:can0)")
+    return kind
