@@ -13,8 +13,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "tt_board.h"
-#include "tt_peltier.h"
+#include "tt_types.h"
 
 /* ---- time */
 

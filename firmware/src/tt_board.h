@@ -34,6 +34,7 @@
 #include <stdint.h>
 
 #include "tt_cobs.h"
+#include "tt_types.h"
 
 #define TT_BOARD_VERSION 1u       /* the display's board */
 #define TT_BOARD_VERSION_SLAVE 2u /* the slave's board */
@@ -69,20 +70,6 @@ typedef struct {
     float pad_drive;    /* version 2 only */
     uint8_t status;
 } tt_board_record;
-
-/* One sample of the board's channels; a channel that could not be read
- * has its status bit clear (its value is then ignored by the driver). */
-typedef struct {
-    uint32_t t_us; /* the board's clock when the channels were sampled */
-    float flux_uv;
-    float tc_uv;
-    float cj_c;
-    float force_n;
-    float ir_object_c;  /* version 2 only */
-    float ir_ambient_c; /* version 2 only */
-    float pad_drive;    /* version 2 only */
-    uint8_t status;
-} tt_board_sample;
 
 /* The record's bytes, CRC included: version 1's layout (27 bytes) for
  * version 1, version 2's (39 bytes) for any other, as the Python codec

@@ -1,6 +1,6 @@
 #include "tt_pad.h"
 
-#include "tt_peltier.h"
+#include "tt_bytes.h"
 
 int tt_pad_cmd_decode(const uint8_t *data, uint8_t dlc, tt_pad_cmd *out)
 {

@@ -25,6 +25,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "tt_types.h"
+
 #define TT_CAN_VERSION 2u
 #define TT_CAN_NODE 1u
 #define TT_PELTIER_CMD_ID (0x100u + TT_CAN_NODE)
@@ -68,10 +70,6 @@ typedef struct {
     uint8_t version;
 } tt_peltier_heartbeat;
 
-/* Little-endian int16 in a data field (two's complement, portably). */
-int16_t tt_get_i16(const uint8_t *p);
-void tt_put_i16(uint8_t *p, int16_t v);
-
 /* Frame codecs. A decoder returns 0, or -1 if the data field is shorter
  * than the message (`out` untouched). */
 int tt_peltier_cmd_decode(const uint8_t *data, uint8_t dlc, tt_peltier_cmd *out);
@@ -81,15 +79,6 @@ void tt_peltier_status_encode(const tt_peltier_status *st, uint8_t out[TT_PELTIE
 int tt_peltier_heartbeat_decode(const uint8_t *data, uint8_t dlc, tt_peltier_heartbeat *out);
 void tt_peltier_heartbeat_encode(const tt_peltier_heartbeat *hb,
                                  uint8_t out[TT_PELTIER_HEARTBEAT_DLC]);
-
-/* What the driver measures each poll (filled by hal_peltier_measure). */
-typedef struct {
-    int16_t junction_cc; /* the active pad: the actuator (junction or water) */
-    int16_t heatsink_cc;
-    int16_t current_ma;
-    int16_t drive_milli; /* the active pad only: current fraction or heater duty, 0.001 */
-    bool sensors_ok;     /* false: a temperature sensor is open or shorted */
-} tt_peltier_measure;
 
 /* Limits of the element a lab builds; tt_peltier_default_config gives
  * the values the project's emulator uses. */

@@ -149,6 +149,34 @@ def test_no_import_circle():
     assert circles(_graph()) == []
 
 
+FIRMWARE = ROOT.parents[1] / "firmware"
+
+
+def c_graph(folder: Path) -> dict[str, list[tuple[int, str]]]:
+    """The firmware's quoted ``#include``s as a graph of units (a ``.c`` and
+    its ``.h`` are one unit, named by path without the suffix)."""
+    import re
+
+    graph: dict[str, list[tuple[int, str]]] = {}
+    for path in sorted(folder.rglob("*.[ch]")):
+        unit = str(path.relative_to(folder).with_suffix(""))
+        graph.setdefault(unit, [])
+        for line, text in enumerate(path.read_text().splitlines(), 1):
+            m = re.match(r'\s*#\s*include\s+"([^"]+)"', text)
+            if m:
+                target = (path.parent / m.group(1)).resolve().relative_to(folder.resolve())
+                graph[unit].append((line, str(target.with_suffix(""))))
+    return graph
+
+
+def test_no_include_circle_in_the_firmware():
+    # Issue 26: tt_pad.c and tt_peltier.c included each other (for the byte
+    # helpers, now in tt_bytes.c).
+    graph = c_graph(FIRMWARE)
+    assert "src/tt_peltier" in graph and "src/tt_bytes" in graph
+    assert circles(graph) == []
+
+
 def test_the_checks_see_a_circle_and_an_upward_import():
     # The checks themselves, on a made-up graph: they must be able to fail.
     graph = {"telethermal.physics.a": [(1, "telethermal.render.b")],

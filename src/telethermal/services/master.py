@@ -22,14 +22,14 @@ from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
-from telethermal.errors import TelethermalError, WindowFull
+from telethermal.errors import TelethermalError
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
-from telethermal.teleop.session import MasterSession, ServiceState
+from telethermal.teleop.session import MasterSession, ServiceState, send_through
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
                                      draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
@@ -124,13 +124,7 @@ class MasterService:
         return self.session.link
 
     def _send(self, sends) -> None:
-        for s in sends:
-            try:
-                self.endpoint.send(s.kind, **s.fields)
-            except WindowFull as exc:
-                # The slave has acknowledged nothing for a whole window: the
-                # event is not sent (told, counted); the display goes on.
-                log.error("%s", exc)
+        send_through(self.endpoint, sends, log)
 
     # ------------------------------------------------------------ hardware
     def _open_hardware(self) -> None:

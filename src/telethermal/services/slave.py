@@ -17,8 +17,7 @@ from pathlib import Path
 import zmq
 
 from telethermal.devices.kinds import DeviceKind
-from telethermal.errors import (CalibrationError, ModelFileError, TelethermalError,
-                                WindowFull)
+from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
@@ -29,7 +28,8 @@ from telethermal.services.slave_devices import (calibrate, device_report, flat_c
                                                 open_devices)
 from telethermal.teleop.memory import ObjectMemory, Verdict
 from telethermal.teleop.run import slave_rng, with_finger
-from telethermal.teleop.session import ContactRequest, ServiceState, SlaveSession
+from telethermal.teleop.session import (ContactRequest, ServiceState, SlaveSession,
+                                        send_through)
 from telethermal.teleop.slave import BOARD_LOST, Slave
 
 log = logging.getLogger("telethermal.slave")
@@ -116,14 +116,7 @@ class SlaveService:
         return self.session.contact_id
 
     def _send(self, sends) -> None:
-        for s in sends:
-            try:
-                self.endpoint.send(s.kind, **s.fields)
-            except WindowFull as exc:
-                # The master has acknowledged nothing for a whole window: the
-                # message is not sent (told, counted); the loop goes on.
-                log.error("%s", exc)
-                continue
+        for s in send_through(self.endpoint, sends, log):
             if s.kind == "flux_trajectory":
                 log.info("decided contact_id=%d material=%s (%s)", self.contact_id,
                          s.fields["material"], decision_text(self.pad, s.fields["material"]))

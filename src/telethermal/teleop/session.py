@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from telethermal.errors import WindowFull
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
@@ -84,6 +85,22 @@ class Send:
     @property
     def message(self) -> dict:
         return {"kind": self.kind, **self.fields}
+
+
+def send_through(endpoint, sends: list[Send], log) -> list[Send]:
+    """Send each of ``sends`` on a transport ``endpoint``; returns those
+    sent. A send the lossless window refuses (the peer has acknowledged
+    nothing for a whole window) is logged and left out: the caller's loop
+    goes on, and nothing it sent before is lost."""
+    sent = []
+    for s in sends:
+        try:
+            endpoint.send(s.kind, **s.fields)
+        except WindowFull as exc:
+            log.error("%s", exc)
+            continue
+        sent.append(s)
+    return sent
 
 
 def _finite_or_none(value: float) -> float | None:
