@@ -136,3 +136,28 @@ def test_the_slave_session_lifts_only_the_contact_of_its_owner():
     assert s.lift(5.3) == ([], "ignored")
     with pytest.raises(ValueError, match="estimates must be"):
         SlaveSession(CURVES, 100.0, estimates="carrier pigeon")
+
+
+def test_a_slave_restarted_mid_contact_reaches_the_display_as_news():
+    # The restarted slave sends its session_config anew: the display renders
+    # its curves from the next period's news (no driver assigns the display's
+    # generator), and the master's own contact stays open until its release.
+    from telethermal.devices.readings import PadSensors
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+
+    s = session()
+    s.period(Step(ContactEvent(True, 0.0)), 10.0, 2.0, 31.0)
+    display = MasterDisplay(DisplayConfig(feedforward_model="static"), None, 1e-3, 0.01, 31.0,
+                            idle_c=22.0)
+    display.step(0.0, 1e-3, PadSensors(0.0, 22.0, 0.0), s.news(10.0, True))
+    before = display.generator
+    assert before is s.link.generator
+    curves = {m: {"t_s": [0.1, 1.0], "g_w_m2k": [7000.0, 3000.0]} for m in CLASSES}
+    s.on_message({"kind": "session_config", "scene": "x", "sample_rate_hz": 100.0,
+                  "classes": list(CLASSES), "identifier": "m", "threshold": 0.9,
+                  "curves": curves}, 10.5)
+    s.on_message({"kind": "contact_event", "contact_id": 0, "touching": False, "t_s": 10.5,
+                  "force_n": 0.0, "object_temp_c": 22.0, "object_id": "a"}, 10.5)
+    display.step(0.001, 1e-3, PadSensors(0.0, 22.0, 0.0), s.news(10.501, True))
+    assert display.generator is not before and display.generator is s.link.generator
+    assert s.contact_id == 1 and s.link.contact_id == 1

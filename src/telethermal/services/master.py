@@ -150,7 +150,6 @@ class MasterService:
     def _hardware_period(self, now: float, dt_s: float) -> None:
         display, t, session = self.display, now - self.t0, self.session
         news = session.news(now, self.endpoint.peer_alive)
-        display.generator = self.link.generator
         sensors = self.hardware.read(t)
         step = display.step(t, dt_s, sensors, news)
         self.hardware.apply(t, step, dt_s, sensors.force_n)
@@ -226,7 +225,6 @@ class MasterService:
         touch, session = self.touch, self.session
         t = now - touch.start - PRE_CONTACT_S
         news = session.news(now, self.endpoint.peer_alive)
-        touch.display.generator = self.link.generator      # a restarted slave sends anew
         sensors = touch.devices.read(t)
         step = touch.display.step(t, dt_s, sensors, news)
         touch.devices.apply(t, step, dt_s, sensors.force_n)

@@ -224,7 +224,7 @@ class SlaveLink:
             elif estimate is not None and estimate.decided:
                 valid = now_s - self.onset_s <= self.final_valid_s
         return SlaveNews(self.object_temp_c, estimate, self.classes, setpoint_w_m2,
-                         link_ok=valid)
+                         link_ok=valid, generator=self.generator)
 
     @property
     def anchor_lag_s(self) -> float:

@@ -1,12 +1,10 @@
 """The master: the operator's finger on a Peltier display pad, a heat-flux
 PID loop, force-based contact detection and the safety supervisor.
 
-One :meth:`MasterDisplay.step` per control period. It is given the time,
-the period actually elapsed, what its own sensors read and what the slave
-has said so far (object temperature, material estimate); it returns the
-Peltier junction temperature the supervisor let through. It never touches a
-device or a clock, so the same object runs in the in-process session, in the
-master service and under test.
+One :meth:`MasterDisplay.step` per control period: given the time, the
+period elapsed, its own sensors' readings and the slave's news, it returns
+what the supervisor let through and the contact event of the period. It
+never touches a device or a clock (in-process, in the service, under test).
 
 Phases of a touch (:class:`Phase`, a ``str`` enum: the names below are its
 values, which recordings, the view stream and the status hold):
@@ -155,6 +153,8 @@ class SlaveNews:
     #: (its object memory, or the slave's own earlier touch): the display
     #: pre-conditions its pad for it; None: unknown, the idle policy's choice.
     expected_material: str | None = None
+    #: The curves to render (the slave's, anew when it restarts); None: its own.
+    generator: object | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -224,8 +224,7 @@ class MasterDisplay:
         self.pid = Pid(config.gains, self.nominal_dt_s)
         self.detector = ContactDetector(config.contact_on_n, config.contact_off_n,
                                         config.debounce_s)
-        # Start in the safe state (neutral), or, when told the pad has been
-        # idling at ``idle_c`` already, from there.
+        # Start in the safe state (neutral), or from ``idle_c`` (idling there).
         self.safety = initial_state(config.limits) if idle_c is None else \
             replace(initial_state(config.limits), applied_temp_c=idle_c, safe=False)
         self._command_c = self.safety.applied_temp_c
@@ -476,6 +475,7 @@ class MasterDisplay:
     def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:
         """One control period: the phase from the contact, the slave's
         decision and the link; then track or hold; then the limits."""
+        self.generator = news.generator or self.generator
         if self.impedance is not None:
             self.impedance.observe(sensors.flux_w_m2, dt_s)
         contact = self._on_contact(t_s, sensors.force_n)
