@@ -157,3 +157,17 @@ def test_dataset_import_adds_recorded_contacts_all_or_nothing(recorded, tmp_path
     with pytest.raises(DatasetError, match="imported before"):
         import_recordings([path], into)
     assert len(load_dataset(into)) == 1                            # left as it was
+
+
+def test_a_recording_written_before_the_session_core_replays_sample_for_sample():
+    # Issue 26's hard case: written by the code at 59b2bb7 (tests/data/NOTICE),
+    # whose in-process display rendered the full generator (no sampled_curves
+    # key): the new code reads it and replays the same commands.
+    from pathlib import Path
+
+    path = Path(__file__).parents[1] / "data" / "wood-59b2bb7.mcap"
+    rec = read_recording(path)
+    assert "sampled_curves" not in rec.config
+    s = replay(path)["summary"]
+    assert s["identical"] and s["junction_max_abs_diff_c"] == 0.0
+    assert s["slave"]["same_estimates"]
