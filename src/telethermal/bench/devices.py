@@ -33,6 +33,7 @@ import time
 import numpy as np
 
 from telethermal.devices.display import EmulatedDisplay, SimDisplay
+from telethermal.ident.anytime import members
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.master import MasterStep, Phase
@@ -171,7 +172,7 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
         return sum(r[path] == r["material"] for r in rows) / n
 
     def accuracy_with_pairs(path):
-        return sum(r["material"] in r[path].split("|") for r in rows) / n
+        return sum(r["material"] in members(r[path]) for r in rows) / n
 
     pad_diff = np.array([r["pad_true_c_emulated"] - r["pad_true_c_sim"] for r in rows])
     return {"scene": scene.name, "identifier": ident.method, "trials": n,

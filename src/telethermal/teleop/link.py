@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.ident.anytime import UNKNOWN, Estimate, members
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.master import SlaveNews
 from telethermal.teleop.memory import Agreement, agreement, remembered_estimate
@@ -99,7 +99,7 @@ class SlaveLink:
         self.estimates, self.trajectory = [], None
         self.latest = self.decision = self.memory = self.recalled = None
         if self.remembered is not None and \
-                all(m in self.classes for m in self.remembered[0].split("|")):
+                all(m in self.classes for m in members(self.remembered[0])):
             self.memory = remembered_estimate(*self.remembered, self.classes)
             self.recalled = self.memory          # kept for the report, never cleared
             self._memory_object = self.object_id

@@ -30,7 +30,7 @@ import logging
 from dataclasses import asdict, dataclass
 from enum import StrEnum
 
-from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.ident.anytime import UNKNOWN, Estimate, members
 
 log = logging.getLogger(__name__)
 
@@ -128,7 +128,7 @@ def learnable(estimate: Estimate | None) -> bool:
 def agreement(held: str, fresh: str) -> Agreement:
     """How a fresh decision ``fresh`` stands to ``held`` (each a material or
     a pair "a|b")."""
-    a, b = set(held.split("|")), set(fresh.split("|"))
+    a, b = set(members(held)), set(members(fresh))
     if a == b:
         return Agreement.SAME
     if b < a:
@@ -141,6 +141,6 @@ def agreement(held: str, fresh: str) -> Agreement:
 def remembered_estimate(material: str, confidence: float, classes) -> Estimate:
     """The estimate the master renders from an announcement, at t = 0: one
     material, or a pair's members weighted equally."""
-    members = material.split("|")
-    return Estimate(0.0, tuple(1.0 / len(members) if c in members else 0.0 for c in classes),
+    these = members(material)
+    return Estimate(0.0, tuple(1.0 / len(these) if c in these else 0.0 for c in classes),
                     material, float(confidence), True, FROM_MEMORY)
