@@ -1,8 +1,8 @@
-"""One set of session rules, two drivers (issue 26): the slave service (on
-its sockets) and the simulated network of ``bench faults`` run the same
-:class:`~telethermal.teleop.session.SlaveSession`, so the same touch fed the
-same contact events at the same instants gives the same messages, byte for
-byte (msgpack, as on the wire). Before the session core the two differed:
+"""One set of session rules, three drivers (issue 26): the slave service (on
+its sockets), the simulated network of ``bench faults`` and the in-process
+run all drive the same :class:`~telethermal.teleop.session.SlaveSession`,
+so the same touch fed the same contact events at the same instants gives
+the same messages, byte for byte (msgpack, as on the wire). Before the session core the two differed:
 the simulator sent a trajectory only on a label change and a fixed
 ``valid_s``, its touching event left out ``object_material``, and it
 never lifted."""
@@ -18,7 +18,7 @@ from telethermal.services.slave import SlaveService
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.netsim import SimSlaveService
-from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.teleop.run import InProcessWire, slave_rng, with_finger
 from telethermal.teleop.slave import Slave
 from telethermal.wire.transport import TransportConfig
 
@@ -43,8 +43,7 @@ def wire(messages):
 
 
 @pytest.mark.parametrize("material, lift_at_s", [("aluminium", 1.0), ("wood", 0.03)])
-def test_the_service_and_the_simulated_network_send_the_same_messages(models, material,
-                                                                      lift_at_s):
+def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
     identifier, generator = models
     control, stream, admin = free_ports(3)
     config = SlaveConfig(place=material, seed=5, admin_port=admin, transport=TransportConfig(
@@ -55,7 +54,13 @@ def test_the_service_and_the_simulated_network_send_the_same_messages(models, ma
     pad = Slave(SCENE, material, identifier, slave_rng(5), session=service.sensors)
     sim = SimSlaveService(pad, service.curves, object_id=material, memory=ObjectMemory(),
                           rate_hz=service.rate_hz)
-    from_service, from_sim = [], []
+    # The in-process run's wire, on a third copy of the same trial.
+    inproc = InProcessWire(Slave(SCENE, material, identifier, slave_rng(5),
+                                 session=service.sensors), generator, identifier,
+                           service.rate_hz, material)
+    from_service, from_sim, from_inproc = [], [], []
+    inproc.master.on_message = lambda m, now, offset_s=None: from_inproc.append(
+        (m["kind"], {f: v for f, v in m.items() if f != "kind"}))
     service.endpoint.send = lambda kind, **fields: from_service.append((kind, fields)) or 0
     events = master_events(lift_at_s)
     try:
@@ -64,6 +69,8 @@ def test_the_service_and_the_simulated_network_send_the_same_messages(models, ma
             if k in events:
                 service._on_message(events[k], now)
                 sim.on_message(events[k], now)
+                inproc._to_slave.append(events[k])
+            inproc.slave_period(now)
             if service.touch_t0 is not None:
                 service._sample(now)
             sim.step(now, lambda t, m, lossless: from_sim.append(
@@ -72,8 +79,8 @@ def test_the_service_and_the_simulated_network_send_the_same_messages(models, ma
         service.shutdown()
     sent = [(kind, fields) for kind, fields in from_service
             if kind not in ("measurement_batch", "status")]   # the simulator models no reader
-    assert [k for k, _ in sent] == [k for k, _ in from_sim]
-    assert wire(sent) == wire(from_sim)
+    assert [k for k, _ in sent] == [k for k, _ in from_sim] == [k for k, _ in from_inproc]
+    assert wire(sent) == wire(from_sim) == wire(from_inproc)
     kinds = [k for k, _ in sent]
     # Both ends of the contact, and the slave's lift last.
     assert kinds.count("contact_event") == 2 and kinds[-1] == "contact_event"
@@ -88,3 +95,29 @@ def test_the_service_and_the_simulated_network_send_the_same_messages(models, ma
         assert service.memory.recall(material) is None
         assert sim.session.memory.recall(material) is None
     np.testing.assert_equal(service.memory.to_dict(), sim.session.memory.to_dict())
+
+
+def test_placing_another_object_during_a_contact_lifts_the_pad_first(models):
+    # Under delay, the operator's next `place` can reach the slave before the
+    # master's lift: the contact going on ends (its lift and final decision
+    # sent, counted), then the new object is placed (bench faults hit this).
+    identifier, generator = models
+    control, stream, admin = free_ports(3)
+    config = SlaveConfig(place="wood", seed=5, admin_port=admin, transport=TransportConfig(
+        security="plain", control_port=control, stream_port=stream))
+    service = SlaveService(config, identifier, generator)
+    sent = []
+    service.endpoint.send = lambda kind, **fields: sent.append((kind, fields)) or 0
+    replies = []
+    service.admin.reply = lambda **r: replies.append(r)
+    try:
+        service._on_message(master_events(1.0)[0], 100.0)
+        for k in range(300):
+            service._sample(100.0 + k / 1000)
+        service._on_admin({"cmd": "place", "material": "steel", "seed": 9})
+        assert service.touch_t0 is None and service.material == "steel"
+        assert service.counters["lifted_by_place"] == 1 and replies[-1]["ok"]
+        lifts = [f for k, f in sent if k == "contact_event" and f["touching"] is False]
+        assert [f["contact_id"] for f in lifts] == [1]
+    finally:
+        service.shutdown()

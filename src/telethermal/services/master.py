@@ -97,7 +97,13 @@ class MasterService:
         #: The session's rules (what the master reads, what it tells the
         #: slave): the simulated network of ``bench faults`` runs the same.
         self.session = MasterSession()
+        #: The display loop on the real clock (``run``); its statistics are
+        #: each touch's report.
+        self.loop = FixedRateLoop(1.0 / config.rate_hz, RealClock())
         self.hardware = None
+        #: The hardware display's controller and its clock origin (hardware only).
+        self.display: MasterDisplay | None = None
+        self.t0 = 0.0
         self.view = None
         try:
             if config.view_port:
@@ -358,7 +364,6 @@ class MasterService:
 
     def run(self) -> None:
         self._realtime()
-        self.loop = FixedRateLoop(1.0 / self.config.rate_hz, RealClock())
         try:
             self.loop.run(self.step, math.inf, keep_last=100_000)
         finally:

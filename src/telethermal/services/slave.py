@@ -84,8 +84,11 @@ class SlaveService:
         #: (status messages and the admin socket).
         self.counters = self.endpoint.extra_counters
         self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
-                             memory_overruled=0)
+                             memory_overruled=0, lifted_by_place=0)
         self.object_id: str | None = None
+        self.material = ""                          # under the pad (``place``)
+        self.sensors = None                         # this process's instruments
+        self._session_rng = None
         self._seed = config.seed
         self.calibration_error: str | None = None
         self.pad: Slave | None = None
@@ -306,6 +309,13 @@ class SlaveService:
                                           len(object_id.encode()) > 256):
                 raise ValueError(f"object_id must be a non-empty string of at most 256 bytes, "
                                  f"got {object_id!r}")
+            if self.touch_t0 is not None:
+                # The pad is moved to another object: the contact going on
+                # ends first (its lift may still be on the way from the master).
+                log.warning("place during contact_id=%d: the pad is lifted first",
+                            self.contact_id)
+                self.counters["lifted_by_place"] += 1
+                self._lift(time.monotonic())
             self.place(str(r["material"]), int(r.get("seed", self._seed + 1)), object_id)
             # object_true_c: the simulator's truth, for comparing with direct contact
             return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c,

@@ -2,12 +2,16 @@
 the object, identifies it, the master renders the flux, and the result is
 compared with the operator's finger touching the object directly.
 
-Both sides touch at session time 0 (learning-based-thermal-rendering:
-"contact is established at the same time both in the master and the slave
-side"). The master runs its loop at ``config.rate_hz`` on a simulated clock
-(exact and instant) or on the real clock (``realtime=True``: the same loop,
-sleeping to absolute deadlines, its period measured). There is no network:
-what the slave knows at time t, the master knows at time t.
+The finger touches at session time 0. The two sides run the services'
+session rules (:mod:`telethermal.teleop.session`) over a wire with no delay
+(:class:`InProcessWire`): the slave's pad goes down when the master's
+contact onset reaches it (the paper has both sides touch at once,
+learning-based-thermal-rendering: "contact is established at the same time
+both in the master and the slave side"; the product's slave waits for the
+master's onset, a debounce later), and what the slave sends, the master
+reads the same period. The master runs its loop at ``config.rate_hz`` on a
+simulated clock (exact and instant) or on the real clock (``realtime=True``:
+the same loop, sleeping to absolute deadlines, its period measured).
 
 The operator is drawn like a person of database 2: finger temperature,
 skin properties, pressing force (hence the contact conductance); the same
