@@ -34,10 +34,11 @@ from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_resistance
 from telethermal.physics.materials import get_material
-from telethermal.physics.scene import FingerSpec, Scene, finger_contact_model
+from telethermal.physics.scene import FingerSpec, Scene
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
 from telethermal.physics.thermoelectric import ModuleState, ThermoelectricStack
 from telethermal.devices.readings import PadSensors
+from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
 from telethermal.teleop.slave import Slave
 
@@ -46,8 +47,6 @@ from telethermal.teleop.slave import Slave
 DEFAULT_FINGER = FingerSpec(temp_c=33.0, temp_sd_c=0.8, persons=5, trials_per_person=10,
                             contact_duration_s=60.0, contact_conductance_w_m2k=5000.0,
                             property_sd=0.12)
-#: Rendered flux within this fraction of the direct-contact peak counts as correct.
-CORRECT_WITHIN = 0.10
 PRE_CONTACT_S = 0.2
 AFTER_RELEASE_S = 0.2
 
@@ -451,43 +450,3 @@ def safety_summary(master: MasterDisplay) -> dict:
                 k.startswith("clamped"))
     return {"safety_events": int(count), "safety_event_counts": events,
             "display_event_counts": dict(master.events)}
-
-
-def compare_with_direct(scene: Scene, material: str, object_true_c: float, operator: Operator,
-                        trace: dict, contact_s: float, render_from_s: float | None) -> dict:
-    """The issue's metrics against the same finger touching the object
-    directly; adds the direct-contact curves to ``trace``."""
-    obj = next(o for o in scene.objects if o.material == material)
-    t = trace["t_s"]
-    during = (t >= 0) & (t < contact_s)
-    finger_model, _ = finger_contact_model(scene, obj)
-    tc = t[during]
-    ref = finger_model.solve(np.clip(tc, 1e-9, None), operator.finger_c, object_true_c,
-                             operator.conductance_w_m2k, k_scale_a=operator.skin_k_scale,
-                             heat_scale_a=operator.skin_heat_scale,
-                             sensor_lag_s=scene.sensors.flux_lag_s)
-    # Direct contact: the finger loses q to the object; the display must give -q.
-    direct = -ref.flux_w_m2[0]
-    for key, values in (("direct_flux_w_m2", direct),
-                        ("direct_flux_sensed_w_m2", -ref.flux_sensed_w_m2[0]),
-                        ("direct_skin_c", ref.surface_temp_a_c[0])):
-        trace[key] = np.full(len(t), np.nan)
-        trace[key][during] = values
-    err = trace["flux_w_m2"][during] - direct
-    peak = float(np.max(np.abs(direct)))
-    window = tc >= render_from_s if render_from_s is not None else np.ones(len(tc), bool)
-
-    def rms_rel(mask):
-        return float(np.sqrt(np.mean(err[mask] ** 2)) / peak) if mask.any() and peak > 0 \
-            else math.nan
-
-    bad = np.abs(err) > CORRECT_WITHIN * peak
-    correct_from = float(tc[np.nonzero(bad)[0][-1] + 1]) if bad.any() and not bad[-1] else \
-        (float(tc[0]) if not bad.any() else math.nan)
-    return {"direct_peak_flux_w_m2": peak,
-            "flux_rms_error_rel": rms_rel(window),
-            "flux_rms_error_rel_first_s": rms_rel(tc < 1.0),
-            "flux_rms_error_rel_whole": rms_rel(np.ones(len(tc), bool)),
-            "temp_rms_error_c": float(np.sqrt(np.nanmean(
-                (trace["skin_surface_c"][during] - ref.surface_temp_a_c[0]) ** 2))),
-            "time_to_correct_flux_s": correct_from, "correct_within_rel": CORRECT_WITHIN}
