@@ -161,3 +161,18 @@ def test_a_slave_restarted_mid_contact_reaches_the_display_as_news():
     display.step(0.001, 1e-3, PadSensors(0.0, 22.0, 0.0), s.news(10.501, True))
     assert display.generator is not before and display.generator is s.link.generator
     assert s.contact_id == 1 and s.link.contact_id == 1
+
+
+def test_the_last_contacts_decision_is_not_news_at_the_next_onset():
+    # make demo caught it: the display steps on the news read before the
+    # period's onset opens the new contact; the previous touch's decision
+    # (aluminium) was still held then, and the display rendered it on the
+    # next object (plexiglass: 5.2 K skin error on the services).
+    s = session()
+    s.period(Step(ContactEvent(True, 0.0)), 10.0, 2.0, 31.0)
+    s.on_message(estimate(1, 0.08), 10.1, 0.0)
+    assert s.news(10.2, True).estimate.label == "aluminium"
+    s.period(Step(ContactEvent(False, 1.0)), 10.0, 0.0, 31.0)
+    assert s.news(12.0, True).estimate is None          # between contacts
+    s.period(Step(ContactEvent(True, 3.0)), 10.0, 2.0, 31.0)
+    assert s.news(13.0, True).estimate is None          # the new contact's own only

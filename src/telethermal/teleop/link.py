@@ -216,7 +216,9 @@ class SlaveLink:
     # ------------------------------------------------------------ per period
     def news(self, now_s: float, link_alive: bool, setpoint_w_m2: float | None = None
              ) -> SlaveNews:
-        estimate = self.estimate
+        # Between contacts nothing held is news: the last contact's decision
+        # must not reach the display at the next onset, before ``begin``.
+        estimate = self.estimate if self.contact_id is not None else None
         valid = link_alive
         if not link_alive and self.onset_s is not None:
             if self.trajectory is not None:
