@@ -170,7 +170,13 @@ def _with_late_error(result):
 
 
 def _touch(scene, material, ports, seed, source, nemesis):
-    """One touch with the nemesis at work; None when the master died with it."""
+    """One touch with the nemesis at work; None when the master died with it.
+    A first touch, as on the simulated clock: the slave forgets the objects
+    it identified under the earlier settings (its process lives through all
+    of them, and from memory the master renders from t = 0: a repeat touch)."""
+    forgot = call(ports[2], "forget")
+    if not forgot.get("ok"):
+        raise TransportError(f"slave: {forgot.get('error')}")
     if nemesis.kind != "master":
         return _with_late_error(networked_touch(scene, material, ports, seed, CONTACT_S,
                                                 source=source, during=nemesis))
