@@ -209,25 +209,37 @@ def _slow_peer(args) -> dict:
     return result
 
 
-def _run_slow(host, port, n=N_SLOW) -> dict:
-    """``loopback.slow_receiver``: the slow-receiver case in two processes."""
+def _run_peers(args: list[str], what: str, timeout_s: float,
+               prefix=(None, None)) -> tuple[dict, dict]:
+    """This module's ``--peer sender`` and ``--peer receiver`` with ``args``
+    as two processes (each in its namespace of ``prefix``, if any); returns
+    what each wrote (sender, receiver)."""
     with tempfile.TemporaryDirectory() as tmp:
-        procs = [subprocess.Popen(
-            [sys.executable, "-m", "telethermal.bench.transport", "--peer", role, "--stack",
-             "slow", "--security", "plain", "--host", host, "--port", str(port), "--n", "0",
-             "--burst", str(n), "--out", str(Path(tmp) / f"{role}.json")],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-            for role in ("sender", "receiver")]
+        procs = []
+        for role, ns in zip(("sender", "receiver"), prefix):
+            cmd = [sys.executable, "-m", "telethermal.bench.transport", "--peer", role, *args,
+                   "--out", str(Path(tmp) / f"{role}.json")]
+            if ns:
+                cmd = ["ip", "netns", "exec", ns] + cmd
+            procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL,
+                                          stderr=subprocess.PIPE, text=True))
         for p in procs:
             try:
-                p.wait(180)
+                p.wait(timeout_s)
             except subprocess.TimeoutExpired:
                 p.kill()
         errors = [p.stderr.read() for p in procs if p.returncode]
         if errors:
-            raise RuntimeError(f"slow receiver peers failed: {errors[0][-800:]}")
-        sent = json.loads((Path(tmp) / "sender.json").read_text())
-        got = json.loads((Path(tmp) / "receiver.json").read_text())
+            raise RuntimeError(f"{what} peers failed: {errors[0][-800:]}")
+        return tuple(json.loads((Path(tmp) / f"{role}.json").read_text())
+                     for role in ("sender", "receiver"))
+
+
+def _run_slow(host, port, n=N_SLOW) -> dict:
+    """``loopback.slow_receiver``: the slow-receiver case in two processes."""
+    sent, got = _run_peers(["--stack", "slow", "--security", "plain", "--host", host,
+                            "--port", str(port), "--n", "0", "--burst", str(n)],
+                           "slow receiver", 180)
     accepted = sent["sent"] - sent["refused_by_window"]
     return {"sent": sent["sent"], "delivered": got["delivered"],
             "refused_by_window": sent["refused_by_window"],
@@ -254,29 +266,10 @@ def _raw_secure(sock, args, server):
 
 def _run_pair(stack, security, host, port, keys, prefix=(None, None), n=N_LATENCY,
               burst=N_THROUGHPUT) -> dict:
-    with tempfile.TemporaryDirectory() as tmp:
-        procs = []
-        for role, ns in zip(("sender", "receiver"), prefix):
-            cmd = [sys.executable, "-m", "telethermal.bench.transport", "--peer", role,
-                   "--stack", stack, "--security", security, "--host", host, "--port", str(port),
-                   "--n", str(n), "--burst", str(burst if stack == "e2e" else 0),
-                   "--interval", str(INTERVAL_S), "--out", str(Path(tmp) / f"{role}.json")]
-            if keys:
-                cmd += ["--keys", str(keys)]
-            if ns:
-                cmd = ["ip", "netns", "exec", ns] + cmd
-            procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL,
-                                          stderr=subprocess.PIPE, text=True))
-        for p in procs:
-            try:
-                p.wait(120)
-            except subprocess.TimeoutExpired:
-                p.kill()
-        errors = [p.stderr.read() for p in procs if p.returncode]
-        if errors:
-            raise RuntimeError(f"{stack}/{security} peers failed: {errors[0][-800:]}")
-        sent = json.loads((Path(tmp) / "sender.json").read_text())
-        got = json.loads((Path(tmp) / "receiver.json").read_text())
+    args = ["--stack", stack, "--security", security, "--host", host, "--port", str(port),
+            "--n", str(n), "--burst", str(burst if stack == "e2e" else 0),
+            "--interval", str(INTERVAL_S)] + (["--keys", str(keys)] if keys else [])
+    sent, got = _run_peers(args, f"{stack}/{security}", 120, prefix)
     lat = np.asarray(got["latency_s"]) * 1e6
     out = {"n": int(len(lat)), "p50_us": float(np.percentile(lat, 50)),
            "p99_us": float(np.percentile(lat, 99)), "max_us": float(lat.max())}

@@ -35,7 +35,7 @@ from typing import Protocol
 from telethermal.control.safety import SafetyLimits
 from telethermal.devices.board import Calibration, SensorBoard
 from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
-from telethermal.devices.kinds import DeviceKind, device_kind
+from telethermal.devices.kinds import DeviceKind, parse_device_kind
 from telethermal.devices.peltier import PeltierDriver
 from telethermal.devices.readings import PadSensors
 
@@ -213,7 +213,7 @@ DISPLAYS: dict[DeviceKind, Callable[..., Display]] = {
 def open_display(kind: str, touch, clock=time.monotonic, realtime: bool = False,
                  seed: int = 0) -> Display:
     """The display devices of ``kind`` around a simulated ``touch``."""
-    factory = DISPLAYS.get(device_kind(kind, "-", "-"))
+    factory = DISPLAYS.get(parse_device_kind(kind))
     if factory is None:
         raise ValueError(f"devices = {kind!r} has no simulated touch (kinds with one: "
                          f"{', '.join(DISPLAYS)}); the master service opens the hardware")

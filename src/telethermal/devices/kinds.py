@@ -15,15 +15,20 @@ class DeviceKind(StrEnum):
     HARDWARE = "hardware"
 
 
-def device_kind(value: str, board_url: str = "", can_bus: str = "",
-                example_tty: str = "/dev/ttyUSB0") -> DeviceKind:
-    """``value`` as a :class:`DeviceKind`; ``ValueError`` naming what is
-    wrong: an unknown kind, or hardware without its two ports."""
+def parse_device_kind(value: str) -> DeviceKind:
+    """``value`` as a :class:`DeviceKind`; ``ValueError`` naming the kinds."""
     try:
-        kind = DeviceKind(value)
+        return DeviceKind(value)
     except ValueError:
         *first, last = (repr(k.value) for k in DeviceKind)
         raise ValueError(f"devices must be {', '.join(first)} or {last}, got {value!r}") from None
+
+
+def device_kind(value: str, board_url: str, can_bus: str,
+                example_tty: str = "/dev/ttyUSB0") -> DeviceKind:
+    """A service config's kind: :func:`parse_device_kind`, and hardware
+    with both its ports."""
+    kind = parse_device_kind(value)
     if kind == DeviceKind.HARDWARE and not (board_url and can_bus):
         raise ValueError(f"devices = 'hardware' needs board_url (e.g. {example_tty}) and "
                          "can_bus (e.g. socketcan:can0)")

@@ -38,8 +38,11 @@ from telethermal.physics.scene import FingerSpec, Scene
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
 from telethermal.physics.thermoelectric import ModuleState, ThermoelectricStack
 from telethermal.devices.readings import PadSensors
+from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
+from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.session import ContactRequest, MasterSession, SlaveSession
 from telethermal.teleop.slave import Slave
 
 #: The fingertip used where a scene has none (the gripper scenes): the
@@ -316,7 +319,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
         t = now[0] = t_loop - PRE_CONTACT_S
         wire.slave_period(t)
         sensors = display.read(t)
-        news = replace(wire.master.news(t, True), expected_material=expected_material)
+        news = wire.master.news(t, True)
+        if expected_material is not None:
+            news = replace(news, expected_material=expected_material)
         step = master.step(t, dt_loop, sensors, news)
         display.apply(t, step, dt_loop, sensors.force_n)
         wire.master_period(step, sensors.force_n, operator.finger_ir_c)
@@ -384,10 +389,6 @@ class InProcessWire:
     say, which the master reads before its display step."""
 
     def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str):
-        from telethermal.render.sampled import SampledGenerator, sample_curves
-        from telethermal.teleop.link import SlaveLink
-        from telethermal.teleop.session import MasterSession, SlaveSession
-
         curves = self.curves = sample_curves(generator, [c for c in identifier.classes_
                                                          if c in generator.materials])
         self.slave = SlaveSession(curves, rate_hz, measurements=False)
@@ -401,8 +402,6 @@ class InProcessWire:
     def slave_period(self, t: float) -> None:
         out = []
         for m in self._to_slave:
-            from telethermal.teleop.session import ContactRequest
-
             verdict = self.slave.classify(m)
             if verdict == ContactRequest.TOUCH:
                 self.slave.touch(m["contact_id"], t, m.get("finger_temp_c"))

@@ -356,17 +356,12 @@ class MasterSession:
             return [Send(t, "contact_event", dict(contact_id=self.contact_id, touching=True,
                                                   t_s=t, force_n=max(float(force_n), 0.0),
                                                   finger_temp_c=finger_c))]
-        if self.contact_id is None:
-            return []
-        out = [Send(t, "contact_event", dict(contact_id=self.contact_id, touching=False, t_s=t,
-                                             force_n=0.0, finger_temp_c=finger_c))]
-        self.link.end()                  # what comes for this contact now is stale
-        self.contact_id = None
-        return out
+        return self.close_contact(t, finger_c)
 
     def close_contact(self, t_s: float, finger_c: float | None) -> list[Send]:
-        """The driver's touch is over with the contact still open (no
-        release was detected): the slave hears the lift all the same."""
+        """The contact going on ends (the display's release, or the driver's
+        touch is over with no release detected): the slave hears the lift,
+        and what comes for this contact from now on is stale."""
         if self.contact_id is None:
             return []
         out = [Send(t_s, "contact_event", dict(contact_id=self.contact_id, touching=False,
