@@ -59,11 +59,12 @@ _LIMITS = {"current_exceeded": 0, "hot_side_exceeded": 0, "sessions": 0}
 def _session_row(scene, material, identifier, generator, config, seed, realtime=False,
                  expected_material=None):
     start = time.process_time()
-    # A repeated touch (the material known from memory) is pre-conditioned
-    # (control/preconditioning.py); a first touch idles at the object.
+    # The pad idles by config.idle (control/preconditioning.py): by default a
+    # repeated touch (the material known from memory) is pre-conditioned for
+    # it, a first touch idles at the policy's choice for an unknown object.
     s = run_session(scene, material, identifier, generator, config, contact_s=CONTACT_S,
-                    seed=seed, realtime=realtime, expected_material=expected_material,
-                    precondition=expected_material is not None).summary
+                    seed=seed, realtime=realtime,
+                    expected_material=expected_material).summary
     cpu = time.process_time() - start
     module = s["module"]
     for key in ("current_exceeded", "hot_side_exceeded"):
@@ -106,16 +107,18 @@ def _per_material(rows) -> dict:
     return out
 
 
-def _materials(first: list[dict], repeat: list[dict]) -> dict:
+def _materials(first: list[dict], repeat: list[dict], at_object: list[dict]) -> dict:
     """Per material, the default display's mean over seeds: a first touch
-    (the idle policy's pad for an unknown object) and a repeated one (the
-    pad pre-conditioned for the material object memory announces). Flux
+    (the idle policy's pad for an unknown object), a repeated one (the
+    pad pre-conditioned for the material object memory announces) and, for
+    comparison, a first touch with the pad idling at the object. Flux
     errors from the slave's first decision and over the first second, as
     fractions of the direct-contact peak; skin RMS over the whole contact."""
     out = {}
     for material in dict.fromkeys(r["material"] for r in first):
         mine = [r for r in first if r["material"] == material]
         again = [r for r in repeat if r["material"] == material]
+        plain = [r for r in at_object if r["material"] == material]
         out[material] = {
             "skin_rms_k": _mean(mine, "temp_rms_error_c"),
             "skin_rms_max_k": float(max(r["temp_rms_error_c"] for r in mine)),
@@ -124,11 +127,13 @@ def _materials(first: list[dict], repeat: list[dict]) -> dict:
             "flux_rms_first_second_rel": _mean(mine, "flux_rms_error_rel_first_s"),
             "flux_rms_whole_rel": _mean(mine, "flux_rms_error_rel_whole"),
             "flux_rms_from_decision_repeat_rel": _mean(again, "flux_rms_error_rel"),
+            "skin_rms_idle_at_object_k": _mean(plain, "temp_rms_error_c"),
+            "flux_rms_from_decision_idle_at_object_rel": _mean(plain, "flux_rms_error_rel"),
             "display_idle_minus_object_k": _mean(
                 [{"d": r["display_idle_c"] - r["object_ir_c"]} for r in mine], "d"),
             "display_idle_minus_object_repeat_k": _mean(
                 [{"d": r["display_idle_c"] - r["object_ir_c"]} for r in again], "d"),
-            "safety_events": int(sum(r["safety_events"] for r in mine + again)),
+            "safety_events": int(sum(r["safety_events"] for r in mine + again + plain)),
             "seeds": len(mine)}
     return out
 
@@ -201,7 +206,10 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
                  if c["feedforward_model"] == DisplayConfig().feedforward_model)
     repeat = [_session_row(scene, m, identifier, generator, DisplayConfig(), s,
                            expected_material=m) for m in materials for s in seeds5]
-    report["materials"] = _materials(first, repeat)
+    step("first touches with the pad idling at the object (the policy's comparison)")
+    at_object = [_session_row(scene, m, identifier, generator, DisplayConfig(idle="object"), s)
+                 for m in materials for s in seeds5]
+    report["materials"] = _materials(first, repeat, at_object)
     report["skin_floor"] = skin_floors(scene, materials, identifier, generator, seeds5[0])
     step("PID gains")
     report["gains"] = []
@@ -383,7 +391,8 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
                      f"closed form {100 * g['contact']:.2f} % RMS of peak")
     per = report.get("materials")
     if isinstance(per, dict):
-        lines += [f"{m:10s}: first touch skin {v['skin_rms_k']:.2f} K, repeated (pre-conditioned) "
+        lines += [f"{m:10s}: first touch skin {v['skin_rms_k']:.2f} K (idling at the object "
+                  f"{v['skin_rms_idle_at_object_k']:.2f} K), repeated (pre-conditioned) "
                   f"{v['skin_rms_repeat_k']:.2f} K; flux from the decision "
                   f"{100 * v['flux_rms_from_decision_rel']:.2f} %, first second "
                   f"{100 * v['flux_rms_first_second_rel']:.2f} % of peak"

@@ -10,6 +10,8 @@ from telethermal.cli._common import _finite, _positive, _progress, console, log
 
 
 def cmd_scenes(args) -> int:
+    if args.write_idle_policy:
+        return _write_idle_policies(args.write_idle_policy)
     from rich.console import Console
     from rich.table import Table
 
@@ -89,9 +91,29 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def _write_idle_policies(names) -> int:
+    """Compute and write the package's idle policy of each shipped scene
+    (developers: after changing a shipped scene, the module, the materials
+    or the search; about a minute each)."""
+    from telethermal.control.preconditioning import compute_policy, shipped_policy_path
+    from telethermal.jsonfile import write_json
+    from telethermal.physics.scene import load_scene
+    from telethermal.teleop.run import with_finger
+
+    for name in names:
+        scene = with_finger(load_scene(name))
+        path = Path(str(shipped_policy_path(scene.name)))
+        write_json(path, compute_policy(scene))
+        print(f"{path}: the idle policy of {scene.name}")
+    return 0
+
+
 def add_scenes(sub) -> None:
     p = sub.add_parser("scenes", help="list the shipped scenes")
     p.add_argument("--verbose", "-v", action="store_true", help="show each contact's model")
+    p.add_argument("--write-idle-policy", nargs="+", metavar="SCENE", default=None,
+                   help="developers: compute the display's idle policy of these shipped "
+                        "scenes and write it into the package (scenes/NAME.idle.json)")
     p.set_defaults(func=cmd_scenes)
 
 

@@ -6,14 +6,27 @@ what the display can then do on the touch (its floor,
 known material the best idle is searched; for an unknown object one idle
 offset from the object's measured temperature is chosen over the scene's
 materials, minimising the worst floor (minimax). :func:`idle_for` is what
-the product calls: the per-scene table is computed once (lru_cache) and
-applied as a rule, ``idle = object + fraction * (finger - object)``.
+the product calls: the per-scene table is shipped for the package's scenes
+(``scenes/<name>.idle.json``), else computed once and cached
+(:func:`scene_policy`), and applied as a rule,
+``idle = object + fraction * (finger - object)``.
+
+Regenerate the shipped tables after changing a shipped scene, the module,
+the materials or the search (a stale table is not used, only recomputed,
+and a test says which are stale)::
+
+    telethermal scenes --write-idle-policy fingertip-7 ...
 """
 
 from __future__ import annotations
 
-import functools
+import hashlib
+import json
+import logging
 import math
+import os
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 
@@ -23,7 +36,10 @@ from telethermal.control.display_floor import (  # noqa: F401  (re-exported)
     pump_bounds_w_m2, verify)
 from telethermal.control.safety import SafetyLimits
 from telethermal.errors import ControlError, UnknownMaterialError
+from telethermal.jsonfile import write_json
 from telethermal.physics.scene import Scene, load_scene
+
+log = logging.getLogger("telethermal.preconditioning")
 
 
 # ---------------------------------------------------------------- idle search and policy
@@ -128,10 +144,125 @@ def minimax_idle(search: FloorSearch, step_k: float = 7.0) -> tuple[float, list[
         subset.append(worst)
 
 
-@functools.lru_cache(maxsize=8)
-def _policy(scene_name: str) -> dict:
-    scene = load_scene(scene_name)
-    return search_idles(FloorSearch(scene, hardware(scene), nominal_touch(scene)))
+#: Bumped when the search or the floor it minimises changes: every stored
+#: policy (shipped or cached) is then recomputed.
+POLICY_VERSION = 1
+
+
+def policy_key(scene: Scene) -> str:
+    """What the policy depends on, hashed: the display's hardware (module,
+    heat sink, pad layers, room), the nominal touch, the finger, the objects
+    and their materials' properties, the variability, the contact models'
+    sampling and tolerance, the skin band, the search's grid and contact
+    length and its version. Not the slave's gap or sensors, nor the names:
+    a scene differing only there shares the policy. A policy stored under
+    another key is stale."""
+    from telethermal.physics.materials import get_material
+
+    inputs = (POLICY_VERSION, SEARCH_GRID_S, SEARCH_ROUNDS, CONTACT_S,
+              repr(hardware(scene)), repr(nominal_touch(scene)), repr(scene.finger),
+              repr(scene.objects), repr(scene.variability), scene.room_temp_c,
+              scene.sample_rate_hz, scene.tolerance_rel,
+              [repr(get_material(m)) for m in scene.materials], repr(SafetyLimits()))
+    return hashlib.sha256(repr(inputs).encode()).hexdigest()[:32]
+
+
+def compute_policy(scene: Scene) -> dict:
+    """The idle table of ``scene`` (:func:`search_idles` on its nominal
+    touch), with the key it was computed for. About a minute on fingertip-7."""
+    policy = search_idles(FloorSearch(scene, hardware(scene), nominal_touch(scene)))
+    return {"scene": scene.name, "key": policy_key(scene), "version": POLICY_VERSION,
+            "minimax": policy["minimax"], "expected": policy["expected"],
+            "preconditioned": policy["preconditioned"]}
+
+
+def shipped_policy_path(scene_name: str):
+    """Where the package keeps a shipped scene's policy."""
+    return resources.files("telethermal").joinpath("scenes", f"{scene_name}.idle.json")
+
+
+def cache_dir() -> Path:
+    """The user's cache of computed policies: ``$TELETHERMAL_CACHE``, else
+    ``$XDG_CACHE_HOME/telethermal``, else ``~/.cache/telethermal``."""
+    if os.environ.get("TELETHERMAL_CACHE"):
+        return Path(os.environ["TELETHERMAL_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "telethermal"
+
+
+def _read_policy(path, key: str) -> dict | None:
+    """The policy stored at ``path`` if it is one for ``key``; None if the
+    file is missing or stale. A file that is not a policy is an error that
+    names it (it is never silently recomputed over)."""
+    try:
+        text = path.read_text()
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    try:
+        data = json.loads(text)
+        ok = isinstance(data, dict) and all(k in data for k in ("key", "minimax",
+                                                                   "preconditioned"))
+    except ValueError:
+        ok = False
+    if not ok:
+        raise ControlError(f"{path}: not an idle policy (delete it to recompute)")
+    return data if data["key"] == key else None
+
+
+_POLICIES: dict[str, dict] = {}
+
+
+def scene_policy(scene: Scene) -> dict:
+    """The idle policy of ``scene``: the package's for a shipped scene it
+    was computed for, else the user's cache (:func:`cache_dir`), else
+    computed now (about a minute; logged) and cached (written atomically)."""
+    key = policy_key(scene)
+    if key in _POLICIES:
+        return _POLICIES[key]
+    policy = _read_policy(shipped_policy_path(scene.name), key)
+    cached = cache_dir() / f"idle-policy-{key}.json"
+    if policy is None:
+        policy = _read_policy(cached, key)
+    if policy is None:
+        log.warning("scene %s: computing the display's idle policy (about a minute, once; "
+                    "cached in %s)", scene.name, cached.parent)
+        policy = compute_policy(scene)
+        try:
+            write_json(cached, policy)
+        except OSError as exc:
+            log.warning("could not cache the idle policy in %s: %s", cached, exc)
+    _POLICIES[key] = policy
+    return policy
+
+
+UNKNOWN_KEY = "unknown"
+
+
+def policy_fractions(scene: Scene) -> dict[str, float]:
+    """The policy as the product applies it: per material, and for an
+    unknown object (:data:`UNKNOWN_KEY`), the idle's fraction of
+    ``finger - object`` (what a recording keeps to replay a touch)."""
+    policy = scene_policy(scene)
+    out = {UNKNOWN_KEY: float(policy["minimax"]["fraction_of_finger_minus_object"])}
+    out.update({m: float(r["fraction_of_finger_minus_object"])
+                for m, r in policy["preconditioned"].items()})
+    return out
+
+
+def idle_from_fractions(fractions: dict[str, float], material: str | None,
+                        object_temp_c: float, finger_temp_c: float) -> float:
+    """``object + fraction * (finger - object)`` for ``material`` (None: an
+    unknown object), clipped to the skin band."""
+    if not (math.isfinite(object_temp_c) and math.isfinite(finger_temp_c)):
+        raise ControlError(f"temperatures must be finite, got object {object_temp_c}, "
+                           f"finger {finger_temp_c}")
+    key = UNKNOWN_KEY if material is None else material
+    if key not in fractions:
+        raise UnknownMaterialError(f"material {material!r} has no idle in the policy (its "
+                                   f"materials: {', '.join(k for k in fractions if k != UNKNOWN_KEY)})")
+    limits = SafetyLimits()
+    idle = object_temp_c + fractions[key] * (finger_temp_c - object_temp_c)
+    return float(min(max(idle, limits.skin_min_c), limits.skin_max_c))
 
 
 def idle_for(scene: Scene | str, material: str | None, object_temp_c: float,
@@ -139,18 +270,21 @@ def idle_for(scene: Scene | str, material: str | None, object_temp_c: float,
     """The pad's idle temperature (C) before a touch: for a known
     ``material`` its best idle, for ``None`` (unknown object) the minimax
     policy's; both as the fraction of ``finger - object`` found on the
-    scene's nominal touch (computed once per scene, cached), clipped to
-    the skin band."""
+    scene's nominal touch (:func:`scene_policy`: shipped, cached or
+    computed), clipped to the skin band."""
     scene = load_scene(scene) if isinstance(scene, str) else scene
     if material is not None and material not in scene.materials:
         raise UnknownMaterialError(f"material {material!r} is not in scene {scene.name} (its "
                                    f"materials: {', '.join(scene.materials)})")
-    if not (math.isfinite(object_temp_c) and math.isfinite(finger_temp_c)):
-        raise ControlError(f"temperatures must be finite, got object {object_temp_c}, "
-                           f"finger {finger_temp_c}")
-    policy = _policy(scene.name)
-    rule = policy["minimax"] if material is None else policy["preconditioned"][material]
-    limits = SafetyLimits()
-    idle = object_temp_c + rule["fraction_of_finger_minus_object"] * (finger_temp_c -
-                                                                       object_temp_c)
-    return float(min(max(idle, limits.skin_min_c), limits.skin_max_c))
+    return idle_from_fractions(policy_fractions(scene), material, object_temp_c,
+                               finger_temp_c)
+
+
+def precondition_from(fractions: dict[str, float], finger_temp_c: float):
+    """The display's pre-conditioning (``MasterDisplay(precondition=...)``):
+    ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
+    def offset(material, object_temp_c):
+        return idle_from_fractions(fractions, material, object_temp_c,
+                                   finger_temp_c) - object_temp_c
+    return offset
+

@@ -76,7 +76,10 @@ def open_recorder(config, role: str, identifier=None, generator=None):
 
 def display_params(scene, config, operator, idle_c) -> dict:
     """What a replay needs to rebuild the display of one touch."""
+    from telethermal.control.preconditioning import policy_fractions
+
     return {"display": {"rate_hz": config.rate_hz, "before": config.before,
+                        "idle": config.idle,
                         "source": config.source, "gains": asdict(config.gains),
                         "feedforward": config.feedforward, "slew_k_s": config.slew_k_s,
                         "handover_k_s": config.handover_k_s, "blend_s": config.blend_s,
@@ -89,6 +92,8 @@ def display_params(scene, config, operator, idle_c) -> dict:
                                           if scene.finger is not None else None),
             "sensor_lag_s": scene.sensors.flux_lag_s,
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
+            # The idle policy the display applied (fractions of finger - object).
+            "idle_policy": policy_fractions(scene) if config.idle == "policy" else None,
             "operator": asdict(operator)}
 
 
@@ -131,7 +136,7 @@ class SessionRecorder:
                 "contact_id": self.contact_id, "k": self._k, "t_s": t_s,
                 "object_temp_c": news.object_temp_c, "estimate": _estimate(news.estimate),
                 "classes": list(news.classes), "setpoint_w_m2": news.setpoint_w_m2,
-                "link_ok": news.link_ok})
+                "link_ok": news.link_ok, "expected_material": news.expected_material})
         cols = self._cols
         if not cols["t_s"]:
             self._k0, self._t0 = self._k, t_s

@@ -55,6 +55,10 @@ class MasterConfig:
     scene: str = "fingertip-7"
     rate_hz: float = 1000.0
     before: str = "prior"
+    #: Where the display's pad idles before a touch: "policy" (the scene's
+    #: idle policy: pre-conditioned for the material the slave expects, the
+    #: minimax idle for an unknown object) or "object" (its temperature).
+    idle: str = "policy"
     seed: int = 0
     admin_port: int = 5571
     admin_ipc: str = ""

@@ -30,8 +30,8 @@ from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
 from telethermal.teleop.session import MasterSession, ServiceState, send_through
-from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_model_args,
-                                     draw_operator, master_rng, pad_resistance,
+from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_idle,
+                                     display_model_args, draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
 
 log = logging.getLogger("telethermal.master")
@@ -54,11 +54,15 @@ class Touch:
         cfg = replace(service.display_config, source=source)
         rng = master_rng(seed)
         self.operator = draw_operator(scene, rng)
-        self.idle_c = MasterDisplay.standby_c_for(cfg.limits, service.link.object_temp_c)
+        # Idling before the touch: pre-conditioned for what the slave expects.
+        self.idle_c, shift = display_idle(scene, cfg, self.operator.finger_ir_c,
+                                          service.link.object_temp_c,
+                                          service.link.expected_material)
         self.display = MasterDisplay(cfg, service.link.generator,
                                      pad_resistance(scene.pad.layers),
                                      scene.sensors.flux_lag_s, self.operator.finger_ir_c,
-                                     idle_c=self.idle_c, **display_model_args(scene))
+                                     idle_c=self.idle_c, precondition=shift,
+                                     **display_model_args(scene))
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed)
         self.start = now
@@ -89,7 +93,8 @@ class MasterService:
     def __init__(self, config: MasterConfig):
         self.config = config
         self.scene = with_finger(load_scene(config.scene))
-        self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before)
+        self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before,
+                                            idle=config.idle)
         self.endpoint, self.admin = open_service_sockets("master", config)
         # The slave's estimates come on the lossy stream, newest wins; the
         # link reads them as it reads the lossless kinds (PROTOCOL.md 6a).
@@ -145,10 +150,11 @@ class MasterService:
         # The module behind the pad: the master commands its current.
         # The pad model (the scene's layers, the finger's contact
         # conductance) and the module behind the pad, as in simulation.
+        _, shift = display_idle(self.scene, self.display_config, cfg.finger_temp_c, None)
         self.display = MasterDisplay(self.display_config, None,
                                      pad_resistance(self.scene.pad.layers),
                                      self.scene.sensors.flux_lag_s, cfg.finger_temp_c,
-                                     **display_model_args(self.scene))
+                                     precondition=shift, **display_model_args(self.scene))
         self.t0 = time.monotonic()
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
                  cfg.can_bus)

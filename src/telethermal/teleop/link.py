@@ -226,7 +226,19 @@ class SlaveLink:
             elif estimate is not None and estimate.decided:
                 valid = now_s - self.onset_s <= self.final_valid_s
         return SlaveNews(self.object_temp_c, estimate, self.classes, setpoint_w_m2,
-                         link_ok=valid, generator=self.generator)
+                         link_ok=valid, expected_material=self.expected_material,
+                         generator=self.generator)
+
+    @property
+    def expected_material(self) -> str | None:
+        """The one material the slave announced for the object under its pad
+        (object memory), if it is one of the classes; None for an unknown
+        object or a remembered pair (the display then idles by the policy
+        for an unknown object)."""
+        if self.remembered is None:
+            return None
+        names = members(self.remembered[0])
+        return names[0] if len(names) == 1 and names[0] in self.classes else None
 
     @property
     def anchor_lag_s(self) -> float:

@@ -10,11 +10,10 @@ Phases of a touch (:class:`Phase`, a ``str`` enum: the names below are its
 values, which recordings, the view stream and the status hold):
 
 ``idle``
-    No contact. The junction is held at the standby temperature: the
-    object's temperature as the slave measured it (so the pad's own contact
-    carries the first instants with the right sign and a plausible size,
-    as in learning-based-thermal-rendering Fig. 3), or neutral while it is
-    unknown.
+    No contact. The pad is held at the standby temperature: the object's as
+    the slave measured it (neutral while unknown), shifted by the idle
+    policy (``DisplayConfig.idle``): pre-conditioned for the material the
+    slave expects, else the minimax idle for an unknown object.
 ``contact``
     Touching, the slave not yet decided. ``before="hold"``: keep the
     junction at standby (the paper's choice). ``before="prior"``: track the
@@ -29,11 +28,10 @@ values, which recordings, the view stream and the status hold):
     back to ``contact``/``render`` when the link returns.
 
 The controller: the flux setpoint is what the pad's sensor should read (the
-generator was trained on sensor readings, so both carry the same lag). The
-feed-forward inverts the sensor lag (``q + sensor_lag_s dq/dt``) and the pad's layers
-(``T_junction = T_pad_surface + q R_pad``); the PID on the measured flux
-removes what the model misses (the operator's own skin, contact, drift).
-That is the ``"static"`` controller; the default, ``"impedance"``
+generator was trained on sensor readings). The ``"static"`` feed-forward
+inverts the sensor lag (``q + sensor_lag_s dq/dt``) and the pad's layers
+(``T_junction = T_pad_surface + q R_pad``); a PID on the measured flux removes
+what the model misses. The default, ``"impedance"``
 (:mod:`telethermal.control.feedforward`), renders the object instead: the
 pad's surface is steered to the object's surface temperature under the
 measured flux, and the flux PID is not used.
@@ -78,14 +76,15 @@ BEFORE_MODES = ("hold", "prior")
 #: by the slave sample by sample (the naive baseline of the fault benchmark).
 SOURCES = ("trajectory", "setpoints")
 FEEDFORWARD_MODELS = ("static", "impedance")
+#: Before a touch: "policy", the object's temperature shifted by the scene's
+#: idle policy (control/preconditioning.py), for the material the slave
+#: expects or, unknown, the minimax idle; "object": at the object's.
+IDLES = ("policy", "object")
 
-#: PID gains of the flux loop: K of junction per W/m^2 of flux error. Chosen
-#: by ``telethermal bench render`` (bench/results/render.json): the lowest
-#: mean flux error with the pad model right and with it 30 % off (ki 3e-3:
-#: 0.61 / 0.65 %; 1e-2: 0.69 / 0.70 %). A smaller integral gain rings less
-#: after a late hand-over (tracking that starts after a long hold, as under
-#: network delay); ten times it oscillates through the flux sensor's 0.15 s
-#: lag. The derivative term bought nothing measurable, so it is off.
+#: PID gains of the flux loop (K of junction per W/m^2 of flux error), from
+#: ``telethermal bench render``: the lowest mean flux error with the pad model
+#: right and 30 % off; more integral rings through the sensor's 0.15 s lag
+#: after a late hand-over; the derivative bought nothing measurable.
 DEFAULT_GAINS = PidGains(kp=1e-3, ki=3e-3, kd=0.0, derivative_filter_s=0.01,
                          output_min=-25.0, output_max=25.0)
 
@@ -103,6 +102,7 @@ class DisplayConfig:
     impedance_horizon_s: float = 0.1
     before: str = "prior"
     source: str = "trajectory"
+    idle: str = "policy"
     #: The controller's own slew limit on the junction command; the
     #: supervisor's rate limit above it is the independent backstop.
     slew_k_s: float = 100.0
@@ -133,8 +133,10 @@ class DisplayConfig:
         if not self.impedance_horizon_s > 0:
             raise ControlError("impedance_horizon_s must be > 0, got "
                                f"{self.impedance_horizon_s}")
-        if self.before not in BEFORE_MODES:
-            raise ControlError(f"before must be one of {BEFORE_MODES}, got {self.before!r}")
+        for name, value, allowed in (("before", self.before, BEFORE_MODES),
+                                     ("idle", self.idle, IDLES)):
+            if value not in allowed:
+                raise ControlError(f"{name} must be one of {allowed}, got {value!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -216,8 +218,7 @@ class MasterDisplay:
         #: where the pad idles relative to the object before (and, holding,
         #: during) a touch (control/preconditioning.py); None: at the object.
         self.precondition = precondition
-        #: The pad's resistance as the controller believes it.
-        self.r_pad_m2k_w = pad_resistance_m2k_w * config.r_pad_belief
+        self.r_pad_m2k_w = pad_resistance_m2k_w * config.r_pad_belief   # as believed
         self.sensor_lag_s = sensor_lag_s
         self.finger_temp_c = finger_temp_c           # measured before contact
         self.nominal_dt_s = 1.0 / config.rate_hz
@@ -258,9 +259,8 @@ class MasterDisplay:
         return min(max(object_temp_c, limits.skin_min_c), limits.skin_max_c)
 
     def standby_c(self, news: SlaveNews) -> float:
-        """Where the pad idles: the object's temperature, shifted by the
-        pre-conditioning for the material expected (or the idle policy's
-        choice for an unknown object), inside the skin band."""
+        """Where the pad idles: the object's temperature, shifted by the idle
+        policy for the material expected (or an unknown), in the skin band."""
         obj = news.object_temp_c
         if self.precondition is not None and obj is not None and math.isfinite(obj):
             obj = obj + self.precondition(news.expected_material, obj)

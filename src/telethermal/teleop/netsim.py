@@ -55,7 +55,7 @@ from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession,
                                         SlaveSession)
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
-                                     display_model_args, draw_operator, master_rng,
+                                     display_idle, display_model_args, draw_operator, master_rng,
                                      pad_resistance, safety_summary, slave_rng, with_finger)
 from telethermal.teleop.slave import Slave
 
@@ -309,15 +309,17 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     rng = master_rng(seed)
     operator = draw_operator(scene, rng)
     generator = SampledGenerator(curves)
-    idle = MasterDisplay.standby_c_for(config.limits, pad.object_ir_c)
-    master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
-                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
-                           **display_model_args(scene))
-    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     net = SimNetwork(network, np.random.default_rng([seed if network_seed is None
                                                      else network_seed, 15]))
     session = MasterSession(SlaveLink(generator=generator, classes=tuple(pad.classes)))
     session.on_message(slave.announcement(-PRE_CONTACT_S), -PRE_CONTACT_S)   # placed long before
+    # The display has idled for what the announcement said (as the services do).
+    idle, shift = display_idle(scene, config, operator.finger_ir_c, pad.object_ir_c,
+                               session.link.expected_material)
+    master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
+                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
+                           precondition=shift, **display_model_args(scene))
+    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     classes = tuple(pad.classes)
     oracle = Estimate(0.0, tuple(float(c == material) for c in classes), material, 1.0, True,
                       "oracle")

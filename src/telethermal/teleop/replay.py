@@ -95,6 +95,7 @@ def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) ->
 
 def _replay_master(rec, params, cid, generator, gains, attached):
     from telethermal.control.pid import PidGains
+    from telethermal.control.preconditioning import precondition_from
     from telethermal.render.generator import load_generator
     from telethermal.devices.readings import PadSensors
     from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
@@ -135,10 +136,15 @@ def _replay_master(rec, params, cid, generator, gains, attached):
                            blend_s=d["blend_s"], r_pad_belief=d["r_pad_belief"],
                            # Recordings from before the skin-side controllers: "static".
                            feedforward_model=d.get("feedforward_model", "static"),
-                           impedance_horizon_s=d.get("impedance_horizon_s", 0.1))
+                           impedance_horizon_s=d.get("impedance_horizon_s", 0.1),
+                           idle=d.get("idle", "object"))
+    # The idle policy the display applied (recordings before it: at the object).
+    fractions = params.get("idle_policy") if d.get("idle") == "policy" else None
     master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
                            params["sensor_lag_s"], params["finger_ir_c"],
-                           idle_c=params["idle_c"], **_replay_pad(params))
+                           idle_c=params["idle_c"], **_replay_pad(params),
+                           precondition=precondition_from(fractions, params["finger_ir_c"])
+                           if fractions else None)
     rows = periods(rec, cid)
     news_at = {n["k"]: n for n in rec.messages("/master/news")
                if n.get("contact_id", 0) == cid}
@@ -148,7 +154,8 @@ def _replay_master(rec, params, cid, generator, gains, attached):
         n = news_at.get(p["k"])
         if n is not None:
             news = SlaveNews(n["object_temp_c"], _estimate_from(n["estimate"]),
-                             tuple(n["classes"]), n["setpoint_w_m2"], n["link_ok"])
+                             tuple(n["classes"]), n["setpoint_w_m2"], n["link_ok"],
+                             expected_material=n.get("expected_material"))
         step = master.step(p["t_s"], p["dt_s"], PadSensors(p["flux_w_m2"], p["pad_temp_c"],
                                                            p["force_n"]), news)
         out["t_s"].append(p["t_s"])

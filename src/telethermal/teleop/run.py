@@ -274,8 +274,8 @@ class SessionResult:
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
                 realtime: bool = False, devices: str = "sim",
-                record: str | Path | None = None, expected_material: str | None = None,
-                precondition: bool = False) -> SessionResult:
+                record: str | Path | None = None, expected_material: str | None = None
+                ) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -293,10 +293,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # The master has idled at its standby before this touch: the object's
     # temperature, pre-conditioned for the material the slave expects
     # (``expected_material``: object memory) or, for an unknown object, by
-    # the idle policy (control/preconditioning.py).
-    shift = precondition_for(scene, operator.finger_ir_c) if precondition else None
-    idle = MasterDisplay.standby_c_for(config.limits, slave.object_ir_c + (
-        shift(expected_material, slave.object_ir_c) if shift else 0.0))
+    # the idle policy (``config.idle``; control/preconditioning.py).
+    idle, shift = display_idle(scene, config, operator.finger_ir_c, slave.object_ir_c,
+                               expected_material)
     # The two sides' session rules, as the services run them, over a wire
     # with no delay: the slave's pad goes down when the master's onset
     # reaches it, the master renders what the slave sends (its sampled curves).
@@ -424,11 +423,24 @@ class InProcessWire:
 def precondition_for(scene: Scene, finger_c: float):
     """The display's pre-conditioning for this scene and operator:
     ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
-    from telethermal.control.preconditioning import idle_for
+    from telethermal.control.preconditioning import policy_fractions, precondition_from
+    return precondition_from(policy_fractions(scene), finger_c)
 
-    def offset(material, object_temp_c):
-        return idle_for(scene, material, object_temp_c, finger_c) - object_temp_c
-    return offset
+
+def display_idle(scene: Scene, config: DisplayConfig, finger_c: float,
+                 object_temp_c: float | None, expected_material: str | None = None):
+    """Where the display's pad idles before a touch, and the pre-conditioning
+    the display keeps applying (``MasterDisplay(precondition=...)``): with
+    ``config.idle`` "policy" the object's temperature shifted by the scene's
+    idle policy for ``expected_material`` (None: an unknown object, the
+    minimax idle); "object": the object's temperature. Every driver (the
+    in-process run, the services, the simulated network) starts its display
+    here. Returns (idle C, precondition or None)."""
+    shift = precondition_for(scene, finger_c) if config.idle == "policy" else None
+    obj = object_temp_c
+    if shift is not None and obj is not None and math.isfinite(obj):
+        obj = obj + shift(expected_material, obj)
+    return MasterDisplay.standby_c_for(config.limits, obj), shift
 
 
 def module_summary(touch: DisplayTouch, master: MasterDisplay) -> dict:

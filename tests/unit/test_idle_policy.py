@@ -1,0 +1,118 @@
+"""The display's idle policy as the product applies it: shipped per scene,
+cached for others, never used stale; every driver idles the same way."""
+
+import json
+import math
+
+import pytest
+
+from telethermal.control import preconditioning as pc
+from telethermal.errors import ControlError, UnknownMaterialError
+from telethermal.physics.scene import list_scenes, load_scene
+from telethermal.teleop.link import SlaveLink
+from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.run import display_idle, with_finger
+
+
+@pytest.fixture(autouse=True)
+def _fresh(monkeypatch, tmp_path):
+    """Each test with its own cache folder and nothing remembered."""
+    monkeypatch.setenv("TELETHERMAL_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(pc, "_POLICIES", {})
+
+
+@pytest.fixture
+def scene():
+    return with_finger(load_scene("fingertip-7"))
+
+
+def test_shipped_policies_are_current():
+    """A policy the package ships was computed for the scene as it is now
+    (else it would be recomputed at every first use: regenerate it with
+    ``telethermal scenes --write-idle-policy NAME``)."""
+    shipped = [n for n in list_scenes() if pc.shipped_policy_path(n).is_file()]
+    assert "fingertip-7" in shipped
+    for name in shipped:
+        data = json.loads(pc.shipped_policy_path(name).read_text())
+        assert data["key"] == pc.policy_key(with_finger(load_scene(name))), name
+
+
+def test_the_shipped_policy_is_used_without_computing(scene, monkeypatch):
+    def refuse(_scene):
+        raise AssertionError("computed although the package ships the policy")
+    monkeypatch.setattr(pc, "compute_policy", refuse)
+    policy = pc.scene_policy(scene)
+    assert policy["key"] == pc.policy_key(scene)
+    # The minimax idle is below the object for fingertip-7 (between the
+    # metals' and the insulators' best idles, bench/results/skin-floor.json).
+    fractions = pc.policy_fractions(scene)
+    assert fractions["aluminium"] < fractions[pc.UNKNOWN_KEY] < fractions["wood"]
+
+
+def test_a_stale_or_missing_policy_is_computed_once_and_cached(scene, monkeypatch, tmp_path):
+    changed = load_scene("fingertip-7").__class__(**{**vars(scene), "room_temp_c": 22.0})
+    assert pc.policy_key(changed) != pc.policy_key(scene)
+    calls = []
+
+    def fake(s):
+        calls.append(s.room_temp_c)
+        return {"scene": s.name, "key": pc.policy_key(s), "version": pc.POLICY_VERSION,
+                "minimax": {"fraction_of_finger_minus_object": -0.25},
+                "expected": {"fraction_of_finger_minus_object": -0.2},
+                "preconditioned": {m: {"fraction_of_finger_minus_object": 0.1}
+                                   for m in s.materials}}
+    monkeypatch.setattr(pc, "compute_policy", fake)
+    assert pc.scene_policy(changed)["minimax"]["fraction_of_finger_minus_object"] == -0.25
+    cached = list((tmp_path / "cache").glob("idle-policy-*.json"))
+    assert len(cached) == 1 and not list((tmp_path / "cache").glob(".*tmp"))
+    monkeypatch.setattr(pc, "_POLICIES", {})
+    pc.scene_policy(changed)                    # from the cache file, not computed again
+    assert calls == [22.0]
+
+
+def test_a_file_that_is_not_a_policy_is_named(scene, tmp_path, monkeypatch):
+    folder = tmp_path / "cache"
+    folder.mkdir()
+    changed = scene.__class__(**{**vars(scene), "room_temp_c": 21.0})
+    bad = folder / f"idle-policy-{pc.policy_key(changed)}.json"
+    bad.write_text("{not json")
+    with pytest.raises(ControlError, match="not an idle policy"):
+        pc.scene_policy(changed)
+    assert bad.read_text() == "{not json"       # nothing overwritten
+
+
+def test_idle_rule_and_its_errors(scene):
+    fractions = {pc.UNKNOWN_KEY: -0.5, "aluminium": -2.0}
+    assert pc.idle_from_fractions(fractions, None, 24.0, 33.0) == pytest.approx(19.5)
+    assert pc.idle_from_fractions(fractions, "aluminium", 24.0, 33.0) == 15.0   # band edge
+    with pytest.raises(UnknownMaterialError, match="steel"):
+        pc.idle_from_fractions(fractions, "steel", 24.0, 33.0)
+    with pytest.raises(ControlError, match="finite"):
+        pc.idle_from_fractions(fractions, None, math.nan, 33.0)
+
+
+def test_display_idle_by_config(scene):
+    """"policy": shifted by the policy (the same for every driver);
+    "object": at the object; an unknown object temperature: neutral."""
+    idle, shift = display_idle(scene, DisplayConfig(), 33.0, 24.0)
+    assert shift is not None
+    assert idle == pytest.approx(pc.idle_for(scene, None, 24.0, 33.0))
+    assert idle < 24.0
+    known, _ = display_idle(scene, DisplayConfig(), 33.0, 24.0, "aluminium")
+    assert known == pytest.approx(pc.idle_for(scene, "aluminium", 24.0, 33.0))
+    assert display_idle(scene, DisplayConfig(idle="object"), 33.0, 24.0) == (24.0, None)
+    neutral, _ = display_idle(scene, DisplayConfig(), 33.0, None)
+    assert neutral == DisplayConfig().limits.neutral_c
+    with pytest.raises(ControlError, match="idle"):
+        DisplayConfig(idle="warm")
+
+
+def test_the_link_expects_one_announced_material():
+    link = SlaveLink(classes=("aluminium", "wood", "rubber"))
+    assert link.expected_material is None
+    link.remembered = ("wood", 0.9)
+    assert link.news(0.0, True).expected_material == "wood"
+    link.remembered = ("wood|rubber", 0.9)            # a pair: unknown to the idle
+    assert link.expected_material is None
+    link.remembered = ("glass", 0.9)                  # not a class of this slave
+    assert link.expected_material is None
