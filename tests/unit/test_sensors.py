@@ -2,7 +2,9 @@ import numpy as np
 import pytest
 
 from telethermal.errors import ModelError
-from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, ObjectThermometer,
+from telethermal.physics.scene import load_scene
+from telethermal.physics.sensors import (DISPLAY_TC_CALIBRATION_SD_K, ForceSensor, HeatFluxSensor,
+                                         ObjectThermometer, draw_instruments,
                                          Thermocouple, quantise, type_t_emf_mv, type_t_temp_c)
 
 
@@ -80,3 +82,16 @@ def test_the_scalar_nist_path_equals_the_array_path():
                                rtol=1e-12, atol=1e-12)
     with pytest.raises(ModelError, match="range"):
         type_t_temp_c(25.0)
+
+
+def test_display_thermocouple_is_calibrated_against_the_probe():
+    """Master: the probe's error (within its class AA bound) plus the
+    calibration's noise; the slave's thermocouple keeps its own bound."""
+    for seed in range(40):
+        spec = load_scene("fingertip-7").sensors
+        spec = spec.__class__(**{**vars(spec), "instrument_seed": seed})
+        master = draw_instruments(spec, np.random.default_rng(seed), "master")
+        slave = draw_instruments(spec, np.random.default_rng(seed), "slave")
+        assert abs(master.pad_tc_bias_k) <= (spec.display_tc_reference_limit_k
+                                             + 5 * DISPLAY_TC_CALIBRATION_SD_K)
+        assert abs(slave.pad_tc_bias_k) <= spec.pad_tc_bias_limit_k

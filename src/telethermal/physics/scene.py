@@ -86,6 +86,12 @@ class SensorSpec:
     onset_jitter_s: float = 0.005
     thermocouple_noise_uv: float = 1.0
     pad_tc_bias_limit_k: float = 0.5
+    #: The display's (master's) pad thermocouple is calibrated before a
+    #: session against a reference probe of this accuracy (IEC 60751 class
+    #: AA Pt100: +-(0.1 + 0.0017 |t|) K, 0.14 K at 25 C); its bias is then
+    #: the probe's error (one probe, fixed per instrument) plus the
+    #: calibration's averaging noise, instead of ``pad_tc_bias_limit_k``.
+    display_tc_reference_limit_k: float = 0.1425
     object_thermometer: str = "ir"
     object_bias_limit_k: float = 0.5
     object_gain_limit: float = 0.0

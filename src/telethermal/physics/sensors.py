@@ -188,6 +188,11 @@ class Instruments:
                 "flux_gain": round(self.flux_gain, 5)}
 
 
+#: The display thermocouple's calibration: 30 readings of 1 uV (0.025 K) of
+#: noise each, averaged.
+DISPLAY_TC_CALIBRATION_SD_K = 0.025 / 30 ** 0.5
+
+
 def draw_instruments(sensors, session_rng: np.random.Generator,
                      role: str = "slave") -> Instruments:
     """The instruments of a scene (a :class:`~telethermal.physics.scene.SensorSpec`)
@@ -206,6 +211,13 @@ def draw_instruments(sensors, session_rng: np.random.Generator,
                                    0 if role == "slave" else 1))   # its own stream
     tc_bias = fixed.uniform(-1, 1) * sensors.pad_tc_bias_limit_k
     flux_gain = 1.0 + fixed.uniform(-1, 1) * sensors.flux_sensitivity_limit_rel
+    if role != "slave":
+        # The display's thermocouple, calibrated against the reference probe
+        # (held with the pad at a settled idle, 30 readings of 0.025 K noise):
+        # what is left is the probe's own error and the readings' mean.
+        probe = np.random.default_rng((int(sensors.instrument_seed), 0x9B0BE))
+        tc_bias = probe.uniform(-1, 1) * sensors.display_tc_reference_limit_k + \
+            fixed.normal(0.0, DISPLAY_TC_CALIBRATION_SD_K)
     bias = session_rng.uniform(-1, 1) * sensors.object_bias_limit_k
     gain = session_rng.uniform(-1, 1) * sensors.object_gain_limit
     thermometer = ObjectThermometer(sensors.object_thermometer, bias, gain,
