@@ -119,16 +119,15 @@ def test_view_lines():
 
 
 def test_render_lines_skip_what_the_report_does_not_hold():
-    floor = {"seed": 1, "band_c": [20, 40], "note": "not a material",
-             "wood": {"impedance_temp_rms_error_c": 0.5,
-                      "floor_idle_at_object": {"temp_rms_error_c": 0.25},
-                      "floor_idle_at_band_bottom": {"temp_rms_error_c": 0.75}}}
-    report = {"rate": [], "controller": [], "skin_floor": floor, "gains": [], "before": [],
+    per = {"wood": {"skin_rms_k": 0.6, "skin_rms_idle_at_object_k": 0.14,
+                    "skin_rms_repeat_k": 0.06, "flux_rms_from_decision_rel": 0.0157,
+                    "flux_rms_first_second_rel": 0.0645},
+           "steel": {}}                                     # a material not run: no line
+    report = {"rate": [], "controller": [], "gains": [], "before": [], "materials": per,
               "generator": None, "real_clock": [], "png": "p.png"}
     assert render.text_report(report, "r.json") == [
-        "ideal-junction bound (seed 1, junction in [20, 40] C, no pumping limit: not a floor of "
-        "the real module, see bench skin-floor), default controller / any controller "
-        "with the pad at the object's temperature / at the band's bottom: wood 0.50/0.25/0.75 K",
+        "wood      : first touch skin 0.60 K (idling at the object 0.14 K), repeated "
+        "(pre-conditioned) 0.06 K; flux from the decision 1.57 %, first second 6.45 % of peak",
         "wrote r.json and p.png"]
 
 

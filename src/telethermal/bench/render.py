@@ -29,7 +29,6 @@ from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
-from telethermal.bench.skin_floor import skin_floor
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
 from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
 from telethermal.teleop.models import train_generator, train_identifier
@@ -138,24 +137,6 @@ def _materials(first: list[dict], repeat: list[dict], at_object: list[dict]) -> 
     return out
 
 
-def skin_floors(scene, materials, identifier, generator, seed: int) -> dict:
-    """Per material, one touch (``seed``): the default controller's skin error
-    beside the floor no controller can beat (bench/skin_floor.py), with the
-    pad at the object's temperature at contact (as it idles) and at the
-    bottom of the skin band."""
-    limits = DisplayConfig().limits
-    band = (limits.skin_min_c, limits.skin_max_c)
-    out = {"seed": seed, "band_c": list(band)}
-    for material in materials:
-        result = run_session(scene, material, identifier, generator, DisplayConfig(),
-                             contact_s=CONTACT_S, seed=seed)
-        out[material] = {"impedance_temp_rms_error_c": result.summary["temp_rms_error_c"],
-                         "floor_idle_at_object": skin_floor(scene, result, band),
-                         "floor_idle_at_band_bottom": skin_floor(scene, result, band,
-                                                                 idle_c=band[0])}
-    return out
-
-
 def generator_comparison(scene) -> dict:
     """Network against fitted closed form, leave one person out of database 2."""
     trials = finger_database(scene, np.random.default_rng(1000))
@@ -210,7 +191,6 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
     at_object = [_session_row(scene, m, identifier, generator, DisplayConfig(idle="object"), s)
                  for m in materials for s in seeds5]
     report["materials"] = _materials(first, repeat, at_object)
-    report["skin_floor"] = skin_floors(scene, materials, identifier, generator, seeds5[0])
     step("PID gains")
     report["gains"] = []
     for name, gains in GAIN_SETS.items():
@@ -247,9 +227,10 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
 
 
 def _plot_skin(ax, report: dict) -> None:
-    """Skin temperature RMS per material for each controller (bars: mean over
-    seeds, triangles: worst), and the mean over materials against the loop
-    rate (inset)."""
+    """Skin temperature RMS per material of a first touch for each controller
+    (bars: mean over seeds, triangles: worst), the default controller's
+    repeated touch and first touch idling at the object (markers), and the
+    mean over materials against the loop rate (inset)."""
     materials = report["materials"]
     x = np.arange(len(materials))
     controllers = report.get("controller") or []
@@ -260,12 +241,13 @@ def _plot_skin(ax, report: dict) -> None:
                color=f"C{i}", label=f"{c['feedforward_model']} (mean)")
         ax.plot(x + off, [pm[m]["max_temp_rms_error_c"] for m in materials], "v", color="k",
                 ms=4, label="worst seed" if i == 0 else None)
-    floor = report.get("skin_floor") or {}
-    if all(m in floor for m in materials):
-        ax.plot(x, [floor[m]["floor_idle_at_object"]["temp_rms_error_c"] for m in materials],
-                "_", color="k", ms=18, mew=2,
-                label=f"floor, any controller (seed {floor['seed']})")
-    ax.axhline(0.3, color="r", lw=0.8, ls=":", label="target 0.3 K")
+    if all(materials[m].get("skin_rms_repeat_k") is not None for m in materials):
+        ax.plot(x, [materials[m]["skin_rms_repeat_k"] for m in materials], "_", color="k",
+                ms=18, mew=2, label="repeated touch, pre-conditioned (impedance)")
+    if all(materials[m].get("skin_rms_idle_at_object_k") is not None for m in materials):
+        ax.plot(x, [materials[m]["skin_rms_idle_at_object_k"] for m in materials], "x",
+                color="C2", ms=6, label="first touch idling at the object (impedance)")
+    ax.axhline(0.3, color="r", lw=0.8, ls=":", label="target 0.3 K (repeated touch)")
     ax.set_xticks(x, materials, rotation=20, fontsize=8)
     ax.set_ylabel("skin temperature RMS error (K), 1 kHz")
     ax.set_title("display controller, per material", fontsize=9)
@@ -350,17 +332,6 @@ def run_and_save(json_path: str | Path, png_path: str | Path, quick: bool = Fals
     return report
 
 
-def _skin_floor_line(floor: dict) -> str:
-    return (f"ideal-junction bound (seed {floor['seed']}, junction in {floor['band_c']} C, no "
-            "pumping limit: not a floor of the real module, see bench skin-floor), default "
-            "controller / any controller with the pad at the object's temperature / at the "
-            "band's bottom: "
-            + ", ".join(f"{m} {v['impedance_temp_rms_error_c']:.2f}/"
-                        f"{v['floor_idle_at_object']['temp_rms_error_c']:.2f}/"
-                        f"{v['floor_idle_at_band_bottom']['temp_rms_error_c']:.2f} K"
-                        for m, v in floor.items() if isinstance(v, dict)))
-
-
 def _controller_line(c: dict) -> str:
     return f"controller {c['feedforward_model']} (mean/worst): " + ", ".join(
         f"{m} flux {100 * v['mean_flux_rms_error_rel']:.2f}/"
@@ -378,7 +349,6 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
              f"{r['mean_temp_rms_error_c']:.2f} K, CPU {r['mean_cpu_s_per_simulated_s']:.3f} s/s, "
              f"safety events {r['safety_events']}" for r in report["rate"]]
     lines += [_controller_line(c) for c in report["controller"]]
-    lines.append(_skin_floor_line(report["skin_floor"]))
     lines += [f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
               f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin "
               f"{r['mean_temp_rms_error_c']:.2f} K" for r in report["gains"]]
