@@ -164,3 +164,40 @@ def test_a_missing_reading_or_an_over_temperature_driver_is_the_safe_state_that_
     assert all(safe[k] for k in range(352, 400))
     assert all(safe[k] for k in range(502, 700))          # over-temperature: safe, stays
     assert master.safety.events                            # and the supervisor says why
+
+
+def test_a_peltier_driver_that_stops_reporting_is_the_safe_state_within_its_heartbeat():
+    # The driver board goes silent (a reboot that does not come back within
+    # the test): its last heartbeat ages past heartbeat_timeout_s, the
+    # display stops trusting the actuator, its flux reading is withdrawn and
+    # the supervisor holds the safe state from then on, saying why.
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from telethermal.teleop.run import pad_resistance
+    touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
+    clock = Clock()
+    d = EmulatedDisplay(touch, clock=clock)
+    master = MasterDisplay(DisplayConfig(before="hold", feedforward_model="static"), None,
+                           pad_resistance(SCENE.pad.layers), SCENE.sensors.flux_lag_s, 33.0,
+                           idle_c=IDLE_C)
+    news = SlaveNews(object_temp_c=IDLE_C)
+    timeout_k = int(round(d.hardware.peltier.heartbeat_timeout_s / 1e-3))
+    safe, healthy = {}, {}
+    try:
+        for k in range(300 + timeout_k + 200):
+            t = clock.t = -0.1 + k * 1e-3
+            if k == 300:
+                d.peltier_emulator.reboot(offline_s=10.0)     # silent from here
+            s = d.read(t)
+            step = master.step(t, 1e-3, s, news)
+            d.apply(t, step, 1e-3, s.force_n)
+            safe[k], healthy[k] = step.safe, d.hardware.peltier.healthy
+    finally:
+        d.close()
+    assert not any(safe[k] for k in range(100, 300))
+    assert all(healthy[k] for k in range(100, 300))
+    # Unhealthy, and the display in its safe state, no later than one
+    # heartbeat timeout plus two periods after the last report; stays so.
+    end = 300 + timeout_k + 2
+    assert not healthy[end] and all(safe[k] for k in range(end, 300 + timeout_k + 200))
+    assert d.counters()["untrusted_periods"] > 0
+    assert master.safety.events

@@ -42,6 +42,9 @@ def test_a_session_renders_what_direct_contact_gives(models, material):
     assert s["flux_rms_error_rel"] < 0.10
     assert s["flux_rms_error_rel_first_s"] < 0.15
     assert s["safety_events"] == 0
+    # The module within its datasheet, counted at every physics period.
+    assert s["module"]["current_exceeded"] == s["module"]["hot_side_exceeded"] == 0
+    assert s["module"]["max_current_a"] <= s["module"]["imax_a"]
     assert s["identified"] in (*SCENE.materials, "unknown")
     assert s["clock"] == "simulated" and "loop_period_p99_us" not in s
 

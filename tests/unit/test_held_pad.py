@@ -211,11 +211,23 @@ def _water_trials(name: str) -> list:
 
 
 #: SHA-256 of the written database of _water_trials on main before the pad
-#: had a module (452b52f), this venv's numpy/scipy.
+#: had a module (452b52f), this venv's numpy/scipy: every water-pad scene
+#: of the package (the old tree's code run with this venv, 2026-11-26).
 WATER_DIGESTS = {
+    "gripper-case-I-cnv": "c0ae6cca5bcb95e9b71952ecffbaabd3b5d67bf036ec03f774b0a4f0277b8119",
     "gripper-case-I-pro": "04594463c9cb99fb105dfeb7ec363bf883163d105e0a034c8a5f15fb1573e345",
+    "gripper-case-II": "47e67a31d54f67179f6621990b02c31ac1aa3de7129ca71906ebd12e1eb90ea5",
+    "gripper-case-III": "a5d144c438c8896d37a9f80266360e31883d8d64f3e61a1f35d1b0636d22d844",
+    "gripper-case-IV": "c0fcbbb5f8a27094c31a7b7155d11f178740cfc4caf82b349c8ab700d09714ee",
     "gripper-case-V": "49722d82ebc42ee06db82d2a6015609c30f35d346004a4dd034dc71479a1d14f",
 }
+
+
+def test_every_water_pad_scene_is_pinned():
+    from importlib import resources
+    water = sorted(p.name[:-5] for p in resources.files("telethermal").joinpath("scenes").iterdir()
+                   if p.name.endswith(".toml") and load_scene(p.name[:-5]).pad.kind == "water")
+    assert water == sorted(WATER_DIGESTS)
 
 
 @pytest.mark.parametrize("name", sorted(WATER_DIGESTS))

@@ -138,10 +138,14 @@ def test_the_heat_sink_warms_over_ten_minutes_of_touches():
     # Ten minutes of touches on a cold object: the pad held 8 K under the
     # room while a finger's 3 W flows in for 3 s of every 6. The sink warms
     # (it rejects pumped heat plus Joule heat through 1 K/W), and the loop
-    # holds the junction through it (or says it saturated).
+    # holds the junction through it: 3 W at 8 K under the room is well
+    # inside what the module pumps (Qmax 18.8 W at dT = 0), so tracking is
+    # asserted outright, within 0.5 K once the first touch has settled,
+    # with the current within Imax and the hot side under its datasheet
+    # limit at every period.
     stack = ThermoelectricStack(PARAMS, SINK, 24.0, ModuleState(16.0, 24.0, 24.0))
     loop, dt = JunctionLoop(PARAMS, default_driver(PARAMS)), 0.01
-    errors, sinks = [], []
+    errors, sinks, hots, currents = [], [], [], []
     for k in range(int(600 / dt)):
         touching = (k * dt) % 6.0 < 3.0
         load = 3.0 if touching else 0.0
@@ -150,9 +154,14 @@ def test_the_heat_sink_warms_over_ten_minutes_of_touches():
         if k * dt > 10.0:
             errors.append(abs(stack.state.cold_c - 16.0))
         sinks.append(stack.state.sink_c)
+        hots.append(stack.state.hot_c)
+        currents.append(abs(out.current_a))
     assert sinks[-1] > 24.0 + 1.0                    # warmed by more than 1 K
-    assert max(errors) < 0.5 or loop.saturated_periods > 0
-    assert stack.state.hot_c < SPEC.hot_side_max_c
+    assert sinks[-1] > sinks[len(sinks) // 2]        # and still warming at 5 minutes
+    assert max(errors) < 0.5
+    assert loop.saturated_periods == 0
+    assert max(currents) <= SPEC.imax_a
+    assert max(hots) < SPEC.hot_side_max_c
 
 
 def test_unknown_module_or_sink_is_a_clear_error():
