@@ -5,8 +5,10 @@ do on a touch, to put the controllers' figures beside.
 Peltier module behind the pad (its pumping limits, the junction's heat
 capacity; ``control/preconditioning.py``), per material of fingertip-7,
 from three idles (the object's temperature, the best idle for the known
-material, the product's idle policy for an unknown object), and a sweep of
-the module's Qmax and the flux film's resistance.
+material, the product's idle policy for an unknown object), a sweep of
+the module's Qmax and the flux film's resistance, and the floor of a
+display that learns the material only at the slave's decision
+(``control/decision_floor.py``) against the decision's time.
 
 The earlier floor (the junction held in the skin band, no pumping limit,
 once printed by ``bench render``) was removed: it bounded a temperature the
@@ -30,6 +32,10 @@ SWEEP_QMAX = (0.5, 1.0, 2.0, 4.0, 8.0)
 SWEEP_FILM_R = (1.0, 0.5, 0.25)
 TARGET_K = 0.3
 SCENE = "fingertip-7"
+#: Decision times (s after contact) for the floor of a display that learns
+#: the material then; live first decisions reach the display 0.05-0.13 s
+#: after contact on fingertip-7 (bench render's ``decision_from_s``).
+DECISION_S = (0.0, 0.05, 0.1, 0.15)
 
 
 def _final(hw, touch, scene, material: str, idle_c: float, plants: dict) -> dict:
@@ -97,6 +103,24 @@ def _sweep(scene, touch, qmax_scales, film_scales, step) -> list[dict]:
     return rows
 
 
+def _decision(search, idle_c: float, times, step) -> dict:
+    from telethermal.control.decision_floor import decision_floor
+
+    rows = []
+    for td in times:
+        step(f"decision floor: material learnt {td:g} s after contact")
+        t0 = time.perf_counter()
+        f = decision_floor(search.hw, search.plant, search.targets, idle_c, td).summary()
+        rows.append({**f, "solve_s": time.perf_counter() - t0})
+    return {"idle_c": idle_c, "grid_s": search.plant.grid_s,
+            "criterion": "minimax over the scene's materials, the heat pumped before the "
+                         "decision the same for all; floor_worst_k: no controller that learns "
+                         "the material at decision_s does better on its worst material; "
+                         "per_material_k: each material on that minimax trajectory (not a "
+                         "bound per material)",
+            "rows": rows}
+
+
 def _verdict(rows) -> str:
     met = [r for r in rows if r["aluminium_floor_k"] <= TARGET_K]
     if not met:
@@ -123,6 +147,9 @@ def run(progress=None, quick: bool = False) -> dict:
     t_floors = time.perf_counter()
     qmax, film = ((1.0, 8.0), (1.0, 0.25)) if quick else (SWEEP_QMAX, SWEEP_FILM_R)
     sweep = _sweep(scene, touch, qmax, film, step)
+    t_sweep = time.perf_counter()
+    decision = _decision(search, idles["minimax"]["idle_c"],
+                         (0.0, 0.1) if quick else DECISION_S, step)
     t_end = time.perf_counter()
     mm, ex = idles["minimax"], idles["expected"]
     policy = {
@@ -156,9 +183,10 @@ def run(progress=None, quick: bool = False) -> dict:
             "searches": "10 ms slots, 3 bound rounds, lsq_linear trf (tol 1e-6), Th at the "
                         "idle's steady hot side; floors reported on 5 ms slots with bvls"},
         "materials": materials, "idle_search": idles, "sweep": sweep,
-        "sweep_verdict": _verdict(sweep),
+        "sweep_verdict": _verdict(sweep), "decision": decision,
         "timings": {"idle_search_s": t_search - t0, "floors_s": t_floors - t_search,
-                    "sweep_s": t_end - t_floors, "total_s": t_end - t0},
+                    "sweep_s": t_sweep - t_floors, "decision_s": t_end - t_sweep,
+                    "total_s": t_end - t0},
         "machine": f"{platform.node()} ({platform.machine()}, {platform.python_version()})",
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
 
@@ -168,7 +196,7 @@ def plot(report: dict, out_png) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 4.8))
+    fig, (ax, ax2, ax3) = plt.subplots(1, 3, figsize=(18, 4.8))
     mats = list(report["materials"])
     x = np.arange(len(mats))
     for i, (key, label) in enumerate((("floor_at_object_k", "idle at the object's temperature"),
@@ -193,6 +221,7 @@ def plot(report: dict, out_png) -> Path:
     ax2.set_title("sweep: pumping and flux film", fontsize=9)
     ax2.legend(fontsize=7)
     ax2.grid(alpha=0.3, which="both")
+    _plot_decision(ax3, report)
     fig.suptitle(f"telethermal bench skin-floor - {report['date']}", fontsize=9)
     fig.tight_layout()
     out_png = Path(out_png)
@@ -200,6 +229,25 @@ def plot(report: dict, out_png) -> Path:
     fig.savefig(out_png, dpi=110)
     plt.close(fig)
     return out_png
+
+
+def _plot_decision(ax, report: dict) -> None:
+    rows = (report.get("decision") or {}).get("rows") or []
+    if not rows:
+        ax.set_axis_off()
+        return
+    td = [r["decision_s"] for r in rows]
+    for i, m in enumerate(report["materials"]):
+        ax.plot(td, [r["per_material_k"][m] for r in rows], ".-", lw=0.8, color=f"C{i}",
+                label=m)
+    ax.plot(td, [r["floor_worst_k"] for r in rows], "k-", lw=2.0,
+            label="worst material (the floor)")
+    ax.axhline(TARGET_K, color="r", ls=":", lw=0.8)
+    ax.set_xlabel("material learnt at (s after contact)")
+    ax.set_ylabel("skin RMS error (K), idle policy")
+    ax.set_title("floor when the material is learnt at the decision (minimax)", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
 
 
 def run_and_save(json_path, png_path, quick: bool = False, command: str = "",
@@ -226,7 +274,12 @@ def text_report(report: dict, json_path) -> list[str]:
               f"aluminium {r['aluminium_floor_k']:.3f} K (idle {r['idle_policy_c']:.1f} C)"
               for r in report["sweep"]]
     lines.append(report["sweep_verdict"])
+    lines += [f"material learnt {r['decision_s']:.2f} s after contact: floor (worst) "
+              f"{r['floor_worst_k']:.3f} K; " + ", ".join(
+                  f"{m} {v:.3f}" for m, v in r["per_material_k"].items())
+              for r in report.get("decision", {}).get("rows", [])]
     t = report["timings"]
     lines.append(f"timings: search {t['idle_search_s']:.0f} s, floors {t['floors_s']:.0f} s, "
-                 f"sweep {t['sweep_s']:.0f} s, total {t['total_s']:.0f} s")
+                 f"sweep {t['sweep_s']:.0f} s, decision {t.get('decision_s', 0):.0f} s, "
+                 f"total {t['total_s']:.0f} s")
     return lines + [f"wrote {json_path} and {report['png']}"]

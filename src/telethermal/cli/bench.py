@@ -106,7 +106,7 @@ def cmd_bench_view(args) -> int:
 def cmd_bench_skin_floor(args) -> int:
     from telethermal.bench import skin_floor
 
-    steps = 12 if args.quick else 23
+    steps = 14 if args.quick else 27
     with _progress(steps, "bench skin-floor") as advance:
         report = skin_floor.run_and_save(args.json, _png(args), quick=args.quick,
                                          command=_command(), progress=advance)

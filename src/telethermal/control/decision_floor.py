@@ -1,0 +1,138 @@
+"""The floor of a display that learns the material only when the slave
+decides: what no controller can beat on a first touch of an unknown object.
+
+The floor of :mod:`telethermal.control.display_floor` knows the material
+from t = 0. A live display does not: until the slave's first decision
+reaches it (``decision_s`` after contact), whatever it pumps is the same for
+every material the object could be. So here the heat the module delivers to
+its junction, ``q_j`` per slot, is one common trajectory over the slots
+before ``decision_s`` and one trajectory per material after (a
+non-anticipative, or causal, controller), all within the module's pumping
+limits, from the same idle.
+
+Criterion: the worst skin RMS error over the scene's materials (minimax,
+as the idle policy). Given the common slots ``c``, each material's own
+slots are an independent bounded least-squares problem (its error
+``e_m(c)``, convex in ``c``: a partial minimum of a convex function, its
+gradient ``-2/n A_c^T (r_m - A q_m)`` by the envelope theorem); the common
+slots (a few: the decision comes in under 0.1 s) then minimise
+``max_m e_m(c)`` in epigraph form (``s >= e_m(c)``) with SLSQP. The
+pumping bounds are recomputed on the solution's junction, as
+:func:`~telethermal.control.display_floor.best_touch` does.
+
+Checks (tests/unit/test_decision_floor.py): with ``decision_s = 0`` it is the
+worst of the per-material floors of ``display_floor.best_touch``; it never
+falls when the decision comes later; with one material it is that
+material's floor whenever the decision comes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from telethermal.control.display_floor import (BOUND_MARGIN, Hardware, JunctionPlant,
+                                               bounded_fit, idle_hold, pump_bounds_w_m2)
+from telethermal.errors import ControlError
+
+#: Rounds re-computing the pumping bounds on the solution's junction.
+BOUND_ROUNDS = 2
+#: q in the solver's units (W/m^2 / SCALE) for conditioning.
+SCALE = 1e4
+
+
+@dataclass
+class DecisionFloor:
+    decision_s: float
+    idle_c: float
+    worst_k: float              # the minimax value: no causal controller's worst is lower
+    per_material_k: dict        # each material's RMS on the minimax trajectory
+    common_q_w_m2: np.ndarray   # what is pumped before the decision
+    converged: bool
+
+    def summary(self) -> dict:
+        return {"decision_s": self.decision_s, "idle_c": self.idle_c,
+                "floor_worst_k": self.worst_k, "per_material_k": dict(self.per_material_k),
+                "common_q_w_m2": self.common_q_w_m2.tolist(), "converged": self.converged}
+
+
+class _Tails:
+    """Each material's best own slots for given common slots (cached)."""
+
+    def __init__(self, plant: JunctionPlant, residuals, k_d, lo, hi):
+        a = plant.skin_matrix
+        self.a_c, self.a_t, self.k_d = a[:, :k_d], a[:, k_d:], k_d
+        self.residuals, self.lo, self.hi = residuals, lo, hi
+        self._key, self._out = None, None
+
+    def __call__(self, c: np.ndarray):
+        key = c.tobytes()
+        if key != self._key:
+            n = self.residuals.shape[1]
+            q, mse, grad = [], [], []
+            for m, r in enumerate(self.residuals):
+                rest = r - self.a_c @ c
+                tail = bounded_fit(self.a_t, rest, self.lo[m, self.k_d:], self.hi[m, self.k_d:],
+                                   exact=False) if self.k_d < n else np.zeros(0)
+                err = rest - self.a_t @ tail
+                q.append(np.r_[c, tail])
+                mse.append(float(err @ err) / n)
+                grad.append(-2.0 / n * (self.a_c.T @ err))
+            self._key, self._out = key, (np.array(q), np.array(mse), np.array(grad))
+        return self._out
+
+
+def _common(tails: _Tails, lo_c, hi_c, start):
+    """argmin over c in [lo_c, hi_c] of max_m e_m(c) (SLSQP, epigraph form,
+    c scaled by SCALE)."""
+    k_d = len(lo_c)
+    if k_d == 0:
+        return np.zeros(0), True
+
+    def cons(x):
+        return x[-1] - tails(x[:-1] * SCALE)[1]
+
+    def cons_jac(x):
+        grad = tails(x[:-1] * SCALE)[2] * SCALE
+        return np.hstack([-grad, np.ones((len(grad), 1))])
+
+    x0 = np.r_[np.clip(start, lo_c, hi_c) / SCALE, tails(np.clip(start, lo_c, hi_c))[1].max()]
+    res = minimize(lambda x: x[-1], x0, jac=lambda x: np.r_[np.zeros(k_d), 1.0],
+                   method="SLSQP", constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
+                   bounds=[*zip(lo_c / SCALE, hi_c / SCALE), (0.0, None)],
+                   options={"maxiter": 200, "ftol": 1e-9})
+    return res.x[:-1] * SCALE, bool(res.success)
+
+
+def decision_floor(hw: Hardware, plant: JunctionPlant, targets: dict, idle_c: float,
+                   decision_s: float) -> DecisionFloor:
+    """The minimax floor over ``targets`` (material -> direct-contact skin
+    at slot ends, C, shape (plant.n,)) of a controller that learns the
+    material ``decision_s`` after contact, from the pad idle at ``idle_c``."""
+    if not (math.isfinite(decision_s) and decision_s >= 0):
+        raise ControlError(f"decision_s must be finite and >= 0, got {decision_s}")
+    if not targets:
+        raise ControlError("no material to take the floor over")
+    names = list(targets)
+    k_d = min(int(math.ceil(decision_s / plant.grid_s - 1e-9)), plant.n)
+    free_j, free_s = plant.free(idle_c)
+    residuals = np.stack([np.asarray(targets[m], float) - free_s for m in names])
+    n_mat, n = residuals.shape
+    hot = np.full((n_mat, n), idle_hold(hw, idle_c)[1])
+    cold = np.broadcast_to(np.r_[idle_c, free_j[:-1]], (n_mat, n)).copy()
+    c, converged = np.zeros(k_d), True
+    for _ in range(BOUND_ROUNDS):
+        lo, hi = pump_bounds_w_m2(hw, cold, hot)
+        margin = BOUND_MARGIN * (hi - lo)
+        lo, hi = lo + margin, hi - margin
+        tails = _Tails(plant, residuals, k_d, lo, hi)
+        c, converged = _common(tails, lo[:, :k_d].max(axis=0), hi[:, :k_d].min(axis=0), c)
+        q, mse, _ = tails(c)
+        junction = free_j[None, :] + q @ plant.junction_matrix.T
+        cold = np.hstack([np.full((n_mat, 1), idle_c), junction[:, :-1]])
+    rms = np.sqrt(mse)
+    return DecisionFloor(decision_s, float(idle_c), float(rms.max()),
+                         {m: float(v) for m, v in zip(names, rms)}, c, converged)

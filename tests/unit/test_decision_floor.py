@@ -1,0 +1,75 @@
+"""The floor of a display that learns the material at the slave's decision
+(control/decision_floor.py), checked against the per-material floor of
+display_floor.best_touch (the same plant and bounds) and against what a
+later decision can only make worse. Short touches (0.4 s on 10 ms slots)
+keep each solve small."""
+
+import math
+
+import pytest
+
+from telethermal.control import display_floor as dfl
+from telethermal.control.decision_floor import decision_floor
+from telethermal.errors import ControlError
+from telethermal.physics.scene import load_scene
+
+CONTACT_S, GRID_S = 0.4, 0.01
+MATERIALS = ("aluminium", "plexiglass", "marble")
+
+
+@pytest.fixture(scope="module")
+def setup():
+    scene = load_scene("fingertip-7")
+    hw, touch = dfl.hardware(scene), dfl.nominal_touch(scene)
+    plant = dfl.JunctionPlant(hw, touch, CONTACT_S, GRID_S)
+    targets = {m: dfl.direct_skin_c(scene, m, touch, plant.n, GRID_S) for m in MATERIALS}
+    idle = touch.object_c - 4.0
+    clairvoyant = {m: dfl.best_touch(hw, plant, targets[m], idle, nonlinear=False,
+                                     exact=True).skin_rms_k for m in MATERIALS}
+    return hw, plant, targets, idle, clairvoyant
+
+
+def test_a_decision_at_contact_is_the_worst_of_the_per_material_floors(setup):
+    # Knowing the material from t = 0 nothing is shared: each material gets
+    # its own best trajectory. Tolerance 2e-3 K: the tails are solved with
+    # trf (tol 1e-6) where best_touch uses the exact bvls.
+    hw, plant, targets, idle, clairvoyant = setup
+    f = decision_floor(hw, plant, targets, idle, 0.0)
+    for m in MATERIALS:
+        assert f.per_material_k[m] == pytest.approx(clairvoyant[m], abs=2e-3)
+    assert f.worst_k == pytest.approx(max(clairvoyant.values()), abs=2e-3)
+    assert len(f.common_q_w_m2) == 0
+
+
+def test_a_later_decision_never_lowers_the_floor_and_a_blind_one_costs(setup):
+    # Sharing more slots is a tighter constraint on the same problem: the
+    # minimax can only rise (tolerance 2e-3 K, the solver's). And it does
+    # rise: materials as far apart as aluminium and plexiglass want
+    # opposite pumping in the first 100 ms.
+    hw, plant, targets, idle, _ = setup
+    worst = [decision_floor(hw, plant, targets, idle, td).worst_k for td in (0.0, 0.05, 0.1)]
+    assert worst[1] >= worst[0] - 2e-3 and worst[2] >= worst[1] - 2e-3
+    assert worst[2] > worst[0] + 0.02
+
+
+def test_one_material_is_its_own_floor_whenever_it_is_decided(setup):
+    # With one material there is nothing to learn: the common slots are its
+    # own, and the floor is best_touch's (2e-3 K) at every decision time.
+    hw, plant, targets, idle, clairvoyant = setup
+    one = {"plexiglass": targets["plexiglass"]}
+    for td in (0.0, 0.05):
+        f = decision_floor(hw, plant, one, idle, td)
+        assert f.worst_k == pytest.approx(clairvoyant["plexiglass"], abs=2e-3)
+
+
+@pytest.mark.parametrize("bad", [-0.01, math.nan, math.inf])
+def test_a_decision_time_that_is_not_a_time_is_refused(setup, bad):
+    hw, plant, targets, idle, _ = setup
+    with pytest.raises(ControlError, match="decision_s must be finite and >= 0"):
+        decision_floor(hw, plant, targets, idle, bad)
+
+
+def test_no_material_is_refused(setup):
+    hw, plant, _, idle, _ = setup
+    with pytest.raises(ControlError, match="no material"):
+        decision_floor(hw, plant, {}, idle, 0.05)
