@@ -313,9 +313,11 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
                                                      else network_seed, 15]))
     session = MasterSession(SlaveLink(generator=generator, classes=tuple(pad.classes)))
     session.on_message(slave.announcement(-PRE_CONTACT_S), -PRE_CONTACT_S)   # placed long before
-    # The display has idled for what the announcement said (as the services do).
-    idle, shift = display_idle(scene, config, operator.finger_ir_c, pad.object_ir_c,
-                               session.link.expected_material)
+    # The display has idled for what the announcement said (as the services
+    # do); the oracle, knowing the material, for that material: the floor of
+    # a repeated touch pre-conditions as the repeated touch does.
+    expected = material if mode == "oracle" else session.link.expected_material
+    idle, shift = display_idle(scene, config, operator.finger_ir_c, pad.object_ir_c, expected)
     master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
                            scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
                            precondition=shift, **display_model_args(scene))
@@ -338,7 +340,8 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
             session.on_message(m, t, 0.0)
         sensors = touch.sense(t)
         if mode == "oracle":
-            news = SlaveNews(pad.object_ir_c, oracle if onset is not None else None, classes)
+            news = SlaveNews(pad.object_ir_c, oracle if onset is not None else None, classes,
+                             expected_material=material)
         else:
             news = session.news(t, True)
         step = master.step(t, dt, sensors, news)
