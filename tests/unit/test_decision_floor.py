@@ -35,6 +35,7 @@ def test_a_decision_at_contact_is_the_worst_of_the_per_material_floors(setup):
     # trf (tol 1e-6) where best_touch uses the exact bvls.
     hw, plant, targets, idle, clairvoyant = setup
     f = decision_floor(hw, plant, targets, idle, 0.0)
+    assert f.converged
     for m in MATERIALS:
         assert f.per_material_k[m] == pytest.approx(clairvoyant[m], abs=2e-3)
     assert f.worst_k == pytest.approx(max(clairvoyant.values()), abs=2e-3)
@@ -59,7 +60,20 @@ def test_one_material_is_its_own_floor_whenever_it_is_decided(setup):
     one = {"plexiglass": targets["plexiglass"]}
     for td in (0.0, 0.05):
         f = decision_floor(hw, plant, one, idle, td)
+        assert f.converged
         assert f.worst_k == pytest.approx(clairvoyant["plexiglass"], abs=2e-3)
+
+
+def test_two_identical_materials_are_one_whenever_they_are_decided(setup):
+    # Two objects with the same direct-contact curve: learning which one it
+    # is tells the display nothing, so sharing any number of slots costs
+    # nothing (2e-3 K), even past the contact's end.
+    hw, plant, targets, idle, clairvoyant = setup
+    twins = {"a": targets["aluminium"], "b": targets["aluminium"].copy()}
+    for td in (0.05, 10.0):
+        f = decision_floor(hw, plant, twins, idle, td)
+        assert f.worst_k == pytest.approx(clairvoyant["aluminium"], abs=2e-3)
+        assert f.per_material_k["a"] == pytest.approx(f.per_material_k["b"], abs=1e-9)
 
 
 @pytest.mark.parametrize("bad", [-0.01, math.nan, math.inf])

@@ -17,8 +17,18 @@ slots are an independent bounded least-squares problem (its error
 gradient ``-2/n A_c^T (r_m - A q_m)`` by the envelope theorem); the common
 slots (a few: the decision comes in under 0.1 s) then minimise
 ``max_m e_m(c)`` in epigraph form (``s >= e_m(c)``) with SLSQP. The
-pumping bounds are recomputed on the solution's junction, as
-:func:`~telethermal.control.display_floor.best_touch` does.
+pumping bounds are recomputed once on the first solution's junction (two
+rounds, not iterated to convergence as
+:func:`~telethermal.control.display_floor.best_touch` does: on fingertip-7
+at 0.08 s a third round moved the worst material by under 1e-4 K).
+
+What it is a floor of: this model (the slots' input held, the error on
+slot ends, a linear junction with the hot side at the idle's steady
+temperature, the bounds ``BOUND_MARGIN`` inside the module's, one nominal
+operator), every material learnt at the same time. For that model the
+worst value is the minimax (SLSQP stopping early can only leave it
+higher); the per-material values are each material's error on that
+trajectory, not bounds for that material.
 
 Checks (tests/unit/test_decision_floor.py): with ``decision_s = 0`` it is the
 worst of the per-material floors of ``display_floor.best_touch``; it never
@@ -124,15 +134,16 @@ def decision_floor(hw: Hardware, plant: JunctionPlant, targets: dict, idle_c: fl
     hot = np.full((n_mat, n), idle_hold(hw, idle_c)[1])
     cold = np.broadcast_to(np.r_[idle_c, free_j[:-1]], (n_mat, n)).copy()
     c, converged = np.zeros(k_d), True
-    for _ in range(BOUND_ROUNDS):
+    for round_ in range(BOUND_ROUNDS):
         lo, hi = pump_bounds_w_m2(hw, cold, hot)
         margin = BOUND_MARGIN * (hi - lo)
         lo, hi = lo + margin, hi - margin
         tails = _Tails(plant, residuals, k_d, lo, hi)
         c, converged = _common(tails, lo[:, :k_d].max(axis=0), hi[:, :k_d].min(axis=0), c)
         q, mse, _ = tails(c)
-        junction = free_j[None, :] + q @ plant.junction_matrix.T
-        cold = np.hstack([np.full((n_mat, 1), idle_c), junction[:, :-1]])
+        if round_ + 1 < BOUND_ROUNDS:
+            junction = free_j[None, :] + q @ plant.junction_matrix.T
+            cold = np.hstack([np.full((n_mat, 1), idle_c), junction[:, :-1]])
     rms = np.sqrt(mse)
     return DecisionFloor(decision_s, float(idle_c), float(rms.max()),
                          {m: float(v) for m, v in zip(names, rms)}, c, converged)
