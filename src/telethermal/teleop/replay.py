@@ -206,7 +206,23 @@ def _replay_slave(rec, cid, identifier, attached):
             "recorded_decision_time_s": last.t_s if last is not None and last.decided else None,
             "estimates": len(slave.events), "recorded_estimates": len(recorded_est),
             "same_estimates": [tuple(e.estimate.posteriors) for e in slave.events] ==
-            [tuple(e.posteriors) for e in recorded_est]}
+            [tuple(e.posteriors) for e in recorded_est],
+            "posteriors_max_abs_diff": _posteriors_diff([e.estimate for e in slave.events],
+                                                        recorded_est)}
+
+
+def _posteriors_diff(replayed, recorded) -> float | None:
+    """The largest difference of one posterior between the replayed and the
+    recorded estimates, or None when they differ in number or shape."""
+    if len(replayed) != len(recorded):
+        return None
+    diff = 0.0
+    for a, b in zip(replayed, recorded):
+        pa, pb = tuple(a.posteriors or ()), tuple(b.posteriors or ())
+        if len(pa) != len(pb) or a.label != b.label or a.t_s != b.t_s:
+            return None
+        diff = max([diff, *(abs(x - y) for x, y in zip(pa, pb))])
+    return diff
 
 
 def plot_replay(result: dict, path: str | Path) -> Path:
