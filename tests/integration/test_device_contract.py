@@ -134,15 +134,22 @@ def test_a_session_through_emulated_devices_writes_the_same_json_as_with_sim():
     assert board["frames"] > 0 and board["crc"] == board["seq_gaps"] == 0
 
 
-def test_a_missing_reading_or_an_over_temperature_driver_is_the_safe_state_that_period():
+def _emulated_display_and_master():
+    """A clock, the emulated display (board on a pty, Peltier driver on a
+    virtual CAN bus), a static-PID master holding at the idle, its news."""
     from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
     from telethermal.teleop.run import pad_resistance
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
     clock = Clock()
     d = EmulatedDisplay(touch, clock=clock)
-    master = MasterDisplay(DisplayConfig(before="hold", feedforward_model="static"), None, pad_resistance(SCENE.pad.layers),
-                           SCENE.sensors.flux_lag_s, 33.0, idle_c=IDLE_C)
-    news = SlaveNews(object_temp_c=IDLE_C)
+    master = MasterDisplay(DisplayConfig(before="hold", feedforward_model="static"), None,
+                           pad_resistance(SCENE.pad.layers), SCENE.sensors.flux_lag_s, 33.0,
+                           idle_c=IDLE_C)
+    return clock, d, master, SlaveNews(object_temp_c=IDLE_C)
+
+
+def test_a_missing_reading_or_an_over_temperature_driver_is_the_safe_state_that_period():
+    clock, d, master, news = _emulated_display_and_master()
     safe = {}
     try:
         for k in range(700):
@@ -171,15 +178,7 @@ def test_a_peltier_driver_that_stops_reporting_is_the_safe_state_within_its_hear
     # the test): its last heartbeat ages past heartbeat_timeout_s, the
     # display stops trusting the actuator, its flux reading is withdrawn and
     # the supervisor holds the safe state from then on, saying why.
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
-    from telethermal.teleop.run import pad_resistance
-    touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
-    clock = Clock()
-    d = EmulatedDisplay(touch, clock=clock)
-    master = MasterDisplay(DisplayConfig(before="hold", feedforward_model="static"), None,
-                           pad_resistance(SCENE.pad.layers), SCENE.sensors.flux_lag_s, 33.0,
-                           idle_c=IDLE_C)
-    news = SlaveNews(object_temp_c=IDLE_C)
+    clock, d, master, news = _emulated_display_and_master()
     timeout_k = int(round(d.hardware.peltier.heartbeat_timeout_s / 1e-3))
     safe, healthy = {}, {}
     try:
