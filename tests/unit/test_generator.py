@@ -4,6 +4,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.special import erfcx
 
 from telethermal.data.dataset import Trial
@@ -125,3 +127,40 @@ def test_sampled_batched_evaluation_matches_one_by_one():
     many = wire.normalised_many(["wood", "marble"], t)
     np.testing.assert_allclose(many[0], wire.normalised("wood", t), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(many[1], wire.normalised("marble", t), rtol=1e-12, atol=1e-12)
+
+
+_CURVE_T = np.geomspace(2e-3, 60.0, 64)
+_CURVES = {f"m{k}": {"t_s": _CURVE_T.tolist(),
+                     "g_w_m2k": (np.random.default_rng(k).normal(size=64) * 1e3).tolist()}
+           for k in range(7)}
+
+
+@settings(max_examples=300, deadline=None)
+@given(names=st.lists(st.sampled_from(sorted(_CURVES)), min_size=1, max_size=7, unique=True),
+       raw=st.lists(st.floats(0.01, 1.0), min_size=7, max_size=7),
+       t_s=st.one_of(st.just(0.0), st.floats(0.0, 3e-3), st.floats(0.0, 100.0),
+                     st.sampled_from([1e-4, 2e-3, 60.0, 120.0])))
+def test_the_display_mixture_gives_the_bits_of_the_batched_sum(names, raw, t_s):
+    # The display's period evaluates the mixture in floats (weighted_sum); a
+    # replay must give the same bits as the numpy form it replaced, so every
+    # operation is the same in the same order. Exact equality, no tolerance.
+    from telethermal.render.sampled import SampledGenerator
+    wire = SampledGenerator(_CURVES)
+    weights = [w / sum(raw[:len(names)]) for w in raw[:len(names)]]
+    lo, hi = max(t_s - 1e-4, 0.0), t_s + 1e-4
+    batched = np.sum(np.asarray(weights)[:, None] *
+                     wire.normalised_many(names, np.array([t_s, lo, hi])), axis=0)
+    assert wire.weighted_sum(names, weights, (t_s, lo, hi)) == batched.tolist()
+    g, dg = mixture(wire, names, weights, t_s)
+    assert (g, dg) == (float(batched[0]), float((batched[2] - batched[1]) / (hi - lo)))
+
+
+def test_curves_that_do_not_share_knots_fall_back_to_the_batched_form():
+    from telethermal.render.sampled import SampledGenerator
+    odd = dict(_CURVES, odd={"t_s": np.geomspace(1e-3, 50.0, 10).tolist(),
+                             "g_w_m2k": np.linspace(-1.0, -5.0, 10).tolist()})
+    wire = SampledGenerator(odd)
+    assert wire.weighted_sum(["m0", "odd"], [0.5, 0.5], (0.1, 0.2, 0.3)) is None
+    g, _ = mixture(wire, ["m0", "odd"], [0.5, 0.5], 0.2)
+    assert g == pytest.approx(0.5 * wire.normalised("m0", 0.2)[0] +
+                              0.5 * wire.normalised("odd", 0.2)[0], rel=1e-12)

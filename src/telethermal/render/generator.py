@@ -33,6 +33,7 @@ from telethermal.ident.lm import MLP, train_lm
 from telethermal.ident.prepare import FLUX, MIN_GAP_K
 from telethermal.npzfile import read_npz, write_npz
 from telethermal.physics.materials import get_material
+from telethermal.render.sampled import SampledGenerator
 
 #: Curves are fitted on this many log-spaced times from the first sample to the end.
 N_KNOTS = 120
@@ -254,9 +255,12 @@ def mixture(generator, materials, weights, t_s: float, step_s: float = 1e-4):
     lo, hi = max(t_s - step_s, 0.0), t_s + step_s
     # A row-by-row sum, not a BLAS product: BLAS may round differently with
     # the arrays' alignment, and a replay must give the same bits.
-    w = np.asarray(weights, dtype=np.float64)
-    g = np.sum(w[:, None] * generator.normalised_many(materials, np.array([t_s, lo, hi])),
-               axis=0)
+    g = generator.weighted_sum(materials, [float(w) for w in weights], (t_s, lo, hi)) \
+        if isinstance(generator, SampledGenerator) else None
+    if g is None:
+        w = np.asarray(weights, dtype=np.float64)
+        g = np.sum(w[:, None] * generator.normalised_many(materials, np.array([t_s, lo, hi])),
+                   axis=0)
     return float(g[0]), float((g[2] - g[1]) / (hi - lo))
 
 

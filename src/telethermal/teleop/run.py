@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import math
+import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -310,6 +311,11 @@ def run_session(scene: Scene, material: str, identifier, generator,
                                     operator, idle, seed, contact_s, devices,
                                     sampled=list(wire.curves)) if record else None
 
+    # On the real clock, the display controller's own share of each period
+    # (its step; not the simulated plants, slave and wire that share the
+    # loop's thread here and run on their own hardware in a lab).
+    master_busy_s: list[float] = []
+
     def one_period(t_loop: float, dt_loop: float) -> bool:
         if touch.done:
             return False
@@ -321,7 +327,12 @@ def run_session(scene: Scene, material: str, identifier, generator,
         news = wire.master.news(t, True)
         if expected_material is not None:
             news = replace(news, expected_material=expected_material)
-        step = master.step(t, dt_loop, sensors, news)
+        if realtime:
+            started = time.perf_counter()
+            step = master.step(t, dt_loop, sensors, news)
+            master_busy_s.append(time.perf_counter() - started)
+        else:
+            step = master.step(t, dt_loop, sensors, news)
         display.apply(t, step, dt_loop, sensors.force_n)
         wire.master_period(step, sensors.force_n, operator.finger_ir_c)
         if recorder is not None:
@@ -378,6 +389,12 @@ def run_session(scene: Scene, material: str, identifier, generator,
         summary["recording"] = recorder.close(summary, touch.trace)
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
+        busy_us = np.asarray(master_busy_s) * 1e6
+        summary["loop"].update({
+            "master_step_p50_us": float(np.percentile(busy_us, 50)),
+            "master_step_p99_us": float(np.percentile(busy_us, 99)),
+            "master_step_mean_us": float(np.mean(busy_us)),
+            "master_step_over_period": int(np.sum(busy_us > 1e6 / config.rate_hz))})
     return SessionResult(summary, touch.trace)
 
 
