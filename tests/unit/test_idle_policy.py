@@ -4,6 +4,7 @@ cached for others, never used stale; every driver idles the same way."""
 import json
 import math
 
+import numpy as np
 import pytest
 
 from telethermal.control import preconditioning as pc
@@ -60,7 +61,7 @@ def test_a_stale_or_missing_policy_is_computed_once_and_cached(scene, monkeypatc
                 "minimax": {"fraction_of_finger_minus_object": -0.25},
                 "expected": {"fraction_of_finger_minus_object": -0.2},
                 "preconditioned": {m: {"fraction_of_finger_minus_object": 0.1}
-                                   for m in s.materials}}
+                                   for m in s.materials}, "groups": {}}
     monkeypatch.setattr(pc, "compute_policy", fake)
     assert pc.scene_policy(changed)["minimax"]["fraction_of_finger_minus_object"] == -0.25
     cached = list((tmp_path / "cache").glob("idle-policy-*.json"))
@@ -107,12 +108,45 @@ def test_display_idle_by_config(scene):
         DisplayConfig(idle="warm")
 
 
-def test_the_link_expects_one_announced_material():
+def test_the_link_expects_the_announced_material_or_pair():
     link = SlaveLink(classes=("aluminium", "wood", "rubber"))
     assert link.expected_material is None
     link.remembered = ("wood", 0.9)
     assert link.news(0.0, True).expected_material == "wood"
-    link.remembered = ("wood|rubber", 0.9)            # a pair: unknown to the idle
-    assert link.expected_material is None
+    link.remembered = ("rubber|wood", 0.9)            # a pair: its own idle
+    assert link.expected_material == "rubber|wood"
     link.remembered = ("glass", 0.9)                  # not a class of this slave
     assert link.expected_material is None
+    link.remembered = ("glass|wood", 0.9)
+    assert link.expected_material is None
+
+
+def test_a_remembered_pair_idles_at_the_pairs_minimax(scene):
+    """The pair's idle minimises the worse of its two materials' floors on
+    the shipped table: no idle on the table's fine grid does better for the
+    pair, it lies between the two materials' own best idles, and for
+    plexiglass|rubber (the pair bench faults' memory holds) both floors are
+    far below what the idle for an unknown object gives them."""
+    policy = pc.scene_policy(scene)
+    table, pair = policy["table"], ("plexiglass", "rubber")
+    row = policy["groups"]["plexiglass|rubber"]
+    idle_c, worst_k = pc.group_minimax_idle(table, pair)
+    assert (idle_c, worst_k) == (row["idle_c"], row["worst_floor_k"])
+    grid = table["idle_c"]
+    worst = [max(table["floor_k"][m][i] for m in pair) for i in range(len(grid))]
+    assert worst_k <= min(worst) + 1e-12
+    best = sorted(policy["preconditioned"][m]["idle_c"] for m in pair)
+    assert best[0] - 1.0 <= idle_c <= best[1] + 1.0          # the table's step
+    unknown = policy["minimax"]["idle_c"]
+    floor_unknown = max(float(np.interp(unknown, grid, table["floor_k"][m])) for m in pair)
+    assert worst_k < 0.25 * floor_unknown
+    fractions = pc.policy_fractions(scene)
+    assert fractions["plexiglass|rubber"] == row["fraction_of_finger_minus_object"]
+    idle, _ = display_idle(scene, DisplayConfig(), 33.0, 24.0, "plexiglass|rubber")
+    assert idle == pytest.approx(24.0 + row["fraction_of_finger_minus_object"] * 9.0, abs=1e-9)
+
+
+def test_a_label_without_an_idle_idles_as_an_unknown_object():
+    shift = pc.precondition_from({pc.UNKNOWN_KEY: -0.5, "wood": 0.2}, 33.0)
+    assert shift("wood", 24.0) == pytest.approx(1.8)
+    assert shift("a|b|c", 24.0) == shift(None, 24.0) == pytest.approx(-4.5)

@@ -118,6 +118,31 @@ def search_idles(search: FloorSearch, step_k: float = 4.0) -> dict:
                       "floor_k": {m: [search.floor_k(m, x) for x in grid] for m in materials}}}
 
 
+#: The floor table's idle step (K): every group's minimax idle is read off
+#: it (linear interpolation between its points, then a 0.05 K search).
+TABLE_STEP_K = 1.0
+
+
+def floor_table(search: FloorSearch, step_k: float = TABLE_STEP_K) -> dict:
+    """Every material's floor on an idle grid over the skin band."""
+    lo, hi = search.band_c
+    grid = np.unique(np.r_[np.arange(lo, hi, step_k), hi])
+    return {"idle_c": grid.tolist(),
+            "floor_k": {m: [search.floor_k(m, x) for x in grid] for m in search.scene.materials}}
+
+
+def group_minimax_idle(table: dict, materials) -> tuple[float, float]:
+    """(idle C, worst floor K) minimising the worst floor over ``materials``
+    (a remembered group: the object is one of them, which is not known),
+    from :func:`floor_table`'s table."""
+    grid = np.asarray(table["idle_c"], dtype=np.float64)
+    fine = np.unique(np.r_[np.arange(grid[0], grid[-1], 0.05), grid[-1]])
+    worst = np.max([np.interp(fine, grid, np.asarray(table["floor_k"][m], dtype=np.float64))
+                    for m in materials], axis=0)
+    i = int(np.argmin(worst))
+    return float(fine[i]), float(worst[i])
+
+
 def minimax_idle(search: FloorSearch, step_k: float = 7.0) -> tuple[float, list[str]]:
     """The idle minimising the worst floor over the scene's materials,
     solved on a subset and certified on all: start with the materials of
@@ -146,7 +171,7 @@ def minimax_idle(search: FloorSearch, step_k: float = 7.0) -> tuple[float, list[
 
 #: Bumped when the search or the floor it minimises changes: every stored
 #: policy (shipped or cached) is then recomputed.
-POLICY_VERSION = 1
+POLICY_VERSION = 2          # 2: minimax idles for every pair (a remembered group)
 
 
 def policy_key(scene: Scene) -> str:
@@ -170,10 +195,26 @@ def policy_key(scene: Scene) -> str:
 def compute_policy(scene: Scene) -> dict:
     """The idle table of ``scene`` (:func:`search_idles` on its nominal
     touch), with the key it was computed for. About a minute on fingertip-7."""
-    policy = search_idles(FloorSearch(scene, hardware(scene), nominal_touch(scene)))
+    from itertools import combinations
+
+    from telethermal.ident.anytime import group_label
+
+    search = FloorSearch(scene, hardware(scene), nominal_touch(scene))
+    policy = search_idles(search)
+    # A remembered pair (the slave's memory holds a group: the object is one
+    # of two materials) idles at the pair's minimax, read off a floor table.
+    table = floor_table(search)
+    span = search.touch.finger_c - search.touch.object_c
+    groups = {}
+    for pair in combinations(scene.materials, 2):
+        idle_c, worst_k = group_minimax_idle(table, pair)
+        groups[group_label(pair)] = {
+            "idle_c": idle_c, "offset_k": idle_c - search.touch.object_c,
+            "fraction_of_finger_minus_object": (idle_c - search.touch.object_c) / span,
+            "worst_floor_k": worst_k}
     return {"scene": scene.name, "key": policy_key(scene), "version": POLICY_VERSION,
             "minimax": policy["minimax"], "expected": policy["expected"],
-            "preconditioned": policy["preconditioned"]}
+            "preconditioned": policy["preconditioned"], "groups": groups, "table": table}
 
 
 def shipped_policy_path(scene_name: str):
@@ -201,7 +242,7 @@ def _read_policy(path, key: str) -> dict | None:
     try:
         data = json.loads(text)
         ok = isinstance(data, dict) and all(k in data for k in ("key", "minimax",
-                                                                   "preconditioned"))
+                                                                   "preconditioned", "groups"))
     except ValueError:
         ok = False
     if not ok:
@@ -239,20 +280,23 @@ UNKNOWN_KEY = "unknown"
 
 
 def policy_fractions(scene: Scene) -> dict[str, float]:
-    """The policy as the product applies it: per material, and for an
-    unknown object (:data:`UNKNOWN_KEY`), the idle's fraction of
-    ``finger - object`` (what a recording keeps to replay a touch)."""
+    """The policy as the product applies it: per material, per pair of
+    materials (a remembered group, its label ``a|b``), and for an unknown
+    object (:data:`UNKNOWN_KEY`), the idle's fraction of ``finger - object``
+    (what a recording keeps to replay a touch)."""
     policy = scene_policy(scene)
     out = {UNKNOWN_KEY: float(policy["minimax"]["fraction_of_finger_minus_object"])}
-    out.update({m: float(r["fraction_of_finger_minus_object"])
-                for m, r in policy["preconditioned"].items()})
+    for section in ("preconditioned", "groups"):
+        out.update({m: float(r["fraction_of_finger_minus_object"])
+                    for m, r in policy[section].items()})
     return out
 
 
 def idle_from_fractions(fractions: dict[str, float], material: str | None,
                         object_temp_c: float, finger_temp_c: float) -> float:
-    """``object + fraction * (finger - object)`` for ``material`` (None: an
-    unknown object), clipped to the skin band."""
+    """``object + fraction * (finger - object)`` for ``material`` (a
+    material, a group's label, or None: an unknown object), clipped to the
+    skin band."""
     if not (math.isfinite(object_temp_c) and math.isfinite(finger_temp_c)):
         raise ControlError(f"temperatures must be finite, got object {object_temp_c}, "
                            f"finger {finger_temp_c}")
@@ -284,6 +328,12 @@ def precondition_from(fractions: dict[str, float], finger_temp_c: float):
     """The display's pre-conditioning (``MasterDisplay(precondition=...)``):
     ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
     def offset(material, object_temp_c):
+        if material is not None and material not in fractions:
+            # A label the policy has no idle for (a group of three, a class
+            # the scene's table lacks): idle as for an unknown object, never
+            # fail a display period over it.
+            log.info("no idle for %r in the policy: idling as for an unknown object", material)
+            material = None
         return idle_from_fractions(fractions, material, object_temp_c,
                                    finger_temp_c) - object_temp_c
     return offset

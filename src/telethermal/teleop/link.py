@@ -231,14 +231,14 @@ class SlaveLink:
 
     @property
     def expected_material(self) -> str | None:
-        """The one material the slave announced for the object under its pad
-        (object memory), if it is one of the classes; None for an unknown
-        object or a remembered pair (the display then idles by the policy
-        for an unknown object)."""
+        """What the slave announced for the object under its pad (object
+        memory): one material, or a pair (its group label) when the memory
+        holds one, if its materials are classes; None for an unknown object
+        (the display then idles by the policy for an unknown object)."""
         if self.remembered is None:
             return None
-        names = members(self.remembered[0])
-        return names[0] if len(names) == 1 and names[0] in self.classes else None
+        label = self.remembered[0]
+        return label if all(m in self.classes for m in members(label)) else None
 
     @property
     def anchor_lag_s(self) -> float:
