@@ -87,3 +87,48 @@ def test_no_material_is_refused(setup):
     hw, plant, _, idle, _ = setup
     with pytest.raises(ControlError, match="no material"):
         decision_floor(hw, plant, {}, idle, 0.05)
+
+
+def test_one_time_for_every_material_is_the_single_time_floor_bit_for_bit(setup):
+    hw, plant, targets, idle, _ = setup
+    single = decision_floor(hw, plant, targets, idle, 0.05)
+    nested = decision_floor(hw, plant, targets, idle, {m: 0.05 for m in MATERIALS})
+    assert nested.worst_k == single.worst_k
+    assert nested.per_material_k == single.per_material_k
+
+
+def test_nested_decisions_lie_between_the_earliest_and_the_latest(setup):
+    # Each material learnt at its own time: the information is between
+    # everyone learning at the earliest of those times and everyone at the
+    # latest, and so is the minimax (tolerance 2e-3 K, the solver's). And a
+    # later decision for one material never lowers it.
+    hw, plant, targets, idle, _ = setup
+    times = {"aluminium": 0.03, "plexiglass": 0.1, "marble": 0.06}
+    nested = decision_floor(hw, plant, targets, idle, times).worst_k
+    early = decision_floor(hw, plant, targets, idle, 0.03).worst_k
+    late = decision_floor(hw, plant, targets, idle, 0.1).worst_k
+    assert early - 2e-3 <= nested <= late + 2e-3
+    later = decision_floor(hw, plant, targets, idle, {**times, "aluminium": 0.08}).worst_k
+    assert later >= nested - 2e-3
+
+
+def test_a_material_decided_at_contact_is_free_of_the_others(setup):
+    # Aluminium named at contact: its slots are its own from t = 0, so its
+    # error on the nested solution is its clairvoyant floor whenever the
+    # others are decided (the others share only among themselves).
+    hw, plant, targets, idle, clairvoyant = setup
+    f = decision_floor(hw, plant, targets, idle, {"aluminium": 0.0, "plexiglass": 0.1,
+                                                  "marble": 0.1})
+    assert f.per_material_k["aluminium"] <= max(clairvoyant["aluminium"] + 2e-3, f.worst_k)
+    both = decision_floor(hw, plant, {m: targets[m] for m in ("plexiglass", "marble")},
+                          idle, 0.1)
+    assert f.worst_k == pytest.approx(max(both.worst_k, clairvoyant["aluminium"]), abs=2e-3)
+
+
+def test_a_material_without_a_decision_time_is_named(setup):
+    hw, plant, targets, idle, _ = setup
+    with pytest.raises(ControlError, match="no decision time for marble"):
+        decision_floor(hw, plant, targets, idle, {"aluminium": 0.05, "plexiglass": 0.05})
+    with pytest.raises(ControlError, match=r"decision_s\['marble'\] must be finite"):
+        decision_floor(hw, plant, targets, idle, {"aluminium": 0.05, "plexiglass": 0.05,
+                                                  "marble": math.nan})

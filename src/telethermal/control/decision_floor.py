@@ -30,6 +30,16 @@ worst value is the minimax (SLSQP stopping early can only leave it
 higher); the per-material values are each material's error on that
 trajectory, not bounds for that material.
 
+Decisions at different times per material (``decision_s`` a mapping, the
+slave's measured decision time for each material): the information is then
+nested. At any instant the display knows only whether the slave has decided;
+an object not yet decided is one of the materials whose decision comes
+later, so slot ``j`` is common to exactly the materials decided after it
+and each material has its own slots from its decision on. The common
+vector is then the longest prefix (to the latest decision), material ``m``
+sees its first ``k_m`` slots; the rest is as above. With equal times it is
+the single-time floor, bit for bit (tested).
+
 Checks (tests/unit/test_decision_floor.py): with ``decision_s = 0`` it is the
 worst of the per-material floors of ``display_floor.best_touch``; it never
 falls when the decision comes later; with one material it is that
@@ -56,7 +66,7 @@ SCALE = 1e4
 
 @dataclass
 class DecisionFloor:
-    decision_s: float
+    decision_s: float | dict    # one time for all, or each material's
     idle_c: float
     worst_k: float              # the minimax value: no causal controller's worst is lower
     per_material_k: dict        # each material's RMS on the minimax trajectory
@@ -64,17 +74,19 @@ class DecisionFloor:
     converged: bool
 
     def summary(self) -> dict:
-        return {"decision_s": self.decision_s, "idle_c": self.idle_c,
+        decision = dict(self.decision_s) if isinstance(self.decision_s, dict) \
+            else self.decision_s
+        return {"decision_s": decision, "idle_c": self.idle_c,
                 "floor_worst_k": self.worst_k, "per_material_k": dict(self.per_material_k),
                 "common_q_w_m2": self.common_q_w_m2.tolist(), "converged": self.converged}
 
 
 class _Tails:
-    """Each material's best own slots for given common slots (cached)."""
+    """Each material's best own slots for given common slots (cached):
+    material ``m`` shares the first ``k[m]`` slots of ``c``."""
 
-    def __init__(self, plant: JunctionPlant, residuals, k_d, lo, hi):
-        a = plant.skin_matrix
-        self.a_c, self.a_t, self.k_d = a[:, :k_d], a[:, k_d:], k_d
+    def __init__(self, plant: JunctionPlant, residuals, k, lo, hi):
+        self.a, self.k = plant.skin_matrix, [int(x) for x in k]
         self.residuals, self.lo, self.hi = residuals, lo, hi
         self._key, self._out = None, None
 
@@ -84,13 +96,15 @@ class _Tails:
             n = self.residuals.shape[1]
             q, mse, grad = [], [], []
             for m, r in enumerate(self.residuals):
-                rest = r - self.a_c @ c
-                tail = bounded_fit(self.a_t, rest, self.lo[m, self.k_d:], self.hi[m, self.k_d:],
-                                   exact=False) if self.k_d < n else np.zeros(0)
-                err = rest - self.a_t @ tail
-                q.append(np.r_[c, tail])
+                k_m = self.k[m]
+                a_c, a_t = self.a[:, :k_m], self.a[:, k_m:]
+                rest = r - a_c @ c[:k_m]
+                tail = bounded_fit(a_t, rest, self.lo[m, k_m:], self.hi[m, k_m:],
+                                   exact=False) if k_m < n else np.zeros(0)
+                err = rest - a_t @ tail
+                q.append(np.r_[c[:k_m], tail])
                 mse.append(float(err @ err) / n)
-                grad.append(-2.0 / n * (self.a_c.T @ err))
+                grad.append(np.r_[-2.0 / n * (a_c.T @ err), np.zeros(len(c) - k_m)])
             self._key, self._out = key, (np.array(q), np.array(mse), np.array(grad))
         return self._out
 
@@ -117,17 +131,31 @@ def _common(tails: _Tails, lo_c, hi_c, start):
     return res.x[:-1] * SCALE, bool(res.success)
 
 
+def _slots(plant: JunctionPlant, decision_s: float, name: str) -> int:
+    """The slots before a decision at ``decision_s`` (the common ones)."""
+    if not (isinstance(decision_s, (int, float)) and math.isfinite(decision_s)
+            and decision_s >= 0):
+        raise ControlError(f"decision_s{name} must be finite and >= 0, got {decision_s}")
+    return min(int(math.ceil(decision_s / plant.grid_s - 1e-9)), plant.n)
+
+
 def decision_floor(hw: Hardware, plant: JunctionPlant, targets: dict, idle_c: float,
-                   decision_s: float) -> DecisionFloor:
+                   decision_s: float | dict) -> DecisionFloor:
     """The minimax floor over ``targets`` (material -> direct-contact skin
     at slot ends, C, shape (plant.n,)) of a controller that learns the
-    material ``decision_s`` after contact, from the pad idle at ``idle_c``."""
-    if not (math.isfinite(decision_s) and decision_s >= 0):
-        raise ControlError(f"decision_s must be finite and >= 0, got {decision_s}")
+    material ``decision_s`` after contact (one time, or a mapping material
+    -> its own time: nested information), from the pad idle at ``idle_c``."""
     if not targets:
         raise ControlError("no material to take the floor over")
     names = list(targets)
-    k_d = min(int(math.ceil(decision_s / plant.grid_s - 1e-9)), plant.n)
+    if isinstance(decision_s, dict):
+        missing = [m for m in names if m not in decision_s]
+        if missing:
+            raise ControlError(f"decision_s: no decision time for {', '.join(missing)}")
+        k = np.array([_slots(plant, decision_s[m], f"[{m!r}]") for m in names])
+    else:
+        k = np.full(len(names), _slots(plant, decision_s, ""))
+    k_d = int(k.max())
     free_j, free_s = plant.free(idle_c)
     residuals = np.stack([np.asarray(targets[m], float) - free_s for m in names])
     n_mat, n = residuals.shape
@@ -138,12 +166,18 @@ def decision_floor(hw: Hardware, plant: JunctionPlant, targets: dict, idle_c: fl
         lo, hi = pump_bounds_w_m2(hw, cold, hot)
         margin = BOUND_MARGIN * (hi - lo)
         lo, hi = lo + margin, hi - margin
-        tails = _Tails(plant, residuals, k_d, lo, hi)
-        c, converged = _common(tails, lo[:, :k_d].max(axis=0), hi[:, :k_d].min(axis=0), c)
+        tails = _Tails(plant, residuals, k, lo, hi)
+        # Slot j is common to the materials decided after it: the bounds of
+        # those (every material shares slot 0 .. min(k) - 1).
+        shares = np.arange(k_d)[None, :] < k[:, None]
+        lo_c = np.where(shares, lo[:, :k_d], -np.inf).max(axis=0)
+        hi_c = np.where(shares, hi[:, :k_d], np.inf).min(axis=0)
+        c, converged = _common(tails, lo_c, hi_c, c)
         q, mse, _ = tails(c)
         if round_ + 1 < BOUND_ROUNDS:
             junction = free_j[None, :] + q @ plant.junction_matrix.T
             cold = np.hstack([np.full((n_mat, 1), idle_c), junction[:, :-1]])
     rms = np.sqrt(mse)
-    return DecisionFloor(decision_s, float(idle_c), float(rms.max()),
+    return DecisionFloor(dict(decision_s) if isinstance(decision_s, dict) else decision_s,
+                         float(idle_c), float(rms.max()),
                          {m: float(v) for m, v in zip(names, rms)}, c, converged)
