@@ -137,6 +137,46 @@ def _materials(first: list[dict], repeat: list[dict], at_object: list[dict]) -> 
     return out
 
 
+def decision_floor_at_the_slaves_times(scene, first: list[dict], materials) -> dict:
+    """The floor of a display that learns each material when this bench's
+    slave decided it (control/decision_floor.py, nested information), from
+    the idle policy's pad for an unknown object, beside the first touches.
+
+    The decision time per material is the mean over seeds of the first
+    touches' ``decision_from_s`` (from contact); the floor is on the
+    scene's nominal touch (as ``bench skin-floor``'s), on 10 ms slots. Its
+    worst material is a bound no causal display beats on its worst
+    material; its per-material values are not bounds (a minimax trades
+    materials)."""
+    from telethermal.control import preconditioning as pc
+    from telethermal.control.decision_floor import decision_floor
+
+    times = {}
+    for m in materials:
+        vals = [r["decision_from_s"] for r in first
+                if r["material"] == m and r["decision_from_s"] is not None]
+        if vals:
+            times[m] = float(np.mean(vals))
+    decided = [m for m in materials if m in times]
+    if not decided:
+        return {"note": "no first touch was decided"}
+    search = pc.FloorSearch(scene, pc.hardware(scene), pc.nominal_touch(scene))
+    idle_c = pc.idle_for(scene, None, search.touch.object_c, search.touch.finger_c)
+    f = decision_floor(search.hw, search.plant, {m: search.targets[m] for m in decided},
+                       idle_c, {m: times[m] for m in decided})
+    first_worst = max(decided, key=lambda m: _mean([r for r in first if r["material"] == m],
+                                                    "temp_rms_error_c"))
+    worst_k = _mean([r for r in first if r["material"] == first_worst], "temp_rms_error_c")
+    return {"decision_s": times, "idle_c": idle_c, "grid_s": search.plant.grid_s,
+            "floor_worst_k": f.worst_k, "per_material_k": f.per_material_k,
+            "converged": f.converged, "first_touch_worst_material": first_worst,
+            "first_touch_worst_k": worst_k, "ratio": worst_k / f.worst_k,
+            "undecided": [m for m in materials if m not in times],
+            "criterion": "nested: the pad's heat common to the materials not yet decided; "
+                         "minimax over the decided materials; per_material_k: each "
+                         "material on that trajectory, not a bound per material"}
+
+
 def generator_comparison(scene) -> dict:
     """Network against fitted closed form, leave one person out of database 2."""
     trials = finger_database(scene, np.random.default_rng(1000))
@@ -191,6 +231,9 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
     at_object = [_session_row(scene, m, identifier, generator, DisplayConfig(idle="object"), s)
                  for m in materials for s in seeds5]
     report["materials"] = _materials(first, repeat, at_object)
+    step("the floor at the slave's decision times")
+    report["decision_floor"] = decision_floor_at_the_slaves_times(
+        scene, first, materials)
     step("PID gains")
     report["gains"] = []
     for name, gains in GAIN_SETS.items():
@@ -367,6 +410,13 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
                   f"{100 * v['flux_rms_from_decision_rel']:.2f} %, first second "
                   f"{100 * v['flux_rms_first_second_rel']:.2f} % of peak"
                   for m, v in per.items() if v]
+    d = report.get("decision_floor")
+    if isinstance(d, dict) and "floor_worst_k" in d:
+        lines.append(f"floor of a display learning each material at the slave's decision "
+                     f"({', '.join(f'{m} {t:.3f} s' for m, t in d['decision_s'].items())}): "
+                     f"worst {d['floor_worst_k']:.3f} K; the worst first touch "
+                     f"({d['first_touch_worst_material']}) {d['first_touch_worst_k']:.3f} K, "
+                     f"{d['ratio']:.2f}x it")
     if "limits" in report:
         lim = report["limits"]
         lines.append(f"module limits over {lim['sessions']} sessions: current exceeded "
