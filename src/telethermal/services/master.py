@@ -65,7 +65,10 @@ class Touch:
                                      **display_model_args(scene))
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed)
-        self.start = now
+        #: Session time 0 (the finger's contact) on the service's clock: the
+        #: display's time is ``now - origin_s`` and its onset goes back to the
+        #: session at ``origin_s`` plus its time (one origin, as ``t0`` on hardware).
+        self.origin_s = now + PRE_CONTACT_S
         self.contact_s = contact_s
         # The id the session gives the contact at the display's onset.
         self.contact_id = service.session.next_contact_id
@@ -235,7 +238,7 @@ class MasterService:
 
     def _touch_period(self, now: float, dt_s: float) -> None:
         touch, session = self.touch, self.session
-        t = now - touch.start - PRE_CONTACT_S
+        t = now - touch.origin_s
         news = session.news(now, self.endpoint.peer_alive)
         sensors = touch.devices.read(t)
         step = touch.display.step(t, dt_s, sensors, news)
@@ -246,7 +249,7 @@ class MasterService:
                                                                        touch.contact_id))
         if self.recorder is not None:
             self.recorder.period(t, dt_s, sensors, news, step)
-        self._send(session.period(step, touch.start + PRE_CONTACT_S, sensors.force_n,
+        self._send(session.period(step, touch.origin_s, sensors.force_n,
                                   touch.operator.finger_ir_c))
         if step.contact is not None and step.contact.touching:
             self.state = ServiceState.TOUCHING
@@ -261,7 +264,7 @@ class MasterService:
         touch.devices.close()
         link, session = self.link, self.session
         trajectory_at = None if session.trajectory_at_s is None else \
-            session.trajectory_at_s - touch.start - PRE_CONTACT_S
+            session.trajectory_at_s - touch.origin_s
         self._send(session.close_contact(time.monotonic(), touch.operator.finger_ir_c))
         # What the slave itself decided on this touch (not the recollection
         # the display may have rendered from; that is reported apart).
@@ -324,7 +327,7 @@ class MasterService:
         def lift(r):
             if self.touch is None:
                 raise ValueError("no touch in progress")
-            self.touch.sim.release_at(now - self.touch.start - PRE_CONTACT_S)
+            self.touch.sim.release_at(now - self.touch.origin_s)
             self.touch.contact_s = self.touch.sim.contact_s
             return {"contact_id": self.touch.contact_id, "contact_s": self.touch.contact_s}
 

@@ -50,9 +50,9 @@ from telethermal.faults.channel import Channel, Direction
 from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import MasterDisplay, SlaveNews
+from telethermal.teleop.master import MasterDisplay, MasterStep, SlaveNews
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession,
+from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession, Send,
                                         SlaveSession)
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
                                      display_idle, display_model_args, draw_operator, master_rng,
@@ -274,6 +274,54 @@ class SimSlaveService:
         self.session.lift(now)
 
 
+class SimMasterService:
+    """The master service on the simulated clock: the same
+    :class:`~telethermal.teleop.session.MasterSession` the service runs, one
+    clock with the slave (offset 0), and the display, idled for what the
+    slave announced (at ``-PRE_CONTACT_S``, placed long before), stepped on
+    the session's news each period. ``oracle``: the material the display is
+    told at its own onset instead (no network; the floor of any compensation)."""
+
+    def __init__(self, scene, config, curves: dict, classes, announcement: dict,
+                 finger_c: float, oracle: str | None = None):
+        generator = SampledGenerator(curves)
+        self.session = MasterSession(SlaveLink(generator=generator, classes=tuple(classes)))
+        self.session.on_message(announcement, -PRE_CONTACT_S)
+        self.finger_c, self.oracle = finger_c, oracle
+        self.classes = tuple(classes)
+        # The display has idled for what the announcement said (as the
+        # services do); the oracle, knowing the material, for that material:
+        # the floor of a repeated touch pre-conditions as the repeated touch does.
+        expected = oracle if oracle is not None else self.session.link.expected_material
+        self.idle_c, shift = display_idle(scene, config, finger_c,
+                                          self.session.link.object_temp_c, expected)
+        self.display = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
+                                     scene.sensors.flux_lag_s, finger_c, idle_c=self.idle_c,
+                                     precondition=shift, **display_model_args(scene))
+        self.onset_s: float | None = None       # the display's last onset
+
+    def on_message(self, m: dict, now: float) -> None:
+        """One message from the slave, as it arrives."""
+        self.session.on_message(m, now, 0.0)
+
+    def news(self, now: float) -> SlaveNews:
+        if self.oracle is None:
+            return self.session.news(now, True)
+        c, est = self.classes, None
+        if self.onset_s is not None:
+            est = Estimate(0.0, tuple(float(n == self.oracle) for n in c), self.oracle, 1.0,
+                           True, "oracle")
+        return SlaveNews(self.session.link.object_temp_c, est, c,
+                         expected_material=self.oracle)
+
+    def period(self, t: float, dt: float, sensors) -> tuple[MasterStep, list[Send]]:
+        """One display period on ``sensors``: (its step, what goes to the slave)."""
+        step = self.display.step(t, dt, sensors, self.news(t))
+        if step.contact is not None and step.contact.touching:
+            self.onset_s = step.contact.t_s
+        return step, self.session.period(step, 0.0, sensors.force_n, self.finger_c)
+
+
 # ---------------------------------------------------------------- one touch
 MODES = ("compensated", "naive", "oracle")
 
@@ -308,24 +356,13 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
                             scene.sample_rate_hz)
     rng = master_rng(seed)
     operator = draw_operator(scene, rng)
-    generator = SampledGenerator(curves)
     net = SimNetwork(network, np.random.default_rng([seed if network_seed is None
                                                      else network_seed, 15]))
-    session = MasterSession(SlaveLink(generator=generator, classes=tuple(pad.classes)))
-    session.on_message(slave.announcement(-PRE_CONTACT_S), -PRE_CONTACT_S)   # placed long before
-    # The display has idled for what the announcement said (as the services
-    # do); the oracle, knowing the material, for that material: the floor of
-    # a repeated touch pre-conditions as the repeated touch does.
-    expected = material if mode == "oracle" else session.link.expected_material
-    idle, shift = display_idle(scene, config, operator.finger_ir_c, pad.object_ir_c, expected)
-    master = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
-                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
-                           precondition=shift, **display_model_args(scene))
-    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
-    classes = tuple(pad.classes)
-    oracle = Estimate(0.0, tuple(float(c == material) for c in classes), material, 1.0, True,
-                      "oracle")
-    onset = None
+    master = SimMasterService(scene, config, curves, pad.classes,
+                              slave.announcement(-PRE_CONTACT_S), operator.finger_ir_c,
+                              oracle=material if mode == "oracle" else None)
+    session = master.session
+    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, master.idle_c, rng)
     dt = 1.0 / config.rate_hz
 
     def send_s2m(t_msg, m, lossless):
@@ -337,37 +374,31 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
             slave.on_message(m, t)
         slave.step(t, send_s2m)
         for m in net.due(t, "s2m"):
-            session.on_message(m, t, 0.0)
+            master.on_message(m, t)
         sensors = touch.sense(t)
-        if mode == "oracle":
-            news = SlaveNews(pad.object_ir_c, oracle if onset is not None else None, classes,
-                             expected_material=material)
-        else:
-            news = session.news(t, True)
-        step = master.step(t, dt, sensors, news)
+        step, sends = master.period(t, dt, sensors)
         touch.actuate(t, step, dt, sensors.force_n)
-        if step.contact is not None and step.contact.touching:
-            onset = step.contact.t_s
-        for s in session.period(step, 0.0, sensors.force_n, operator.finger_ir_c):
+        for s in sends:
             net.send(t, "m2s", s.message, s.lossless)
     slave.lift(t)
+    display = master.display
     metrics = compare_with_direct(scene, material, pad.object_true_c, operator, touch.trace,
-                                  contact_s, master.rendered_from_s)
+                                  contact_s, display.rendered_from_s)
     news_s = 0.0 if mode == "oracle" else session.first_news_s
     est = session.link.estimate
     summary = {
         "material": material, "seed": seed, "mode": mode, "object_id": object_id,
         "before_identification": config.before, "estimates": network.estimates,
-        "first_news_s": news_s, "master_onset_s": onset, "slave_onset_s": (
+        "first_news_s": news_s, "master_onset_s": master.onset_s, "slave_onset_s": (
             None if pad.onset_s is None or slave.touch_t0 is None
             else slave.touch_t0 + pad.onset_s),
         "identified": est.label if est is not None and est.decided else UNKNOWN,
         "decision_reason": est.reason if est is not None else "no estimate",
-        "render_start_s": master.rendered_from_s,
-        "rendered": master.rendering,
+        "render_start_s": display.rendered_from_s,
+        "rendered": display.rendering,
         **windowed_errors(touch.trace, contact_s, news_s),
         "temp_rms_error_c": metrics["temp_rms_error_c"],
-        **safety_summary(master), "link_counters": dict(session.link.counters),
+        **safety_summary(display), "link_counters": dict(session.link.counters),
         "lossless": {d: dict(s.counters) for d, s in net.streams.items()},
         "channel": {d: dict(c.counters) for d, c in net.channels.items()},
     }

@@ -291,19 +291,16 @@ def run_session(scene: Scene, material: str, identifier, generator,
     slave = Slave(scene, material, identifier, slave_rng(seed))
     rng = master_rng(seed)
     operator = draw_operator(scene, rng)
-    # The master has idled at its standby before this touch: the object's
-    # temperature, pre-conditioned for the material the slave expects
-    # (``expected_material``: object memory) or, for an unknown object, by
-    # the idle policy (``config.idle``; control/preconditioning.py).
-    idle, shift = display_idle(scene, config, operator.finger_ir_c, slave.object_ir_c,
-                               expected_material)
     # The two sides' session rules, as the services run them, over a wire
     # with no delay: the slave's pad goes down when the master's onset
     # reaches it, the master renders what the slave sends (its sampled curves).
     wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material)
-    master = MasterDisplay(config, wire.master.link.generator, pad_resistance(scene.pad.layers),
-                           scene.sensors.flux_lag_s, operator.finger_ir_c, idle_c=idle,
-                           precondition=shift, **display_model_args(scene))
+    # The master has idled at its standby before this touch: the object's
+    # temperature, pre-conditioned for the material the slave expects
+    # (``expected_material``: object memory) or, for an unknown object, by
+    # the idle policy (``config.idle``; control/preconditioning.py).
+    master = wire.set_up_display(scene, config, operator.finger_ir_c, expected_material)
+    idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=realtime, seed=seed)
@@ -311,9 +308,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
                                     operator, idle, seed, contact_s, devices,
                                     sampled=list(wire.curves)) if record else None
 
-    # On the real clock, the display controller's own share of each period
-    # (its step; not the simulated plants, slave and wire that share the
-    # loop's thread here and run on their own hardware in a lab).
+    # On the real clock, the master's own share of each period (its news,
+    # display step and messages; not the simulated plants and slave that
+    # share the loop's thread here and run on their own hardware in a lab).
     master_busy_s: list[float] = []
 
     def one_period(t_loop: float, dt_loop: float) -> bool:
@@ -324,17 +321,13 @@ def run_session(scene: Scene, material: str, identifier, generator,
         t = now[0] = t_loop - PRE_CONTACT_S
         wire.slave_period(t)
         sensors = display.read(t)
-        news = wire.master.news(t, True)
-        if expected_material is not None:
-            news = replace(news, expected_material=expected_material)
         if realtime:
             started = time.perf_counter()
-            step = master.step(t, dt_loop, sensors, news)
+            news, step = wire.master_step(t, dt_loop, sensors)
             master_busy_s.append(time.perf_counter() - started)
         else:
-            step = master.step(t, dt_loop, sensors, news)
+            news, step = wire.master_step(t, dt_loop, sensors)
         display.apply(t, step, dt_loop, sensors.force_n)
-        wire.master_period(step, sensors.force_n, operator.finger_ir_c)
         if recorder is not None:
             recorder.period(t, dt_loop, sensors, news, step)
         return True
@@ -402,7 +395,8 @@ class InProcessWire:
     """Both sides' session rules (:mod:`telethermal.teleop.session`) joined
     by a wire with no delay and no loss, for the in-process run: each
     period the slave reads what the master sent and sends what its rules
-    say, which the master reads before its display step."""
+    say, which the master reads before its display step (``master_step``,
+    on the display made by ``set_up_display``)."""
 
     def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str):
         curves = self.curves = sample_curves(generator, [c for c in identifier.classes_
@@ -414,6 +408,29 @@ class InProcessWire:
         self.master.on_message(self.slave.announcement(-PRE_CONTACT_S).message, -PRE_CONTACT_S)
         self._to_slave: list[dict] = []
         self.slave_t0_s: float | None = None
+        self.display: MasterDisplay | None = None
+        self.idle_c = math.nan
+        self.finger_c = math.nan
+        self.expected_material: str | None = None
+
+    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float,
+                     expected_material: str | None = None) -> MasterDisplay:
+        """The master's display, idled before this touch at its standby: the
+        object's temperature, pre-conditioned for the material the slave
+        expects (``expected_material``: object memory; it is the news's
+        every period) or, for an unknown object, by the idle policy."""
+        idle, shift = display_idle(scene, config, finger_c, self.slave.pad.object_ir_c,
+                                   expected_material)
+        self.display = MasterDisplay(config, self.master.link.generator,
+                                     pad_resistance(scene.pad.layers), scene.sensors.flux_lag_s,
+                                     finger_c, idle_c=idle, precondition=shift,
+                                     **display_model_args(scene))
+        self.idle_c, self.finger_c, self.expected_material = idle, finger_c, expected_material
+        return self.display
+
+    def to_master(self, m: dict, t: float) -> None:
+        """One message from the slave reaches the master (no delay, one clock)."""
+        self.master.on_message(m, t, 0.0)
 
     def slave_period(self, t: float) -> None:
         out = []
@@ -426,10 +443,19 @@ class InProcessWire:
                 out += self.slave.lift(t)[0]
         self._to_slave = []
         for send in out + self.slave.step(t):
-            self.master.on_message(send.message, t, 0.0)
+            self.to_master(send.message, t)
 
-    def master_period(self, step, force_n: float, finger_c: float) -> None:
-        self._to_slave += [s.message for s in self.master.period(step, 0.0, force_n, finger_c)]
+    def master_step(self, t: float, dt: float, sensors: PadSensors):
+        """One display period on ``sensors`` with what the slave has said:
+        returns the news it read and its step; what it tells the slave
+        goes on the wire."""
+        news = self.master.news(t, True)
+        if self.expected_material is not None:
+            news = replace(news, expected_material=self.expected_material)
+        step = self.display.step(t, dt, sensors, news)
+        self._to_slave += [s.message for s in self.master.period(step, 0.0, sensors.force_n,
+                                                                 self.finger_c)]
+        return news, step
 
     def end(self, t_end: float) -> None:
         """The session is over: a contact still open is lifted on both sides."""
