@@ -32,7 +32,7 @@ import numpy as np
 from telethermal.control.loop import FixedRateLoop, RealClock, SimClock
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
-from telethermal.ident.anytime import UNKNOWN
+from telethermal.ident.anytime import UNKNOWN, Estimate
 from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_resistance
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
@@ -43,6 +43,7 @@ from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.session import ContactRequest, MasterSession, SlaveSession
 from telethermal.teleop.slave import Slave
 
@@ -281,7 +282,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
     read through the real drivers). ``record``: an MCAP file to record the
-    session to (:mod:`telethermal.record.recording`)."""
+    session to (:mod:`telethermal.record.recording`). ``expected_material``:
+    the slave's object memory holds it for this object (an earlier touch
+    decided it), so the touch runs as a repeated one does in the services:
+    announced, pre-conditioned for and rendered from memory at onset."""
     from telethermal.devices.display import open_display
     from telethermal.record.recorder import SessionRecorder
 
@@ -294,12 +298,19 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # The two sides' session rules, as the services run them, over a wire
     # with no delay: the slave's pad goes down when the master's onset
     # reaches it, the master renders what the slave sends (its sampled curves).
-    wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material)
+    memory = ObjectMemory()
+    if expected_material is not None:
+        # An earlier touch of this object decided it (the slave's clock
+        # before this session: only its label and confidence are used).
+        memory.learn(material, Estimate(0.0, (), expected_material, 1.0, True, "confident"),
+                     -PRE_CONTACT_S)
+    wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material,
+                         memory=memory)
     # The master has idled at its standby before this touch: the object's
-    # temperature, pre-conditioned for the material the slave expects
-    # (``expected_material``: object memory) or, for an unknown object, by
-    # the idle policy (``config.idle``; control/preconditioning.py).
-    master = wire.set_up_display(scene, config, operator.finger_ir_c, expected_material)
+    # temperature, pre-conditioned for what the slave announced (object
+    # memory) or, for an unknown object, by the idle policy (``config.idle``;
+    # control/preconditioning.py).
+    master = wire.set_up_display(scene, config, operator.finger_ir_c)
     idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
@@ -398,10 +409,11 @@ class InProcessWire:
     say, which the master reads before its display step (``master_step``,
     on the display made by ``set_up_display``)."""
 
-    def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str):
+    def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str,
+                 memory: ObjectMemory | None = None):
         curves = self.curves = sample_curves(generator, [c for c in identifier.classes_
                                                          if c in generator.materials])
-        self.slave = SlaveSession(curves, rate_hz, measurements=False)
+        self.slave = SlaveSession(curves, rate_hz, memory=memory, measurements=False)
         self.slave.place(pad, object_id)
         self.master = MasterSession(SlaveLink(generator=SampledGenerator(curves),
                                               classes=tuple(pad.classes)))
@@ -411,21 +423,20 @@ class InProcessWire:
         self.display: MasterDisplay | None = None
         self.idle_c = math.nan
         self.finger_c = math.nan
-        self.expected_material: str | None = None
 
-    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float,
-                     expected_material: str | None = None) -> MasterDisplay:
+    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float
+                       ) -> MasterDisplay:
         """The master's display, idled before this touch at its standby: the
-        object's temperature, pre-conditioned for the material the slave
-        expects (``expected_material``: object memory; it is the news's
-        every period) or, for an unknown object, by the idle policy."""
+        object's temperature, pre-conditioned for what the slave announced
+        it expects (object memory) or, for an unknown object, by the idle
+        policy."""
         idle, shift = display_idle(scene, config, finger_c, self.slave.pad.object_ir_c,
-                                   expected_material)
+                                   self.master.link.expected_material)
         self.display = MasterDisplay(config, self.master.link.generator,
                                      pad_resistance(scene.pad.layers), scene.sensors.flux_lag_s,
                                      finger_c, idle_c=idle, precondition=shift,
                                      **display_model_args(scene))
-        self.idle_c, self.finger_c, self.expected_material = idle, finger_c, expected_material
+        self.idle_c, self.finger_c = idle, finger_c
         return self.display
 
     def to_master(self, m: dict, t: float) -> None:
@@ -450,8 +461,6 @@ class InProcessWire:
         returns the news it read and its step; what it tells the slave
         goes on the wire."""
         news = self.master.news(t, True)
-        if self.expected_material is not None:
-            news = replace(news, expected_material=self.expected_material)
         step = self.display.step(t, dt, sensors, news)
         self._to_slave += [s.message for s in self.master.period(step, 0.0, sensors.force_n,
                                                                  self.finger_c)]
