@@ -108,6 +108,14 @@ def test_real_clock_session_reports_its_period(models):
                     contact_s=0.3, seed=1, realtime=True).summary
     assert s["clock"] == "real" and s["loop_period_p99_us"] > 0
     assert s["loop"]["steps"] == int(round((0.2 + 0.3 + 0.2) * 200))
+    assert s["loop"]["master_step_p99_us"] > 0
+    # The master's own loop: the same touch, the world's time not charged.
+    own = run_session(SCENE, "wood", identifier, generator, DisplayConfig(rate_hz=200.0),
+                      contact_s=0.3, seed=1, realtime="master").summary
+    assert own["clock"] == "real, less the world's time"
+    assert own["loop"]["steps"] == s["loop"]["steps"]
+    with pytest.raises(SceneError, match="realtime must be"):
+        run_session(SCENE, "wood", identifier, generator, contact_s=0.3, realtime="fast")
 
 
 def test_session_command_writes_json_and_plot(tmp_path, models, capsys):

@@ -65,3 +65,24 @@ def test_real_clock_structure():
     assert s["steps"] == 30
     assert min(stats.lateness_s) >= 0.0
     assert all(b > a for a, b in zip(stats.starts_s, stats.starts_s[1:]))
+
+
+def test_the_world_paused_clock_does_not_count_the_worlds_time():
+    # Inequalities that hold whatever the machine's load: time.sleep lasts
+    # at least what it is asked, and the clock moves by at most the real
+    # time outside the world's spans.
+    import time
+
+    from telethermal.control.loop import WorldPausedClock
+    clock = WorldPausedClock()
+    before_real, before = time.perf_counter(), clock.now()
+    with clock.world():
+        time.sleep(0.01)
+    assert clock.paused_s >= 0.01
+    assert clock.now() - before <= (time.perf_counter() - before_real) - 0.01
+    with pytest.raises(RuntimeError):
+        with clock.world():
+            raise RuntimeError("the world failed")
+    assert clock.paused_s >= 0.01                 # still counted, the span closed
+    stats = FixedRateLoop(0.002, clock).run(lambda t, dt: None, 5)
+    assert stats.summary()["steps"] == 5 and min(stats.lateness_s) >= 0.0

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -46,6 +47,33 @@ class RealClock:
             time.sleep(remaining - self.spin_s)
         while time.perf_counter() < deadline_s:
             pass
+
+
+class WorldPausedClock(RealClock):
+    """The real clock less the time spent inside :meth:`world`: for a loop
+    that also simulates what, in a lab, runs elsewhere (the plant, the
+    remote side). The loop's deadlines, lateness and busy time are then its
+    own work's on this machine (the OS, the sleeps, the machine's stalls
+    outside the world's spans included); the world's time is not charged
+    to it."""
+
+    def __init__(self, spin_s: float = 200e-6):
+        super().__init__(spin_s)
+        self.paused_s = 0.0
+
+    def now(self) -> float:
+        return time.perf_counter() - self.paused_s
+
+    def sleep_until(self, deadline_s: float) -> None:
+        super().sleep_until(deadline_s + self.paused_s)
+
+    @contextmanager
+    def world(self):
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.paused_s += time.perf_counter() - start
 
 
 class SimClock:

@@ -21,6 +21,7 @@ draws give the direct-contact reference, so the comparison is with what
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import time
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.control.loop import FixedRateLoop, RealClock, SimClock
+from telethermal.control.loop import FixedRateLoop, RealClock, SimClock, WorldPausedClock
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate
@@ -275,7 +276,7 @@ class SessionResult:
 
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
-                realtime: bool = False, devices: str = "sim",
+                realtime: bool | str = False, devices: str = "sim",
                 record: str | Path | None = None, expected_material: str | None = None
                 ) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
@@ -285,7 +286,14 @@ def run_session(scene: Scene, material: str, identifier, generator,
     session to (:mod:`telethermal.record.recording`). ``expected_material``:
     the slave's object memory holds it for this object (an earlier touch
     decided it), so the touch runs as a repeated one does in the services:
-    announced, pre-conditioned for and rendered from memory at onset."""
+    announced, pre-conditioned for and rendered from memory at onset.
+    ``realtime``: False (the simulated clock), True (the real clock, the
+    simulated world on the loop's thread and its time charged to the loop)
+    or "master" (the real clock less the world's time: the slave, the wire
+    to it and the display's plant and sensors, which run on their own
+    hardware in a lab, are not charged to the master's loop)."""
+    if realtime not in (False, True, "master"):
+        raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
     from telethermal.devices.display import open_display
     from telethermal.record.recorder import SessionRecorder
 
@@ -314,7 +322,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
-    display = open_display(devices, touch, clock=lambda: now[0], realtime=realtime, seed=seed)
+    display = open_display(devices, touch, clock=lambda: now[0], realtime=bool(realtime),
+                           seed=seed)
     recorder = SessionRecorder.open(record, scene, material, identifier, generator, config,
                                     operator, idle, seed, contact_s, devices,
                                     sampled=list(wire.curves)) if record else None
@@ -324,26 +333,31 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # share the loop's thread here and run on their own hardware in a lab).
     master_busy_s: list[float] = []
 
+    clock = (WorldPausedClock() if realtime == "master" else RealClock()) if realtime \
+        else SimClock()
+    world = clock.world if isinstance(clock, WorldPausedClock) else contextlib.nullcontext
+
     def one_period(t_loop: float, dt_loop: float) -> bool:
         if touch.done:
             return False
         # Simulated time follows the loop: exact on the simulated clock, the
         # real elapsed time on the real one.
         t = now[0] = t_loop - PRE_CONTACT_S
-        wire.slave_period(t)
-        sensors = display.read(t)
+        with world():
+            wire.slave_period(t)
+            sensors = display.read(t)
         if realtime:
             started = time.perf_counter()
             news, step = wire.master_step(t, dt_loop, sensors)
             master_busy_s.append(time.perf_counter() - started)
         else:
             news, step = wire.master_step(t, dt_loop, sensors)
-        display.apply(t, step, dt_loop, sensors.force_n)
+        with world():
+            display.apply(t, step, dt_loop, sensors.force_n)
         if recorder is not None:
             recorder.period(t, dt_loop, sensors, news, step)
         return True
 
-    clock = RealClock() if realtime else SimClock()
     try:
         stats = FixedRateLoop(1.0 / config.rate_hz, clock).run(one_period, touch.n_total)
     finally:
@@ -385,7 +399,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
         "display_idle_c": idle, "expected_material": expected_material,
         **metrics, **safety_summary(master),
-        "clock": "real" if realtime else "simulated", "loop": stats.summary(),
+        "clock": {False: "simulated", True: "real", "master": "real, less the world's time"}[
+            realtime], "loop": stats.summary(),
         "devices": devices, "device_counters": device_counters,
         "module": module_summary(touch, master),
     }
