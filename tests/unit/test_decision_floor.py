@@ -132,3 +132,22 @@ def test_a_material_without_a_decision_time_is_named(setup):
     with pytest.raises(ControlError, match=r"decision_s\['marble'\] must be finite"):
         decision_floor(hw, plant, targets, idle, {"aluminium": 0.05, "plexiglass": 0.05,
                                                   "marble": math.nan})
+
+
+def test_the_worst_ratio_to_each_materials_own_floor(setup):
+    # Relative to each material's floor knowing it at contact: deciding at
+    # contact, every material reaches its own floor (ratio 1, 2e-3 K over
+    # the smallest floor); deciding later, the least worst ratio is above 1
+    # and no lower than the plain minimax's worst ratio allows (the plain
+    # minimax trajectory is one candidate): min max ratio <= its max ratio.
+    hw, plant, targets, idle, clairvoyant = setup
+    at_contact = decision_floor(hw, plant, targets, idle, 0.0, relative_to=clairvoyant)
+    assert at_contact.worst_ratio == pytest.approx(1.0, abs=2e-3 / min(clairvoyant.values()))
+    late = decision_floor(hw, plant, targets, idle, 0.1, relative_to=clairvoyant)
+    plain = decision_floor(hw, plant, targets, idle, 0.1)
+    plain_ratio = max(plain.per_material_k[m] / clairvoyant[m] for m in MATERIALS)
+    assert 1.0 < late.worst_ratio <= plain_ratio + 1e-3
+    assert late.worst_ratio == pytest.approx(
+        max(late.per_material_k[m] / clairvoyant[m] for m in MATERIALS), rel=1e-9)
+    with pytest.raises(ControlError, match="positive reference RMS"):
+        decision_floor(hw, plant, targets, idle, 0.1, relative_to={"aluminium": 0.3})

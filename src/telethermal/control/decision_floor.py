@@ -72,13 +72,18 @@ class DecisionFloor:
     per_material_k: dict        # each material's RMS on the minimax trajectory
     common_q_w_m2: np.ndarray   # what is pumped before the decision
     converged: bool
+    #: With ``relative_to``: the least worst ratio of a material's RMS to its
+    #: reference (no causal controller has every material under it); then
+    #: ``worst_k`` is only the largest RMS on that trajectory.
+    worst_ratio: float | None = None
 
     def summary(self) -> dict:
         decision = dict(self.decision_s) if isinstance(self.decision_s, dict) \
             else self.decision_s
         return {"decision_s": decision, "idle_c": self.idle_c,
                 "floor_worst_k": self.worst_k, "per_material_k": dict(self.per_material_k),
-                "common_q_w_m2": self.common_q_w_m2.tolist(), "converged": self.converged}
+                "common_q_w_m2": self.common_q_w_m2.tolist(), "converged": self.converged,
+                "worst_ratio": self.worst_ratio}
 
 
 class _Tails:
@@ -109,21 +114,22 @@ class _Tails:
         return self._out
 
 
-def _common(tails: _Tails, lo_c, hi_c, start):
-    """argmin over c in [lo_c, hi_c] of max_m e_m(c) (SLSQP, epigraph form,
-    c scaled by SCALE)."""
+def _common(tails: _Tails, lo_c, hi_c, start, weight):
+    """argmin over c in [lo_c, hi_c] of max_m weight_m e_m(c) (SLSQP,
+    epigraph form, c scaled by SCALE)."""
     k_d = len(lo_c)
     if k_d == 0:
         return np.zeros(0), True
 
     def cons(x):
-        return x[-1] - tails(x[:-1] * SCALE)[1]
+        return x[-1] - weight * tails(x[:-1] * SCALE)[1]
 
     def cons_jac(x):
-        grad = tails(x[:-1] * SCALE)[2] * SCALE
+        grad = weight[:, None] * tails(x[:-1] * SCALE)[2] * SCALE
         return np.hstack([-grad, np.ones((len(grad), 1))])
 
-    x0 = np.r_[np.clip(start, lo_c, hi_c) / SCALE, tails(np.clip(start, lo_c, hi_c))[1].max()]
+    x0 = np.r_[np.clip(start, lo_c, hi_c) / SCALE,
+               (weight * tails(np.clip(start, lo_c, hi_c))[1]).max()]
     res = minimize(lambda x: x[-1], x0, jac=lambda x: np.r_[np.zeros(k_d), 1.0],
                    method="SLSQP", constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
                    bounds=[*zip(lo_c / SCALE, hi_c / SCALE), (0.0, None)],
@@ -140,14 +146,26 @@ def _slots(plant: JunctionPlant, decision_s: float, name: str) -> int:
 
 
 def decision_floor(hw: Hardware, plant: JunctionPlant, targets: dict, idle_c: float,
-                   decision_s: float | dict) -> DecisionFloor:
+                   decision_s: float | dict, relative_to: dict | None = None) -> DecisionFloor:
     """The minimax floor over ``targets`` (material -> direct-contact skin
     at slot ends, C, shape (plant.n,)) of a controller that learns the
     material ``decision_s`` after contact (one time, or a mapping material
-    -> its own time: nested information), from the pad idle at ``idle_c``."""
+    -> its own time: nested information), from the pad idle at ``idle_c``.
+    ``relative_to`` (material -> a reference RMS, K, e.g. its floor knowing
+    the material at contact): minimise the worst ratio to it instead; its
+    value is ``worst_ratio``: no causal controller has every material's
+    RMS under that multiple of its reference."""
     if not targets:
         raise ControlError("no material to take the floor over")
     names = list(targets)
+    if relative_to is None:
+        weight = np.ones(len(names))
+    else:
+        refs = [relative_to.get(m) for m in names]
+        if not all(isinstance(r, (int, float)) and math.isfinite(r) and r > 0 for r in refs):
+            raise ControlError(f"relative_to: need a positive reference RMS for each of "
+                               f"{', '.join(names)}, got {relative_to}")
+        weight = 1.0 / np.square(np.asarray(refs, dtype=np.float64))
     if isinstance(decision_s, dict):
         missing = [m for m in names if m not in decision_s]
         if missing:
@@ -172,12 +190,13 @@ def decision_floor(hw: Hardware, plant: JunctionPlant, targets: dict, idle_c: fl
         shares = np.arange(k_d)[None, :] < k[:, None]
         lo_c = np.where(shares, lo[:, :k_d], -np.inf).max(axis=0)
         hi_c = np.where(shares, hi[:, :k_d], np.inf).min(axis=0)
-        c, converged = _common(tails, lo_c, hi_c, c)
+        c, converged = _common(tails, lo_c, hi_c, c, weight)
         q, mse, _ = tails(c)
         if round_ + 1 < BOUND_ROUNDS:
             junction = free_j[None, :] + q @ plant.junction_matrix.T
             cold = np.hstack([np.full((n_mat, 1), idle_c), junction[:, :-1]])
     rms = np.sqrt(mse)
+    ratio = None if relative_to is None else float(np.sqrt((weight * mse).max()))
     return DecisionFloor(dict(decision_s) if isinstance(decision_s, dict) else decision_s,
                          float(idle_c), float(rms.max()),
-                         {m: float(v) for m, v in zip(names, rms)}, c, converged)
+                         {m: float(v) for m, v in zip(names, rms)}, c, converged, ratio)
