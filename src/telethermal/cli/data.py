@@ -94,7 +94,7 @@ def cmd_simulate(args) -> int:
 def _write_idle_policies(names) -> int:
     """Compute and write the package's idle policy of each shipped scene
     (developers: after changing a shipped scene, the module, the materials
-    or the search; about a minute each)."""
+    or the search; a few minutes each)."""
     from telethermal.control.preconditioning import compute_policy, shipped_policy_path
     from telethermal.jsonfile import write_json
     from telethermal.physics.scene import load_scene

@@ -194,7 +194,8 @@ def policy_key(scene: Scene) -> str:
 
 def compute_policy(scene: Scene) -> dict:
     """The idle table of ``scene`` (:func:`search_idles` on its nominal
-    touch), with the key it was computed for. About a minute on fingertip-7."""
+    touch), with the key it was computed for. A few minutes on fingertip-7
+    (most of it the floor table the pairs' idles are read off)."""
     from itertools import combinations
 
     from telethermal.ident.anytime import group_label
@@ -256,7 +257,7 @@ _POLICIES: dict[str, dict] = {}
 def scene_policy(scene: Scene) -> dict:
     """The idle policy of ``scene``: the package's for a shipped scene it
     was computed for, else the user's cache (:func:`cache_dir`), else
-    computed now (about a minute; logged) and cached (written atomically)."""
+    computed now (a few minutes; logged) and cached (written atomically)."""
     key = policy_key(scene)
     if key in _POLICIES:
         return _POLICIES[key]
@@ -265,7 +266,7 @@ def scene_policy(scene: Scene) -> dict:
     if policy is None:
         policy = _read_policy(cached, key)
     if policy is None:
-        log.warning("scene %s: computing the display's idle policy (about a minute, once; "
+        log.warning("scene %s: computing the display's idle policy (a few minutes, once; "
                     "cached in %s)", scene.name, cached.parent)
         policy = compute_policy(scene)
         try:
