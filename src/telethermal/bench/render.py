@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
@@ -267,6 +268,10 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
     # The master's loop on the real clock, the simulated world (the slave,
     # its pad, the display's plant and sensors: other hardware in a lab)
     # not charged to it; and, for comparison, everything on its thread.
+    # The machine's own floor first: the same loop doing nothing (its misses
+    # are this machine's stalls and sleep overshoot alone).
+    empty = FixedRateLoop(1e-3, RealClock()).run(lambda t, dt: None, 3400).summary()
+    report["real_clock_empty_loop"] = {"rate_hz": 1000.0, **empty}
     report["real_clock"], report["real_clock_world_on_thread"] = [], []
     for key, mode, rates in (("real_clock", "master", (100.0, 500.0, 1000.0)),
                              ("real_clock_world_on_thread", True, (1000.0,))):
@@ -443,6 +448,11 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
         lines.append(f"module limits over {lim['sessions']} sessions: current exceeded "
                      f"{lim['current_exceeded']}, hot side exceeded {lim['hot_side_exceeded']}; "
                      f"safety events {report['safety_events']}")
+    e = report.get("real_clock_empty_loop")
+    if e:
+        lines.append(f"real clock   1000 Hz, an empty loop (this machine's floor): period p99 "
+                     f"{e['period_p99_us']:.0f} us, max {e['period_max_us']:.0f} us, deadline "
+                     f"misses {e['deadline_misses']} of {e['steps']}, stalls {e['stalls']}")
     for key, what in (("real_clock", "the master's loop"),
                       ("real_clock_world_on_thread", "with the simulated world on its thread")):
         lines += [f"real clock {r['rate_hz']:6.0f} Hz, {what}: period p50 "

@@ -266,6 +266,11 @@ def render(out: Path, d: dict) -> list[str]:
         lines.append(f"| {r['rate_hz']:g} Hz | {_pct(r['mean_flux_rms_error_rel'])} | "
                      f"{_pct(r['max_flux_rms_error_rel'])} | {r['mean_temp_rms_error_c']:.2f} K"
                      f" | {r['mean_cpu_s_per_simulated_s']:.3g} |")
+    e = d.get("real_clock_empty_loop")
+    if e:
+        lines.append(f"\nAn empty loop at 1 kHz (this machine's own floor): period p99 "
+                     f"{e['period_p99_us']:.0f} us, {e['deadline_misses']} deadline misses of "
+                     f"{e['steps']}, {e['stalls']} stalls.")
     for key, what in (("real_clock", "the master's loop (the simulated world not charged "
                                      "to it)"),
                       ("real_clock_world_on_thread", "the simulated world on the loop's thread")):
