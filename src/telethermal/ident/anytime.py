@@ -22,20 +22,24 @@ import numpy as np
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.base import FORCE_SAMPLES, Identifier, force_at, force_in_range
+from telethermal.ident.label import GROUP_SEPARATOR, UNKNOWN, Label, Reason
 from telethermal.ident.prepare import MIN_GAP_K
 
-UNKNOWN = "unknown"
-GROUP_SEPARATOR = "|"
-FORCE_OUTSIDE = "force outside trained range"
+__all__ = ["GROUP_SEPARATOR", "UNKNOWN", "FORCE_OUTSIDE", "Label", "Reason", "Decision",
+           "Estimate", "StreamingIdentifier", "decide", "decide_all", "group_label", "members"]
+
+FORCE_OUTSIDE = Reason.FORCE_OUTSIDE
 
 
 def group_label(members) -> str:
-    return GROUP_SEPARATOR.join(sorted(members))
+    """The text of a group's label (members sorted), a plain ``str``."""
+    return str(Label.of(members))
 
 
 def members(label: str) -> tuple[str, ...]:
-    """The materials a decision's label stands for (one, or a group's)."""
-    return tuple(label.split(GROUP_SEPARATOR))
+    """The materials a decision's label stands for (one, or a group's; none
+    for unknown): :attr:`Label.members`."""
+    return Label(label).members
 
 
 def _group(p: np.ndarray, threshold: float):
@@ -49,12 +53,16 @@ def _group(p: np.ndarray, threshold: float):
 
 @dataclass(frozen=True, slots=True)
 class Decision:
-    label: str                 # a class of the identifier, or "unknown"
+    label: Label               # a class of the identifier, a group, or unknown (any str given)
     confidence: float          # posterior of the best class when decided (or at the end)
     time_s: float | None       # time after contact of the commitment; None if none
-    reason: str                # confident | confident group | outside classes | gap too small
-    #                            | not confident
+    reason: str                # a Reason: confident | confident group | outside classes
+    #                            | gap too small | not confident | force outside trained range
     time_first_s: float | None = None   # first commitment (a group's), when refined later
+
+    def __post_init__(self):
+        if type(self.label) is not Label:
+            object.__setattr__(self, "label", Label(self.label))
 
 
 def decide(model: Identifier, x: np.ndarray, gap_k: float,
@@ -71,7 +79,7 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     decision as updating at every sample, at a fraction of the cost.
     """
     if not np.isfinite(gap_k) or abs(gap_k) < MIN_GAP_K:
-        return Decision(UNKNOWN, 0.0, None, "gap too small")
+        return Decision(UNKNOWN, 0.0, None, Reason.GAP_TOO_SMALL)
     n = int(np.sum(np.all(np.isfinite(x), axis=1)))
     path = model.posterior_path(x[:n])
     forces = None if force_n is None else np.asarray(force_n, dtype=np.float64)[None]
@@ -88,18 +96,19 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
                 continue
         if p[k] >= model.threshold:
             if model.outside_classes(x[None, :n], i)[0]:
-                return Decision(UNKNOWN, best, model.windows_s_[i], "outside classes")
+                return Decision(UNKNOWN, best, model.windows_s_[i], Reason.OUTSIDE_CLASSES)
             # The group's earlier commitment counts only if it held this material.
-            first = group.time_s if group and model.classes_[k] in members(group.label) \
+            first = group.time_s if group and group.label.holds(model.classes_[k]) \
                 else model.windows_s_[i]
-            return Decision(model.classes_[k], best, model.windows_s_[i], "confident", first)
+            return Decision(model.classes_[k], best, model.windows_s_[i], Reason.CONFIDENT,
+                            first)
         pair = _group(p, model.threshold)
         if group is None and pair is not None and not model.outside_classes(x[None, :n], i)[0]:
-            group = Decision(group_label(model.classes_[j] for j in pair), float(p[pair].sum()),
-                             model.windows_s_[i], "confident group", model.windows_s_[i])
+            group = Decision(Label.of(model.classes_[j] for j in pair), float(p[pair].sum()),
+                             model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
         return group
-    return Decision(UNKNOWN, best, None, FORCE_OUTSIDE if outside else "not confident")
+    return Decision(UNKNOWN, best, None, FORCE_OUTSIDE if outside else Reason.NOT_CONFIDENT)
 
 
 def decide_all(model: Identifier, contacts) -> list[Decision]:
@@ -116,15 +125,19 @@ class Estimate:
 
     t_s: float
     posteriors: tuple[float, ...]      # over the identifier's classes
-    label: str                         # the best class, or "unknown"
+    label: Label                       # the best class, a group, or unknown (any str given)
     confidence: float
     decided: bool                      # committed (to a class, a group or "unknown")
-    reason: str = ""
+    reason: str = Reason.UNDECIDED     # a Reason (a peer's unknown one stays its string)
+
+    def __post_init__(self):
+        if type(self.label) is not Label:
+            object.__setattr__(self, "label", Label(self.label))
 
     @property
     def final(self) -> bool:
         """Committed for good: a group's commitment may still be refined."""
-        return self.decided and self.reason != "confident group"
+        return self.decided and self.reason != Reason.CONFIDENT_GROUP
 
 
 class StreamingIdentifier:
@@ -154,7 +167,7 @@ class StreamingIdentifier:
         self.gap_ok = bool(np.isfinite(gap_k) and abs(gap_k) >= MIN_GAP_K)
         if not self.gap_ok:
             self.estimate = Estimate(0.0, self.estimate.posteriors, UNKNOWN, 0.0, True,
-                                     "gap too small")
+                                     Reason.GAP_TOO_SMALL)
 
     @property
     def decided(self) -> bool:
@@ -192,27 +205,29 @@ class StreamingIdentifier:
         k = int(np.argmax(p))
         t_s = model.windows_s_[index]
         pair = _group(p, model.threshold)
-        held = self.estimate if self.estimate.reason == "confident group" else None
+        held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
         last = index == len(model.windows_s_) - 1
         if outside and held is None:
             est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
-                           last, FORCE_OUTSIDE if last else "")
+                           last, FORCE_OUTSIDE if last else Reason.UNDECIDED)
         elif outside:
-            est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, "confident group")
+            est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
         elif p[k] >= model.threshold:
             if model.outside_classes(x, index)[0]:
-                est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, "outside classes")
+                est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True,
+                               Reason.OUTSIDE_CLASSES)
             else:
-                est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), True, "confident")
+                est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), True,
+                               Reason.CONFIDENT)
         elif held is not None:            # a group stands until a member is sure alone
-            est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, "confident group")
+            est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
         elif pair is not None and not model.outside_classes(x, index)[0]:
-            est = Estimate(t_s, tuple(p), group_label(model.classes_[j] for j in pair),
-                           float(p[pair].sum()), True, "confident group")
+            est = Estimate(t_s, tuple(p), Label.of(model.classes_[j] for j in pair),
+                           float(p[pair].sum()), True, Reason.CONFIDENT_GROUP)
         elif last:
-            est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, "not confident")
+            est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, Reason.NOT_CONFIDENT)
         else:
             est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), False)
         self.estimate = est

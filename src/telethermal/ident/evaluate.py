@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from telethermal.data.dataset import Trial, load_dataset
-from telethermal.ident.anytime import UNKNOWN, decide, decide_all
+from telethermal.ident.anytime import Reason, decide, decide_all
 from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials
 from telethermal.ident.registry import check_scene, dataset_scene, load_model
@@ -77,31 +77,33 @@ def decision_summary(decisions, labels, within_s: float = 1.0) -> dict:
     time, counting commitments to a class or a group within ``within_s``
     (the first commitment's time; a group is right when it holds the
     truth, and ``group_rate`` says how many stayed groups)."""
-    from telethermal.ident.anytime import members
-
     def first(d):
         return d.time_first_s if d.time_first_s is not None else d.time_s
 
     committed = [(d, lab) for d, lab in zip(decisions, labels)
-                 if d.label != UNKNOWN and first(d) is not None and first(d) <= within_s + 1e-9]
+                 if not d.label.is_unknown and first(d) is not None and first(d) <= within_s + 1e-9]
     return {"commit_rate": len(committed) / len(decisions) if decisions else float("nan"),
-            "accuracy": (float(np.mean([lab in members(d.label) for d, lab in committed]))
+            "accuracy": (float(np.mean([d.label.holds(lab) for d, lab in committed]))
                          if committed else None),
             "time_s_p50": (float(np.median([first(d) for d, _ in committed]))
                            if committed else None),
-            "group_rate": (sum(d.reason == "confident group" for d, _ in committed)
+            "group_rate": (sum(d.reason == Reason.CONFIDENT_GROUP for d, _ in committed)
                            / len(decisions) if decisions else float("nan")),
             # Commitments to one material only (a group left as a group is not one).
-            "single_commit_rate": (sum(d.reason != "confident group" for d, _ in committed)
+            "single_commit_rate": (sum(d.reason != Reason.CONFIDENT_GROUP for d, _ in committed)
                                    / len(decisions) if decisions else float("nan")),
             "single_accuracy": (float(np.mean([d.label == lab for d, lab in committed
-                                               if d.reason != "confident group"]))
-                                if any(d.reason != "confident group" for d, _ in committed)
+                                               if d.reason != Reason.CONFIDENT_GROUP]))
+                                if any(d.reason != Reason.CONFIDENT_GROUP for d, _ in committed)
                                 else None),
             "committed": len(committed), "touches": len(decisions),
-            "unknown_reasons": {r: sum(d.reason == r for d in decisions if d.label == UNKNOWN)
-                                for r in sorted({d.reason for d in decisions
-                                                 if d.label == UNKNOWN})}}
+            "unknown_reasons": _unknown_reasons(decisions)}
+
+
+def _unknown_reasons(decisions) -> dict[str, int]:
+    """How many of the decisions were unknown, by reason (plain strings, sorted)."""
+    reasons = [str(d.reason) for d in decisions if d.label.is_unknown]
+    return {r: reasons.count(r) for r in sorted(set(reasons))}
 
 
 def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> dict:
@@ -158,7 +160,7 @@ def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
         labels = contacts.labels
     decisions += [decide(model, np.empty((0, len(model.channels))), t.gap_k) for t in skipped]
     truth_all = labels + [t.material for t in skipped]
-    committed = [(d, t) for d, t in zip(decisions, truth_all) if d.label != UNKNOWN]
+    committed = [(d, t) for d, t in zip(decisions, truth_all) if not d.label.is_unknown]
     report = {
         "method": model.method, "classes": model.classes_, "channels": list(model.channels),
         "trials": len(truth_all), "trials_without_gap": len(skipped),
@@ -167,8 +169,7 @@ def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
         "decision_accuracy": (float(np.mean([d.label == t for d, t in committed]))
                               if committed else None),
         "decision_unknown_rate": 1.0 - len(committed) / len(truth_all),
-        "unknown_reasons": {r: sum(d.reason == r for d in decisions if d.label == UNKNOWN)
-                            for r in sorted({d.reason for d in decisions if d.label == UNKNOWN})},
+        "unknown_reasons": _unknown_reasons(decisions),
         "threshold": model.threshold,
     }
     if usable_trials:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from telethermal.errors import TelethermalError, TransportError
+from telethermal.ident.anytime import Reason
 from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
 from telethermal.services.viewer import open_view
@@ -180,7 +181,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     slave_devices = report.get("devices")
     if report.get("object_true_c") is None:          # the slave was restarted meanwhile
         report = {"object_true_c": placed["object_true_c"], "identified": result["identified"],
-                  "decision_time_s": None, "onset_s": None, "reason": "slave restarted"}
+                  "decision_time_s": None, "onset_s": None, "reason": Reason.SLAVE_RESTARTED}
     import numpy as np
 
     from telethermal.teleop.run import Operator

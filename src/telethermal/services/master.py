@@ -23,6 +23,7 @@ from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
+from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
@@ -276,7 +277,7 @@ class MasterService:
             "operator": vars(touch.operator), "trace": touch.sim.trace,
             "render_start_s": touch.display.rendered_from_s,
             "master_onset_s": touch.display.last_onset_s,
-            "identified": est.label if est is not None and est.decided else "unknown",
+            "identified": est.label if est is not None and est.decided else UNKNOWN,
             # when the slave first decided this label (a group that stood
             # until the last window was decided at its first commitment, as
             # the slave reports it)

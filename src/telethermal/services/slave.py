@@ -18,7 +18,7 @@ import zmq
 
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
-from telethermal.ident.anytime import UNKNOWN
+from telethermal.ident.anytime import UNKNOWN, Reason
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
@@ -292,13 +292,13 @@ class SlaveService:
                 "identified": est.label if est is not None and est.decided else UNKNOWN,
                 # the first commitment (a group's, when refined later)
                 "decision_time_s": (pad.committed_at_s if est is not None and est.decided
-                                    and est.label != UNKNOWN else None),
+                                    and not est.label.is_unknown else None),
                 # when the identified label itself was decided (later, after a group)
                 "identified_at_s": (pad.decided_at_s(est.label) if est is not None and
-                                    est.decided and est.label != UNKNOWN else None),
+                                    est.decided and not est.label.is_unknown else None),
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
-                "reason": est.reason if est is not None else "no estimate",
+                "reason": est.reason if est is not None else Reason.NO_ESTIMATE,
                 **({"devices": device_report(self.devices, self._touch_counters)}
                    if self.devices is not None else {})}
 

@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from telethermal.ident.anytime import UNKNOWN, Estimate, members
+from telethermal.ident.anytime import Estimate, Label
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.master import SlaveNews
 from telethermal.teleop.memory import Agreement, agreement, remembered_estimate
@@ -98,8 +98,7 @@ class SlaveLink:
         self.contact_id, self.onset_s = contact_id, None
         self.estimates, self.trajectory = [], None
         self.latest = self.decision = self.memory = self.recalled = None
-        if self.remembered is not None and \
-                all(m in self.classes for m in members(self.remembered[0])):
+        if self.remembered is not None and Label(self.remembered[0]).within(self.classes):
             self.memory = remembered_estimate(*self.remembered, self.classes)
             self.recalled = self.memory          # kept for the report, never cleared
             self._memory_object = self.object_id
@@ -170,7 +169,7 @@ class SlaveLink:
             mem = self.memory
             # "unknown", or a decision vaguer than the memory (a pair that
             # holds the remembered material), leaves the memory in force.
-            verdict = None if mem is None or e.label == UNKNOWN else \
+            verdict = None if mem is None or e.label.is_unknown else \
                 agreement(mem.label, e.label)
             if verdict == Agreement.DISAGREES:
                 log.warning("contact %s: the slave decided %s, memory said %s: the fresh "
@@ -237,8 +236,8 @@ class SlaveLink:
         (the display then idles by the policy for an unknown object)."""
         if self.remembered is None:
             return None
-        label = self.remembered[0]
-        return label if all(m in self.classes for m in members(label)) else None
+        label = Label(self.remembered[0])
+        return label if label.within(self.classes) else None
 
     @property
     def anchor_lag_s(self) -> float:

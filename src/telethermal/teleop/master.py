@@ -51,7 +51,7 @@ from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
                                         supervise, surface_barrier)
 from telethermal.errors import ControlError, UnknownMaterialError
-from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.ident.anytime import Estimate
 from telethermal.physics.materials import get_material
 from telethermal.physics.thermoelectric import ModuleParams, default_driver
 from telethermal.render.generator import mixture, posterior_weights
@@ -338,12 +338,12 @@ class MasterDisplay:
         if est is None or not est.decided:
             return
         h = self.handover
-        if self.phase == Phase.CONTACT and est.label != UNKNOWN and \
+        if self.phase == Phase.CONTACT and not est.label.is_unknown and \
                 self.generator is not None and est.label in self.generator.materials:
             self.phase, self.rendering, self.rendered_from_s = Phase.RENDER, est.label, t_s
             h.blend = (t_s, h.last_weights) if h.pid_running and h.last_weights else None
-        elif self.phase == Phase.RENDER and est.label not in (UNKNOWN, self.rendering) and \
-                est.label in self.generator.materials:
+        elif self.phase == Phase.RENDER and not est.label.is_unknown and \
+                est.label != self.rendering and est.label in self.generator.materials:
             # The slave changed its mind: blend to the new material, no step.
             log.info("rendering changes from %s to %s at t=%.3f s", self.rendering, est.label, t_s)
             self._count("decision changed")

@@ -30,12 +30,12 @@ import logging
 from dataclasses import asdict, dataclass
 from enum import StrEnum
 
-from telethermal.ident.anytime import UNKNOWN, Estimate, members
+from telethermal.ident.anytime import Estimate, Label, Reason
 
 log = logging.getLogger(__name__)
 
 #: The ``reason`` of an estimate made from memory rather than from sensing.
-FROM_MEMORY = "object memory"
+FROM_MEMORY = Reason.OBJECT_MEMORY
 
 
 class Agreement(StrEnum):
@@ -121,14 +121,17 @@ class ObjectMemory:
 
 
 def learnable(estimate: Estimate | None) -> bool:
-    return (estimate is not None and estimate.decided and estimate.label != UNKNOWN and
+    return (estimate is not None and estimate.decided and not estimate.label.is_unknown and
             estimate.reason != FROM_MEMORY)
 
 
 def agreement(held: str, fresh: str) -> Agreement:
     """How a fresh decision ``fresh`` stands to ``held`` (each a material or
     a pair "a|b")."""
-    a, b = set(members(held)), set(members(fresh))
+    held, fresh = Label(held), Label(fresh)
+    if held.is_unknown or fresh.is_unknown:      # no material: agrees only with itself
+        return Agreement.SAME if held == fresh else Agreement.DISAGREES
+    a, b = set(held.members), set(fresh.members)
     if a == b:
         return Agreement.SAME
     if b < a:
@@ -141,6 +144,6 @@ def agreement(held: str, fresh: str) -> Agreement:
 def remembered_estimate(material: str, confidence: float, classes) -> Estimate:
     """The estimate the master renders from an announcement, at t = 0: one
     material, or a pair's members weighted equally."""
-    these = members(material)
+    these = Label(material).members
     return Estimate(0.0, tuple(1.0 / len(these) if c in these else 0.0 for c in classes),
                     material, float(confidence), True, FROM_MEMORY)

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from telethermal.faults.channel import Channel, Direction
-from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.ident.anytime import UNKNOWN, Estimate, Reason
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import MasterDisplay, MasterStep, SlaveNews
@@ -393,7 +393,7 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
             None if pad.onset_s is None or slave.touch_t0 is None
             else slave.touch_t0 + pad.onset_s),
         "identified": est.label if est is not None and est.decided else UNKNOWN,
-        "decision_reason": est.reason if est is not None else "no estimate",
+        "decision_reason": est.reason if est is not None else Reason.NO_ESTIMATE,
         "render_start_s": display.rendered_from_s,
         "rendered": display.rendering,
         **windowed_errors(touch.trace, contact_s, news_s),

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from telethermal.ident.anytime import UNKNOWN
 from telethermal.jsonfile import write_json
 from telethermal.record.recorder import periods
 from telethermal.record.recording import RecordingError, read_recording
@@ -199,10 +200,10 @@ def _replay_slave(rec, cid, identifier, attached):
                     if m.get("contact_id", 0) == cid]
     last = recorded_est[-1] if recorded_est else None
     return {"onset_s": slave.onset_s,
-            "identified": est.label if est is not None and est.decided else "unknown",
+            "identified": est.label if est is not None and est.decided else UNKNOWN,
             "decision_time_s": est.t_s if est is not None and est.decided else None,
             "recorded_identified": last.label if last is not None and last.decided
-            else "unknown",
+            else UNKNOWN,
             "recorded_decision_time_s": last.t_s if last is not None and last.decided else None,
             "estimates": len(slave.events), "recorded_estimates": len(recorded_est),
             "same_estimates": [tuple(e.estimate.posteriors) for e in slave.events] ==

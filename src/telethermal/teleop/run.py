@@ -33,7 +33,7 @@ import numpy as np
 from telethermal.control.loop import FixedRateLoop, RealClock, SimClock, WorldPausedClock
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
-from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.ident.anytime import UNKNOWN, Estimate, Reason
 from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_resistance
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
@@ -310,7 +310,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
     if expected_material is not None:
         # An earlier touch of this object decided it (the slave's clock
         # before this session: only its label and confidence are used).
-        memory.learn(material, Estimate(0.0, (), expected_material, 1.0, True, "confident"),
+        memory.learn(material, Estimate(0.0, (), expected_material, 1.0, True, Reason.CONFIDENT),
                      -PRE_CONTACT_S)
     wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material,
                          memory=memory)
@@ -386,8 +386,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "scene": scene.name, "material": material, "seed": seed,
         "identified": est.label if decided else UNKNOWN,
         "identified_correctly": decided and est.label == material,
-        "decision_reason": est.reason if decided else "no decision",
-        "decision_time_s": ((slave.committed_at_s if est.label != UNKNOWN else est.t_s)
+        "decision_reason": est.reason if decided else Reason.NO_DECISION,
+        "decision_time_s": ((est.t_s if est.label.is_unknown else slave.committed_at_s)
                             if decided else None),
         "slave_onset_s": None if slave.onset_s is None else slave_t0 + slave.onset_s,
         "slave_touch_s": wire.slave_t0_s, "master_onset_s": master.last_onset_s,

@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 from telethermal.errors import WindowFull
-from telethermal.ident.anytime import UNKNOWN
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import ESTIMATE_KINDS, SlaveLink
@@ -234,8 +233,8 @@ class SlaveSession:
     def _estimate_fields(self, e) -> dict:
         return dict(contact_id=self.contact_id, t_since_contact_s=float(e.t_s),
                     classes=list(self.pad.classes), posteriors=[float(p) for p in e.posteriors],
-                    label=e.label, confidence=float(e.confidence), decided=bool(e.decided),
-                    reason=e.reason, object_temp_c=float(self.pad.object_ir_c))
+                    label=str(e.label), confidence=float(e.confidence), decided=bool(e.decided),
+                    reason=str(e.reason), object_temp_c=float(self.pad.object_ir_c))
 
     def _decision(self, t: float, e) -> Send:
         self._decision_sent = e
@@ -249,10 +248,10 @@ class SlaveSession:
             out = [Send(t, "posterior_estimate", self._estimate_fields(e))]
             if changed or final:
                 out.append(self._decision(t, e))
-        if changed and e.label != UNKNOWN and e.label in self.curves:
+        if changed and not e.label.is_unknown and e.label in self.curves:
             c = self.curves[e.label]
             out.append(Send(t, "flux_trajectory", dict(
-                contact_id=self.contact_id, material=e.label,
+                contact_id=self.contact_id, material=str(e.label),
                 object_temp_c=float(self.pad.object_ir_c),
                 t_s=[0.0] + list(c["t_s"]), g_w_m2k=[0.0] + list(c["g_w_m2k"]),
                 valid_s=TRAJECTORY_VALID_S, t0_s=self.onset_at_s)))

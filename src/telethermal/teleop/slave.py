@@ -33,13 +33,13 @@ from telethermal.data.generate import pad_database
 import time
 
 from telethermal.errors import SceneError
-from telethermal.ident.anytime import UNKNOWN, Estimate, StreamingIdentifier
+from telethermal.ident.anytime import UNKNOWN, Estimate, Reason, StreamingIdentifier
 from telethermal.physics.scene import Scene
 
 
-#: Reasons of a touch the slave refused on its devices' account.
-NO_OBJECT_TEMPERATURE = "no object temperature"
-BOARD_LOST = "sensor board lost"
+#: Reasons of a touch the slave refused on its devices' account (also its fault).
+NO_OBJECT_TEMPERATURE = Reason.NO_OBJECT_TEMPERATURE
+BOARD_LOST = Reason.BOARD_LOST
 
 
 class _ObjectRefused(Exception):
@@ -220,14 +220,14 @@ class Slave:
         """Time after contact of the first commitment (to a material or a
         group, later refined), or None."""
         return next((ev.estimate.t_s for ev in self.events
-                     if ev.estimate.decided and ev.estimate.label != UNKNOWN), None)
+                     if ev.estimate.decided and not ev.estimate.label.is_unknown), None)
 
     @property
     def first_commitment(self) -> Estimate | None:
         """The first committed estimate (a material, or a group later
         refined), or None: :attr:`committed_at_s` is its time."""
         return next((ev.estimate for ev in self.events
-                     if ev.estimate.decided and ev.estimate.label != UNKNOWN), None)
+                     if ev.estimate.decided and not ev.estimate.label.is_unknown), None)
 
     def decided_at_s(self, label: str) -> float | None:
         """Time after contact at which ``label`` itself was first decided
