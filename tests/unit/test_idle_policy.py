@@ -142,6 +142,11 @@ def test_a_remembered_pair_idles_at_the_pairs_minimax(scene):
     assert worst_k < 0.25 * floor_unknown
     fractions = pc.policy_fractions(scene)
     assert fractions["plexiglass|rubber"] == row["fraction_of_finger_minus_object"]
+    # The policy's pair keys are the identifier's group labels.
+    from telethermal.ident.label import GROUP_SEPARATOR, Label
+    assert pc.PAIR_SEPARATOR == GROUP_SEPARATOR
+    assert all(Label(key).is_group and key == Label.of(Label(key).members)
+               for key in policy["groups"])
     idle, _ = display_idle(scene, DisplayConfig(), 33.0, 24.0, "plexiglass|rubber")
     assert idle == pytest.approx(24.0 + row["fraction_of_finger_minus_object"] * 9.0, abs=1e-9)
 

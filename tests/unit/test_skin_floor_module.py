@@ -108,7 +108,7 @@ def test_idle_for_applies_the_rule(scene, monkeypatch):
     difference, clipped to the skin band (the table itself stubbed)."""
     table = {"minimax": {"fraction_of_finger_minus_object": -0.5},
              "preconditioned": {m: {"fraction_of_finger_minus_object": -2.0}
-                                for m in scene.materials}}
+                                for m in scene.materials}, "groups": {}}
     monkeypatch.setattr(pc, "scene_policy", lambda scene: table)
     assert pc.idle_for(scene, None, 24.0, 33.0) == pytest.approx(19.5)
     assert pc.idle_for(scene, "aluminium", 24.0, 33.0) == pytest.approx(15.0)   # clipped

@@ -169,6 +169,10 @@ def minimax_idle(search: FloorSearch, step_k: float = 7.0) -> tuple[float, list[
         subset.append(worst)
 
 
+#: How a pair's label joins its materials: the identifier's group label
+#: (``ident.label.GROUP_SEPARATOR``, a layer above; a test checks they agree).
+PAIR_SEPARATOR = "|"
+
 #: Bumped when the search or the floor it minimises changes: every stored
 #: policy (shipped or cached) is then recomputed.
 POLICY_VERSION = 2          # 2: minimax idles for every pair (a remembered group)
@@ -198,8 +202,6 @@ def compute_policy(scene: Scene) -> dict:
     (most of it the floor table the pairs' idles are read off)."""
     from itertools import combinations
 
-    from telethermal.ident.anytime import group_label
-
     search = FloorSearch(scene, hardware(scene), nominal_touch(scene))
     policy = search_idles(search)
     # A remembered pair (the slave's memory holds a group: the object is one
@@ -209,7 +211,7 @@ def compute_policy(scene: Scene) -> dict:
     groups = {}
     for pair in combinations(scene.materials, 2):
         idle_c, worst_k = group_minimax_idle(table, pair)
-        groups[group_label(pair)] = {
+        groups[PAIR_SEPARATOR.join(sorted(pair))] = {
             "idle_c": idle_c, "offset_k": idle_c - search.touch.object_c,
             "fraction_of_finger_minus_object": (idle_c - search.touch.object_c) / span,
             "worst_floor_k": worst_k}

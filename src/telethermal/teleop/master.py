@@ -151,9 +151,8 @@ class SlaveNews:
     #: more: the display decays to its safe state (neutral) at its slew limit
     #: and resumes, bumplessly, when this is True again.
     link_ok: bool = True
-    #: The material (or pair, its group label) the slave expects this object
-    #: to be before the touch (its object memory, or the slave's own earlier
-    #: touch): the display pre-conditions its pad for it (a pair: the pair's
+    #: The material or pair the slave expects this object to be (its object
+    #: memory): the display pre-conditions its pad for it (a pair: the pair's
     #: minimax idle); None: unknown, the idle policy's choice.
     expected_material: str | None = None
     #: The curves to render (the slave's, anew when it restarts); None: its own.

@@ -42,6 +42,7 @@ from telethermal.physics.thermoelectric import ModuleState, ThermoelectricStack
 from telethermal.devices.readings import PadSensors
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
+from telethermal.teleop.display_setup import display_idle, module_summary, safety_summary
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
 from telethermal.teleop.memory import ObjectMemory
@@ -485,46 +486,3 @@ class InProcessWire:
         """The session is over: a contact still open is lifted on both sides."""
         self._to_slave += [s.message for s in self.master.close_contact(t_end, None)]
         self.slave_period(t_end)
-
-
-def precondition_for(scene: Scene, finger_c: float):
-    """The display's pre-conditioning for this scene and operator:
-    ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
-    from telethermal.control.preconditioning import policy_fractions, precondition_from
-    return precondition_from(policy_fractions(scene), finger_c)
-
-
-def display_idle(scene: Scene, config: DisplayConfig, finger_c: float,
-                 object_temp_c: float | None, expected_material: str | None = None):
-    """Where the display's pad idles before a touch, and the pre-conditioning
-    the display keeps applying (``MasterDisplay(precondition=...)``): with
-    ``config.idle`` "policy" the object's temperature shifted by the scene's
-    idle policy for ``expected_material`` (None: an unknown object, the
-    minimax idle); "object": the object's temperature. Every driver (the
-    in-process run, the services, the simulated network) starts its display
-    here. Returns (idle C, precondition or None)."""
-    shift = precondition_for(scene, finger_c) if config.idle == "policy" else None
-    obj = object_temp_c
-    if shift is not None and obj is not None and math.isfinite(obj):
-        obj = obj + shift(expected_material, obj)
-    return MasterDisplay.standby_c_for(config.limits, obj), shift
-
-
-def module_summary(touch: DisplayTouch, master: MasterDisplay) -> dict:
-    """The display's module over the touch: its datasheet limits never
-    exceeded (counted), how close it came, how often the current saturated."""
-    spec = touch.module.spec
-    loop = master.junction_loop
-    return {"name": spec.name, **touch.limit_counts,
-            "max_current_a": round(touch.max_current_a, 4), "imax_a": spec.imax_a,
-            "max_hot_c": round(touch.max_hot_c, 3), "hot_side_max_c": spec.hot_side_max_c,
-            "max_sink_c": round(touch.max_sink_c, 3),
-            "saturated_periods": loop.saturated_periods if loop is not None else 0}
-
-
-def safety_summary(master: MasterDisplay) -> dict:
-    events = dict(master.safety.events)
-    count = sum(v for k, v in events.items() if k == "entered safe state" or
-                k.startswith("clamped"))
-    return {"safety_events": int(count), "safety_event_counts": events,
-            "display_event_counts": dict(master.events)}
