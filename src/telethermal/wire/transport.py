@@ -6,9 +6,9 @@ heartbeats, resends, duplicate and gap accounting), liveness, clock-offset
 estimation and CURVE security. It never blocks for long: the services call
 :meth:`Endpoint.poll` from their loops with a timeout that fits the loop.
 
-Its parts live beside it: the sockets and the master's handshake watch in
-:mod:`~telethermal.wire.sockets`, the lossless stream in
-:mod:`~telethermal.wire.lossless`, the hello exchange in
+Its parts live beside it: the sockets and the master's handshake watch
+(``sockets``, an object it owns) in :mod:`~telethermal.wire.sockets`, the
+lossless stream in :mod:`~telethermal.wire.lossless`, the hello exchange in
 :mod:`~telethermal.wire.hello`, the key files in :mod:`~telethermal.wire.keys`;
 this module holds the configuration, the messages' way in and out, and
 :meth:`Endpoint.poll`.
@@ -127,8 +127,9 @@ class ClockOffset:
         return min(self.samples)[0] if self.samples else None
 
 
-class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
-    """One side of a master-slave link."""
+class Endpoint(LosslessStream, HelloExchange):
+    """One side of a master-slave link: owns its ``sockets``
+    (:class:`~telethermal.wire.sockets.EndpointSockets`)."""
 
     def __init__(self, role: str, config: TransportConfig, context: zmq.Context | None = None,
                  clock=time.monotonic):
@@ -162,8 +163,9 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
         self._was_alive = False
         self._init_lossless()
         self._init_hello()
-        self._init_sockets()
-        self._open_sockets()
+        self.sockets = EndpointSockets(role=role, config=config, ctx=self.ctx, clock=clock,
+                                       session_id=self.session_id, counters=self.counters)
+        self.sockets.open()
 
     # ------------------------------------------------------------ state
     @property
@@ -175,6 +177,39 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
     def silent_s(self) -> float | None:
         """How long since the session's peer was last heard (None: never)."""
         return None if self._last_heard is None else self.clock() - self._last_heard
+
+    @property
+    def control(self):
+        """The control socket (slave: ROUTER; master: DEALER)."""
+        return self.sockets.control
+
+    @property
+    def stream(self):
+        """The stream socket (slave: PUB; master: SUB)."""
+        return self.sockets.stream
+
+    @property
+    def ports(self) -> list[int]:
+        """Slave: the ports bound (control, stream)."""
+        return self.sockets.ports
+
+    @property
+    def poller(self) -> zmq.Poller | None:
+        """Polls both sockets (a service registers its own beside them)."""
+        return self.sockets.poller
+
+    @property
+    def diagnosis(self) -> dict | None:
+        """Master: the likely cause while no session comes up, else None."""
+        return self.sockets.diagnosis
+
+    @property
+    def last_rejected_key(self) -> dict | None:
+        """Slave: the latest master key refused (fingerprint, address)."""
+        return self.sockets.last_rejected_key
+
+    def close(self) -> None:
+        self.sockets.close()
 
     # ------------------------------------------------------------ sending
     def _raw_send(self, sock, message: dict, data: bytes | None = None) -> bool:
@@ -263,7 +298,7 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
         out, self._held_back = self._held_back, []
         if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
             if self.role == "master":
-                self._watch_handshakes(now, alive)
+                self.sockets.watch_handshakes(now, alive)
             if self.role == "master" and (not alive or self.peer_version is None):
                 self._hello()
             if self.peer_version is not None:
