@@ -22,9 +22,9 @@ class HelloExchange:
     """The hello half of :class:`~telethermal.wire.transport.Endpoint` (a
     base class of it). Uses the endpoint's ``role``, ``config``, ``clock``,
     ``counters``, ``session_id``, ``peer_*``, ``latest``, ``_stream_seen``,
-    ``_last_heard``, the lossless stream's ``receiver``, ``_next_seq``,
-    ``_restart_lossless`` and ``_resend_from``, and ``_raw_send``,
-    ``_send_to``, ``_drop`` and ``_unordered``."""
+    ``_last_heard``, its ``lossless`` stream's ``expected``, ``last_seq``,
+    ``restart`` and ``resend_from``, and ``_raw_send``, ``_send_to``,
+    ``_drop`` and ``_unordered``."""
 
     def _init_hello(self) -> None:
         self._last_hello: tuple[str, int, float] | None = None
@@ -34,7 +34,7 @@ class HelloExchange:
         self._raw_send(self.control, self._unordered(
             "hello", self.clock(), role=self.role, versions=list(SUPPORTED_VERSIONS),
             software=f"telethermal {__version__}", session_id=self.session_id,
-            resume_from=self.receiver.expected))
+            resume_from=self.lossless.expected))
 
     def _refuse(self, identity, now: float, code: str, text: str) -> None:
         """``fault`` to a connection whose hello is not taken up (no common
@@ -73,10 +73,10 @@ class HelloExchange:
             return []
         self._last_hello = (message["session_id"], message["resume_from"], now)
         restarted = self.peer_session is not None and message["session_id"] != self.peer_session
-        if restarted or (self.peer_session is None and self._next_seq > 1 and
+        if restarted or (self.peer_session is None and self.lossless.last_seq > 0 and
                          message["resume_from"] == 1 and self.role == "slave"):
             log.info("%s: peer session %s (new run)", self.role, message["session_id"][:32])
-            self._restart_lossless()
+            self.lossless.restart()
             # Its lossy kinds count from 1 again too: without this, every
             # stream message of the new run would look older than the last
             # one of the previous run and be ignored until its seq caught up.
@@ -90,7 +90,7 @@ class HelloExchange:
         self._last_heard = now
         if self.role == "slave":
             self._hello()                          # answer every hello
-        self._resend_from(message["resume_from"])
+        self.lossless.resend_from(message["resume_from"])
         return [message]
 
     def _repeated_hello(self, message, identity, now) -> bool:

@@ -8,7 +8,8 @@ estimation and CURVE security. It never blocks for long: the services call
 
 Its parts live beside it: the sockets and the master's handshake watch
 (``sockets``, an object it owns) in :mod:`~telethermal.wire.sockets`, the
-lossless stream in :mod:`~telethermal.wire.lossless`, the hello exchange in
+lossless stream (``lossless``, an object it owns) in
+:mod:`~telethermal.wire.lossless`, the hello exchange in
 :mod:`~telethermal.wire.hello`, the key files in :mod:`~telethermal.wire.keys`;
 this module holds the configuration, the messages' way in and out, and
 :meth:`Endpoint.poll`.
@@ -127,9 +128,10 @@ class ClockOffset:
         return min(self.samples)[0] if self.samples else None
 
 
-class Endpoint(LosslessStream, HelloExchange):
+class Endpoint(HelloExchange):
     """One side of a master-slave link: owns its ``sockets``
-    (:class:`~telethermal.wire.sockets.EndpointSockets`)."""
+    (:class:`~telethermal.wire.sockets.EndpointSockets`) and its ``lossless``
+    stream (:class:`~telethermal.wire.lossless.LosslessStream`)."""
 
     def __init__(self, role: str, config: TransportConfig, context: zmq.Context | None = None,
                  clock=time.monotonic):
@@ -161,7 +163,12 @@ class Endpoint(LosslessStream, HelloExchange):
         self.peer_version: int | None = None
         self._last_heard = None
         self._was_alive = False
-        self._init_lossless()
+        self._held_back: list[dict] = []            # arrived while a send waited for room
+        self._last_heartbeat_sent = -1e9            # poll's once-a-heartbeat housekeeping
+        self.lossless = LosslessStream(
+            role=role, config=config, clock=clock, counters=self.counters, offset=self.offset,
+            limited=self._limited, send=self._to_peer, unordered=self._unordered,
+            drop=self._drop)
         self._init_hello()
         self.sockets = EndpointSockets(role=role, config=config, ctx=self.ctx, clock=clock,
                                        session_id=self.session_id, counters=self.counters)
@@ -177,6 +184,11 @@ class Endpoint(LosslessStream, HelloExchange):
     def silent_s(self) -> float | None:
         """How long since the session's peer was last heard (None: never)."""
         return None if self._last_heard is None else self.clock() - self._last_heard
+
+    @property
+    def unacked(self) -> int:
+        """Lossless messages kept until the peer acknowledges them."""
+        return self.lossless.unacked
 
     @property
     def control(self):
@@ -222,6 +234,10 @@ class Endpoint(LosslessStream, HelloExchange):
         except zmq.Again:
             return False
 
+    def _to_peer(self, message: dict, data: bytes | None = None) -> bool:
+        """On the control connection, to the session's peer."""
+        return self._raw_send(self.control, message, data)
+
     def _send_to(self, identity: bytes | None, data: bytes) -> bool:
         """The slave's ROUTER: to one master's connection, never blocking."""
         if identity is None:
@@ -259,7 +275,7 @@ class Endpoint(LosslessStream, HelloExchange):
                 # (poll hands back what was held back, then what is new)
                 self._held_back = self.poll(min(deadline - self.clock(),
                                                 self.config.heartbeat_s / 4))
-            return self._send_lossless(kind, self.clock(), fields)
+            return self.lossless.send(kind, self.clock(), fields, self.peer_version is not None)
         message = self._unordered(kind, now, **fields)
         sock = self.stream if KINDS[kind].stream == "stream" else self.control
         if sock is self.stream and self.role != "slave":
@@ -302,8 +318,9 @@ class Endpoint(LosslessStream, HelloExchange):
             if self.role == "master" and (not alive or self.peer_version is None):
                 self._hello()
             if self.peer_version is not None:
-                self._heartbeat(now)
-                out += self._repair(now)
+                self.lossless.heartbeat(now)
+                self._last_heartbeat_sent = now
+                out += self.lossless.repair(now)
             else:
                 self._last_heartbeat_sent = now
         if self.peer_version is not None and alive:
@@ -378,7 +395,7 @@ class Endpoint(LosslessStream, HelloExchange):
             # seq: one bad message must not wedge the ordered stream.
             if void_seq is not None and self._from_peer(identity):
                 self._last_heard = now
-                return self.receiver.push(void_seq, None, now)
+                return self.lossless.void(void_seq, now)
             return []
         kind = message["kind"]
         if kind == "hello":
@@ -397,14 +414,14 @@ class Endpoint(LosslessStream, HelloExchange):
         if not self._may_receive(kind):
             self._drop("wrong_direction", now, "%s may not come from the %s", kind,
                        "master" if self.role == "slave" else "slave")
-            return self.receiver.push(message["seq"], None, now) if kind in LOSSLESS else []
+            return self.lossless.void(message["seq"], now) if kind in LOSSLESS else []
         if kind == "heartbeat":
-            self._on_heartbeat(message, now)
+            self.lossless.on_heartbeat(message, now)
             return []
         if kind == "resend":
-            self._serve_resend(message, now)
+            self.lossless.serve_resend(message, now)
             return []
-        return self._receive_lossless(message, now)
+        return self.lossless.receive(message, now)
 
     def _session_message(self, kind: str, identity, now: float) -> bool:
         """Whether a message (not a hello) comes within the session: after a
