@@ -281,18 +281,18 @@ def test_a_repeated_hello_is_neither_answered_nor_resent_for(link):
     slave, master = link
     master.send("contact_event", **contact(1))
     pump(slave, master, seconds=0.5, until=lambda: master.unacked == 0 and master.peer_alive)
-    session, resume_from, _ = slave._last_hello
+    session, resume_from, _ = slave.hello._last_hello
     again = {"kind": "hello", "v": 1, "seq": 0, "sent_s": 0.0, "role": "master",
              "versions": [1], "software": "test", "session_id": session,
              "resume_from": resume_from}
     before = dict(slave.counters)
-    assert slave._on_hello(again, slave.peer_identity, slave.clock()) == []
+    assert slave.hello.receive(again, slave.peer_identity, slave.clock()) == []
     assert slave.counters["duplicate_hellos"] == before["duplicate_hellos"] + 1
     assert slave.counters["reconnects"] == before["reconnects"]
     assert slave.counters["resent"] == before["resent"]
     # A hello from a new run of the master is acted on.
     fresh = dict(again, session_id="another-run", resume_from=1)
-    assert slave._on_hello(fresh, slave.peer_identity, slave.clock()) == [fresh]
+    assert slave.hello.receive(fresh, slave.peer_identity, slave.clock()) == [fresh]
 
 
 def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monkeypatch):
