@@ -22,6 +22,7 @@ import zmq
 from telethermal.faults.channel import Direction
 from telethermal.faults.proxy import FaultProfile, FaultProxy, Link
 from telethermal.services.demo import free_ports
+from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.transport import Endpoint, TransportConfig
 
 PLAIN = TransportConfig(security="plain", control_port=0, stream_port=0, heartbeat_s=0.1,
@@ -70,14 +71,14 @@ class Net:
         self.delivered: list[tuple[int, str, float]] = []
         self.sent_kind: dict[int, str] = {}                   # the slave's lossless seqs
         self.decided: dict[int, bool] = {}                    # ... of material_estimate
-        push = self.master.receiver.push
+        push = self.master.lossless.receiver.push
 
         def watched_push(seq, message, now_s):
             if seq not in self.arrivals:
-                self.arrivals[seq] = (now_s, self.master.receiver.expected)
+                self.arrivals[seq] = (now_s, self.master.lossless.receiver.expected)
             return push(seq, message, now_s)
 
-        self.master.receiver.push = watched_push
+        self.master.lossless.receiver.push = watched_push
         self.run_until(lambda: self.slave.peer_alive and self.master.peer_alive, 5.0)
         assert self.slave.peer_alive and self.master.peer_alive, "no session through the proxy"
 
@@ -299,7 +300,8 @@ def figures() -> None:
                 net.close()
     for delay_s in (0.05, 0.2):
         for tail_rule in (True, False):
-            with mock.patch.object(Endpoint, "_check_tail", Endpoint._check_tail if tail_rule
+            with mock.patch.object(LosslessStream, "_check_tail",
+                                   LosslessStream._check_tail if tail_rule
                                    else lambda self, last_seq, now: None):
                 net = Net(Direction(delay_s=delay_s, partitions=((2.4975, 0.02),)),
                           Direction(delay_s=delay_s))

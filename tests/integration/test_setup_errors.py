@@ -64,7 +64,7 @@ def test_a_missing_key_is_named_on_both_sides_and_adding_it_lets_the_master_in(
     assert master.diagnosis["likely"] == "key"
     assert key_file_fingerprint(master_public) in master.diagnosis["fix"]
     assert slave.counters["curve_rejected"] >= 1
-    rejected = slave._auth.last_rejected
+    rejected = slave.sockets._auth.last_rejected
     assert rejected["fingerprint"] == key_file_fingerprint(master_public)
     assert rejected["address"] == "127.0.0.1"
     slave_log = [r.getMessage() for r in caplog.records if r.name == "telethermal.zap"]

@@ -96,8 +96,8 @@ def test_duplicates_are_counted_and_delivered_once(link):
     slave, master = link
     for i in range(1, 4):
         master.send("contact_event", **contact(i))
-    master._resend_from(1)
-    master._resend_from(2)
+    master.lossless.resend_from(1)
+    master.lossless.resend_from(2)
     (s_got, _) = pump(slave, master, seconds=1.0)
     assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [1, 2, 3]
     assert slave.counters["duplicates"] >= 5
@@ -160,7 +160,7 @@ def test_a_tail_the_sender_no_longer_holds_is_given_up_not_asked_for_forever(lin
     # slave never got and that it cannot resend: the slave asks, then gives
     # them up after 5 dead_after_s like any gap, and the stream goes on.
     slave, master = link
-    master._next_seq += 3
+    master.lossless._next_seq += 3
     pump(slave, master, seconds=1.0, until=lambda: slave.counters["gaps"] >= 1)
     assert slave.counters["gaps"] == 1
     pump(slave, master, seconds=5 * PLAIN.dead_after_s + 1.0,
@@ -281,18 +281,18 @@ def test_a_repeated_hello_is_neither_answered_nor_resent_for(link):
     slave, master = link
     master.send("contact_event", **contact(1))
     pump(slave, master, seconds=0.5, until=lambda: master.unacked == 0 and master.peer_alive)
-    session, resume_from, _ = slave._last_hello
+    session, resume_from, _ = slave.hello._last_hello
     again = {"kind": "hello", "v": 1, "seq": 0, "sent_s": 0.0, "role": "master",
              "versions": [1], "software": "test", "session_id": session,
              "resume_from": resume_from}
     before = dict(slave.counters)
-    assert slave._on_hello(again, slave.peer_identity, slave.clock()) == []
+    assert slave.hello.receive(again, slave.peer_identity, slave.clock()) == []
     assert slave.counters["duplicate_hellos"] == before["duplicate_hellos"] + 1
     assert slave.counters["reconnects"] == before["reconnects"]
     assert slave.counters["resent"] == before["resent"]
     # A hello from a new run of the master is acted on.
     fresh = dict(again, session_id="another-run", resume_from=1)
-    assert slave._on_hello(fresh, slave.peer_identity, slave.clock()) == [fresh]
+    assert slave.hello.receive(fresh, slave.peer_identity, slave.clock()) == [fresh]
 
 
 def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monkeypatch):
@@ -316,7 +316,7 @@ def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monk
     assert accepted == list(range(1, 9)) and refused == 12
     assert slave.counters["refused_by_window"] == 12 and slave.unacked == 8
     # The next seq is still 9: a refused send leaves no gap.
-    assert slave._next_seq == 9
+    assert slave.lossless._next_seq == 9
     _, m_got = pump(slave, master, seconds=3.0, until=lambda: slave.unacked == 0)
     assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == accepted
     # With a bound to wait, the send waits for the ack instead of refusing,
@@ -348,6 +348,6 @@ def test_a_resend_sends_what_was_asked_at_most_a_burst(link):
     for i in range(1, RESEND_BURST + 51):
         master.send("contact_event", **contact(i))
     sent.clear()
-    master._resend_from(40)
+    master.lossless.resend_from(40)
     assert sent == list(range(40, 40 + RESEND_BURST))
     master._raw_send = real

@@ -19,22 +19,57 @@ log = logging.getLogger("telethermal.wire.transport")
 
 
 class HelloExchange:
-    """The hello half of :class:`~telethermal.wire.transport.Endpoint` (a
-    base class of it). Uses the endpoint's ``role``, ``config``, ``clock``,
-    ``counters``, ``session_id``, ``peer_*``, ``latest``, ``_stream_seen``,
-    ``_last_heard``, the lossless stream's ``receiver``, ``_next_seq``,
-    ``_restart_lossless`` and ``_resend_from``, and ``_raw_send``,
-    ``_send_to``, ``_drop`` and ``_unordered``."""
+    """The hello exchange of one :class:`~telethermal.wire.transport.Endpoint`,
+    which owns it, and the session it agrees: the peer's run
+    (``peer_session``), the version both speak (``peer_version``, None
+    until a hello is taken up), the slave's connection to it
+    (``peer_identity``) and when it was last heard (:meth:`heard`,
+    :attr:`peer_alive`).
 
-    def _init_hello(self) -> None:
+    What it needs of the endpoint is passed in: the endpoint's ``lossless``
+    stream (restarted for a peer's new run, resent from where a hello
+    resumes); ``send(message, data=None)`` to the session's peer on the
+    control connection and ``send_to(identity, data)`` to one connection
+    of the slave's; ``unordered(kind, now, **fields)`` makes the hello;
+    ``drop(key, now, fmt, *args)`` counts and logs a dropped hello;
+    ``forget_stream()`` forgets the peer's lossy kinds for its new run."""
+
+    def __init__(self, *, role: str, config, clock, session_id: str, counters: dict,
+                 lossless, send, send_to, unordered, drop, forget_stream):
+        self.role, self.config, self.clock = role, config, clock
+        self.session_id, self.counters, self.lossless = session_id, counters, lossless
+        self._send, self._send_to, self._unordered = send, send_to, unordered
+        self._drop, self._forget_stream = drop, forget_stream
+        self.peer_session: str | None = None
+        self.peer_identity: bytes | None = None
+        self.peer_version: int | None = None
+        self._last_heard: float | None = None
         self._last_hello: tuple[str, int, float] | None = None
         self._refused_at = -1e9
 
-    def _hello(self):
-        self._raw_send(self.control, self._unordered(
+    # ------------------------------------------------------------ the session's peer
+    def heard(self, now: float) -> None:
+        """A message from the session's peer arrived at ``now``."""
+        self._last_heard = now
+
+    @property
+    def peer_alive(self) -> bool:
+        return self._last_heard is not None and \
+            self.clock() - self._last_heard < self.config.dead_after_s
+
+    @property
+    def silent_s(self) -> float | None:
+        """How long since the session's peer was last heard (None: never)."""
+        return None if self._last_heard is None else self.clock() - self._last_heard
+
+    # ------------------------------------------------------------ the exchange
+    def send(self) -> None:
+        """Our hello (the master's every heartbeat until answered; the
+        slave's in answer to each hello taken up)."""
+        self._send(self._unordered(
             "hello", self.clock(), role=self.role, versions=list(SUPPORTED_VERSIONS),
             software=f"telethermal {__version__}", session_id=self.session_id,
-            resume_from=self.receiver.expected))
+            resume_from=self.lossless.expected))
 
     def _refuse(self, identity, now: float, code: str, text: str) -> None:
         """``fault`` to a connection whose hello is not taken up (no common
@@ -49,9 +84,11 @@ class HelloExchange:
         if self.role == "slave":
             self._send_to(identity, encode(message))
         else:
-            self._raw_send(self.control, message)
+            self._send(message)
 
-    def _on_hello(self, message, identity, now) -> list[dict]:
+    def receive(self, message, identity, now) -> list[dict]:
+        """A hello from connection ``identity`` (None: the master's one):
+        taken up (returned) or refused, dropped or repeated (nothing)."""
         common = set(message["versions"]) & set(SUPPORTED_VERSIONS)
         if not common:
             self._drop("version_mismatch", now, "hello with versions %s, we speak %s",
@@ -73,15 +110,14 @@ class HelloExchange:
             return []
         self._last_hello = (message["session_id"], message["resume_from"], now)
         restarted = self.peer_session is not None and message["session_id"] != self.peer_session
-        if restarted or (self.peer_session is None and self._next_seq > 1 and
+        if restarted or (self.peer_session is None and self.lossless.last_seq > 0 and
                          message["resume_from"] == 1 and self.role == "slave"):
             log.info("%s: peer session %s (new run)", self.role, message["session_id"][:32])
-            self._restart_lossless()
+            self.lossless.restart()
             # Its lossy kinds count from 1 again too: without this, every
             # stream message of the new run would look older than the last
             # one of the previous run and be ignored until its seq caught up.
-            self._stream_seen.clear()
-            self.latest.clear()
+            self._forget_stream()
         if self.peer_session is not None:
             self.counters["reconnects"] += 1
         self.peer_session = message["session_id"]
@@ -89,8 +125,8 @@ class HelloExchange:
         self.peer_identity = identity
         self._last_heard = now
         if self.role == "slave":
-            self._hello()                          # answer every hello
-        self._resend_from(message["resume_from"])
+            self.send()                            # answer every hello
+        self.lossless.resend_from(message["resume_from"])
         return [message]
 
     def _repeated_hello(self, message, identity, now) -> bool:

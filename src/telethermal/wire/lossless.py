@@ -34,17 +34,27 @@ GAP_GIVE_UP_DEAD = 5
 
 
 class LosslessStream:
-    """The lossless half of :class:`~telethermal.wire.transport.Endpoint`
-    (a base class of it). Uses the endpoint's ``role``, ``config``,
-    ``clock``, ``counters``, ``offset``, ``control``, ``peer_version``,
-    ``_limited``, ``_drop``, ``_raw_send`` and ``_unordered``."""
+    """The lossless stream of one :class:`~telethermal.wire.transport.Endpoint`,
+    which owns it: the messages it numbered and keeps until acknowledged,
+    the receiving order (``receiver``), and the heartbeats' timing of the
+    round trip (into ``offset``).
 
-    def _init_lossless(self) -> None:
+    What it needs of the endpoint is passed in: ``send(message, data=None)``
+    puts a message on the control connection to the session's peer;
+    ``unordered(kind, now, **fields)`` makes a message outside this stream
+    (heartbeat, resend); ``drop(key, now, fmt, *args)`` counts and logs a
+    dropped message; ``counters`` is the endpoint's (shared with the
+    receiver), ``limited`` its rate-limited log, ``offset`` its
+    :class:`~telethermal.wire.transport.ClockOffset`."""
+
+    def __init__(self, *, role: str, config, clock, counters: dict, offset, limited,
+                 send, unordered, drop):
+        self.role, self.config, self.clock = role, config, clock
+        self.counters, self.offset, self._limited = counters, offset, limited
+        self._send, self._unordered, self._drop = send, unordered, drop
         self._next_seq = 1
         self._outbox: OrderedDict[int, dict] = OrderedDict()
-        self._held_back: list[dict] = []            # arrived while a send waited for room
-        self.receiver = OrderedReceiver(self.counters)
-        self._last_heartbeat_sent = -1e9
+        self.receiver = OrderedReceiver(counters)
         self._last_peer_hb: tuple[float, float] | None = None   # (its sent_s, our receipt)
         self._resend_asked_at = -1e9
         self._resend_served_at = -1e9
@@ -56,7 +66,17 @@ class LosslessStream:
     def unacked(self) -> int:
         return len(self._outbox)
 
-    def _send_lossless(self, kind: str, now: float, fields: dict) -> int:
+    @property
+    def expected(self) -> int:
+        """The next seq expected from the peer (a hello's ``resume_from``)."""
+        return self.receiver.expected
+
+    @property
+    def last_seq(self) -> int:
+        """The last seq this run numbered (0: none yet)."""
+        return self._next_seq - 1
+
+    def send(self, kind: str, now: float, fields: dict, session_up: bool) -> int:
         """Number ``kind`` in the lossless stream, keep it until acknowledged,
         and send it if a session is up; returns its seq."""
         if len(self._outbox) >= WINDOW:
@@ -70,32 +90,37 @@ class LosslessStream:
         self._next_seq += 1
         self._outbox[seq] = message
         self.counters["lossless_sent"] += 1
-        if self.peer_version is not None:
-            self._raw_send(self.control, message, data)
+        if session_up:
+            self._send(message, data)
         return seq
 
-    def _restart_lossless(self) -> None:
+    def restart(self) -> None:
         """A new run of the peer: both directions start again from 1."""
         self.receiver.reset()
         self._tail_since = None
         self._next_seq, self._outbox = 1, OrderedDict()
 
-    def _heartbeat(self, now):
+    def void(self, seq: int, now: float) -> list[dict]:
+        """A lossless message from the peer that cannot be used still uses
+        up its seq (one bad message must not wedge the ordered stream)."""
+        return self.receiver.push(seq, None, now)
+
+    def heartbeat(self, now: float) -> None:
+        """Ours: the ack of what arrived in order, the echo of the peer's
+        last heartbeat (to time the round trip) and the last seq numbered."""
         echo = held = None
         if self._last_peer_hb is not None:
             echo, received = self._last_peer_hb
             held = max(now - received, 0.0)
-        self._raw_send(self.control, self._unordered(
+        self._send(self._unordered(
             "heartbeat", now, ack=self.receiver.expected - 1, echo_sent_s=echo,
             echo_held_s=held, last_seq=self._next_seq - 1))
-        self._last_heartbeat_sent = now
 
     def _ask_resend(self, now: float) -> None:
-        self._raw_send(self.control, self._unordered("resend", now,
-                                                     from_seq=self.receiver.expected))
+        self._send(self._unordered("resend", now, from_seq=self.receiver.expected))
         self._resend_asked_at = now
 
-    def _repair(self, now: float) -> list[dict]:
+    def repair(self, now: float) -> list[dict]:
         """Once per heartbeat. As receiver: a gap still open is asked for
         again (the first ``resend`` may itself have been lost), and given up
         after ``gap_give_up_s`` (its seqs counted as ``skipped``). As sender:
@@ -122,10 +147,10 @@ class LosslessStream:
                           2 * (self.offset.rtt_s or 0.0) + self.config.heartbeat_s)
             if waited >= timeout and now - self._retransmitted_at >= timeout:
                 self._retransmitted_at = now
-                self._resend_from(first)
+                self.resend_from(first)
         return out
 
-    def _resend_from(self, first: int):
+    def resend_from(self, first: int) -> None:
         """What was asked: the kept messages from ``first``, at most
         ``RESEND_BURST`` of them."""
         sent = 0
@@ -133,20 +158,20 @@ class LosslessStream:
             if sent >= RESEND_BURST:
                 break
             if seq >= first:
-                self._raw_send(self.control, {**message, "sent_s": self.clock()})
+                self._send({**message, "sent_s": self.clock()})
                 self.counters["resent"] += 1
                 sent += 1
 
-    def _serve_resend(self, message: dict, now: float) -> None:
+    def serve_resend(self, message: dict, now: float) -> None:
         """The peer's ``resend``: at most one served per heartbeat period."""
         if now - self._resend_served_at < self.config.heartbeat_s:
             self._drop("resend_throttled", now, "a second resend within %.3f s",
                        self.config.heartbeat_s)
             return
         self._resend_served_at = now
-        self._resend_from(message["from_seq"])
+        self.resend_from(message["from_seq"])
 
-    def _receive_lossless(self, message: dict, now: float) -> list[dict]:
+    def receive(self, message: dict, now: float) -> list[dict]:
         """A lossless message from the peer, through the ordering; a gap it
         opens is asked for at once (at most once per heartbeat period)."""
         out = self.receiver.push(message["seq"], message, now)
@@ -155,7 +180,7 @@ class LosslessStream:
             self._ask_resend(now)
         return out
 
-    def _on_heartbeat(self, message, now) -> None:
+    def on_heartbeat(self, message, now) -> None:
         ack = message["ack"]
         acked = [s for s in self._outbox if s <= ack]
         for seq in acked:

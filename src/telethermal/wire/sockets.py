@@ -40,14 +40,18 @@ UNANSWERED_S = 2.0
 
 
 class EndpointSockets:
-    """The socket half of :class:`~telethermal.wire.transport.Endpoint`
-    (a base class of it): opens, secures, recreates and closes ``control``
-    and ``stream``. Uses the endpoint's ``role``, ``config``, ``clock``,
-    ``ctx``, ``session_id`` and ``counters``."""
+    """The sockets of one :class:`~telethermal.wire.transport.Endpoint`,
+    which owns them: opens (:meth:`open`), secures, recreates and closes
+    ``control`` and ``stream``. ``session_id`` names the master's control
+    connection; ``counters`` is the endpoint's (``curve_rejected``,
+    ``sockets_recreated``)."""
 
-    def _init_sockets(self) -> None:
+    def __init__(self, *, role: str, config, ctx: zmq.Context, clock, session_id: str,
+                 counters: dict):
         """The socket state, declared before any socket is opened (so that
         :meth:`close` after a failed open closes what there is)."""
+        self.role, self.config, self.ctx, self.clock = role, config, ctx, clock
+        self.session_id, self.counters = session_id, counters
         self.control = self.stream = None
         self.ports: list[int] = []                  # slave: the ports bound
         self.poller: zmq.Poller | None = None
@@ -87,7 +91,8 @@ class EndpointSockets:
         sock.bind(f"tcp://{self.config.bind_host}:{port}")
         return port
 
-    def _open_sockets(self):
+    def open(self) -> None:
+        """Open, bind or connect, and poll both sockets."""
         cfg = self.config
         try:
             if self.role == "slave":
@@ -160,7 +165,7 @@ class EndpointSockets:
         self.counters["sockets_recreated"] += 1
         log.debug("master: %s socket recreated (refused, or nothing answered)", name)
 
-    def _watch_handshakes(self, now: float, alive: bool) -> None:
+    def watch_handshakes(self, now: float, alive: bool) -> None:
         """Master: recreate a socket the slave refused, and name the likely
         cause while no session comes up."""
         for name, watch in self._watch.items():

@@ -6,12 +6,13 @@ heartbeats, resends, duplicate and gap accounting), liveness, clock-offset
 estimation and CURVE security. It never blocks for long: the services call
 :meth:`Endpoint.poll` from their loops with a timeout that fits the loop.
 
-Its parts live beside it: the sockets and the master's handshake watch in
-:mod:`~telethermal.wire.sockets`, the lossless stream in
-:mod:`~telethermal.wire.lossless`, the hello exchange in
-:mod:`~telethermal.wire.hello`, the key files in :mod:`~telethermal.wire.keys`;
-this module holds the configuration, the messages' way in and out, and
-:meth:`Endpoint.poll`.
+It owns its parts as objects, each in its module beside this one: the
+sockets and the master's handshake watch (``sockets``,
+:mod:`~telethermal.wire.sockets`), the lossless stream (``lossless``,
+:mod:`~telethermal.wire.lossless`), the hello exchange and the session it
+agrees (``hello``, :mod:`~telethermal.wire.hello`); the key files are in
+:mod:`~telethermal.wire.keys`. This module holds the configuration, the
+messages' way in and out, and :meth:`Endpoint.poll`.
 """
 
 from __future__ import annotations
@@ -127,8 +128,11 @@ class ClockOffset:
         return min(self.samples)[0] if self.samples else None
 
 
-class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
-    """One side of a master-slave link."""
+class Endpoint:
+    """One side of a master-slave link: owns its ``sockets``
+    (:class:`~telethermal.wire.sockets.EndpointSockets`), its ``lossless``
+    stream (:class:`~telethermal.wire.lossless.LosslessStream`) and its
+    ``hello`` exchange (:class:`~telethermal.wire.hello.HelloExchange`)."""
 
     def __init__(self, role: str, config: TransportConfig, context: zmq.Context | None = None,
                  clock=time.monotonic):
@@ -155,26 +159,84 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
         #: as it arrives (the master's ``posterior_estimate``); the others
         #: are only kept in ``latest``.
         self.deliver_stream: frozenset[str] = frozenset()
-        self.peer_session: str | None = None
-        self.peer_identity: bytes | None = None
-        self.peer_version: int | None = None
-        self._last_heard = None
         self._was_alive = False
-        self._init_lossless()
-        self._init_hello()
-        self._init_sockets()
-        self._open_sockets()
+        self._held_back: list[dict] = []            # arrived while a send waited for room
+        self._last_heartbeat_sent = -1e9            # poll's once-a-heartbeat housekeeping
+        self.lossless = LosslessStream(
+            role=role, config=config, clock=clock, counters=self.counters, offset=self.offset,
+            limited=self._limited, send=self._to_peer, unordered=self._unordered,
+            drop=self._drop)
+        self.hello = HelloExchange(
+            role=role, config=config, clock=clock, session_id=self.session_id,
+            counters=self.counters, lossless=self.lossless, send=self._to_peer,
+            send_to=self._send_to, unordered=self._unordered, drop=self._drop,
+            forget_stream=self._forget_stream)
+        self.sockets = EndpointSockets(role=role, config=config, ctx=self.ctx, clock=clock,
+                                       session_id=self.session_id, counters=self.counters)
+        self.sockets.open()
 
     # ------------------------------------------------------------ state
     @property
     def peer_alive(self) -> bool:
-        return self._last_heard is not None and \
-            self.clock() - self._last_heard < self.config.dead_after_s
+        return self.hello.peer_alive
 
     @property
     def silent_s(self) -> float | None:
         """How long since the session's peer was last heard (None: never)."""
-        return None if self._last_heard is None else self.clock() - self._last_heard
+        return self.hello.silent_s
+
+    @property
+    def peer_session(self) -> str | None:
+        """The session id of the peer's run (None before its first hello)."""
+        return self.hello.peer_session
+
+    @property
+    def peer_version(self) -> int | None:
+        """The protocol version of the session (None: no session yet)."""
+        return self.hello.peer_version
+
+    @property
+    def peer_identity(self) -> bytes | None:
+        """Slave: the session's master's connection."""
+        return self.hello.peer_identity
+
+    @property
+    def unacked(self) -> int:
+        """Lossless messages kept until the peer acknowledges them."""
+        return self.lossless.unacked
+
+    @property
+    def control(self):
+        """The control socket (slave: ROUTER; master: DEALER)."""
+        return self.sockets.control
+
+    @property
+    def stream(self):
+        """The stream socket (slave: PUB; master: SUB)."""
+        return self.sockets.stream
+
+    @property
+    def ports(self) -> list[int]:
+        """Slave: the ports bound (control, stream)."""
+        return self.sockets.ports
+
+    @property
+    def poller(self) -> zmq.Poller | None:
+        """Polls both sockets (a service registers its own beside them)."""
+        return self.sockets.poller
+
+    @property
+    def diagnosis(self) -> dict | None:
+        """Master: the likely cause while no session comes up, else None."""
+        return self.sockets.diagnosis
+
+    @property
+    def last_rejected_key(self) -> dict | None:
+        """Slave: the latest master key refused (fingerprint, address)."""
+        return self.sockets.last_rejected_key
+
+    def close(self) -> None:
+        self.sockets.close()
 
     # ------------------------------------------------------------ sending
     def _raw_send(self, sock, message: dict, data: bytes | None = None) -> bool:
@@ -186,6 +248,10 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
             return True
         except zmq.Again:
             return False
+
+    def _to_peer(self, message: dict, data: bytes | None = None) -> bool:
+        """On the control connection, to the session's peer."""
+        return self._raw_send(self.control, message, data)
 
     def _send_to(self, identity: bytes | None, data: bytes) -> bool:
         """The slave's ROUTER: to one master's connection, never blocking."""
@@ -224,7 +290,7 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
                 # (poll hands back what was held back, then what is new)
                 self._held_back = self.poll(min(deadline - self.clock(),
                                                 self.config.heartbeat_s / 4))
-            return self._send_lossless(kind, self.clock(), fields)
+            return self.lossless.send(kind, self.clock(), fields, self.peer_version is not None)
         message = self._unordered(kind, now, **fields)
         sock = self.stream if KINDS[kind].stream == "stream" else self.control
         if sock is self.stream and self.role != "slave":
@@ -263,12 +329,13 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
         out, self._held_back = self._held_back, []
         if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
             if self.role == "master":
-                self._watch_handshakes(now, alive)
+                self.sockets.watch_handshakes(now, alive)
             if self.role == "master" and (not alive or self.peer_version is None):
-                self._hello()
+                self.hello.send()
             if self.peer_version is not None:
-                self._heartbeat(now)
-                out += self._repair(now)
+                self.lossless.heartbeat(now)
+                self._last_heartbeat_sent = now
+                out += self.lossless.repair(now)
             else:
                 self._last_heartbeat_sent = now
         if self.peer_version is not None and alive:
@@ -290,6 +357,11 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
                     break
                 out += self._on_stream(data)
         return out
+
+    def _forget_stream(self) -> None:
+        """The peer's new run: its lossy kinds count from 1 again."""
+        self._stream_seen.clear()
+        self.latest.clear()
 
     def _drop(self, key: str, now: float, fmt: str, *args) -> None:
         """Count one dropped message under ``key`` and log it, rate-limited."""
@@ -342,12 +414,12 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
             # An unusable lossless message from the peer still uses up its
             # seq: one bad message must not wedge the ordered stream.
             if void_seq is not None and self._from_peer(identity):
-                self._last_heard = now
-                return self.receiver.push(void_seq, None, now)
+                self.hello.heard(now)
+                return self.lossless.void(void_seq, now)
             return []
         kind = message["kind"]
         if kind == "hello":
-            return self._on_hello(message, identity, now)
+            return self.hello.receive(message, identity, now)
         if kind == "fault" and message["seq"] == 0 and self.role == "master" and \
                 self.peer_version is None:
             # The slave did not take up our hello (no common version, or busy
@@ -358,18 +430,18 @@ class Endpoint(EndpointSockets, LosslessStream, HelloExchange):
             return [message]
         if not self._session_message(kind, identity, now):
             return []
-        self._last_heard = now
+        self.hello.heard(now)
         if not self._may_receive(kind):
             self._drop("wrong_direction", now, "%s may not come from the %s", kind,
                        "master" if self.role == "slave" else "slave")
-            return self.receiver.push(message["seq"], None, now) if kind in LOSSLESS else []
+            return self.lossless.void(message["seq"], now) if kind in LOSSLESS else []
         if kind == "heartbeat":
-            self._on_heartbeat(message, now)
+            self.lossless.on_heartbeat(message, now)
             return []
         if kind == "resend":
-            self._serve_resend(message, now)
+            self.lossless.serve_resend(message, now)
             return []
-        return self._receive_lossless(message, now)
+        return self.lossless.receive(message, now)
 
     def _session_message(self, kind: str, identity, now: float) -> bool:
         """Whether a message (not a hello) comes within the session: after a
