@@ -116,6 +116,9 @@ def test_real_clock_session_reports_its_period(models):
     assert own["loop"]["steps"] == s["loop"]["steps"]
     with pytest.raises(SceneError, match="realtime must be"):
         run_session(SCENE, "wood", identifier, generator, contact_s=0.3, realtime="fast")
+    with pytest.raises(SceneError, match="needs devices='sim'"):
+        run_session(SCENE, "wood", identifier, generator, contact_s=0.3, realtime="master",
+                    devices="emulated")
 
 
 def test_session_command_writes_json_and_plot(tmp_path, models, capsys):

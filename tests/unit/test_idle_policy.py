@@ -151,7 +151,27 @@ def test_a_remembered_pair_idles_at_the_pairs_minimax(scene):
     assert idle == pytest.approx(24.0 + row["fraction_of_finger_minus_object"] * 9.0, abs=1e-9)
 
 
-def test_a_label_without_an_idle_idles_as_an_unknown_object():
+def test_the_pairs_idle_read_off_the_table_is_the_floors_there(scene):
+    # The table is interpolated between 1 K points; at the idle chosen for
+    # plexiglass|rubber the two floors, solved there (the search's own
+    # solver), are within 0.02 K of the table's worst (a fifth of the
+    # unknown object's idle's 0.36 K), and the worse of them is the
+    # table's to within that.
+    policy = pc.scene_policy(scene)
+    row = policy["groups"]["plexiglass|rubber"]
+    search = pc.FloorSearch(scene, pc.hardware(scene), pc.nominal_touch(scene))
+    solved = [search.floor_k(m, row["idle_c"]) for m in ("plexiglass", "rubber")]
+    assert max(solved) == pytest.approx(row["worst_floor_k"], abs=0.02)
+    assert pc.idle_for(scene, "plexiglass|rubber", 24.0, 33.0) == pytest.approx(
+        24.0 + row["fraction_of_finger_minus_object"] * 9.0)
+    with pytest.raises(UnknownMaterialError, match="glass"):
+        pc.idle_for(scene, "glass|wood", 24.0, 33.0)
+
+
+def test_a_label_without_an_idle_idles_as_an_unknown_object(caplog):
     shift = pc.precondition_from({pc.UNKNOWN_KEY: -0.5, "wood": 0.2}, 33.0)
     assert shift("wood", 24.0) == pytest.approx(1.8)
-    assert shift("a|b|c", 24.0) == shift(None, 24.0) == pytest.approx(-4.5)
+    with caplog.at_level("INFO", logger="telethermal.preconditioning"):
+        for _ in range(3):                          # every display period: said once
+            assert shift("a|b|c", 24.0) == shift(None, 24.0) == pytest.approx(-4.5)
+    assert sum("no idle for 'a|b|c'" in r.getMessage() for r in caplog.records) == 1

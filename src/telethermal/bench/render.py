@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from telethermal.control.loop import FixedRateLoop, RealClock
+from telethermal.control.loop import WORLD_PAUSED, FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
@@ -77,7 +77,7 @@ def _session_row(scene, material, identifier, generator, config, seed, realtime=
            "module_saturated_periods": module["saturated_periods"],
            "cpu_s_per_simulated_s": cpu / (CONTACT_S + 0.4)}
     if realtime:
-        row["loop"] = s["loop"]
+        row["loop"], row["clock"] = s["loop"], s["clock"]
     return row
 
 
@@ -146,9 +146,16 @@ def decision_floor_at_the_slaves_times(scene, first: list[dict], materials) -> d
     The decision time per material is the mean over seeds of the first
     touches' ``decision_from_s`` (from contact); the floor is on the
     scene's nominal touch (as ``bench skin-floor``'s), on 10 ms slots. Its
-    worst material is a bound no causal display beats on its worst
-    material; its per-material values are not bounds (a minimax trades
-    materials)."""
+    worst material is a bound no causal display that learns nothing before
+    its decision beats on its worst material, on this model and up to the
+    solver's slack; its per-material values are not bounds (a minimax
+    trades materials). Caveats, each stated in the report: the sessions'
+    touches each have their own operator and object (the floor is the
+    nominal touch's), so a session can fall below it; the times include
+    decisions that named a pair, "unknown" or a wrong material (each
+    earlier than naming the material: the floor is then lower, the
+    comparison harsher); the product's display mixes the posteriors before
+    the decision, which this floor does not give it."""
     from telethermal.control import preconditioning as pc
     from telethermal.control.decision_floor import decision_floor
 
@@ -182,6 +189,11 @@ def decision_floor_at_the_slaves_times(scene, first: list[dict], materials) -> d
             "ratio_converged": rel.converged,
             "first_touch_ratio_to_floor_k": {m: skin[m] / known[m] for m in decided},
             "undecided": [m for m in materials if m not in times],
+            "caveats": "the floor is on the scene's nominal touch, each session on its own "
+                       "operator and object; decision times include pairs, unknown and wrong "
+                       "decisions (harsher); the display's posterior mixture before the "
+                       "decision is information this floor does not give it; on 10 ms slots, "
+                       "up to the solver's slack (control/decision_floor.py)",
             "criterion": "nested: the pad's heat common to the materials not yet decided; "
                          "minimax over the decided materials; per_material_k: each "
                          "material on that trajectory, not a bound per material; "
@@ -278,7 +290,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
         for rate in rates:
             row = _session_row(scene, "steel", identifier, generator,
                                DisplayConfig(rate_hz=rate), seeds[0], realtime=mode)
-            report[key].append({"rate_hz": rate, **row["loop"],
+            report[key].append({"rate_hz": rate, "clock": row["clock"], **row["loop"],
                                 "flux_rms_error_rel": row["flux_rms_error_rel"]})
     report["limits"] = dict(_LIMITS)
     report["safety_events"] = int(sum(r["safety_events"] for sec in ("rate", "controller",
@@ -435,7 +447,8 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
                   for m, v in per.items() if v]
     d = report.get("decision_floor")
     if isinstance(d, dict) and "floor_worst_k" in d:
-        lines.append(f"floor of a display learning each material at the slave's decision "
+        lines.append(f"floor (nominal touch, this model) of a display learning each material "
+                     f"only at the slave's decision "
                      f"({', '.join(f'{m} {t:.3f} s' for m, t in d['decision_s'].items())}): "
                      f"worst {d['floor_worst_k']:.3f} K; the worst first touch "
                      f"({d['first_touch_worst_material']}) {d['first_touch_worst_k']:.3f} K, "
@@ -453,9 +466,10 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
         lines.append(f"real clock   1000 Hz, an empty loop (this machine's floor): period p99 "
                      f"{e['period_p99_us']:.0f} us, max {e['period_max_us']:.0f} us, deadline "
                      f"misses {e['deadline_misses']} of {e['steps']}, stalls {e['stalls']}")
-    for key, what in (("real_clock", "the master's loop"),
-                      ("real_clock_world_on_thread", "with the simulated world on its thread")):
-        lines += [f"real clock {r['rate_hz']:6.0f} Hz, {what}: period p50 "
+    for key in ("real_clock", "real_clock_world_on_thread"):
+        lines += [f"real clock {r['rate_hz']:6.0f} Hz, "
+                  f"{'the master' if r.get('clock') == WORLD_PAUSED else 'the whole session'}"
+                  f"'s loop: period p50 "
                   f"{r['period_p50_us']:.0f} us, p99 {r['period_p99_us']:.0f} us, max "
                   f"{r['period_max_us']:.0f} us, deadline misses {r['deadline_misses']} of "
                   f"{r['steps']}, stalls {r['stalls']}; busy p99 {r['busy_p99_us']:.0f} us, "

@@ -16,6 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from telethermal.bench.faults_text import recovery_text  # noqa: E402
+from telethermal.control.loop import WORLD_PAUSED  # noqa: E402
 
 
 def _load(results: Path, name: str) -> dict | None:
@@ -271,10 +272,13 @@ def render(out: Path, d: dict) -> list[str]:
         lines.append(f"\nAn empty loop at 1 kHz (this machine's own floor): period p99 "
                      f"{e['period_p99_us']:.0f} us, {e['deadline_misses']} deadline misses of "
                      f"{e['steps']}, {e['stalls']} stalls.")
-    for key, what in (("real_clock", "the master's loop (the simulated world not charged "
-                                     "to it)"),
-                      ("real_clock_world_on_thread", "the simulated world on the loop's thread")):
+    for key in ("real_clock", "real_clock_world_on_thread"):
         for rc in d.get(key, []):
+            # Rows written before the master's own loop was measured have no
+            # clock: they ran the whole session on the loop's thread.
+            what = ("the master's loop (the simulated world not charged to it)"
+                    if rc.get("clock") == WORLD_PAUSED
+                    else "the whole session on the loop's thread")
             own = (f", the master's step p99 {rc['master_step_p99_us']:.0f} us"
                    if "master_step_p99_us" in rc else "")
             lines.append(f"\nReal clock at {rc['rate_hz']:g} Hz, {what}: period p99 "

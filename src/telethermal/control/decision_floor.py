@@ -22,12 +22,20 @@ rounds, not iterated to convergence as
 :func:`~telethermal.control.display_floor.best_touch` does: on fingertip-7
 at 0.08 s a third round moved the worst material by under 1e-4 K).
 
+How exact: the tails are solved by a fast bounded least squares, the
+bounds in two rounds, SLSQP to its tolerance; each can only leave the
+computed minimax higher than the model's true one, so "no controller does
+better" holds up to that slack (2e-3 K against the exact per-material
+floor at t_d = 0, tested).
+
 What it is a floor of: this model (the slots' input held, the error on
 slot ends, a linear junction with the hot side at the idle's steady
 temperature, the bounds ``BOUND_MARGIN`` inside the module's, one nominal
-operator), every material learnt at the same time. For that model the
-worst value is the minimax (SLSQP stopping early can only leave it
-higher); the per-material values are each material's error on that
+operator), for a display that knows nothing of the material before its
+decision. The product's display renders the slave's posterior mixture
+before the decision (``DisplayConfig.before = "prior"``): information this
+model does not give it, so a display using it could in principle go
+below. The per-material values are each material's error on the minimax
 trajectory, not bounds for that material.
 
 Decisions at different times per material (``decision_s`` a mapping, the
@@ -38,7 +46,7 @@ later, so slot ``j`` is common to exactly the materials decided after it
 and each material has its own slots from its decision on. The common
 vector is then the longest prefix (to the latest decision), material ``m``
 sees its first ``k_m`` slots; the rest is as above. With equal times it is
-the single-time floor, bit for bit (tested).
+the single-time floor (the same arithmetic: tested against the scalar form).
 
 Checks (tests/unit/test_decision_floor.py): with ``decision_s = 0`` it is the
 worst of the per-material floors of ``display_floor.best_touch``; it never
@@ -138,11 +146,14 @@ def _common(tails: _Tails, lo_c, hi_c, start, weight):
 
 
 def _slots(plant: JunctionPlant, decision_s: float, name: str) -> int:
-    """The slots before a decision at ``decision_s`` (the common ones)."""
+    """The slots wholly before a decision at ``decision_s`` (the common
+    ones). A slot the decision falls inside is the material's own: the
+    display is credited with the material from that slot's start, up to one
+    slot early, so the floor never gives it less than it has."""
     if not (isinstance(decision_s, (int, float)) and math.isfinite(decision_s)
             and decision_s >= 0):
         raise ControlError(f"decision_s{name} must be finite and >= 0, got {decision_s}")
-    return min(int(math.ceil(decision_s / plant.grid_s - 1e-9)), plant.n)
+    return min(int(math.floor(decision_s / plant.grid_s + 1e-9)), plant.n)
 
 
 def decision_floor(hw: Hardware, plant: JunctionPlant, targets: dict, idle_c: float,

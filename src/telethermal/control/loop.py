@@ -49,6 +49,10 @@ class RealClock:
             pass
 
 
+#: What a session's summary calls a run on :class:`WorldPausedClock`.
+WORLD_PAUSED = "real, less the world's time"
+
+
 class WorldPausedClock(RealClock):
     """The real clock less the time spent inside :meth:`world`: for a loop
     that also simulates what, in a lab, runs elsewhere (the plant, the

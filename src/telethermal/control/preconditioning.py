@@ -315,12 +315,14 @@ def idle_from_fractions(fractions: dict[str, float], material: str | None,
 def idle_for(scene: Scene | str, material: str | None, object_temp_c: float,
              finger_temp_c: float) -> float:
     """The pad's idle temperature (C) before a touch: for a known
-    ``material`` its best idle, for ``None`` (unknown object) the minimax
-    policy's; both as the fraction of ``finger - object`` found on the
-    scene's nominal touch (:func:`scene_policy`: shipped, cached or
-    computed), clipped to the skin band."""
+    ``material`` its best idle (a pair's label: the pair's), for ``None``
+    (unknown object) the minimax policy's; each as the fraction of
+    ``finger - object`` found on the scene's nominal touch
+    (:func:`scene_policy`: shipped, cached or computed), clipped to the
+    skin band."""
     scene = load_scene(scene) if isinstance(scene, str) else scene
-    if material is not None and material not in scene.materials:
+    if material is not None and not all(m in scene.materials
+                                        for m in material.split(PAIR_SEPARATOR)):
         raise UnknownMaterialError(f"material {material!r} is not in scene {scene.name} (its "
                                    f"materials: {', '.join(scene.materials)})")
     return idle_from_fractions(policy_fractions(scene), material, object_temp_c,
@@ -330,12 +332,17 @@ def idle_for(scene: Scene | str, material: str | None, object_temp_c: float,
 def precondition_from(fractions: dict[str, float], finger_temp_c: float):
     """The display's pre-conditioning (``MasterDisplay(precondition=...)``):
     ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
+    said = set()
+
     def offset(material, object_temp_c):
         if material is not None and material not in fractions:
             # A label the policy has no idle for (a group of three, a class
             # the scene's table lacks): idle as for an unknown object, never
-            # fail a display period over it.
-            log.info("no idle for %r in the policy: idling as for an unknown object", material)
+            # fail a display period over it; said once per label.
+            if material not in said:
+                said.add(material)
+                log.info("no idle for %r in the policy: idling as for an unknown object",
+                         material)
             material = None
         return idle_from_fractions(fractions, material, object_temp_c,
                                    finger_temp_c) - object_temp_c

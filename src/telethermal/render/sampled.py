@@ -126,10 +126,9 @@ class SampledGenerator:
             a = min(max(a, 0.0), 1.0)
             inside = t >= t_first
             ramp = max(t, 0.0) / t_first
-            total = None
+            total = 0.0                 # numpy's sum starts from its identity (so -0.0 -> 0.0)
             for w, g in zip(weights, rows):
                 q = g[i - 1] * (1 - a) + g[i] * a if inside else ramp * g[0]
-                term = w * q
-                total = term if total is None else total + term
+                total = total + w * q
             out.append(total)
         return out

@@ -30,10 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.control.loop import FixedRateLoop, RealClock, SimClock, WorldPausedClock
+from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, RealClock, SimClock,
+                                      WorldPausedClock)
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
-from telethermal.ident.anytime import UNKNOWN, Estimate, Reason
+from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
 from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_resistance
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
@@ -288,13 +289,14 @@ def run_session(scene: Scene, material: str, identifier, generator,
     the slave's object memory holds it for this object (an earlier touch
     decided it), so the touch runs as a repeated one does in the services:
     announced, pre-conditioned for and rendered from memory at onset.
-    ``realtime``: False (the simulated clock), True (the real clock, the
-    simulated world on the loop's thread and its time charged to the loop)
-    or "master" (the real clock less the world's time: the slave, the wire
-    to it and the display's plant and sensors, which run on their own
-    hardware in a lab, are not charged to the master's loop)."""
+    ``realtime``: False (simulated clock), True (real clock, the simulated
+    world's time charged to the loop) or "master" (the real clock less the
+    time of the slave and the display's plant and sensors: other hardware)."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
+    if realtime == "master" and devices != "sim":   # driver and emulator share the calls
+        raise SceneError(f"realtime='master' needs devices='sim' (got {devices!r}): the "
+                         "driver's time and its emulator's cannot be told apart")
     from telethermal.devices.display import open_display
     from telethermal.record.recorder import SessionRecorder
 
@@ -308,11 +310,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # with no delay: the slave's pad goes down when the master's onset
     # reaches it, the master renders what the slave sends (its sampled curves).
     memory = ObjectMemory()
-    if expected_material is not None:
-        # An earlier touch of this object decided it (the slave's clock
-        # before this session: only its label and confidence are used).
-        memory.learn(material, Estimate(0.0, (), expected_material, 1.0, True, Reason.CONFIDENT),
-                     -PRE_CONTACT_S)
+    if expected_material is not None:   # an earlier touch of this object decided it
+        label = Label.parse(expected_material)
+        memory.learn(material, Estimate(0.0, (), label, 1.0, True, Reason.CONFIDENT_GROUP
+                                        if label.is_group else Reason.CONFIDENT), -PRE_CONTACT_S)
     wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material,
                          memory=memory)
     # The master has idled at its standby before this touch: the object's
@@ -345,7 +346,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
         # real elapsed time on the real one.
         t = now[0] = t_loop - PRE_CONTACT_S
         with world():
-            wire.slave_period(t)
+            wire.slave_period(t, deliver=False)
+        wire.deliver(t)                 # the master's session reads it: the master's work
+        with world():
             sensors = display.read(t)
         if realtime:
             started = time.perf_counter()
@@ -400,8 +403,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
         "display_idle_c": idle, "expected_material": expected_material,
         **metrics, **safety_summary(master),
-        "clock": {False: "simulated", True: "real", "master": "real, less the world's time"}[
-            realtime], "loop": stats.summary(),
+        "clock": {False: "simulated", True: "real", "master": WORLD_PAUSED}[realtime],
+        "loop": stats.summary(),
         "devices": devices, "device_counters": device_counters,
         "module": module_summary(touch, master),
     }
@@ -435,6 +438,7 @@ class InProcessWire:
                                               classes=tuple(pad.classes)))
         self.master.on_message(self.slave.announcement(-PRE_CONTACT_S).message, -PRE_CONTACT_S)
         self._to_slave: list[dict] = []
+        self._to_master: list[dict] = []
         self.slave_t0_s: float | None = None
         self.display: MasterDisplay | None = None
         self.idle_c = math.nan
@@ -459,7 +463,9 @@ class InProcessWire:
         """One message from the slave reaches the master (no delay, one clock)."""
         self.master.on_message(m, t, 0.0)
 
-    def slave_period(self, t: float) -> None:
+    def slave_period(self, t: float, deliver: bool = True) -> None:
+        """The slave's period; what it sends reaches the master now or, not
+        ``deliver``, at :meth:`deliver` (the master's work when timed apart)."""
         out = []
         for m in self._to_slave:
             verdict = self.slave.classify(m)
@@ -469,8 +475,14 @@ class InProcessWire:
             elif verdict == ContactRequest.LIFT:
                 out += self.slave.lift(t)[0]
         self._to_slave = []
-        for send in out + self.slave.step(t):
-            self.to_master(send.message, t)
+        self._to_master += [send.message for send in out + self.slave.step(t)]
+        if deliver:
+            self.deliver(t)
+
+    def deliver(self, t: float) -> None:
+        pending, self._to_master = self._to_master, []
+        for m in pending:
+            self.to_master(m, t)
 
     def master_step(self, t: float, dt: float, sensors: PadSensors):
         """One display period on ``sensors`` with what the slave has said:
