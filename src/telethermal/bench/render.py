@@ -25,7 +25,8 @@ from typing import Callable
 
 import numpy as np
 
-from telethermal.control.loop import WORLD_PAUSED, FixedRateLoop, RealClock
+from telethermal.bench.clock_text import real_clock_sentences
+from telethermal.control.loop import FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
@@ -461,18 +462,5 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
         lines.append(f"module limits over {lim['sessions']} sessions: current exceeded "
                      f"{lim['current_exceeded']}, hot side exceeded {lim['hot_side_exceeded']}; "
                      f"safety events {report['safety_events']}")
-    e = report.get("real_clock_empty_loop")
-    if e:
-        lines.append(f"real clock   1000 Hz, an empty loop (this machine's floor): period p99 "
-                     f"{e['period_p99_us']:.0f} us, max {e['period_max_us']:.0f} us, deadline "
-                     f"misses {e['deadline_misses']} of {e['steps']}, stalls {e['stalls']}")
-    for key in ("real_clock", "real_clock_world_on_thread"):
-        lines += [f"real clock {r['rate_hz']:6.0f} Hz, "
-                  f"{'the master' if r.get('clock') == WORLD_PAUSED else 'the whole session'}"
-                  f"'s loop: period p50 "
-                  f"{r['period_p50_us']:.0f} us, p99 {r['period_p99_us']:.0f} us, max "
-                  f"{r['period_max_us']:.0f} us, deadline misses {r['deadline_misses']} of "
-                  f"{r['steps']}, stalls {r['stalls']}; busy p99 {r['busy_p99_us']:.0f} us, "
-                  f"the master's step p99 {r['master_step_p99_us']:.0f} us"
-                  for r in report.get(key, [])]
+    lines += real_clock_sentences(report)
     return lines + [f"wrote {json_path} and {report['png']}"]

@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from telethermal.bench.faults_text import recovery_text  # noqa: E402
-from telethermal.control.loop import WORLD_PAUSED  # noqa: E402
+from telethermal.bench.clock_text import real_clock_sentences  # noqa: E402
 
 
 def _load(results: Path, name: str) -> dict | None:
@@ -267,23 +267,7 @@ def render(out: Path, d: dict) -> list[str]:
         lines.append(f"| {r['rate_hz']:g} Hz | {_pct(r['mean_flux_rms_error_rel'])} | "
                      f"{_pct(r['max_flux_rms_error_rel'])} | {r['mean_temp_rms_error_c']:.2f} K"
                      f" | {r['mean_cpu_s_per_simulated_s']:.3g} |")
-    e = d.get("real_clock_empty_loop")
-    if e:
-        lines.append(f"\nAn empty loop at 1 kHz (this machine's own floor): period p99 "
-                     f"{e['period_p99_us']:.0f} us, {e['deadline_misses']} deadline misses of "
-                     f"{e['steps']}, {e['stalls']} stalls.")
-    for key in ("real_clock", "real_clock_world_on_thread"):
-        for rc in d.get(key, []):
-            # Rows written before the master's own loop was measured have no
-            # clock: they ran the whole session on the loop's thread.
-            what = ("the master's loop (the simulated world not charged to it)"
-                    if rc.get("clock") == WORLD_PAUSED
-                    else "the whole session on the loop's thread")
-            own = (f", the master's step p99 {rc['master_step_p99_us']:.0f} us"
-                   if "master_step_p99_us" in rc else "")
-            lines.append(f"\nReal clock at {rc['rate_hz']:g} Hz, {what}: period p99 "
-                         f"{rc['period_p99_us']:.0f} us, {rc['deadline_misses']} deadline misses "
-                         f"of {rc['steps']}, {rc['stalls']} stalls{own}.")
+    lines += [f"\n{t[0].upper()}{t[1:]}." for t in real_clock_sentences(d)]
     lines += ["", figure, _provenance(d), ""]
     return lines
 

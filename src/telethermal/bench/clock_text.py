@@ -1,0 +1,32 @@
+"""The real-clock rows of ``bench render`` in words, for its printout and
+for ``bench/report.md`` alike."""
+
+from __future__ import annotations
+
+from telethermal.control.loop import WORLD_PAUSED
+
+
+def real_clock_sentences(report: dict) -> list[str]:
+    """One sentence per real-clock row: this machine's empty loop, the
+    master's own loop (rows on the world-paused clock) and the whole
+    session on the loop's thread (rows written before the master's own
+    loop was measured carry no clock: they are those)."""
+    out = []
+    e = report.get("real_clock_empty_loop")
+    if e:
+        out.append(f"real clock at 1000 Hz, an empty loop (this machine's own floor): period "
+                   f"p99 {e['period_p99_us']:.0f} us, max {e['period_max_us']:.0f} us, "
+                   f"{e['deadline_misses']} deadline misses of {e['steps']}, "
+                   f"{e['stalls']} stalls")
+    for key in ("real_clock", "real_clock_world_on_thread"):
+        for r in report.get(key, []):
+            who = ("the master's loop (the simulated world not charged to it)"
+                   if r.get("clock") == WORLD_PAUSED else "the whole session on the loop's thread")
+            own = (f", the master's step p99 {r['master_step_p99_us']:.0f} us"
+                   if "master_step_p99_us" in r else "")
+            out.append(f"real clock at {r['rate_hz']:g} Hz, {who}: period p50 "
+                       f"{r['period_p50_us']:.0f} us, p99 {r['period_p99_us']:.0f} us, max "
+                       f"{r['period_max_us']:.0f} us, {r['deadline_misses']} deadline misses of "
+                       f"{r['steps']}, {r['stalls']} stalls; busy p99 {r['busy_p99_us']:.0f} us"
+                       f"{own}")
+    return out
