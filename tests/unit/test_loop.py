@@ -86,3 +86,15 @@ def test_the_world_paused_clock_does_not_count_the_worlds_time():
     assert clock.paused_s >= 0.01                 # still counted, the span closed
     stats = FixedRateLoop(0.002, clock).run(lambda t, dt: None, 5)
     assert stats.summary()["steps"] == 5 and min(stats.lateness_s) >= 0.0
+
+
+def test_the_loop_counts_the_garbage_collections_inside_it():
+    # A full collection forced in a step is counted in generation 2 (with
+    # its length); the loop leaves no callback behind.
+    import gc
+    before = len(gc.callbacks)
+    stats = FixedRateLoop(0.01, SimClock()).run(
+        lambda t, dt: gc.collect() if t == 0.0 else None, 3)
+    s = stats.summary()
+    assert s["gc_collections"][2] >= 1 and s["gc_max_us"] > 0.0
+    assert len(gc.callbacks) == before

@@ -24,6 +24,9 @@ def real_clock_sentences(report: dict) -> list[str]:
                    if r.get("clock") == WORLD_PAUSED else "the whole session on the loop's thread")
             own = (f", the master's step p99 {r['master_step_p99_us']:.0f} us"
                    if "master_step_p99_us" in r else "")
+            if "gc_collections" in r:
+                own += (f"; garbage collections {'/'.join(map(str, r['gc_collections']))} "
+                        f"(generations 0/1/2), the longest {r['gc_max_us']:.0f} us")
             out.append(f"real clock at {r['rate_hz']:g} Hz, {who}: period p50 "
                        f"{r['period_p50_us']:.0f} us, p99 {r['period_p99_us']:.0f} us, max "
                        f"{r['period_max_us']:.0f} us, {r['deadline_misses']} deadline misses of "

@@ -17,6 +17,7 @@ check the overrun policy.
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from collections import deque
@@ -108,6 +109,10 @@ class LoopStats:
     busy_s: list = field(default_factory=list)         # how long each step took
     missed_deadlines: int = 0                          # deadlines skipped
     count: int = 0                                     # steps run (all, even if not kept)
+    #: Python's garbage collections during the run, per generation, and the
+    #: longest (s): a pause inside a step the loop's own figures cannot name.
+    gc_collections: list = field(default_factory=lambda: [0, 0, 0])
+    gc_max_s: float = 0.0
 
     def summary(self, last: int | None = None) -> dict:
         """Period p50/p99/max, lateness p99/max, overruns, stalls (us), over
@@ -133,7 +138,22 @@ class LoopStats:
                 "busy_mean_us": float(np.mean(busy) * 1e6) if len(busy) else math.nan,
                 "overruns": int(np.sum(busy > self.period_s)),
                 "deadline_misses": self.missed_deadlines,
-                "stalls": int(np.sum(late > STALL_S))}
+                "stalls": int(np.sum(late > STALL_S)),
+                "gc_collections": list(self.gc_collections), "gc_max_us": self.gc_max_s * 1e6}
+
+
+class _GcWatch:
+    """A ``gc.callbacks`` entry counting collections into ``stats``."""
+
+    def __init__(self, stats: LoopStats):
+        self.stats, self.started = stats, 0.0
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self.started = time.perf_counter()
+            return
+        self.stats.gc_collections[info["generation"]] += 1
+        self.stats.gc_max_s = max(self.stats.gc_max_s, time.perf_counter() - self.started)
 
 
 class FixedRateLoop:
@@ -162,6 +182,14 @@ class FixedRateLoop:
             stats.starts_s, stats.lateness_s, stats.busy_s = (deque(maxlen=keep_last)
                                                               for _ in range(3))
         self.stats = stats
+        watch = _GcWatch(stats)
+        gc.callbacks.append(watch)
+        try:
+            return self._run(stats, step, n_steps)
+        finally:
+            gc.callbacks.remove(watch)
+
+    def _run(self, stats: LoopStats, step, n_steps) -> LoopStats:
         clock, period = self.clock, self.period_s
         t0 = clock.now()
         k = 0                                   # index of the next deadline

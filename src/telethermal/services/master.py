@@ -78,6 +78,7 @@ class Touch:
                                          display_params(scene, cfg, self.operator, self.idle_c))
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
+        self.gc0 = list(service.loop.stats.gc_collections)
         self.reply_when_done = True          # the admin "touch" request waits for the end
         self.truth: dict | None = None       # the placed object (simulation), for the figures
 
@@ -272,6 +273,8 @@ class MasterService:
         est = link.decision or link.latest
         loop = stats.summary(last=stats.count - touch.loop_count0)
         loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
+        loop["gc_collections"] = [a - b for a, b in zip(stats.gc_collections, touch.gc0)]
+        loop.pop("gc_max_us")                   # the service's run's, not this touch's
         result = {
             "ok": True, "contact_id": touch.contact_id, "contact_s": touch.contact_s,
             "operator": vars(touch.operator), "trace": touch.sim.trace,
