@@ -3,7 +3,8 @@ structure only, on the real clock (no wall-clock figure is asserted)."""
 
 import pytest
 
-from telethermal.control.loop import FixedRateLoop, RealClock, SimClock
+from telethermal.control.loop import (SPIN_FRACTION, FixedRateLoop, RealClock, SimClock,
+                                      WorldPausedClock, combined_summary)
 from telethermal.errors import ControlError
 
 
@@ -73,7 +74,6 @@ def test_the_world_paused_clock_does_not_count_the_worlds_time():
     # time outside the world's spans.
     import time
 
-    from telethermal.control.loop import WorldPausedClock
     clock = WorldPausedClock()
     before_real, before = time.perf_counter(), clock.now()
     with clock.world():
@@ -98,3 +98,37 @@ def test_the_loop_counts_the_garbage_collections_inside_it():
     s = stats.summary()
     assert s["gc_collections"][2] >= 1 and s["gc_max_us"] > 0.0
     assert len(gc.callbacks) == before
+
+
+def test_runs_pooled_as_one_never_count_the_gap_between_them():
+    # Two runs of 50 steps at 10 ms on one simulated clock, an hour apart,
+    # the second with one overrun of 2.5 periods: the pooled summary has
+    # 100 steps, both runs' misses, and no period spanning the gap.
+    clock = SimClock()
+    a = FixedRateLoop(0.01, clock).run(lambda t, dt: None, 50)
+    clock.advance(3600.0)
+
+    def slow_once(t, dt, n=[0]):
+        n[0] += 1
+        if n[0] == 10:
+            clock.advance(0.025)
+
+    b = FixedRateLoop(0.01, clock).run(slow_once, 50)
+    pooled = combined_summary([a, b])
+    assert pooled["steps"] == 100
+    assert pooled["deadline_misses"] == a.missed_deadlines + b.missed_deadlines == 2
+    assert pooled["period_max_us"] == pytest.approx(3e4)        # the overrun, not the hour
+    assert pooled["overruns"] == 1
+    assert combined_summary([a]) == a.summary()
+    with pytest.raises(ControlError, match="one period"):
+        combined_summary([a, FixedRateLoop(0.02, SimClock()).run(lambda t, dt: None, 3)])
+    with pytest.raises(ControlError):
+        combined_summary([])
+
+
+def test_the_clock_for_a_period_spins_a_fixed_share_of_it():
+    assert RealClock.for_period(1e-3).spin_s == pytest.approx(SPIN_FRACTION * 1e-3)
+    assert WorldPausedClock.for_period(5e-3).spin_s == pytest.approx(SPIN_FRACTION * 5e-3)
+    assert isinstance(WorldPausedClock.for_period(5e-3), WorldPausedClock)
+    with pytest.raises(ControlError, match="spin_s"):
+        RealClock(float("nan"))

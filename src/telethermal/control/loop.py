@@ -4,7 +4,10 @@ simulated clock.
 On the real clock each period sleeps to an absolute deadline (never "sleep
 for dt", which accumulates drift) and busy-waits the last ``spin_s`` of it,
 which holds p99 lateness to some microseconds on this class of machine
-where ``time.sleep`` alone overshoots by 50-100 us. When a step overruns
+where ``time.sleep`` alone overshoots by 50-100 us, and by up to some
+hundreds after a sleep of several milliseconds (a virtual machine's idle
+vCPU wakes late). :meth:`RealClock.for_period` spins a fixed fraction of
+the period (``SPIN_FRACTION``: the same share of a core at every rate). When a step overruns
 (or the machine stalls), the missed deadlines are skipped, not made up in a
 burst: the next deadline is the first one still in the future, the miss is
 counted, and the step is given the true elapsed time ``dt_s`` so that
@@ -31,13 +34,37 @@ from telethermal.errors import ControlError
 
 #: A lateness above this is a stall of the machine, reported apart (s).
 STALL_S = 3e-3
+#: The share of each period :meth:`RealClock.for_period` busy-waits: 200 us
+#: at 1 kHz (50-100 us of sleep overshoot covered), 1 ms at 200 Hz (a 4 ms
+#: sleep here overshot 200 us at p99 by 381 us, with 1 ms spun by 19 us:
+#: measured with an empty loop, 1,600 periods each, 2026-11-26). A fifth
+#: of a core at any rate.
+SPIN_FRACTION = 0.2
+
+#: The display loop's rate, chosen from ``bench render``'s error against
+#: rate (fingertip-7, 7 materials x 5 seeds, 2026-11-26): the skin error is
+#: flat from 100 Hz to 2 kHz (0.413-0.416 K); the flux error over the first
+#: second falls 6.5 / 5.6 / 4.9 / 4.7 / 4.6 % of peak at 100 / 200 / 500 /
+#: 1,000 / 2,000 Hz, so 500 Hz has all but 0.3 points of it; and on this
+#: 2-core virtual machine the master's loop holds 500 Hz (1 deadline of
+#: 6,800 missed) where at 1 kHz it missed 25 (its sleeps are too short to
+#: absorb the machine's 1-3 ms wake-up delays). The first paper's dSPACE
+#: ran at 100 Hz.
+DEFAULT_RATE_HZ = 500.0
 
 
 class RealClock:
     """``time.perf_counter`` with an absolute-deadline sleep."""
 
     def __init__(self, spin_s: float = 200e-6):
+        if not (spin_s >= 0 and math.isfinite(spin_s)):
+            raise ControlError(f"spin_s must be a finite time >= 0, got {spin_s}")
         self.spin_s = spin_s
+
+    @classmethod
+    def for_period(cls, period_s: float):
+        """A clock for a loop of ``period_s``: it spins ``SPIN_FRACTION`` of it."""
+        return cls(SPIN_FRACTION * period_s)
 
     def now(self) -> float:
         return time.perf_counter()
@@ -117,29 +144,41 @@ class LoopStats:
     def summary(self, last: int | None = None) -> dict:
         """Period p50/p99/max, lateness p99/max, overruns, stalls (us), over
         every kept step or the ``last`` ones (deadline misses: all steps)."""
-        def tail(xs):
-            xs = list(xs)
-            return np.asarray(xs[-last:] if last else xs)
+        return combined_summary([self], last)
 
-        starts = tail(self.starts_s)
-        periods = np.diff(starts) if len(starts) > 1 else np.zeros(0)
-        late = tail(self.lateness_s)
-        busy = tail(self.busy_s)
 
-        def pct(a, q):
-            return float(np.percentile(a, q) * 1e6) if len(a) else math.nan
+def combined_summary(runs: list[LoopStats], last: int | None = None) -> dict:
+    """:meth:`LoopStats.summary` over several runs of one period, as if one:
+    periods are taken within each run (never across two), counts summed,
+    percentiles over the pooled samples."""
+    if not runs or len({r.period_s for r in runs}) != 1:
+        raise ControlError("combined_summary needs one or more runs of one period")
 
-        return {"steps": len(starts), "period_target_us": self.period_s * 1e6,
-                "period_p50_us": pct(periods, 50), "period_p99_us": pct(periods, 99),
-                "period_max_us": float(periods.max() * 1e6) if len(periods) else math.nan,
-                "lateness_p50_us": pct(late, 50), "lateness_p99_us": pct(late, 99),
-                "lateness_max_us": float(late.max() * 1e6) if len(late) else math.nan,
-                "busy_p50_us": pct(busy, 50), "busy_p99_us": pct(busy, 99),
-                "busy_mean_us": float(np.mean(busy) * 1e6) if len(busy) else math.nan,
-                "overruns": int(np.sum(busy > self.period_s)),
-                "deadline_misses": self.missed_deadlines,
-                "stalls": int(np.sum(late > STALL_S)),
-                "gc_collections": list(self.gc_collections), "gc_max_us": self.gc_max_s * 1e6}
+    def tail(xs):
+        xs = list(xs)
+        return np.asarray(xs[-last:] if last else xs, dtype=float)
+
+    starts = [tail(r.starts_s) for r in runs]
+    periods = np.concatenate([np.diff(s) for s in starts if len(s) > 1] or [np.zeros(0)])
+    late = np.concatenate([tail(r.lateness_s) for r in runs])
+    busy = np.concatenate([tail(r.busy_s) for r in runs])
+    period_s = runs[0].period_s
+
+    def pct(a, q):
+        return float(np.percentile(a, q) * 1e6) if len(a) else math.nan
+
+    return {"steps": int(sum(len(s) for s in starts)), "period_target_us": period_s * 1e6,
+            "period_p50_us": pct(periods, 50), "period_p99_us": pct(periods, 99),
+            "period_max_us": float(periods.max() * 1e6) if len(periods) else math.nan,
+            "lateness_p50_us": pct(late, 50), "lateness_p99_us": pct(late, 99),
+            "lateness_max_us": float(late.max() * 1e6) if len(late) else math.nan,
+            "busy_p50_us": pct(busy, 50), "busy_p99_us": pct(busy, 99),
+            "busy_mean_us": float(np.mean(busy) * 1e6) if len(busy) else math.nan,
+            "overruns": int(np.sum(busy > period_s)),
+            "deadline_misses": int(sum(r.missed_deadlines for r in runs)),
+            "stalls": int(np.sum(late > STALL_S)),
+            "gc_collections": [int(sum(r.gc_collections[g] for r in runs)) for g in range(3)],
+            "gc_max_us": max(r.gc_max_s for r in runs) * 1e6}
 
 
 class _GcWatch:
@@ -169,7 +208,7 @@ class FixedRateLoop:
             raise ControlError(f"loop period must be a positive number of seconds, "
                                f"got {period_s}")
         self.period_s = period_s
-        self.clock = clock if clock is not None else RealClock()
+        self.clock = clock if clock is not None else RealClock.for_period(period_s)
 
     def run(self, step: Callable[[float, float], bool | None], n_steps: int,
             keep_last: int | None = None) -> LoopStats:

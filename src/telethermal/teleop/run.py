@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, RealClock, SimClock,
-                                      WorldPausedClock)
+from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, LoopStats, RealClock,
+                                      SimClock, WorldPausedClock)
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
@@ -274,6 +274,9 @@ class DisplayTouch:
 class SessionResult:
     summary: dict
     trace: dict          # arrays over the master's periods
+    #: The loop's record and the master's step times (s): to pool sessions.
+    loop_stats: LoopStats | None = None
+    master_step_s: tuple = ()
 
 
 def run_session(scene: Scene, material: str, identifier, generator,
@@ -335,8 +338,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # share the loop's thread here and run on their own hardware in a lab).
     master_busy_s: list[float] = []
 
-    clock = (WorldPausedClock() if realtime == "master" else RealClock()) if realtime \
-        else SimClock()
+    clock = (WorldPausedClock if realtime == "master" else RealClock).for_period(
+        1.0 / config.rate_hz) if realtime else SimClock()
     world = clock.world if isinstance(clock, WorldPausedClock) else contextlib.nullcontext
 
     def one_period(t_loop: float, dt_loop: float) -> bool:
@@ -415,7 +418,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
             "master_step_p99_us": float(np.percentile(busy_us, 99)),
             "master_step_mean_us": float(np.mean(busy_us)),
             "master_step_over_period": int(np.sum(busy_us > 1e6 / config.rate_hz))})
-    return SessionResult(summary, touch.trace)
+    return SessionResult(summary, touch.trace, stats, tuple(master_busy_s))
 
 
 class InProcessWire:
