@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from telethermal.control.pid import Pid, PidGains
-from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
-                                        supervise)
+from telethermal.control.safety import (Clamp, Fault, Reading, Request, SafetyLimits,
+                                        initial_state, safety_event_count, supervise)
 from telethermal.errors import ControlError
 
 DT = 1e-3
@@ -226,3 +226,13 @@ def test_a_limit_downstream_of_the_controller_stops_integration():
         out = free.update(1.0, 0.0, DT)
         free.limited_downstream(out.output, out.output)                # all passes
     assert out.integral == pytest.approx(100 * 10.0 * DT)
+
+
+def test_the_safety_count_holds_entries_and_clamps_by_the_names_recordings_hold():
+    # Summaries and recordings written before the names were enums hold the
+    # same strings; faults are counted by name beside, not as events.
+    events = {"entered safe state": 2, "left safe state": 2, "stuck sensor": 4,
+              "clamped: rate": 3, "clamped: flux at temperature limit": 1}
+    assert safety_event_count(events) == 6
+    assert {f.value for f in Fault} >= {"stuck sensor", "no setpoint", "setpoint expired"}
+    assert Clamp.RATE.event == "clamped: rate"

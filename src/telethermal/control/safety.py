@@ -34,10 +34,51 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 
 from telethermal.errors import ControlError
 
 log = logging.getLogger(__name__)
+
+
+class Fault(StrEnum):
+    """Why the safe state: the values are the event names summaries and
+    recordings hold."""
+    READING_OUT_OF_RANGE = "temperature reading out of range"
+    SURFACE_OUT_OF_BAND = "surface out of band"
+    FLUX_NOT_FINITE = "flux reading not finite"
+    STUCK_SENSOR = "stuck sensor"
+    NO_SETPOINT = "no setpoint"
+    SETPOINT_NOT_FINITE = "setpoint not finite"
+    SETPOINT_EXPIRED = "setpoint expired"
+
+
+class Clamp(StrEnum):
+    """What a healthy request had limited; counted as ``clamped: <value>``."""
+    SURFACE_BAND = "surface band"
+    RATE = "rate"
+    FLUX = "flux"
+    FLUX_AT_TEMPERATURE_LIMIT = "flux at temperature limit"
+
+    @property
+    def event(self) -> str:
+        return f"clamped: {self.value}"
+
+
+class Transition(StrEnum):
+    ENTERED_SAFE_STATE = "entered safe state"
+    LEFT_SAFE_STATE = "left safe state"
+
+
+#: The events a session's ``safety_events`` counts: every entry into the
+#: safe state and every limited setpoint (faults are counted by name beside).
+SAFETY_EVENTS = frozenset({Transition.ENTERED_SAFE_STATE.value,
+                           *(c.event for c in Clamp)})
+
+
+def safety_event_count(events: dict) -> int:
+    """The number of safety events in a supervisor's ``events`` counts."""
+    return int(sum(n for name, n in events.items() if name in SAFETY_EVENTS))
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,25 +147,25 @@ def initial_state(limits: SafetyLimits = SafetyLimits()) -> SafetyState:
 
 
 def _faults(state: SafetyState, reading: Reading, request: Request | None,
-            limits: SafetyLimits) -> list[str]:
+            limits: SafetyLimits) -> list[Fault]:
     faults = []
     temp_ok = math.isfinite(reading.pad_temp_c) and \
         limits.reading_min_c <= reading.pad_temp_c <= limits.reading_max_c
     if not temp_ok:
-        faults.append("temperature reading out of range")
+        faults.append(Fault.READING_OUT_OF_RANGE)
     elif not (limits.skin_min_c - limits.surface_margin_k <= reading.pad_temp_c
               <= limits.skin_max_c + limits.surface_margin_k):
-        faults.append("surface out of band")
+        faults.append(Fault.SURFACE_OUT_OF_BAND)
     if not math.isfinite(reading.flux_w_m2):
-        faults.append("flux reading not finite")
+        faults.append(Fault.FLUX_NOT_FINITE)
     if reading.t_s - state.unchanged_since_s >= limits.stuck_after_s:
-        faults.append("stuck sensor")
+        faults.append(Fault.STUCK_SENSOR)
     if request is None:
-        faults.append("no setpoint")
+        faults.append(Fault.NO_SETPOINT)
     elif not (math.isfinite(request.temp_c) and math.isfinite(request.flux_w_m2)):
-        faults.append("setpoint not finite")
+        faults.append(Fault.SETPOINT_NOT_FINITE)
     elif reading.t_s - request.issued_s > limits.setpoint_lifetime_s:
-        faults.append("setpoint expired")
+        faults.append(Fault.SETPOINT_EXPIRED)
     return faults
 
 
@@ -148,20 +189,20 @@ def _limit(state, reading, request, limits, dt_s):
     lo, hi = surface_barrier(limits, reading.pad_temp_c)
     temp = min(max(request.temp_c, lo), hi)
     if temp != request.temp_c:
-        clamps.append("surface band")
+        clamps.append(Clamp.SURFACE_BAND)
     step = limits.max_rate_k_s * dt_s
     limited = min(max(temp, state.applied_temp_c - step), state.applied_temp_c + step)
     if limited != temp:
-        clamps.append("rate")
+        clamps.append(Clamp.RATE)
     flux = min(max(request.flux_w_m2, -limits.max_flux_w_m2), limits.max_flux_w_m2)
     if flux != request.flux_w_m2:
-        clamps.append("flux")
+        clamps.append(Clamp.FLUX)
     # Positive flux heats the skin: none at or past the top of the band, and
     # no cooling flux at or past its bottom.
     if (reading.pad_temp_c >= limits.skin_max_c and flux > 0) or \
             (reading.pad_temp_c <= limits.skin_min_c and flux < 0):
         flux = 0.0
-        clamps.append("flux at temperature limit")
+        clamps.append(Clamp.FLUX_AT_TEMPERATURE_LIMIT)
     return limited, flux, clamps
 
 
@@ -177,19 +218,21 @@ def supervise(state: SafetyState, reading: Reading, request: Request | None,
     events = dict(state.events)
     if faults:
         for fault in faults:
-            events[fault] = events.get(fault, 0) + 1
+            events[fault.value] = events.get(fault.value, 0) + 1
         if not state.safe:
-            events["entered safe state"] = events.get("entered safe state", 0) + 1
+            key = Transition.ENTERED_SAFE_STATE.value
+            events[key] = events.get(key, 0) + 1
             log.warning("safe state entered: %s", ", ".join(faults))
         applied = Applied(limits.neutral_c, None, True, tuple(faults))
         return applied, replace(tracked, applied_temp_c=limits.neutral_c, safe=True,
                                 events=events)
     if state.safe:
-        events["left safe state"] = events.get("left safe state", 0) + 1
+        key = Transition.LEFT_SAFE_STATE.value
+        events[key] = events.get(key, 0) + 1
         log.info("safe state left")
     temp, flux, clamps = _limit(state, reading, request, limits, dt_s)
     for clamp in clamps:
-        events[f"clamped: {clamp}"] = events.get(f"clamped: {clamp}", 0) + 1
+        events[clamp.event] = events.get(clamp.event, 0) + 1
     if clamps:
         log.info("setpoint limited (%s)", ", ".join(clamps))
     return (Applied(temp, flux, False, (), tuple(clamps)),

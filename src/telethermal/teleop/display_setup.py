@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+from telethermal.control.safety import safety_event_count
 from telethermal.physics.scene import Scene
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
 
@@ -50,7 +51,5 @@ def module_summary(touch, master: MasterDisplay) -> dict:
 
 def safety_summary(master: MasterDisplay) -> dict:
     events = dict(master.safety.events)
-    count = sum(v for k, v in events.items() if k == "entered safe state" or
-                k.startswith("clamped"))
-    return {"safety_events": int(count), "safety_event_counts": events,
+    return {"safety_events": safety_event_count(events), "safety_event_counts": events,
             "display_event_counts": dict(master.events)}
