@@ -41,8 +41,11 @@ def link(tmp_path_factory):
 
 
 @contextlib.contextmanager
-def proxy_between(out, link: str, both: str):
-    """The fault proxy with the ``[both]`` faults, for the ``with`` block."""
+def proxy_between(out, link: str, both: str, master_admin: int):
+    """The fault proxy with the ``[both]`` faults, for the ``with`` block.
+    After it, the master has seen the link go (its peer silent for
+    ``dead_after_s``): otherwise the next test's wait for a connection could
+    pass on the liveness left over from this proxy and touch on a dead link."""
     profile = out / "profile.toml"
     profile.write_text(link + "[both]\n" + both)
     proxy = subprocess.Popen([sys.executable, "-m", "telethermal", "faults", "--profile",
@@ -52,6 +55,7 @@ def proxy_between(out, link: str, both: str):
     finally:
         proxy.terminate()
         proxy.wait(10)
+        _wait_for(lambda: not call(master_admin, "status")["peer_alive"], 10)
 
 
 def touch_again(services, ports, seed):
@@ -61,7 +65,7 @@ def touch_again(services, ports, seed):
 
 
 def touch_through(out, services, ports, link, both: str, seed=5):
-    with proxy_between(out, link, both):
+    with proxy_between(out, link, both, ports[3]):
         wait_connected(services, ports[3], timeout_s=60)
         before = call(ports[3], "status")["counters"]
         result = networked_touch(SCENE, "wood", ports, seed, 2.0).summary
@@ -129,7 +133,7 @@ def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
         time.sleep(0.5)
         services.start("slave")
 
-    with proxy_between(out, text, "delay_s = 0.005\n"):
+    with proxy_between(out, text, "delay_s = 0.005\n", ports[3]):
         wait_connected(services, ports[3], timeout_s=60)
         under = networked_touch(SCENE, "wood", ports, 7, 2.0, during=crash).summary
         assert under["safety_events"] == 0
@@ -146,7 +150,7 @@ def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
 
 def test_a_master_crash_mid_contact_lifts_the_slave_and_a_new_master_renders(link):
     out, services, ports, text = link
-    with proxy_between(out, text, "delay_s = 0.005\n"):
+    with proxy_between(out, text, "delay_s = 0.005\n", ports[3]):
         wait_connected(services, ports[3], timeout_s=60)
         lost_before = call(ports[2], "status")["masters_lost"]
         call(ports[2], "place", material="wood", seed=9)

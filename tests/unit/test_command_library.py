@@ -72,8 +72,8 @@ def _devices_report(slave):
     hop = {"p50_us": 100.0, "p99_us": 200.0, "max_us": 900.0, "n": 5}
     return {"paths": {"sim": path, "emulated": path | {"serial_sensor_to_controller": hop,
                                                        "can_controller_to_actuator": hop}},
-            "sessions_1khz_real_clock": {"sim": {
-                "loop_period_p99_us": 1001.0, "busy_p99_us": 300.0, "deadline_misses": 0,
+            "sessions_real_clock": {"sim": {
+                "rate_hz": 500.0, "loop_period_p99_us": 1001.0, "busy_p99_us": 300.0, "deadline_misses": 0,
                 "steps": 3000, "flux_rms_error_rel_whole": 0.0125}},
             "slave": slave}
 
@@ -85,7 +85,7 @@ def test_devices_lines_keep_the_empty_line_where_there_is_no_slave_part():
         "emulated  read p50    1.0 us p99    2.0 us; apply p50    3.0 us p99    4.0 us",
         "emulated serial_sensor_to_controller: p50 100.0 us, p99 200.0 us, max 900 us",
         "emulated can_controller_to_actuator: p50 100.0 us, p99 200.0 us, max 900 us",
-        "1 kHz real-clock session, sim     : period p99 1001 us, busy p99 300 us, 0 missed "
+        "500 Hz real-clock session, sim     : period p99 1001 us, busy p99 300 us, 0 missed "
         "deadlines of 3000, flux error 1.25 %",
         "",
         "wrote r.json"]

@@ -26,8 +26,8 @@ TAU = SCENE.sensors.flux_lag_s
 def static(**kw) -> DisplayConfig:
     """These tests drive the flux PID with its static feed-forward: they give
     the display no pad model, which the impedance controller (the default)
-    refuses (issue 26: no silent fall back)."""
-    return DisplayConfig(feedforward_model="static", **kw)
+    refuses (issue 26: no silent fall back). They step it every 1 ms."""
+    return DisplayConfig(feedforward_model="static", **{"rate_hz": 1000.0, **kw})
 
 
 @pytest.fixture(scope="module")

@@ -72,7 +72,7 @@ def test_the_same_models_replay_the_same_commands_sample_for_sample(recorded):
     assert not other["identical"] and other["junction_max_abs_diff_c"] > 0.01
 
 
-@pytest.mark.parametrize("keep", [0.3, 0.7, 0.999])
+@pytest.mark.parametrize("keep", [0.5, 0.7, 0.999])  # 0.3 cut before the first period
 def test_a_recording_cut_mid_write_is_read_up_to_the_cut(recorded, tmp_path, keep):
     path, _ = recorded
     data = path.read_bytes()

@@ -14,7 +14,9 @@ import zmq
 
 from telethermal.record.recording import Recorder
 from telethermal.record.recorder import SessionRecorder
-from telethermal.view.stream import BATCH, ViewPublisher, skin_estimate_c
+from telethermal.view.stream import BATCH_S, ViewPublisher, skin_estimate_c
+
+BATCH = round(BATCH_S * 1000.0)          # readings per message at 1 kHz
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.master import MasterStep, SlaveNews
 from telethermal.view.feed import CLIENT_QUEUE, MAX_RATE_HZ, Frames, LiveFeed, _decimated
@@ -53,6 +55,11 @@ def test_view_stream_batches_are_protocol_messages(publisher_and_sub):
     assert len(first["flux_w_m2"]) == BATCH and first["t0_s"] == 10.0
     assert first["flux_w_m2"][5] == first["flux_w_m2"][4] and pub.counters["nonfinite"] == 1
     assert first["posteriors"] == [0.25, 0.75] and first["link"] == {"stream_lost": 1}
+    # At 200 Hz, the same 20 ms: four readings a message.
+    for k in range(4):
+        pub.period(20.0 + k / 200, 200.0, -1.0, 30.0, 4.0, lambda: dict(STATE))
+    assert sub.poll(2000)
+    assert len(decode(sub.recv())["flux_w_m2"]) == 4
     # The skin under the pad: the pad surface less flux / conductance (pad -> finger +).
     assert second["skin_temp_c"] == pytest.approx(
         second["temp_c"][-1] - second["flux_w_m2"][-1] / 2000.0)

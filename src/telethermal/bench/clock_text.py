@@ -14,7 +14,7 @@ def real_clock_sentences(report: dict) -> list[str]:
     out = []
     e = report.get("real_clock_empty_loop")
     if e:
-        out.append(f"real clock at 1000 Hz, an empty loop (this machine's own floor): period "
+        out.append(f"real clock at {e.get('rate_hz', 1000.0):g} Hz, an empty loop (this machine's own floor): period "
                    f"p99 {e['period_p99_us']:.0f} us, max {e['period_max_us']:.0f} us, "
                    f"{e['deadline_misses']} deadline misses of {e['steps']}, "
                    f"{e['stalls']} stalls")
@@ -32,4 +32,14 @@ def real_clock_sentences(report: dict) -> list[str]:
                        f"{r['period_max_us']:.0f} us, {r['deadline_misses']} deadline misses of "
                        f"{r['steps']}, {r['stalls']} stalls; busy p99 {r['busy_p99_us']:.0f} us"
                        f"{own}")
+    default = report.get("default_rate_hz")
+    row = next((r for r in report.get("real_clock", []) if r["rate_hz"] == default
+                and r.get("clock") == WORLD_PAUSED), None)
+    if row is not None:
+        share = row["deadline_misses"] / max(row["steps"], 1)
+        ratio = row["period_p99_us"] / row["period_target_us"]
+        out.append(f"the display's default rate, {default:g} Hz: {row['deadline_misses']} of "
+                   f"{row['steps']} deadlines missed ({100 * share:.3f} %, target 0.1 %: "
+                   f"{'met' if share <= 1e-3 else 'MISSED'}), period p99 {ratio:.3f}x the "
+                   f"period (target 1.2x: {'met' if ratio <= 1.2 else 'MISSED'})")
     return out

@@ -1,5 +1,5 @@
-"""``telethermal bench record``: what recording costs the master's 1 kHz
-loop. The same real-clock session (same seeds) without and with recording,
+"""``telethermal bench record``: what recording costs the master's loop
+at its default rate. The same real-clock session (same seeds) without and with recording,
 alternated; the loop's busy time per period, its deadline misses, and the
 recorder's own ``log`` call, beside the period budget."""
 
@@ -15,6 +15,7 @@ import numpy as np
 
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
+from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import run_session, with_finger
 
@@ -24,6 +25,7 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
     scene = with_finger(load_scene("fingertip-7"))
     ident, gen = train_identifier(scene, 0), train_generator(scene, 0)
     rows = {"without": [], "with": []}
+    period_s = 1.0 / DEFAULT_RATE_HZ
     log_calls = []
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(rounds):
@@ -52,9 +54,10 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
         news = SlaveNews(24.0)
         for k in range(5000):
             sensors = PadSensors(-1234.5 + k, 30.1, 4.0)
-            step_ = MasterStep(k * 1e-3, Phase.RENDER, True, -1200.0, 25.0, 25.0, False)
+            t_s = k * period_s
+            step_ = MasterStep(t_s, Phase.RENDER, True, -1200.0, 25.0, 25.0, False)
             t0 = time.perf_counter()
-            rec.period(k * 1e-3, 1e-3, sensors, news, step_)
+            rec.period(t_s, period_s, sensors, news, step_)
             log_calls.append(time.perf_counter() - t0)
             time.sleep(2e-4)
         rec.close()
@@ -62,11 +65,11 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
     def mean(mode, key):
         return float(np.mean([x[key] for x in rows[mode]]))
 
-    period_us = 1e6 / 1000.0
+    period_us = period_s * 1e6
     calls = np.asarray(log_calls) * 1e6
     extra = mean("with", "busy_mean_us") - mean("without", "busy_mean_us")
     return {
-        "rounds": rows, "contact_s": contact_s,
+        "rounds": rows, "contact_s": contact_s, "rate_hz": DEFAULT_RATE_HZ,
         "busy_mean_us": {m: mean(m, "busy_mean_us") for m in rows},
         "busy_p99_us": {m: mean(m, "busy_p99_us") for m in rows},
         "deadline_misses": {m: int(sum(x["deadline_misses"] for x in rows[m])) for m in rows},

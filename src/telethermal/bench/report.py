@@ -360,8 +360,11 @@ def devices(out: Path, d: dict) -> list[str]:
              f"| CAN: setpoint to the driver applying it | "
              f"{e['can_controller_to_actuator']['p50_us']:.0f} us | "
              f"{e['can_controller_to_actuator']['p99_us']:.0f} us |", ""]
-    for kind, r in d["sessions_1khz_real_clock"].items():
-        lines.append(f"- 1 kHz real-clock session, {kind}: period p99 "
+    # Results written before the display's default rate moved to 500 Hz
+    # carry their sessions under the old key (they ran at 1 kHz).
+    sessions = d.get("sessions_real_clock") or d["sessions_1khz_real_clock"]
+    for kind, r in sessions.items():
+        lines.append(f"- {r.get('rate_hz', 1000.0):g} Hz real-clock session, {kind}: period p99 "
                      f"{r['loop_period_p99_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, "
                      f"{r['deadline_misses']} deadline misses of {r['steps']}, flux error "
                      f"{_pct(r['flux_rms_error_rel_whole'])}.")
@@ -385,9 +388,11 @@ def devices(out: Path, d: dict) -> list[str]:
 
 def record(out: Path, d: dict) -> list[str]:
     b, m, n = d["busy_mean_us"], d["deadline_misses"], d["steps"]
-    return ["## Recording: its cost to the master's 1 kHz loop", "",
+    rate = d.get("rate_hz", 1000.0)         # results written before the rate was a key
+    return [f"## Recording: its cost to the master's {rate:g} Hz loop", "",
             f"Busy time per period {b['without']:.0f} us without recording, {b['with']:.0f} us "
-            f"with: {100 * d['cost_of_period_budget']:.1f} % of the 1 ms budget. The "
+            f"with: {100 * d['cost_of_period_budget']:.1f} % of the {1e3 / rate:g} ms budget. "
+            f"The "
             f"recorder's call per period: p50 {d['log_call_p50_us']:.1f} us, p99 "
             f"{d['log_call_p99_us']:.1f} us. Deadline misses {m['without']} of {n['without']} "
             f"without, {m['with']} of {n['with']} with.", "", _provenance(d), ""]
@@ -396,7 +401,7 @@ def record(out: Path, d: dict) -> list[str]:
 def view(out: Path, d: dict) -> list[str]:
     lines = ["## The live view: first paint, lag, and the master's loop with the page open", "",
              f"First paint {d['first_paint_s']:.2f} s after the server started (target 2 s); "
-             f"view lag behind the 1 kHz session p50 {1000 * d['lag_p50_s']:.0f} ms, p99 "
+             f"view lag behind the {d['rate_hz']:g} Hz session p50 {1000 * d['lag_p50_s']:.0f} ms, p99 "
              f"{1000 * d['lag_p99_s']:.0f} ms over {d['lag_frames']} frames (target 200 ms). "
              f"The view stream's call per display period alone: "
              f"{d['publisher_call']['mean_us']:.1f} us mean. {d.get('touches_per_mode', '?')} "

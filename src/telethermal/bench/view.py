@@ -1,9 +1,9 @@
 """``telethermal bench view``: the live view's first paint, its lag behind a
-1 kHz session, and the master's loop timing without the view stream, with
+session at the display's default rate, and the master's loop timing without the view stream, with
 it and no page, and with the page open in Chromium.
 
-Slave and master run as processes on loopback (CURVE) with a 1 kHz display
-loop; the view server runs in this process and Chromium (the
+Slave and master run as processes on loopback (CURVE) with the display
+loop at its default rate; the view server runs in this process and Chromium (the
 distribution's, through Playwright) shows the page. First paint: from the
 server's start to the page's first contentful paint (the browser's own
 paint timing), with a fresh server each time. Lag: for every live frame
@@ -26,6 +26,7 @@ import numpy as np
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
+from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
 from telethermal.services.viewer import open_view
@@ -63,7 +64,8 @@ def publisher_call_us(n: int = 5000) -> dict:
     try:
         for k in range(n):
             t0 = time.perf_counter()
-            pub.period(k * 1e-3, 1000.0, -1234.5 + k, 30.1, 4.0, lambda: dict(state))
+            pub.period(k / DEFAULT_RATE_HZ, DEFAULT_RATE_HZ, -1234.5 + k, 30.1, 4.0,
+                       lambda: dict(state))
             calls.append(time.perf_counter() - t0)
     finally:
         pub.close()
@@ -158,7 +160,7 @@ def run_view_bench(touches: int = 3, contact_s: float = 3.0, progress=print,
     lag = np.asarray(lags)
     return {
         "material": MATERIAL, "touches_per_mode": touches, "contact_s": contact_s,
-        "rate_hz": 1000.0,
+        "rate_hz": DEFAULT_RATE_HZ,
         "first_paint_s": max(p["first_paint_s"] for p in paints),
         "first_frame_s": max(p["first_frame_s"] for p in paints), "first_paints": paints,
         "lag_frames": int(len(lag)),

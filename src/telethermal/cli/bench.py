@@ -133,7 +133,7 @@ def _add_speed(bsub) -> None:
     p.add_argument("--out", required=True, help="report.md (its PNGs are written beside it)")
     p.set_defaults(func=cmd_bench_report)
 
-    p = bsub.add_parser("record", help="what recording costs the master's 1 kHz loop")
+    p = bsub.add_parser("record", help="what recording costs the master's loop")
     p.add_argument("--json", required=True)
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--contact-s", type=_positive(), default=3.0)
@@ -194,7 +194,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--methods", help="comma-separated (default: all)")
     p.set_defaults(func=cmd_bench_identify)
 
-    p = bsub.add_parser("view", help="the view's first paint, its lag at 1 kHz, and the "
+    p = bsub.add_parser("view", help="the view's first paint, its lag behind a session, and the "
                                      "master's loop timing with and without the page")
     p.add_argument("--json", required=True)
     p.add_argument("--touches", type=int, default=3)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from telethermal.cli._common import _positive, _progress, console
 from telethermal.errors import TelethermalError
+from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
 
 
@@ -133,7 +134,8 @@ def add_session(sub) -> None:
     p.add_argument("--plot", help="PNG of flux and temperature against direct contact")
     p.add_argument("--identifier", help="saved identifier (.npz); default: train one")
     p.add_argument("--generator", help="saved flux generator (.npz); default: train one")
-    p.add_argument("--rate-hz", type=_positive(), default=1000.0, help="display loop rate")
+    p.add_argument("--rate-hz", type=_positive(), default=DEFAULT_RATE_HZ,
+                   help=f"display loop rate (default {DEFAULT_RATE_HZ:g} Hz)")
     p.add_argument("--before", choices=("prior", "hold"), default="prior",
                    help="before identification: track the posterior-weighted flux (prior) "
                         "or hold the pad at the object temperature (hold, the paper's)")

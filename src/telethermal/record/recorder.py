@@ -20,9 +20,10 @@ from telethermal.physics.layered import pad_resistance
 from telethermal.record.recording import Recorder
 
 
-#: Control periods per recorded message (columns): 20 ms at 1 kHz, the most a
-#: recording cut mid-write loses of them.
-PERIOD_BATCH = 20
+#: Control periods per recorded message (columns): 20 ms of them at any
+#: rate (20 periods at 1 kHz, 4 at 200 Hz), the most a recording cut
+#: mid-write loses.
+PERIOD_BATCH_S = 0.020
 PERIOD_FIELDS = ("t_s", "dt_s", "flux_w_m2", "pad_temp_c", "force_n", "phase",
                  "desired_flux_w_m2", "junction_cmd_c", "junction_applied_c", "safe")
 
@@ -128,7 +129,7 @@ class SessionRecorder:
 
     def period(self, t_s, dt_s, sensors, news, step) -> None:
         """One control period. Periods are sent to the writer in batches of
-        ``PERIOD_BATCH`` (columns, one message), which costs the loop a few
+        ``PERIOD_BATCH_S`` (columns, one message), which costs the loop a few
         list appends per period and the writer one record per batch."""
         if news != self._news:
             self._news = news
@@ -148,7 +149,7 @@ class SessionRecorder:
                            ("safe", bool(step.safe))):
             cols[key].append(value)
         self._k += 1
-        if len(cols["t_s"]) >= PERIOD_BATCH:
+        if t_s + dt_s - self._t0 >= PERIOD_BATCH_S * (1.0 - 1e-6):
             self._flush_periods()
 
     def _flush_periods(self) -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from telethermal.devices.kinds import DeviceKind, device_kind
 from telethermal.errors import TelethermalError
+from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.tomltables import read_toml, table_values
 from telethermal.wire.transport import TransportConfig
 
@@ -53,7 +54,7 @@ class SlaveConfig:
 @dataclass
 class MasterConfig:
     scene: str = "fingertip-7"
-    rate_hz: float = 1000.0
+    rate_hz: float = DEFAULT_RATE_HZ
     before: str = "prior"
     #: Where the display's pad idles before a touch: "policy" (the scene's
     #: idle policy: pre-conditioned for the material the slave expects, the

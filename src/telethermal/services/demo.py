@@ -19,6 +19,7 @@ from telethermal.ident.anytime import Reason
 from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
 from telethermal.services.viewer import open_view
+from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
 from telethermal.view.server import ViewServer
@@ -37,7 +38,7 @@ def free_ports(n: int) -> list[int]:
 
 
 def write_configs(out: Path, scene: str, identifier: Path, generator: Path, ports, seed: int,
-                  rate_hz: float = 1000.0, realtime_priority: int = 0,
+                  rate_hz: float = DEFAULT_RATE_HZ, realtime_priority: int = 0,
                   slave_host: str = "127.0.0.1", security: str = "curve",
                   master_ports: tuple[int, int] | None = None,
                   devices: str = "sim", record_dir: str | Path | None = None,

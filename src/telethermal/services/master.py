@@ -109,7 +109,7 @@ class MasterService:
         self.session = MasterSession()
         #: The display loop on the real clock (``run``); its statistics are
         #: each touch's report.
-        self.loop = FixedRateLoop(1.0 / config.rate_hz, RealClock())
+        self.loop = FixedRateLoop(1.0 / config.rate_hz, RealClock.for_period(1.0 / config.rate_hz))
         self.hardware = None
         #: The hardware display's controller and its clock origin (hardware only).
         self.display: MasterDisplay | None = None

@@ -46,6 +46,7 @@ from enum import StrEnum
 
 from telethermal.control.contact import ContactDetector, ContactEvent
 from telethermal.control.junction import JunctionLoop
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
@@ -81,17 +82,16 @@ FEEDFORWARD_MODELS = ("static", "impedance")
 #: expects or, unknown, the minimax idle; "object": at the object's.
 IDLES = ("policy", "object")
 
-#: PID gains of the flux loop (K of junction per W/m^2 of flux error), from
-#: ``telethermal bench render``: the lowest mean flux error with the pad model
-#: right and 30 % off; more integral rings through the sensor's 0.15 s lag
-#: after a late hand-over; the derivative bought nothing measurable.
+#: PID gains of the flux loop (K of junction per W/m^2 of flux error), from ``bench render``:
+#: the lowest mean flux error with the pad model right and 30 % off; more integral rings
+#: through the sensor's 0.15 s lag after a late hand-over; the derivative bought nothing.
 DEFAULT_GAINS = PidGains(kp=1e-3, ki=3e-3, kd=0.0, derivative_filter_s=0.01,
                          output_min=-25.0, output_max=25.0)
 
 
 @dataclass(frozen=True)
 class DisplayConfig:
-    rate_hz: float = 1000.0
+    rate_hz: float = DEFAULT_RATE_HZ
     gains: PidGains = DEFAULT_GAINS
     feedforward: bool = True
     #: "impedance": the pad's surface made to behave as the rendered object's

@@ -4,7 +4,7 @@ the optional fields a live view needs (setpoint, skin estimate, phase,
 safety, link health, the newest posterior).
 
 It never blocks the display loop: the loop appends one period's readings to
-three lists (:meth:`ViewPublisher.period`) and, every ``BATCH`` periods,
+three lists (:meth:`ViewPublisher.period`) and, every ``BATCH_S`` of them,
 one message is encoded and sent with ``NOBLOCK`` on a socket whose send
 high-water mark is small, so a slow or absent subscriber costs a dropped
 message (ZeroMQ's PUB drops past the mark), never a wait.
@@ -23,8 +23,9 @@ from telethermal.wire.schema import PROTOCOL_VERSION
 
 log = logging.getLogger(__name__)
 
-#: Periods per message: 20 ms at 1 kHz, the view's floor of lag.
-BATCH = 20
+#: Readings per message: 20 ms of them at any rate (20 periods at 1 kHz, 4
+#: at 200 Hz), the view's floor of lag.
+BATCH_S = 0.020
 #: With no touch going on, a state-only message this often.
 IDLE_EVERY_S = 0.1
 
@@ -76,7 +77,7 @@ class ViewPublisher:
         flux.append(float(values[0]))
         temp.append(float(values[1]))
         force.append(float(values[2]))
-        if len(flux) >= BATCH:
+        if len(flux) >= max(1, round(BATCH_S * rate_hz)):
             self._publish(now_s, rate_hz, state())
 
     def idle(self, now_s: float, state) -> None:

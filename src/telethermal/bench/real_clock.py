@@ -1,0 +1,46 @@
+"""``bench render``'s real-clock rows: the master's loop on this machine's
+clock, its timing pooled over whole touches until a row has enough periods
+for a miss rate of 0.1 % to be a count."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from telethermal.control.loop import combined_summary
+from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.run import run_session
+
+#: The master's own loop on the real clock at these rates, each row pooled
+#: over this many periods or more (whole steel touches).
+REAL_CLOCK_RATES_HZ = (100.0, 200.0, 500.0, 1000.0)
+REAL_CLOCK_PERIODS = 6800
+
+
+def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s: float,
+                   limits: dict, periods: int = REAL_CLOCK_PERIODS) -> dict:
+    """Steel touches on the real clock at ``rate_hz`` (seeds 1, 2, ...) until
+    the loop has run ``periods``, its timing pooled over them
+    (:func:`combined_summary`): a miss rate of 0.1 % is then a count of
+    some, whatever the rate. ``limits``: the bench's module-limit counts,
+    added to. ``mode``: ``"master"`` (the world's time not charged to the
+    loop) or True (everything on the loop's thread)."""
+    runs, steps_s, flux = [], [], []
+    config = DisplayConfig(rate_hz=rate_hz)
+    while sum(len(r.starts_s) for r in runs) < periods:
+        res = run_session(scene, "steel", identifier, generator, config, contact_s=contact_s,
+                          seed=len(runs) + 1, realtime=mode)
+        for key in ("current_exceeded", "hot_side_exceeded"):
+            limits[key] += int(res.summary["module"][key])
+        limits["sessions"] += 1
+        runs.append(res.loop_stats)
+        steps_s.extend(res.master_step_s)
+        flux.append(res.summary["flux_rms_error_rel"])
+        clock = res.summary["clock"]
+    step_us = np.asarray(steps_s) * 1e6
+    return {"rate_hz": rate_hz, "clock": clock, "sessions": len(runs),
+            **combined_summary(runs),
+            "master_step_p50_us": float(np.percentile(step_us, 50)),
+            "master_step_p99_us": float(np.percentile(step_us, 99)),
+            "master_step_mean_us": float(np.mean(step_us)),
+            "master_step_over_period": int(np.sum(step_us > 1e6 / rate_hz)),
+            "flux_rms_error_rel": float(np.mean(flux))}
