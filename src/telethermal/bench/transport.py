@@ -39,6 +39,7 @@ from telethermal.jsonfile import write_json
 from telethermal.netns import Namespaces
 from telethermal.wire.codec import decode, encode
 from telethermal.wire.golden import messages
+from telethermal.wire.schema import MessageKind
 
 N_LATENCY = 2000
 INTERVAL_S = 0.001
@@ -113,7 +114,7 @@ def _peer(args) -> None:
             end = time.monotonic() + 60
             while got < args.n + args.burst and time.monotonic() < end:
                 for m in endpoint.poll(0.1):
-                    if m["kind"] != "material_estimate":
+                    if m["kind"] != MessageKind.MATERIAL_ESTIMATE:
                         continue
                     got += 1
                     if got <= args.n:
@@ -194,7 +195,7 @@ def _slow_peer(args) -> dict:
         got, paused, last = 0, False, time.monotonic()
         end = time.monotonic() + 90
         while time.monotonic() < end:
-            n = sum(m["kind"] == "material_estimate" for m in endpoint.poll(0.05))
+            n = sum(m["kind"] == MessageKind.MATERIAL_ESTIMATE for m in endpoint.poll(0.05))
             if n:
                 got, last = got + n, time.monotonic()
             if got and not paused:

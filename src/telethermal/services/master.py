@@ -34,6 +34,7 @@ from telethermal.teleop.session import MasterSession, ServiceState, send_through
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_idle,
                                      display_model_args, draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
+from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger("telethermal.master")
 
@@ -197,7 +198,7 @@ class MasterService:
 
     # ------------------------------------------------------------ network
     def _on_message(self, m: dict, now: float) -> None:
-        if m["kind"] == "session_config":
+        if m["kind"] == MessageKind.SESSION_CONFIG:
             log.info("session config from slave: %d classes, scene %s", len(m["classes"]),
                      m["scene"])
         if self.recorder is not None:

@@ -31,6 +31,7 @@ from telethermal.teleop.run import slave_rng, with_finger
 from telethermal.teleop.session import (ContactRequest, ServiceState, SlaveSession,
                                         send_through)
 from telethermal.teleop.slave import BOARD_LOST, Slave
+from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger("telethermal.slave")
 
@@ -120,7 +121,7 @@ class SlaveService:
 
     def _send(self, sends) -> None:
         for s in send_through(self.endpoint, sends, log):
-            if s.kind == "flux_trajectory":
+            if s.kind == MessageKind.FLUX_TRAJECTORY:
                 log.info("decided contact_id=%d material=%s (%s)", self.contact_id,
                          s.fields["material"], decision_text(self.pad, s.fields["material"]))
 
@@ -198,7 +199,7 @@ class SlaveService:
         kind = m["kind"]
         if self.recorder is not None:
             self.recorder.wire(now, "in", m)
-        if kind == "hello":
+        if kind == MessageKind.HELLO:
             self.endpoint.send("session_config", scene=self.scene.name,
                                sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
                                identifier=self.identifier.method,
@@ -207,7 +208,7 @@ class SlaveService:
                 self._superseded(now, m["session_id"])     # lifts; the new object announced
             else:
                 self._announce_object()
-        elif kind == "contact_event":
+        elif kind == MessageKind.CONTACT_EVENT:
             self._on_contact_event(m, now)
 
     def _on_contact_event(self, m: dict, now: float) -> None:

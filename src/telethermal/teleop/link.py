@@ -56,10 +56,11 @@ from telethermal.ident.anytime import Estimate, Label
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.master import SlaveNews
 from telethermal.teleop.memory import Agreement, agreement, remembered_estimate
+from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger(__name__)
 
-ESTIMATE_KINDS = ("material_estimate", "posterior_estimate")
+ESTIMATE_KINDS = (MessageKind.MATERIAL_ESTIMATE, MessageKind.POSTERIOR_ESTIMATE)
 
 
 @dataclass
@@ -115,11 +116,11 @@ class SlaveLink:
         """``now_s``: the master's clock; ``offset_s``: slave clock minus
         master clock, if known."""
         kind = m["kind"]
-        if kind == "session_config":
+        if kind == MessageKind.SESSION_CONFIG:
             self.generator = SampledGenerator(m["curves"])
             self.classes = tuple(m["classes"])
             return
-        if kind == "contact_event":
+        if kind == MessageKind.CONTACT_EVENT:
             # The slave always says what it measured; nil: it has no object
             # temperature (its thermometer's reading was refused), so the
             # display holds neutral rather than the previous object's.
@@ -127,7 +128,7 @@ class SlaveLink:
                 self.object_temp_c = m["object_temp_c"]
             self._on_object(m)
             return
-        if kind not in ESTIMATE_KINDS and kind != "flux_trajectory":
+        if kind not in ESTIMATE_KINDS and kind != MessageKind.FLUX_TRAJECTORY:
             return
         if self.contact_id is None or m["contact_id"] != self.contact_id:
             self.counters["stale"] += 1

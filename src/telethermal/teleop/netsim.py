@@ -58,6 +58,7 @@ from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_di
                                      display_idle, display_model_args, draw_operator, master_rng,
                                      pad_resistance, safety_summary, slave_rng, with_finger)
 from telethermal.teleop.slave import Slave
+from telethermal.wire.schema import MessageKind
 
 #: Bytes of a message on the wire, roughly (only a serialising link cares).
 MESSAGE_BYTES = {"flux_trajectory": 4200, "material_estimate": 160,
@@ -253,7 +254,7 @@ class SimSlaveService:
         return self.session.announcement(now).message
 
     def on_message(self, m: dict, now: float) -> None:
-        if m["kind"] != "contact_event":
+        if m["kind"] != MessageKind.CONTACT_EVENT:
             return
         verdict = self.session.classify(m)
         if verdict == ContactRequest.TOUCH:

@@ -44,7 +44,7 @@ from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import ESTIMATE_KINDS, SlaveLink
 from telethermal.teleop.master import SlaveNews
 from telethermal.teleop.memory import ObjectMemory, Verdict
-from telethermal.wire.schema import LOSSLESS
+from telethermal.wire.schema import LOSSLESS, MessageKind
 
 #: Samples per ``measurement_batch``.
 BATCH = 10
@@ -320,7 +320,7 @@ class MasterSession:
     def on_message(self, m: dict, now: float, offset_s: float | None = None) -> None:
         """One message from the slave; ``offset_s``: slave clock minus ours."""
         link, kind = self.link, m["kind"]
-        if kind == "flux_setpoint":
+        if kind == MessageKind.FLUX_SETPOINT:
             if self.contact_id is not None and m["contact_id"] == self.contact_id and \
                     m["t_since_contact_s"] >= self.setpoint_t_s:
                 self.setpoint_w_m2, self.setpoint_t_s = m["flux_w_m2"], m["t_since_contact_s"]

@@ -24,6 +24,7 @@ import zmq
 
 from telethermal.errors import ProtocolError
 from telethermal.wire.codec import decode
+from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger(__name__)
 
@@ -187,13 +188,13 @@ class LiveFeed:
 
     def _take(self, role: str, m: dict, pending: Pending) -> None:
         ref = self.t_ref_s
-        if m["kind"] == "flux_setpoint":
+        if m["kind"] == MessageKind.FLUX_SETPOINT:
             self.counters["setpoints"] += 1
             pending.counts["slave_setpoint"] += 1
             pending.add("slave_setpoint", [[round(m["sent_s"] - ref, 4), m["flux_w_m2"]]])
             pending.seen(m["sent_s"])
             return
-        if m["kind"] != "measurement_batch":
+        if m["kind"] != MessageKind.MEASUREMENT_BATCH:
             return
         n, rate, t0 = len(m["temp_c"]), m["rate_hz"], m["t0_s"]
         self.counters[f"{role}_batches"] += 1

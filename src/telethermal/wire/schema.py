@@ -9,6 +9,7 @@ holding the envelope keys and then its kind's fields.
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 from dataclasses import dataclass
 
 PROTOCOL_VERSION = 1
@@ -198,8 +199,30 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
     ), "something went wrong; the sender says what it did about it"),
 )}
 
+
+
+class MessageKind(StrEnum):
+    """The kinds by name, as the envelope's ``kind`` holds them: what code
+    outside the codec compares a message's kind with."""
+    HELLO = "hello"
+    HEARTBEAT = "heartbeat"
+    RESEND = "resend"
+    SESSION_CONFIG = "session_config"
+    CONTACT_EVENT = "contact_event"
+    MATERIAL_ESTIMATE = "material_estimate"
+    FLUX_TRAJECTORY = "flux_trajectory"
+    FLUX_SETPOINT = "flux_setpoint"
+    POSTERIOR_ESTIMATE = "posterior_estimate"
+    MEASUREMENT_BATCH = "measurement_batch"
+    STATUS = "status"
+    FAULT = "fault"
+
+
+if {k.value for k in MessageKind} != set(KINDS):
+    raise RuntimeError("MessageKind and KINDS disagree")     # caught at import, in every test
+
 LOSSLESS = frozenset(k for k, v in KINDS.items() if v.stream == "control" and
-                     k not in ("hello", "heartbeat", "resend"))
+                     k not in (MessageKind.HELLO, MessageKind.HEARTBEAT, MessageKind.RESEND))
 
 
 def field_tables() -> str:

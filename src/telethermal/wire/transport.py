@@ -39,7 +39,8 @@ from telethermal.wire.lossless import (GAP_GIVE_UP_DEAD, RESEND_BURST,  # noqa: 
                                        RETRANSMIT_AFTER, WINDOW, LosslessStream, lossless_seq)
 from telethermal.wire.loglimit import LogLimiter
 from telethermal.wire.ordering import MAX_BUFFERED, OrderedReceiver  # noqa: F401 (re-export)
-from telethermal.wire.schema import KINDS, LOSSLESS, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
+from telethermal.wire.schema import (KINDS, LOSSLESS, MAX_MESSAGE_BYTES, PROTOCOL_VERSION,
+                                     MessageKind)
 from telethermal.wire.sockets import (DIAGNOSE_AFTER_S, DIAGNOSE_REPEAT_S,  # noqa: F401
                                       RECEIVE_LIMIT_BYTES, RECONNECT_IVL_MAX_S,
                                       REFUSED_RETRY_S, UNANSWERED_S, EndpointSockets)
@@ -418,9 +419,9 @@ class Endpoint:
                 return self.lossless.void(void_seq, now)
             return []
         kind = message["kind"]
-        if kind == "hello":
+        if kind == MessageKind.HELLO:
             return self.hello.receive(message, identity, now)
-        if kind == "fault" and message["seq"] == 0 and self.role == "master" and \
+        if kind == MessageKind.FAULT and message["seq"] == 0 and self.role == "master" and \
                 self.peer_version is None:
             # The slave did not take up our hello (no common version, or busy
             # with another master): said once per heartbeat at most.
@@ -435,10 +436,10 @@ class Endpoint:
             self._drop("wrong_direction", now, "%s may not come from the %s", kind,
                        "master" if self.role == "slave" else "slave")
             return self.lossless.void(message["seq"], now) if kind in LOSSLESS else []
-        if kind == "heartbeat":
+        if kind == MessageKind.HEARTBEAT:
             self.lossless.on_heartbeat(message, now)
             return []
-        if kind == "resend":
+        if kind == MessageKind.RESEND:
             self.lossless.serve_resend(message, now)
             return []
         return self.lossless.receive(message, now)
