@@ -31,6 +31,7 @@ from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
 from telethermal.teleop.run import PRE_CONTACT_S
+from telethermal.teleop.session import ServiceState
 from telethermal.wire.transport import TransportConfig
 
 MATERIALS = ("wood", "steel")
@@ -128,7 +129,7 @@ class Nemesis:
             t_kill = time.monotonic()
             self.services.kill("master")
             t_safe = _wait(lambda: call(slave_admin, "status", timeout_s=0.5).get("state")
-                           == "idle", 10.0)
+                           == ServiceState.IDLE, 10.0)
             time.sleep(max(0.0, t_kill + DOWN_S - time.monotonic()))
             self.services.start("master")
             t_ready = _wait(lambda: call(master_admin, "status", timeout_s=0.5).get("ok"), 60.0)
