@@ -55,7 +55,9 @@ def proxy_between(out, link: str, both: str, master_admin: int):
     finally:
         proxy.terminate()
         proxy.wait(10)
-        _wait_for(lambda: not call(master_admin, "status")["peer_alive"], 10)
+        gone = _wait_for(lambda: not call(master_admin, "status")["peer_alive"], 10)
+    # (Reached only when the block did not raise: its own error comes first.)
+    assert gone, "the master did not see the link go within 10 s of the proxy's end"
 
 
 def touch_again(services, ports, seed):

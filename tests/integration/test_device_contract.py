@@ -142,7 +142,8 @@ def _emulated_display_and_master():
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
     clock = Clock()
     d = EmulatedDisplay(touch, clock=clock)
-    master = MasterDisplay(DisplayConfig(before="hold", feedforward_model="static"), None,
+    master = MasterDisplay(DisplayConfig(before="hold", feedforward_model="static",
+                                         rate_hz=1000.0), None,          # stepped every 1 ms
                            pad_resistance(SCENE.pad.layers), SCENE.sensors.flux_lag_s, 33.0,
                            idle_c=IDLE_C)
     return clock, d, master, SlaveNews(object_temp_c=IDLE_C)

@@ -48,6 +48,7 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
                               else (33.0, 24.0, 0.0))
     control, stream, admin = free_ports(3)
     config = MasterConfig(devices="hardware", board_url=board.path, can_bus=bus,
+                          rate_hz=1000.0,              # stepped every 1 ms below
                           admin_port=admin, transport=TransportConfig(
                               security="plain", control_port=control, stream_port=stream))
     service = MasterService(config)

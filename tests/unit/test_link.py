@@ -52,7 +52,8 @@ def drive(link, deliveries, seconds=1.0, alive=lambda t: True, rate=1000.0):
     handed to the link when the master's clock reaches that time. Returns the
     display's steps. The pad's sensors read a fixed contact (the desired flux
     does not depend on them)."""
-    master = MasterDisplay(DisplayConfig(feedforward_model="static"), link.generator, pad_resistance(SCENE.pad.layers),
+    master = MasterDisplay(DisplayConfig(feedforward_model="static", rate_hz=rate),
+                           link.generator, pad_resistance(SCENE.pad.layers),
                            TAU, FINGER_C, idle_c=OBJECT_C)
     pending = sorted(deliveries.items())
     steps, dt = [], 1.0 / rate

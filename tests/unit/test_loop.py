@@ -1,6 +1,7 @@
 """The fixed-rate loop runner on the simulated clock (exact) and, for
 structure only, on the real clock (no wall-clock figure is asserted)."""
 
+import numpy as np
 import pytest
 
 from telethermal.control.loop import (SPIN_FRACTION, FixedRateLoop, RealClock, SimClock,
@@ -103,7 +104,9 @@ def test_the_loop_counts_the_garbage_collections_inside_it():
 def test_runs_pooled_as_one_never_count_the_gap_between_them():
     # Two runs of 50 steps at 10 ms on one simulated clock, an hour apart,
     # the second with one overrun of 2.5 periods: the pooled summary has
-    # 100 steps, both runs' misses, and no period spanning the gap.
+    # 100 steps, both runs' misses, and no period spanning the two (each
+    # run's times start at its own start: joined, they would make a
+    # negative period): 98 periods, 97 of 10 ms and one of 30 ms.
     clock = SimClock()
     a = FixedRateLoop(0.01, clock).run(lambda t, dt: None, 50)
     clock.advance(3600.0)
@@ -118,6 +121,9 @@ def test_runs_pooled_as_one_never_count_the_gap_between_them():
     assert pooled["steps"] == 100
     assert pooled["deadline_misses"] == a.missed_deadlines + b.missed_deadlines == 2
     assert pooled["period_max_us"] == pytest.approx(3e4)        # the overrun, not the hour
+    expected = np.array([1e4] * 97 + [3e4])
+    assert pooled["period_p99_us"] == pytest.approx(np.percentile(expected, 99))
+    assert pooled["period_p50_us"] == pytest.approx(1e4)
     assert pooled["overruns"] == 1
     assert combined_summary([a]) == a.summary()
     with pytest.raises(ControlError, match="one period"):

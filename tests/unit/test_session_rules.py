@@ -147,8 +147,8 @@ def test_a_slave_restarted_mid_contact_reaches_the_display_as_news():
 
     s = session()
     s.period(Step(ContactEvent(True, 0.0)), 10.0, 2.0, 31.0)
-    display = MasterDisplay(DisplayConfig(feedforward_model="static"), None, 1e-3, 0.01, 31.0,
-                            idle_c=22.0)
+    display = MasterDisplay(DisplayConfig(feedforward_model="static", rate_hz=1000.0), None,
+                            1e-3, 0.01, 31.0, idle_c=22.0)
     display.step(0.0, 1e-3, PadSensors(0.0, 22.0, 0.0), s.news(10.0, True))
     before = display.generator
     assert before is s.link.generator

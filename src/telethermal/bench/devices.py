@@ -1,7 +1,8 @@
 """``telethermal bench devices``: sensor-to-controller and controller-to-
 actuator latency through the emulated serial and CAN paths, beside the
-direct simulator, in the same run; and a real-clock session with each,
-the display loop at its default rate.
+direct simulator, in the same run (the paths stepped every 1 ms: a
+per-call latency, not a rate); and a real-clock session with each, the
+display loop at its default rate.
 
 * serial: from the board emulator's ``send`` (the sample leaves the board:
   frame, COBS, pty write) to the driver returning the converted reading

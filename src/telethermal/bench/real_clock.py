@@ -24,6 +24,8 @@ def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s
     some, whatever the rate. ``limits``: the bench's module-limit counts,
     added to. ``mode``: ``"master"`` (the world's time not charged to the
     loop) or True (everything on the loop's thread)."""
+    if periods < 1:
+        raise ValueError(f"a real-clock row needs periods >= 1, got {periods}")
     runs, steps_s, flux = [], [], []
     config = DisplayConfig(rate_hz=rate_hz)
     while sum(len(r.starts_s) for r in runs) < periods:

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
-from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import run_session, with_finger
 
@@ -100,7 +100,8 @@ def text_report(report: dict, json_path) -> list[str]:
     b, m = report["busy_mean_us"], report["deadline_misses"]
     return [f"master loop busy per period: {b['without']:.0f} us without recording, "
             f"{b['with']:.0f} us with: +{report['extra_busy_per_period_us']:.1f} us = "
-            f"{100 * report['cost_of_period_budget']:.1f} % of the 1 ms budget",
+            f"{100 * report['cost_of_period_budget']:.1f} % of the "
+            f"{1e3 / report.get('rate_hz', 1000.0):g} ms budget",
             f"recorder call per period: p50 {report['log_call_p50_us']:.1f} us, p99 "
             f"{report['log_call_p99_us']:.1f} us; deadline misses {m['without']} of "
             f"{report['steps']['without']} without, {m['with']} of {report['steps']['with']} with",

@@ -152,7 +152,8 @@ def _safety_counts(report: dict, more_rows: list[dict]) -> dict:
     study = {}
     for row in report["gains"]:
         n = int(sum(r["safety_events"] for r in row["rows"]))
-        if "(default)" in row["gains"]:
+        if (row["kp"], row["ki"], row["kd"]) == (DEFAULT_GAINS.kp, DEFAULT_GAINS.ki,
+                                                 DEFAULT_GAINS.kd):
             product += row["rows"]
         else:
             study[f"{row['gains']}, pad model x{row['pad_resistance_belief']:g}"] = n
@@ -246,7 +247,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> d
     scene = with_finger(load_scene("fingertip-7"))
     materials = scene.materials[::3] if quick else scene.materials
     seeds = SEEDS[:1] if quick else SEEDS
-    rates = (100.0, 1000.0) if quick else RATES_HZ
+    rates = (100.0, DEFAULT_RATE_HZ, 1000.0) if quick else RATES_HZ
     step("training")
     t0 = time.perf_counter()
     identifier, generator = train_identifier(scene, 0), train_generator(scene, 0)
@@ -351,7 +352,8 @@ def _plot_skin(ax, report: dict) -> None:
                 color="C2", ms=6, label="first touch idling at the object (impedance)")
     ax.axhline(0.3, color="r", lw=0.8, ls=":", label="target 0.3 K (repeated touch)")
     ax.set_xticks(x, materials, rotation=20, fontsize=8)
-    ax.set_ylabel("skin temperature RMS error (K), 1 kHz")
+    ax.set_ylabel(f"skin temperature RMS error (K), "
+                  f"{report.get('default_rate_hz', 1000.0):g} Hz")
     ax.set_title("display controller, per material", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     ax.grid(alpha=0.3, axis="y")

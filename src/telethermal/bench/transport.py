@@ -8,7 +8,8 @@
   network namespaces joined by a veth pair (real addresses, separate
   network stacks; skipped with the reason where namespaces cannot be made).
   Plain and CURVE. The receiver waits in the socket poll, so the figure is
-  the transport's; the master's 1 kHz loop adds up to one period on top.
+  the transport's; the master's display loop (500 Hz by default) adds up
+  to one period on top.
 - Messages per second through the whole stack (a burst of lossless
   messages, each send waiting for room in the window).
 - A slow receiver: it stops reading for 2 s while the sender sends 10,000

@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
-from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
 from telethermal.services.viewer import open_view
@@ -43,7 +43,7 @@ REALTIME_PRIORITY = 20
 
 def publisher_call_us(n: int = 5000) -> dict:
     """The view stream's cost to one display period, alone: the call the
-    loop makes every period (one message every ``BATCH`` of them), with a
+    loop makes every period (one message every ``BATCH_S`` of them), with a
     subscriber connected."""
     import zmq
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from telethermal.cli._common import _positive, _progress, console
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TelethermalError
-from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
 
 

@@ -35,10 +35,10 @@ from telethermal.errors import ControlError
 #: A lateness above this is a stall of the machine, reported apart (s).
 STALL_S = 3e-3
 #: The share of each period :meth:`RealClock.for_period` busy-waits: 200 us
-#: at 1 kHz (50-100 us of sleep overshoot covered), 1 ms at 200 Hz (a 4 ms
-#: sleep here overshot 200 us at p99 by 381 us, with 1 ms spun by 19 us:
-#: measured with an empty loop, 1,600 periods each, 2026-11-26). A fifth
-#: of a core at any rate.
+#: at 1 kHz (50-100 us of sleep overshoot covered), 1 ms at 200 Hz. An empty
+#: 200 Hz loop here (1,600 periods each, 2026-11-26) was late by 381 us at
+#: p99 with 200 us spun (a 4.8 ms sleep) and by 19 us with 1 ms spun (a 4 ms
+#: sleep). A fifth of a core at any rate.
 SPIN_FRACTION = 0.2
 
 #: The display loop's rate, chosen from ``bench render``'s error against

@@ -6,9 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.devices.kinds import DeviceKind, device_kind
 from telethermal.errors import TelethermalError
-from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.tomltables import read_toml, table_values
 from telethermal.wire.transport import TransportConfig
 

@@ -14,12 +14,12 @@ from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TelethermalError, TransportError
 from telethermal.ident.anytime import Reason
 from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
 from telethermal.services.viewer import open_view
-from telethermal.teleop.master import DEFAULT_RATE_HZ
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
 from telethermal.view.server import ViewServer

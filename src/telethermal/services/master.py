@@ -104,7 +104,8 @@ class MasterService:
         self.endpoint, self.admin = open_service_sockets("master", config)
         # The slave's estimates come on the lossy stream, newest wins; the
         # link reads them as it reads the lossless kinds (PROTOCOL.md 6a).
-        self.endpoint.deliver_stream = frozenset({"posterior_estimate", "flux_setpoint"})
+        self.endpoint.deliver_stream = frozenset({MessageKind.POSTERIOR_ESTIMATE,
+                                                  MessageKind.FLUX_SETPOINT})
         #: The session's rules (what the master reads, what it tells the
         #: slave): the simulated network of ``bench faults`` runs the same.
         self.session = MasterSession()

@@ -17,6 +17,7 @@ import math
 
 import zmq
 
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TransportError
 from telethermal.wire.codec import encode
 from telethermal.wire.schema import PROTOCOL_VERSION
@@ -59,7 +60,7 @@ class ViewPublisher:
         self._seq = 0
         self._cols: tuple[list, list, list] = ([], [], [])
         self._t0 = 0.0
-        self._rate_hz = 1000.0
+        self._rate_hz = DEFAULT_RATE_HZ          # until the first period says
         self._last_sent = -math.inf
 
     def period(self, now_s: float, rate_hz: float, flux_w_m2: float, pad_temp_c: float,
