@@ -44,6 +44,11 @@ OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat
                     force_n=4.0, conductance_w_m2k=5000.0)
 
 
+#: How long a CAN command may take to reach the emulated board before the
+#: bench counts it timed out (s).
+CAN_WAIT_S = 0.05
+
+
 def _percentiles(samples_s) -> dict:
     us = np.asarray(samples_s) * 1e6
     return {"n": int(len(us)), "p50_us": float(np.percentile(us, 50)),
@@ -74,9 +79,11 @@ def _paths(n: int) -> dict:
                 step = MasterStep(t, Phase.CONTACT, True, float("nan"), 34.0, 34.0, False)
                 t0 = time.perf_counter()
                 if kind == "emulated":
-                    d.hardware.peltier.command(34.0)
-                    d._applied = None
-                    while d._applied is None and time.perf_counter() - t0 < 0.05:
+                    # A current well inside the module's limits, alternating
+                    # sign; timed until the board drives it (CAN_WAIT_S: timed out).
+                    d._applied_a = None
+                    d.hardware.peltier.command(0.5 if k % 2 else -0.5)
+                    while d._applied_a is None and time.perf_counter() - t0 < CAN_WAIT_S:
                         d.peltier_emulator.poll()
                     can.append(time.perf_counter() - t0)
                     d.hardware.peltier.poll()
@@ -88,7 +95,8 @@ def _paths(n: int) -> dict:
         out[kind] = {"read": _percentiles(read), "apply": _percentiles(apply_)}
         if kind == "emulated":
             out[kind]["serial_sensor_to_controller"] = _percentiles(serial)
-            out[kind]["can_controller_to_actuator"] = _percentiles(can)
+            out[kind]["can_controller_to_actuator"] = {
+                **_percentiles(can), "timed_out": int(sum(c >= CAN_WAIT_S for c in can))}
     return out
 
 
@@ -156,11 +164,14 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
                              "pad_true_c_sim": float(sim.trial.extra["T_pad_true_C"]),
                              "pad_true_c_emulated": float(emu.trial.extra["T_pad_true_C"])})
         can = []
-        for _ in range(1000):                   # the pad's CAN: command to applied
-            devices.junction_c = float("nan")
+        for k in range(1000):                   # the pad's CAN: command to applied
+            # A current inside the module's limits, alternating sign, timed
+            # until the pad's board drives it (CAN_WAIT_S: timed out).
+            target = 0.5 if k % 2 else -0.5
             t0 = time.perf_counter()
-            devices.pad.command(34.0)
-            while not devices.junction_c == 34.0 and time.perf_counter() - t0 < 0.05:
+            devices.pad.command(target)
+            while abs(devices.pad_emulator.current_a - target) > 1e-3 and \
+                    time.perf_counter() - t0 < CAN_WAIT_S:
                 devices.pad_emulator.poll()
             can.append(time.perf_counter() - t0)
             devices.pad.poll()
@@ -192,7 +203,8 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
             "sensor_to_identifier": _percentiles(to_ident),
             "sensor_to_identifier_onset_backlog": _percentiles(to_ident_backlog),
             "serial_sensor_to_driver": _percentiles(serial),
-            "can_controller_to_actuator": _percentiles(can),
+            "can_controller_to_actuator": {
+                **_percentiles(can), "timed_out": int(sum(c >= CAN_WAIT_S for c in can))},
             "device_counters": counters, "touches": rows}
 
 
@@ -233,7 +245,7 @@ def slave_lines(report: dict) -> list[str]:
                  "serial_sensor_to_driver", "can_controller_to_actuator"):
         r = s[name]
         out.append(f"slave {name}: p50 {r['p50_us']:.1f} us, p99 {r['p99_us']:.1f} us, "
-                   f"max {r['max_us']:.0f} us (n {r['n']})")
+                   f"max {r['max_us']:.0f} us (n {r['n']}){_timed_out(r)}")
     return out
 
 
@@ -247,6 +259,11 @@ def run_and_save(json_path, n: int = 3000, contact_s: float = 3.0, slave_trials:
     return report
 
 
+def _timed_out(r: dict) -> str:
+    n = r.get("timed_out")
+    return "" if n is None else f", {n} timed out"
+
+
 def text_report(report: dict, json_path) -> list[str]:
     """What ``telethermal bench devices`` prints of ``report``."""
     lines = [f"{kind:9s} read p50 {r['read']['p50_us']:6.1f} us p99 {r['read']['p99_us']:6.1f} us;"
@@ -255,9 +272,10 @@ def text_report(report: dict, json_path) -> list[str]:
     emu = report["paths"]["emulated"]
     lines += [f"emulated {name}: p50 {emu[name]['p50_us']:.1f} us, p99 "
               f"{emu[name]['p99_us']:.1f} us, max {emu[name]['max_us']:.0f} us"
+              f"{_timed_out(emu[name])}"
               for name in ("serial_sensor_to_controller", "can_controller_to_actuator")]
-    lines += [f"{r['rate_hz']:g} Hz real-clock session, {kind:8s}: period p99 {r['loop_period_p99_us']:.0f} us,"
-              f" busy p99 {r['busy_p99_us']:.0f} us, {r['deadline_misses']} missed deadlines of "
+    lines += [f"{r['rate_hz']:g} Hz real-clock session, {kind:8s}: period p99 "
+              f"{r['loop_period_p99_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, {r['deadline_misses']} missed deadlines of "
               f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %"
               for kind, r in report["sessions_real_clock"].items()]
     # An empty line where there is no slave part, as the command always printed.
