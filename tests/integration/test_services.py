@@ -56,7 +56,8 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     if devices == "emulated":
         board = s["device_counters"]["board"]
         # A frame per display period at least over the 1.5 s contact.
-        assert board["frames"] > 1.5 * DEFAULT_RATE_HZ and board["crc"] == 0 and board["port_lost"] == 0
+        assert board["frames"] > 1.5 * DEFAULT_RATE_HZ
+        assert board["crc"] == 0 and board["port_lost"] == 0
         # The slave's side too: its board's version-2 frames, its pad's loop.
         slave = s["devices_per_side"]["slave"]
         assert slave["kind"] == "emulated" and slave["frames"] > 150

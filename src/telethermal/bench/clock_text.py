@@ -14,8 +14,9 @@ def real_clock_sentences(report: dict) -> list[str]:
     out = []
     e = report.get("real_clock_empty_loop")
     if e:
-        out.append(f"real clock at {e.get('rate_hz', 1000.0):g} Hz, an empty loop (this machine's own floor): period "
-                   f"p99 {e['period_p99_us']:.0f} us, max {e['period_max_us']:.0f} us, "
+        out.append(f"real clock at {e.get('rate_hz', 1000.0):g} Hz, an empty loop (this "
+                   f"machine's own floor): period p99 {e['period_p99_us']:.0f} us, max "
+                   f"{e['period_max_us']:.0f} us, "
                    f"{e['deadline_misses']} deadline misses of {e['steps']}, "
                    f"{e['stalls']} stalls")
     for key in ("real_clock", "real_clock_world_on_thread"):

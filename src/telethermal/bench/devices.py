@@ -275,7 +275,8 @@ def text_report(report: dict, json_path) -> list[str]:
               f"{_timed_out(emu[name])}"
               for name in ("serial_sensor_to_controller", "can_controller_to_actuator")]
     lines += [f"{r['rate_hz']:g} Hz real-clock session, {kind:8s}: period p99 "
-              f"{r['loop_period_p99_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, {r['deadline_misses']} missed deadlines of "
+              f"{r['loop_period_p99_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, "
+              f"{r['deadline_misses']} missed deadlines of "
               f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %"
               for kind, r in report["sessions_real_clock"].items()]
     # An empty line where there is no slave part, as the command always printed.

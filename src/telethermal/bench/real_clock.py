@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from telethermal.control.loop import combined_summary
+from telethermal.control.loop import combined_summary, master_step_summary
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.run import run_session
 
@@ -38,11 +38,6 @@ def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s
         steps_s.extend(res.master_step_s)
         flux.append(res.summary["flux_rms_error_rel"])
         clock = res.summary["clock"]
-    step_us = np.asarray(steps_s) * 1e6
     return {"rate_hz": rate_hz, "clock": clock, "sessions": len(runs),
-            **combined_summary(runs),
-            "master_step_p50_us": float(np.percentile(step_us, 50)),
-            "master_step_p99_us": float(np.percentile(step_us, 99)),
-            "master_step_mean_us": float(np.mean(step_us)),
-            "master_step_over_period": int(np.sum(step_us > 1e6 / rate_hz)),
+            **combined_summary(runs), **master_step_summary(steps_s, rate_hz),
             "flux_rms_error_rel": float(np.mean(flux))}

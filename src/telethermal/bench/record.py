@@ -1,6 +1,6 @@
 """``telethermal bench record``: what recording costs the master's loop
-at its default rate. The same real-clock session (same seeds) without and with recording,
-alternated; the loop's busy time per period, its deadline misses, and the
+at its default rate. The same real-clock session (same seeds) without and
+with recording, alternated; the loop's busy time per period, its deadline misses, and the
 recorder's own ``log`` call, beside the period budget."""
 
 from __future__ import annotations

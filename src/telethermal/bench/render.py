@@ -27,13 +27,13 @@ import numpy as np
 
 from telethermal.bench.clock_text import real_clock_sentences
 from telethermal.bench.real_clock import REAL_CLOCK_PERIODS, REAL_CLOCK_RATES_HZ, real_clock_row
-from telethermal.control.loop import FixedRateLoop, RealClock
+from telethermal.control.loop import DEFAULT_RATE_HZ, FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
-from telethermal.teleop.master import DEFAULT_GAINS, DEFAULT_RATE_HZ, DisplayConfig
+from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import run_session, with_finger
 

@@ -392,8 +392,7 @@ def record(out: Path, d: dict) -> list[str]:
     return [f"## Recording: its cost to the master's {rate:g} Hz loop", "",
             f"Busy time per period {b['without']:.0f} us without recording, {b['with']:.0f} us "
             f"with: {100 * d['cost_of_period_budget']:.1f} % of the {1e3 / rate:g} ms budget. "
-            f"The "
-            f"recorder's call per period: p50 {d['log_call_p50_us']:.1f} us, p99 "
+            f"The recorder's call per period: p50 {d['log_call_p50_us']:.1f} us, p99 "
             f"{d['log_call_p99_us']:.1f} us. Deadline misses {m['without']} of {n['without']} "
             f"without, {m['with']} of {n['with']} with.", "", _provenance(d), ""]
 
@@ -401,7 +400,8 @@ def record(out: Path, d: dict) -> list[str]:
 def view(out: Path, d: dict) -> list[str]:
     lines = ["## The live view: first paint, lag, and the master's loop with the page open", "",
              f"First paint {d['first_paint_s']:.2f} s after the server started (target 2 s); "
-             f"view lag behind the {d['rate_hz']:g} Hz session p50 {1000 * d['lag_p50_s']:.0f} ms, p99 "
+             f"view lag behind the {d['rate_hz']:g} Hz session p50 "
+             f"{1000 * d['lag_p50_s']:.0f} ms, p99 "
              f"{1000 * d['lag_p99_s']:.0f} ms over {d['lag_frames']} frames (target 200 ms). "
              f"The view stream's call per display period alone: "
              f"{d['publisher_call']['mean_us']:.1f} us mean. {d.get('touches_per_mode', '?')} "

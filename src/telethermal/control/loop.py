@@ -7,8 +7,8 @@ which holds p99 lateness to some microseconds on this class of machine
 where ``time.sleep`` alone overshoots by 50-100 us, and by up to some
 hundreds after a sleep of several milliseconds (a virtual machine's idle
 vCPU wakes late). :meth:`RealClock.for_period` spins a fixed fraction of
-the period (``SPIN_FRACTION``: the same share of a core at every rate). When a step overruns
-(or the machine stalls), the missed deadlines are skipped, not made up in a
+the period (``SPIN_FRACTION``: the same share of a core at every rate).
+When a step overruns (or the machine stalls), the missed deadlines are skipped, not made up in a
 burst: the next deadline is the first one still in the future, the miss is
 counted, and the step is given the true elapsed time ``dt_s`` so that
 controllers integrate over what really passed.
@@ -46,10 +46,10 @@ SPIN_FRACTION = 0.2
 #: flat from 100 Hz to 2 kHz (0.413-0.416 K); the flux error over the first
 #: second falls 6.5 / 5.6 / 4.9 / 4.7 / 4.6 % of peak at 100 / 200 / 500 /
 #: 1,000 / 2,000 Hz, so 500 Hz has all but 0.3 points of it; and on this
-#: 2-core virtual machine the master's loop holds 500 Hz (1 deadline of
-#: 6,800 missed) where at 1 kHz it missed 25 (its sleeps are too short to
-#: absorb the machine's 1-3 ms wake-up delays). The first paper's dSPACE
-#: ran at 100 Hz.
+#: 2-core virtual machine the master's loop holds 500 Hz (3 deadlines of
+#: 6,800 missed, bench/results/render.json) where at 1 kHz it missed 36
+#: (its sleeps are too short to absorb the machine's wake-up delays). The
+#: first paper's dSPACE ran at 100 Hz.
 DEFAULT_RATE_HZ = 500.0
 
 
@@ -179,6 +179,17 @@ def combined_summary(runs: list[LoopStats], last: int | None = None) -> dict:
             "stalls": int(np.sum(late > STALL_S)),
             "gc_collections": [int(sum(r.gc_collections[g] for r in runs)) for g in range(3)],
             "gc_max_us": max(r.gc_max_s for r in runs) * 1e6}
+
+
+def master_step_summary(step_s, rate_hz: float) -> dict:
+    """A step's own times (s; one or more runs' pooled), in us: the part of
+    each period a loop's caller times itself (the master's step in a
+    session that also simulates its world)."""
+    us = np.asarray(step_s) * 1e6
+    return {"master_step_p50_us": float(np.percentile(us, 50)),
+            "master_step_p99_us": float(np.percentile(us, 99)),
+            "master_step_mean_us": float(np.mean(us)),
+            "master_step_over_period": int(np.sum(us > 1e6 / rate_hz))}
 
 
 class _GcWatch:

@@ -18,7 +18,7 @@ import time
 from dataclasses import dataclass, replace
 
 
-from telethermal.control.loop import FixedRateLoop, RealClock
+from telethermal.control.loop import FixedRateLoop
 from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
@@ -111,7 +111,7 @@ class MasterService:
         self.session = MasterSession()
         #: The display loop on the real clock (``run``); its statistics are
         #: each touch's report.
-        self.loop = FixedRateLoop(1.0 / config.rate_hz, RealClock.for_period(1.0 / config.rate_hz))
+        self.loop = FixedRateLoop(1.0 / config.rate_hz)     # the real clock, for its period
         self.hardware = None
         #: The hardware display's controller and its clock origin (hardware only).
         self.display: MasterDisplay | None = None

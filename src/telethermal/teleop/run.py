@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, LoopStats, RealClock,
-                                      SimClock, WorldPausedClock)
+                                      SimClock, WorldPausedClock, master_step_summary)
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
@@ -412,12 +412,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         summary["recording"] = recorder.close(summary, touch.trace)
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
-        busy_us = np.asarray(master_busy_s) * 1e6
-        summary["loop"].update({
-            "master_step_p50_us": float(np.percentile(busy_us, 50)),
-            "master_step_p99_us": float(np.percentile(busy_us, 99)),
-            "master_step_mean_us": float(np.mean(busy_us)),
-            "master_step_over_period": int(np.sum(busy_us > 1e6 / config.rate_hz))})
+        summary["loop"].update(master_step_summary(master_busy_s, config.rate_hz))
     return SessionResult(summary, touch.trace, stats, tuple(master_busy_s))
 
 

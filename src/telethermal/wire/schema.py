@@ -9,8 +9,8 @@ holding the envelope keys and then its kind's fields.
 from __future__ import annotations
 
 import math
-from enum import StrEnum
 from dataclasses import dataclass
+from enum import StrEnum
 
 PROTOCOL_VERSION = 1
 #: Versions this implementation speaks (negotiated by ``hello``).
@@ -198,7 +198,6 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("safe_state", "bool", doc="the sender's pad is in its safe state"),
     ), "something went wrong; the sender says what it did about it"),
 )}
-
 
 
 class MessageKind(StrEnum):
