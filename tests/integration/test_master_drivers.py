@@ -45,6 +45,7 @@ from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, InProcessWire, 
 from telethermal.teleop.session import SlaveSession
 from telethermal.teleop.slave import Slave
 from telethermal.wire.codec import decode, encode
+from telethermal.wire.messages import parse
 from telethermal.wire.schema import PROTOCOL_VERSION
 from telethermal.wire.transport import TransportConfig
 
@@ -112,7 +113,7 @@ def slave_recording(models, material: str, forces, finger_c: float, reorder: boo
         scene=SCENE.name, sample_rate_hz=SCENE.sample_rate_hz,
         classes=list(identifier.classes_), identifier=identifier.method,
         threshold=float(identifier.threshold), curves=curves), 1, t_before),
-        wire_message(announcement.kind, announcement.fields, 2, t_before)]
+        wire_message(announcement.kind, announcement.message.fields(), 2, t_before)]
     k_on, k_off = contact_periods(forces)
     arrivals: dict[int, list[bytes]] = {}
     reordered = []
@@ -130,9 +131,9 @@ def slave_recording(models, material: str, forces, finger_c: float, reorder: boo
         for s in sends:
             seq += 1
             late = reorder and trajectory_now and s.kind in (
-                "material_estimate", "posterior_estimate") and s.fields["decided"]
+                "material_estimate", "posterior_estimate") and s.message.decided
             arrivals.setdefault(k + DELAY + (REORDER if late else 0), []).append(
-                wire_message(s.kind, s.fields, seq, s.t_s))
+                wire_message(s.kind, s.message.fields(), seq, s.t_s))
     return before, arrivals, (k_on, k_off), reordered
 
 
@@ -230,13 +231,13 @@ def run_service(before, arrivals, n_periods: int, source: str, contact_s: float)
 def run_netsim(before, arrivals, readings, source: str, finger_c: float):
     session_config, announcement = (decode(data) for data in before)
     sim = SimMasterService(SCENE, replace(CONFIG, source=source), session_config["curves"],
-                           session_config["classes"], announcement, finger_c)
+                           session_config["classes"], parse(announcement), finger_c)
     out = []
     for k, (t, sensors) in enumerate(readings):
         for data in arrivals.get(k, ()):
-            sim.on_message(decode(data), t)
+            sim.on_message(parse(decode(data)), t)
         step, sends = sim.period(t, DT, sensors)
-        sent = [msgpack.packb([s.kind, s.fields], use_bin_type=True) for s in sends]
+        sent = [msgpack.packb([s.kind, s.message.fields()], use_bin_type=True) for s in sends]
         out.append(period_output(sent, step, sim.display, sim.session.link))
     return out, session_output(sim.session)
 
@@ -249,18 +250,19 @@ def run_inprocess(models, material, before, arrivals, readings, source: str, fin
     # samples its curves itself: the recording's, byte for byte.
     t0 = -PRE_CONTACT_S
     session_config = decode(before[0])
-    assert wire_message("contact_event", wire.slave.announcement(t0).fields, 2, t0) == before[1]
+    assert wire_message("contact_event", wire.slave.announcement(t0).message.fields(), 2,
+                        t0) == before[1]
     assert msgpack.packb(wire.curves) == msgpack.packb(session_config["curves"])
     assert list(wire.master.link.classes) == session_config["classes"]
     wire.set_up_display(SCENE, replace(CONFIG, source=source), finger_c)
     out = []
     for k, (t, sensors) in enumerate(readings):
         for data in arrivals.get(k, ()):
-            wire.to_master(decode(data), t)
+            wire.to_master(parse(decode(data)), t)
         n = len(wire._to_slave)
         _, step = wire.master_step(t, DT, sensors)
-        sent = [msgpack.packb([m["kind"], {f: v for f, v in m.items() if f != "kind"}],
-                              use_bin_type=True) for m in wire._to_slave[n:]]
+        sent = [msgpack.packb([m.kind, m.fields()], use_bin_type=True)
+                for m in wire._to_slave[n:]]
         out.append(period_output(sent, step, wire.display, wire.master.link))
     return out, session_output(wire.master)
 

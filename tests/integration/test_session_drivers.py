@@ -20,6 +20,7 @@ from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.netsim import SimSlaveService
 from telethermal.teleop.run import InProcessWire, slave_rng, with_finger
 from telethermal.teleop.slave import Slave
+from telethermal.wire.messages import parse
 from telethermal.wire.transport import TransportConfig
 
 SCENE = with_finger(load_scene("fingertip-7"))
@@ -60,21 +61,20 @@ def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
                            service.rate_hz, material)
     from_service, from_sim, from_inproc = [], [], []
     inproc.master.on_message = lambda m, now, offset_s=None: from_inproc.append(
-        (m["kind"], {f: v for f, v in m.items() if f != "kind"}))
+        (m.kind, m.fields()))
     service.endpoint.send = lambda kind, **fields: from_service.append((kind, fields)) or 0
     events = master_events(lift_at_s)
     try:
         for k in range(int(round(1000 * (lift_at_s + 0.2)))):
             now = 100.0 + k / 1000          # the same clock for both drivers
             if k in events:
-                service._on_message(events[k], now)
-                sim.on_message(events[k], now)
-                inproc._to_slave.append(events[k])
+                service._on_message(events[k], now)        # as the codec decoded it
+                sim.on_message(parse(events[k]), now)
+                inproc._to_slave.append(parse(events[k]))
             inproc.slave_period(now)
             if service.touch_t0 is not None:
                 service._sample(now)
-            sim.step(now, lambda t, m, lossless: from_sim.append(
-                (m["kind"], {f: v for f, v in m.items() if f != "kind"})))
+            sim.step(now, lambda t, m, lossless: from_sim.append((m.kind, m.fields())))
     finally:
         service.shutdown()
     sent = [(kind, fields) for kind, fields in from_service

@@ -6,6 +6,7 @@ faulty network would deliver them, and the display is driven with what it
 makes of them."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from telethermal.teleop.link import SlaveLink
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
 from telethermal.teleop.run import pad_resistance
+from telethermal.wire.messages import FluxTrajectory, MaterialEstimate, SessionConfig
 
 from test_master import FINGER_C, OBJECT_C, SCENE, TAU, closed_form_generator
 
@@ -23,22 +25,22 @@ CURVES = sample_curves(closed_form_generator(), CLASSES)
 
 
 def config_msg():
-    return {"kind": "session_config", "classes": CLASSES, "curves": CURVES}
+    return SessionConfig(scene="closed-form", sample_rate_hz=1000.0, classes=CLASSES,
+                         identifier="test", threshold=0.9, curves=CURVES)
 
 
 def estimate(cid, t, label="steel", decided=False, p_steel=0.6):
-    return {"kind": "material_estimate", "contact_id": cid, "t_since_contact_s": t,
-            "classes": CLASSES, "posteriors": [1 - p_steel, p_steel], "label": label,
-            "confidence": max(p_steel, 1 - p_steel), "decided": decided,
-            "reason": "confident" if decided else "", "object_temp_c": OBJECT_C}
+    return MaterialEstimate(contact_id=cid, t_since_contact_s=t, classes=CLASSES,
+                            posteriors=[1 - p_steel, p_steel], label=label,
+                            confidence=max(p_steel, 1 - p_steel), decided=decided,
+                            reason="confident" if decided else "", object_temp_c=OBJECT_C)
 
 
 def trajectory(cid, material="steel", t0_s=None, scale=1.0, valid_s=60.0):
     c = CURVES[material]
-    return {"kind": "flux_trajectory", "contact_id": cid, "material": material,
-            "object_temp_c": OBJECT_C, "t_s": [0.0] + c["t_s"],
-            "g_w_m2k": [0.0] + [scale * g for g in c["g_w_m2k"]], "valid_s": valid_s,
-            "t0_s": t0_s}
+    return FluxTrajectory(contact_id=cid, material=material, object_temp_c=OBJECT_C,
+                          t_s=[0.0] + c["t_s"], g_w_m2k=[0.0] + [scale * g for g in c["g_w_m2k"]],
+                          valid_s=valid_s, t0_s=t0_s)
 
 
 def fresh_link():
@@ -172,8 +174,8 @@ def test_link_loss_keeps_a_valid_trajectory_and_decays_without_one():
     # So does a final "unknown" (its posterior mixture is rendered).
     link = fresh_link()
     link.begin(1)
-    final_unknown = dict(estimate(1, 0.15, "unknown", p_steel=0.7), decided=True,
-                         reason="not confident")
+    final_unknown = replace(estimate(1, 0.15, "unknown", p_steel=0.7), decided=True,
+                            reason="not confident")
     _, steps = drive(link, {0.2: [final_unknown]}, alive=down)
     assert all(s.phase == "contact" and math.isfinite(s.desired_flux_w_m2)
                for s in steps if 0.25 < s.t_s < 1.0)

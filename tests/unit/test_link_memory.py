@@ -2,21 +2,24 @@
 object memory (``SlaveLink``), with the messages handed over in the order
 a faulty network delivers them, and the slave's :class:`ObjectMemory`."""
 
+from dataclasses import replace
+
 from telethermal.ident.anytime import Estimate
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.memory import FROM_MEMORY, ObjectMemory
+from telethermal.wire.messages import ContactEvent, PosteriorEstimate
 
 from test_link import CLASSES, OBJECT_C, config_msg, drive, estimate, fresh_link
 
 
 def posterior(cid, t, **kw):
-    return estimate(cid, t, **kw) | {"kind": "posterior_estimate"}
+    return PosteriorEstimate(**estimate(cid, t, **kw).fields())
 
 
 def announce(object_id, material=None, confidence=None):
-    return {"kind": "contact_event", "contact_id": 0, "touching": False, "t_s": 0.0,
-            "force_n": 0.0, "object_temp_c": OBJECT_C, "object_id": object_id,
-            "object_material": material, "object_confidence": confidence}
+    return ContactEvent(contact_id=0, touching=False, t_s=0.0, force_n=0.0,
+                        object_temp_c=OBJECT_C, object_id=object_id, object_material=material,
+                        object_confidence=confidence)
 
 
 def test_a_late_decision_is_not_replaced_by_newer_posteriors():
@@ -67,7 +70,7 @@ def test_a_touch_on_another_object_drops_the_memory():
     link = fresh_link()
     link.on_message(announce("plate", "steel", 0.98), 0.0)
     link.begin(3)
-    touching = announce("cup") | {"contact_id": 3, "touching": True}
+    touching = replace(announce("cup"), contact_id=3, touching=True)
     link.on_message(touching, 0.0)
     assert link.estimate is None and link.counters["memory_mismatch"] == 1
     # ...and the announcement of the other object (reordered after it) does

@@ -23,12 +23,16 @@ from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.netsim import NetworkSpec, SimNetwork, run_network_touch
 from telethermal.teleop.run import with_finger
+from telethermal.wire.messages import CLASSES, ContactEvent
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
 
 def msg(i, kind="material_estimate"):
-    return {"kind": kind, "i": i}
+    """A message numbered ``i`` (by its contact id) of ``kind``."""
+    return CLASSES[kind](contact_id=i, t_since_contact_s=0.0, classes=[], posteriors=[],
+                         label="", confidence=0.0, decided=False, reason="",
+                         object_temp_c=20.0)
 
 
 def drain(net, until_s, step_s=0.01, direction="s2m"):
@@ -50,9 +54,9 @@ def test_lossless_messages_arrive_once_and_in_order(loss, jitter_s, dup, reorder
         net.send(0.01 * i, "s2m", msg(i), lossless=True)
         net.send(0.01 * i + 0.005, "s2m", msg(i, "posterior_estimate"), lossless=False)
     got = drain(net, 60.0, 0.05)
-    lossless = [m["i"] for _, m in got if m["kind"] == "material_estimate"]
+    lossless = [m.contact_id for _, m in got if m.kind == "material_estimate"]
     assert lossless == list(range(30))
-    lossy = [m["i"] for _, m in got if m["kind"] == "posterior_estimate"]
+    lossy = [m.contact_id for _, m in got if m.kind == "posterior_estimate"]
     assert len(lossy) <= 2 * 30 and set(lossy) <= set(range(30))
 
 
@@ -77,14 +81,14 @@ def test_a_lost_estimate_holds_back_a_decision_only_when_ordered(lossless_estima
     net.send(0.0, "s2m", msg(0, "posterior_estimate"), lossless=lossless_estimate)
     net.send(0.01, "s2m", msg(1), lossless=True)              # the decision
     got = drain(net, 3.0, 0.001)
-    t_decision = next(t for t, m in got if m["i"] == 1)
+    t_decision = next(t for t, m in got if m.contact_id == 1)
     if lossless_estimate:
         # Behind the gap: a resend request (0.2 s back), the resend (0.2 s).
         assert t_decision >= 0.21 + 0.4 - 1e-9
-        assert [m["i"] for _, m in got] == [0, 1]
+        assert [m.contact_id for _, m in got] == [0, 1]
     else:
         assert t_decision == pytest.approx(0.21, abs=1.5e-3)
-        assert [m["i"] for _, m in got] == [1]                 # the lost estimate is gone
+        assert [m.contact_id for _, m in got] == [1]                 # the lost estimate is gone
 
 
 def test_a_lost_tail_is_found_by_the_next_heartbeat():
@@ -92,7 +96,7 @@ def test_a_lost_tail_is_found_by_the_next_heartbeat():
     net.channels["s2m"] = DropFirst(0.05)
     net.send(0.0, "s2m", msg(0), lossless=True)                # alone: no gap to see
     got = drain(net, 2.0, 0.001)
-    assert [m["i"] for _, m in got] == [0]
+    assert [m.contact_id for _, m in got] == [0]
     # PROTOCOL.md section 4: the heartbeat at 0.1 s carries last_seq (0.15 s
     # there), the resend goes back (0.2 s), the message comes again (0.25 s).
     assert got[0][0] == pytest.approx(0.25, abs=1.5e-3)
@@ -112,7 +116,7 @@ def test_a_lost_tail_without_heartbeats_waits_for_the_retransmission_timer():
     net.send(0.0, "s2m", msg(0), lossless=True)
     got = drain(net, 2.0, 0.001)
     # max(3 heartbeats, 2 round trips + 1 heartbeat) = 0.3 s, then 0.05 s delay.
-    assert [m["i"] for _, m in got] == [0] and got[0][0] == pytest.approx(0.35, abs=1.5e-3)
+    assert [m.contact_id for _, m in got] == [0] and got[0][0] == pytest.approx(0.35, abs=1.5e-3)
 
 
 def test_two_objects_announced_in_quick_succession_are_read_in_order():
@@ -124,11 +128,10 @@ def test_two_objects_announced_in_quick_succession_are_read_in_order():
                          np.random.default_rng(seed))
         link = SlaveLink(classes=("steel", "wood"))
         for i, (obj, material) in enumerate((("plate", "steel"), ("board", "wood"))):
-            net.send(0.005 * i, "s2m", {"kind": "contact_event", "contact_id": 0,
-                                        "touching": False, "t_s": 0.0, "force_n": 0.0,
-                                        "object_temp_c": 25.0 + i, "object_id": obj,
-                                        "object_material": material,
-                                        "object_confidence": 0.99}, lossless=True)
+            net.send(0.005 * i, "s2m", ContactEvent(contact_id=0, touching=False, t_s=0.0,
+                                                    force_n=0.0, object_temp_c=25.0 + i,
+                                                    object_id=obj, object_material=material,
+                                                    object_confidence=0.99), lossless=True)
         for _, m in drain(net, 5.0):
             link.on_message(m, 0.0)
         link.begin(1)

@@ -34,6 +34,7 @@ from telethermal.teleop.session import MasterSession, ServiceState, send_through
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_idle,
                                      display_model_args, draw_operator, master_rng, pad_resistance,
                                      safety_summary, with_finger)
+from telethermal.wire.messages import SessionConfig, parse
 from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger("telethermal.master")
@@ -198,12 +199,12 @@ class MasterService:
             self.state = ServiceState.RENDERING
 
     # ------------------------------------------------------------ network
-    def _on_message(self, m: dict, now: float) -> None:
-        if m["kind"] == MessageKind.SESSION_CONFIG:
-            log.info("session config from slave: %d classes, scene %s", len(m["classes"]),
-                     m["scene"])
+    def _on_message(self, raw: dict, now: float) -> None:
         if self.recorder is not None:
-            self.recorder.wire(now, "in", m)
+            self.recorder.wire(now, "in", raw)
+        m = parse(raw)
+        if isinstance(m, SessionConfig):
+            log.info("session config from slave: %d classes, scene %s", len(m.classes), m.scene)
         self.session.on_message(m, now, self.endpoint.offset.offset_s)
 
     # ------------------------------------------------------------ loop

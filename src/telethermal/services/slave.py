@@ -28,10 +28,11 @@ from telethermal.services.slave_devices import (calibrate, device_report, flat_c
                                                 open_devices)
 from telethermal.teleop.memory import ObjectMemory, Verdict
 from telethermal.teleop.run import slave_rng, with_finger
-from telethermal.teleop.session import (ContactRequest, ServiceState, SlaveSession,
+from telethermal.teleop.session import (ContactRequest, Send, ServiceState, SlaveSession,
                                         send_through)
 from telethermal.teleop.slave import BOARD_LOST, Slave
-from telethermal.wire.schema import MessageKind
+from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, SessionConfig,
+                                       given, parse)
 
 log = logging.getLogger("telethermal.slave")
 
@@ -121,9 +122,10 @@ class SlaveService:
 
     def _send(self, sends) -> None:
         for s in send_through(self.endpoint, sends, log):
-            if s.kind == MessageKind.FLUX_TRAJECTORY:
-                log.info("decided contact_id=%d material=%s (%s)", self.contact_id,
-                         s.fields["material"], decision_text(self.pad, s.fields["material"]))
+            if isinstance(s.message, FluxTrajectory):
+                material = s.message.material
+                log.info("decided contact_id=%d material=%s (%s)", self.contact_id, material,
+                         decision_text(self.pad, material))
 
     # ------------------------------------------------------------ instruments
     def _start_sensor_session(self, seed: int) -> None:
@@ -195,23 +197,23 @@ class SlaveService:
         self._send([self.session.announcement(time.monotonic())])
 
     # ------------------------------------------------------------ loop
-    def _on_message(self, m: dict, now: float) -> None:
-        kind = m["kind"]
+    def _on_message(self, raw: dict, now: float) -> None:
         if self.recorder is not None:
-            self.recorder.wire(now, "in", m)
-        if kind == MessageKind.HELLO:
-            self.endpoint.send("session_config", scene=self.scene.name,
-                               sample_rate_hz=self.rate_hz, classes=list(self.identifier.classes_),
-                               identifier=self.identifier.method,
-                               threshold=float(self.identifier.threshold), curves=self.curves)
-            if self.touch_t0 is not None and m["session_id"] != self.session.owner:
-                self._superseded(now, m["session_id"])     # lifts; the new object announced
+            self.recorder.wire(now, "in", raw)
+        m = parse(raw)
+        if isinstance(m, Hello):
+            self._send([Send(now, SessionConfig(
+                scene=self.scene.name, sample_rate_hz=self.rate_hz,
+                classes=list(self.identifier.classes_), identifier=self.identifier.method,
+                threshold=float(self.identifier.threshold), curves=self.curves))])
+            if self.touch_t0 is not None and m.session_id != self.session.owner:
+                self._superseded(now, m.session_id)       # lifts; the new object announced
             else:
                 self._announce_object()
-        elif kind == MessageKind.CONTACT_EVENT:
+        elif isinstance(m, ContactEvent):
             self._on_contact_event(m, now)
 
-    def _on_contact_event(self, m: dict, now: float) -> None:
+    def _on_contact_event(self, m: ContactEvent, now: float) -> None:
         """Only the session that opened a contact may lift it, and only by its
         id; a touch while a contact is going on, or a lift of another
         contact, changes nothing and is counted (``contact_ignored``)."""
@@ -225,7 +227,7 @@ class SlaveService:
                 except TelethermalError as exc:
                     log.error("touch on an unprepared pad: %s", exc)
             # The operator touched: the slave's pad goes down on the object now.
-            self.session.touch(m["contact_id"], now, m.get("finger_temp_c"),
+            self.session.touch(m.contact_id, now, given(m.finger_temp_c),
                                owner=self.endpoint.peer_session)
             self.state = ServiceState.TOUCHING
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
@@ -234,7 +236,7 @@ class SlaveService:
         else:
             self.counters["contact_ignored"] += 1
             log.debug("contact event ignored: contact_id=%d touching=%s (going on: %s)",
-                      m["contact_id"], m["touching"],
+                      m.contact_id, m.touching,
                       self.contact_id if self.touch_t0 is not None else None)
 
     def _lift(self, now: float) -> None:

@@ -56,11 +56,10 @@ from telethermal.ident.anytime import Estimate, Label
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.master import SlaveNews
 from telethermal.teleop.memory import Agreement, agreement, remembered_estimate
-from telethermal.wire.schema import MessageKind
+from telethermal.wire.messages import (ESTIMATES, ContactEvent, FluxTrajectory, Message,
+                                       SessionConfig, given)
 
 log = logging.getLogger(__name__)
-
-ESTIMATE_KINDS = (MessageKind.MATERIAL_ESTIMATE, MessageKind.POSTERIOR_ESTIMATE)
 
 
 @dataclass
@@ -112,49 +111,47 @@ class SlaveLink:
         self.contact_id = None
 
     # ------------------------------------------------------------ messages
-    def on_message(self, m: dict, now_s: float, offset_s: float | None = None) -> None:
+    def on_message(self, m: Message, now_s: float, offset_s: float | None = None) -> None:
         """``now_s``: the master's clock; ``offset_s``: slave clock minus
         master clock, if known."""
-        kind = m["kind"]
-        if kind == MessageKind.SESSION_CONFIG:
-            self.generator = SampledGenerator(m["curves"])
-            self.classes = tuple(m["classes"])
+        if isinstance(m, SessionConfig):
+            self.generator = SampledGenerator(m.curves)
+            self.classes = tuple(m.classes)
             return
-        if kind == MessageKind.CONTACT_EVENT:
+        if isinstance(m, ContactEvent):
             # The slave always says what it measured; nil: it has no object
             # temperature (its thermometer's reading was refused), so the
             # display holds neutral rather than the previous object's.
-            if "object_temp_c" in m:
-                self.object_temp_c = m["object_temp_c"]
+            self.object_temp_c = given(m.object_temp_c, self.object_temp_c)
             self._on_object(m)
             return
-        if kind not in ESTIMATE_KINDS and kind != MessageKind.FLUX_TRAJECTORY:
+        if not isinstance(m, (*ESTIMATES, FluxTrajectory)):
             return
-        if self.contact_id is None or m["contact_id"] != self.contact_id:
+        if self.contact_id is None or m.contact_id != self.contact_id:
             self.counters["stale"] += 1
             return
-        self.object_temp_c = m["object_temp_c"]
-        if kind in ESTIMATE_KINDS:
-            self._on_estimate(Estimate(m["t_since_contact_s"], tuple(m["posteriors"]),
-                                       m["label"], m["confidence"], m["decided"], m["reason"]))
+        self.object_temp_c = m.object_temp_c
+        if isinstance(m, FluxTrajectory):
+            self._on_trajectory(m, now_s, offset_s)
             return
-        self._on_trajectory(m, now_s, offset_s)
+        self._on_estimate(Estimate(m.t_since_contact_s, tuple(m.posteriors), m.label,
+                                   m.confidence, m.decided, m.reason))
 
-    def _on_object(self, m: dict) -> None:
-        if "object_id" not in m:
+    def _on_object(self, m: ContactEvent) -> None:
+        if not m.names_object:
             return                       # a slave that does not name its objects
-        if m.get("touching") and m.get("contact_id") == self.contact_id:
+        if m.touching and m.contact_id == self.contact_id:
             # The slave's pad is down: on the object the memory was for?
-            if self.memory is not None and m["object_id"] != self._memory_object:
+            if self.memory is not None and m.object_id != self._memory_object:
                 log.warning("contact %s is on object %s, not the announced %s: its memory "
-                            "is not used", self.contact_id, m["object_id"], self._memory_object)
+                            "is not used", self.contact_id, m.object_id, self._memory_object)
                 self.counters["memory_mismatch"] += 1
                 self.memory = None
             return
-        self.object_id = m["object_id"]
-        material = m.get("object_material")
+        self.object_id = m.object_id
+        material = given(m.object_material)
         self.remembered = None if material is None else \
-            (material, float(m.get("object_confidence") or 0.0))
+            (material, float(given(m.object_confidence) or 0.0))
 
     def _on_estimate(self, e: Estimate) -> None:
         newest = self.latest is None or e.t_s >= self.latest.t_s
@@ -191,27 +188,27 @@ class SlaveLink:
             return self.latest
         return self.decision or self.latest
 
-    def _on_trajectory(self, m: dict, now_s: float, offset_s: float | None) -> None:
-        t = np.asarray(m["t_s"], dtype=np.float64)
-        g = np.asarray(m["g_w_m2k"], dtype=np.float64)
+    def _on_trajectory(self, m: FluxTrajectory, now_s: float, offset_s: float | None) -> None:
+        t = np.asarray(m.t_s, dtype=np.float64)
+        g = np.asarray(m.g_w_m2k, dtype=np.float64)
         if len(t) and t[0] == 0:          # the explicit (0, 0) knot: the ramp is implied
             t, g = t[1:], g[1:]
         old = self.trajectory
-        if old is not None and old.material == m["material"] and \
+        if old is not None and old.material == m.material and \
                 np.array_equal(old.t_s, t) and np.array_equal(old.g_w_m2k, g):
             self.counters["duplicate_trajectory"] += 1
             return
         if old is not None:
             self.counters["replaced_trajectory"] += 1
         lag = None
-        if m.get("t0_s") is not None and offset_s is not None and self.onset_s is not None:
-            anchor = m["t0_s"] - offset_s                  # the slave's onset, our clock
+        if given(m.t0_s) is not None and offset_s is not None and self.onset_s is not None:
+            anchor = m.t0_s - offset_s                     # the slave's onset, our clock
             if anchor > now_s:
                 self.counters["anchor_in_future"] += 1     # a wrong offset; not waited for
             else:
                 lag = anchor - self.onset_s
-        self.trajectory = Trajectory(m["material"], t, g, float(m["valid_s"]), lag)
-        self.generator.set_curve(m["material"], t, g)
+        self.trajectory = Trajectory(m.material, t, g, float(m.valid_s), lag)
+        self.generator.set_curve(m.material, t, g)
 
     # ------------------------------------------------------------ per period
     def news(self, now_s: float, link_alive: bool, setpoint_w_m2: float | None = None

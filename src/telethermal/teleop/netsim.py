@@ -58,7 +58,7 @@ from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_di
                                      display_idle, display_model_args, draw_operator, master_rng,
                                      pad_resistance, safety_summary, slave_rng, with_finger)
 from telethermal.teleop.slave import Slave
-from telethermal.wire.schema import MessageKind
+from telethermal.wire.messages import ContactEvent, Message
 
 #: Bytes of a message on the wire, roughly (only a serialising link cares).
 MESSAGE_BYTES = {"flux_trajectory": 4200, "material_estimate": 160,
@@ -146,16 +146,16 @@ class SimNetwork:
         for t in self.channels[direction].send(now, MESSAGE_BYTES.get(kind, 100)):
             self._push(t, action, direction, payload)
 
-    def send(self, now: float, direction: str, message: dict, lossless: bool) -> None:
+    def send(self, now: float, direction: str, message: Message, lossless: bool) -> None:
         if not lossless:
-            self._transmit(now, direction, "lossy", message, message["kind"])
+            self._transmit(now, direction, "lossy", message, message.KIND)
             return
         s = self.streams[direction]
         seq = s.next_seq
         s.next_seq += 1
         s.sent[seq] = (message, now)
         s.counters["sent"] += 1
-        self._transmit(now, direction, "lossless", (seq, message), message["kind"])
+        self._transmit(now, direction, "lossless", (seq, message), message.KIND)
         self._push(now + self._retransmit_s, "timer", direction, seq)
         if not s.heartbeat_due:
             hb = self.spec.heartbeat_s
@@ -167,7 +167,7 @@ class SimNetwork:
         for seq in sorted(q for q in s.sent if q >= from_seq):
             s.counters["resent"] += 1
             message = s.sent[seq][0]
-            self._transmit(now, direction, "lossless", (seq, message), message["kind"])
+            self._transmit(now, direction, "lossless", (seq, message), message.KIND)
 
     def _arrive(self, t: float, action: str, direction: str, payload) -> None:
         s = self.streams[direction]
@@ -226,7 +226,7 @@ class SimNetwork:
         if s.buffered:
             self._push(t + self.spec.heartbeat_s, "gap check", direction, None)
 
-    def due(self, now: float, direction: str) -> list[dict]:
+    def due(self, now: float, direction: str) -> list[Message]:
         while self._events and self._events[0][0] <= now:
             t, _, action, d, payload = heapq.heappop(self._events)
             self._arrive(t, action, d, payload)
@@ -249,19 +249,17 @@ class SimSlaveService:
         self._out: list = []
         self.touch_t0: float | None = None     # when the pad went down (kept after the lift)
 
-    def announcement(self, now: float) -> dict:
+    def announcement(self, now: float) -> ContactEvent:
         """The object announcement (the service sends it on ``place``)."""
         return self.session.announcement(now).message
 
-    def on_message(self, m: dict, now: float) -> None:
-        if m["kind"] != MessageKind.CONTACT_EVENT:
+    def on_message(self, m: Message, now: float) -> None:
+        if not isinstance(m, ContactEvent):
             return
-        verdict = self.session.classify(m)
-        if verdict == ContactRequest.TOUCH:
-            self.session.touch(m["contact_id"], now, m.get("finger_temp_c"))
+        request, out, _ = self.session.on_contact_event(m, now)
+        if request == ContactRequest.TOUCH:
             self.touch_t0 = now
-        elif verdict == ContactRequest.LIFT:
-            self._out += self.session.lift(now)[0]
+        self._out += out
 
     def step(self, now: float, send) -> None:
         """Read the pad up to ``now``; ``send(t, message, lossless)``."""
@@ -283,7 +281,7 @@ class SimMasterService:
     the session's news each period. ``oracle``: the material the display is
     told at its own onset instead (no network; the floor of any compensation)."""
 
-    def __init__(self, scene, config, curves: dict, classes, announcement: dict,
+    def __init__(self, scene, config, curves: dict, classes, announcement: ContactEvent,
                  finger_c: float, oracle: str | None = None):
         generator = SampledGenerator(curves)
         self.session = MasterSession(SlaveLink(generator=generator, classes=tuple(classes)))
@@ -301,7 +299,7 @@ class SimMasterService:
                                      precondition=shift, **display_model_args(scene))
         self.onset_s: float | None = None       # the display's last onset
 
-    def on_message(self, m: dict, now: float) -> None:
+    def on_message(self, m: Message, now: float) -> None:
         """One message from the slave, as it arrives."""
         self.session.on_message(m, now, 0.0)
 

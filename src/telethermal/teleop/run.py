@@ -49,6 +49,7 @@ from telethermal.teleop.master import DisplayConfig, MasterDisplay
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.session import ContactRequest, MasterSession, SlaveSession
 from telethermal.teleop.slave import Slave
+from telethermal.wire.messages import Message
 
 #: The fingertip used where a scene has none (the gripper scenes): the
 #: first paper's operator, nominal skin.
@@ -432,8 +433,8 @@ class InProcessWire:
         self.master = MasterSession(SlaveLink(generator=SampledGenerator(curves),
                                               classes=tuple(pad.classes)))
         self.master.on_message(self.slave.announcement(-PRE_CONTACT_S).message, -PRE_CONTACT_S)
-        self._to_slave: list[dict] = []
-        self._to_master: list[dict] = []
+        self._to_slave: list[Message] = []
+        self._to_master: list[Message] = []
         self.slave_t0_s: float | None = None
         self.display: MasterDisplay | None = None
         self.idle_c = math.nan
@@ -454,7 +455,7 @@ class InProcessWire:
         self.idle_c, self.finger_c = idle, finger_c
         return self.display
 
-    def to_master(self, m: dict, t: float) -> None:
+    def to_master(self, m: Message, t: float) -> None:
         """One message from the slave reaches the master (no delay, one clock)."""
         self.master.on_message(m, t, 0.0)
 
@@ -463,12 +464,10 @@ class InProcessWire:
         ``deliver``, at :meth:`deliver` (the master's work when timed apart)."""
         out = []
         for m in self._to_slave:
-            verdict = self.slave.classify(m)
-            if verdict == ContactRequest.TOUCH:
-                self.slave.touch(m["contact_id"], t, m.get("finger_temp_c"))
+            request, sends, _ = self.slave.on_contact_event(m, t)
+            if request == ContactRequest.TOUCH:
                 self.slave_t0_s = t
-            elif verdict == ContactRequest.LIFT:
-                out += self.slave.lift(t)[0]
+            out += sends
         self._to_slave = []
         self._to_master += [send.message for send in out + self.slave.step(t)]
         if deliver:

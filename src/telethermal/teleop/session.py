@@ -35,16 +35,19 @@ The rules:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import StrEnum
 
 from telethermal.errors import WindowFull
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
-from telethermal.teleop.link import ESTIMATE_KINDS, SlaveLink
+from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import SlaveNews
 from telethermal.teleop.memory import ObjectMemory, Verdict
-from telethermal.wire.schema import LOSSLESS, MessageKind
+from telethermal.wire.messages import (ContactEvent, FluxSetpoint, FluxTrajectory,
+                                       ESTIMATES, MaterialEstimate, MeasurementBatch,
+                                       Message, PosteriorEstimate, given)
+from telethermal.wire.schema import MessageKind
 
 #: Samples per ``measurement_batch``.
 BATCH = 10
@@ -70,20 +73,19 @@ class ServiceState(StrEnum):
 
 @dataclass(frozen=True)
 class Send:
-    """One message the session sends: its kind, its fields, and the time
-    (the slave's clock) the rule sends it at."""
+    """One message the session sends and the time (the sender's clock) the
+    rule sends it at."""
 
     t_s: float
-    kind: str
-    fields: dict = field(default_factory=dict)
+    message: Message
+
+    @property
+    def kind(self) -> MessageKind:
+        return self.message.KIND
 
     @property
     def lossless(self) -> bool:
-        return self.kind in LOSSLESS
-
-    @property
-    def message(self) -> dict:
-        return {"kind": self.kind, **self.fields}
+        return self.message.lossless
 
 
 def send_through(endpoint, sends: list[Send], log) -> list[Send]:
@@ -94,7 +96,7 @@ def send_through(endpoint, sends: list[Send], log) -> list[Send]:
     sent = []
     for s in sends:
         try:
-            endpoint.send(s.kind, **s.fields)
+            endpoint.send(s.kind, **s.message.fields())
         except WindowFull as exc:
             log.error("%s", exc)
             continue
@@ -151,27 +153,42 @@ class SlaveSession:
         return _finite_or_none(float(self.pad.object_ir_c))
 
     def object_fields(self) -> dict:
-        """The object under the pad and what the memory holds for it (6b)."""
+        """The object under the pad and what the memory holds for it (6b):
+        the object fields of a :class:`ContactEvent`."""
         known = self.memory.recall(self.object_id)
         return {"object_id": self.object_id,
-                "object_material": None if known is None else known.material,
-                "object_confidence": None if known is None else known.confidence}
+                "object_material": None if known is None else str(known.material),
+                "object_confidence": None if known is None else float(known.confidence)}
 
     def announcement(self, now: float) -> Send:
         """The object announcement (on ``place`` and to a new master)."""
-        return Send(now, "contact_event", dict(contact_id=0, touching=False, t_s=now,
-                                               force_n=0.0, object_temp_c=self.object_temp_c(),
-                                               **self.object_fields()))
+        return Send(now, ContactEvent(contact_id=0, touching=False, t_s=now, force_n=0.0,
+                                      object_temp_c=self.object_temp_c(),
+                                      **self.object_fields()))
 
     # ------------------------------------------------------------ contacts
-    def classify(self, m: dict, peer_session: str | None = None) -> ContactRequest:
+    def classify(self, m: ContactEvent, peer_session: str | None = None) -> ContactRequest:
         """What a master's ``contact_event`` asks of this session."""
-        if m["touching"] and not self.touching:
+        if m.touching and not self.touching:
             return ContactRequest.TOUCH
-        if not m["touching"] and self.touching and m["contact_id"] == self.contact_id and \
+        if not m.touching and self.touching and m.contact_id == self.contact_id and \
                 peer_session == self.owner:
             return ContactRequest.LIFT
         return ContactRequest.IGNORED
+
+    def on_contact_event(self, m: ContactEvent, now: float, peer_session: str | None = None
+                         ) -> tuple[ContactRequest, list[Send], Verdict | None]:
+        """A master's ``contact_event``, acted on: the pad goes down (a
+        touch), or leaves the object (its owner's lift), or nothing. Returns
+        what it asked, what goes out for it and, for a lift, the memory's
+        verdict on the touch."""
+        request = self.classify(m, peer_session)
+        if request == ContactRequest.TOUCH:
+            self.touch(m.contact_id, now, given(m.finger_temp_c), owner=peer_session)
+            return request, [], None
+        if request == ContactRequest.LIFT:
+            return (request, *self.lift(now))
+        return request, [], None
 
     def touch(self, contact_id: int, now: float, finger_c: float | None,
               owner: str | None = None) -> None:
@@ -192,9 +209,8 @@ class SlaveSession:
         est = self.pad.estimate
         if est is not None and est is not self._decision_sent:
             out.append(self._decision(now, est))      # the contact's final estimate (6a)
-        out.append(Send(now, "contact_event", dict(contact_id=self.contact_id, touching=False,
-                                                   t_s=now, force_n=0.0,
-                                                   object_temp_c=self.object_temp_c())))
+        out.append(Send(now, ContactEvent(contact_id=self.contact_id, touching=False, t_s=now,
+                                          force_n=0.0, object_temp_c=self.object_temp_c())))
         self.touch_t0 = self.owner = None
         return out, self.memory.learn(self.object_id, est, now)
 
@@ -215,7 +231,7 @@ class SlaveSession:
         before = pad.onset_s
         events = pad.advance_to(now - self.touch_t0)
         if before is None and pad.onset_s is not None:
-            out.append(Send(at(pad.onset_s), "contact_event", dict(
+            out.append(Send(at(pad.onset_s), ContactEvent(
                 contact_id=self.contact_id, touching=True, t_s=at(pad.onset_s),
                 force_n=float(pad.force_n[pad.onset_index]),
                 object_temp_c=self.object_temp_c(), **self.object_fields())))
@@ -238,19 +254,19 @@ class SlaveSession:
 
     def _decision(self, t: float, e) -> Send:
         self._decision_sent = e
-        return Send(t, "material_estimate", self._estimate_fields(e))
+        return Send(t, MaterialEstimate(**self._estimate_fields(e)))
 
     def _estimate(self, t: float, e, final: bool) -> list[Send]:
         changed = e.decided and e.label != self._decided_label
         if self.estimates == "lossless":
             out = [self._decision(t, e)]
         else:
-            out = [Send(t, "posterior_estimate", self._estimate_fields(e))]
+            out = [Send(t, PosteriorEstimate(**self._estimate_fields(e)))]
             if changed or final:
                 out.append(self._decision(t, e))
         if changed and not e.label.is_unknown and e.label in self.curves:
             c = self.curves[e.label]
-            out.append(Send(t, "flux_trajectory", dict(
+            out.append(Send(t, FluxTrajectory(
                 contact_id=self.contact_id, material=str(e.label),
                 object_temp_c=float(self.pad.object_ir_c),
                 t_s=[0.0] + list(c["t_s"]), g_w_m2k=[0.0] + list(c["g_w_m2k"]),
@@ -271,13 +287,13 @@ class SlaveSession:
                               pad.object_ir_c - self.finger_c)
         if flux is None:
             return []
-        return [Send(now, "flux_setpoint", dict(contact_id=self.contact_id,
-                                                t_since_contact_s=t, flux_w_m2=flux))]
+        return [Send(now, FluxSetpoint(contact_id=self.contact_id, t_since_contact_s=t,
+                                       flux_w_m2=flux))]
 
     def _batch(self, now: float) -> Send:
         pad, read = self.pad, self.pad.samples_read
         i, ch = slice(self._sent, read), self.pad.channels
-        send = Send(now, "measurement_batch", dict(
+        send = Send(now, MeasurementBatch(
             contact_id=self.contact_id, t0_s=self.touch_t0 + float(pad.t_s[self._sent]),
             rate_hz=self.rate_hz,
             flux_w_m2=[float(v) for v in ch["heat_flux_W_m2"][i]],
@@ -317,19 +333,20 @@ class MasterSession:
         self.first_news_s: float | None = None
         self.trajectory_at_s: float | None = None
 
-    def on_message(self, m: dict, now: float, offset_s: float | None = None) -> None:
+    def on_message(self, m: Message, now: float, offset_s: float | None = None) -> None:
         """One message from the slave; ``offset_s``: slave clock minus ours."""
-        link, kind = self.link, m["kind"]
-        if kind == MessageKind.FLUX_SETPOINT:
-            if self.contact_id is not None and m["contact_id"] == self.contact_id and \
-                    m["t_since_contact_s"] >= self.setpoint_t_s:
-                self.setpoint_w_m2, self.setpoint_t_s = m["flux_w_m2"], m["t_since_contact_s"]
+        link = self.link
+        if isinstance(m, FluxSetpoint):
+            if self.contact_id is not None and m.contact_id == self.contact_id and \
+                    m.t_since_contact_s >= self.setpoint_t_s:
+                self.setpoint_w_m2, self.setpoint_t_s = m.flux_w_m2, m.t_since_contact_s
             return
         had = link.trajectory
         link.on_message(m, now, offset_s)
-        if self.contact_id is None or m.get("contact_id") != self.contact_id:
+        if self.contact_id is None or not isinstance(m, (*ESTIMATES, FluxTrajectory)) or \
+                m.contact_id != self.contact_id:
             return
-        if kind in ESTIMATE_KINDS and self.first_news_s is None:
+        if isinstance(m, ESTIMATES) and self.first_news_s is None:
             self.first_news_s = now
         if link.trajectory is not had and self.trajectory_at_s is None:
             self.trajectory_at_s = now
@@ -352,9 +369,9 @@ class MasterSession:
             self.link.onset(t)
             self.setpoint_w_m2, self.setpoint_t_s = None, -math.inf
             self.first_news_s = self.trajectory_at_s = None
-            return [Send(t, "contact_event", dict(contact_id=self.contact_id, touching=True,
-                                                  t_s=t, force_n=max(float(force_n), 0.0),
-                                                  finger_temp_c=finger_c))]
+            return [Send(t, ContactEvent(contact_id=self.contact_id, touching=True, t_s=t,
+                                         force_n=max(float(force_n), 0.0),
+                                         finger_temp_c=finger_c))]
         return self.close_contact(t, finger_c)
 
     def close_contact(self, t_s: float, finger_c: float | None) -> list[Send]:
@@ -363,8 +380,8 @@ class MasterSession:
         and what comes for this contact from now on is stale."""
         if self.contact_id is None:
             return []
-        out = [Send(t_s, "contact_event", dict(contact_id=self.contact_id, touching=False,
-                                               t_s=t_s, force_n=0.0, finger_temp_c=finger_c))]
+        out = [Send(t_s, ContactEvent(contact_id=self.contact_id, touching=False, t_s=t_s,
+                                      force_n=0.0, finger_temp_c=finger_c))]
         self.link.end()
         self.contact_id = None
         return out
