@@ -104,3 +104,17 @@ def test_bench_heat_balance_and_plot(tmp_path):
     report = {"rows": [{"model": "layered", "runtime_s": 1e-3, "max_rel_error": 1e-3}],
               "default": {"max_rel_error": 5e-4}, "date": "now", "machine": "here"}
     assert physics.plot(report, tmp_path / "p.png").stat().st_size > 10_000
+
+
+def test_a_reader_that_closes_the_pipe_gets_no_traceback():
+    # ``telethermal identify methods | head -1``: head exits after one line.
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "telethermal", "identify", "methods"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()                  # before the command has written anything
+    with proc.stderr:
+        err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 1
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err

@@ -22,6 +22,15 @@ def test_addresses_are_ports_ipc_paths_or_config_files(tmp_path):
     cfg = tmp_path / "m.toml"
     cfg.write_text('[master]\nadmin_port = 6123\n[transport]\nsecurity = "plain"\n')
     assert resolve(str(cfg), "master") == 6123
+    # HOST:PORT, what a person types first: this host's, or a clear error.
+    assert resolve("127.0.0.1:15571", "master") == 15571
+    assert resolve("localhost:6001", "slave") == 6001
+    assert resolve("tcp://127.0.0.1:6002", "slave") == 6002
+    with pytest.raises(AdminError, match=r"--master 10\.1\.2\.3:5571: .*127\.0\.0\.1 only.*"
+                                         r"ssh -N -L 5571:127\.0\.0\.1:5571 10\.1\.2\.3"):
+        resolve("10.1.2.3:5571", "master")
+    with pytest.raises(AdminError, match="expected tcp://127.0.0.1:PORT"):
+        resolve("tcp://127.0.0.1", "slave")
 
 
 def test_status_lines_name_the_problem_and_every_other_cause():

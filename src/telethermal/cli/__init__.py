@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import sys
 
 from telethermal import __version__
 from telethermal.cli import bench, data, identify, operate, run, services, view
@@ -47,4 +49,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         console.print("interrupted")
         return 130
+    except BrokenPipeError:
+        # The reader of our output went away (``telethermal ... | head``):
+        # nothing more to say, and nothing to say it to. Python's own
+        # recipe: point stdout at devnull so the interpreter's final flush
+        # does not raise again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 

@@ -35,10 +35,10 @@ def add_parsers(sub) -> None:
 def _admin_parser(sub) -> None:
     p = sub.add_parser("admin", help="operate a session: place, touch, lift, status, report, "
                                      "or any admin request (send)")
-    p.add_argument("--slave", help="the slave's admin: port, ipc:// path or its config file "
-                                   "(default 5570)")
-    p.add_argument("--master", help="the master's admin: port, ipc:// path or its config "
-                                    "file (default 5571)")
+    p.add_argument("--slave", help="the slave's admin: PORT, 127.0.0.1:PORT, ipc:// path or "
+                                   "its config file (default 5570)")
+    p.add_argument("--master", help="the master's admin: PORT, 127.0.0.1:PORT, ipc:// path or "
+                                    "its config file (default 5571)")
     p.add_argument("--json", action="store_true", help="print the raw replies as JSON")
     asub = p.add_subparsers(dest="admin_command", required=True)
     q = asub.add_parser("status", help="each reachable service's state, peer, counters and, "

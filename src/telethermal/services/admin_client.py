@@ -26,15 +26,41 @@ class AdminError(TelethermalError):
     """A service that answered an admin request with an error."""
 
 
+#: The names of this host an admin address may give (the admin socket
+#: listens on 127.0.0.1 only).
+LOCAL_HOSTS = ("127.0.0.1", "localhost")
+
+
+def _host_port(where: str, role: str) -> int | None:
+    """``HOST:PORT`` or ``tcp://HOST:PORT`` for this host: the port; None
+    if ``where`` is not of that form (a config file's path)."""
+    text = where[len("tcp://"):] if where.startswith("tcp://") else where
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit() or not host or "/" in host:
+        if where.startswith("tcp://"):
+            raise AdminError(f"--{role} {where}: expected tcp://127.0.0.1:PORT")
+        return None
+    if host not in LOCAL_HOSTS:
+        raise AdminError(f"--{role} {where}: the {role}'s admin socket listens on its own "
+                         f"host's 127.0.0.1 only; from here, forward its port "
+                         f"(ssh -N -L {port}:127.0.0.1:{port} {host}) and give "
+                         f"127.0.0.1:{port}")
+    return int(port)
+
+
 def resolve(where: str | int | None, role: str):
-    """A port, an ``ipc://`` path, or a service config file (its admin_ipc
-    or admin_port); None: the role's default port on 127.0.0.1."""
+    """A port, ``127.0.0.1:PORT`` (or ``tcp://``), an ``ipc://`` path, or a
+    service config file (its admin_ipc or admin_port); None: the role's
+    default port on 127.0.0.1."""
     if where is None or where == "":
         return DEFAULT[role]
     if isinstance(where, int) or str(where).isdigit():
         return int(where)
     if str(where).startswith("ipc://"):
         return str(where)
+    port = _host_port(str(where), role)
+    if port is not None:
+        return port
     from telethermal.services.config import load_config
 
     config = load_config(Path(where), role)
