@@ -81,6 +81,35 @@ def test_not_toml_and_missing_file_are_clear_errors(tmp_path):
         load_scene("no-such-scene")
 
 
+def test_a_typo_names_the_file_section_key_and_the_key_meant(tmp_path):
+    # 'gapk' for 'gap_k' said "give exactly one of 'gap_k' or 'temp_c'",
+    # without the key written or, through the CLI's markup, the section.
+    with pytest.raises(SceneError, match=r"^x\.toml: \[pad\]: unknown key\(s\) 'gapk' "
+                                         r"\(did you mean 'gap_k'\?\)"):
+        parse_scene(tomllib.loads(MINIMAL.replace("gap_k = 10.0", "gapk = 10.0")), "x.toml")
+    # A path typed wrong is a missing file, not an unknown shipped scene.
+    (tmp_path / "lab-pad.toml").write_text(MINIMAL)
+    with pytest.raises(SceneError, match=r"scene file .*lab-pad\.tml does not exist \(did you "
+                                         r"mean .*lab-pad\.toml\?\); a scene file ends in "
+                                         r"\.toml"):
+        load_scene(tmp_path / "lab-pad.tml")
+    with pytest.raises(SceneError, match=r"unknown scene 'fingertip7' \(did you mean "
+                                         r"'fingertip-7'\?\)"):
+        load_scene("fingertip7")
+
+
+def test_the_command_line_prints_an_error_s_brackets(tmp_path, capsys):
+    from telethermal.cli import main
+
+    scene = tmp_path / "typo.toml"
+    scene.write_text(MINIMAL.replace("gap_k = 10.0", "gapk = 10.0"))
+    assert main(["session", "--scene", str(scene), "--material", "wood",
+                 "--json", str(tmp_path / "x.json")]) == 2
+    out = " ".join(capsys.readouterr().err.split())
+    assert "typo.toml: [pad]: unknown key(s) 'gapk'" in out
+    assert not (tmp_path / "x.json").exists()
+
+
 def test_model_choice_follows_penetration_depth():
     scene = load_scene("fingertip-7")
     by_material = {o.material: o for o in scene.objects}

@@ -7,6 +7,8 @@ import logging
 import os
 import sys
 
+from rich.markup import escape
+
 from telethermal import __version__
 from telethermal.cli import bench, data, identify, operate, run, services, view
 from telethermal.cli._common import console
@@ -44,7 +46,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except TelethermalError as exc:
-        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        # escape: the text is the error's, not markup ("[pad]" is a TOML
+        # section a message names, which rich would swallow as a tag).
+        console.print(f"[red]error:[/red] {escape(str(exc))}", highlight=False)
         return 2
     except KeyboardInterrupt:
         console.print("interrupted")

@@ -11,6 +11,7 @@ listed by :func:`list_scenes`; ``load_scene`` takes a shipped name or a path.
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -51,6 +52,10 @@ class PadSpec:
                                                         sink_params)
         params = derive(get_module(self.module))
         return params, sink_params(get_heat_sink(self.heat_sink), params.spec)
+
+
+#: The keys a scene's [pad] table may hold (its fields: TOML names them the same).
+PAD_KEYS = tuple(PadSpec.__dataclass_fields__)
 
 
 @dataclass(frozen=True)
@@ -168,9 +173,18 @@ class _Reader:
         return value
 
     def done(self):
-        extra = sorted(set(self.table) - self.used)
+        self.only(self.used)
+
+    def only(self, keys) -> None:
+        """Fail on any key of the table outside ``keys``, naming it and the
+        nearest known key (a typo is the likely cause)."""
+        extra = sorted(set(self.table) - set(keys))
         if extra:
-            self.fail(f"unknown key(s) {', '.join(extra)}")
+            hints = []
+            for key in extra:
+                near = difflib.get_close_matches(key, sorted(keys), n=1)
+                hints.append(f"'{key}'" + (f" (did you mean '{near[0]}'?)" if near else ""))
+            self.fail(f"unknown key(s) {', '.join(hints)}; known: {', '.join(sorted(keys))}")
 
 
 def _material(name, reader: _Reader, roles=None):
@@ -203,6 +217,7 @@ def _parse_pad(table, source) -> PadSpec:
                                                     heat_sink_names, module_names)
 
     r = _Reader(table, "[pad]", source)
+    r.only(PAD_KEYS)              # a typo first: 'gapk' is not a missing 'gap_k'
     kind = r.text("kind", choices=PAD_KINDS)
     layers = _layers(table.get("layers"), r)
     gap = table.get("gap_k")
@@ -321,14 +336,24 @@ def list_scenes() -> list[str]:
 def load_scene(name_or_path: str | Path) -> Scene:
     """Load a shipped scene by name, or any scene file by path."""
     path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
+    name = str(name_or_path)
+    shipped = list_scenes()
+    if name not in shipped and (path.suffix or path.exists() or "/" in name):
+        # A path (shipped names have no dot and no slash): the file, or an
+        # error that names it and, for a near miss, the file meant.
         if not path.is_file():
-            raise SceneError(f"scene file {path} does not exist")
+            near = difflib.get_close_matches(path.name, [p.name for p in path.parent.glob(
+                "*.toml")] if path.parent.is_dir() else [], n=1)
+            raise SceneError(f"scene file {path} does not exist" + (
+                f" (did you mean {path.parent / near[0]}?)" if near else "") +
+                ("" if path.suffix == ".toml" else "; a scene file ends in .toml"))
         text, source = path.read_text(), str(path)
     else:
-        name = str(name_or_path)
-        if name not in list_scenes():
-            raise SceneError(f"unknown scene {name!r}; shipped scenes: {', '.join(list_scenes())}")
+        if name not in shipped:
+            near = difflib.get_close_matches(name, shipped, n=1)
+            raise SceneError(f"unknown scene {name!r}" + (
+                f" (did you mean {near[0]!r}?)" if near else "") +
+                f"; shipped scenes: {', '.join(shipped)}; or give a scene file's path (.toml)")
         text, source = _shipped().joinpath(f"{name}.toml").read_text(), f"{name}.toml"
     try:
         data = tomllib.loads(text)
