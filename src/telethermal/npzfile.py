@@ -36,10 +36,20 @@ def read_npz(path: str | Path, fmt: str, version: int, what: str) -> tuple[dict,
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such {what} file")
+    if not zipfile.is_zipfile(path):
+        # (numpy would try it as a pickle, and its error advises
+        # allow_pickle=True: advice this program must never take.)
+        raise ModelFileError(f"{path}: not a telethermal {what} file (not an .npz archive: "
+                             f"truncated, overwritten, or another kind of file)")
     try:
         with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError) as exc:
+    except ValueError as exc:
+        # An array of Python objects: numpy refuses it without unpickling.
+        why = "it holds pickled objects, which telethermal never loads" \
+            if "pickle" in str(exc) else str(exc)
+        raise ModelFileError(f"{path}: not a readable {what} file: {why}") from exc
+    except (zipfile.BadZipFile, EOFError, OSError, KeyError) as exc:
         raise ModelFileError(f"{path}: not a readable {what} file (truncated or not "
                              f"a telethermal {what}): {exc}") from exc
     try:

@@ -174,8 +174,13 @@ def test_model_files_round_trip_and_refuse_damage(tmp_path, rng, method):
     with pytest.raises(ModelFileError, match="truncated"):
         load_model(tmp_path / "cut.npz")
     (tmp_path / "junk.npz").write_bytes(b"not a model")
-    with pytest.raises(ModelFileError):
+    with pytest.raises(ModelFileError, match="junk.npz: not a telethermal model file") as info:
         load_model(tmp_path / "junk.npz")
+    assert "allow_pickle" not in str(info.value)        # numpy's advice, never to be taken
+    # An archive holding a pickled array is refused, and says so.
+    np.savez(tmp_path / "pickled.npz", header=np.array([{"a": 1}], dtype=object))
+    with pytest.raises(ModelFileError, match="pickled objects, which telethermal never loads"):
+        load_model(tmp_path / "pickled.npz")
 
 
 def test_model_file_from_another_version(tmp_path, rng, monkeypatch):
