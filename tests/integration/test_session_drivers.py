@@ -121,3 +121,33 @@ def test_placing_another_object_during_a_contact_lifts_the_pad_first(models):
         assert [f["contact_id"] for f in lifts] == [1]
     finally:
         service.shutdown()
+
+
+def test_a_slave_refused_for_a_busy_port_writes_no_recording(models, tmp_path):
+    # It left a 99 KB recording of nothing, which the view then listed.
+    import socket
+
+    from telethermal.errors import TelethermalError
+
+    identifier, generator = models
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    control = busy.getsockname()[1]
+    stream, admin = free_ports(2)
+    config = SlaveConfig(seed=5, admin_port=admin, record_dir=str(tmp_path / "rec"),
+                         transport=TransportConfig(security="plain", control_port=control,
+                                                   stream_port=stream))
+    try:
+        with pytest.raises(TelethermalError, match=str(control)):
+            SlaveService(config, identifier, generator)
+    finally:
+        busy.close()
+    assert not (tmp_path / "rec").exists() or not any((tmp_path / "rec").iterdir())
+    # The ports it did take are free again: a slave starts on them now.
+    config = SlaveConfig(seed=5, admin_port=admin, record_dir=str(tmp_path / "rec"),
+                         transport=TransportConfig(security="plain", control_port=control,
+                                                   stream_port=stream))
+    service = SlaveService(config, identifier, generator)
+    service.shutdown()
+    assert len(list((tmp_path / "rec").glob("slave-*.mcap"))) == 1

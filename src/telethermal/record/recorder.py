@@ -195,6 +195,11 @@ class SessionRecorder:
         self._flush_periods()
         return self.rec.close()
 
+    def discard(self) -> None:
+        """The service did not start: close and remove the file (a recording
+        of nothing must not be listed beside the sessions that ran)."""
+        self.rec.discard()
+
 
 def _plain(value):
     """msgpack-safe: numpy scalars to Python, NaN kept."""

@@ -157,6 +157,11 @@ class Recorder:
                     self._fail(exc)
         return {**self.counters, "error": self.error, "path": str(self.path)}
 
+    def discard(self) -> None:
+        """Close and remove the file: nothing of it is kept."""
+        self.close()
+        self.path.unlink(missing_ok=True)
+
     # ------------------------------------------------------------ writer thread
     def _channel(self, topic: str) -> int:
         cid = self._channels.get(topic)

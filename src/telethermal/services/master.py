@@ -125,13 +125,14 @@ class MasterService:
                 log.info("view stream on tcp://127.0.0.1:%d", self.view.port)
             if config.devices == DeviceKind.HARDWARE:
                 self._open_hardware()
+            # Last: a master that did not start writes no recording.
+            self.recorder = open_recorder(config, "master")
         except TelethermalError:
             self.endpoint.close()
             self.admin.close()
             if self.view is not None:
                 self.view.close()
             raise
-        self.recorder = open_recorder(config, "master")
         self.touch: Touch | None = None
         self.stop_requested = False
         self.state = ServiceState.IDLE

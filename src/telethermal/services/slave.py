@@ -73,9 +73,10 @@ class SlaveService:
         self.identifier, self.generator = identifier, generator
         renderable = [c for c in identifier.classes_ if c in generator.materials]
         self.curves = sample_curves(generator, renderable)
-        self.recorder = open_recorder(config, "slave", identifier, generator)
         self.rate_hz = self.scene.sample_rate_hz
         self.endpoint, self.admin = open_service_sockets("slave", config)
+        # Opened once the sockets are: a slave refused (a busy port) writes nothing.
+        self.recorder = None
         self.stop_requested = False
         #: The session's rules (what goes out, when): the simulated network
         #: of ``bench faults`` runs the same object.
@@ -98,10 +99,15 @@ class SlaveService:
         self._touch_counters: dict = {}
         self.last_touch: dict = {}
         try:
+            self.recorder = open_recorder(config, "slave", identifier, generator)
             self._start_sensor_session(config.seed)
             self.place(config.place or self.scene.materials[0], config.seed)
         except BaseException:
             self._close_devices()
+            if self.recorder is not None:
+                self.recorder.discard()
+            self.endpoint.close()
+            self.admin.close()
             raise
 
     # ------------------------------------------------------------ the session
