@@ -47,6 +47,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     assert codes == {"slave": 0, "master": 0}
     assert s["safety_events"] == 0, s["safety_event_counts"]
     assert s["identified"] == local["identified"]
+    assert s["unknown_reason"] is None            # named: nothing to explain
     # Over the network the slave touches when the master's contact event
     # reaches it and the loop runs on the real clock; the rendering stays
     # within a few percent of peak, like the in-process session.

@@ -59,3 +59,24 @@ def test_a_touch_without_the_placed_object_says_why_there_are_no_errors():
     assert lines[0] == ("touch 3: identified wood (decided at 0.60 s), rendering from 0.62 s, "
                         "safety events 0, rtt 0.75 ms")
     assert "--material and --object-c" in lines[1]
+
+
+def test_an_unknown_touch_says_why():
+    lines = describe_touch({"contact_id": 4, "identified": "unknown",
+                            "unknown_reason": "force outside trained range",
+                            "decision_time_s": None, "render_start_s": None,
+                            "safety_events": 0, "rtt_s": None, "direct": None})
+    assert lines[0].startswith("touch 4: identified unknown (force outside trained range; "
+                               "no decision)")
+
+
+def test_unknown_reason_is_none_only_for_a_name():
+    from telethermal.ident.anytime import Estimate, Reason, unknown_reason
+
+    assert unknown_reason(None) == Reason.NO_ESTIMATE
+    assert unknown_reason(Estimate(0.1, (0.5, 0.5), "wood", 0.5, False)) == Reason.NO_DECISION
+    assert unknown_reason(Estimate(1.0, (0.5, 0.5), "unknown", 0.5, True,
+                                   Reason.FORCE_OUTSIDE)) == "force outside trained range"
+    assert unknown_reason(Estimate(0.2, (0.0, 1.0), "wood", 1.0, True, Reason.CONFIDENT)) is None
+    assert unknown_reason(Estimate(0.2, (0.5, 0.5), "plexiglass|rubber", 0.99, True,
+                                   Reason.CONFIDENT_GROUP)) is None

@@ -140,6 +140,18 @@ class Estimate:
         return self.decided and self.reason != Reason.CONFIDENT_GROUP
 
 
+def unknown_reason(estimate: Estimate | None) -> str | None:
+    """Why a touch ended without a name (a :class:`Reason`), or None when it
+    was named (a class or a pair): what a person is told beside "unknown"."""
+    if estimate is None:
+        return Reason.NO_ESTIMATE
+    if not estimate.decided:
+        return Reason.NO_DECISION
+    if estimate.label.is_unknown:
+        return estimate.reason or Reason.NO_DECISION
+    return None
+
+
 class StreamingIdentifier:
     """The anytime decision of :func:`decide`, fed one sample at a time.
 

@@ -195,6 +195,8 @@ def describe_status(status: dict) -> list[str]:
 def describe_touch(result: dict) -> list[str]:
     when = "no decision" if result.get("decision_time_s") is None else \
         f"decided at {result['decision_time_s']:.2f} s"
+    if result.get("unknown_reason"):
+        when = f"{result['unknown_reason']}; {when}"
     lines = [f"touch {result['contact_id']}: identified {result['identified']} ({when}), "
              f"rendering from {_s(result.get('render_start_s'))}, safety events "
              f"{result['safety_events']}, rtt {_ms(result.get('rtt_s'))}"]

@@ -182,7 +182,8 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     slave_devices = report.get("devices")
     if report.get("object_true_c") is None:          # the slave was restarted meanwhile
         report = {"object_true_c": placed["object_true_c"], "identified": result["identified"],
-                  "decision_time_s": None, "onset_s": None, "reason": Reason.SLAVE_RESTARTED}
+                  "decision_time_s": None, "onset_s": None, "reason": Reason.SLAVE_RESTARTED,
+                  "unknown_reason": result.get("unknown_reason") and Reason.SLAVE_RESTARTED}
     import numpy as np
 
     from telethermal.teleop.run import Operator
@@ -200,6 +201,8 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                "identified": report["identified"], "decision_time_s": report["decision_time_s"],
                "identified_at_s": report.get("identified_at_s"),
                "decision_reason": report["reason"], "decision_from_s": render_from,
+               # why it is "unknown" (None: named), as the slave reports it
+               "unknown_reason": report.get("unknown_reason"),
                "render_start_s": result["render_start_s"],
                "object_memory": result.get("object_memory"),
                "rate_hz": 1.0 / float(np.median(np.diff(trace["t_s"]))),
@@ -251,8 +254,10 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
     start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
     memory = "" if s["object_memory"] is None else \
         f"announced from memory as {s['object_memory']}, rendered from {start}; "
+    said = s["identified"] if s["unknown_reason"] is None else \
+        f"{s['identified']} ({s['unknown_reason']})"
     echo(f"touch on {material + (' again' if again else ''):16s}: {memory}slave said "
-         f"{s['identified']} {when}; rendered flux "
+         f"{said} {when}; rendered flux "
          f"{100 * s['flux_rms_error_rel']:.2f} % of peak from the decision on, "
          f"{100 * s['flux_rms_error_rel_first_s']:.2f} % over the first second, "
          f"{100 * s['flux_rms_error_rel_whole']:.2f} % over the whole contact; skin "
@@ -261,7 +266,8 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
          f"{s['loop']['deadline_misses']} missed deadlines; in one process "
          f"{100 * local['flux_rms_error_rel']:.2f} %")
     return {k: s[k] for k in (
-        "material", "identified", "decision_time_s", "render_start_s", "object_memory",
+        "material", "identified", "unknown_reason", "decision_time_s", "render_start_s",
+        "object_memory",
         "flux_rms_error_rel", "flux_rms_error_rel_first_s", "flux_rms_error_rel_whole",
         "temp_rms_error_c", "time_to_correct_flux_s", "safety_events", "loop_period_p99_us")} | \
         {"again": again, "deadline_misses": s["loop"]["deadline_misses"],

@@ -23,7 +23,7 @@ from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
-from telethermal.ident.anytime import UNKNOWN
+from telethermal.ident.anytime import UNKNOWN, unknown_reason
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
@@ -285,6 +285,7 @@ class MasterService:
             "render_start_s": touch.display.rendered_from_s,
             "master_onset_s": touch.display.last_onset_s,
             "identified": est.label if est is not None and est.decided else UNKNOWN,
+            "unknown_reason": unknown_reason(est),
             # when the slave first decided this label (a group that stood
             # until the last window was decided at its first commitment, as
             # the slave reports it)

@@ -18,7 +18,7 @@ import zmq
 
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
-from telethermal.ident.anytime import UNKNOWN, Reason
+from telethermal.ident.anytime import UNKNOWN, Reason, unknown_reason
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
@@ -308,6 +308,7 @@ class SlaveService:
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else Reason.NO_ESTIMATE,
+                "unknown_reason": unknown_reason(est),
                 **({"devices": device_report(self.devices, self._touch_counters)}
                    if self.devices is not None else {})}
 
