@@ -386,7 +386,8 @@ def demo_identify(scene, out: Path, seed: int, echo=print):
     acc = report["accuracy_by_window_s"]
     echo(f"identification ({model.method}, fresh trials): "
          + ", ".join(f"{k} s {100 * v:.0f} %" for k, v in acc.items() if k in ("0.2", "0.5", "1.0"))
-         + f"; 5 merged classes at 1 s {100 * report.get('accuracy_5_at_end', float('nan')):.0f} %"
+         + (f"; 5 merged classes at 1 s {100 * report['accuracy_5_at_end']:.0f} %"
+            if "accuracy_5_at_end" in report else "")
          + f"; decisions {report['decision_time_s']['n']}/{report['trials']} committed")
     return model
 
