@@ -272,7 +272,7 @@ class _Quiet:
 
 
 # ------------------------------------------------------------------ replay
-def test_replay_into_a_folder_with_the_recorded_and_with_new_gains(tmp_path):
+def test_replay_into_a_folder_with_the_recorded_and_with_new_gains(tmp_path, capsys):
     from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
     from telethermal.teleop.replay import replay_to_folder
     from telethermal.teleop.run import run_session, with_finger
@@ -290,6 +290,20 @@ def test_replay_into_a_folder_with_the_recorded_and_with_new_gains(tmp_path):
     other, _ = replay_to_folder(path, tmp_path / "other",
                                 gains_kp_ki_kd=(2 * DEFAULT_GAINS.kp, DEFAULT_GAINS.ki, 0.0))
     assert not other["identical"] and other["junction_max_abs_diff_c"] > 0.0
+    # The error against direct contact, as the session measured it.
+    session = json.loads(json.dumps(same))["direct"]
+    assert set(session) == {"flux_rms_error_rel", "flux_rms_error_rel_first_s",
+                            "temp_rms_error_c"} and 0 < session["temp_rms_error_c"] < 5
+    # The command: every touch by default, the figures printed; a touch the
+    # recording does not hold is a clear error.
+    from telethermal.cli import main
+
+    assert main(["replay", str(path), "--out", str(tmp_path / "cli")]) == 0
+    printed = capsys.readouterr().out
+    assert f"skin {session['temp_rms_error_c']:.2f} K RMS" in printed
+    assert main(["replay", str(path), "--out", str(tmp_path / "cli2"), "--touch", "2"]) == 2
+    assert "touch 2 asked, the recording holds one touch (0)" in capsys.readouterr().err
+    assert not (tmp_path / "cli2").exists()
 
 
 # ------------------------------------------------------------------ admin status

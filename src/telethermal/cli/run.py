@@ -91,11 +91,35 @@ def _gains(text: str | None) -> tuple[float, float, float] | None:
 
 
 def cmd_replay(args) -> int:
-    """Re-run the rendering and the identifier on a recording, and plot it."""
+    """Re-run the rendering and the identifier on a recording's touches (or
+    the one asked), and plot each."""
+    from telethermal.teleop.replay import touch_count
+
+    n = touch_count(args.file)
+    touches = range(n) if args.touch is None else [args.touch]
+    for i in touches:
+        # One touch: its files in --out; several: one folder per touch.
+        out = Path(args.out) if len(touches) == 1 else Path(args.out) / f"touch-{i}"
+        if len(touches) > 1 or n > 1:
+            print(f"touch {i} of {n} (0..{n - 1}):")
+        _replay_one(args, i, out)
+    return 0
+
+
+def _replay_one(args, touch: int, out: Path) -> None:
     from telethermal.teleop.replay import replay_to_folder
 
-    s, png = replay_to_folder(args.file, args.out, args.identifier, args.generator,
-                              _gains(args.gains), touch=args.touch)
+    s, png = replay_to_folder(args.file, out, args.identifier, args.generator,
+                              _gains(args.gains), touch=touch)
+    d = s["direct"]
+    if d is not None:
+        print(f"against direct contact (the simulator's truth, as recorded): flux "
+              f"{100 * d['flux_rms_error_rel']:.2f} % of peak from the decision on, "
+              f"{100 * d['flux_rms_error_rel_first_s']:.2f} % over the first second; skin "
+              f"{d['temp_rms_error_c']:.2f} K RMS")
+    else:
+        print("no figures against direct contact: the recording holds no truth to compare "
+              "with (a lab's recording, or a slave's)")
     if "periods" in s:
         verdict = "identical to the recording, sample for sample" if s["identical"] else \
             f"junction differs from the recording by up to {s['junction_max_abs_diff_c']:.3g} K"
@@ -108,8 +132,7 @@ def cmd_replay(args) -> int:
         print(f"the recording was cut: read up to the cut ({s['truncated']})")
     for note in s["notes"]:
         print(f"note: {note}")
-    print(f"wrote {Path(args.out) / 'replay.json'} and {png}")
-    return 0
+    print(f"wrote {out / 'replay.json'} and {png}")
 
 
 def add_replay(sub) -> None:
@@ -120,8 +143,9 @@ def add_replay(sub) -> None:
     p.add_argument("--identifier", help="identifier model instead of the recorded one")
     p.add_argument("--generator", help="generator model instead of the recorded one")
     p.add_argument("--gains", help="kp,ki,kd instead of the recorded gains")
-    p.add_argument("--touch", type=int, default=0, help="which touch of a service's "
-                                                        "recording (0: the first)")
+    p.add_argument("--touch", type=int, default=None,
+                   help="which touch of a service's recording (0: the first); default: "
+                        "every touch, each in its own folder OUT/touch-N")
     p.set_defaults(func=cmd_replay)
 
 

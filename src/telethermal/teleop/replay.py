@@ -42,6 +42,22 @@ def _estimate_from(x):
     return None if x is None else Estimate(x[0], tuple(x[1]), x[2], x[3], x[4], x[5])
 
 
+def touch_count(path) -> int:
+    """How many touches a recording holds (a service's: many; a session's: one)."""
+    rec = read_recording(path)
+    starts = rec.messages("/master/touch_start")
+    if starts:
+        return len(starts)
+    if rec.role == "slave":
+        return len({m.get("contact_id", 0) for m in rec.messages("/slave/samples")})
+    return 1
+
+
+#: The figures against direct contact a touch's recorded summary may hold
+#: (a simulated session's: the simulator knows the truth; a lab's has none).
+DIRECT_KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c")
+
+
 def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) -> dict:
     """Re-run the master's rendering (open loop, on the recorded sensor
     readings and news) and the slave's identifier (on the recorded samples)
@@ -64,6 +80,8 @@ def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) ->
             raise RecordingError(f"{path}: touch {touch} asked, the recording has "
                                  f"{len(slave_touches)}")
         cid = slave_touches[touch]
+    elif touch != 0:
+        raise RecordingError(f"{path}: touch {touch} asked, the recording holds one touch (0)")
 
     def attached(name, loader):
         if name not in rec.attachments:
@@ -88,9 +106,13 @@ def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) ->
     ends = [m for m in rec.messages("/master/touch") if m.get("contact_id", 0) == cid]
     trace = [m for m in rec.messages("/sim/trace") if m.get("contact_id", 0) == cid]
     pad = [m for m in rec.messages("/slave/samples") if m.get("contact_id", 0) == cid]
+    session = ends[0]["summary"] if ends else None
+    summary["touch"] = touch
+    summary["direct"] = {k: session[k] for k in DIRECT_KEYS} \
+        if session is not None and all(session.get(k) is not None for k in DIRECT_KEYS) else None
     return {"summary": summary, "replayed": out, "recorded": recorded,
             "slave_samples": pad[0] if pad else None,
-            "session": ends[0]["summary"] if ends else None,
+            "session": session,
             "trace": trace[0]["trace"] if trace else None}
 
 
