@@ -33,6 +33,10 @@ def test_train_eval_round_trip(gripper_db, tmp_path):
     # Aluminium alone of the first paper's merged materials: no "5 merged
     # classes" figure (the demo printed "5 merged classes at 1 s nan %").
     assert "confusion" in report and "accuracy_5_at_end" not in report
+    # Each window's accuracy with its count and 95 % interval.
+    for w, acc in report["accuracy_by_window_s"].items():
+        lo, hi = report["accuracy_ci_by_window_s"][w]
+        assert lo <= acc <= hi and report["accuracy_n_by_window_s"][w] == report["trials"]
     assert report["inference_ms_p99"] > 0 and "confusion" in report
     assert (tmp_path / "eval.png").stat().st_size > 10_000
 

@@ -1,6 +1,7 @@
 """Identification: PCA, Levenberg-Marquardt, the bank identifiers, anytime
 decisions and model files, on the hard cases the identification issue lists."""
 
+import math
 import numpy as np
 import pytest
 
@@ -245,3 +246,17 @@ def test_streaming_refuses_bad_samples_and_answers_tiny_gaps_at_once(rng):
     with pytest.raises(IdentificationError, match="1 finite"):
         stream.push([1.0, 2.0])
     assert stream.estimate.posteriors == pytest.approx((1 / 3,) * 3)  # nothing learnt yet
+
+
+@pytest.mark.parametrize("correct, n", [(70, 70), (65, 70), (0, 10), (1, 3)])
+def test_the_accuracy_interval_is_wilsons_closed_form(correct, n):
+    from telethermal.ident.evaluate import wilson_interval
+
+    z = 1.959963984540054                        # the 97.5 % normal quantile
+    p = correct / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    lo, hi = wilson_interval(correct, n)
+    assert lo == pytest.approx(centre - half, abs=1e-12)
+    assert hi == pytest.approx(centre + half, abs=1e-12)
+    assert 0.0 <= lo <= p <= hi <= 1.0

@@ -16,7 +16,7 @@ import numpy as np  # noqa: E402
 from telethermal.data.dataset import MANIFEST, Trial, load_dataset  # noqa: E402
 from telethermal.errors import DatasetError  # noqa: E402
 
-PANELS = (("heat_flux_W_m2", "heat flux (W/m$^2$)"), ("temperature_C", "temperature ($^\\circ$C)"))
+PANELS = (("heat_flux_W_m2", "heat flux (W/m$^2$)"), ("temperature_C", "temperature (°C)"))
 
 
 def _dataset_dirs(root: Path) -> list[Path]:
@@ -49,16 +49,18 @@ def plot_datasets(root: str | Path, out_png: str | Path) -> Path:
         colours = plt.cm.tab10(np.linspace(0, 1, max(len(materials), 10)))
         for ax, (channel, label) in zip(row, PANELS):
             for colour, material in zip(colours, materials):
-                band = _mean_band([t for t in trials if t.material == material], channel)
+                group = [t for t in trials if t.material == material]
+                band = _mean_band(group, channel)
                 if band is None:
                     continue
                 axis, mean, std = band
-                ax.plot(axis, mean, color=colour, label=material, lw=1.4)
+                ax.plot(axis, mean, color=colour, label=f"{material} (n = {len(group)})", lw=1.4)
                 ax.fill_between(axis, mean - std, mean + std, color=colour, alpha=0.2, lw=0)
             ax.axvline(0.0, color="0.5", lw=0.8, ls=":")
             ax.set_xlabel("time after contact (s)")
             ax.set_ylabel(label)
-            ax.set_title(f"{folder.name}: {len(trials)} trials")
+            ax.set_title(f"{folder.name}: {len(trials)} trials; line: mean, band: +- 1 sd "
+                         f"across the trials of a material", fontsize=9)
             ax.grid(alpha=0.3)
         row[0].legend(fontsize=8, ncol=2)
     fig.tight_layout()

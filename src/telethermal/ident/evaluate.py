@@ -127,10 +127,23 @@ def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> d
             "inference_ms_p99": float(np.percentile(costs, 99))}
 
 
+def wilson_interval(correct: int, n: int, level: float = 0.95) -> list[float]:
+    """The Wilson score interval of a proportion ``correct / n`` (scipy's
+    binomial test): [lo, hi], valid near 0 and 1 where the normal
+    approximation is not (an accuracy of 100 % on 70 touches is [0.95, 1])."""
+    from scipy.stats import binomtest
+
+    ci = binomtest(int(correct), int(n)).proportion_ci(level, method="wilson")
+    return [float(ci.low), float(ci.high)]
+
+
 def _accuracy_by_window(model, contacts, windows_s):
     """Accuracy at each window (trials too short for it left out), and the
-    guesses at the last window every trial covers."""
+    guesses at the last window every trial covers, each window's trial
+    count and its 95 % interval (the report's ``accuracy_n_by_window_s``
+    and ``accuracy_ci_by_window_s``)."""
     accuracy, predicted_at_end = {}, None
+    n_by, ci_by = {}, {}
     for w in windows_s:
         n_w = int(round(w * model.sample_rate_hz_)) + 1
         index = model.window_index(n_w)
@@ -140,10 +153,13 @@ def _accuracy_by_window(model, contacts, windows_s):
         p = model.proba_normalised(contacts.x[usable], index)
         guess = [model.classes_[k] for k in p.argmax(axis=1)]
         truth = [lab for lab, ok in zip(contacts.labels, usable) if ok]
-        accuracy[f"{w:.1f}"] = float(np.mean([a == b for a, b in zip(guess, truth)]))
+        right = sum(a == b for a, b in zip(guess, truth))
+        accuracy[f"{w:.1f}"] = right / len(truth)
+        n_by[f"{w:.1f}"] = len(truth)
+        ci_by[f"{w:.1f}"] = wilson_interval(right, len(truth))
         if usable.all():
             predicted_at_end = guess
-    return accuracy, predicted_at_end
+    return accuracy, predicted_at_end, n_by, ci_by
 
 
 def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
@@ -152,10 +168,12 @@ def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
     skipped = [t for t in trials if not abs(t.gap_k) >= MIN_GAP_K]
     usable_trials = [t for t in trials if abs(t.gap_k) >= MIN_GAP_K]
     accuracy, predicted_at_end, decisions, labels = {}, None, [], []
+    n_by, ci_by = {}, {}
     if usable_trials:
         contacts, _ = from_trials(usable_trials, model.channels, model.sample_rate_hz_,
                                   max_s=max(windows_s))
-        accuracy, predicted_at_end = _accuracy_by_window(model, contacts, windows_s)
+        accuracy, predicted_at_end, n_by, ci_by = _accuracy_by_window(model, contacts,
+                                                                      windows_s)
         decisions = decide_all(model, contacts)
         labels = contacts.labels
     decisions += [decide(model, np.empty((0, len(model.channels))), t.gap_k) for t in skipped]
@@ -165,6 +183,7 @@ def evaluate(model: Identifier, trials: list[Trial], windows_s=None) -> dict:
         "method": model.method, "classes": model.classes_, "channels": list(model.channels),
         "trials": len(truth_all), "trials_without_gap": len(skipped),
         "accuracy_by_window_s": accuracy,
+        "accuracy_n_by_window_s": n_by, "accuracy_ci_by_window_s": ci_by,
         "decision_time_s": _percentiles([d.time_s for d, _ in committed]),
         "decision_accuracy": (float(np.mean([d.label == t for d, t in committed]))
                               if committed else None),
@@ -197,7 +216,19 @@ def plot_accuracy(reports: dict[str, dict], out_png, title: str = "") -> None:
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for name, rep in reports.items():
         acc = rep["accuracy_by_window_s"]
-        ax.plot([float(k) for k in acc], [100 * v for v in acc.values()], "o-", label=name)
+        x = [float(k) for k in acc]
+        y = np.array([100 * v for v in acc.values()])
+        ci = rep.get("accuracy_ci_by_window_s") or {}
+        counts = sorted(set((rep.get("accuracy_n_by_window_s") or {}).values()))
+        n = "" if not counts else f" (n = {counts[0]}" + (
+            f"-{counts[-1]}" if len(counts) > 1 else "") + " touches)"
+        if ci and set(ci) == set(acc):
+            lo = np.array([100 * ci[k][0] for k in acc])
+            hi = np.array([100 * ci[k][1] for k in acc])
+            ax.errorbar(x, y, yerr=[y - lo, hi - y], fmt="o-", capsize=3,
+                        label=f"{name}{n}, bars: 95 % interval (Wilson)")
+        else:
+            ax.plot(x, y, "o-", label=f"{name}{n}")
     ax.set_xlabel("time after contact (s)")
     ax.set_ylabel("accuracy (%)")
     ax.set_ylim(0, 102)

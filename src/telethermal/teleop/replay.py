@@ -305,7 +305,7 @@ def plot_replay(result: dict, path: str | Path) -> Path:
         ax.set_xlabel("time since contact (s)")
         ax.legend(fontsize=7)
     ax_q.set_ylabel("heat flux pad -> finger (kW/m$^2$)")
-    ax_t.set_ylabel("temperature (C)")
+    ax_t.set_ylabel("temperature (°C)")
     verdict = "identical to the recording" if s["identical"] else \
         f"junction differs by up to {s['junction_max_abs_diff_c']:.3g} K"
     fig.suptitle(f"replay of {Path(s['file']).name}: {s['periods']} periods, {verdict}",
@@ -343,7 +343,7 @@ def _plot_slave(result: dict, path) -> Path:
     ax2 = ax.twinx()
     ax2.plot(t, np.asarray(pad["temperature_C"], dtype=float), "C1-", lw=1,
              label="sensing pad temperature")
-    ax2.set_ylabel("temperature (C)")
+    ax2.set_ylabel("temperature (°C)")
     if sl.get("onset_s") is not None:
         ax.axvline(sl["onset_s"], color="0.5", lw=0.8)
         for time_key, label_key, color, ls, y in (
