@@ -159,3 +159,33 @@ def test_any_bad_value_is_a_scene_error_not_a_crash(top_key, top_value, pad_key,
         parse_scene(data, "fuzz.toml")
     except SceneError as exc:
         assert "fuzz.toml" in str(exc)
+
+
+def test_the_pad_face_size_is_a_key_and_sets_the_area_the_module_pumps_over(tmp_path):
+    import dataclasses
+
+    import numpy as np
+
+    from telethermal.control.display_floor import hardware, pump_bounds_w_m2
+
+    default = parse_scene(tomllib.loads(MINIMAL), "x.toml")
+    module_face = default.pad.module_params()[0].spec.area_m2
+    assert default.pad.size_mm is None and default.pad.area_m2 == module_face
+    sized = parse_scene(tomllib.loads(MINIMAL.replace("gap_k = 10.0",
+                                                      "gap_k = 10.0\nsize_mm = [10, 12.5]")),
+                        "x.toml")
+    assert sized.pad.size_mm == (10.0, 12.5) and sized.pad.area_m2 == pytest.approx(1.25e-4)
+    for bad in ("[10]", "[0, 10]", "[10, \"a\"]", "10"):
+        with pytest.raises(SceneError, match=r"x\.toml: \[pad\]: 'size_mm' must be \[width, "
+                                             r"height\] in mm"):
+            parse_scene(tomllib.loads(MINIMAL.replace("gap_k = 10.0",
+                                                      f"gap_k = 10.0\nsize_mm = {bad}")), "x.toml")
+    # The same module's heat over a face a quarter of its own: four times the
+    # flux at every junction temperature (W/m^2 = Qc / area), to rounding.
+    side = 1e3 * module_face ** 0.5 / 2
+    quarter = dataclasses.replace(default, pad=dataclasses.replace(default.pad,
+                                                                   size_mm=(side, side)))
+    cold, hot = np.array([10.0, 25.0, 40.0]), np.array([30.0, 30.0, 35.0])
+    for a, b in zip(pump_bounds_w_m2(hardware(default), cold, hot),
+                    pump_bounds_w_m2(hardware(quarter), cold, hot)):
+        np.testing.assert_allclose(b, 4 * a, rtol=1e-12)

@@ -87,10 +87,12 @@ class Hardware:
     driver: te.HBridge
     pad_layers: tuple[Layer, ...]
     room_c: float
+    #: The pad's face (the scene's ``size_mm``); None: the module's face.
+    face_m2: float | None = None
 
     @property
     def area_m2(self) -> float:
-        return self.params.spec.area_m2
+        return self.params.spec.area_m2 if self.face_m2 is None else self.face_m2
 
 
 def hardware(scene: Scene, qmax_scale: float = 1.0, film_r_scale: float = 1.0,
@@ -107,8 +109,9 @@ def hardware(scene: Scene, qmax_scale: float = 1.0, film_r_scale: float = 1.0,
     params = te.derive(spec)
     layers = list(scene.pad.layers)
     layers[0] = Layer(layers[0].material, layers[0].thickness_m * film_r_scale)
+    face = None if scene.pad.size_mm is None else scene.pad.area_m2
     return Hardware(params, te.sink_params(te.get_heat_sink(heat_sink), spec),
-                    te.default_driver(params), tuple(layers), scene.room_temp_c)
+                    te.default_driver(params), tuple(layers), scene.room_temp_c, face)
 
 
 # ---------------------------------------------------------------- the plant

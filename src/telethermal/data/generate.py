@@ -230,7 +230,7 @@ def _held_pad_contact(scene: Scene, obj, model, t_s, pad_c, draws) -> HeldPadRes
     database would hold touches the pad cannot make)."""
     params, sink = _pad_module(scene)
     plant = HeldPad(model, params, sink, default_driver(params), scene.room_temp_c,
-                    sensor_lag_s=scene.sensors.flux_lag_s)
+                    sensor_lag_s=scene.sensors.flux_lag_s, area_m2=scene.pad.area_m2)
     result = plant.run(t_s, pad_c, draws.object_true_c, draws.conductance_w_m2k)
     over_i, over_hot = int(result.over_current_periods.sum()), int(result.over_hot_periods.sum())
     if over_i or over_hot:

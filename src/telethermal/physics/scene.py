@@ -45,6 +45,18 @@ class PadSpec:
     #: stand-in (thermoelectric.DEFAULT_MODULE / DEFAULT_HEAT_SINK).
     module: str = "TM-31-1.4-8.5"
     heat_sink: str = "fan-40"
+    #: The pad's contact face, [width, height] in mm; None: the module's own
+    #: face (its datasheet's size). The layers, the flux sensor and the
+    #: module's heat act on this area: the module pumps its heat over the
+    #: pad's face, lumped (a plate conductive enough to be one temperature).
+    size_mm: tuple[float, float] | None = None
+
+    @property
+    def area_m2(self) -> float:
+        """The contact face's area: ``size_mm``, or the module's face."""
+        if self.size_mm is not None:
+            return self.size_mm[0] * self.size_mm[1] * 1e-6
+        return self.module_params()[0].spec.area_m2
 
     def module_params(self):
         """(ModuleParams, SinkParams) of this pad's module and heat sink."""
@@ -234,9 +246,23 @@ def _parse_pad(table, source) -> PadSpec:
         back_h_w_m2k=r.num("back_h_w_m2k", 300.0, 1e-3, 1e7),
         module=r.text("module", DEFAULT_MODULE, choices=module_names()),
         heat_sink=r.text("heat_sink", DEFAULT_HEAT_SINK, choices=heat_sink_names()),
+        size_mm=_size_mm(table, r),
     )
     r.done()
     return spec
+
+
+def _size_mm(table, reader: _Reader) -> tuple[float, float] | None:
+    """``size_mm = [width, height]``: the pad's face in mm (0.5 to 200 each)."""
+    reader.used.add("size_mm")
+    raw = table.get("size_mm")
+    if raw is None:
+        return None
+    if not isinstance(raw, list) or len(raw) != 2 or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.5 <= v <= 200
+            for v in raw):
+        reader.fail(f"'size_mm' must be [width, height] in mm, each in [0.5, 200], got {raw!r}")
+    return float(raw[0]), float(raw[1])
 
 
 def _parse_finger(table, source) -> FingerSpec:

@@ -88,7 +88,7 @@ def display_model_args(scene: Scene) -> dict:
     layers and the nominal pad-fingertip contact conductance."""
     return {"pad_layers": tuple(scene.pad.layers),
             "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
-            "module": scene.pad.module_params()[0]}
+            "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2}
 
 
 @dataclass
@@ -169,7 +169,7 @@ class DisplayTouch:
         self._current_a = 0.0
         # The module, idling at ``idle_c`` on a sink at the room's temperature.
         self.module, sink = scene.pad.module_params()
-        self.area_m2 = self.module.spec.area_m2
+        self.area_m2 = scene.pad.area_m2            # the pad's face: the module's by default
         self.stack = ThermoelectricStack(self.module, sink, scene.room_temp_c,
                                          ModuleState(idle_c, scene.room_temp_c,
                                                      scene.room_temp_c))
