@@ -3,8 +3,8 @@ import tomllib
 import pytest
 
 from telethermal.errors import SceneError
-from telethermal.physics.scene import (describe_models, finger_contact_model, list_scenes,
-                                       load_scene, pad_contact_model, parse_scene)
+from telethermal.physics.scene import (PAD_KEYS, describe_models, finger_contact_model,
+                                       list_scenes, load_scene, pad_contact_model, parse_scene)
 
 REQUIRED = {"fingertip-7", "gripper-case-I-cnv", "gripper-case-I-pro", "gripper-case-II",
             "gripper-case-III", "gripper-case-IV", "gripper-case-V"}
@@ -189,3 +189,18 @@ def test_the_pad_face_size_is_a_key_and_sets_the_area_the_module_pumps_over(tmp_
     for a, b in zip(pump_bounds_w_m2(hardware(default), cold, hot),
                     pump_bounds_w_m2(hardware(quarter), cold, hot)):
         np.testing.assert_allclose(b, 4 * a, rtol=1e-12)
+
+
+def test_every_key_a_scene_may_hold_is_documented():
+    # docs/scenes.md is the schema a lab writes from: each key in a table row.
+    from pathlib import Path
+
+    from telethermal.physics.scene import FingerSpec, SensorSpec, VariabilitySpec
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "scenes.md").read_text()
+    keys = {"name", "description", "room_temp_c", "sample_rate_hz", "pre_contact_s",
+            "tolerance_rel", "material", "thickness_m"} | set(PAD_KEYS)
+    for spec in (FingerSpec, SensorSpec, VariabilitySpec):
+        keys |= set(spec.__dataclass_fields__)
+    missing = sorted(k for k in keys if f"| `{k}` |" not in doc)
+    assert not missing, f"docs/scenes.md leaves out {missing}"
