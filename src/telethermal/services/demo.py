@@ -149,6 +149,20 @@ def wait_connected(services: Services, master_admin: int, timeout_s: float = 90.
                          f"{services.log_tail('master')}\n{services.log_tail('slave')}")
 
 
+def _wait_pad_up(slave_admin: int, timeout_s: float) -> bool:
+    """Until the slave's pad is up (its contact over); False on timeout or
+    when the slave does not answer (killed: the caller's fallback applies)."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        try:
+            if not call(slave_admin, "status", timeout_s=0.5).get("pad_down"):
+                return True
+        except TransportError:
+            return False
+        time.sleep(0.01)
+    return False
+
+
 def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                     source: str = "trajectory", during=None) -> SessionResult:
     """Place, touch, compare with direct contact; returns the session result.
@@ -162,9 +176,19 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     placed = call(slave_admin, "place", material=material, seed=seed)
     if not placed.get("ok"):
         raise TelethermalError(f"slave: {placed.get('error')}")
-    end = time.monotonic() + 2.0                    # the master hears of the new object
-    while time.monotonic() < end and abs((call(master_admin, "status").get("object_temp_c")
-                                          or 1e9) - placed["object_ir_c"]) > 1e-9:
+    # The master hears of the new object: this placement's announcement, not
+    # an earlier one with the same temperature (after a lift the slave puts
+    # the previous material back with the next seed, the one this touch may
+    # use: same object temperature, another object and memory).
+    announced = {"object_temp_c": placed["object_ir_c"], "object_id": placed["object_id"],
+                 "object_material": placed.get("object_material")}
+
+    def heard(status):
+        return abs((status.get("object_temp_c") or 1e9) - announced["object_temp_c"]) <= 1e-9 \
+            and all(status.get(k) == announced[k] for k in ("object_id", "object_material"))
+
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end and not heard(call(master_admin, "status")):
         time.sleep(0.05)
     thread = None
     if during is not None:
@@ -178,6 +202,11 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
             thread.join()
     if not result.get("ok"):
         raise TelethermalError(f"master: {result.get('error')}")
+    # The master's lift reaches the slave one network delay later: its report
+    # (the object's true temperature, the decision) is this touch's only once
+    # its pad is up; and a next touch must not begin on a pad still down
+    # (a place would lift it then, and the memory learn it after a forget).
+    _wait_pad_up(slave_admin, timeout_s=5.0)
     report = call(slave_admin, "report")
     slave_devices = report.get("devices")
     if report.get("object_true_c") is None:          # the slave was restarted meanwhile
