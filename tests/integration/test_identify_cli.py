@@ -98,3 +98,51 @@ def test_a_model_of_another_scene_is_refused_on_its_data(gripper_db, tmp_path, c
                  "--json", str(tmp_path / "e.json")]) != 0
     err = capsys.readouterr().err
     assert "gripper-case-II" in err and "gripper-case-V" in err
+
+
+def test_cross_validation_by_group_with_intervals_and_decisions(gripper_db, tmp_path, capsys):
+    out = tmp_path / "cv.json"
+    assert main(["identify", "cv", "--data", str(gripper_db), "--method", "effusivity-lda",
+                 "--folds", "3", "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["folds"] == 3 and report["grouped_by"] == "group" and report["groups"] >= 3
+    # The table starts at the method's first window (a decision can use it),
+    # not at 0.1 s.
+    from telethermal.ident.registry import load_model
+    model = tmp_path / "m.npz"
+    assert main(["identify", "train", "--data", str(gripper_db), "--method", "effusivity-lda",
+                 "--out", str(model)]) == 0
+    windows = [float(w) for w in report["accuracy_by_window_s"]]
+    assert windows == load_model(model).windows_s_ and windows[0] < 0.1
+    for w, acc in report["accuracy_by_window_s"].items():
+        lo, hi = report["accuracy_ci_by_window_s"][w]
+        assert 0 <= lo <= acc <= hi <= 1
+        assert report["accuracy_n_by_window_s"][w] <= report["trials"]
+    d = report["decisions"]
+    assert d["named_rate"] + d["pair_rate"] + d["unknown_rate"] == pytest.approx(1.0)
+    # Every held-out touch is in the decisions' confusion once.
+    assert sum(sum(row.values()) for row in d["confusion"].values()) == report["trials"]
+    assert set(d["confusion"]) == set(report["classes"])
+    assert 0 <= report["calibration_ece"] <= 1
+    printed = capsys.readouterr().out
+    assert "3 folds by group" in printed and "decisions:" in printed
+
+
+def test_cross_validation_needs_two_groups_and_two_folds(gripper_db, tmp_path, capsys):
+    import shutil
+
+    one = tmp_path / "one-group"
+    shutil.copytree(gripper_db, one)
+    manifest = one / "manifest.csv"
+    lines = manifest.read_text().splitlines()
+    col = lines[0].split(",").index("group")
+    rows = [r.split(",") for r in lines[1:]]
+    for r in rows:
+        r[col] = "everyone"
+    manifest.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+    assert main(["identify", "cv", "--data", str(one), "--method", "effusivity-lda"]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "holds out whole groups, and these trials have 1 (everyone)" in err
+    assert main(["identify", "cv", "--data", str(gripper_db), "--method", "effusivity-lda",
+                 "--folds", "1"]) == 2
+    assert "needs at least 2 folds" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""``telethermal identify methods|train|eval``."""
+"""``telethermal identify methods|train|eval|cv``."""
 
 from __future__ import annotations
 
@@ -44,6 +44,23 @@ def cmd_identify_eval(args) -> int:
     return 0
 
 
+def cmd_identify_cv(args) -> int:
+    from telethermal.data.dataset import load_dataset
+    from telethermal.ident.crossval import cross_validate, text_report
+    from telethermal.jsonfile import write_json
+
+    with console.status(f"reading {args.data}"):
+        trials = load_dataset(args.data)
+    with console.status("cross-validating") as status:
+        report = cross_validate(trials, args.method, args.folds, args.channels,
+                                args.max_window_s, progress=status.update)
+    report["data"], report["command"] = str(args.data), _command()
+    if args.json:
+        write_json(args.json, report)
+    _print_lines(text_report(report, args.json))
+    return 0
+
+
 def add_parser(sub) -> None:
     ident = sub.add_parser("identify", help="material identification")
     isub = ident.add_subparsers(dest="identify_command", required=True)
@@ -63,3 +80,15 @@ def add_parser(sub) -> None:
     p.add_argument("--json", required=True)
     p.add_argument("--png")
     p.set_defaults(func=cmd_identify_eval)
+    p = isub.add_parser("cv", help="grouped k-fold cross-validation of a method on a dataset: "
+                                   "accuracy per window with 95 %% intervals, the decisions "
+                                   "(commit rate, accuracy, named alone, confusion), calibration")
+    p.add_argument("--data", required=True, help="dataset folder")
+    p.add_argument("--method", required=True)
+    p.add_argument("--folds", type=int, default=5,
+                   help="folds; each holds whole groups (default 5)")
+    p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),
+                   help="comma-separated channels (default heat_flux_W_m2)")
+    p.add_argument("--max-window-s", type=_positive(), default=1.0)
+    p.add_argument("--json", help="write the report here")
+    p.set_defaults(func=cmd_identify_cv)
