@@ -1,7 +1,8 @@
 """docker-compose.yml brought up for real (marker ``compose``): a base image
 made from Debian's packages (mmdebstrap, docker import: no registry of
 images is needed), a wheelhouse filled by the host's pip, the project's
-image built from it with no network, then ``up``, a touch through ``exec``,
+image built from it with no network (from this checkout's sources, every
+run), then ``up``, a touch through ``exec``,
 ``down`` mid-touch, the demo profile and ``down``.
 
 Network: every packet stays on the containers' own loopback. A compose
@@ -12,17 +13,28 @@ only through ``exec``.
 
 Skips, saying why, when no engine can be had (no docker client, no
 ``dockerd`` to start, not root, no mmdebstrap); ``TELETHERMAL_REQUIRE_DOCKER=1``
-makes that a failure. Each stage's wall time is printed at the end."""
+makes that a failure. Each stage's wall time is printed at the end.
+
+Work kept between runs, none of it from the sources: the base image (in the
+engine), the wheelhouse (under ``$XDG_CACHE_HOME/telethermal``, default
+``~/.cache/telethermal``, one folder per set of dependencies; delete it to
+download again) and the image's dependency layers (the engine's layer
+cache: deploy/Dockerfile installs the dependencies before it reads src/).
+The image itself is built every run, and a test checks that it holds this
+checkout's sources."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -172,27 +184,94 @@ def _copy_context(dest: Path) -> None:
             shutil.copy2(src, dst)
 
 
-def _fill_wheelhouse(ctx: Path) -> None:
+TORCH = "torch==2.13.0"
+
+
+def _requirements() -> list[str]:
+    """What the wheelhouse must hold: the project's dependencies (as
+    deploy/Dockerfile installs them) and its build requirements."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    return [*project["project"]["dependencies"], *project["build-system"]["requires"]]
+
+
+def _wheelhouse_dir() -> Path:
+    """The wheelhouse's folder in the user's cache, named by what decides its
+    content: the requirements, constraints.txt, torch's pin, the host's Python
+    and platform (the wheels are the host pip's choice for them)."""
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    key = hashlib.sha256(json.dumps({
+        "requirements": _requirements(), "torch": TORCH,
+        "constraints": (ROOT / "constraints.txt").read_text(),
+        "python": list(sys.version_info[:2]), "platform": sysconfig.get_platform(),
+    }, sort_keys=True).encode()).hexdigest()[:16]
+    return cache / "telethermal" / f"wheelhouse-{key}"
+
+
+def _fill_wheelhouse(wheels: Path) -> None:
     """Wheels for the image, by the host's pip: torch's CPU build first
     (refusing the CUDA build before any of its libraries is fetched), then
     everything else; the project itself is built inside the image."""
-    wheels = ctx / "deploy" / "wheels"
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
-    torch = _run(pip + ["download", "--no-deps", "--no-index", "-d", str(wheels),
-                        "torch==2.13.0"], 600, check=False)
+    torch = _run(pip + ["download", "--no-deps", "--no-index", "-d", str(wheels), TORCH],
+                 600, check=False)
     if torch.returncode != 0:        # no local wheel: whatever the configured indexes serve
-        _run(pip + ["download", "--no-deps", "-d", str(wheels), "torch==2.13.0"], 600)
+        _run(pip + ["download", "--no-deps", "-d", str(wheels), TORCH], 600)
+    _check_wheelhouse(wheels)
+    _run(pip + ["wheel", "-q", "-w", str(wheels), "--find-links", str(wheels),
+                "-c", str(ROOT / "constraints.txt"), *_requirements()], 900)
+    _check_wheelhouse(wheels)
+
+
+def _check_wheelhouse(wheels: Path) -> None:
     got = [p.name for p in wheels.glob("torch-*.whl")]
     assert got and all("+cpu" in name for name in got), \
         f"the host's pip gives {got}, not torch's CPU build: point it at one " \
         "(PIP_FIND_LINKS or PIP_EXTRA_INDEX_URL with torch's CPU index)"
-    _run(pip + ["wheel", "-q", "-w", str(wheels), "--find-links", str(wheels),
-                "-c", str(ctx / "constraints.txt"), str(ctx), "setuptools>=77", "wheel"], 900)
-    for built in wheels.glob("telethermal-*.whl"):
-        built.unlink()
-    shutil.rmtree(ctx / "build", ignore_errors=True)
     cuda = [p.name for p in wheels.glob("nvidia*.whl")]
     assert not cuda, f"CUDA wheels in the wheelhouse: {cuda}"
+
+
+def _wheelhouse(timings) -> Path:
+    """The filled wheelhouse: the cached one when complete, else filled now
+    (into a temporary folder renamed when done, so a run cut short leaves
+    nothing half-filled behind); older ones are removed."""
+    house = _wheelhouse_dir()
+    if not (house / ".complete").is_file():
+        house.parent.mkdir(parents=True, exist_ok=True)
+        with timings.stage("wheelhouse filled by the host's pip"):
+            tmp = Path(tempfile.mkdtemp(prefix=".filling-", dir=house.parent))
+            try:
+                _fill_wheelhouse(tmp)
+                (tmp / ".complete").write_text("filled by tests/integration/"
+                                               "test_compose_up.py\n")
+                shutil.rmtree(house, ignore_errors=True)
+                tmp.rename(house)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+        for old in house.parent.glob("wheelhouse-*"):
+            if old != house:
+                shutil.rmtree(old, ignore_errors=True)
+    _check_wheelhouse(house)
+    return house
+
+
+def _link_wheels(house: Path, ctx: Path) -> None:
+    """The wheels into the build context: hard links where the cache and the
+    context share a file system, else copies."""
+    dest = ctx / "deploy" / "wheels"
+    dest.mkdir(parents=True, exist_ok=True)
+    for wheel in house.glob("*.whl"):
+        try:
+            os.link(wheel, dest / wheel.name)
+        except OSError:
+            shutil.copy2(wheel, dest / wheel.name)
+
+
+def _package_files(package: Path) -> dict[str, str]:
+    """sha256 of each file of the package (bytecode caches aside), by path."""
+    return {str(p.relative_to(package)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(package.rglob("*"))
+            if p.is_file() and "__pycache__" not in p.parts}
 
 
 OVERRIDE = {
@@ -216,9 +295,10 @@ def stack(engine, base_image, timings):
     offline; yields a function running compose there. ``down`` at the end."""
     ctx = Path(tempfile.mkdtemp(prefix="telethermal-compose-"))
     ctx.chmod(0o755)
-    _copy_context(ctx)
-    with timings.stage("wheelhouse filled by the host's pip"):
-        _fill_wheelhouse(ctx)
+    house = _wheelhouse(timings)
+    with timings.stage("build context: sources copied, wheels linked"):
+        _copy_context(ctx)
+        _link_wheels(house, ctx)
     with timings.stage("image built offline (--network none)"):
         r = _run(["docker", "build", "--network", "none", "--build-arg", f"BASE={base_image}",
                   "-f", "deploy/Dockerfile", "-t", IMAGE, "."], 900, cwd=ctx)
@@ -283,6 +363,25 @@ def test_image_is_small_and_has_no_cuda(stack):
     assert torch == ["2.13.0+cpu", "None"], torch
     assert size < 2.0e9, f"image {size / 1e9:.2f} GB"
     print(f"image {IMAGE}: {size / 1e9:.2f} GB")
+
+
+def test_the_image_holds_this_checkouts_sources(stack):
+    """Built from the sources under test, not a cached image of older ones:
+    the installed package's files are this checkout's src/telethermal, byte
+    for byte, every module included."""
+    listing = ("import hashlib, json, pathlib, telethermal\n"
+               "root = pathlib.Path(telethermal.__file__).parent\n"
+               "print(json.dumps({str(p.relative_to(root)): "
+               "hashlib.sha256(p.read_bytes()).hexdigest() for p in root.rglob('*') "
+               "if p.is_file() and '__pycache__' not in p.parts}))\n")
+    r = _run(["docker", "run", "--rm", "--network", "none", "--entrypoint", "python", IMAGE,
+              "-c", listing], 120)
+    installed = json.loads(r.stdout)
+    sources = _package_files(ROOT / "src" / "telethermal")
+    assert installed == {name: sources.get(name) for name in installed}, \
+        sorted(name for name in installed if installed[name] != sources.get(name))
+    modules = {name for name in sources if name.endswith(".py")}
+    assert modules <= set(installed), sorted(modules - set(installed))
 
 
 def test_up_waits_for_training_then_a_touch_through_exec(stack, timings):
