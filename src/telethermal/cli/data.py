@@ -72,9 +72,15 @@ def cmd_dataset_validate(args) -> int:
 
 
 def cmd_dataset_import(args) -> int:
+    from telethermal.data.csv_import import CsvSpec
     from telethermal.record.importer import import_recordings
 
-    before, after = import_recordings(args.recordings, args.into, args.material, args.group)
+    values = {k: v for k, v in (("T_object_C", args.object_c), ("T_pad_C", args.pad_c),
+                                ("T_room_C", args.room_c), ("onset_s", args.onset_s))
+              if v is not None}
+    before, after = import_recordings(args.files, args.into, args.material, args.group,
+                                      CsvSpec.from_options(args.columns, args.units), values,
+                                      args.manifest)
     print(f"{args.into}: {before} trials before, {after} now")
     return 0
 
@@ -134,12 +140,27 @@ def add_dataset(sub) -> None:
     p.add_argument("dir")
     p.set_defaults(func=cmd_dataset_validate)
 
-    p = dsub.add_parser("import", help="add recorded slave contacts to a dataset "
-                                       "(identification database)")
-    p.add_argument("recordings", nargs="+", help="MCAP recordings (session or slave)")
+    p = dsub.add_parser("import", help="add contacts to a dataset (identification database): "
+                                       "MCAP recordings, or a lab's CSV files (one contact each; "
+                                       "README, Dataset format)")
+    p.add_argument("files", nargs="*", help="MCAP recordings or CSV files, told by content")
     p.add_argument("--into", required=True, help="dataset folder (created if absent)")
-    p.add_argument("--material", help="the material touched (required for lab recordings)")
-    p.add_argument("--group", default="recorded")
+    p.add_argument("--material", help="the material touched (required for lab files)")
+    p.add_argument("--group", help="what is held out together in cross-validation: a person, "
+                                   "a session, an object (default for recordings: recorded)")
+    p.add_argument("--manifest", help="CSV: file,material,group and, where known, T_object_C, "
+                                      "T_pad_C, T_room_C, onset_s per lab file (relative to it)")
+    p.add_argument("--columns", help="dataset column=the file's column, comma-separated "
+                                     "(t_s=time,heat_flux_W_m2=flux,temperature_C=T,force_N=F)")
+    p.add_argument("--units", help="dataset column=unit: t_s s|ms, heat_flux_W_m2 "
+                                   "W/m2|kW/m2|W/cm2, temperature_C C|K, force_N N|kN|gf")
+    p.add_argument("--object-c", type=float, help="the object's temperature before contact (C)")
+    p.add_argument("--pad-c", type=float, help="the pad's measured temperature before "
+                                               "contact (C; not its set point)")
+    p.add_argument("--room-c", type=float, help="the room's temperature (C)")
+    p.add_argument("--onset-s", type=float, help="the contact's start on the file's clock (s); "
+                                                 "default: t = 0 when the time goes below 0, "
+                                                 "else the first force >= 1 N")
     p.set_defaults(func=cmd_dataset_import)
 
 

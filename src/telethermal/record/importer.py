@@ -1,5 +1,6 @@
-"""``telethermal dataset import``: recorded slave contacts into the dataset
-format, so lab sessions grow the identification database."""
+"""``telethermal dataset import``: recorded slave contacts (MCAP) and a lab's
+own contacts (CSV) into the dataset format, so lab sessions grow the
+identification database."""
 
 from __future__ import annotations
 
@@ -49,12 +50,33 @@ def trials_from_recording(path, material: str | None = None, group: str = "recor
 
 
 def import_recordings(paths, into: str | Path, material: str | None = None,
-                      group: str = "recorded") -> tuple[int, int]:
-    """Add the recordings' contacts to the dataset at ``into`` (created if
-    absent), all or nothing. Returns (trials before, trials after)."""
+                      group: str | None = None, spec=None, values: dict | None = None,
+                      manifest: str | Path | None = None) -> tuple[int, int]:
+    """Add the files' contacts to the dataset at ``into`` (created if
+    absent), all or nothing. Each file is told by its content: an MCAP
+    recording (its slave contacts), or a lab's CSV of one contact
+    (:mod:`telethermal.data.csv_import`, read with ``spec``; its per-trial
+    ``values`` from the call, or its row of the lab's ``manifest``, which may
+    also list the files). Returns (trials before, trials after)."""
+    from telethermal.data.csv_import import CsvSpec, is_recording, lab_trial, read_lab_manifest
+
     into = Path(into)
+    spec = spec or CsvSpec({}, {})
+    rows = read_lab_manifest(manifest) if manifest is not None else {}
+    files = [str(p) for p in paths] + [f for f in rows if f not in {str(p) for p in paths}]
+    if not files:
+        raise DatasetError("no files to import: give them, or a --manifest listing them")
     existing = load_dataset(into) if (into / "manifest.csv").is_file() else []
-    new = [t for p in paths for t in trials_from_recording(p, material, group)]
+    new = []
+    for i, path in enumerate(files):
+        if not Path(path).is_file():
+            raise DatasetError(f"{path}: no such file")
+        if is_recording(path):
+            new += trials_from_recording(path, material, group or "recorded")
+            continue
+        per_trial = {"material": material, "group": group, **(values or {}),
+                     **rows.get(path, {})}
+        new.append(lab_trial(path, spec, per_trial, i))
     ids = {t.trial_id for t in existing}
     clash = [t.trial_id for t in new if t.trial_id in ids]
     if clash:

@@ -206,18 +206,13 @@ class MasterDisplay:
     def __init__(self, config: DisplayConfig, generator, pad_resistance_m2k_w: float,
                  sensor_lag_s: float, finger_temp_c: float, idle_c: float | None = None,
                  pad_layers=None, contact_conductance_w_m2k: float | None = None,
-                 module: ModuleParams | None = None, precondition=None,
-                 pad_area_m2: float | None = None):
+                 module: ModuleParams | None = None, precondition=None, pad_area_m2=None):
         self.config = config
         self.generator = generator
-        #: The inner loop from the junction's target to the module's current
-        #: (control/junction.py); None without a module model.
-        self.junction_loop = JunctionLoop(module, default_driver(module)) \
-            if module is not None else None
-        # The pad's face the module pumps over (the scene's size_mm, or the
-        # module's own face).
-        self._module_area_m2 = 0.0 if module is None else \
-            pad_area_m2 if pad_area_m2 is not None else module.spec.area_m2
+        #: junction target -> module current (control/junction.py); None: no module model.
+        self.junction_loop = JunctionLoop(module, default_driver(module)) if module else None
+        # The face the module pumps over: the scene's size_mm, or the module's.
+        self._module_area_m2 = 0.0 if module is None else (pad_area_m2 or module.spec.area_m2)
         #: ``precondition(material or None, object_temp_c) -> idle offset, K``:
         #: where the pad idles relative to the object before (and, holding,
         #: during) a touch (control/preconditioning.py); None: at the object.

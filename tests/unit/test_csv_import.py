@@ -1,0 +1,143 @@
+"""A lab's CSV files into the dataset format (data/csv_import.py, issue 27):
+columns mapped and units converted, the onset found or given, and every bad
+input an error naming the file, the line and the column; nothing written
+when anything is wrong."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from telethermal.cli import main
+from telethermal.data.csv_import import CsvSpec, read_lab_csv
+from telethermal.data.dataset import load_dataset
+from telethermal.errors import DatasetError
+
+RATE = 100.0
+
+
+def lab_file(path, n=120, rate=RATE, start_s=-0.2, delimiter=",", decimal=".", bom=False,
+             header=("time_ms", "q_kW", "T_pad", "F")):
+    """A lab's file: time in ms, flux in kW/m2 (q ~ 1/sqrt(t) after contact),
+    pad temperature, force (10 N in contact)."""
+    t = start_s + np.arange(n) / rate
+    q = np.where(t >= 0, -4.0 / np.sqrt(np.maximum(t, 0.0) + 0.01), 0.0)
+    temp = 34.0 + np.where(t >= 0, -2.0, 0.0)
+    force = np.where(t >= 0, 10.0, 0.0)
+    rows = [delimiter.join(header)]
+    for row in zip(1e3 * t, q, temp, force):
+        rows.append(delimiter.join(f"{v:.6f}".replace(".", decimal) for v in row))
+    path.write_text(("\ufeff" if bom else "") + "\n".join(rows) + "\n", encoding="utf-8")
+    return t, q
+
+
+COLUMNS = "t_s=time_ms,heat_flux_W_m2=q_kW,temperature_C=T_pad,force_N=F"
+UNITS = "t_s=ms,heat_flux_W_m2=kW/m2"
+
+
+@pytest.mark.parametrize("delimiter, decimal, bom", [(",", ".", False), (";", ",", True),
+                                                      ("\t", ",", False)])
+def test_columns_mapped_and_units_converted_whatever_the_separators(tmp_path, delimiter,
+                                                                    decimal, bom):
+    t, q = lab_file(tmp_path / "glass_1.csv", delimiter=delimiter, decimal=decimal, bom=bom)
+    ch = read_lab_csv(tmp_path / "glass_1.csv", CsvSpec.from_options(COLUMNS, UNITS))
+    np.testing.assert_allclose(ch["t_s"], t, atol=1e-9)                 # ms -> s
+    np.testing.assert_allclose(ch["heat_flux_W_m2"], 1e3 * q, rtol=1e-6, atol=1e-3)
+
+
+def test_import_then_train_a_lab_dataset_at_another_rate_than_the_scene(tmp_path, capsys):
+    # Two materials, two groups each, sampled at 250 Hz (the scene: 100 Hz).
+    for m, scale in (("glass", 1.0), ("cork", 0.2)):
+        for g in ("alice", "bob"):
+            for k in range(3):
+                f = tmp_path / "lab" / f"{m}_{g}_{k}.csv"
+                f.parent.mkdir(exist_ok=True)
+                t, q = lab_file(f, n=300, rate=250.0, start_s=0.0)      # no pre-contact
+                text = f.read_text().splitlines()
+                f.write_text("\n".join(text[:1] + [
+                    ",".join([*r.split(",")[:1], f"{float(r.split(',')[1]) * scale * (1 + 0.01 * k):.6f}",
+                              *r.split(",")[2:]]) for r in text[1:]]) + "\n")
+    manifest = tmp_path / "lab" / "manifest.csv"
+    manifest.write_text("file,material,group,T_object_C\n" + "".join(
+        f"{m}_{g}_{k}.csv,{m},{g},24.0\n" for m in ("glass", "cork") for g in ("alice", "bob")
+        for k in range(3)))
+    into = tmp_path / "ds"
+    assert main(["dataset", "import", "--manifest", str(manifest), "--into", str(into),
+                 "--columns", COLUMNS, "--units", UNITS, "--pad-c", "34", "--room-c", "22"]) == 0
+    trials = load_dataset(into)
+    assert len(trials) == 12 and {t.sample_rate_hz for t in trials} == {250.0}
+    assert {t.group for t in trials} == {"alice", "bob"} and trials[0].gap_k == 10.0
+    # The onset: the first sample with force >= 1 N (the file's time starts at 0).
+    assert trials[0].channels["t_s"][0] == 0.0
+    assert main(["identify", "train", "--data", str(into), "--method", "effusivity-lda",
+                 "--out", str(tmp_path / "m.npz")]) == 0
+    assert main(["identify", "cv", "--data", str(into), "--method", "effusivity-lda",
+                 "--folds", "2"]) == 0
+    assert "2 folds by group (2 groups, 12 trials)" in capsys.readouterr().out
+
+
+def _cell(text: str, line: int, column: int, value: str) -> str:
+    """``text`` with the cell at file line ``line`` (1: the header), ``column`` replaced."""
+    lines = text.splitlines()
+    cells = lines[line - 1].split(",")
+    cells[column] = value
+    lines[line - 1] = ",".join(cells)
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda s: s.replace("time_ms", "clock"), r"no t_s \(column 'time_ms'\).*its header: "
+                                               r"clock, q_kW"),
+    (lambda s: s.replace("q_kW", "heat"), r"no heat_flux_W_m2 \(column 'q_kW'\)"),
+    (lambda s: _cell(s, 6, 1, "x0.5"), r"line 6, column 'q_kW': 'x0\.5' is not a number"),
+    (lambda s: "\n".join(s.splitlines()[:30] + [s.splitlines()[2]] + s.splitlines()[30:]),
+     r"line 31, column 'time_ms': the time restarts \(0\.08 then -0\.19\): one contact "
+     r"per file"),
+    (lambda s: "\n".join(s.splitlines()[:20] + s.splitlines()[40:]),
+     r"line 21: a gap in the time"),
+    (lambda s: s.replace(",10.000000\n", ",10.000000,1\n", 1), r"line \d+: 5 cells, 4 columns"),
+])
+def test_bad_files_are_named_by_line_and_column(tmp_path, capsys, damage, message):
+    f = tmp_path / "lab.csv"
+    lab_file(f)
+    f.write_text(damage(f.read_text()))
+    into = tmp_path / "ds"
+    assert main(["dataset", "import", str(f), "--into", str(into), "--columns", COLUMNS,
+                 "--units", UNITS, "--material", "glass", "--group", "g", "--object-c", "24",
+                 "--pad-c", "34", "--room-c", "22"]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "lab.csv" in err
+    import re
+    assert re.search(message, err), err
+    assert not into.exists()                                       # nothing half-written
+
+
+def test_missing_per_trial_values_and_options_are_named(tmp_path, capsys):
+    f = tmp_path / "lab.csv"
+    lab_file(f)
+    args = ["dataset", "import", str(f), "--into", str(tmp_path / "ds"), "--columns", COLUMNS,
+            "--units", UNITS, "--material", "glass", "--group", "g", "--pad-c", "34",
+            "--room-c", "22"]
+    assert main(args) == 2
+    assert "no T_object_C given (--object-c or a manifest column 'T_object_C')" in \
+        " ".join(capsys.readouterr().err.split())
+    assert main(args + ["--object-c", "24", "--units", "heat_flux_W_m2=mW"]) == 2
+    assert "heat_flux_W_m2 takes W/m2, kW/m2, W/cm2" in capsys.readouterr().err
+    assert main(args + ["--object-c", "24", "--columns", "flux=q_kW"]) == 2
+    assert "--columns 'flux': not a dataset column" in " ".join(capsys.readouterr().err.split())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=3, max_size=8),
+       st.sampled_from([(",", "."), (";", ",")]))
+def test_any_numbers_survive_the_separators(tmp_path_factory, values, sep):
+    delimiter, decimal = sep
+    path = tmp_path_factory.mktemp("h") / "x.csv"
+    lines = [delimiter.join(["t_s", "heat_flux_W_m2"])] + [
+        delimiter.join([f"{0.01 * i:.2f}".replace(".", decimal),
+                        repr(v).replace(".", decimal)]) for i, v in enumerate(values)]
+    path.write_text("\n".join(lines))
+    ch = read_lab_csv(path, CsvSpec({}, {}))
+    np.testing.assert_array_equal(ch["heat_flux_W_m2"], np.array(values))
+    with pytest.raises(DatasetError):
+        read_lab_csv(path, CsvSpec({"force_N": "F"}, {}))
