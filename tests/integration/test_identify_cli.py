@@ -19,7 +19,7 @@ def gripper_db(tmp_path_factory):
     return root / "pad"
 
 
-def test_train_eval_round_trip(gripper_db, tmp_path):
+def test_train_eval_round_trip(gripper_db, tmp_path, capsys):
     model = tmp_path / "lda.npz"
     assert main(["identify", "train", "--data", str(gripper_db), "--method", "effusivity-lda",
                  "--out", str(model)]) == 0
@@ -27,6 +27,10 @@ def test_train_eval_round_trip(gripper_db, tmp_path):
     assert main(["identify", "eval", "--model", str(model), "--data", str(gripper_db),
                  "--json", str(out)]) == 0
     report = json.loads(out.read_text())
+    # Evaluated on its own training data: said, with the count.
+    assert report["trials_in_training"] == report["trials"]
+    assert f"warning: {report['trials']} of {report['trials']} evaluation trials were in the " \
+        "model's training data" in " ".join(capsys.readouterr().out.split())
     assert list(report["accuracy_by_window_s"]) == [f"{0.1 * k:.1f}" for k in range(1, 11)]
     # Aluminium, glass and wood differ in effusivity by 10x and more: separable at 1 s.
     assert report["accuracy_by_window_s"]["1.0"] == 1.0

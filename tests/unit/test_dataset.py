@@ -154,3 +154,15 @@ def test_garbage_cells_give_dataset_errors_not_crashes(tmp_path_factory, cell):
 def test_manifest_columns_are_the_documented_ones():
     assert MANIFEST_COLUMNS == ("trial_id", "material", "file", "sample_rate_hz", "T_object_C",
                                 "T_pad_C", "T_room_C", "group")
+
+
+def test_a_trials_digest_follows_its_content_not_its_name(tmp_path):
+    from telethermal.data.dataset import trial_digest
+
+    a = load_dataset(written(tmp_path))
+    renamed = make_trial(0)
+    renamed.trial_id, renamed.file = "copy", "elsewhere/copy.csv"
+    b = load_dataset(written(tmp_path / "other", [renamed, make_trial(2, n=60)]))
+    assert trial_digest(a[0]) == trial_digest(b[0])           # the same contact, copied
+    # (make_trial's two trials hold the same samples: one content, one digest)
+    assert trial_digest(a[1]) == trial_digest(a[0]) != trial_digest(b[1])

@@ -176,6 +176,18 @@ def _check_time(path: Path, t_s: np.ndarray, sample_rate_hz: float | None):
                                f"but the manifest says sample_rate_hz = {sample_rate_hz:g}")
 
 
+def trial_digest(trial: Trial) -> str:
+    """A short digest of a loaded trial's content (its channels, as read):
+    the same contact copied, renamed or re-imported has the same digest."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for name in sorted(trial.channels or {}):
+        h.update(name.encode())
+        h.update(np.round(np.asarray(trial.channels[name], dtype=np.float64), 6).tobytes())
+    return h.hexdigest()[:16]
+
+
 def load_dataset(root: str | Path) -> list[Trial]:
     """Read the manifest and every trial file, fully checked."""
     root = Path(root)

@@ -138,6 +138,9 @@ class Identifier:
         self.params_: list[dict] | None = None
         #: Per window, the range of pressing forces the training touches had.
         self.force_range_n_: list | None = None
+        #: Content digests of the training trials (``data.dataset.trial_digest``),
+        #: when trained from a dataset: an evaluation on them is not held out.
+        self.training_digests_: list[str] | None = None
         #: Per window, the softmax temperature of the calibration (Guo et al.
         #: 2017): logits are divided by it. Stored as "temperature" in files.
         self.softmax_temperature_: np.ndarray | None = None
@@ -292,7 +295,8 @@ class Identifier:
         """Learned values (names ending in ``_``, JSON-able) kept in the
         model file's header beside the weights; subclasses add theirs
         (an attribute a model file from before it lacks is saved as None)."""
-        return {"force_range_n_": self.force_range_n_}
+        return {"force_range_n_": self.force_range_n_,
+                "training_digests_": self.training_digests_}
 
     # ------------------------------------------------------------ subclass hooks
     def _fit_window(self, x: np.ndarray, y: np.ndarray) -> dict:

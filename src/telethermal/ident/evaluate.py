@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.data.dataset import Trial, load_dataset
+from telethermal.data.dataset import Trial, load_dataset, trial_digest
 from telethermal.ident.anytime import Reason, decide, decide_all
 from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials
@@ -250,8 +250,12 @@ def evaluate_saved(model_path: str | Path, data: str | Path, json_path: str | Pa
     scene_name = dataset_scene(data)
     if scene_name is not None:
         check_scene(model, scene_name, str(model_path))
+    trials = load_dataset(data)
     with status(f"evaluating on {data}"):
-        report = evaluate(model, load_dataset(data))
+        report = evaluate(model, trials)
+    if model.training_digests_:
+        trained = set(model.training_digests_)
+        report["trials_in_training"] = sum(trial_digest(t) in trained for t in trials)
     report["command"] = command
     write_json(json_path, report)
     plot_accuracy({model.method: report}, png_path, f"{model_path} on {data}")
@@ -262,6 +266,10 @@ def text_report(report: dict, json_path, png_path) -> list[str]:
     """What ``telethermal identify eval`` prints of ``report``."""
     acc = ", ".join(f"{k} s {100 * v:.0f} %" for k, v in report["accuracy_by_window_s"].items())
     lines = [f"accuracy: {acc}"]
+    if report.get("trials_in_training"):
+        lines.insert(0, f"warning: {report['trials_in_training']} of {report['trials']} "
+                        f"evaluation trials were in the model's training data: these figures "
+                        f"are not held out (use `identify cv`, or data the model did not see)")
     d = report["decision_time_s"]
     if d["n"]:
         lines.append(f"decisions: {d['n']} committed, median {d['p50']:.2f} s, accuracy "

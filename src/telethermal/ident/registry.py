@@ -8,7 +8,7 @@ from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
-from telethermal.data.dataset import load_dataset
+from telethermal.data.dataset import load_dataset, trial_digest
 from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.base import Identifier, read_model_file
 from telethermal.ident.methods import EffusivityLda, PcaFnn
@@ -91,5 +91,7 @@ def train_on_dataset(data: str | Path, method: str, channels, max_window_s: floa
     scene_name = dataset_scene(data)
     if scene_name is not None:
         model.scene_ = scene_name
+    keep = {id(t) for t in trials} - {id(t) for t in skipped}
+    model.training_digests_ = sorted({trial_digest(t) for t in trials if id(t) in keep})
     path = model.save(out)
     return Trained(model, Path(path), skipped, time.perf_counter() - start)
