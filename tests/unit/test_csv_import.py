@@ -74,6 +74,20 @@ def test_import_then_train_a_lab_dataset_at_another_rate_than_the_scene(tmp_path
     assert main(["identify", "cv", "--data", str(into), "--method", "effusivity-lda",
                  "--folds", "2"]) == 0
     assert "2 folds by group (2 groups, 12 trials)" in capsys.readouterr().out
+    # The model names no scene (the lab's data do not): a scene without its
+    # materials refuses it, naming them.
+    from telethermal.errors import ModelFileError
+    from telethermal.ident.registry import load_model
+    from telethermal.physics.scene import load_scene
+    from telethermal.teleop.run import slave_rng
+    from telethermal.teleop.slave import Slave
+
+    model = load_model(tmp_path / "m.npz")
+    assert model.scene_ is None
+    with pytest.raises(ModelFileError, match=r"trained on data that name no scene, on cork, "
+                                             r"glass; scene 'fingertip-7' has objects of "
+                                             r"aluminium.*: cork, glass are not among them"):
+        Slave(load_scene("fingertip-7"), "wood", model, slave_rng(0))
 
 
 def _cell(text: str, line: int, column: int, value: str) -> str:

@@ -199,8 +199,73 @@ def test_every_key_a_scene_may_hold_is_documented():
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "scenes.md").read_text()
     keys = {"name", "description", "room_temp_c", "sample_rate_hz", "pre_contact_s",
-            "tolerance_rel", "material", "thickness_m"} | set(PAD_KEYS)
+            "materials", "tolerance_rel", "material", "thickness_m"} | set(PAD_KEYS)
     for spec in (FingerSpec, SensorSpec, VariabilitySpec):
         keys |= set(spec.__dataclass_fields__)
     missing = sorted(k for k in keys if f"| `{k}` |" not in doc)
     assert not missing, f"docs/scenes.md leaves out {missing}"
+
+
+@pytest.fixture
+def own_materials(monkeypatch):
+    """A clean registry of scene materials (they apply to the process)."""
+    from telethermal.physics import materials
+    monkeypatch.setattr(materials, "_SCENE_MATERIALS", {})
+
+
+TABLE = """name,role,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,source
+cork,object,0.045,120,1800,"a supplier's datasheet"
+glass,object,1.05,2500,840,our own glass
+"""
+
+
+def test_a_scene_brings_its_own_materials(tmp_path, own_materials):
+    from telethermal.physics.materials import get_material, load_materials
+
+    (tmp_path / "lab-materials.csv").write_text(TABLE)
+    scene = tmp_path / "lab.toml"
+    scene.write_text('materials = "lab-materials.csv"\n' + MINIMAL.replace(
+        'material = "wood"', 'material = "cork"\n[[objects]]\nmaterial = "glass"\n'
+                             '[[objects]]\nmaterial = "wood"'))
+    loaded = load_scene(scene)
+    assert loaded.materials == ["cork", "glass", "wood"]
+    assert get_material("cork").conductivity_w_mk == 0.045                  # added
+    assert get_material("glass").conductivity_w_mk == 1.05                  # shadowed
+    assert load_materials()["glass"].conductivity_w_mk != 1.05              # the package's kept
+    assert get_material("wood") == load_materials()["wood"]                 # the package's
+    # The contact models read the scene's: cork's closed form with its effusivity.
+    _, choice = finger_contact_model(with_finger_for_test(loaded), loaded.objects[0])
+    assert choice.error_bound_rel <= loaded.tolerance_rel
+    # Another scene in this process using the package's glass is refused.
+    other = tmp_path / "other.toml"
+    other.write_text(MINIMAL.replace('material = "wood"', 'material = "glass"'))
+    with pytest.raises(SceneError, match=r"other\.toml: .*'glass' was redefined in this "
+                                         r"process by .*lab-materials\.csv"):
+        load_scene(other)
+
+
+@pytest.mark.parametrize("table, message", [
+    (TABLE.replace("0.045", "-1"), r"lab-materials\.csv line 2, column 'conductivity_w_mk': "
+                                   r"'-1' must be positive"),
+    (TABLE.replace("1800", "lots"), r"lab-materials\.csv line 2, column 'specific_heat_j_kgk': "
+                                    r"'lots' is not a number"),
+    (TABLE.replace("cork,object", "cork,furniture"), r"line 2, column 'role': 'furniture'"),
+    (TABLE.replace("density_kg_m3", "rho"), r"missing column\(s\) density_kg_m3"),
+    (TABLE + "cork,object,1,1,1,x\n", r"line 4: material 'cork' appears twice"),
+])
+def test_a_bad_materials_table_is_named_by_file_line_and_column(tmp_path, own_materials,
+                                                                table, message):
+    (tmp_path / "lab-materials.csv").write_text(table)
+    scene = tmp_path / "lab.toml"
+    scene.write_text('materials = "lab-materials.csv"\n' + MINIMAL)
+    with pytest.raises(SceneError, match=message):
+        load_scene(scene)
+    scene.write_text('materials = "absent.csv"\n' + MINIMAL)
+    with pytest.raises(SceneError, match=r"lab\.toml: top level: 'materials' = 'absent\.csv': "
+                                         r"no such file"):
+        load_scene(scene)
+
+
+def with_finger_for_test(scene):
+    from telethermal.teleop.run import with_finger
+    return with_finger(scene)

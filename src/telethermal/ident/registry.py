@@ -52,14 +52,26 @@ def dataset_scene(data_dir: str | Path) -> str | None:
     return None
 
 
-def check_scene(model: Identifier, scene_name: str, where: str = "the identifier") -> None:
+def check_scene(model: Identifier, scene_name: str, where: str = "the identifier",
+                scene_materials=None) -> None:
     """Refuse a model trained (and calibrated) on another scene: its
-    sensors, pad and gap differ, so its posteriors would mean nothing."""
-    trained = getattr(model, "scene_", None)
+    sensors, pad and gap differ, so its posteriors would mean nothing. A
+    model from data that name no scene (a lab's imported contacts) is
+    refused where it knows materials the scene's objects are not
+    (``scene_materials``): it was made for other objects."""
+    trained = model.scene_
     if trained is not None and trained != scene_name:
         raise ModelFileError(f"{where} was trained and calibrated on scene {trained!r}; this "
                              f"runs scene {scene_name!r}. Train one on {scene_name!r} "
                              "(telethermal identify train) or run the scene it was made for")
+    if trained is None and scene_materials is not None:
+        foreign = [c for c in model.classes_ if c not in set(scene_materials)]
+        if foreign:
+            raise ModelFileError(
+                f"{where} was trained on data that name no scene, on {', '.join(model.classes_)}; "
+                f"scene {scene_name!r} has objects of {', '.join(scene_materials)}: "
+                f"{', '.join(foreign)} {'is' if len(foreign) == 1 else 'are'} not among them. "
+                f"Give the scene those objects, or train on contacts of its materials")
 
 
 @dataclass(frozen=True)

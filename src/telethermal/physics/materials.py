@@ -47,37 +47,97 @@ class Material:
                         self.density_kg_m3 * heat, self.specific_heat_j_kgk, self.source)
 
 
-def _parse_row(row: dict[str, str], line: int) -> Material:
-    try:
-        values = [float(row[k]) for k in
-                  ("conductivity_w_mk", "density_kg_m3", "specific_heat_j_kgk")]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"materials.csv line {line}: bad number ({exc})") from exc
-    if not all(v > 0 and math.isfinite(v) for v in values):
-        raise ValueError(f"materials.csv line {line}: properties must be positive and finite")
+COLUMNS = ("name", "role", "conductivity_w_mk", "density_kg_m3", "specific_heat_j_kgk",
+           "source")
+ROLES = ("object", "skin", "pad", "fluid")
+
+
+def _parse_row(row: dict[str, str], line: int, where: str = "materials.csv") -> Material:
+    missing = [c for c in COLUMNS if not (row.get(c) or "").strip()]
+    if missing:
+        raise ValueError(f"{where} line {line}: empty or missing {', '.join(missing)}")
+    values = []
+    for k in ("conductivity_w_mk", "density_kg_m3", "specific_heat_j_kgk"):
+        try:
+            values.append(float(row[k]))
+        except ValueError:
+            raise ValueError(f"{where} line {line}, column {k!r}: {row[k]!r} is not a "
+                             f"number") from None
+        if not (values[-1] > 0 and math.isfinite(values[-1])):
+            raise ValueError(f"{where} line {line}, column {k!r}: {row[k]!r} must be positive "
+                             f"and finite")
+    if row["role"].strip() not in ROLES:
+        raise ValueError(f"{where} line {line}, column 'role': {row['role']!r}; roles: "
+                         f"{', '.join(ROLES)}")
     return Material(row["name"].strip(), row["role"].strip(), *values, row["source"].strip())
+
+
+def read_table(text: str, where: str) -> dict[str, Material]:
+    """A materials table (the package's columns; ``#`` lines are comments)."""
+    lines = [ln for ln in text.lstrip("\ufeff").splitlines() if ln and not ln.startswith("#")]
+    rows = csv.DictReader(lines)
+    missing = [c for c in COLUMNS if c not in (rows.fieldnames or [])]
+    if missing:
+        raise ValueError(f"{where}: missing column(s) {', '.join(missing)}; a materials table "
+                         f"has {', '.join(COLUMNS)}")
+    table: dict[str, Material] = {}
+    for i, r in enumerate(rows):
+        m = _parse_row(r, i + 2, where)
+        if m.name in table:
+            raise ValueError(f"{where} line {i + 2}: material {m.name!r} appears twice")
+        table[m.name] = m
+    return table
 
 
 @functools.cache
 def load_materials() -> dict[str, Material]:
-    """Read the shipped materials table, keyed by name."""
+    """The package's materials table, keyed by name (a scene's own come
+    through :func:`register_materials`; :func:`get_material` reads both)."""
     text = resources.files("telethermal.physics").joinpath("materials.csv").read_text()
-    lines = [ln for ln in text.splitlines() if ln and not ln.startswith("#")]
-    rows = csv.DictReader(lines)
-    return {m.name: m for m in (_parse_row(r, i + 2) for i, r in enumerate(rows))}
+    return read_table(text, "materials.csv")
+
+
+#: Materials scene files brought (their ``materials`` table), by name: the
+#: material and the table that defined it. They add to the package's table
+#: or shadow its rows, for this process.
+_SCENE_MATERIALS: dict[str, tuple[Material, str]] = {}
+
+
+def register_materials(table: dict[str, Material], source: str) -> None:
+    """A scene's own materials, for this process. A material another table
+    defined differently is refused (one process, one definition of a name)."""
+    for name, m in table.items():
+        held = _SCENE_MATERIALS.get(name)
+        if held is not None and held[0] != m:
+            raise ValueError(f"{source}: material {name!r} is defined differently by "
+                             f"{held[1]}, loaded before in this process: one process holds one "
+                             f"definition of a material (run the scenes in separate processes)")
+    for name, m in table.items():
+        _SCENE_MATERIALS[name] = (m, source)
+
+
+def shadowed_by(name: str) -> str | None:
+    """The table that redefined the package's ``name`` in this process, if any."""
+    held = _SCENE_MATERIALS.get(name)
+    return held[1] if held is not None and name in load_materials() else None
 
 
 def get_material(name: str) -> Material:
-    """Look a material up by name; the error lists the known names."""
+    """Look a material up by name (a scene's own table first, then the
+    package's); the error lists the known names."""
+    held = _SCENE_MATERIALS.get(name)
+    if held is not None:
+        return held[0]
     table = load_materials()
     try:
         return table[name]
     except KeyError as exc:
-        known = ", ".join(sorted(table))
+        known = ", ".join(sorted(set(table) | set(_SCENE_MATERIALS)))
         raise UnknownMaterialError(
             f"unknown material {name!r}; known materials: {known}") from exc
 
 
 def object_materials() -> list[str]:
     """Names of the materials a scene may place as objects."""
-    return sorted(n for n, m in load_materials().items() if m.role == "object")
+    names = set(load_materials()) | set(_SCENE_MATERIALS)
+    return sorted(n for n in names if get_material(n).role == "object")

@@ -20,7 +20,8 @@ from pathlib import Path
 
 from telethermal.errors import SceneError, UnknownMaterialError
 from telethermal.physics.layered import Boundary, Layer
-from telethermal.physics.materials import get_material, object_materials
+from telethermal.physics.materials import (get_material, object_materials, read_table,
+                                           register_materials, shadowed_by)
 from telethermal.physics.model import ModelChoice, choose_model
 
 PAD_KINDS = ("peltier", "water")
@@ -141,6 +142,8 @@ class Scene:
     variability: VariabilitySpec = field(default_factory=VariabilitySpec)
     tolerance_rel: float = 1e-3
     source: str = ""
+    #: The scene's own materials table (its ``materials`` key), if any.
+    materials_table: str | None = None
 
     @property
     def materials(self) -> list[str]:
@@ -326,6 +329,7 @@ def _parse_dataclass(cls, table, where, source):
 def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     """Build a :class:`Scene` from parsed TOML, naming every bad key."""
     r = _Reader(data, "top level", source)
+    own_table = _own_materials(data, r, source)
     room = r.num("room_temp_c", lo=-20, hi=60)
     for table in ("pad", "finger", "objects", "sensors", "variability", "model"):
         r.used.add(table)
@@ -345,9 +349,35 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         sensors=_parse_dataclass(SensorSpec, data.get("sensors"), "[sensors]", source),
         variability=_parse_dataclass(VariabilitySpec, data.get("variability"),
                                      "[variability]", source),
-        tolerance_rel=tolerance, source=source)
+        tolerance_rel=tolerance, source=source, materials_table=own_table)
+    for o in scene.objects:
+        other = shadowed_by(o.material)
+        if other is not None and other != own_table:
+            r.fail(f"material {o.material!r} was redefined in this process by {other}; this "
+                   f"scene uses the package's (run the two scenes in separate processes)")
     r.done()
     return scene
+
+
+def _own_materials(data: dict, reader: _Reader, source: str) -> str | None:
+    """``materials = "FILE.csv"``: the scene's own materials table (the
+    package's columns), relative to the scene file; its rows add to the
+    package's or shadow them. Returns the table's path, or None."""
+    reader.used.add("materials")
+    name = data.get("materials")
+    if name is None:
+        return None
+    if not isinstance(name, str) or not name.strip():
+        reader.fail(f"'materials' must be the path of a CSV table, got {name!r}")
+    path = Path(source).parent / name
+    if not path.is_file():
+        reader.fail(f"'materials' = {name!r}: no such file {path}")
+    try:
+        table = read_table(path.read_text(encoding="utf-8"), str(path))
+        register_materials(table, str(path))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{source}: {exc}") from exc
+    return str(path)
 
 
 def _shipped():

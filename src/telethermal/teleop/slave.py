@@ -65,7 +65,7 @@ class Slave:
             raise SceneError(f"scene {scene.name} has no object of {material!r}; it has "
                              f"{', '.join(scene.materials)}")
         from telethermal.ident.registry import check_scene
-        check_scene(identifier, scene.name)
+        check_scene(identifier, scene.name, scene_materials=scene.materials)
         if abs(identifier.sample_rate_hz_ - scene.sample_rate_hz) > 1e-9:
             raise SceneError(f"the identifier expects {identifier.sample_rate_hz_:g} Hz samples, "
                              f"the scene's pad gives {scene.sample_rate_hz:g} Hz")
