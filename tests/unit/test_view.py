@@ -213,3 +213,19 @@ def test_other_version_is_refused_with_the_file(tmp_path, monkeypatch):
     monkeypatch.undo()
     with pytest.raises(RecordingError, match="v7.mcap.*recording version 7"):
         load_playback(path)
+
+
+def test_an_unknown_on_the_view_stream_carries_its_reason():
+    # The master's view batch holds the estimate's reason (an optional field
+    # of measurement_batch); the page's state passes it on.
+    from telethermal.view.feed import master_state
+    from telethermal.wire.codec import encode
+
+    batch = {"kind": "measurement_batch", "v": 1, "seq": 1, "sent_s": 0.0, "contact_id": 2,
+             "t0_s": 0.0, "rate_hz": 500.0, "flux_w_m2": [0.0], "temp_c": [30.0],
+             "force_n": [8.0], "classes": ["steel", "wood"], "posteriors": [0.5, 0.5],
+             "label": "unknown", "decided": True, "estimate_t_s": 1.0,
+             "reason": "force outside trained range"}
+    state = master_state(decode(encode(batch)))
+    assert state["estimate"]["reason"] == "force outside trained range"
+    assert "reason" not in decode(encode({k: v for k, v in batch.items() if k != "reason"}))

@@ -239,7 +239,8 @@ class MasterService:
         if est is not None:
             state.update(classes=list(link.classes), posteriors=[float(p) for p in
                                                                   est.posteriors],
-                         label=est.label, decided=bool(est.decided), estimate_t_s=float(est.t_s))
+                         label=est.label, decided=bool(est.decided), estimate_t_s=float(est.t_s),
+                         reason=str(est.reason))
         return state
 
     def _touch_period(self, now: float, dt_s: float) -> None:

@@ -109,7 +109,7 @@ def master_state(m: dict) -> dict:
     if m.get("posteriors") is not None:
         state["estimate"] = {"classes": m.get("classes", []), "posteriors": m["posteriors"],
                              "label": m.get("label", ""), "decided": m.get("decided", False),
-                             "t_s": m.get("estimate_t_s")}
+                             "t_s": m.get("estimate_t_s"), "reason": m.get("reason", "")}
     return state
 
 

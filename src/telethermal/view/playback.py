@@ -116,7 +116,8 @@ def _estimates(rec, offset) -> list[dict]:
         if e is not None:
             out.append({"t": round(offset(m["contact_id"]) + m["t_s"], 4), "contact_id":
                         m["contact_id"], "classes": m.get("classes", []), "t_s": e[0],
-                        "posteriors": e[1], "label": e[2], "decided": e[4]})
+                        "posteriors": e[1], "label": e[2], "decided": e[4],
+                        "reason": e[5] if len(e) > 5 else ""})
     slave = [m for m in rec.messages("/slave/estimates") if m.get("estimate")]
     if not out and slave:
         classes = _slave_classes(rec, len(slave[0]["estimate"][1]))
@@ -124,7 +125,8 @@ def _estimates(rec, offset) -> list[dict]:
             e = m["estimate"]
             out.append({"t": round(offset(m["contact_id"]) + e[0], 4), "contact_id":
                         m["contact_id"], "classes": classes,
-                        "t_s": e[0], "posteriors": e[1], "label": e[2], "decided": e[4]})
+                        "t_s": e[0], "posteriors": e[1], "label": e[2], "decided": e[4],
+                        "reason": e[5] if len(e) > 5 else ""})
     return out
 
 

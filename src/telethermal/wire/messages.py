@@ -213,6 +213,7 @@ class MeasurementBatch(Message):
     label: str = ABSENT
     decided: bool = ABSENT
     estimate_t_s: float | None = ABSENT
+    reason: str = ABSENT
 
 
 @dataclass(frozen=True, slots=True)

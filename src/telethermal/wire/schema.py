@@ -184,6 +184,8 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("decided", "bool", required=False),
         Field("estimate_t_s", "float", "s", lo=0, required=False, nullable=True,
               doc="that estimate's t_since_contact_s"),
+        Field("reason", "str", required=False,
+              doc="master: that estimate's reason (for 'unknown': why); a later addition, optional"),
     ), "raw samples of the sender's pad, for display and recording (lossy); the three "
        "channels hold one value per sample (equal lengths); the master publishes its own, "
        "with the optional fields, on its view stream"),

@@ -118,7 +118,9 @@ function addEstimate(e, contactId) {
 function showDecision(e, plot) {
   const el = $("decision");
   if (e.decided) {
-    el.textContent = `${e.label} at ${e.t_s.toFixed(2)} s`;
+    // An "unknown" says why (README, the table of reasons).
+    const why = e.label === "unknown" && e.reason ? ` (${e.reason})` : "";
+    el.textContent = `${e.label}${why} at ${e.t_s.toFixed(2)} s`;
     el.dataset.label = e.label;
     plot.marker = [e.t_s, `decided: ${e.label}`];
   } else {
