@@ -256,6 +256,15 @@ def _read_policy(path, key: str) -> dict | None:
 _POLICIES: dict[str, dict] = {}
 
 
+def policy_known(scene: Scene) -> bool:
+    """Whether :func:`scene_policy` has the scene's policy without computing
+    it (shipped for it, cached, or read before in this process)."""
+    key = policy_key(scene)
+    return key in _POLICIES or \
+        _read_policy(shipped_policy_path(scene.name), key) is not None or \
+        _read_policy(cache_dir() / f"idle-policy-{key}.json", key) is not None
+
+
 def scene_policy(scene: Scene) -> dict:
     """The idle policy of ``scene``: the package's for a shipped scene it
     was computed for, else the user's cache (:func:`cache_dir`), else
