@@ -53,6 +53,10 @@ def test_the_shipped_policy_is_used_without_computing(scene, monkeypatch):
 def test_a_stale_or_missing_policy_is_computed_once_and_cached(scene, monkeypatch, tmp_path):
     changed = load_scene("fingertip-7").__class__(**{**vars(scene), "room_temp_c": 22.0})
     assert pc.policy_key(changed) != pc.policy_key(scene)
+    # A pad face of its own is another display: another policy.
+    import dataclasses
+    sized = dataclasses.replace(scene, pad=dataclasses.replace(scene.pad, size_mm=(15.0, 15.0)))
+    assert pc.policy_key(sized) != pc.policy_key(scene)
     calls = []
 
     def fake(s):

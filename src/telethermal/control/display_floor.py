@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.linalg import eigh_tridiagonal, toeplitz
@@ -88,7 +88,9 @@ class Hardware:
     pad_layers: tuple[Layer, ...]
     room_c: float
     #: The pad's face (the scene's ``size_mm``); None: the module's face.
-    face_m2: float | None = None
+    #: (Left out of the repr, which keys the idle policies: a scene without
+    #: it keeps its shipped policy; preconditioning.policy_key adds it.)
+    face_m2: float | None = field(default=None, repr=False)
 
     @property
     def area_m2(self) -> float:

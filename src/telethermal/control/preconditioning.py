@@ -193,6 +193,8 @@ def policy_key(scene: Scene) -> str:
               repr(scene.objects), repr(scene.variability), scene.room_temp_c,
               scene.sample_rate_hz, scene.tolerance_rel,
               [repr(get_material(m)) for m in scene.materials], repr(SafetyLimits()))
+    if scene.pad.size_mm is not None:           # a face other than the module's
+        inputs += (scene.pad.size_mm,)
     return hashlib.sha256(repr(inputs).encode()).hexdigest()[:32]
 
 
