@@ -31,13 +31,13 @@ layers = [["flux_sensor_film", 3.0e-4], ["thermal_grease", 2.0e-5], ["alumina", 
 gap_k = 10.0
 size_mm = [15.0, 15.0]
 contact_duration_s = 2.0
-trials_per_material = 8
+trials_per_material = 6
 contact_conductance_w_m2k = 3000.0
 
 [finger]
 temp_c = 33.0
-persons = 3
-trials_per_person = 4
+persons = 2
+trials_per_person = 3
 
 [[objects]]
 material = "cork"
@@ -107,15 +107,18 @@ def test_a_lab_walks_from_its_scene_to_a_live_session(tmp_path, own_materials, c
                  "effusivity-lda", "--folds", "4", "--json", str(cv)]) == 0
     report = json.loads(cv.read_text())
     assert report["classes"] == ["aluminium", "cork", "granite", "plexiglass"]
-    assert report["trials"] == 32 and report["folds"] == 4
+    assert report["trials"] == 24 and report["folds"] == 4
     # Four effusivities 100 to 24,000 W s^0.5/(m^2 K) apart by 4x and more.
     assert report["accuracy_by_window_s"]["1"] == 1.0
     capsys.readouterr()
     out = tmp_path / "demo"
-    assert main(["demo", "--scene", str(scene), "--materials", "cork,granite,aluminium,plexiglass",
+    # (One of the scene's own materials and one of the package's: the suite's
+    # time; `telethermal demo --scene lab-pad.toml --materials
+    # cork,granite,aluminium,plexiglass` names all four.)
+    assert main(["demo", "--scene", str(scene), "--materials", "cork,aluminium",
                  "--contact-s", "1.5", "--out", str(out), "--seed", "4"]) == 0
     touches = json.loads((out / "demo.json").read_text())["touches"]
-    assert [t["material"] for t in touches][:4] == ["cork", "granite", "aluminium", "plexiglass"]
+    assert [t["material"] for t in touches][:2] == ["cork", "aluminium"]
     for t in touches:
         # (an "unknown" would say why: its reason is in the failure's text)
         assert (t["identified"], t["unknown_reason"]) == (t["material"], None), t
