@@ -110,6 +110,15 @@ def test_a_lab_walks_from_its_scene_to_a_live_session(tmp_path, own_materials, c
     assert report["trials"] == 24 and report["folds"] == 4
     # Four effusivities 100 to 24,000 W s^0.5/(m^2 K) apart by 4x and more.
     assert report["accuracy_by_window_s"]["1"] == 1.0
+    # The slave's models from the lab's pad contacts alone (no finger
+    # database: the generator is the scene's direct-contact model).
+    assert main(["models", "--scene", str(scene), "--data", str(tmp_path / "imported"),
+                 "--out", str(tmp_path / "models")]) == 0
+    from telethermal.ident.registry import load_model
+    from telethermal.render.generator import load_generator
+    ident = load_model(tmp_path / "models" / "identifier.npz")
+    assert set(ident.classes_) <= set(load_generator(tmp_path / "models" /
+                                                     "generator.npz").materials)
     capsys.readouterr()
     out = tmp_path / "demo"
     # (One of the scene's own materials and one of the package's: the suite's

@@ -26,8 +26,10 @@ def add_parsers(sub) -> None:
                                                 "SHA256SUMS")
     p.add_argument("--scene", default="fingertip-7")
     p.add_argument("--data", help="a dataset folder with pad/ and finger/ (e.g. from "
-                                  "`dataset generate` or `dataset import`) instead of the "
-                                  "scene's simulated databases")
+                                  "`dataset generate`), or one dataset of pad contacts (a "
+                                  "lab's `dataset import`: the generator is then the scene's "
+                                  "direct-contact model), instead of the scene's simulated "
+                                  "databases")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_models)
 

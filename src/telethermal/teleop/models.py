@@ -53,8 +53,11 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
     """A slave host's ``identifier.npz`` and ``generator.npz`` in ``out``,
     with ``SHA256SUMS`` (``sha256sum -c`` checks a copy). Trained on the
     scene's simulated databases (as the slave does at start when its config
-    names no files), or on a dataset folder ``data`` holding ``pad/`` and
-    ``finger/`` (a generated or a recorded one)."""
+    names no files), or on a dataset folder ``data``: ``pad/`` and
+    ``finger/`` (a generated or a recorded one), or one dataset of pad
+    contacts (a lab's import). Without a finger database the generator is
+    the scene's direct-contact model (its simulated finger database: the
+    closed forms and layered solutions the simulator is checked against)."""
     import hashlib
     from pathlib import Path
 
@@ -69,10 +72,16 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
     if data is None:
         identifier, generator = train_identifier(scene, seed), train_generator(scene, seed)
     else:
+        from telethermal.data.dataset import MANIFEST, trial_digest
         from telethermal.ident.registry import dataset_scene
-        identifier = make("effusivity-lda").fit(from_trials(load_dataset(Path(data) / "pad"))[0])
-        identifier.scene_ = dataset_scene(Path(data) / "pad")      # None when it has no record
-        generator = NetworkGenerator().fit(load_dataset(Path(data) / "finger"))
+        pad = Path(data) / "pad" if (Path(data) / "pad" / MANIFEST).is_file() else Path(data)
+        trials = load_dataset(pad)
+        identifier = make("effusivity-lda").fit(from_trials(trials)[0])
+        identifier.scene_ = dataset_scene(pad)          # None when it has no record
+        identifier.training_digests_ = sorted({trial_digest(t) for t in trials})
+        finger = Path(data) / "finger"
+        generator = NetworkGenerator().fit(load_dataset(finger)) \
+            if (finger / MANIFEST).is_file() else train_generator(scene, seed)
     paths = [Path(identifier.save(out / "identifier.npz")),
              Path(save_generator(generator, out / "generator.npz"))]
     sums = out / "SHA256SUMS"
