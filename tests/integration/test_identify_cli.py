@@ -150,3 +150,26 @@ def test_cross_validation_needs_two_groups_and_two_folds(gripper_db, tmp_path, c
     assert main(["identify", "cv", "--data", str(gripper_db), "--method", "effusivity-lda",
                  "--folds", "1"]) == 2
     assert "needs at least 2 folds" in capsys.readouterr().err
+
+
+def test_bench_identify_on_a_labs_own_scene(tmp_path, capsys):
+    scene = tmp_path / "two.toml"
+    scene.write_text((
+        'name = "two"\nroom_temp_c = 24.0\nsample_rate_hz = 100.0\n[pad]\nkind = "peltier"\n'
+        'layers = [["flux_sensor_film", 3.0e-4], ["thermal_grease", 2.0e-5], '
+        '["alumina", 2.5e-4]]\ngap_k = 10.0\ncontact_duration_s = 1.0\n'
+        'trials_per_material = 4\n[[objects]]\nmaterial = "wood"\nthickness_m = 0.03\n'
+        '[[objects]]\nmaterial = "aluminium"\nthickness_m = 0.03\n'))
+    out = tmp_path / "bi.json"
+    assert main(["bench", "identify", "--scene", str(scene), "--methods", "effusivity-lda",
+                 "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["scene"] == str(scene) and "the papers' sections" in report["not_run"][0]
+    cv = report["methods"]["effusivity-lda"]
+    assert cv["classes"] == ["aluminium", "wood"] and cv["trials"] == 8
+    assert cv["accuracy_by_window_s"]["1"] == 1.0           # 60x apart in effusivity
+    assert (tmp_path / "bi.png").is_file()
+    printed = capsys.readouterr().out
+    # 4 trials of each material, one group each: 4 groups, so 4 folds, said.
+    assert "effusivity-lda: 4 folds by group (4 groups, 8 trials)" in printed
+    assert "note: 5 folds asked, 4 groups: 4 folds" in printed

@@ -9,7 +9,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from telethermal.bench import devices, identify, physics, record, render, transport, view
+from telethermal.bench import (devices, identify_text, physics, record, render,
+                             transport, view)
 from telethermal.errors import TransportError
 from telethermal.ident import evaluate as ident_evaluate
 from telethermal.jsonfile import write_json
@@ -144,7 +145,7 @@ def test_identify_bench_lines():
            "session_shift": {"raw": {"accuracy_5": {"1": 0.6}}}}
     report = {"methods": {"m": rep},
               "thermometer_ablation": {"accuracy": {"ir": {"0.2": 0.5, "0.5": 0.75, "1": 1.0}}}}
-    assert identify.text_report(report, "i.json", "i.png") == [
+    assert identify_text.text_report(report, "i.json", "i.png") == [
         "m: Table 1, 7 classes 0.5 s 90 %",
         "   5 classes 0.5 s 95 % (paper 80 %), 1 s 100 %",
         "   train 1.5 s; inference p99 0.123 ms",

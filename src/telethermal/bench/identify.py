@@ -350,7 +350,11 @@ def thermometer_ablation(seed: int, method: str = "effusivity-lda") -> dict:
     return {"method": method, "accuracy": rows}
 
 
-def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = None) -> dict:
+def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = None,
+        scene: str | None = None) -> dict:
+    """The papers' tables on their scenes; with ``scene`` (a name or a
+    path: a lab's own), each method's grouped 5-fold cross-validation on
+    that scene's simulated pad database instead (``identify cv``'s report)."""
     step = progress or (lambda _m: None)
     methods = methods or sorted(METHODS)
     report = {"machine": f"{platform.node()} ({platform.machine()}, Python "
@@ -360,6 +364,16 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
               "not_run": ["lstm and rnn on the temperature channel (5 s sequences: "
                           "minutes of training per fold on this machine)"]}
     try:
+        if scene is not None:
+            from telethermal.ident.crossval import cross_validate
+            report["scene"] = scene
+            report["not_run"] = ["the papers' sections (Table 1, active/passive, "
+                                 "cross-temperature, session shift): they are the papers' "
+                                 "scenes'; run without --scene"]
+            for method in methods:
+                step(f"{method}: 5 folds on {scene}")
+                report["methods"][method] = cross_validate(_trials(scene, seed), method, 5)
+            return report
         _run_methods(report, seed, methods, step)
     finally:
         _database.cache_clear()              # trials and models are kept for one run only
@@ -429,65 +443,19 @@ def plot(report: dict, out_png) -> None:
 
 
 def run_and_save(json_path, png_path, seed: int = 0, methods=None, command: str = "",
-                 progress: Callable[[str], None] | None = None) -> dict:
+                 progress: Callable[[str], None] | None = None, scene: str | None = None
+                 ) -> dict:
     """Run the benchmark, plot it to ``png_path`` and write the JSON report
     (with ``command``); returns the report."""
     from telethermal.jsonfile import write_json
 
-    report = run(seed=seed, methods=methods, progress=progress)
+    report = run(seed=seed, methods=methods, progress=progress, scene=scene)
     report["command"] = command
-    plot(report, png_path)
+    if scene is not None:
+        from telethermal.ident.evaluate import plot_accuracy
+        plot_accuracy(report["methods"], png_path, f"{scene}: each method, 5 folds by group "
+                                                    f"(seed {seed})")
+    else:
+        plot(report, png_path)
     write_json(json_path, report)
     return report
-
-
-def _pct(by_window: dict) -> str:
-    return ", ".join(f"{k} s {100 * v:.0f} %" for k, v in by_window.items())
-
-
-def _method_lines(method: str, rep: dict) -> list[str]:
-    """One method's lines of ``telethermal bench identify``."""
-    pad = " " * len(method)
-    t1, ap = rep["table1"], rep["active_passive"]
-    lines = [f"{method}: Table 1, 7 classes " + _pct(t1["accuracy_7"]),
-             f"{pad}  5 classes " + ", ".join(
-                 f"{k} s {100 * v:.0f} % (paper {100 * t1['paper_accuracy_5'][k]:.0f} %)"
-                 if k in t1["paper_accuracy_5"] else f"{k} s {100 * v:.0f} %"
-                 for k, v in t1["accuracy_5"].items()),
-             f"{pad}  train {t1['train_s_full_database']:.1f} s; inference "
-             f"p99 {t1['inference_ms_p99']:.3f} ms",
-             f"{pad}  active pad: " + _pct(ap["active_accuracy_by_window_s"])
-             + f"; passive pad unknown {100 * ap['passive_unknown_rate']:.0f} %"]
-    if "temperature" in rep:
-        tr = rep["temperature"]
-        lines.append(f"{pad}  temperature channel, active pad: "
-                     + _pct(tr["active_accuracy_by_window_s"])
-                     + f"; passive unknown {100 * tr['passive_unknown_rate']:.0f} %")
-    lines += [f"{pad}  {name}: >= 99 % from {row['first_window_at_99pct_s']} s (paper 100 % "
-              f"within {row['paper_100pct_within_s']} s)"
-              for name, row in rep["cross_temperature"].items()]
-    dec = t1["decision"]
-    lines.append(f"{pad}  calibration error {t1['calibration_ece']:.3f}; decisions "
-                 f"within 1 s: {100 * dec['commit_rate']:.0f} % committed, "
-                 + ("-" if dec["accuracy"] is None else f"{100 * dec['accuracy']:.0f} %")
-                 + " of them right")
-    return lines + [f"{pad}  session shift (1 K), thermometer {mode}: " + _pct(row["accuracy_5"])
-                    for mode, row in rep["session_shift"].items()]
-
-
-def text_report(report: dict, json_path, png_path) -> list[str]:
-    """What ``telethermal bench identify`` prints of ``report``."""
-    lines = [line for method, rep in report["methods"].items()
-             for line in _method_lines(method, rep)]
-    lines.append("object-thermometer ablation (effusivity-lda, 0.2 / 0.5 / 1 s): " + "; ".join(
-        f"{k}: " + " / ".join(f"{100 * x:.0f}" for x in v.values()) + " %"
-        for k, v in report["thermometer_ablation"]["accuracy"].items()))
-    if "lm_vs_adam" in report:
-        lines.append("LM against Adam: " + "; ".join(
-            f"{k} loss {v['final_loss']:.4f} after {v['iterations']} iterations, "
-            f"{v['runtime_s']:.2f} s" for k, v in report["lm_vs_adam"].items()))
-    if "lstm_hidden_sweep" in report:
-        lines.append("LSTM width sweep (0.4 s / 1 s): " + "; ".join(
-            f"{k}: {100 * v['0.4']:.0f} / {100 * v['1']:.0f} %"
-            for k, v in report["lstm_hidden_sweep"]["accuracy"].items()))
-    return lines + [f"wrote {json_path} and {png_path}"]

@@ -82,14 +82,14 @@ def cmd_bench_faults(args) -> int:
 
 
 def cmd_bench_identify(args) -> int:
-    from telethermal.bench import identify
+    from telethermal.bench import identify, identify_text
 
     methods = args.methods.split(",") if args.methods else None
     png = _png(args)
     with _progress(5 * len(methods or identify.METHODS) + 3, "bench identify") as advance:
         report = identify.run_and_save(args.json, png, seed=args.seed, methods=methods,
-                                       command=_command(), progress=advance)
-    _print_lines(identify.text_report(report, args.json, png))
+                                       command=_command(), progress=advance, scene=args.scene)
+    _print_lines(identify_text.text_report(report, args.json, png))
     return 0
 
 
@@ -192,6 +192,9 @@ def _add_error(bsub) -> None:
     p.add_argument("--png")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--methods", help="comma-separated (default: all)")
+    p.add_argument("--scene", help="a scene (name or path, a lab's own): each method's grouped "
+                                   "5-fold cross-validation on its simulated pad database "
+                                   "instead of the papers' tables")
     p.set_defaults(func=cmd_bench_identify)
 
     p = bsub.add_parser("view", help="the view's first paint, its lag behind a session, and the "
