@@ -51,15 +51,18 @@ def _select(settings, only: str | None):
 
 
 def run(progress=None, quick: bool = False, only: str | None = None,
-        seeds: int | None = None, processes: bool = True, jobs: int = 2) -> dict:
+        seeds: int | None = None, processes: bool = True, jobs: int = 2,
+        scene_name: str = "fingertip-7") -> dict:
     """Both parts; ``quick``: the zero-delay and WAN rows, 2 seeds, the
     processes on one material; ``only``: parts of row names (the zero-delay
-    row is always run, every ratio needs it)."""
+    row is always run, every ratio needs it); ``scene_name``: a shipped
+    scene or a scene file (its processes touch wood and steel where it has
+    them, else its first two materials)."""
     from telethermal.bench import faults_sim
     from telethermal.teleop.master import DisplayConfig
 
     step = progress or (lambda _m: None)
-    scene = with_finger(load_scene("fingertip-7"))
+    scene = with_finger(load_scene(scene_name))
     sim_rows = [r for r in faults_sim.ROWS if not quick or r[0] in faults_sim.ABLATION_ROWS]
     sim_rows = _select(sim_rows, only)
     settings = _select([SETTINGS[0], SETTINGS[2]] if quick else SETTINGS, only)
@@ -70,7 +73,9 @@ def run(progress=None, quick: bool = False, only: str | None = None,
     n_seeds = seeds if seeds is not None else (2 if quick else SIM_SEEDS)
     if n_seeds < 1:
         raise BenchError(f"--seeds must be >= 1, got {n_seeds}")
-    materials = MATERIALS[:1] if quick else MATERIALS
+    materials = MATERIALS if set(MATERIALS) <= set(scene.materials) else \
+        tuple(scene.materials[:2])
+    materials = materials[:1] if quick else materials
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         step("training")

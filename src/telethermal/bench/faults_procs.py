@@ -205,7 +205,7 @@ def run_processes(scene, out: Path, ident: Path, gen: Path, settings, materials,
     traces by setting and the services' exit codes."""
     s_control, s_stream, p_control, p_stream, s_admin, m_admin = free_ports(6)
     ports = (s_control, s_stream, s_admin, m_admin)
-    slave_cfg, master_cfg = write_configs(out, scene.name, ident, gen, ports, 0,
+    slave_cfg, master_cfg = write_configs(out, scene.ref or scene.name, ident, gen, ports, 0,
                                           security="plain",
                                           master_ports=(p_control, p_stream),
                                           realtime_priority=20)

@@ -196,7 +196,7 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
     with tempfile.TemporaryDirectory() as tmp:
         procs = []
         for i, part in enumerate(parts):
-            job = {"scene": scene.name, "identifier": str(identifier_path),
+            job = {"scene": scene.ref or scene.name, "identifier": str(identifier_path),
                    "generator": str(generator_path), "seeds": list(seeds),
                    "contact_s": contact_s, "units": part, "links": dict(rows),
                    "rate_hz": config.rate_hz, "before": config.before}

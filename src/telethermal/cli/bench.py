@@ -70,7 +70,8 @@ def cmd_bench_faults(args) -> int:
 
     with _progress(len(faults_sim.ROWS) + len(faults.SETTINGS) + 1, "bench faults") as advance:
         report = faults.run(progress=advance, quick=args.quick, only=args.only,
-                            seeds=args.seeds, processes=not args.no_processes, jobs=args.jobs)
+                            seeds=args.seeds, processes=not args.no_processes, jobs=args.jobs,
+                            scene_name=args.scene)
     traces = report.pop("_traces")
     report["command"] = _command()
     png = faults.plot(report, traces, _png(args))
@@ -164,6 +165,9 @@ def _add_faults(bsub) -> None:
                                              "(default 5; 2 with --quick)")
     p.add_argument("--jobs", type=int, default=2,
                    help="worker processes for the simulated rows (default 2)")
+    p.add_argument("--scene", default="fingertip-7",
+                   help="a shipped scene or a scene file (a lab's own): its materials, seeds "
+                        "and processes")
     p.add_argument("--no-processes", action="store_true",
                    help="the simulated part only (no services, no fault proxy)")
     p.set_defaults(func=cmd_bench_faults)

@@ -11,6 +11,7 @@ listed by :func:`list_scenes`; ``load_scene`` takes a shipped name or a path.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 import tomllib
@@ -144,6 +145,9 @@ class Scene:
     source: str = ""
     #: The scene's own materials table (its ``materials`` key), if any.
     materials_table: str | None = None
+    #: What loads this scene again in another process: a shipped scene's
+    #: name, or a scene file's absolute path ("" when parsed from a table).
+    ref: str = ""
 
     @property
     def materials(self) -> list[str]:
@@ -403,7 +407,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
             raise SceneError(f"scene file {path} does not exist" + (
                 f" (did you mean {path.parent / near[0]}?)" if near else "") +
                 ("" if path.suffix == ".toml" else "; a scene file ends in .toml"))
-        text, source = path.read_text(), str(path)
+        text, source, ref = path.read_text(), str(path), str(path.resolve())
     else:
         if name not in shipped:
             near = difflib.get_close_matches(name, shipped, n=1)
@@ -411,11 +415,12 @@ def load_scene(name_or_path: str | Path) -> Scene:
                 f" (did you mean {near[0]!r}?)" if near else "") +
                 f"; shipped scenes: {', '.join(shipped)}; or give a scene file's path (.toml)")
         text, source = _shipped().joinpath(f"{name}.toml").read_text(), f"{name}.toml"
+        ref = name
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML: {exc}") from exc
-    return parse_scene(data, source)
+    return dataclasses.replace(parse_scene(data, source), ref=ref)
 
 
 # ---------------------------------------------------------------- models
