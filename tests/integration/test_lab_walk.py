@@ -60,6 +60,7 @@ SCALE = {"t_s": (1e3, 0.0), "heat_flux_W_m2": (1e-3, 0.0), "temperature_C": (1.0
 def own_materials(monkeypatch):
     from telethermal.physics import materials
     monkeypatch.setattr(materials, "_SCENE_MATERIALS", {})
+    monkeypatch.setattr(materials, "_PACKAGE_USED", set())
 
 
 def _export_as_the_lab_would(db: Path, out: Path) -> Path:

@@ -144,6 +144,14 @@ def test_a_slave_refused_for_a_busy_port_writes_no_recording(models, tmp_path):
     finally:
         busy.close()
     assert not (tmp_path / "rec").exists() or not any((tmp_path / "rec").iterdir())
+    # A failure after the sockets and the recording opened (an object the
+    # scene does not have): the recording is removed, the sockets closed.
+    config = SlaveConfig(seed=5, admin_port=admin, record_dir=str(tmp_path / "rec"),
+                         place="unobtainium", transport=TransportConfig(
+                             security="plain", control_port=control, stream_port=stream))
+    with pytest.raises(TelethermalError, match="unobtainium"):
+        SlaveService(config, identifier, generator)
+    assert not any((tmp_path / "rec").glob("*.mcap"))
     # The ports it did take are free again: a slave starts on them now.
     config = SlaveConfig(seed=5, admin_port=admin, record_dir=str(tmp_path / "rec"),
                          transport=TransportConfig(security="plain", control_port=control,

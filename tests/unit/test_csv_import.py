@@ -155,3 +155,55 @@ def test_any_numbers_survive_the_separators(tmp_path_factory, values, sep):
     np.testing.assert_array_equal(ch["heat_flux_W_m2"], np.array(values))
     with pytest.raises(DatasetError):
         read_lab_csv(path, CsvSpec({"force_N": "F"}, {}))
+
+
+def test_the_onset_inside_a_file_from_its_force_or_given(tmp_path):
+    # The file's time starts at 0 with 20 samples before contact: the onset
+    # is the first force >= 1 N (sample 20), or what --onset-s says.
+    from telethermal.data.csv_import import lab_trial
+
+    f = tmp_path / "late.csv"
+    lab_file(f, n=120, start_s=-0.2)
+    text = f.read_text().splitlines()
+    # shift the file's clock: time in ms from 0 (the contact at 200 ms)
+    f.write_text("\n".join(text[:1] + [",".join([f"{float(r.split(',')[0]) + 200.0:.6f}",
+                                                  *r.split(",")[1:]]) for r in text[1:]]) + "\n")
+    spec = CsvSpec.from_options(COLUMNS, UNITS)
+    values = {"material": "glass", "group": "g", "T_object_C": 24, "T_pad_C": 34,
+              "T_room_C": 22}
+    found = lab_trial(f, spec, values, 0)
+    assert found.channels["t_s"][20] == pytest.approx(0.0, abs=1e-9)
+    assert found.channels["t_s"][0] == pytest.approx(-0.2, abs=1e-9)
+    given_ = lab_trial(f, spec, {**values, "onset_s": "0,25"}, 0)   # a decimal comma too
+    assert given_.channels["t_s"][25] == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(DatasetError, match=r"late\.csv: onset_s 'soon' is not a number"):
+        lab_trial(f, spec, {**values, "onset_s": "soon"}, 0)
+    with pytest.raises(DatasetError, match=r"material '\.\./x': letters, digits"):
+        lab_trial(f, spec, {**values, "material": "../x"}, 0)
+
+
+def test_line_numbers_count_blank_lines_and_one_file_is_imported_once(tmp_path, capsys):
+    f = tmp_path / "lab" / "a.csv"
+    f.parent.mkdir()
+    lab_file(f)
+    lines = f.read_text().splitlines()
+    cells = lines[4].split(",")
+    lines[4] = ",".join([cells[0], "bad", *cells[2:]])                 # file line 5
+    f.write_text("\n".join(lines[:2] + [""] + lines[2:]) + "\n")       # a blank line 3
+    with pytest.raises(DatasetError, match=r"a\.csv line 6, column 'q_kW': 'bad'"):
+        read_lab_csv(f, CsvSpec.from_options(COLUMNS, UNITS))
+    lab_file(f)
+    (tmp_path / "lab" / "manifest.csv").write_text("file,material,group\na.csv,glass,g1\n")
+    # The same file on the command line (spelt another way) and in the manifest: once.
+    into = tmp_path / "ds"
+    assert main(["dataset", "import", str(tmp_path / "lab" / ".." / "lab" / "a.csv"),
+                 "--manifest", str(tmp_path / "lab" / "manifest.csv"), "--into", str(into),
+                 "--columns", COLUMNS, "--units", UNITS, "--object-c", "24", "--pad-c", "34",
+                 "--room-c", "22"]) == 0
+    trials = load_dataset(into)
+    assert len(trials) == 1 and trials[0].group == "g1"
+    # Again: the same contact, refused as imported before.
+    assert main(["dataset", "import", str(f), "--into", str(into), "--columns", COLUMNS,
+                 "--units", UNITS, "--material", "glass", "--group", "g1", "--object-c", "24",
+                 "--pad-c", "34", "--room-c", "22"]) == 2
+    assert "imported before?" in capsys.readouterr().err

@@ -180,6 +180,11 @@ def test_the_pad_face_size_is_a_key_and_sets_the_area_the_module_pumps_over(tmp_
                                              r"height\] in mm"):
             parse_scene(tomllib.loads(MINIMAL.replace("gap_k = 10.0",
                                                       f"gap_k = 10.0\nsize_mm = {bad}")), "x.toml")
+    # Every user of the area gets the pad's face: the display's load model,
+    # the in-process plant (its pad heat capacity), the display floor.
+    from telethermal.teleop.run import display_model_args
+    assert display_model_args(with_finger_for_test(sized))["pad_area_m2"] == sized.pad.area_m2
+    assert hardware(sized).area_m2 == sized.pad.area_m2
     # The same module's heat over a face a quarter of its own: four times the
     # flux at every junction temperature (W/m^2 = Qc / area), to rounding.
     side = 1e3 * module_face ** 0.5 / 2
@@ -211,6 +216,7 @@ def own_materials(monkeypatch):
     """A clean registry of scene materials (they apply to the process)."""
     from telethermal.physics import materials
     monkeypatch.setattr(materials, "_SCENE_MATERIALS", {})
+    monkeypatch.setattr(materials, "_PACKAGE_USED", set())
 
 
 TABLE = """name,role,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,source
@@ -269,3 +275,40 @@ def test_a_bad_materials_table_is_named_by_file_line_and_column(tmp_path, own_ma
 def with_finger_for_test(scene):
     from telethermal.teleop.run import with_finger
     return with_finger(scene)
+
+
+def test_what_a_scene_uses_of_the_package_cannot_change_under_it(tmp_path, own_materials):
+    from telethermal.physics.materials import get_material
+
+    # A table that redefines a pad layer (alumina): a scene using the
+    # package's alumina is refused after it, whatever it touches.
+    (tmp_path / "t.csv").write_text(TABLE + "alumina,pad,1.0,3900,880,ours\n")
+    (tmp_path / "a.toml").write_text('materials = "t.csv"\n' + MINIMAL)
+    load_scene(tmp_path / "a.toml")
+    with pytest.raises(SceneError, match=r"'alumina' was redefined in this process"):
+        load_scene("fingertip-7")
+
+
+def test_a_table_cannot_shadow_a_row_already_used_and_a_failed_scene_registers_nothing(
+        tmp_path, own_materials):
+    from telethermal.physics import materials
+
+    load_scene("fingertip-7")                    # uses the package's rows (aluminium, ...)
+    (tmp_path / "t.csv").write_text("# our table\n# (comments count as lines)\n" +
+                                    TABLE.replace("glass,object", "aluminium,object"))
+    (tmp_path / "a.toml").write_text('materials = "t.csv"\n' + MINIMAL)
+    with pytest.raises(SceneError, match=r"'aluminium' shadows the package's row, which this "
+                                         r"process has already used"):
+        load_scene(tmp_path / "a.toml")
+    assert "cork" not in materials._SCENE_MATERIALS
+    # The line numbers count the comment lines: the bad value is on line 4.
+    (tmp_path / "t.csv").write_text("# ours\n# two comments\n" + TABLE.replace("0.045", "x"))
+    with pytest.raises(SceneError, match=r"t\.csv line 4, column 'conductivity_w_mk': 'x'"):
+        load_scene(tmp_path / "a.toml")
+    # A scene whose table is fine but whose body is not registers nothing.
+    (tmp_path / "t.csv").write_text(TABLE)
+    (tmp_path / "a.toml").write_text('materials = "t.csv"\n' + MINIMAL.replace(
+        "gap_k = 10.0", "gapk = 10.0"))
+    with pytest.raises(SceneError, match="gapk"):
+        load_scene(tmp_path / "a.toml")
+    assert "cork" not in materials._SCENE_MATERIALS

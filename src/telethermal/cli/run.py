@@ -96,6 +96,9 @@ def cmd_replay(args) -> int:
     from telethermal.teleop.replay import touch_count
 
     n = touch_count(args.file)
+    if n == 0:
+        from telethermal.record.recording import RecordingError
+        raise RecordingError(f"{args.file}: no touch recorded: nothing to replay")
     touches = range(n) if args.touch is None else [args.touch]
     for i in touches:
         # One touch: its files in --out; several: one folder per touch.

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.data.dataset import MANIFEST_COLUMNS, TIME, Trial
+from telethermal.data.dataset import MANIFEST_COLUMNS, TIME, Trial, trial_digest
 from telethermal.errors import DatasetError
 
 #: Dataset channels a lab file may map to, and the units each may be given in
@@ -107,7 +107,9 @@ def read_lab_csv(path: str | Path, spec: CsvSpec) -> dict[str, np.ndarray]:
     except UnicodeDecodeError as exc:
         raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}): not a CSV file") \
             from exc
-    lines = [ln for ln in text.splitlines() if ln.strip()]
+    numbered = [(i, ln) for i, ln in enumerate(text.splitlines(), start=1) if ln.strip()]
+    file_line = [i for i, _ in numbered]            # a row's line in the file (blanks skipped)
+    lines = [ln for _, ln in numbered]
     if len(lines) < 3:
         raise DatasetError(f"{path}: a header and at least two samples are needed")
     delimiter = ";" if lines[0].count(";") > lines[0].count(",") else \
@@ -127,7 +129,8 @@ def read_lab_csv(path: str | Path, spec: CsvSpec) -> dict[str, np.ndarray]:
                                f"header: {', '.join(header)}")
     index = {n: header.index(c) for n, c in wanted.items() if c in header}
     out = {n: np.empty(len(rows) - 1) for n in index}
-    for line, row in enumerate(rows[1:], start=2):
+    for k, row in enumerate(rows[1:], start=1):
+        line = file_line[k]
         if len(row) != len(header):
             raise DatasetError(f"{path} line {line}: {len(row)} cells, {len(header)} columns in "
                                f"the header")
@@ -141,7 +144,7 @@ def read_lab_csv(path: str | Path, spec: CsvSpec) -> dict[str, np.ndarray]:
             if not math.isfinite(value):
                 raise DatasetError(f"{path} line {line}, column {header[i]!r}: {cell!r} is not "
                                    f"finite")
-            out[n][line - 2] = value
+            out[n][k - 1] = value
     for n in out:
         factor, offset = UNITS[n][spec.units.get(n, next(iter(UNITS[n])))]
         out[n] = out[n] * factor + offset
@@ -149,15 +152,15 @@ def read_lab_csv(path: str | Path, spec: CsvSpec) -> dict[str, np.ndarray]:
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0))
         what = "restarts" if steps[k] < 0 else "repeats"
-        raise DatasetError(f"{path} line {k + 3}, column {header[index[TIME]]!r}: the time "
-                           f"{what} ({out[TIME][k]:g} then {out[TIME][k + 1]:g}): one contact "
-                           f"per file, time increasing")
+        raise DatasetError(f"{path} line {file_line[k + 2]}, column {header[index[TIME]]!r}: "
+                           f"the time {what} ({out[TIME][k]:g} then {out[TIME][k + 1]:g}): one "
+                           f"contact per file, time increasing")
     rel = np.abs(steps / np.median(steps) - 1.0)
     if np.any(rel > 0.5):
         k = int(np.argmax(rel > 0.5))
-        raise DatasetError(f"{path} line {k + 3}: a gap in the time ({steps[k]:g} s after "
-                           f"{out[TIME][k]:g} s, the usual step {np.median(steps):g} s): samples "
-                           f"missing")
+        raise DatasetError(f"{path} line {file_line[k + 2]}: a gap in the time ({steps[k]:g} s "
+                           f"after {out[TIME][k]:g} s, the usual step {np.median(steps):g} s): "
+                           f"samples missing")
     return out
 
 
@@ -181,7 +184,9 @@ def lab_trial(path: str | Path, spec: CsvSpec, values: dict, index: int) -> Tria
             raise DatasetError(f"{path}: no {key} given (--{_option(key)} or a manifest column "
                                f"{key!r})")
     onset = values.get("onset_s")
-    if onset in (None, ""):
+    if onset not in (None, ""):
+        onset = _number(values, "onset_s", path)
+    else:
         if np.any(channels[TIME] < 0):
             onset = 0.0                              # the file's own t = 0 is the contact
         else:
@@ -195,12 +200,19 @@ def lab_trial(path: str | Path, spec: CsvSpec, values: dict, index: int) -> Tria
         raise DatasetError(f"{path}: the contact begins at {onset} s, after the last sample")
     channels = {TIME: t, **{n: v for n, v in channels.items() if n != TIME}}
     rate = 1.0 / float(np.median(np.diff(t)))
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", path.stem) or f"trial-{index}"
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", path.stem).strip(".") or f"trial-{index}"
     material = str(values["material"]).strip()
-    return Trial(f"{stem}-{index}", material, f"{material}/{stem}-{index}.csv", round(rate, 6),
-                 _number(values, "T_object_C", path), _number(values, "T_pad_C", path),
-                 _number(values, "T_room_C", path), str(values["group"]).strip(),
-                 extra={"source": path.name}, channels=channels)
+    if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_ .|+-]*", material) or ".." in material:
+        raise DatasetError(f"{path}: material {material!r}: letters, digits and _ . - + | only "
+                           f"(it names a folder of the dataset)")
+    trial = Trial("", material, "", round(rate, 6), _number(values, "T_object_C", path),
+                  _number(values, "T_pad_C", path), _number(values, "T_room_C", path),
+                  str(values["group"]).strip(), extra={"source": path.name}, channels=channels)
+    # Named by content: the same contact imported again has the same id (and
+    # is refused as such), two different ones never share one.
+    trial.trial_id = f"{stem}-{trial_digest(trial)[:8]}"
+    trial.file = f"{material}/{trial.trial_id}.csv"
+    return trial
 
 
 def _option(key: str) -> str:
@@ -219,7 +231,7 @@ def _number(values: dict, key: str, path: Path) -> float:
 
 def read_lab_manifest(path: str | Path) -> dict[str, dict]:
     """A lab's manifest: ``file`` and any of ``PER_TRIAL`` per row; the
-    files relative to the manifest. Returns {file path: values}."""
+    files relative to the manifest. Returns {resolved file path: values}."""
     path = Path(path)
     with path.open(newline="", encoding="utf-8-sig") as fh:
         reader = csv.DictReader(fh)
@@ -232,12 +244,15 @@ def read_lab_manifest(path: str | Path) -> dict[str, dict]:
             raise DatasetError(f"{path}: unknown column(s) {', '.join(unknown)}; a lab manifest "
                                f"holds file, {', '.join(PER_TRIAL)}")
         out = {}
-        for line, row in enumerate(reader, start=2):
+        for row in reader:
+            line = reader.line_num                  # the file's line (blank lines counted)
             row = {k.strip(): (v or "").strip() for k, v in row.items() if k}
             file = path.parent / row["file"]
             if not file.is_file():
                 raise DatasetError(f"{path} line {line}: file {row['file']!r} does not exist")
-            out[str(file)] = {k: v for k, v in row.items() if k != "file" and v != ""}
+            if str(file.resolve()) in out:
+                raise DatasetError(f"{path} line {line}: file {row['file']!r} listed twice")
+            out[str(file.resolve())] = {k: v for k, v in row.items() if k != "file" and v != ""}
     if not out:
         raise DatasetError(f"{path}: no rows")
     return out

@@ -244,9 +244,12 @@ def staged_dir(root: str | Path, overwrite: bool = False):
 def write_trials(root: Path, trials: Iterable[Trial]) -> None:
     """Write trials (each with ``channels``) and the manifest into ``root``
     (not atomic by itself: use inside :func:`staged_dir`)."""
-    rows = []
+    rows, ids = [], set()
     root.mkdir(parents=True, exist_ok=True)
     for trial in trials:
+        if trial.trial_id in ids:
+            raise DatasetError(f"trial {trial.trial_id!r} twice: not written")
+        ids.add(trial.trial_id)
         if trial.channels is None:
             raise DatasetError(f"trial {trial.trial_id}: no channels to write")
         dest = root / trial.file

@@ -74,17 +74,19 @@ def _parse_row(row: dict[str, str], line: int, where: str = "materials.csv") -> 
 
 def read_table(text: str, where: str) -> dict[str, Material]:
     """A materials table (the package's columns; ``#`` lines are comments)."""
-    lines = [ln for ln in text.lstrip("\ufeff").splitlines() if ln and not ln.startswith("#")]
-    rows = csv.DictReader(lines)
+    numbered = [(i, ln) for i, ln in enumerate(text.lstrip("\ufeff").splitlines(), start=1)
+                if ln.strip() and not ln.startswith("#")]
+    rows = csv.DictReader([ln for _, ln in numbered])
     missing = [c for c in COLUMNS if c not in (rows.fieldnames or [])]
     if missing:
         raise ValueError(f"{where}: missing column(s) {', '.join(missing)}; a materials table "
                          f"has {', '.join(COLUMNS)}")
     table: dict[str, Material] = {}
-    for i, r in enumerate(rows):
-        m = _parse_row(r, i + 2, where)
+    for k, r in enumerate(rows, start=1):
+        line = numbered[k][0]                      # the file's line (comments counted)
+        m = _parse_row(r, line, where)
         if m.name in table:
-            raise ValueError(f"{where} line {i + 2}: material {m.name!r} appears twice")
+            raise ValueError(f"{where} line {line}: material {m.name!r} appears twice")
         table[m.name] = m
     return table
 
@@ -101,19 +103,36 @@ def load_materials() -> dict[str, Material]:
 #: material and the table that defined it. They add to the package's table
 #: or shadow its rows, for this process.
 _SCENE_MATERIALS: dict[str, tuple[Material, str]] = {}
+#: Package rows this process has looked up: a table may no longer shadow them
+#: (what used them would silently change).
+_PACKAGE_USED: set[str] = set()
 
 
-def register_materials(table: dict[str, Material], source: str) -> None:
+def register_materials(table: dict[str, Material], source: str) -> list[str]:
     """A scene's own materials, for this process. A material another table
-    defined differently is refused (one process, one definition of a name)."""
+    defined differently is refused (one process, one definition of a name),
+    and so is a shadow of a package row this process has already used.
+    Returns the names it added (those already held, identical, excluded)."""
     for name, m in table.items():
         held = _SCENE_MATERIALS.get(name)
         if held is not None and held[0] != m:
             raise ValueError(f"{source}: material {name!r} is defined differently by "
                              f"{held[1]}, loaded before in this process: one process holds one "
                              f"definition of a material (run the scenes in separate processes)")
-    for name, m in table.items():
-        _SCENE_MATERIALS[name] = (m, source)
+        if held is None and name in _PACKAGE_USED and load_materials()[name] != m:
+            raise ValueError(f"{source}: material {name!r} shadows the package's row, which "
+                             f"this process has already used (another scene's): run the "
+                             f"scenes in separate processes")
+    added = [name for name in table if name not in _SCENE_MATERIALS]
+    for name in added:
+        _SCENE_MATERIALS[name] = (table[name], source)
+    return added
+
+
+def unregister_materials(names) -> None:
+    """Forget ``names`` (what a scene that did not load registered)."""
+    for name in names:
+        _SCENE_MATERIALS.pop(name, None)
 
 
 def shadowed_by(name: str) -> str | None:
@@ -130,7 +149,9 @@ def get_material(name: str) -> Material:
         return held[0]
     table = load_materials()
     try:
-        return table[name]
+        material = table[name]
+        _PACKAGE_USED.add(name)
+        return material
     except KeyError as exc:
         known = ", ".join(sorted(set(table) | set(_SCENE_MATERIALS)))
         raise UnknownMaterialError(

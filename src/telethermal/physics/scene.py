@@ -22,7 +22,8 @@ from pathlib import Path
 from telethermal.errors import SceneError, UnknownMaterialError
 from telethermal.physics.layered import Boundary, Layer
 from telethermal.physics.materials import (get_material, object_materials, read_table,
-                                           register_materials, shadowed_by)
+                                           register_materials, shadowed_by,
+                                           unregister_materials)
 from telethermal.physics.model import ModelChoice, choose_model
 
 PAD_KINDS = ("peltier", "water")
@@ -332,8 +333,17 @@ def _parse_dataclass(cls, table, where, source):
 
 def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     """Build a :class:`Scene` from parsed TOML, naming every bad key."""
+    own_table, added = _own_materials(data, _Reader(data, "top level", source), source)
+    try:
+        return _parse_scene(data, source, own_table)
+    except BaseException:
+        unregister_materials(added)             # a scene that did not load changes nothing
+        raise
+
+
+def _parse_scene(data: dict, source: str, own_table: str | None) -> Scene:
     r = _Reader(data, "top level", source)
-    own_table = _own_materials(data, r, source)
+    r.used.add("materials")
     room = r.num("room_temp_c", lo=-20, hi=60)
     for table in ("pad", "finger", "objects", "sensors", "variability", "model"):
         r.used.add(table)
@@ -354,23 +364,24 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         variability=_parse_dataclass(VariabilitySpec, data.get("variability"),
                                      "[variability]", source),
         tolerance_rel=tolerance, source=source, materials_table=own_table)
-    for o in scene.objects:
-        other = shadowed_by(o.material)
+    for name in [o.material for o in scene.objects] + [lay.material.name
+                                                       for lay in scene.pad.layers]:
+        other = shadowed_by(name)
         if other is not None and other != own_table:
-            r.fail(f"material {o.material!r} was redefined in this process by {other}; this "
+            r.fail(f"material {name!r} was redefined in this process by {other}; this "
                    f"scene uses the package's (run the two scenes in separate processes)")
     r.done()
     return scene
 
 
-def _own_materials(data: dict, reader: _Reader, source: str) -> str | None:
+def _own_materials(data: dict, reader: _Reader, source: str) -> tuple[str | None, list]:
     """``materials = "FILE.csv"``: the scene's own materials table (the
     package's columns), relative to the scene file; its rows add to the
-    package's or shadow them. Returns the table's path, or None."""
-    reader.used.add("materials")
+    package's or shadow them. Returns the table's path (or None) and the
+    names it added to this process."""
     name = data.get("materials")
     if name is None:
-        return None
+        return None, []
     if not isinstance(name, str) or not name.strip():
         reader.fail(f"'materials' must be the path of a CSV table, got {name!r}")
     path = Path(source).parent / name
@@ -378,10 +389,10 @@ def _own_materials(data: dict, reader: _Reader, source: str) -> str | None:
         reader.fail(f"'materials' = {name!r}: no such file {path}")
     try:
         table = read_table(path.read_text(encoding="utf-8"), str(path))
-        register_materials(table, str(path))
+        added = register_materials(table, str(path))
     except (ValueError, UnicodeDecodeError) as exc:
         raise SceneError(f"{source}: {exc}") from exc
-    return str(path)
+    return str(path), added
 
 
 def _shipped():

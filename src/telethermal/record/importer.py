@@ -63,20 +63,30 @@ def import_recordings(paths, into: str | Path, material: str | None = None,
     into = Path(into)
     spec = spec or CsvSpec({}, {})
     rows = read_lab_manifest(manifest) if manifest is not None else {}
-    files = [str(p) for p in paths] + [f for f in rows if f not in {str(p) for p in paths}]
+    for p in paths:
+        if not Path(p).is_file():
+            raise DatasetError(f"{p}: no such file")
+    # One file, however it is spelt, once (the command line's and the manifest's).
+    files = list(dict.fromkeys([str(Path(p).resolve()) for p in paths] + list(rows)))
     if not files:
         raise DatasetError("no files to import: give them, or a --manifest listing them")
     existing = load_dataset(into) if (into / "manifest.csv").is_file() else []
     new = []
     for i, path in enumerate(files):
-        if not Path(path).is_file():
-            raise DatasetError(f"{path}: no such file")
-        if is_recording(path):
-            new += trials_from_recording(path, material, group or "recorded")
-            continue
         per_trial = {"material": material, "group": group, **(values or {}),
                      **rows.get(path, {})}
+        if is_recording(path):
+            new += trials_from_recording(path, per_trial["material"],
+                                         per_trial["group"] or "recorded")
+            continue
         new.append(lab_trial(path, spec, per_trial, i))
+    seen: dict[str, str] = {}
+    for t in new:
+        source = t.extra.get("source", "?")
+        if t.trial_id in seen:
+            raise DatasetError(f"{source} and {seen[t.trial_id]} give the same trial "
+                               f"{t.trial_id!r} (the same contact twice?)")
+        seen[t.trial_id] = source
     ids = {t.trial_id for t in existing}
     clash = [t.trial_id for t in new if t.trial_id in ids]
     if clash:

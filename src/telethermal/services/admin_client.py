@@ -28,7 +28,7 @@ class AdminError(TelethermalError):
 
 #: The names of this host an admin address may give (the admin socket
 #: listens on 127.0.0.1 only).
-LOCAL_HOSTS = ("127.0.0.1", "localhost")
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
 
 
 def _host_port(where: str, role: str) -> int | None:
@@ -58,7 +58,7 @@ def resolve(where: str | int | None, role: str):
         return int(where)
     if str(where).startswith("ipc://"):
         return str(where)
-    port = _host_port(str(where), role)
+    port = None if Path(where).is_file() else _host_port(str(where), role)
     if port is not None:
         return port
     from telethermal.services.config import load_config

@@ -206,7 +206,11 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     # (the object's true temperature, the decision) is this touch's only once
     # its pad is up; and a next touch must not begin on a pad still down
     # (a place would lift it then, and the memory learn it after a forget).
-    _wait_pad_up(slave_admin, timeout_s=5.0)
+    if not _wait_pad_up(slave_admin, timeout_s=5.0):
+        import logging
+        logging.getLogger(__name__).warning(
+            "%s: the slave's pad was not up 5 s after the touch (or the slave did not "
+            "answer): its report may be an earlier touch's", material)
     report = call(slave_admin, "report")
     slave_devices = report.get("devices")
     if report.get("object_true_c") is None:          # the slave was restarted meanwhile
