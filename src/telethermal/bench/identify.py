@@ -29,8 +29,9 @@ import numpy as np
 from telethermal.data.generate import pad_database
 from telethermal.ident.anytime import decide_all
 from telethermal.ident.base import group_folds
-from telethermal.ident.evaluate import (FIRST_PAPER_MERGE, decision_summary, default_windows,
-                                       evaluate, expected_calibration_error, inference_cost_ms)
+from telethermal.ident.evaluate import (ECE_MAX_S, FIRST_PAPER_MERGE, decision_summary,
+                                       default_windows, evaluate, expected_calibration_error,
+                                       inference_cost_ms)
 from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import METHODS, make
 from telethermal.physics.scene import load_scene
@@ -41,10 +42,6 @@ PAPER1_5_CLASSES = {"0.25": 29 / 35, "0.5": 34 / 35, "0.75": 1.0}
 #: 100 % within 0.5 s (II, III) and 0.7 s (V).
 PAPER2 = {"active_100pct_within_s": 0.4, "cross": {"II": 0.5, "III": 0.5, "V": 0.7}}
 WINDOWS_T1 = (0.25, 0.5, 0.75, 1.0)
-#: The calibration error pools the held-out posteriors of every window of a
-#: model up to this time after contact (every posterior a decision within
-#: 1 s consults).
-ECE_MAX_S = 1.0
 
 
 def _trials(scene_name: str, seed: int):

@@ -25,16 +25,11 @@ import numpy as np
 from telethermal.errors import IdentificationError
 from telethermal.ident.anytime import decide_all
 from telethermal.ident.base import group_folds
-from telethermal.ident.evaluate import (decision_summary, expected_calibration_error,
-                                        wilson_interval)
+from telethermal.ident.evaluate import (ECE_MAX_S, decision_summary,
+                                        expected_calibration_error, wilson_interval)
 from telethermal.ident.label import Reason
 from telethermal.ident.prepare import MIN_GAP_K, from_trials
 from telethermal.ident.registry import make
-
-#: Posteriors pooled for the calibration error: every window up to this
-#: time after contact (those a decision within 1 s consults), as ``bench
-#: identify`` pools them.
-ECE_MAX_S = 1.0
 
 
 def cross_validate(trials, method: str, folds: int = 5, channels=("heat_flux_W_m2",),

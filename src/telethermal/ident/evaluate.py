@@ -54,6 +54,12 @@ def _percentiles(values):
             "values": [round(float(x), 4) for x in v]}
 
 
+#: Calibration errors pool the held-out posteriors of every window of a
+#: model up to this time after contact (every posterior a decision within
+#: 1 s consults): ``identify cv`` and ``bench identify`` alike.
+ECE_MAX_S = 1.0
+
+
 def expected_calibration_error(proba: np.ndarray, truth: np.ndarray, bins: int = 15) -> float:
     """Top-label expected calibration error (Guo et al. 2017): the mean over
     equal-width confidence bins of |accuracy - confidence|, weighted by the

@@ -160,5 +160,6 @@ def get_material(name: str) -> Material:
 
 def object_materials() -> list[str]:
     """Names of the materials a scene may place as objects."""
-    names = set(load_materials()) | set(_SCENE_MATERIALS)
-    return sorted(n for n in names if get_material(n).role == "object")
+    # (read directly: listing the rows is not using them, see _PACKAGE_USED)
+    table = {**load_materials(), **{n: m for n, (m, _) in _SCENE_MATERIALS.items()}}
+    return sorted(n for n, m in table.items() if m.role == "object")

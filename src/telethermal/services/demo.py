@@ -4,6 +4,7 @@ material directly."""
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -24,6 +25,8 @@ from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
 from telethermal.view.server import ViewServer
 from telethermal.wire.transport import generate_link_keys
+
+log = logging.getLogger(__name__)
 
 
 def free_ports(n: int) -> list[int]:
@@ -202,13 +205,11 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
             thread.join()
     if not result.get("ok"):
         raise TelethermalError(f"master: {result.get('error')}")
-    # The master's lift reaches the slave one network delay later: its report
-    # (the object's true temperature, the decision) is this touch's only once
-    # its pad is up; and a next touch must not begin on a pad still down
-    # (a place would lift it then, and the memory learn it after a forget).
+    # The lift reaches the slave a network delay later: its report is this
+    # touch's only once its pad is up, and the next place must not find it
+    # down (it would lift it, and the memory learn it after a forget).
     if not _wait_pad_up(slave_admin, timeout_s=5.0):
-        import logging
-        logging.getLogger(__name__).warning(
+        log.warning(
             "%s: the slave's pad was not up 5 s after the touch (or the slave did not "
             "answer): its report may be an earlier touch's", material)
     report = call(slave_admin, "report")
