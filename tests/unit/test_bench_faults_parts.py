@@ -18,3 +18,52 @@ def test_the_processes_rows_keep_their_names_and_order():
         "delay 0 ms", "delay 200 ms", "delay 200 ms, jitter 20 ms, loss 5 %", "loss 20 %",
         "2 s partition mid-contact", "slave crash and restart mid-contact",
         "master crash and restart mid-contact"]
+
+
+def test_delays_replace_the_pure_delay_rows_of_both_parts_and_keep_the_rest():
+    import pytest
+
+    from telethermal.errors import BenchError
+
+    delays = faults.parse_delays("30, 150,0,30")
+    assert delays == [0.0, 30.0, 150.0]                      # 0 always, sorted, once
+    rows = faults.with_delays(faults_sim.ROWS, delays)
+    assert [n for n, _ in rows[:3]] == ["delay 0 ms", "delay 30 ms", "delay 150 ms"]
+    assert rows[0][1] == {} and rows[1][1] == {"delay_s": 0.03}
+    kept = [n for n, link in faults_sim.ROWS if set(link) - {"delay_s"}]
+    assert [n for n, _ in rows[3:]] == kept                  # jitter, loss: unchanged
+    assert faults_sim.WAN in kept                            # the summary's row stays
+    procs = [n for n, _ in faults.with_delays(faults.SETTINGS, delays)]
+    assert procs[:3] == ["delay 0 ms", "delay 30 ms", "delay 150 ms"]
+    assert "delay 200 ms" not in procs and "2 s partition mid-contact" in procs
+    assert faults.with_delays(faults.SETTINGS, None) == list(faults.SETTINGS)
+    for bad, says in (("30,abc", "'abc' is not a delay"), ("-5", "-5 ms is outside"),
+                      ("5000", "5000 ms is outside")):
+        with pytest.raises(BenchError, match=says):
+            faults.parse_delays(bad)
+
+
+def test_the_benches_take_a_scene_from_the_command_line(monkeypatch, tmp_path):
+    """--scene reaches every bench that runs on a scene (the run itself is
+    measured by hand: a lab scene's bench faults --quick takes 30 s)."""
+    from telethermal.bench import render, skin_floor
+    from telethermal.cli import main
+
+    seen = {}
+
+    def fake(name):
+        def run(*args, **kwargs):
+            seen[name] = kwargs.get("scene_name", kwargs.get("scene"))
+            raise SystemExit(0)
+        return run
+
+    monkeypatch.setattr(render, "run_and_save", fake("render"))
+    monkeypatch.setattr(skin_floor, "run_and_save", fake("skin-floor"))
+    monkeypatch.setattr(faults, "run", fake("faults"))
+    for bench in ("render", "skin-floor", "faults"):
+        try:
+            main(["bench", bench, "--json", str(tmp_path / "x.json"), "--scene", "lab.toml"])
+        except SystemExit:
+            pass
+    assert seen == {"render": "lab.toml", "skin-floor": "lab.toml", "faults": "lab.toml"}
+    assert main(["bench", "faults", "--json", str(tmp_path / "x.json"), "--delays", "x"]) == 2

@@ -36,7 +36,7 @@ from telethermal.render.generator import save_generator
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import with_finger
 
-__all__ = ["CONTACT_S", "MATERIALS", "SETTINGS", "SIM_SEEDS", "plot", "plot_traces", "run",
+__all__ = ["CONTACT_S", "MATERIALS", "SETTINGS", "SIM_SEEDS", "parse_delays", "plot", "plot_traces", "run",
            "text_report"]
 
 #: Seeds per material of the simulated part (the issue asks for >= 5).
@@ -50,23 +50,56 @@ def _select(settings, only: str | None):
     return [s for s in settings if s[0] == "delay 0 ms" or any(p in s[0] for p in parts)]
 
 
+def parse_delays(text: str) -> list[float]:
+    """``--delays``: comma-separated one-way delays in ms, each in
+    [0, ``MAX_DELAY_MS``]; 0 is added (every ratio needs it)."""
+    out = set()
+    for part in text.split(","):
+        try:
+            ms = float(part.strip())
+        except ValueError:
+            raise BenchError(f"--delays: {part.strip()!r} is not a delay in ms "
+                             f"(give e.g. --delays 0,50,200)") from None
+        if not 0.0 <= ms <= MAX_DELAY_MS:
+            raise BenchError(f"--delays: {ms:g} ms is outside [0, {MAX_DELAY_MS:g}] ms")
+        out.add(ms)
+    return sorted(out | {0.0})
+
+
+def with_delays(rows, delays_ms: list[float] | None) -> list:
+    """``rows`` with their pure-delay rows (no jitter, loss or fault)
+    replaced by one row per delay of ``delays_ms`` (None: unchanged)."""
+    if delays_ms is None:
+        return list(rows)
+    pure = [(f"delay {d:g} ms", {"delay_s": d / 1e3} if d else {}) for d in delays_ms]
+    return pure + [r for r in rows if set(r[1]) - {"delay_s"}]
+
+
+#: The longest one-way delay ``--delays`` takes (ms): longer than the
+#: bench's contacts, so nothing after it would be measured.
+MAX_DELAY_MS = 2000.0
+
+
 def run(progress=None, quick: bool = False, only: str | None = None,
         seeds: int | None = None, processes: bool = True, jobs: int = 2,
-        scene_name: str = "fingertip-7") -> dict:
+        scene_name: str = "fingertip-7", delays_ms: list[float] | None = None) -> dict:
     """Both parts; ``quick``: the zero-delay and WAN rows, 2 seeds, the
     processes on one material; ``only``: parts of row names (the zero-delay
     row is always run, every ratio needs it); ``scene_name``: a shipped
     scene or a scene file (its processes touch wood and steel where it has
-    them, else its first two materials)."""
+    them, else its first two materials); ``delays_ms``: the pure-delay rows
+    of both parts (``parse_delays``; default: the committed rows)."""
     from telethermal.bench import faults_sim
     from telethermal.teleop.master import DisplayConfig
 
     step = progress or (lambda _m: None)
     scene = with_finger(load_scene(scene_name))
     sim_rows = [r for r in faults_sim.ROWS if not quick or r[0] in faults_sim.ABLATION_ROWS]
-    sim_rows = _select(sim_rows, only)
-    settings = _select([SETTINGS[0], SETTINGS[2]] if quick else SETTINGS, only)
-    names = list(dict.fromkeys([n for n, _ in faults_sim.ROWS] + [n for n, _ in SETTINGS]))
+    sim_rows = _select(with_delays(sim_rows, delays_ms), only)
+    settings = _select(with_delays([SETTINGS[0], SETTINGS[2]] if quick else SETTINGS,
+                                   delays_ms), only)
+    names = list(dict.fromkeys([n for n, _ in with_delays(faults_sim.ROWS, delays_ms)] +
+                               [n for n, _ in with_delays(SETTINGS, delays_ms)]))
     parts = [q.strip() for q in (only or "").split(",") if q.strip()]
     if only and not any(q in n for q in parts for n in names):
         raise BenchError(f"--only {only!r} matches no setting; settings: " + "; ".join(names))

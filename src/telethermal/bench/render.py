@@ -4,7 +4,7 @@ feed-forward, every material), PID gains, the before-identification strategy
 and the flux generator, and the display loop's timing on the real clock.
 
 Every session is the in-process session of ``telethermal session`` on
-``fingertip-7`` (identifier and generator trained once on the scene's own
+``fingertip-7`` or ``--scene`` (identifier and generator trained once on its
 databases, seed 0), 3 s contacts, operators and slave trials drawn from the
 session seeds, so that every configuration sees the very same touches.
 Errors are those of the session JSON: ``flux_rms_error_rel`` (after the
@@ -242,9 +242,10 @@ def generator_comparison(scene) -> dict:
             "per_person": scores}
 
 
-def run(progress: Callable[[str], None] | None = None, quick: bool = False) -> dict:
+def run(progress: Callable[[str], None] | None = None, quick: bool = False,
+        scene_name: str = "fingertip-7") -> dict:
     step = progress or (lambda _msg: None)
-    scene = with_finger(load_scene("fingertip-7"))
+    scene = with_finger(load_scene(scene_name))
     materials = scene.materials[::3] if quick else scene.materials
     seeds = SEEDS[:1] if quick else SEEDS
     rates = (100.0, DEFAULT_RATE_HZ, 1000.0) if quick else RATES_HZ
@@ -426,10 +427,11 @@ def plot(report: dict, out_png: str | Path) -> Path:
 
 
 def run_and_save(json_path: str | Path, png_path: str | Path, quick: bool = False,
-                 command: str = "", progress: Callable[[str], None] | None = None) -> dict:
-    """Run the benchmark, plot it to ``png_path`` and write the JSON report
-    (with ``command`` and the plot's path); returns the report."""
-    report = run(progress=progress, quick=quick)
+                 command: str = "", progress: Callable[[str], None] | None = None,
+                 scene: str = "fingertip-7") -> dict:
+    """Run the benchmark on ``scene`` (a shipped name or a scene file), plot
+    it to ``png_path`` and write the JSON report; returns the report."""
+    report = run(progress=progress, quick=quick, scene_name=scene)
     report["command"] = command
     report["png"] = str(plot(report, png_path))
     write_json(json_path, report)

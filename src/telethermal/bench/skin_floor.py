@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from telethermal.errors import BenchError
 from telethermal.jsonfile import write_json
 
 # ---------------------------------------------------------------- bench skin-floor
@@ -132,13 +133,17 @@ def _verdict(rows) -> str:
         f"({r['aluminium_floor_k']:.2f} K)" for r in met)
 
 
-def run(progress=None, quick: bool = False) -> dict:
+def run(progress=None, quick: bool = False, scene_name: str = SCENE) -> dict:
     from telethermal.control import preconditioning as pc
     from telethermal.physics.scene import load_scene
 
     step = progress or (lambda _msg: None)
     t0 = time.perf_counter()
-    scene = load_scene(SCENE)
+    scene = load_scene(scene_name)
+    if "aluminium" not in scene.materials:       # the sweep's figure is aluminium's floor
+        raise BenchError(f"bench skin-floor --scene {scene_name}: the Qmax and film sweep is "
+                         f"on aluminium, which the scene has no object of (it has "
+                         f"{', '.join(scene.materials)})")
     hw, touch = pc.hardware(scene), pc.nominal_touch(scene)
     step("idle search")
     search = pc.FloorSearch(scene, hw, touch)
@@ -252,9 +257,10 @@ def _plot_decision(ax, report: dict) -> None:
 
 
 def run_and_save(json_path, png_path, quick: bool = False, command: str = "",
-                 progress=None) -> dict:
-    """Run, plot to ``png_path``, write the JSON (with ``command`` and the plot)."""
-    report = run(progress=progress, quick=quick)
+                 progress=None, scene: str = SCENE) -> dict:
+    """Run on ``scene`` (a shipped name or a scene file), plot to
+    ``png_path``, write the JSON (with ``command`` and the plot)."""
+    report = run(progress=progress, quick=quick, scene_name=scene)
     report["command"] = command
     report["png"] = str(plot(report, png_path))
     write_json(json_path, report)

@@ -21,7 +21,7 @@ def cmd_bench_render(args) -> int:
 
     with _progress(7, "bench render") as advance:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
-                                     command=_command(), progress=advance)
+                                     command=_command(), progress=advance, scene=args.scene)
     _print_lines(render.text_report(report, args.json))
     return 0
 
@@ -68,10 +68,12 @@ def cmd_bench_faults(args) -> int:
     from telethermal.bench import faults, faults_sim
     from telethermal.jsonfile import write_json
 
-    with _progress(len(faults_sim.ROWS) + len(faults.SETTINGS) + 1, "bench faults") as advance:
+    delays = faults.parse_delays(args.delays) if args.delays else None
+    n_rows = len(faults_sim.ROWS) + len(faults.SETTINGS) + 2 * len(delays or ())
+    with _progress(n_rows + 1, "bench faults") as advance:
         report = faults.run(progress=advance, quick=args.quick, only=args.only,
                             seeds=args.seeds, processes=not args.no_processes, jobs=args.jobs,
-                            scene_name=args.scene)
+                            scene_name=args.scene, delays_ms=delays)
     traces = report.pop("_traces")
     report["command"] = _command()
     png = faults.plot(report, traces, _png(args))
@@ -110,7 +112,8 @@ def cmd_bench_skin_floor(args) -> int:
     steps = 14 if args.quick else 27
     with _progress(steps, "bench skin-floor") as advance:
         report = skin_floor.run_and_save(args.json, _png(args), quick=args.quick,
-                                         command=_command(), progress=advance)
+                                         command=_command(), progress=advance,
+                                         scene=args.scene)
     _print_lines(skin_floor.text_report(report, args.json))
     return 0
 
@@ -168,9 +171,17 @@ def _add_faults(bsub) -> None:
     p.add_argument("--scene", default="fingertip-7",
                    help="a shipped scene or a scene file (a lab's own): its materials, seeds "
                         "and processes")
+    p.add_argument("--delays", help="comma-separated one-way delays in ms (e.g. 0,30,80,150): "
+                                    "the pure-delay rows of both parts (0 is always run; "
+                                    "default: the committed rows)")
     p.add_argument("--no-processes", action="store_true",
                    help="the simulated part only (no services, no fault proxy)")
     p.set_defaults(func=cmd_bench_faults)
+
+
+def _scene_arg(p) -> None:
+    p.add_argument("--scene", default="fingertip-7",
+                   help="a shipped scene or a scene file (a lab's own; default fingertip-7)")
 
 
 def _add_error(bsub) -> None:
@@ -180,6 +191,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--json", required=True)
     p.add_argument("--png")
     p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
+    _scene_arg(p)
     p.set_defaults(func=cmd_bench_render)
 
     p = bsub.add_parser("skin-floor", help="the best any current trajectory within the "
@@ -189,6 +201,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--png")
     p.add_argument("--quick", action="store_true",
                    help="a coarser idle search and a 2 x 2 sweep")
+    _scene_arg(p)
     p.set_defaults(func=cmd_bench_skin_floor)
 
     p = bsub.add_parser("identify", help="the papers' identification tables, ours beside")
