@@ -186,13 +186,14 @@ class Oracle:
     # ----------------------------------------------------------- building
     @classmethod
     def for_scene(cls, scene, seed: int | None = None, max_s: float = 1.0,
-                  n_prior: int = 3500, n_sessions: int = 20,
-                  prior_seed: int = 12345) -> "Oracle":
+                  n_prior: int = 3500, n_sessions: int = 20, prior_seed: int = 12345,
+                  n_h: int = MODEL_N_H) -> "Oracle":
         """The oracle of ``scene``'s pad database up to ``max_s`` after the
         detected onset; ``seed``: the session of ``pad_database(scene,
         np.random.default_rng(seed))`` (else the amplitude's prior pools
         ``n_sessions`` sessions). ``n_prior`` Monte Carlo draws in all
-        (split over the materials), from ``prior_seed``."""
+        (split over the materials), from ``prior_seed``; ``n_h`` points of
+        the forward model's grid in log h."""
         if scene.pad.kind != "peltier":
             raise IdentificationError(f"{scene.name}: the oracle models a Peltier pad, "
                                       f"not a {scene.pad.kind} pad")
@@ -201,7 +202,7 @@ class Oracle:
         theta = np.column_stack([draws["u"], draws["tau_s"]])
         lo = np.quantile(draws["u"], 0.0) - 0.1, np.quantile(draws["u"], 1.0) + 0.1
         tau = (float(draws["tau_s"].min()) - 0.003, float(min(draws["tau_s"].max() + 0.003, 0)))
-        curves = forward_curves(scene, np.linspace(lo[0], lo[1], MODEL_N_H),
+        curves = forward_curves(scene, np.linspace(lo[0], lo[1], n_h),
                                 max_s - tau[0] + 0.01)
         amplitude = {m: (float(np.mean(a)), float(np.std(a))) for m, a in draws["amp"].items()}
         return cls(curves, KernelPrior.scott(theta), amplitude, flux_noise_w_m2(scene),
@@ -264,6 +265,8 @@ class Oracle:
                 lam = max(lam / 10, 1e-9)
                 if done:
                     break
+            elif value - v_new < 1e-12 * max(1.0, abs(value)):
+                break                                   # at the optimum to rounding
             else:
                 lam *= 10
                 if lam > 1e8:
