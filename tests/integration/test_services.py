@@ -176,8 +176,10 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
     # Item 2 of issue 15 on the wire: place object A, touch, identify;
     # place B, touch; place A again: its announcement carries what the slave
     # identified on A, and the master renders it from the touch's start.
-    # Then another material under A's name (the fresh identification wins,
-    # logged and counted) and a restarted slave (its memory is gone).
+    # Then another material under A's name (the fresh identification wins on
+    # the master, logged and counted; the slave's memory keeps A's evidence
+    # until a second touch in a row disagrees) and a restarted slave (its
+    # memory is gone).
     from telethermal.services.admin import call
     ident_path, gen_path, _, _ = models
     ports = free_ports(4)
@@ -203,15 +205,23 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         assert {k: v["material"] for k, v in memory.items()} == {"cup-a": "wood",
                                                                 "cup-b": "steel"}
         assert memory["cup-a"]["touches"] == 2
-        # Steel under the name cup-a: announced as wood, identified steel.
+        # Steel under the name cup-a: announced as wood, identified steel. The
+        # fresh decision wins on the master; the slave's memory weighs it
+        # against two wood touches and keeps wood (issue 29)...
         assert _place(ports, "steel", "cup-a", seed=3)["object_material"] == "wood"
         fresh = _touch(ports, seed=4)
         assert fresh["identified"] == "steel"
         assert fresh["link_counters"]["memory_overruled"] == 1
         status = slave_status()
         assert status["counters"]["memory_overruled"] == 1
+        assert status["memory"]["cup-a"]["material"] == "wood"
+        assert "kept, now wood" in (tmp_path / "slave.log").read_text()
+        # ... until a second steel touch in a row: the object was changed.
+        assert _touch(ports, seed=5)["identified"] == "steel"
+        status = slave_status()
         assert status["memory"]["cup-a"]["material"] == "steel"
-        assert "the fresh identification wins" in (tmp_path / "slave.log").read_text()
+        assert status["memory"]["cup-a"]["touches"] == 2
+        assert "replaced, now steel" in (tmp_path / "slave.log").read_text()
         # forget: one object, or all (announced again: the master forgets too);
         # then a restart forgets everything.
         assert "cup-b" not in call(ports[2], "forget", object_id="cup-b")["memory"]
@@ -219,14 +229,14 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         assert call(ports[2], "forget")["memory"] == {}
         _until(lambda: call(ports[3], "status")["object_material"] is None,
                "the master was not told the memory was cleared")
-        _touch(ports, seed=5)                        # steel on cup-a, remembered again
+        _touch(ports, seed=6)                        # steel on cup-a, remembered again
         assert slave_status()["memory"]["cup-a"]["material"] == "steel"
         services.kill("slave")
         services.start("slave")
         _until(lambda: (lambda s: s.get("ok") and s["peer_alive"])(slave_status()),
                "the restarted slave found no master", 90.0)
         assert slave_status()["memory"] == {}
-        assert _place(ports, "steel", "cup-a", seed=6)["object_material"] is None
+        assert _place(ports, "steel", "cup-a", seed=7)["object_material"] is None
         assert call(ports[3], "status")["object_material"] is None
     finally:
         codes = services.stop()

@@ -113,17 +113,81 @@ def test_object_memory_learns_decisions_and_sharpens_them():
     assert memory.learn("plate", Estimate(0.1, (), "steel", 0.6, False, ""), 1.0) == "ignored"
     assert memory.recall("plate") is None
     assert memory.learn("plate", decided("plexiglass|steel", "confident group"), 1.0) == "learned"
+    assert memory.recall("plate").material == "plexiglass|steel"
     assert memory.learn("plate", decided("steel"), 1.5) == "refined"
     assert memory.learn("plate", decided("steel", confidence=0.95), 2.0) == "confirmed"
     assert memory.learn("plate", decided("plexiglass|steel", "confident group"), 2.5) == \
         "confirmed"                                       # vaguer: the member stays
     r = memory.recall("plate")
-    assert (r.material, r.confidence, r.touches) == ("steel", 0.95, 4)
-    assert memory.learn("plate", decided("plexiglass"), 3.0) == "overruled"
-    assert memory.recall("plate").material == "plexiglass" and memory.recall("plate").touches == 1
-    assert memory.counters == {"learned": 1, "confirmed": 2, "refined": 1, "overruled": 1}
+    assert (r.material, r.touches) == ("steel", 4) and r.confidence > 0.999
+    assert memory.counters["learned"] == 1 and memory.counters["refined"] == 1
+    assert memory.counters["confirmed"] == 2
     memory.forget("plate")
     assert len(memory) == 0 and memory.to_dict() == {}
+
+
+CLASSES7 = ("aluminium", "graphite", "marble", "plexiglass", "rubber", "steel", "wood")
+
+
+def touch(label, p_label=0.995, p_second=None, second=None):
+    """A decided touch with posteriors over CLASSES7: ``p_label`` on its
+    material, ``p_second`` on ``second``, the rest shared."""
+    p = {c: 0.0 for c in CLASSES7}
+    p[label] = p_label
+    if second:
+        p[second] = p_second
+    rest = (1.0 - sum(p.values())) / sum(v == 0.0 for v in p.values())
+    post = tuple(v if v else rest for v in p.values())
+    return Estimate(0.3, post, label, p_label, True, "confident")
+
+
+def test_the_memory_is_the_normalised_product_of_its_touches_posteriors():
+    """Closed form: two touches with posteriors p and q (above the floor):
+    the memory's posterior is p q / sum(p q) (touches independent given the
+    material, equal priors), to 1e-9."""
+    memory = ObjectMemory()
+    a = touch("rubber", 0.7, 0.25, "plexiglass")
+    b = touch("rubber", 0.6, 0.38, "plexiglass")
+    memory.learn("ball", a, 1.0, classes=CLASSES7)
+    memory.learn("ball", b, 2.0, classes=CLASSES7)
+    pq = [x * y for x, y in zip(a.posteriors, b.posteriors)]
+    expected = {c: v / sum(pq) for c, v in zip(CLASSES7, pq)}
+    got = memory.to_dict()["ball"]["posteriors"]
+    assert all(abs(got[c] - expected[c]) < 1e-6 for c in CLASSES7)   # rounded to 1e-6
+    # 0.7*0.6 and 0.25*0.38 normalised: rubber 0.81, the pair 0.99+: announced as the pair
+    r = memory.recall("ball")
+    assert r.material == "plexiglass|rubber" and r.confidence >= 0.99
+
+
+def test_one_wrong_decision_cannot_flip_a_memory_of_two_right_ones():
+    memory = ObjectMemory()
+    for t in (1.0, 2.0):
+        memory.learn("ball", touch("rubber", 0.999), t, classes=CLASSES7)
+    # A confident wrong decision (its posterior of rubber far below the floor).
+    wrong = Estimate(0.1, tuple(0.9999994 if c == "plexiglass" else 1e-7 for c in CLASSES7),
+                     "plexiglass", 0.9999994, True, "confident")
+    assert memory.learn("ball", wrong, 3.0, classes=CLASSES7) == "kept"
+    assert memory.recall("ball").material == "rubber" and memory.counters["kept"] == 1
+    # Against a single right touch, the same wrong one leaves the honest pair.
+    single = ObjectMemory()
+    single.learn("ball", touch("rubber", 0.999), 1.0, classes=CLASSES7)
+    assert single.learn("ball", wrong, 2.0, classes=CLASSES7) == "doubted"
+    assert single.recall("ball").material == "plexiglass|rubber"
+
+
+def test_a_changed_object_is_found_after_disagreeing_touches_in_a_row():
+    memory = ObjectMemory()
+    for t in (1.0, 2.0, 3.0):
+        memory.learn("cup", touch("marble"), t, classes=CLASSES7)
+    assert memory.learn("cup", touch("wood"), 4.0, classes=CLASSES7) == "kept"
+    assert memory.learn("cup", touch("wood"), 5.0, classes=CLASSES7) == "replaced"
+    r = memory.recall("cup")
+    assert r.material == "wood" and r.touches == 2 and memory.counters["replaced"] == 1
+    # A right touch between two wrong ones breaks the streak: nothing replaced.
+    other = ObjectMemory()
+    for label in ("marble", "marble", "wood", "marble", "wood"):
+        other.learn("cup", touch(label), 1.0, classes=CLASSES7)
+    assert other.recall("cup").material == "marble" and other.counters["replaced"] == 0
 
 
 def test_a_remembered_pair_renders_its_mixture_and_a_member_refines_it():

@@ -260,10 +260,10 @@ class SlaveService:
                  if r["decision_time_s"] is None else decision_text(self.pad, r["identified"]))
         self.state = ServiceState.IDLE
         # The touch's decision (a material or a pair; not "unknown"), once per
-        # touch: remembered for this object, announced with it just below; a
-        # disagreeing fresh decision wins (logged, counted).
-        if learned == Verdict.OVERRULED:
-            self.counters["memory_overruled"] += 1
+        # touch: its evidence added to this object's, what that supports
+        # announced just below; a disagreeing decision is logged and counted.
+        if learned in (Verdict.KEPT, Verdict.DOUBTED, Verdict.OVERRULED, Verdict.REPLACED):
+            self.counters["memory_overruled"] += 1        # disagreed with the memory
         try:
             self.place(self.material, self._seed + 1, self.object_id)   # a fresh trial
         except TelethermalError as exc:

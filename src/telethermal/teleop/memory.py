@@ -1,34 +1,48 @@
-"""What the slave has identified, kept per object.
+"""What the slave has identified, kept per object: the evidence of all its touches.
 
-A telepresence operator touches the same objects again and again. Once the
-slave has decided what an object is made of, it remembers it under the
-object's name (the scene names its objects; on hardware the operator or a
-fiducial names them) and announces it when it moves to that object, so the
-master renders the right material from the first instant of a repeated
+A telepresence operator touches the same objects again and again. The slave
+keeps, under the object's name (the scene names its objects; on hardware the
+operator or a fiducial names them), the evidence of every touch it decided,
+and announces what that evidence supports when it moves to the object, so
+the master renders the right material from the first instant of a repeated
 touch, whatever the network's delay.
 
-The rules:
+The rules (issue 29, deliverable 4):
 
-* A decision is learned: for one material, or for a pair (``"a|b"``, the
-  slave was sure it is one of the two; the master then renders the pair's
-  mixture from t = 0, as it would live). Not ``"unknown"``, not an
-  estimate that is itself a recollection.
-* A sharper decision that agrees replaces it (a pair refined to a member,
-  counted ``refined``); a vaguer one that agrees leaves it (a pair that
-  holds the remembered member, ``confirmed``).
-* A fresh decision that disagrees with what is remembered wins; the change
-  is logged and counted (``overruled``). The slave's sensing of *this*
-  touch is better evidence than an older touch of what may have been
-  another object under the same name.
+* A touch counts when its decision committed (to a material or a pair; not
+  ``"unknown"``, not an estimate that is itself a recollection). Its
+  evidence is the log of its calibrated posteriors (equal priors: the
+  posterior is the likelihood normalised), each floored at
+  ``EVIDENCE_FLOOR``: a calibration measured on a few hundred held-out
+  touches cannot vouch for an error rate below about one in a thousand, so
+  no single touch may rule a material out harder than that.
+* The memory's posterior is the normalised sum of its touches' evidence
+  (touches independent given the material). What is announced is what it
+  supports at the identifier's threshold: one material, else the two most
+  probable together (a pair), else nothing.
+* So one wrong decision cannot flip a memory built from several right
+  ones: its evidence is outweighed (counted ``kept``), or, against a
+  single earlier touch, leaves the two as a pair (``doubted``).
+* A change of object is still found: by its announcement (another object's
+  name), or when ``CHANGE_TOUCHES`` touches in a row each disagree with what
+  is remembered and agree with each other; the memory then holds their
+  evidence alone (``replaced``, logged).
 * It lives in the slave's memory only: a restarted slave has forgotten
   everything (its first touch of each object is a first touch again).
+
+A touch given without posteriors over the classes (a label and a
+confidence only) counts as the confidence shared among the label's
+members and the rest shared among the other classes.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import dataclass, field
 from enum import StrEnum
+
+import numpy as np
 
 from telethermal.ident.anytime import Estimate, Label, Reason
 
@@ -36,6 +50,13 @@ log = logging.getLogger(__name__)
 
 #: The ``reason`` of an estimate made from memory rather than from sensing.
 FROM_MEMORY = Reason.OBJECT_MEMORY
+#: The smallest posterior a touch's evidence takes for any class (see above).
+EVIDENCE_FLOOR = 1e-3
+#: Disagreeing touches in a row, agreeing among themselves, that mean the
+#: object was changed under its name.
+CHANGE_TOUCHES = 2
+#: The threshold of the announcement when none is given (the identifiers' default).
+THRESHOLD = 0.99
 
 
 class Agreement(StrEnum):
@@ -50,64 +71,137 @@ class Verdict(StrEnum):
     """What the memory did with a touch's decision (its counters' names)."""
     IGNORED = "ignored"
     LEARNED = "learned"
-    CONFIRMED = "confirmed"
-    REFINED = "refined"
-    OVERRULED = "overruled"
+    CONFIRMED = "confirmed"      # agrees; what is announced is unchanged
+    REFINED = "refined"          # agrees; what is announced is sharper
+    KEPT = "kept"                # disagrees, outweighed by the object's history
+    DOUBTED = "doubted"          # disagrees; what is announced is now vaguer or nothing
+    OVERRULED = "overruled"      # disagrees, and its material is now announced
+    REPLACED = "replaced"        # CHANGE_TOUCHES disagreeing in a row: another object
 
 
 @dataclass(frozen=True)
 class Remembered:
+    """What the memory announces for an object: a material or a pair, the
+    memory's posterior of it, when the last touch was learnt, and how many
+    touches the evidence holds."""
     material: str
     confidence: float
-    t_s: float               # when the deciding touch was made (the slave's clock)
-    touches: int             # touches that decided this material in a row
+    t_s: float
+    touches: int
+    posteriors: dict = field(default_factory=dict)     # class -> the memory's posterior
+
+
+@dataclass
+class _Evidence:
+    log_p: dict                  # class -> summed log evidence
+    touches: int
+    t_s: float
+    streak: list                 # (label, log evidence) of the disagreeing touches in a row
+
+
+def touch_evidence(estimate: Estimate, classes) -> dict:
+    """A decided touch's log evidence per class (floored posteriors)."""
+    classes = tuple(classes or ())
+    label = estimate.label
+    if classes and len(estimate.posteriors) == len(classes):
+        p = np.asarray(estimate.posteriors, dtype=np.float64)
+    else:
+        classes = tuple(dict.fromkeys((*classes, *label.members)))
+        inside = [c in label.members for c in classes]
+        n_in, n_out = sum(inside), len(classes) - sum(inside)
+        conf = float(estimate.confidence)
+        p = np.array([conf / n_in if i else (1.0 - conf) / max(n_out, 1) for i in inside])
+    p = np.maximum(np.nan_to_num(p, nan=0.0), EVIDENCE_FLOOR)
+    return {c: float(math.log(v / p.sum())) for c, v in zip(classes, p)}
+
+
+def _add(a: dict, b: dict) -> dict:
+    floor = math.log(EVIDENCE_FLOOR)            # a class one side never saw
+    return {c: a.get(c, floor) + b.get(c, floor) for c in dict.fromkeys((*a, *b))}
+
+
+def _posterior(log_p: dict) -> dict:
+    top = max(log_p.values())
+    w = {c: math.exp(v - top) for c, v in log_p.items()}
+    total = sum(w.values())
+    return {c: v / total for c, v in w.items()}
+
+
+def supported(log_p: dict, threshold: float) -> tuple[Label | None, float, dict]:
+    """What evidence ``log_p`` supports at ``threshold``: a material, else a
+    pair, else None; with its posterior and the posteriors."""
+    post = _posterior(log_p)
+    ranked = sorted(post, key=lambda c: (-post[c], c))
+    if post[ranked[0]] >= threshold:
+        return Label(ranked[0]), post[ranked[0]], post
+    if len(ranked) >= 2 and post[ranked[0]] + post[ranked[1]] >= threshold:
+        return Label.of(ranked[:2]), post[ranked[0]] + post[ranked[1]], post
+    return None, post[ranked[0]], post
 
 
 class ObjectMemory:
-    """object name -> :class:`Remembered`."""
+    """object name -> the evidence of its touches (see the module's rules).
+    ``threshold``: what the announcement must reach (the identifier's)."""
 
-    def __init__(self):
-        self._known: dict[str, Remembered] = {}
+    def __init__(self, threshold: float = THRESHOLD):
+        if not 0.5 < threshold < 1.0:
+            raise ValueError(f"threshold must be in (0.5, 1), got {threshold}")
+        self.threshold = float(threshold)
+        self._known: dict[str, _Evidence] = {}
         self.counters = {str(v): 0 for v in Verdict if v != Verdict.IGNORED}
 
     def __len__(self) -> int:
         return len(self._known)
 
     def recall(self, object_id: str | None) -> Remembered | None:
-        return None if object_id is None else self._known.get(object_id)
+        """What is announced for ``object_id``; None when nothing is known
+        or the evidence supports neither a material nor a pair."""
+        ev = None if object_id is None else self._known.get(object_id)
+        if ev is None:
+            return None
+        label, conf, post = supported(ev.log_p, self.threshold)
+        return None if label is None else Remembered(str(label), conf, ev.t_s, ev.touches,
+                                                     post)
 
-    def learn(self, object_id: str | None, estimate: Estimate | None, t_s: float) -> Verdict:
-        """Take a decision of a touch of ``object_id``; returns what was done."""
+    def learn(self, object_id: str | None, estimate: Estimate | None, t_s: float,
+              classes=None) -> Verdict:
+        """Take a touch of ``object_id`` (its final estimate; ``classes``: the
+        identifier's, the order of its posteriors); returns what was done."""
         if object_id is None or not learnable(estimate):
             return Verdict.IGNORED
+        fresh = touch_evidence(estimate, classes)
         old = self._known.get(object_id)
-        new = Remembered(estimate.label, float(estimate.confidence), t_s, 1)
         if old is None:
-            self._known[object_id] = new
+            self._known[object_id] = _Evidence(fresh, 1, t_s, [])
             self.counters[Verdict.LEARNED] += 1
-            log.info("object %s remembered as %s (confidence %.3f)", object_id,
-                     estimate.label, estimate.confidence)
+            log.info("object %s: learnt %s (confidence %.3f)", object_id, estimate.label,
+                     estimate.confidence)
             return Verdict.LEARNED
-        verdict = agreement(old.material, estimate.label)
-        if verdict == Agreement.SAME:
-            self._known[object_id] = Remembered(old.material, new.confidence, t_s,
-                                                old.touches + 1)
-        elif verdict == Agreement.SHARPER:
-            self._known[object_id] = Remembered(new.material, new.confidence, t_s,
-                                                old.touches + 1)
-        elif verdict == Agreement.VAGUER:
-            self._known[object_id] = Remembered(old.material, old.confidence, t_s,
-                                                old.touches + 1)
+        before = self.recall(object_id)
+        held = Label(before.material) if before else None
+        disagrees = held is not None and \
+            agreement(held, estimate.label) == Agreement.DISAGREES
+        streak = old.streak + [(estimate.label, fresh)] if disagrees else []
+        if len(streak) >= CHANGE_TOUCHES and all(
+                set(a.members) & set(streak[-1][0].members) for a, _ in streak):
+            log_p = streak[0][1]
+            for _, ev in streak[1:]:
+                log_p = _add(log_p, ev)
+            self._known[object_id] = _Evidence(log_p, len(streak), t_s, [])
+            verdict = Verdict.REPLACED
         else:
-            self._known[object_id] = new
-            self.counters[Verdict.OVERRULED] += 1
-            log.warning("object %s: remembered as %s, the fresh touch says %s (confidence "
-                        "%.3f): the fresh identification wins", object_id, old.material,
-                        estimate.label, estimate.confidence)
-            return Verdict.OVERRULED
-        what = Verdict.REFINED if verdict == Agreement.SHARPER else Verdict.CONFIRMED
-        self.counters[what] += 1
-        return what
+            self._known[object_id] = _Evidence(_add(old.log_p, fresh), old.touches + 1, t_s,
+                                               streak)
+            after = self.recall(object_id)
+            verdict = _verdict(held, None if after is None else Label(after.material),
+                               disagrees)
+        self.counters[verdict] += 1
+        if disagrees:
+            now = self.recall(object_id)
+            log.warning("object %s: remembered as %s, a touch says %s (confidence %.3f): "
+                        "%s, now %s", object_id, held, estimate.label, estimate.confidence,
+                        verdict, now.material if now else "nothing announced")
+        return verdict
 
     def forget(self, object_id: str | None = None) -> None:
         """One object, or everything (``None``)."""
@@ -117,7 +211,29 @@ class ObjectMemory:
             self._known.pop(object_id, None)
 
     def to_dict(self) -> dict:
-        return {name: asdict(r) for name, r in sorted(self._known.items())}
+        out = {}
+        for name in sorted(self._known):
+            r = self.recall(name)
+            ev = self._known[name]
+            out[name] = {"material": r.material if r else None,
+                         "confidence": r.confidence if r else None, "t_s": ev.t_s,
+                         "touches": ev.touches,
+                         "posteriors": {c: round(p, 6) for c, p in
+                                        sorted(_posterior(ev.log_p).items())}}
+        return out
+
+
+def _verdict(held: Label | None, now: Label | None, disagrees: bool) -> Verdict:
+    if not disagrees:
+        if held is None or now is None:
+            return Verdict.CONFIRMED if now is None else Verdict.REFINED
+        return Verdict.REFINED if agreement(held, now) == Agreement.SHARPER \
+            else Verdict.CONFIRMED
+    if now is not None and now == held:
+        return Verdict.KEPT
+    if now is not None and agreement(held, now) == Agreement.DISAGREES:
+        return Verdict.OVERRULED
+    return Verdict.DOUBTED
 
 
 def learnable(estimate: Estimate | None) -> bool:

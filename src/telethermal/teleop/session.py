@@ -212,7 +212,7 @@ class SlaveSession:
         out.append(Send(now, ContactEvent(contact_id=self.contact_id, touching=False, t_s=now,
                                           force_n=0.0, object_temp_c=self.object_temp_c())))
         self.touch_t0 = self.owner = None
-        return out, self.memory.learn(self.object_id, est, now)
+        return out, self.memory.learn(self.object_id, est, now, classes=self.pad.classes)
 
     @property
     def onset_at_s(self) -> float | None:
