@@ -85,7 +85,7 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     forces = None if force_n is None else np.asarray(force_n, dtype=np.float64)[None]
     best = 0.0
     group = None
-    outside = False
+    outside = unlike = False
     for i, p in enumerate(path):
         k = int(np.argmax(p))
         best = float(p[k])
@@ -94,9 +94,14 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
             if outside:
                 continue
+        if not model.may_commit(i):
+            continue
         if p[k] >= model.threshold:
-            if model.outside_classes(x[None, :n], i)[0]:
-                return Decision(UNKNOWN, best, model.windows_s_[i], Reason.OUTSIDE_CLASSES)
+            # Unlike every class here: not final (a few samples can be), the
+            # touch is watched on; "unknown" if it ends so.
+            unlike = bool(model.outside_classes(x[None, :n], i)[0])
+            if unlike:
+                continue
             # The group's earlier commitment counts only if it held this material.
             first = group.time_s if group and group.label.holds(model.classes_[k]) \
                 else model.windows_s_[i]
@@ -108,6 +113,8 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
                              model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
         return group
+    if unlike and not outside:
+        return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None, FORCE_OUTSIDE if outside else Reason.NOT_CONFIDENT)
 
 
@@ -173,6 +180,7 @@ class StreamingIdentifier:
         self._rows: list[np.ndarray] = []
         self._forces: list[float] = []
         self._window = -1
+        self._unlike = False               # the last confident window was unlike every class
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
                                  False)
@@ -221,25 +229,27 @@ class StreamingIdentifier:
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
         last = index == len(model.windows_s_) - 1
+        may = model.may_commit(index)
+        sure = may and p[k] >= model.threshold and not outside
+        if sure:                          # unlike every class: watched on, not final
+            self._unlike = bool(model.outside_classes(x, index)[0])
+            sure = not self._unlike
         if outside and held is None:
             est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
                            last, FORCE_OUTSIDE if last else Reason.UNDECIDED)
         elif outside:
             est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
-        elif p[k] >= model.threshold:
-            if model.outside_classes(x, index)[0]:
-                est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True,
-                               Reason.OUTSIDE_CLASSES)
-            else:
-                est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), True,
-                               Reason.CONFIDENT)
+        elif sure:
+            est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), True,
+                           Reason.CONFIDENT)
         elif held is not None:            # a group stands until a member is sure alone
             est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
-        elif pair is not None and not model.outside_classes(x, index)[0]:
+        elif may and pair is not None and not model.outside_classes(x, index)[0]:
             est = Estimate(t_s, tuple(p), Label.of(model.classes_[j] for j in pair),
                            float(p[pair].sum()), True, Reason.CONFIDENT_GROUP)
         elif last:
-            est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True, Reason.NOT_CONFIDENT)
+            est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True,
+                           Reason.OUTSIDE_CLASSES if self._unlike else Reason.NOT_CONFIDENT)
         else:
             est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), False)
         self.estimate = est
