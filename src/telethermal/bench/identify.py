@@ -27,6 +27,8 @@ from typing import Callable
 import numpy as np
 
 from telethermal.data.generate import pad_database
+from telethermal.bench.identify_live import (gaps_to_limit, limit, live_counts,
+                                             sessions_table1)
 from telethermal.ident.anytime import decide_all
 from telethermal.ident.base import group_folds
 from telethermal.ident.evaluate import (ECE_MAX_S, FIRST_PAPER_MERGE, decision_summary,
@@ -141,6 +143,7 @@ def table1(method: str, seed: int) -> dict:
                                                           np.concatenate(truth)),
             "calibration_ece_up_to_s": ECE_MAX_S,
             "decision": {**decision_summary(decisions, labels), "threshold": full.threshold},
+            "live_counts": live_counts(decisions, labels), "n_touches": len(contacts),
             "paper_accuracy_5": {k: round(v, 3) for k, v in PAPER1_5_CLASSES.items()},
             "paper_accuracy_7": "not reported (confusions Al/steel and graphite/rubber at 1 s)",
             "train_s_full_database": train_all_s, "train_s_per_fold_mean": float(np.mean(fit_s)),
@@ -350,7 +353,7 @@ def thermometer_ablation(seed: int, method: str = "effusivity-lda") -> dict:
 
 
 def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = None,
-        scene: str | None = None) -> dict:
+        scene: str | None = None, sessions: int = 3, with_limit: bool = True) -> dict:
     """The papers' tables on their scenes; with ``scene`` (a name or a
     path: a lab's own), each method's grouped 5-fold cross-validation on
     that scene's simulated pad database instead (``identify cv``'s report)."""
@@ -359,7 +362,7 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
     report = {"machine": f"{platform.node()} ({platform.machine()}, Python "
                          f"{platform.python_version()})",
               "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-              "seed": seed, "methods": {},
+              "seed": seed, "sessions": sessions, "methods": {},
               "not_run": ["lstm and rnn on the temperature channel (5 s sequences: "
                           "minutes of training per fold on this machine)"]}
     try:
@@ -373,7 +376,13 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
                 step(f"{method}: 5 folds on {scene}")
                 report["methods"][method] = cross_validate(_trials(scene, seed), method, 5)
             return report
-        _run_methods(report, seed, methods, step)
+        _run_methods(report, seed, methods, step, sessions)
+        if with_limit:
+            step("the physical limit (oracle)")
+            report["limit"] = limit(load_scene("fingertip-7"), [
+                (s, from_trials(_trials("fingertip-7", s), max_s=1.0)[0])
+                for s in range(seed, seed + sessions)])
+            report["limit_gap_points"] = gaps_to_limit(report["methods"], report["limit"])
     finally:
         _database.cache_clear()              # trials and models are kept for one run only
         _shift_session.cache_clear()
@@ -381,10 +390,10 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
     return report
 
 
-def _run_methods(report: dict, seed: int, methods, step) -> None:
+def _run_methods(report: dict, seed: int, methods, step, sessions: int = 1) -> None:
     for method in methods:
-        step(f"{method}: table 1")
-        t1 = table1(method, seed)
+        step(f"{method}: table 1, {sessions} session(s)")
+        t1 = sessions_table1(table1, method, seed, sessions, table1(method, seed))
         step(f"{method}: active/passive")
         ap = active_passive(method, seed)
         step(f"{method}: cross-temperature")
@@ -442,13 +451,14 @@ def plot(report: dict, out_png) -> None:
 
 
 def run_and_save(json_path, png_path, seed: int = 0, methods=None, command: str = "",
-                 progress: Callable[[str], None] | None = None, scene: str | None = None
-                 ) -> dict:
+                 progress: Callable[[str], None] | None = None, scene: str | None = None,
+                 sessions: int = 3, with_limit: bool = True) -> dict:
     """Run the benchmark, plot it to ``png_path`` and write the JSON report
     (with ``command``); returns the report."""
     from telethermal.jsonfile import write_json
 
-    report = run(seed=seed, methods=methods, progress=progress, scene=scene)
+    report = run(seed=seed, methods=methods, progress=progress, scene=scene, sessions=sessions,
+                 with_limit=with_limit and scene is None)
     report["command"] = command
     if scene is not None:
         from telethermal.ident.evaluate import plot_accuracy

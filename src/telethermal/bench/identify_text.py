@@ -33,6 +33,17 @@ def _method_lines(method: str, rep: dict) -> list[str]:
                  f"within 1 s: {100 * dec['commit_rate']:.0f} % committed, "
                  + ("-" if dec["accuracy"] is None else f"{100 * dec['accuracy']:.0f} %")
                  + " of them right")
+    if "live" in t1:
+        lv = t1["live"]
+        lines.append(f"{pad}  over {lv['sessions']} session(s), {lv['touches']} touches: 7 classes "
+                     + ", ".join(f"{k} s {100 * v:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}]"
+                                 for (k, v), (lo, hi) in zip(t1["accuracy_7"].items(),
+                                                             t1["accuracy_7_ci"].values())))
+        lines.append(f"{pad}  live decisions: named alone {100 * lv['named_rate']:.1f} %, pair "
+                     f"{100 * lv['pair_rate']:.1f} %, unknown {100 * lv['unknown_rate']:.1f} %, "
+                     f"wrong {100 * lv['wrong_rate']:.1f} % [{100 * lv['wrong_rate_ci'][0]:.1f}, "
+                     f"{100 * lv['wrong_rate_ci'][1]:.1f}]; first commitment p50 "
+                     + ("-" if lv["time_s_p50"] is None else f"{lv['time_s_p50']:.2f} s"))
     return lines + [f"{pad}  session shift (1 K), thermometer {mode}: " + _pct(row["accuracy_5"])
                     for mode, row in rep["session_shift"].items()]
 
@@ -48,6 +59,15 @@ def text_report(report: dict, json_path, png_path) -> list[str]:
     lines.append("object-thermometer ablation (effusivity-lda, 0.2 / 0.5 / 1 s): " + "; ".join(
         f"{k}: " + " / ".join(f"{100 * x:.0f}" for x in v.values()) + " %"
         for k, v in report["thermometer_ablation"]["accuracy"].items()))
+    if "limit" in report:
+        lim = report["limit"]
+        lines.append(f"physical limit (oracle, {len(lim['sessions'])} session(s), "
+                     f"{lim['touches']} touches): "
+                     "7 classes " + _pct(lim["accuracy_7"]) + "; 5 classes "
+                     + _pct(lim["accuracy_5"]))
+        lines += [f"  {m}: points below the limit " + ", ".join(
+            f"{w} s {v:+.1f}" for w, v in gap.items())
+            for m, gap in report.get("limit_gap_points", {}).items()]
     if "lm_vs_adam" in report:
         lines.append("LM against Adam: " + "; ".join(
             f"{k} loss {v['final_loss']:.4f} after {v['iterations']} iterations, "

@@ -89,9 +89,10 @@ def cmd_bench_identify(args) -> int:
 
     methods = args.methods.split(",") if args.methods else None
     png = _png(args)
-    with _progress(5 * len(methods or identify.METHODS) + 3, "bench identify") as advance:
+    with _progress(5 * len(methods or identify.METHODS) + 4, "bench identify") as advance:
         report = identify.run_and_save(args.json, png, seed=args.seed, methods=methods,
-                                       command=_command(), progress=advance, scene=args.scene)
+                                       command=_command(), progress=advance, scene=args.scene,
+                                       sessions=args.sessions, with_limit=not args.no_limit)
     _print_lines(identify_text.text_report(report, args.json, png))
     return 0
 
@@ -212,6 +213,12 @@ def _add_error(bsub) -> None:
     p.add_argument("--scene", help="a scene (name or path, a lab's own): each method's grouped "
                                    "5-fold cross-validation on its simulated pad database "
                                    "instead of the papers' tables")
+    p.add_argument("--sessions", type=_positive(int), default=3,
+                   help="Table 1 on this many independent sessions (seeds SEED, SEED+1, ...): "
+                        "pooled figures with 95 %% intervals and the live decisions' rates")
+    p.add_argument("--no-limit", action="store_true",
+                   help="skip the physical limit (the oracle on every session's touches, "
+                        "a few minutes)")
     p.set_defaults(func=cmd_bench_identify)
 
     p = bsub.add_parser("view", help="the view's first paint, its lag behind a session, and the "
