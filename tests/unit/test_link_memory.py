@@ -154,9 +154,18 @@ def test_the_memory_is_the_normalised_product_of_its_touches_posteriors():
     expected = {c: v / sum(pq) for c, v in zip(CLASSES7, pq)}
     got = memory.to_dict()["ball"]["posteriors"]
     assert all(abs(got[c] - expected[c]) < 1e-6 for c in CLASSES7)   # rounded to 1e-6
-    # 0.7*0.6 and 0.25*0.38 normalised: rubber 0.81, the pair 0.99+: announced as the pair
+    # No touch disagreed: announced as what they decided, with the evidence's posterior.
     r = memory.recall("ball")
-    assert r.material == "plexiglass|rubber" and r.confidence >= 0.99
+    assert r.material == "rubber" and abs(r.confidence - expected["rubber"]) < 1e-12
+
+
+def test_a_single_touch_committed_at_the_threshold_is_announced_as_decided():
+    # Its ruled-out classes floored, the touch's material is below 0.99
+    # (0.992 / (0.992 + 0.008 + 5e-3)): the floor weighs disagreements only.
+    memory = ObjectMemory()
+    memory.learn("plate", touch("aluminium", 0.992, 0.008, "steel"), 1.0, classes=CLASSES7)
+    r = memory.recall("plate")
+    assert r.material == "aluminium" and r.confidence < 0.99
 
 
 def test_one_wrong_decision_cannot_flip_a_memory_of_two_right_ones():

@@ -17,9 +17,13 @@ The rules (issue 29, deliverable 4):
   touches cannot vouch for an error rate below about one in a thousand, so
   no single touch may rule a material out harder than that.
 * The memory's posterior is the normalised sum of its touches' evidence
-  (touches independent given the material). What is announced is what it
-  supports at the identifier's threshold: one material, else the two most
-  probable together (a pair), else nothing.
+  (touches independent given the material). While no touch has disagreed,
+  what is announced is what they decided (the sharpest: a pair refined by
+  a member); once one has, what the evidence supports at the identifier's
+  threshold: one material, else the two most probable together (a pair),
+  else nothing. (A single touch committed at 0.99 is below 0.99 once its
+  ruled-out classes are floored: the floor is for weighing disagreements,
+  not for doubting agreement.)
 * So one wrong decision cannot flip a memory built from several right
   ones: its evidence is outweighed (counted ``kept``), or, against a
   single earlier touch, leaves the two as a pair (``doubted``).
@@ -97,6 +101,7 @@ class _Evidence:
     touches: int
     t_s: float
     streak: list                 # (label, log evidence) of the disagreeing touches in a row
+    agreed: Label | None         # the sharpest decision while none disagreed; None after one
 
 
 def touch_evidence(estimate: Estimate, classes) -> dict:
@@ -160,6 +165,9 @@ class ObjectMemory:
         if ev is None:
             return None
         label, conf, post = supported(ev.log_p, self.threshold)
+        if ev.agreed is not None:        # no touch disagreed: what they decided, sharpest
+            label = ev.agreed
+            conf = sum(post.get(m, 0.0) for m in label.members)
         return None if label is None else Remembered(str(label), conf, ev.t_s, ev.touches,
                                                      post)
 
@@ -172,7 +180,7 @@ class ObjectMemory:
         fresh = touch_evidence(estimate, classes)
         old = self._known.get(object_id)
         if old is None:
-            self._known[object_id] = _Evidence(fresh, 1, t_s, [])
+            self._known[object_id] = _Evidence(fresh, 1, t_s, [], Label(estimate.label))
             self.counters[Verdict.LEARNED] += 1
             log.info("object %s: learnt %s (confidence %.3f)", object_id, estimate.label,
                      estimate.confidence)
@@ -187,11 +195,18 @@ class ObjectMemory:
             log_p = streak[0][1]
             for _, ev in streak[1:]:
                 log_p = _add(log_p, ev)
-            self._known[object_id] = _Evidence(log_p, len(streak), t_s, [])
+            labels = [a for a, _ in streak]
+            agreed = min(labels, key=lambda a: len(a.members)) \
+                if all(set(b.members) <= set(a.members) or set(a.members) <= set(b.members)
+                       for a in labels for b in labels) else None
+            self._known[object_id] = _Evidence(log_p, len(streak), t_s, [], agreed)
             verdict = Verdict.REPLACED
         else:
+            agreed = None if disagrees or old.agreed is None else (
+                Label(estimate.label) if agreement(old.agreed, estimate.label) ==
+                Agreement.SHARPER else old.agreed)
             self._known[object_id] = _Evidence(_add(old.log_p, fresh), old.touches + 1, t_s,
-                                               streak)
+                                               streak, agreed)
             after = self.recall(object_id)
             verdict = _verdict(held, None if after is None else Label(after.material),
                                disagrees)
