@@ -43,7 +43,8 @@ def wire(messages):
     return [msgpack.packb([kind, fields], use_bin_type=True) for kind, fields in messages]
 
 
-@pytest.mark.parametrize("material, lift_at_s", [("aluminium", 1.0), ("wood", 0.03)])
+@pytest.mark.parametrize("material, lift_at_s", [("aluminium", 1.0), ("plexiglass", 1.0),
+                                               ("wood", 0.03)])
 def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
     identifier, generator = models
     control, stream, admin = free_ports(3)
@@ -88,6 +89,15 @@ def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
     if lift_at_s > 0.5:
         assert "flux_trajectory" in kinds and "material_estimate" in kinds
         assert any(k == "measurement_batch" for k, _ in from_service)
+        # And the bench's decision on the very same touch (issue 29): what
+        # bench identify counts is what the slave told the master, and when.
+        from telethermal.ident.anytime import decide
+        from telethermal.ident.prepare import from_trials
+        contacts, _ = from_trials([pad.trial], max_s=2.0)
+        bench = decide(identifier, contacts.x[0], contacts.gap_k[0], contacts.force_n[0])
+        final = [f for k, f in sent if k == "material_estimate"][-1]
+        assert final["decided"] and final["label"] == str(bench.label)
+        assert abs(final["t_since_contact_s"] - bench.time_s) < 1e-6
     else:
         # A contact that ends before the identifier has decided: no
         # trajectory, and the memory learns nothing from it.

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from telethermal.errors import ModelFileError
-from telethermal.ident.anytime import StreamingIdentifier, decide, members
+from telethermal.ident.anytime import StreamingIdentifier, decide, members, unknown_reason
 from telethermal.ident.registry import check_scene, load_model
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.models import train_identifier
@@ -102,6 +102,7 @@ class _Fixed:
         self.path, self.classes_ = np.asarray(path, dtype=float), list(classes)
         self.windows_s_ = [0.1 * (i + 1) for i in range(len(path))]
         self.threshold, self.sample_rate_hz_, self.channels = 0.99, 10.0, ("x",)
+        self.confirm_windows = 1
 
     def posterior_path(self, x):
         return self.path[:max(0, (len(x) - 1))]
@@ -137,3 +138,65 @@ def test_a_group_that_never_refines_stands():
     path = [[0.5, 0.3, 0.2], [0.6, 0.395, 0.005], [0.55, 0.445, 0.005]]
     d = decide(_Fixed(path), np.zeros((5, 1)), 10.0)
     assert (d.label, d.reason, d.time_s) == ("a|b", "confident group", 0.2)
+
+
+def test_a_pair_refines_at_1_5_s_on_a_3_s_contact():
+    """Issue 29's hard case, on the rule: a model whose windows run to 3 s
+    (trained on contacts that long) keeps refining a pair past 1 s; both the
+    bench's decide and the slave's stream name the member at 1.5 s."""
+    pair = [0.6, 0.395, 0.005]
+    path = [[0.5, 0.3, 0.2]] + [pair] * 13 + [[0.995, 0.004, 0.001]] * 16   # windows 0.1..3.0 s
+    model = _Fixed(path)
+    d = decide(model, np.zeros((32, 1)), 10.0)
+    assert (d.label, d.reason, d.time_first_s) == ("a", "confident", 0.2)
+    assert abs(d.time_s - 1.5) < 1e-9
+    stream = StreamingIdentifier(model, 10.0)
+    out = [e for e in (stream.push([0.0]) for _ in range(32)) if e is not None]
+    named = next(e for e in out if e.label == "a" and e.decided)
+    assert abs(named.t_s - 1.5) < 1e-9 and all(e.label == "a|b" for e in out[1:14])
+
+
+def test_no_commitment_before_the_window_the_calibration_supports():
+    path = [[0.995, 0.004, 0.001]] * 5
+    model = _Fixed(path)
+    model.may_commit = lambda i: i >= 3          # commit_from_s_ = 0.4 s
+    d = decide(model, np.zeros((7, 1)), 10.0)
+    assert d.label == "a" and abs(d.time_s - 0.4) < 1e-9
+    stream = StreamingIdentifier(model, 10.0)
+    out = [e for e in (stream.push([0.0]) for _ in range(7)) if e is not None]
+    assert [e.decided for e in out] == [False, False, False, True]
+
+
+def test_a_contact_lifted_at_0_3_s_reports_what_was_known_not_a_guess():
+    """Lifted before any commitment: the slave's last estimate is undecided
+    (its posteriors at 0.3 s, no label committed), the touch reports
+    "unknown" for want of a decision, and the memory learns nothing."""
+    from telethermal.teleop.memory import ObjectMemory
+
+    path = [[0.5, 0.3, 0.2], [0.6, 0.3, 0.1], [0.7, 0.25, 0.05], [0.995, 0.004, 0.001]]
+    stream = StreamingIdentifier(_Fixed(path), 10.0)
+    for _ in range(4):                             # samples up to 0.3 s after contact
+        stream.push([0.0])
+    est = stream.estimate
+    assert abs(est.t_s - 0.3) < 1e-9 and not est.decided and est.posteriors == (0.7, 0.25, 0.05)
+    assert unknown_reason(est) == "no decision"
+    memory = ObjectMemory()
+    assert memory.learn("cup", est, 0.3) == "ignored" and memory.recall("cup") is None
+
+
+def test_a_one_window_spike_does_not_commit_when_two_are_needed():
+    """A rubber touch seen live: 0.998 plexiglass at one window, rubber at
+    the next (each window is its own fit). With confirm_windows = 2 the
+    spike commits nothing; the class that holds commits at its second window."""
+    spike = [[0.4, 0.3, 0.3], [0.002, 0.998, 0.0], [0.995, 0.005, 0.0], [0.999, 0.001, 0.0]]
+    model = _Fixed(spike)
+    model.confirm_windows = 2
+    d = decide(model, np.zeros((6, 1)), 10.0)
+    assert d.label == "a" and abs(d.time_s - 0.4) < 1e-9
+    assert abs(d.time_first_s - 0.3) < 1e-9       # the pair a|b held two windows first
+    stream = StreamingIdentifier(model, 10.0)
+    out = [e for e in (stream.push([0.0]) for _ in range(6)) if e is not None]
+    assert [(str(e.label), e.decided) for e in out] == [
+        ("a", False), ("b", False), ("a|b", True), ("a", True)]
+    model.confirm_windows = 1                     # the old rule: the spike commits
+    assert decide(model, np.zeros((6, 1)), 10.0).label == "b"

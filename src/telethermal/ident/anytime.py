@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from telethermal.errors import IdentificationError
-from telethermal.ident.base import FORCE_SAMPLES, Identifier, force_at, force_in_range
+from telethermal.ident.base import FORCE_SAMPLES, Identifier, Runs, force_at, force_in_range
 from telethermal.ident.label import GROUP_SEPARATOR, UNKNOWN, Label, Reason
 from telethermal.ident.prepare import MIN_GAP_K
 
@@ -86,6 +86,7 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     best = 0.0
     group = None
     outside = unlike = False
+    runs = Runs(model.confirm_windows)
     for i, p in enumerate(path):
         k = int(np.argmax(p))
         best = float(p[k])
@@ -93,10 +94,12 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
             if outside:
+                runs.reset()
                 continue
         if not model.may_commit(i):
+            runs.reset()
             continue
-        if p[k] >= model.threshold:
+        if runs.single(k, p[k] >= model.threshold):
             # Unlike every class here: not final (a few samples can be), the
             # touch is watched on; "unknown" if it ends so.
             unlike = bool(model.outside_classes(x[None, :n], i)[0])
@@ -108,7 +111,9 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
             return Decision(model.classes_[k], best, model.windows_s_[i], Reason.CONFIDENT,
                             first)
         pair = _group(p, model.threshold)
-        if group is None and pair is not None and not model.outside_classes(x[None, :n], i)[0]:
+        holds = group is None and pair is not None and \
+            not model.outside_classes(x[None, :n], i)[0]
+        if runs.pair(pair if holds else (), holds):
             group = Decision(Label.of(model.classes_[j] for j in pair), float(p[pair].sum()),
                              model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
@@ -181,6 +186,7 @@ class StreamingIdentifier:
         self._forces: list[float] = []
         self._window = -1
         self._unlike = False               # the last confident window was unlike every class
+        self._runs = Runs(model.confirm_windows)
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
                                  False)
@@ -229,22 +235,29 @@ class StreamingIdentifier:
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
         last = index == len(model.windows_s_) - 1
-        may = model.may_commit(index)
-        sure = may and p[k] >= model.threshold and not outside
-        if sure:                          # unlike every class: watched on, not final
-            self._unlike = bool(model.outside_classes(x, index)[0])
-            sure = not self._unlike
+        may = not outside and model.may_commit(index)
+        fire = new_pair = False
+        if not may:
+            self._runs.reset()
+        else:
+            fire = self._runs.single(k, p[k] >= model.threshold)
+            if fire:                      # unlike every class: watched on, not final
+                self._unlike = bool(model.outside_classes(x, index)[0])
+            else:
+                holds = held is None and pair is not None and \
+                    not model.outside_classes(x, index)[0]
+                new_pair = self._runs.pair(pair if holds else (), holds)
         if outside and held is None:
             est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
                            last, FORCE_OUTSIDE if last else Reason.UNDECIDED)
         elif outside:
             est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
-        elif sure:
+        elif fire and not self._unlike:
             est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), True,
                            Reason.CONFIDENT)
         elif held is not None:            # a group stands until a member is sure alone
             est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
-        elif may and pair is not None and not model.outside_classes(x, index)[0]:
+        elif new_pair:
             est = Estimate(t_s, tuple(p), Label.of(model.classes_[j] for j in pair),
                            float(p[pair].sum()), True, Reason.CONFIDENT_GROUP)
         elif last:

@@ -119,7 +119,8 @@ def force_ranges(model, contacts: Contacts) -> list | None:
 FORCE_MARGIN = 0.1
 
 
-def commit_from_index(post: np.ndarray, y: np.ndarray, threshold: float) -> int:
+def commit_from_index(post: np.ndarray, y: np.ndarray, threshold: float,
+                      confirm: int = 1) -> int:
     """The first window from which the anytime rule (a class at
     ``threshold``; a pair of the two most probable, refined by a member
     later) commits no held-out touch wrongly: ``post`` (n_windows, N,
@@ -134,18 +135,18 @@ def commit_from_index(post: np.ndarray, y: np.ndarray, threshold: float) -> int:
     while start < n_windows:
         first_wrong = None
         for j in range(n):
-            pair = None
+            pair, runs = None, Runs(confirm)
             for i in range(start, n_windows):
                 p = post[i, j]
                 if not np.all(np.isfinite(p)):
                     break
                 k = int(np.argmax(p))
-                if p[k] >= threshold:
+                if runs.single(k, p[k] >= threshold):
                     if k != y[j]:
                         first_wrong = i if first_wrong is None else min(first_wrong, i)
                     break
                 top = np.argsort(p)[::-1][:2]
-                if pair is None and len(p) >= 3 and p[top].sum() >= threshold:
+                if runs.pair(top, pair is None and len(p) >= 3 and p[top].sum() >= threshold):
                     pair = top
                     if y[j] not in pair:
                         first_wrong = i if first_wrong is None else min(first_wrong, i)
@@ -154,6 +155,37 @@ def commit_from_index(post: np.ndarray, y: np.ndarray, threshold: float) -> int:
             return start
         start = first_wrong + 1
     return n_windows
+
+
+class Runs:
+    """Consecutive windows a commitment's condition has held (the same
+    class, or the same pair): a decision commits once it has held for
+    ``need`` windows in a row (``confirm_windows``). Each window is a
+    separate fit, so a posterior can spike past the threshold at one window
+    and fall back at the next (seen: a rubber touch at 0.998 plexiglass at
+    0.44 s, 1.000 rubber at 0.50 s); a crossing that holds is the evidence,
+    a spike is not."""
+
+    def __init__(self, need: int):
+        self.need = max(1, int(need))
+        self._single, self._pair = (None, 0), (None, 0)
+
+    def single(self, k: int, holds: bool) -> bool:
+        """Window's best class ``k`` passed the threshold (``holds``): commit now?"""
+        key, n = self._single
+        self._single = ((k, n + 1 if key == k else 1) if holds else (None, 0))
+        return holds and self._single[1] >= self.need
+
+    def pair(self, members, holds: bool) -> bool:
+        """The two most probable together passed it (``holds``): commit the pair now?"""
+        key = tuple(sorted(int(m) for m in members)) if holds else None
+        old, n = self._pair
+        self._pair = ((key, n + 1 if old == key else 1) if holds else (None, 0))
+        return holds and self._pair[1] >= self.need
+
+    def reset(self) -> None:
+        """A window that may not commit (force outside, before the schedule)."""
+        self._single, self._pair = (None, 0), (None, 0)
 
 
 def force_in_range(model, window_index: int, force_n: float | None) -> bool:
@@ -173,7 +205,9 @@ class Identifier:
     streaming = False        # True: one model answers every prefix (recurrent nets)
 
     def __init__(self, channels=(FLUX,), max_window_s: float = 1.0, window_step_s: float = 0.05,
-                 threshold: float = 0.99, calibrate: bool = True, seed: int = 0):
+                 threshold: float = 0.99, calibrate: bool = True, seed: int = 0,
+                 confirm_windows: int = 2):
+        self.confirm_windows = int(confirm_windows)
         self.channels = tuple(channels)
         self.max_window_s = max_window_s
         self.window_step_s = window_step_s
@@ -202,7 +236,7 @@ class Identifier:
     # ------------------------------------------------------------ fitting
     def hyper(self) -> dict:
         return {k: getattr(self, k) for k in ("max_window_s", "window_step_s", "threshold",
-                                              "calibrate", "seed")}
+                                              "calibrate", "seed", "confirm_windows")}
 
     def _check_fit_input(self, contacts: Contacts):
         if tuple(contacts.channels) != self.channels:
@@ -246,7 +280,7 @@ class Identifier:
         z = logits / self.softmax_temperature_[:, None, None]
         z = z - np.nanmax(z, axis=2, keepdims=True)
         post = np.exp(z) / np.exp(z).sum(axis=2, keepdims=True)
-        index = commit_from_index(post, y, self.threshold)
+        index = commit_from_index(post, y, self.threshold, self.confirm_windows)
         self.commit_from_s_ = (float(self.windows_s_[index]) if index < len(self.windows_s_)
                                else None)
 

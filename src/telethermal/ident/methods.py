@@ -78,8 +78,14 @@ class EffusivityLda(Identifier):
     window is cut into ``n_boxes`` equal boxes and each box's mean normalised
     flux, times the square root of its mid time, estimates an effusivity (the
     pad's film, lag and contact conductance bend it in a way that is itself
-    characteristic). ``asinh`` compresses the range; linear discriminant
-    analysis with a shrunk pooled covariance classifies, and a contact whose
+    characteristic). ``asinh`` compresses the range; discriminant analysis
+    classifies: a shrunk pooled covariance blended with each class's own
+    (regularised discriminant analysis, Friedman 1989, J. Am. Stat. Assoc.
+    84:165; weight 1 is linear discriminant analysis). A material's touches
+    spread along its own curve of contact conductance, which a single pooled
+    covariance cannot follow for two close materials (plexiglass and rubber,
+    6 % apart in effusivity). Both the shrinkage and the weight are chosen by
+    grouped cross-validation on the training touches. A contact whose
     squared Mahalanobis distance to every class exceeds the chi-square
     quantile ``1 - outlier_p`` is outside every class."""
 
@@ -88,9 +94,16 @@ class EffusivityLda(Identifier):
     #: Shrinkage values tried by grouped cross-validation (``shrinkage="cv"``).
     SHRINKAGE_GRID = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3)
 
+    #: Weights of the pooled scatter tried by grouped cross-validation
+    #: (``pooled_weight="cv"``; 1: linear discriminant analysis).
+    POOLED_WEIGHT_GRID = (1.0, 0.85, 0.7, 0.5, 0.3)
+
     def __init__(self, channels=(FLUX,), n_boxes: int = 8, shrinkage: float | str = "cv",
-                 outlier_p: float = 1e-4, window_step_s: float = 0.02, **kw):
+                 outlier_p: float = 1e-4, window_step_s: float = 0.02,
+                 pooled_weight: float | str = "cv", **kw):
         super().__init__(channels, window_step_s=window_step_s, **kw)
+        self.pooled_weight = pooled_weight
+        self.pooled_weight_: float | None = None    # learned (or given) by fit()
         self.n_boxes = n_boxes
         self.shrinkage = shrinkage
         self.outlier_p = outlier_p
@@ -98,7 +111,7 @@ class EffusivityLda(Identifier):
 
     def hyper(self) -> dict:
         return {**super().hyper(), "n_boxes": self.n_boxes, "shrinkage": self.shrinkage,
-                "outlier_p": self.outlier_p}
+                "outlier_p": self.outlier_p, "pooled_weight": self.pooled_weight}
 
     def _raw_features(self, x):
         """Box means (cumulative sums: one pass, no Python loop over boxes),
@@ -118,57 +131,66 @@ class EffusivityLda(Identifier):
 
     def fit(self, contacts):
         """Choose the shrinkage (unless given as a number), then fit."""
-        if self.shrinkage == "cv":
+        from telethermal.errors import IdentificationError
+
+        for name, value in (("shrinkage", self.shrinkage), ("pooled_weight", self.pooled_weight)):
+            if value != "cv" and not (isinstance(value, (int, float)) and 0 <= value <= 1):
+                raise IdentificationError(f"{name} must be 'cv' or a number in [0, 1], got "
+                                          f"{value!r}")
+        if "cv" in (self.shrinkage, self.pooled_weight):
             self.classes_ = self._check_fit_input(contacts)
             self.sample_rate_hz_ = contacts.sample_rate_hz
-            self.shrinkage_ = self._cv_shrinkage(contacts)
-        elif isinstance(self.shrinkage, (int, float)) and 0 <= self.shrinkage <= 1:
-            self.shrinkage_ = float(self.shrinkage)
-        else:
-            from telethermal.errors import IdentificationError
-            raise IdentificationError(f"shrinkage must be 'cv' or a number in [0, 1], got "
-                                      f"{self.shrinkage!r}")
+        # The shrinkage first, as linear discriminant analysis; then how much
+        # of each class's own scatter to keep, with that shrinkage.
+        self.pooled_weight_ = 1.0
+        self.shrinkage_ = self._cv_choose(contacts, "shrinkage_", self.SHRINKAGE_GRID, 0.1) \
+            if self.shrinkage == "cv" else float(self.shrinkage)
+        self.pooled_weight_ = self._cv_choose(contacts, "pooled_weight_",
+                                              self.POOLED_WEIGHT_GRID, 1.0) \
+            if self.pooled_weight == "cv" else float(self.pooled_weight)
         return super().fit(contacts)
 
     def learned(self) -> dict:
-        return {**super().learned(), "shrinkage_": self.shrinkage_}
+        return {**super().learned(), "shrinkage_": self.shrinkage_,
+                "pooled_weight_": self.pooled_weight_}
 
-    def _cv_shrinkage(self, contacts) -> float:
-        """The grid value with the lowest held-out log loss, pooled over
-        windows every 0.1 s up to 1 s; folds grouped by the trials' group
-        (``trial-k`` within one session of a generated database; a dataset
-        of several sessions can name sessions as groups), so a group never
-        both trains and scores."""
+    def _cv_choose(self, contacts, attr: str, grid, fallback: float) -> float:
+        """The value of ``attr`` in ``grid`` with the lowest held-out log
+        loss, pooled over windows every 0.1 s up to 1 s; folds grouped by the
+        trials' group (``trial-k`` within one session of a generated
+        database; a dataset of several sessions can name sessions as
+        groups), so a group never both trains and scores. ``fallback``
+        when there are too few groups, or a fold lacks a class."""
         from telethermal.ident.base import group_folds
         from scipy.special import log_softmax
 
         y = np.array([self.classes_.index(c) for c in contacts.labels])
         folds = group_folds(contacts.groups, 5)
         if len(folds) < 2:
-            return 0.1
+            return fallback
         usable = float(np.min(contacts.lengths - 1)) / self.sample_rate_hz_
         windows = [w for w in np.arange(1, 11) * 0.1 if w <= min(usable, self.max_window_s) + 1e-9]
         windows = windows or [usable]
         losses = []
-        for shrinkage in self.SHRINKAGE_GRID:
-            self.shrinkage_ = shrinkage
+        for value in grid:
+            setattr(self, attr, value)
             total = 0.0
             for test in folds:
                 train = np.setdiff1d(np.arange(len(y)), test)
                 if len(set(y[train])) < len(self.classes_):
-                    log.warning("shrinkage: a fold lacks a class; 0.1 used without "
-                                "cross-validation")
-                    return 0.1
+                    log.warning("%s: a fold lacks a class; %g used without cross-validation",
+                                attr.rstrip("_"), fallback)
+                    return fallback
                 for w in windows:
                     params = self._fit_window(self._window(contacts.x[train], w), y[train])
                     z = self._logits(params, self._window(contacts.x[test], w))
                     total -= log_softmax(z, axis=1)[np.arange(len(test)), y[test]].sum()
             losses.append(total)
         best = int(np.argmin(losses))
-        if best in (0, len(self.SHRINKAGE_GRID) - 1):
-            log.info("shrinkage %g chosen at the edge of the grid %s", self.SHRINKAGE_GRID[best],
-                     self.SHRINKAGE_GRID)
-        return float(self.SHRINKAGE_GRID[best])
+        if best in (0, len(grid) - 1):
+            log.info("%s %g chosen at the edge of the grid %s", attr.rstrip("_"), grid[best],
+                     grid)
+        return float(grid[best])
 
     def _fit_window(self, x, y):
         f = self._raw_features(x)
@@ -181,16 +203,35 @@ class EffusivityLda(Identifier):
         p = cov.shape[0]
         target = np.trace(cov) / p if np.trace(cov) > 0 else 1.0
         cov = (1 - self.shrinkage_) * cov + self.shrinkage_ * target * np.eye(p)
+        if self.pooled_weight_ >= 1.0:
+            return {"centre": centre, "scale": scale, "means": means,
+                    "precision": np.linalg.pinv(cov, hermitian=True)}
+        # Regularised discriminant analysis (Friedman 1989): each class's own
+        # scatter blended with the pooled one.
+        precisions, logdets = [], []
+        for c in classes:
+            r = resid[y == c]
+            own = r.T @ r / max(len(r) - 1, 1)
+            blend = self.pooled_weight_ * cov + (1 - self.pooled_weight_) * own
+            sign, logdet = np.linalg.slogdet(blend)
+            precisions.append(np.linalg.pinv(blend, hermitian=True))
+            logdets.append(logdet)
         return {"centre": centre, "scale": scale, "means": means,
-                "precision": np.linalg.pinv(cov, hermitian=True)}
+                "precision": np.stack(precisions), "logdet": np.asarray(logdets)}
 
     def _distances(self, params, x):
         z = (self._raw_features(x) - params["centre"]) / params["scale"]
         diff = z[:, None, :] - params["means"][None]
-        return np.sum((diff @ params["precision"]) * diff, axis=2)
+        prec = params["precision"]
+        if prec.ndim == 3:
+            return np.einsum("nci,cij,ncj->nc", diff, prec, diff)
+        return np.sum((diff @ prec) * diff, axis=2)
 
     def _logits(self, params, x):
-        return -0.5 * self._distances(params, x)
+        d = self._distances(params, x)
+        if "logdet" in params:
+            return -0.5 * (d + params["logdet"][None])
+        return -0.5 * d
 
     def outside_classes(self, x, window_index):
         params = self.params_[window_index]
