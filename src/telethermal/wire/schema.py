@@ -125,7 +125,8 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
               doc="slave, with object_id: what it decided on this object before (its "
                   "object memory): a material, or a pair 'a|b'; nil: none remembered"),
         Field("object_confidence", "float", lo=0, hi=1, required=False, nullable=True,
-              doc="the confidence of that remembered decision; nil with object_material"),
+              doc="the object memory's posterior of object_material (section 6b); nil "
+                  "with object_material"),
     ), "the master's operator touched or lifted; the slave's pad touched or left"),
     Kind("material_estimate", "control", "slave->master", ESTIMATE_FIELDS,
          "decisions only: sent each time the decided label changes (a commitment to a class, "
