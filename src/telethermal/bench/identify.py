@@ -44,6 +44,13 @@ PAPER1_5_CLASSES = {"0.25": 29 / 35, "0.5": 34 / 35, "0.75": 1.0}
 #: 100 % within 0.5 s (II, III) and 0.7 s (V).
 PAPER2 = {"active_100pct_within_s": 0.4, "cross": {"II": 0.5, "III": 0.5, "V": 0.7}}
 WINDOWS_T1 = (0.25, 0.5, 0.75, 1.0)
+#: Methods the bench runs by default: those whose calibration error is
+#: within issue 29's 0.05. The recurrent ones are not (bench identify's own
+#: runs, Table 1's held-out touches and the active pad's); they stay
+#: available by name.
+DROPPED = {"lstm": "was 0.080-0.084 on fingertip-7 (target 0.05)",
+           "rnn": "was 0.046-0.099 on fingertip-7 and 0.105 on the active pad (target 0.05)"}
+DEFAULT_METHODS = tuple(m for m in sorted(METHODS) if m not in DROPPED)
 
 
 def _trials(scene_name: str, seed: int):
@@ -358,13 +365,16 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
     path: a lab's own), each method's grouped 5-fold cross-validation on
     that scene's simulated pad database instead (``identify cv``'s report)."""
     step = progress or (lambda _m: None)
-    methods = methods or sorted(METHODS)
+    dropped = [] if methods else [
+        f"{m} (not in the defaults: its held-out calibration error {DROPPED[m]}; run it with "
+        f"--methods {m})" for m in sorted(DROPPED)]
+    methods = methods or list(DEFAULT_METHODS)
     report = {"machine": f"{platform.node()} ({platform.machine()}, Python "
                          f"{platform.python_version()})",
               "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
               "seed": seed, "sessions": sessions, "methods": {},
               "not_run": ["lstm and rnn on the temperature channel (5 s sequences: "
-                          "minutes of training per fold on this machine)"]}
+                          "minutes of training per fold on this machine)"] + dropped}
     try:
         if scene is not None:
             from telethermal.ident.crossval import cross_validate

@@ -89,7 +89,7 @@ def cmd_bench_identify(args) -> int:
 
     methods = args.methods.split(",") if args.methods else None
     png = _png(args)
-    with _progress(5 * len(methods or identify.METHODS) + 4, "bench identify") as advance:
+    with _progress(5 * len(methods or identify.DEFAULT_METHODS) + 4, "bench identify") as advance:
         report = identify.run_and_save(args.json, png, seed=args.seed, methods=methods,
                                        command=_command(), progress=advance, scene=args.scene,
                                        sessions=args.sessions, with_limit=not args.no_limit)
@@ -209,7 +209,8 @@ def _add_error(bsub) -> None:
     p.add_argument("--json", required=True)
     p.add_argument("--png")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--methods", help="comma-separated (default: all)")
+    p.add_argument("--methods", help="comma-separated (default: those whose calibration error "
+                                     "is within 0.05: effusivity-lda, pca-fnn)")
     p.add_argument("--scene", help="a scene (name or path, a lab's own): each method's grouped "
                                    "5-fold cross-validation on its simulated pad database "
                                    "instead of the papers' tables")

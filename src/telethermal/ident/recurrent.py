@@ -20,6 +20,7 @@ from torch import nn
 from telethermal.errors import IdentificationError
 from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import FLUX, Contacts
+from telethermal.threads import single_threaded_torch
 
 
 def _softmax(z: np.ndarray) -> np.ndarray:
@@ -88,6 +89,7 @@ class Recurrent(Identifier):
         return self._module
 
     # ------------------------------------------------------------ fitting
+    @single_threaded_torch
     def fit(self, contacts: Contacts) -> "Recurrent":
         """Train on ``contacts``; with ``calibrate``, first train the same
         network on two thirds of the groups and fit one softmax temperature
@@ -163,6 +165,7 @@ class Recurrent(Identifier):
         self._module = net
 
     # ------------------------------------------------------------ predicting
+    @single_threaded_torch
     def posterior_path(self, x: np.ndarray) -> np.ndarray:
         """Posteriors after every input step of one contact, (steps, n_classes)."""
         with torch.no_grad():
@@ -170,6 +173,7 @@ class Recurrent(Identifier):
         z = logits[0].numpy().astype(np.float64)
         return _softmax(z / self._temperatures(len(z))[:, None])
 
+    @single_threaded_torch
     def proba_normalised(self, x: np.ndarray, window_index: int) -> np.ndarray:
         n = (window_index + 1) * self._factor
         with torch.no_grad():
@@ -185,6 +189,7 @@ class Recurrent(Identifier):
             return t[:steps]
         return np.concatenate([t, np.full(steps - len(t), t[-1] if len(t) else 1.0)])
 
+    @single_threaded_torch
     def update_probe(self, row: np.ndarray, window_index: int) -> None:
         """One streaming update: a single step from a carried state."""
         net = self._net()
