@@ -1,0 +1,40 @@
+"""Issue 29's soak, the slave's side: the demo's 22 touches (`telethermal
+demo --materials` with the 7 materials three times, seed 13) once committed
+rubber as plexiglass in the second round, and the object memory then
+announced the third touch of the same object as plexiglass. Here the three
+rubber touches of that soak (the demo's slave session and trial seeds,
+its identifier trained on its seed's database): each is decided rubber,
+and the memory the slave builds from them announces rubber before the
+third."""
+
+import numpy as np
+
+from telethermal.data.generate import sensor_session
+from telethermal.physics.scene import load_scene
+from telethermal.physics.sensors import draw_instruments
+from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.models import train_identifier
+from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.teleop.slave import Slave
+
+SCENE = with_finger(load_scene("fingertip-7"))
+DEMO_SEED = 13
+#: The demo's touch i uses seed DEMO_SEED + 1 + i; rubber is the 6th material.
+RUBBER_SEEDS = [DEMO_SEED + 1 + i for i in (5, 12, 19)]
+
+
+def test_the_soak_rubber_touches_are_rubber_and_remembered_so():
+    identifier = train_identifier(SCENE, DEMO_SEED)
+    # The slave service's instruments (its seed's stream), calibrated.
+    session = sensor_session(SCENE, np.random.default_rng(DEMO_SEED), instruments=draw_instruments(
+        SCENE.sensors, np.random.default_rng(DEMO_SEED)))
+    memory = ObjectMemory(identifier.threshold)
+    announced = []
+    for seed in RUBBER_SEEDS:
+        r = memory.recall("rubber")
+        announced.append(None if r is None else r.material)
+        pad = Slave(SCENE, "rubber", identifier, slave_rng(seed), session=session)
+        pad.advance_to(10.0)
+        assert pad.estimate.decided and pad.estimate.label == "rubber", (seed, pad.estimate)
+        memory.learn("rubber", pad.estimate, float(seed), classes=pad.classes)
+    assert announced == [None, "rubber", "rubber"]
