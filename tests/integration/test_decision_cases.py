@@ -2,16 +2,21 @@
 demo --materials` with the 7 materials three times, seed 13) once committed
 rubber as plexiglass in the second round, and the object memory then
 announced the third touch of the same object as plexiglass. Here the three
-rubber touches of that soak (the demo's slave session and trial seeds,
-its identifier trained on its seed's database): each is decided rubber,
+rubber touches of that soak (the demo's trial seeds, the slave's
+instruments and calibration drawn as its service draws them, the
+identifier trained on the seed's database in memory: the demo trains it
+from the database written to disk): each is decided rubber,
 and the memory the slave builds from them announces rubber before the
 third."""
 
+from dataclasses import replace
+
 import numpy as np
 
-from telethermal.data.generate import sensor_session
+from telethermal.data.generate import SensorSession
 from telethermal.physics.scene import load_scene
 from telethermal.physics.sensors import draw_instruments
+from telethermal.services.slave_devices import calibrate
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.models import train_identifier
 from telethermal.teleop.run import slave_rng, with_finger
@@ -25,9 +30,11 @@ RUBBER_SEEDS = [DEMO_SEED + 1 + i for i in (5, 12, 19)]
 
 def test_the_soak_rubber_touches_are_rubber_and_remembered_so():
     identifier = train_identifier(SCENE, DEMO_SEED)
-    # The slave service's instruments (its seed's stream), calibrated.
-    session = sensor_session(SCENE, np.random.default_rng(DEMO_SEED), instruments=draw_instruments(
-        SCENE.sensors, np.random.default_rng(DEMO_SEED)))
+    # The slave service's instruments and calibration, drawn as the service
+    # draws them for its seed (SlaveService._start_sensor_session).
+    session_rng = np.random.default_rng((DEMO_SEED, 0xCA1))
+    sensors = SensorSession(draw_instruments(SCENE.sensors, session_rng))
+    session = replace(sensors, calibration=calibrate(None, sensors, SCENE, session_rng))
     memory = ObjectMemory(identifier.threshold)
     announced = []
     for seed in RUBBER_SEEDS:
