@@ -6,7 +6,6 @@ import pytest
 
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import run_session
 
 SCENE = load_scene("fingertip-7")
@@ -14,8 +13,8 @@ SEEDS = (1, 2)
 
 
 @pytest.fixture(scope="module")
-def models():
-    return train_identifier(SCENE, 0), train_generator(SCENE, 0)
+def models(trained_models):
+    return trained_models.pair(SCENE, 0)
 
 
 def skin_rms(models, material, model, seed, idle="object", expected=None):
