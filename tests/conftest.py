@@ -16,3 +16,94 @@ settings.load_profile("shared-machine")
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+class TrainedModels:
+    """``train_identifier`` / ``train_generator`` of a scene and seed, each
+    trained once for the whole session (they are deterministic in the scene
+    and the seed, and about 15 s a pair), and their saved files, written
+    once. Shared read-only: at the session's end each model is saved again
+    and each file hashed, and a test that changed one fails the run."""
+
+    def __init__(self, folder):
+        self.folder = folder
+        self._models = {}          # (repr(scene), seed, kind) -> model
+        self._files = {}           # (repr(scene), seed) -> (identifier path, generator path)
+        self._digests = {}         # what each model and file was when made
+        # Bound now: a test may monkeypatch teleop.models' functions later.
+        from telethermal.teleop.models import train_generator, train_identifier
+        self._train = {"identifier": train_identifier, "generator": train_generator}
+
+    @staticmethod
+    def _npz_digest(path) -> str:
+        import hashlib
+        h = hashlib.sha256()
+        with np.load(path, allow_pickle=False) as z:
+            for name in sorted(z.files):
+                h.update(name.encode())
+                h.update(np.ascontiguousarray(z[name]).tobytes())
+        return h.hexdigest()
+
+    def _model_digest(self, model, kind) -> str:
+        import tempfile
+        from pathlib import Path
+
+        from telethermal.render.generator import save_generator
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / f"{kind}.npz"
+            model.save(path) if kind == "identifier" else save_generator(model, path)
+            return self._npz_digest(path)
+
+    def _model(self, scene, seed, kind):
+        key = (repr(scene), seed, kind)
+        if key not in self._models:
+            self._models[key] = self._train[kind](scene, seed)
+            self._digests[key] = self._model_digest(self._models[key], kind)
+        return self._models[key]
+
+    def identifier(self, scene, seed: int = 0):
+        """``train_identifier(scene, seed)``: not to be changed by the test."""
+        return self._model(scene, seed, "identifier")
+
+    def generator(self, scene, seed: int = 0):
+        """``train_generator(scene, seed)``: not to be changed by the test."""
+        return self._model(scene, seed, "generator")
+
+    def pair(self, scene, seed: int = 0):
+        return self.identifier(scene, seed), self.generator(scene, seed)
+
+    def files(self, scene, seed: int = 0):
+        """(identifier.npz, generator.npz) of ``pair(scene, seed)``, saved
+        once into a session folder: read them, copy them, never write them."""
+        from telethermal.render.generator import save_generator
+        key = (repr(scene), seed)
+        if key not in self._files:
+            folder = self.folder / f"models-{len(self._files)}"
+            folder.mkdir()
+            identifier, generator = self.pair(scene, seed)
+            paths = (identifier.save(folder / "identifier.npz"),
+                     save_generator(generator, folder / "generator.npz"))
+            self._files[key] = paths
+            for p in paths:
+                self._digests[p] = p.read_bytes()
+        return self._files[key]
+
+    def changed(self) -> list[str]:
+        bad = []
+        for key, model in self._models.items():
+            if self._model_digest(model, key[2]) != self._digests[key]:
+                bad.append(f"{key[2]} of seed {key[1]} for {key[0][:60]}...")
+        for paths in self._files.values():
+            for p in paths:
+                if not p.is_file() or p.read_bytes() != self._digests[p]:
+                    bad.append(str(p))
+        return bad
+
+
+@pytest.fixture(scope="session")
+def trained_models(tmp_path_factory):
+    """The session's shared trained identifiers and generators (TrainedModels)."""
+    trained = TrainedModels(tmp_path_factory.mktemp("trained-models"))
+    yield trained
+    changed = trained.changed()
+    assert not changed, f"a test changed a shared trained model or its file: {changed}"

@@ -42,7 +42,7 @@ def pytest_configure(config):
 
 
 @pytest.fixture(scope="session")
-def slave_models(tmp_path_factory):
+def slave_models(tmp_path_factory, trained_models):
     """The slave's identifier decides within 0.3 s of contact (its longest
     window), so each touch the suite makes is short."""
     import numpy as np
@@ -52,7 +52,6 @@ def slave_models(tmp_path_factory):
     from telethermal.ident.registry import make
     from telethermal.physics.scene import load_scene
     from telethermal.render.generator import save_generator
-    from telethermal.teleop.models import train_generator
     from telethermal.teleop.run import with_finger
 
     scene = with_finger(load_scene(SCENE))
@@ -60,7 +59,7 @@ def slave_models(tmp_path_factory):
     trials = pad_database(scene, np.random.default_rng(0))
     identifier = make("effusivity-lda", max_window_s=0.3).fit(from_trials(trials)[0])
     return (identifier.save(folder / "identifier.npz"),
-            save_generator(train_generator(scene, 0), folder / "generator.npz"))
+            save_generator(trained_models.generator(scene, 0), folder / "generator.npz"))
 
 
 @pytest.fixture(scope="session")

@@ -13,21 +13,18 @@ import pytest
 
 from telethermal.errors import TransportError
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import save_generator
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import PRE_CONTACT_S, with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
 
 @pytest.fixture(scope="module")
-def link(tmp_path_factory):
+def link(tmp_path_factory, trained_models):
     out = tmp_path_factory.mktemp("faults")
-    ident = train_identifier(SCENE, 0).save(out / "identifier.npz")
-    gen = save_generator(train_generator(SCENE, 0), out / "generator.npz")
+    ident, gen = trained_models.files(SCENE, 0)
     s_control, s_stream, p_control, p_stream, s_admin, m_admin = free_ports(6)
     ports = (s_control, s_stream, s_admin, m_admin)
     slave_cfg, master_cfg = write_configs(out, SCENE.name, ident, gen, ports, 0,

@@ -9,16 +9,13 @@ import pytest
 from telethermal.bench import faults_sim
 from telethermal.errors import BenchError
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import save_generator
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import with_finger
 
 
-def test_simulated_rows_in_two_workers(tmp_path):
+def test_simulated_rows_in_two_workers(tmp_path, trained_models):
     scene = with_finger(load_scene("fingertip-7"))
-    ident = train_identifier(scene, 0).save(tmp_path / "identifier.npz")
-    gen = save_generator(train_generator(scene, 0), tmp_path / "generator.npz")
+    ident, gen = trained_models.files(scene, 0)
     rows = [r for r in faults_sim.ROWS if r[0] in (faults_sim.ZERO, faults_sim.WAN)]
     seen = []
     out = faults_sim.run(scene, ident, gen, DisplayConfig(), ["wood"], [1], 1.0, rows,

@@ -15,7 +15,8 @@ import pytest
 import yaml
 
 from telethermal.services.demo import free_ports, write_configs
-from telethermal.teleop.models import write_models
+from telethermal.physics.scene import load_scene
+from telethermal.teleop.run import with_finger
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -57,13 +58,13 @@ def processes():
             proc.wait()
 
 
-def test_master_alone_is_unhealthy_and_a_touch_waits_for_the_slave(tmp_path, processes):
-    write_models(tmp_path / "models", "fingertip-7", seed=0)
+def test_master_alone_is_unhealthy_and_a_touch_waits_for_the_slave(tmp_path, processes,
+                                                                   trained_models):
+    # (the files `telethermal models --scene fingertip-7` writes: seed 0)
+    identifier, generator = trained_models.files(with_finger(load_scene("fingertip-7")), 0)
     ports = free_ports(4)
-    slave_cfg, master_cfg = write_configs(tmp_path, "fingertip-7",
-                                          tmp_path / "models" / "identifier.npz",
-                                          tmp_path / "models" / "generator.npz", ports, 0,
-                                          security="plain")
+    slave_cfg, master_cfg = write_configs(tmp_path, "fingertip-7", identifier, generator,
+                                          ports, 0, security="plain")
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
 
     def start(role, config):

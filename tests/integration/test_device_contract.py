@@ -120,9 +120,8 @@ def test_emulated_devices_read_what_the_simulator_reads():
     assert np.abs(a[:, 3] - b[:, 3]).max() < 1e-5               # N
 
 
-def test_a_session_through_emulated_devices_writes_the_same_json_as_with_sim():
-    from telethermal.teleop.models import train_generator, train_identifier
-    ident, gen = train_identifier(SCENE, 0), train_generator(SCENE, 0)
+def test_a_session_through_emulated_devices_writes_the_same_json_as_with_sim(trained_models):
+    ident, gen = trained_models.pair(SCENE, 0)
     sim = run_session(SCENE, "plexiglass", ident, gen, contact_s=1.0, seed=3).summary
     emu = run_session(SCENE, "plexiglass", ident, gen, contact_s=1.0, seed=3,
                       devices="emulated").summary

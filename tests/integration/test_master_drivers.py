@@ -38,7 +38,6 @@ from telethermal.services.config import MasterConfig
 from telethermal.services.demo import free_ports
 from telethermal.services.master import MasterService
 from telethermal.teleop.master import DisplayConfig, MasterStep
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.netsim import SimMasterService
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, InProcessWire, draw_operator,
                                     master_rng, slave_rng, with_finger)
@@ -60,8 +59,8 @@ REORDER = 15
 
 
 @pytest.fixture(scope="module")
-def models():
-    identifier, generator = train_identifier(SCENE, 0), train_generator(SCENE, 0)
+def models(trained_models):
+    identifier, generator = trained_models.pair(SCENE, 0)
     # What the slave service samples and sends in its session config.
     curves = sample_curves(generator, [c for c in identifier.classes_
                                        if c in generator.materials])

@@ -102,21 +102,18 @@ def test_a_hardware_master_needs_its_ports():
         MasterConfig(devices="hardware")
 
 
-def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path):
+def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path, trained_models):
     # A slave process on loopback; the master in this process on the emulated
     # devices. The operator presses for 1.5 s: the slave touches when told,
     # streams its posteriors, and the master tracks them on the hardware path.
     import subprocess
     import sys
 
-    from telethermal.render.generator import save_generator
     from telethermal.services.admin import call
     from telethermal.services.demo import write_configs
-    from telethermal.teleop.models import train_generator, train_identifier
     from telethermal.teleop.run import compare_with_direct
 
-    ident = train_identifier(SCENE, 0).save(tmp_path / "identifier.npz")
-    gen = save_generator(train_generator(SCENE, 0), tmp_path / "generator.npz")
+    ident, gen = trained_models.files(SCENE, 0)
     s_control, s_stream, s_admin, m_admin = free_ports(4)
     slave_cfg, _ = write_configs(tmp_path, SCENE.name, ident, gen,
                                  (s_control, s_stream, s_admin, m_admin), 0, security="plain")

@@ -133,7 +133,9 @@ def test_a_missing_master_key_is_shown_by_admin_status_and_fixed_without_restart
         assert "likely: this master's key is not allowed" in out
         assert f"last rejected CURVE key {fp} from 127.0.0.1" in out
         assert call(ports[2], "status")["counters"]["curve_rejected"] >= 1
-        code, out = admin(ports, "touch", capsys=capsys)
+        # (--session-wait 5: the refusal names what the master's status says,
+        # which already holds the diagnosis; the default waits 30 s for it.)
+        code, out = admin(ports, "touch", "--session-wait", "5", capsys=capsys)
         assert code == 2                                          # refused, with the cause
         assert "key is not allowed" in " ".join(out.split())
         shutil.copy(tmp_path / "keys" / "master" / "master.key", allowed_key)

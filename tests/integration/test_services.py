@@ -8,22 +8,17 @@ import pytest
 from telethermal.cli import main
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import save_generator
 from telethermal.services.config import ConfigError, load_config
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import run_session, with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
 
 @pytest.fixture(scope="module")
-def models(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("models")
-    identifier, generator = train_identifier(SCENE, 0), train_generator(SCENE, 0)
-    return (identifier.save(folder / "identifier.npz"),
-            save_generator(generator, folder / "generator.npz"), identifier, generator)
+def models(trained_models):
+    return (*trained_models.files(SCENE, 0), *trained_models.pair(SCENE, 0))
 
 
 @pytest.mark.parametrize("devices", ["sim", "emulated"])

@@ -14,7 +14,6 @@ from telethermal.ident.prepare import FLUX
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import run_session
 from telethermal.teleop.slave import Slave
 
@@ -24,8 +23,8 @@ KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
 
 
 @pytest.fixture(scope="module")
-def models():
-    return train_identifier(SCENE, 0), train_generator(SCENE, 0)
+def models(trained_models):
+    return trained_models.pair(SCENE, 0)
 
 
 @pytest.mark.parametrize("material", ["steel", "wood"])

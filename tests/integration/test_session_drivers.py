@@ -16,7 +16,6 @@ from telethermal.services.config import SlaveConfig
 from telethermal.services.demo import free_ports
 from telethermal.services.slave import SlaveService
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.netsim import SimSlaveService
 from telethermal.teleop.run import InProcessWire, slave_rng, with_finger
 from telethermal.teleop.slave import Slave
@@ -27,8 +26,8 @@ SCENE = with_finger(load_scene("fingertip-7"))
 
 
 @pytest.fixture(scope="module")
-def models():
-    return train_identifier(SCENE, 0), train_generator(SCENE, 0)
+def models(trained_models):
+    return trained_models.pair(SCENE, 0)
 
 
 def master_events(lift_at_s: float):

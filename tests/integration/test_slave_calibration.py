@@ -4,21 +4,17 @@ drifting target is refused and the calibration in force stays."""
 import pytest
 
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import save_generator
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
 
 @pytest.fixture(scope="module")
-def models(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("models")
-    return (train_identifier(SCENE, 0).save(folder / "identifier.npz"),
-            save_generator(train_generator(SCENE, 0), folder / "generator.npz"))
+def models(trained_models):
+    return trained_models.files(SCENE, 0)
 
 
 def test_calibration_at_start_on_request_and_refused_when_drifting(tmp_path, models):

@@ -19,7 +19,6 @@ from telethermal.errors import CalibrationError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene
 from telethermal.services.config import ConfigError, SlaveConfig
-from telethermal.teleop.models import train_identifier
 from telethermal.teleop.run import slave_rng, with_finger
 from telethermal.teleop.slave import BOARD_LOST, NO_OBJECT_TEMPERATURE, Slave
 
@@ -27,8 +26,8 @@ SCENE = with_finger(load_scene("fingertip-7"))
 
 
 @pytest.fixture(scope="module")
-def identifier():
-    return train_identifier(SCENE, 0)
+def identifier(trained_models):
+    return trained_models.identifier(SCENE, 0)
 
 
 @pytest.fixture(scope="module")
@@ -293,10 +292,9 @@ class FreeRunningRig:
 
 
 def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
-        tmp_path, identifier, session):
+        tmp_path, identifier, session, trained_models):
     from telethermal.services.demo import free_ports
     from telethermal.services.slave import SlaveService
-    from telethermal.teleop.models import train_generator
     from telethermal.wire.transport import TransportConfig
 
     bus = "virtual:slave-service-hardware-test"
@@ -308,7 +306,7 @@ def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
     service = None
     try:
         # The lab aims the thermometer at the pad for the calibration at start...
-        service = SlaveService(config, identifier, train_generator(SCENE, 0))
+        service = SlaveService(config, identifier, trained_models.generator(SCENE, 0))
         cal = service.status()["thermometer_calibration"]
         assert cal["calibrated"] and cal["error"] is None and cal["residual_k"] < 0.1
         # ... then at the object, 20 C: the pad pre-conditioned to it plus the gap.

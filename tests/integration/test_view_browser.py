@@ -17,10 +17,8 @@ from pathlib import Path
 import pytest
 
 from telethermal.physics.scene import load_scene
-from telethermal.render.generator import save_generator
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.run import with_finger
 from telethermal.view.browser import BrowserUnavailable, find_chromium, launch
 from telethermal.services.viewer import open_view
@@ -47,10 +45,8 @@ def browser():
 
 
 @pytest.fixture(scope="module")
-def models(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("models")
-    return (train_identifier(SCENE, 0).save(folder / "identifier.npz"),
-            save_generator(train_generator(SCENE, 0), folder / "generator.npz"))
+def models(trained_models):
+    return trained_models.files(SCENE, 0)
 
 
 class PageWatch:

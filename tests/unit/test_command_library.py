@@ -273,15 +273,14 @@ class _Quiet:
 
 
 # ------------------------------------------------------------------ replay
-def test_replay_into_a_folder_with_the_recorded_and_with_new_gains(tmp_path, capsys):
+def test_replay_into_a_folder_with_the_recorded_and_with_new_gains(tmp_path, capsys, trained_models):
     from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
     from telethermal.teleop.replay import replay_to_folder
     from telethermal.teleop.run import run_session, with_finger
 
     scene = with_finger(load_scene("fingertip-7"))
     path = tmp_path / "s.mcap"
-    run_session(scene, "plexiglass", teleop_models.train_identifier(scene, 0),
-                teleop_models.train_generator(scene, 0),
+    run_session(scene, "plexiglass", *trained_models.pair(scene, 0),
                 DisplayConfig(feedforward_model="static"), contact_s=0.5, seed=2, record=path)
     same, png = replay_to_folder(path, tmp_path / "same")
     # Same models and gains: the replay is the recording, sample for sample.

@@ -29,12 +29,27 @@ def setup():
     return hw, plant, targets, idle, clairvoyant
 
 
-def test_a_decision_at_contact_is_the_worst_of_the_per_material_floors(setup):
+@pytest.fixture(scope="module")
+def all_at():
+    """``decision_floor(hw, plant, targets, idle, td)`` for all three
+    materials decided at one time ``td``: each solved once for the module
+    (several tests read the same solve; none changes its result)."""
+    solved = {}
+
+    def floor(setup, td: float):
+        hw, plant, targets, idle, _ = setup
+        if td not in solved:
+            solved[td] = decision_floor(hw, plant, targets, idle, td)
+        return solved[td]
+    return floor
+
+
+def test_a_decision_at_contact_is_the_worst_of_the_per_material_floors(setup, all_at):
     # Knowing the material from t = 0 nothing is shared: each material gets
     # its own best trajectory. Tolerance 2e-3 K: the tails are solved with
     # trf (tol 1e-6) where best_touch uses the exact bvls.
     hw, plant, targets, idle, clairvoyant = setup
-    f = decision_floor(hw, plant, targets, idle, 0.0)
+    f = all_at(setup, 0.0)
     assert f.converged
     for m in MATERIALS:
         assert f.per_material_k[m] == pytest.approx(clairvoyant[m], abs=2e-3)
@@ -42,13 +57,13 @@ def test_a_decision_at_contact_is_the_worst_of_the_per_material_floors(setup):
     assert len(f.common_q_w_m2) == 0
 
 
-def test_a_later_decision_never_lowers_the_floor_and_a_blind_one_costs(setup):
+def test_a_later_decision_never_lowers_the_floor_and_a_blind_one_costs(setup, all_at):
     # Sharing more slots is a tighter constraint on the same problem: the
     # minimax can only rise (tolerance 2e-3 K, the solver's). And it does
     # rise: materials as far apart as aluminium and plexiglass want
     # opposite pumping in the first 100 ms.
     hw, plant, targets, idle, _ = setup
-    worst = [decision_floor(hw, plant, targets, idle, td).worst_k for td in (0.0, 0.05, 0.1)]
+    worst = [all_at(setup, td).worst_k for td in (0.0, 0.05, 0.1)]
     assert worst[1] >= worst[0] - 2e-3 and worst[2] >= worst[1] - 2e-3
     assert worst[2] > worst[0] + 0.02
 
@@ -89,15 +104,15 @@ def test_no_material_is_refused(setup):
         decision_floor(hw, plant, {}, idle, 0.05)
 
 
-def test_one_time_for_every_material_is_the_single_time_floor_bit_for_bit(setup):
+def test_one_time_for_every_material_is_the_single_time_floor_bit_for_bit(setup, all_at):
     hw, plant, targets, idle, _ = setup
-    single = decision_floor(hw, plant, targets, idle, 0.05)
+    single = all_at(setup, 0.05)
     nested = decision_floor(hw, plant, targets, idle, {m: 0.05 for m in MATERIALS})
     assert nested.worst_k == single.worst_k
     assert nested.per_material_k == single.per_material_k
 
 
-def test_nested_decisions_lie_between_the_earliest_and_the_latest(setup):
+def test_nested_decisions_lie_between_the_earliest_and_the_latest(setup, all_at):
     # Each material learnt at its own time: the information is between
     # everyone learning at the earliest of those times and everyone at the
     # latest, and so is the minimax (tolerance 2e-3 K, the solver's). And a
@@ -105,8 +120,8 @@ def test_nested_decisions_lie_between_the_earliest_and_the_latest(setup):
     hw, plant, targets, idle, _ = setup
     times = {"aluminium": 0.03, "plexiglass": 0.1, "marble": 0.06}
     nested = decision_floor(hw, plant, targets, idle, times).worst_k
-    early = decision_floor(hw, plant, targets, idle, 0.03).worst_k
-    late = decision_floor(hw, plant, targets, idle, 0.1).worst_k
+    early = all_at(setup, 0.03).worst_k
+    late = all_at(setup, 0.1).worst_k
     assert early - 2e-3 <= nested <= late + 2e-3
     later = decision_floor(hw, plant, targets, idle, {**times, "aluminium": 0.08}).worst_k
     assert later >= nested - 2e-3
@@ -134,7 +149,7 @@ def test_a_material_without_a_decision_time_is_named(setup):
                                                   "marble": math.nan})
 
 
-def test_the_worst_ratio_to_each_materials_own_floor(setup):
+def test_the_worst_ratio_to_each_materials_own_floor(setup, all_at):
     # Relative to each material's floor knowing it at contact: deciding at
     # contact, every material reaches its own floor (ratio 1, 2e-3 K over
     # the smallest floor); deciding later, the least worst ratio is above 1
@@ -144,7 +159,7 @@ def test_the_worst_ratio_to_each_materials_own_floor(setup):
     at_contact = decision_floor(hw, plant, targets, idle, 0.0, relative_to=clairvoyant)
     assert at_contact.worst_ratio == pytest.approx(1.0, abs=2e-3 / min(clairvoyant.values()))
     late = decision_floor(hw, plant, targets, idle, 0.1, relative_to=clairvoyant)
-    plain = decision_floor(hw, plant, targets, idle, 0.1)
+    plain = all_at(setup, 0.1)
     plain_ratio = max(plain.per_material_k[m] / clairvoyant[m] for m in MATERIALS)
     assert 1.0 < late.worst_ratio <= plain_ratio + 1e-3
     assert late.worst_ratio == pytest.approx(

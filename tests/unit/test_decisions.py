@@ -11,7 +11,6 @@ from telethermal.errors import ModelFileError
 from telethermal.ident.anytime import StreamingIdentifier, decide, members, unknown_reason
 from telethermal.ident.registry import check_scene, load_model
 from telethermal.physics.scene import load_scene
-from telethermal.teleop.models import train_identifier
 from telethermal.teleop.run import slave_rng
 from telethermal.teleop.slave import Slave
 
@@ -19,8 +18,8 @@ SCENE = load_scene("fingertip-7")
 
 
 @pytest.fixture(scope="module")
-def model():
-    return train_identifier(SCENE, 0)
+def model(trained_models):
+    return trained_models.identifier(SCENE, 0)
 
 
 def _touches(scene, model, seeds=range(3)):

@@ -20,7 +20,6 @@ from telethermal.render.sampled import sample_curves
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.netsim import NetworkSpec, SimNetwork, run_network_touch
 from telethermal.teleop.run import with_finger
 from telethermal.wire.messages import CLASSES, ContactEvent
@@ -141,8 +140,8 @@ def test_two_objects_announced_in_quick_succession_are_read_in_order():
 
 # ------------------------------------------------------------- whole touches
 @pytest.fixture(scope="module")
-def models():
-    ident, gen = train_identifier(SCENE, 0), train_generator(SCENE, 0)
+def models(trained_models):
+    ident, gen = trained_models.pair(SCENE, 0)
     return ident, sample_curves(gen, [m for m in gen.materials if m in ident.classes_])
 
 

@@ -77,19 +77,17 @@ def test_recorded_phases_are_byte_identical_to_plain_strings(tmp_path):
     assert column == plain and all(type(p) is str for p in column)
 
 
-def test_a_recorded_session_replays_the_same_phase_column(tmp_path):
+def test_a_recorded_session_replays_the_same_phase_column(tmp_path, trained_models):
     # A whole touch: the phases the recording holds are plain strings, and
     # the replay's (Phase members) compare equal to them period by period.
     from telethermal.physics.scene import load_scene
     from telethermal.teleop.master import DisplayConfig
-    from telethermal.teleop.models import train_generator, train_identifier
     from telethermal.teleop.replay import replay
     from telethermal.teleop.run import run_session, with_finger
 
     scene = with_finger(load_scene("fingertip-7"))
     path = tmp_path / "session.mcap"
-    result = run_session(scene, "plexiglass", train_identifier(scene, 0),
-                         train_generator(scene, 0), DisplayConfig(), contact_s=0.5, seed=2,
+    result = run_session(scene, "plexiglass", *trained_models.pair(scene, 0), DisplayConfig(), contact_s=0.5, seed=2,
                          record=path)
     recorded = [row["phase"] for row in periods(read_recording(path))]
     assert all(type(p) is str for p in recorded)

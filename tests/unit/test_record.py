@@ -15,7 +15,6 @@ from telethermal.record.importer import import_recordings
 from telethermal.record.recording import Recorder, RecordingError, read_recording
 from telethermal.record.recorder import periods
 from telethermal.teleop.replay import replay
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.run import run_session, with_finger
 
@@ -23,8 +22,8 @@ SCENE = with_finger(load_scene("fingertip-7"))
 
 
 @pytest.fixture(scope="module")
-def models():
-    return train_identifier(SCENE, 0), train_generator(SCENE, 0)
+def models(trained_models):
+    return trained_models.pair(SCENE, 0)
 
 
 @pytest.fixture(scope="module")
