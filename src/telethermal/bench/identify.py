@@ -407,7 +407,8 @@ def _run_methods(report: dict, seed: int, methods, step, sessions: int = 1) -> N
         step(f"{method}: active/passive")
         ap = active_passive(method, seed)
         step(f"{method}: cross-temperature")
-        report["methods"][method] = {"table1": t1, "active_passive": ap,
+        report["methods"][method] = {"table1": t1, "live": t1.pop("live"),
+                                     "active_passive": ap,
                                      "cross_temperature": cross_temperature(method, seed)}
         step(f"{method}: session shift")
         report["methods"][method]["session_shift"] = session_shift(method, seed)

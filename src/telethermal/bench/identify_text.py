@@ -33,8 +33,8 @@ def _method_lines(method: str, rep: dict) -> list[str]:
                  f"within 1 s: {100 * dec['commit_rate']:.0f} % committed, "
                  + ("-" if dec["accuracy"] is None else f"{100 * dec['accuracy']:.0f} %")
                  + " of them right")
-    if "live" in t1:
-        lv = t1["live"]
+    if "live" in rep:
+        lv = rep["live"]
         lines.append(f"{pad}  over {lv['sessions']} session(s), {lv['touches']} touches: 7 classes "
                      + ", ".join(f"{k} s {100 * v:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}]"
                                  for (k, v), (lo, hi) in zip(t1["accuracy_7"].items(),

@@ -141,6 +141,11 @@ def identify(out: Path, d: dict) -> list[str]:
         for n in (7, 5):
             acc = m.get("table1", {}).get(f"accuracy_{n}", {})
             lines.append(f"| {name} | {n} | " + " | ".join(_pct(acc.get(k)) for k in keys) + " |")
+    lim = d.get("limit") or {}
+    for n in (7, 5):
+        if lim.get(f"accuracy_{n}"):
+            lines.append(f"| physical limit (oracle) | {n} | " + " | ".join(
+                _pct(lim[f"accuracy_{n}"].get(k)) for k in keys) + " |")
     for n in (7, 5):
         paper = t1.get(f"paper_accuracy_{n}")
         if isinstance(paper, str):
