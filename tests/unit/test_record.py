@@ -138,7 +138,10 @@ class FillingDisk:
 
 def test_a_disk_that_fills_up_stops_the_recording_not_the_session(models, tmp_path,
                                                                       monkeypatch, caplog):
-    monkeypatch.setattr(recording, "_open", lambda p, m: FillingDisk(p, m, 200_000))
+    # The disk fills mid-session: past the recording's start (it carries the
+    # models: the identifier file is 271 KB since issue 29's per-class
+    # covariances), well before its end (503 KB); the asserts below check both.
+    monkeypatch.setattr(recording, "_open", lambda p, m: FillingDisk(p, m, 300_000))
     path = tmp_path / "full.mcap"
     result = run_session(SCENE, "wood", *models, contact_s=1.0, seed=2, record=path)
     s = result.summary
@@ -148,6 +151,23 @@ def test_a_disk_that_fills_up_stops_the_recording_not_the_session(models, tmp_pa
     assert s["safety_events"] == 0 and np.isfinite(s["flux_rms_error_rel_whole"])
     assert "the session goes on" in caplog.text
     assert len(periods(read_recording(path))) > 0                    # up to the full disk
+
+
+def test_a_disk_full_at_the_start_refuses_the_recording_and_leaves_nothing(tmp_path,
+                                                                         monkeypatch):
+    # The models attached at the start do not fit: a clear error, the file
+    # closed (no ResourceWarning reaches a later test) and removed.
+    opened = []
+
+    def full(p, m):
+        opened.append(FillingDisk(p, m, 1000))
+        return opened[-1]
+
+    monkeypatch.setattr(recording, "_open", full)
+    path = tmp_path / "full.mcap"
+    with pytest.raises(RecordingError, match=r"cannot record to .*full\.mcap: .*No space left"):
+        Recorder(path, "slave", config={}, attachments={"identifier.npz": b"x" * 5000})
+    assert opened and opened[0].f.closed and not path.exists()
 
 
 def test_dataset_import_adds_recorded_contacts_all_or_nothing(recorded, tmp_path):

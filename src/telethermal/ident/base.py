@@ -426,7 +426,9 @@ class Identifier:
 
     @classmethod
     def restore(cls, header: dict, arrays: dict) -> "Identifier":
-        model = cls(channels=header["channels"], **header["hyper"])
+        # A model file from before confirm_windows decided at the first
+        # window past the threshold: it keeps deciding so.
+        model = cls(channels=header["channels"], **{"confirm_windows": 1, **header["hyper"]})
         model.classes_ = list(header["classes"])
         model.sample_rate_hz_ = float(header["sample_rate_hz"])
         model.windows_s_ = list(header["windows_s"])

@@ -102,6 +102,7 @@ class Recorder:
         self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self._channels: dict[str, int] = {}
         self._closed = False
+        self._file = None
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = _open(self.path, "wb")
@@ -119,6 +120,12 @@ class Recorder:
                 self._writer.add_attachment(0, 0, name, "application/octet-stream", data)
             self._file.flush()
         except OSError as exc:
+            if self._file is not None:   # opened, then its start could not be written:
+                try:                     # nothing half-written is left behind
+                    self._file.close()
+                except OSError:
+                    pass
+                self.path.unlink(missing_ok=True)
             raise RecordingError(f"cannot record to {self.path}: {exc}") from exc
         self._thread = threading.Thread(target=self._run, name=f"recorder-{role}",
                                         daemon=True)
