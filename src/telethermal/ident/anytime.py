@@ -1,6 +1,10 @@
 """Anytime decisions: commit to a material as soon as the calibrated
 confidence passes the identifier's threshold, or say "unknown".
 
+A commitment needs the threshold passed at ``confirm_windows`` windows in a
+row (:class:`~telethermal.ident.base.Runs`) and at a window the model's
+held-out touches support (``commit_from_s_``, :func:`~telethermal.ident.base.commit_from_index`).
+
 "unknown" is the answer, rather than a guess, when the contact exchanged too
 little heat (a gap under ``MIN_GAP_K``: the passive pad at the object's own
 temperature), when the contact lies outside every learnt class, or when the
