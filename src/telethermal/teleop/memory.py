@@ -197,7 +197,7 @@ class ObjectMemory:
                 log_p = _add(log_p, ev)
             labels = [a for a, _ in streak]
             agreed = min(labels, key=lambda a: len(a.members)) \
-                if all(set(b.members) <= set(a.members) or set(a.members) <= set(b.members)
+                if all(agreement(a, b) != Agreement.DISAGREES
                        for a in labels for b in labels) else None
             self._known[object_id] = _Evidence(log_p, len(streak), t_s, [], agreed)
             verdict = Verdict.REPLACED
@@ -230,11 +230,11 @@ class ObjectMemory:
         for name in sorted(self._known):
             r = self.recall(name)
             ev = self._known[name]
+            post = r.posteriors if r else _posterior(ev.log_p)
             out[name] = {"material": r.material if r else None,
                          "confidence": r.confidence if r else None, "t_s": ev.t_s,
                          "touches": ev.touches,
-                         "posteriors": {c: round(p, 6) for c, p in
-                                        sorted(_posterior(ev.log_p).items())}}
+                         "posteriors": {c: round(p, 6) for c, p in sorted(post.items())}}
         return out
 
 
