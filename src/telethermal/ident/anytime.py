@@ -2,7 +2,8 @@
 confidence passes the identifier's threshold, or say "unknown".
 
 A commitment needs the threshold passed at ``confirm_windows`` windows in a
-row (:class:`~telethermal.ident.base.Runs`) and at a window the model's
+row (:class:`~telethermal.ident.rule.Runs`; the rule's one copy is
+:class:`~telethermal.ident.rule.AnytimeRule`) and at a window the model's
 held-out touches support (``commit_from_s_``, :func:`~telethermal.ident.base.commit_from_index`).
 
 "unknown" is the answer, rather than a guess, when the contact exchanged too
@@ -25,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from telethermal.errors import IdentificationError
-from telethermal.ident.base import FORCE_SAMPLES, Identifier, Runs, force_at, force_in_range
+from telethermal.ident.base import FORCE_SAMPLES, Identifier, force_at, force_in_range
+from telethermal.ident.rule import AnytimeRule
 from telethermal.ident.label import GROUP_SEPARATOR, UNKNOWN, Label, Reason
 from telethermal.ident.prepare import MIN_GAP_K
 
@@ -44,15 +46,6 @@ def members(label: str) -> tuple[str, ...]:
     """The materials a decision's label stands for (one, or a group's; none
     for unknown): :attr:`Label.members`."""
     return Label(label).members
-
-
-def _group(p: np.ndarray, threshold: float):
-    """Indices of the two most probable classes when together, but neither
-    alone, they pass the threshold; else None."""
-    if len(p) < 3:
-        return None
-    top = np.argsort(p)[::-1][:2]
-    return top if p[top].sum() >= threshold else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,44 +80,34 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     n = int(np.sum(np.all(np.isfinite(x), axis=1)))
     path = model.posterior_path(x[:n])
     forces = None if force_n is None else np.asarray(force_n, dtype=np.float64)[None]
-    best = 0.0
+    rule = AnytimeRule(model.threshold, model.confirm_windows)
     group = None
-    outside = unlike = False
-    runs = Runs(model.confirm_windows)
+    best = 0.0
     for i, p in enumerate(path):
-        k = int(np.argmax(p))
-        best = float(p[k])
+        best = float(np.max(p))
+        outside = False
         if forces is not None:
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
-            if outside:
-                runs.reset()
-                continue
-        if not model.may_commit(i):
-            runs.reset()
+        step = rule.step(i, p, may_commit=model.may_commit(i), force_outside=outside,
+                         unlike=lambda i=i: bool(model.outside_classes(x[None, :n], i)[0]))
+        if step is None:
             continue
-        if runs.single(k, p[k] >= model.threshold):
-            # Unlike every class here: not final (a few samples can be), the
-            # touch is watched on; "unknown" if it ends so.
-            unlike = bool(model.outside_classes(x[None, :n], i)[0])
-            if unlike:
-                continue
+        kind, what = step
+        if kind == "class":
             # The group's earlier commitment counts only if it held this material.
-            first = group.time_s if group and group.label.holds(model.classes_[k]) \
+            first = group.time_s if group and group.label.holds(model.classes_[what]) \
                 else model.windows_s_[i]
-            return Decision(model.classes_[k], best, model.windows_s_[i], Reason.CONFIDENT,
+            return Decision(model.classes_[what], best, model.windows_s_[i], Reason.CONFIDENT,
                             first)
-        pair = _group(p, model.threshold)
-        holds = group is None and pair is not None and \
-            not model.outside_classes(x[None, :n], i)[0]
-        if runs.pair(pair if holds else (), holds):
-            group = Decision(Label.of(model.classes_[j] for j in pair), float(p[pair].sum()),
-                             model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
+        group = Decision(Label.of(model.classes_[j] for j in what), float(p[list(what)].sum()),
+                         model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
         return group
-    if unlike and not outside:
+    if rule.unlike and not rule.force_outside:
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
-    return Decision(UNKNOWN, best, None, FORCE_OUTSIDE if outside else Reason.NOT_CONFIDENT)
+    return Decision(UNKNOWN, best, None,
+                    FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
 
 
 def decide_all(model: Identifier, contacts) -> list[Decision]:
@@ -189,8 +172,7 @@ class StreamingIdentifier:
         self._rows: list[np.ndarray] = []
         self._forces: list[float] = []
         self._window = -1
-        self._unlike = False               # the last confident window was unlike every class
-        self._runs = Runs(model.confirm_windows)
+        self._rule = AnytimeRule(model.threshold, model.confirm_windows)
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
                                  False)
@@ -234,39 +216,30 @@ class StreamingIdentifier:
         p = model.proba_normalised(x, index)[0]
         k = int(np.argmax(p))
         t_s = model.windows_s_[index]
-        pair = _group(p, model.threshold)
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
         last = index == len(model.windows_s_) - 1
-        may = not outside and model.may_commit(index)
-        fire = new_pair = False
-        if not may:
-            self._runs.reset()
-        else:
-            fire = self._runs.single(k, p[k] >= model.threshold)
-            if fire:                      # unlike every class: watched on, not final
-                self._unlike = bool(model.outside_classes(x, index)[0])
-            else:
-                holds = held is None and pair is not None and \
-                    not model.outside_classes(x, index)[0]
-                new_pair = self._runs.pair(pair if holds else (), holds)
+        step = self._rule.step(index, p, may_commit=model.may_commit(index),
+                               force_outside=outside,
+                               unlike=lambda: bool(model.outside_classes(x, index)[0]))
+        kind, what = step if step is not None else (None, None)
         if outside and held is None:
             est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
                            last, FORCE_OUTSIDE if last else Reason.UNDECIDED)
         elif outside:
             est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
-        elif fire and not self._unlike:
-            est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), True,
+        elif kind == "class":
+            est = Estimate(t_s, tuple(p), model.classes_[what], float(p[k]), True,
                            Reason.CONFIDENT)
         elif held is not None:            # a group stands until a member is sure alone
             est = Estimate(t_s, tuple(p), held.label, float(p[k]), True, Reason.CONFIDENT_GROUP)
-        elif new_pair:
-            est = Estimate(t_s, tuple(p), Label.of(model.classes_[j] for j in pair),
-                           float(p[pair].sum()), True, Reason.CONFIDENT_GROUP)
+        elif kind == "pair":
+            est = Estimate(t_s, tuple(p), Label.of(model.classes_[j] for j in what),
+                           float(p[list(what)].sum()), True, Reason.CONFIDENT_GROUP)
         elif last:
             est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True,
-                           Reason.OUTSIDE_CLASSES if self._unlike else Reason.NOT_CONFIDENT)
+                           Reason.OUTSIDE_CLASSES if self._rule.unlike else Reason.NOT_CONFIDENT)
         else:
             est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), False)
         self.estimate = est

@@ -27,6 +27,7 @@ from scipy.special import log_softmax
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts, normalise
+from telethermal.ident.rule import AnytimeRule, Runs  # noqa: F401 (Runs: its old home)
 from telethermal.npzfile import read_npz, write_npz
 
 FORMAT_VERSION = 1
@@ -135,57 +136,24 @@ def commit_from_index(post: np.ndarray, y: np.ndarray, threshold: float,
     while start < n_windows:
         first_wrong = None
         for j in range(n):
-            pair, runs = None, Runs(confirm)
+            rule = AnytimeRule(threshold, confirm)
             for i in range(start, n_windows):
                 p = post[i, j]
                 if not np.all(np.isfinite(p)):
                     break
-                k = int(np.argmax(p))
-                if runs.single(k, p[k] >= threshold):
-                    if k != y[j]:
-                        first_wrong = i if first_wrong is None else min(first_wrong, i)
+                step = rule.step(i, p)
+                if step is None:
+                    continue
+                kind, what = step
+                if (kind == "class" and what != y[j]) or (kind == "pair" and y[j] not in what):
+                    first_wrong = i if first_wrong is None else min(first_wrong, i)
                     break
-                top = np.argsort(p)[::-1][:2]
-                if runs.pair(top, pair is None and len(p) >= 3 and p[top].sum() >= threshold):
-                    pair = top
-                    if y[j] not in pair:
-                        first_wrong = i if first_wrong is None else min(first_wrong, i)
-                        break
+                if kind == "class":
+                    break
         if first_wrong is None:
             return start
         start = first_wrong + 1
     return n_windows
-
-
-class Runs:
-    """Consecutive windows a commitment's condition has held (the same
-    class, or the same pair): a decision commits once it has held for
-    ``need`` windows in a row (``confirm_windows``). Each window is a
-    separate fit, so a posterior can spike past the threshold at one window
-    and fall back at the next (seen: a rubber touch at 0.998 plexiglass at
-    0.44 s, 1.000 rubber at 0.50 s); a crossing that holds is the evidence,
-    a spike is not."""
-
-    def __init__(self, need: int):
-        self.need = max(1, int(need))
-        self._single, self._pair = (None, 0), (None, 0)
-
-    def single(self, k: int, holds: bool) -> bool:
-        """Window's best class ``k`` passed the threshold (``holds``): commit now?"""
-        key, n = self._single
-        self._single = ((k, n + 1 if key == k else 1) if holds else (None, 0))
-        return holds and self._single[1] >= self.need
-
-    def pair(self, members, holds: bool) -> bool:
-        """The two most probable together passed it (``holds``): commit the pair now?"""
-        key = tuple(sorted(int(m) for m in members)) if holds else None
-        old, n = self._pair
-        self._pair = ((key, n + 1 if old == key else 1) if holds else (None, 0))
-        return holds and self._pair[1] >= self.need
-
-    def reset(self) -> None:
-        """A window that may not commit (force outside, before the schedule)."""
-        self._single, self._pair = (None, 0), (None, 0)
 
 
 def force_in_range(model, window_index: int, force_n: float | None) -> bool:
