@@ -124,6 +124,9 @@ class EffusivityFamily:
     @classmethod
     def from_grid(cls, log_e, u, t_s, g) -> "EffusivityFamily":
         axes = [np.asarray(a, float) for a in (log_e, u, t_s)]
+        if min(len(a) for a in axes) < 4:
+            raise IdentificationError(f"a tricubic spline needs >= 4 points on each axis, got "
+                                      f"{[len(a) for a in axes]} (log e, log h, t)")
         c, knots = np.asarray(g, float), []
         for ax, x in enumerate(axes):                  # tensor product: one axis at a time
             spl = make_interp_spline(x, c, k=3, axis=ax)
