@@ -111,3 +111,18 @@ def test_cli_bad_seeds_exit_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "unseen", "--json", str(tmp_path / "u.json"), "--seeds", "0"])
     assert exc.value.code == 2 and "'0' must be positive" in capsys.readouterr().err
+
+
+def test_targets_pool_coverage_per_window_and_judge_the_unseen_error():
+    e_glass, e_wood = get_material("glass").effusivity, get_material("wood").effusivity
+    glass = [{"windows": {w: _estimate(e_glass * 1.2, e_glass * 1.1, e_glass * 1.3)
+                          for w in unseen.WINDOWS_S}}] * 3          # 20 % off, never covered
+    wood = [{"windows": {w: _estimate(e_wood, e_wood * 0.9, e_wood * 1.1)
+                         for w in unseen.WINDOWS_S}}] * 5
+    materials = {"glass": unseen._material_summary("glass", glass, TRAINED),
+                 "wood": unseen._material_summary("wood", wood, TRAINED)}
+    targets = unseen._targets(materials)
+    assert targets["unseen_rel_error_within_10pct_by_0.5_s"] == {"glass": False}
+    pooled = targets["coverage_by_window"]["0.5"]
+    assert (pooled["covered"], pooled["n"], pooled["within_90_98"]) == (5, 8, False)
+    assert targets["unseen_coverage_by_window"]["1"]["covered"] == 0

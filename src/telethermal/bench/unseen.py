@@ -175,22 +175,27 @@ def _timing(rows: list[dict]) -> dict:
     return out
 
 
+def _pooled_coverage(materials: dict, key: str) -> dict:
+    """The share of ``materials``' touches whose interval at window ``key``
+    holds the truth, with its Wilson interval and the target's verdict."""
+    hit = sum(r["interval_coverage"][key]["covered"] for r in materials.values())
+    n = sum(r["interval_coverage"][key]["n"] for r in materials.values())
+    lo, hi = TARGET_COVERAGE
+    return {"rate": hit / n, "covered": hit, "n": n, "ci": wilson_interval(hit, n),
+            "within_90_98": lo <= hit / n <= hi}
+
+
 def _targets(materials: dict) -> dict:
-    """The issue's targets, per unseen material and pooled."""
+    """The issue's targets: per unseen material its median error at 0.5 s;
+    per window the pooled coverage of every material and of the unseen."""
     key = f"{TARGET_WINDOW_S:g}"
     unseen = {m: r for m, r in materials.items() if not r["trained"]}
-    err = {m: r["effusivity_rel_error"][key] <= TARGET_REL_ERROR for m, r in unseen.items()}
-    hit = sum(r["interval_coverage"][k]["covered"] for r in materials.values()
-              for k in r["interval_coverage"])
-    n = sum(r["interval_coverage"][k]["n"] for r in materials.values()
-            for k in r["interval_coverage"])
-    lo, hi = TARGET_COVERAGE
-    per = {m: {k: lo <= c["rate"] <= hi for k, c in r["interval_coverage"].items()}
-           for m, r in materials.items()}
-    return {"unseen_rel_error_within_10pct_by_0.5_s": err,
-            "coverage_pooled": {"rate": hit / n, "covered": hit, "n": n,
-                                "ci": wilson_interval(hit, n), "within_90_98": lo <= hit / n <= hi},
-            "coverage_within_90_98": per}
+    windows = [f"{w:g}" for w in WINDOWS_S]
+    return {"unseen_rel_error_within_10pct_by_0.5_s": {
+                m: r["effusivity_rel_error"][key] <= TARGET_REL_ERROR for m, r in unseen.items()},
+            "coverage_by_window": {k: _pooled_coverage(materials, k) for k in windows},
+            "unseen_coverage_by_window": {k: _pooled_coverage(unseen, k) for k in windows}
+            if unseen else None}
 
 
 def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
@@ -208,11 +213,13 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     base = load_scene(scene)
     trained = [o.material for o in base.objects]
     room_like = base.objects[0]
-    objects = package_objects(DEFAULT_UNSEEN if unseen is None else unseen, trained,
-                              room_like.temp_c, room_like.thickness_m)
+    # The default set leaves out what the scene trains on (glass on the active pad).
+    names = [m for m in DEFAULT_UNSEEN if m not in trained] if unseen is None else unseen
+    objects = package_objects(names, trained, room_like.temp_c, room_like.thickness_m)
     path = default_unseen_scene_path() if unseen is None and unseen_scene is None else unseen_scene
     if path is not None:
-        objects += scene_objects(path, trained)
+        objects += [dataclasses.replace(o, temp_c=room_like.temp_c) if path ==
+                    default_unseen_scene_path() else o for o in scene_objects(path, trained)]
     touched = touch_scene(base, objects)
     if quick:
         touched = dataclasses.replace(touched, pad=dataclasses.replace(
@@ -265,9 +272,9 @@ def text_report(report: dict, json_path) -> list[str]:
         cov = " ".join(f"{100 * c['rate']:3.0f}%" for c in r["interval_coverage"].values())
         lines.append(f"  {tag} {m:<13} e {r['effusivity_w_s05_m2k']:8.0f}  error {err}  "
                      f"coverage {cov}  (n {r['touches']})")
-    pooled = report["targets"]["coverage_pooled"]
-    lines.append(f"  coverage pooled {100 * pooled['rate']:.1f} % [{100 * pooled['ci'][0]:.1f}, "
-                 f"{100 * pooled['ci'][1]:.1f}] (target 90-98 %)")
+    lines.append("  coverage, every material (target 90-98 %): " + ", ".join(
+        f"{k} s {100 * c['rate']:.1f} % [{100 * c['ci'][0]:.1f}, {100 * c['ci'][1]:.1f}]"
+        for k, c in report["targets"]["coverage_by_window"].items()))
     lines.append("  one estimate, ms (cold p50 / warm p50): " + ", ".join(
         f"{k} s {1e3 * v['cold_s_p50']:.1f}/{1e3 * v['warm_s_p50']:.1f}"
         for k, v in report["time_per_estimate_s"].items()))

@@ -36,15 +36,34 @@ of ``x`` (W/m^2 K)::
   does not know its instruments' errors); ``A`` is marginalised in closed
   form. The prior on ``log e`` is flat over the grid.
 
+- The curves' own error: the simulator that makes the touches solves the
+  layered conduction to its scene's ``[model] tolerance_rel`` (1e-3), and
+  its grid depends on the object's diffusivity, which the estimator does
+  not know: fingertip-7's aluminium differs from the estimator's curve of
+  the same effusivity by 0.36 W/m^2 K (5e-4 of the flux), ~90 times the
+  flux noise per sample over a 10 K gap (0.004 W/m^2 K). Without an
+  allowance for it the metals' intervals covered 0 of 20 touches at 0.5 s
+  and 1 s (seeds 7 and 8). The allowance: ``model_error_rel`` (the scene's
+  tolerance) times the rms of the touch's samples, added to the noise's
+  variance as if white. A systematic error is not white: the allowance is
+  an approximation, on the conservative side where the signal is large.
+
 The fit: damped Gauss-Newton on the log posterior density in
 ``(log e, log h / h_ref, tau)`` from the best node of a coarse grid (or from
 a previous window's estimate, as a live slave would); the interval is
 Laplace's: ``log e +- 1.96 sd`` with ``sd`` from the inverse Gauss-Newton
 Hessian (the other two parameters marginalised). An estimate whose
 interval reaches the grid's edge says so (``at_bound``). Goodness of fit:
-the residual's chi-square against the noise; ``fits`` is False when its
-p-value is below :data:`FIT_P_MIN` (the object is not what the model
-assumes: layered, thin, or at another temperature than the model's).
+the residual's chi-square against the noise and the allowance; ``fits`` is
+False when its p-value is below :data:`FIT_P_MIN` (the object is not what
+the model assumes: a coat on another material fails it; a thin plate's
+slow fall-off does not within 0.5 s, its estimate drifts down instead).
+
+Cost (``telethermal bench unseen``'s ``time_per_estimate_s``): from the
+grid's best node ("cold": the coarse search over every node and 9 onsets)
+and from the estimate one 50 Hz period before ("warm": as a live slave
+re-estimates); the curves are built once per scene and object temperature
+(seconds: the pad's loop simulated at 1 kHz for every grid point).
 """
 
 from __future__ import annotations
