@@ -42,7 +42,7 @@ of ``x`` (W/m^2 K)::
   not know: fingertip-7's aluminium differs from the estimator's curve of
   the same effusivity by 0.36 W/m^2 K (5e-4 of the flux), ~90 times the
   flux noise per sample over a 10 K gap (0.004 W/m^2 K). Without an
-  allowance for it the metals' intervals covered 0 of 20 touches at 0.5 s
+  allowance for it aluminium's intervals covered 0 of 20 touches at 0.5 s
   and 1 s (seeds 7 and 8). The allowance: ``model_error_rel`` (the scene's
   tolerance) times the rms of the touch's samples, added to the noise's
   variance as if white. A systematic error is not white: the allowance is
