@@ -243,3 +243,21 @@ def test_bad_samples_and_windows_are_refused(estimator):
         estimator.estimate(np.array([1.0, np.nan, 2.0, 3.0, 4.0]), 10.0)
     with pytest.raises(IdentificationError, match="longer than the estimator's curves"):
         estimator.estimate(np.ones(200), 10.0)
+
+
+def test_contacts_of_another_rate_or_too_short_are_refused(estimator, touches):
+    slow = dataclasses.replace(touches, sample_rate_hz=10.0)
+    with pytest.raises(IdentificationError, match="100 Hz; the contacts have .* at 10 Hz"):
+        estimator.estimate_contacts(slow, 0.1)
+    short = dataclasses.replace(touches, lengths=np.where(np.arange(len(touches)) == 2, 20,
+                                                          touches.lengths))
+    with pytest.raises(IdentificationError, match="touch 2 is shorter than the 0.5 s window"):
+        estimator.estimate_contacts(short, WINDOW_S)
+
+
+def test_an_estimate_reports_in_si_names(estimates):
+    out = estimates[0].to_dict()
+    assert {"effusivity_w_s05_m2k", "interval_w_s05_m2k", "contact_conductance_w_m2k",
+            "onset_offset_s", "window_s"} <= set(out) and "theta" not in out
+    lo, hi = out["interval_w_s05_m2k"]
+    assert lo < out["effusivity_w_s05_m2k"] < hi
