@@ -3,6 +3,7 @@ set, the touched scene, the per-material figures, and the command line's
 bad input (one line naming the bad value, exit 2)."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -126,3 +127,27 @@ def test_targets_pool_coverage_per_window_and_judge_the_unseen_error():
     pooled = targets["coverage_by_window"]["0.5"]
     assert (pooled["covered"], pooled["n"], pooled["within_90_98"]) == (5, 8, False)
     assert targets["unseen_coverage_by_window"]["1"]["covered"] == 0
+
+
+def test_the_unseen_set_from_the_options(tmp_path):
+    base = load_scene("fingertip-7")
+    default, path = unseen.unseen_objects(base)
+    assert [o.material for o in default] == ["copper", "carbon_steel", "glass", "foam", "brass",
+                                             "concrete"]
+    assert path == unseen.default_unseen_scene_path()
+    (tmp_path / "lab.csv").write_text(
+        "name,role,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,source\n"
+        "cork_lab,object,0.039,120.0,1800.0,\"Cork, board, Incropera A.3\"\n")
+    scene_file = tmp_path / "lab.toml"
+    text = Path(unseen.default_unseen_scene_path()).read_text()
+    scene_file.write_text(text[:text.index("[[objects]]")].replace(
+        "unseen-materials.csv", "lab.csv")
+        + '[[objects]]\nmaterial = "cork_lab"\ntemp_c = 40.0\nthickness_m = 0.03\n')
+    alone, path = unseen.unseen_objects(base, unseen_scene=str(scene_file))
+    assert [(o.material, o.temp_c) for o in alone] == [("cork_lab", 40.0)]
+    both, _ = unseen.unseen_objects(base, unseen="foam", unseen_scene=str(scene_file))
+    assert [o.material for o in both] == ["foam", "cork_lab"]
+    active = load_scene("gripper-case-I-pro")          # glass is trained there: left out
+    names = [o.material for o in unseen.unseen_objects(active)[0]]
+    assert "glass" not in names and "copper" in names
+    assert {o.temp_c for o in unseen.unseen_objects(active)[0]} == {34.0}

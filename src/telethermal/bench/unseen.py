@@ -114,6 +114,31 @@ def same_as_trained(name: str, trained) -> str | None:
     return None
 
 
+def unseen_objects(base: Scene, unseen=None, unseen_scene=None) -> tuple[list, str | None]:
+    """(the unseen objects, the scene file they came from or None):
+    ``unseen`` (package materials, at the temperature and thickness of
+    ``base``'s first object) and the objects of the scene file
+    ``unseen_scene``; with neither, :data:`DEFAULT_UNSEEN` less ``base``'s
+    own (glass on the active pad) and the shipped unseen-objects scene's,
+    at ``base``'s temperature."""
+    trained = base.materials
+    first = base.objects[0]
+    if unseen is None:
+        names = [] if unseen_scene is not None else [m for m in DEFAULT_UNSEEN
+                                                      if m not in trained]
+    else:
+        names = unseen
+    objects = package_objects(names, trained, first.temp_c, first.thickness_m) if names else []
+    if unseen is None and unseen_scene is None:
+        path = default_unseen_scene_path()
+        objects += [dataclasses.replace(o, temp_c=first.temp_c)
+                    for o in scene_objects(path, trained)]
+    else:
+        path = unseen_scene
+        objects += scene_objects(path, trained) if path is not None else []
+    return objects, path
+
+
 # ---------------------------------------------------------------- measuring
 def _estimates(estimators: dict, scene: Scene, contacts, timed: set) -> list[dict]:
     """Per touch: each window's estimate (dicts), and for the ``timed``
@@ -200,11 +225,11 @@ def _targets(materials: dict) -> dict:
 
 def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         scene: str = "fingertip-7", progress: Callable[[str], None] | None = None) -> dict:
-    """Run the benchmark (``seeds`` sessions, seeds 0 .. seeds-1); ``unseen``:
-    package materials (default :data:`DEFAULT_UNSEEN`), ``unseen_scene``: a
-    scene file whose objects add to them (default the shipped one; with
-    ``unseen`` given, only if given). ``quick``: 3 touches per material and
-    a coarser prior. Returns the report."""
+    """Run the benchmark (``seeds`` sessions, seeds 0 .. seeds-1). The
+    unseen set: ``unseen`` (package materials) and the objects of the scene
+    file ``unseen_scene``; with neither, :data:`DEFAULT_UNSEEN` (less the
+    scene's own) and the shipped unseen-objects scene. ``quick``: 3 touches
+    per material and a coarser prior. Returns the report."""
     from telethermal.data.generate import pad_database
     from telethermal.ident.effusivity import EffusivityEstimator
     from telethermal.ident.prepare import from_trials
@@ -212,14 +237,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     step = progress or (lambda _label: None)
     base = load_scene(scene)
     trained = [o.material for o in base.objects]
-    room_like = base.objects[0]
-    # The default set leaves out what the scene trains on (glass on the active pad).
-    names = [m for m in DEFAULT_UNSEEN if m not in trained] if unseen is None else unseen
-    objects = package_objects(names, trained, room_like.temp_c, room_like.thickness_m)
-    path = default_unseen_scene_path() if unseen is None and unseen_scene is None else unseen_scene
-    if path is not None:
-        objects += [dataclasses.replace(o, temp_c=room_like.temp_c) if path ==
-                    default_unseen_scene_path() else o for o in scene_objects(path, trained)]
+    objects, path = unseen_objects(base, unseen, unseen_scene)
     touched = touch_scene(base, objects)
     if quick:
         touched = dataclasses.replace(touched, pad=dataclasses.replace(
