@@ -89,6 +89,22 @@ def test_a_finite_object_depends_on_more_than_its_effusivity():
     assert np.max(np.abs(q_glass / q_heavy - 1)) > 0.1
 
 
+def test_the_contracted_spline_is_the_tensor_spline(estimator, rng):
+    # curve() contracts the tricubic spline in (ln e, u) before evaluating
+    # it in t: the same polynomial, so equal to rounding, edges included.
+    fam = estimator.family
+    t = np.arange(51) / 100.0
+    lo = [fam.log_e[0], fam.u[0], -0.02]
+    hi = [fam.log_e[-1], fam.u[-1], 0.0]
+    for theta in [tuple(lo), tuple(hi)] + [tuple(rng.uniform(lo, hi)) for _ in range(10)]:
+        g, jac = fam.curve(theta, t, deriv=True)
+        pts = np.column_stack([np.full(51, theta[0]), np.full(51, theta[1]), t - theta[2]])
+        ref = np.column_stack([fam.spline(pts), fam.spline(pts, nu=(1, 0, 0)),
+                               fam.spline(pts, nu=(0, 1, 0)), -fam.spline(pts, nu=(0, 0, 1))])
+        scale = np.abs(ref).max(axis=0)
+        np.testing.assert_allclose(np.column_stack([g, jac]) / scale, ref / scale, atol=1e-9)
+
+
 # ---------------------------------------------------------------- recovering e
 @pytest.mark.parametrize("material", ["foam", "plexiglass", "glass", "steel", "copper"])
 def test_a_noise_free_curve_gives_back_its_effusivity(scene, estimator, material):
