@@ -119,6 +119,18 @@ def cmd_bench_skin_floor(args) -> int:
     return 0
 
 
+def cmd_bench_unseen(args) -> int:
+    from telethermal.bench import unseen
+
+    seeds = args.seeds or (1 if args.quick else 3)
+    with _progress(seeds + 1, "bench unseen") as advance:
+        report = unseen.run_and_save(args.json, command=_command(), seeds=seeds,
+                                     unseen=args.unseen, unseen_scene=args.unseen_scene,
+                                     quick=args.quick, scene=args.scene, progress=advance)
+    _print_lines(unseen.text_report(report, args.json))
+    return 0
+
+
 def _add_speed(bsub) -> None:
     """physics, transport, report, record, devices."""
     p = bsub.add_parser("physics", help="contact models: error against runtime")
@@ -221,6 +233,20 @@ def _add_error(bsub) -> None:
                    help="skip the physical limit (the oracle on every session's touches, "
                         "a few minutes)")
     p.set_defaults(func=cmd_bench_identify)
+
+    p = bsub.add_parser("unseen", help="materials the identifiers never saw: the live "
+                                       "effusivity estimate's error and interval coverage")
+    p.add_argument("--json", required=True)
+    p.add_argument("--seeds", type=_positive(int),
+                   help="sessions (seeds 0 .. N-1; default 3, 1 with --quick)")
+    p.add_argument("--quick", action="store_true", help="3 touches per material, a coarser prior")
+    p.add_argument("--unseen", help="comma-separated package materials to touch (default "
+                                    "copper,carbon_steel,glass,foam and the shipped "
+                                    "unseen-objects scene's brass and concrete)")
+    p.add_argument("--unseen-scene", help="a scene file whose objects (with its own materials "
+                                          "table) are touched as unseen materials")
+    _scene_arg(p)
+    p.set_defaults(func=cmd_bench_unseen)
 
     p = bsub.add_parser("view", help="the view's first paint, its lag behind a session, and the "
                                      "master's loop timing with and without the page")

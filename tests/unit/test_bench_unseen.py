@@ -1,0 +1,153 @@
+"""``telethermal bench unseen`` (issue 30, part 4, first cut): the unseen
+set, the touched scene, the per-material figures, and the command line's
+bad input (one line naming the bad value, exit 2)."""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from telethermal.bench import unseen
+from telethermal.cli import main
+from telethermal.data.generate import pad_database
+from telethermal.errors import SceneError, UnknownMaterialError
+from telethermal.ident.effusivity import EffusivityEstimate
+from telethermal.physics.materials import get_material
+from telethermal.physics.scene import load_scene
+
+TRAINED = ["aluminium", "steel", "marble", "plexiglass", "graphite", "rubber", "wood"]
+
+
+def test_default_unseen_set_holds_the_issues_materials_and_two_from_a_scene_table():
+    objects = (unseen.package_objects(unseen.DEFAULT_UNSEEN, TRAINED, 24.0, 0.03)
+               + unseen.scene_objects(unseen.default_unseen_scene_path(), TRAINED))
+    names = [o.material for o in objects]
+    assert {"copper", "carbon_steel", "glass", "foam"} <= set(names) and len(names) >= 6
+    for name in names:                         # every property with its source named
+        m = get_material(name)
+        assert m.role == "object" and "Incropera" in m.source and name not in TRAINED
+
+
+@pytest.mark.parametrize("names, error, word", [
+    ("copper,unobtainium", UnknownMaterialError, "unobtainium"),
+    ("skin", SceneError, "skin"),
+    ("glass,wood", SceneError, "wood"),
+    ("glass,,foam", SceneError, "empty"),
+])
+def test_bad_unseen_names_are_refused_naming_the_value(names, error, word):
+    with pytest.raises(error, match=word):
+        unseen.package_objects(names, TRAINED, 24.0, 0.03)
+
+
+def test_touch_scene_adds_the_unseen_objects_on_the_same_pad():
+    base = load_scene("fingertip-7")
+    objects = unseen.package_objects("glass,foam", TRAINED, 24.0, 0.03)
+    scene = unseen.touch_scene(base, objects)
+    assert scene.pad == base.pad and scene.sensors == base.sensors
+    assert scene.materials == TRAINED + ["glass", "foam"]
+    with pytest.raises(SceneError, match="glass given twice"):
+        unseen.touch_scene(scene, objects[:1])
+    short = dataclasses.replace(
+        unseen.touch_scene(dataclasses.replace(base, objects=base.objects[:1]), objects),
+        pad=dataclasses.replace(base.pad, trials_per_material=1, contact_duration_s=0.2))
+    trials = pad_database(short, np.random.default_rng(0))
+    assert [t.material for t in trials] == ["aluminium", "glass", "foam"]
+
+
+def test_aliases_of_trained_materials_are_named():
+    assert unseen.same_as_trained("stainless_steel", TRAINED) == "steel"
+    assert unseen.same_as_trained("glass", TRAINED) is None
+
+
+def _estimate(e, lo, hi, fits=True):
+    return EffusivityEstimate(e, (lo, hi), 0.01, 0.5, 51, 3000.0, -0.005, 1.0, fits, False,
+                              (np.log(e), 0.0, -0.005))
+
+
+def test_material_summary_counts_coverage_and_median_error():
+    true = get_material("glass").effusivity
+    rows = [{"windows": {w: _estimate(true * f, true * f * 0.97, true * f * 1.03)
+                         for w in unseen.WINDOWS_S}} for f in (1.0, 1.02, 1.10, 0.90)]
+    out = unseen._material_summary("glass", rows, TRAINED)
+    assert out["effusivity_rel_error"]["0.5"] == pytest.approx(0.06)      # median of 0, 2, 10, 10 %
+    cov = out["interval_coverage"]["0.5"]
+    assert (cov["covered"], cov["n"], cov["rate"]) == (2, 4, 0.5)
+    assert cov["ci"][0] < 0.5 < cov["ci"][1]
+    assert not out["trained"] and out["reported"].startswith("not_run")
+    assert out["flux_rms_rel"].startswith("not_run") and out["skin_rms_k"].startswith("not_run")
+
+
+@pytest.fixture(autouse=True)
+def wide_console(monkeypatch):
+    """The error console as wide as a long message: its lines are then the
+    message's own, not the terminal's wrapping."""
+    from telethermal.cli._common import console
+    monkeypatch.setattr(console, "width", 1000)
+
+
+def _run_cli(tmp_path, capsys, *args):
+    code = main(["bench", "unseen", "--json", str(tmp_path / "u.json"), *args])
+    err = capsys.readouterr().err.strip()
+    return code, err
+
+
+def test_cli_unknown_material_is_one_line_naming_it(tmp_path, capsys):
+    code, err = _run_cli(tmp_path, capsys, "--unseen", "copper,unobtainium")
+    assert code == 2 and "unobtainium" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "u.json").exists()
+
+
+def test_cli_trained_material_as_unseen_is_refused(tmp_path, capsys):
+    code, err = _run_cli(tmp_path, capsys, "--unseen", "marble")
+    assert code == 2 and "marble" in err and "trained" in err and len(err.splitlines()) == 1
+
+
+def test_cli_missing_unseen_scene_names_the_file(tmp_path, capsys):
+    code, err = _run_cli(tmp_path, capsys, "--unseen-scene", str(tmp_path / "nope.toml"))
+    assert code == 2 and "nope.toml" in err and len(err.splitlines()) == 1
+
+
+def test_cli_bad_seeds_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "unseen", "--json", str(tmp_path / "u.json"), "--seeds", "0"])
+    assert exc.value.code == 2 and "'0' must be positive" in capsys.readouterr().err
+
+
+def test_targets_pool_coverage_per_window_and_judge_the_unseen_error():
+    e_glass, e_wood = get_material("glass").effusivity, get_material("wood").effusivity
+    glass = [{"windows": {w: _estimate(e_glass * 1.2, e_glass * 1.1, e_glass * 1.3)
+                          for w in unseen.WINDOWS_S}}] * 3          # 20 % off, never covered
+    wood = [{"windows": {w: _estimate(e_wood, e_wood * 0.9, e_wood * 1.1)
+                         for w in unseen.WINDOWS_S}}] * 5
+    materials = {"glass": unseen._material_summary("glass", glass, TRAINED),
+                 "wood": unseen._material_summary("wood", wood, TRAINED)}
+    targets = unseen._targets(materials)
+    assert targets["unseen_rel_error_within_10pct_by_0.5_s"] == {"glass": False}
+    pooled = targets["coverage_by_window"]["0.5"]
+    assert (pooled["covered"], pooled["n"], pooled["within_90_98"]) == (5, 8, False)
+    assert targets["unseen_coverage_by_window"]["1"]["covered"] == 0
+
+
+def test_the_unseen_set_from_the_options(tmp_path):
+    base = load_scene("fingertip-7")
+    default, path = unseen.unseen_objects(base)
+    assert [o.material for o in default] == ["copper", "carbon_steel", "glass", "foam", "brass",
+                                             "concrete"]
+    assert path == unseen.default_unseen_scene_path()
+    (tmp_path / "lab.csv").write_text(
+        "name,role,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,source\n"
+        "cork_lab,object,0.039,120.0,1800.0,\"Cork, board, Incropera A.3\"\n")
+    scene_file = tmp_path / "lab.toml"
+    text = Path(unseen.default_unseen_scene_path()).read_text()
+    scene_file.write_text(text[:text.index("[[objects]]")].replace(
+        "unseen-materials.csv", "lab.csv")
+        + '[[objects]]\nmaterial = "cork_lab"\ntemp_c = 40.0\nthickness_m = 0.03\n')
+    alone, path = unseen.unseen_objects(base, unseen_scene=str(scene_file))
+    assert [(o.material, o.temp_c) for o in alone] == [("cork_lab", 40.0)]
+    both, _ = unseen.unseen_objects(base, unseen="foam", unseen_scene=str(scene_file))
+    assert [o.material for o in both] == ["foam", "cork_lab"]
+    active = load_scene("gripper-case-I-pro")          # glass is trained there: left out
+    names = [o.material for o in unseen.unseen_objects(active)[0]]
+    assert "glass" not in names and "copper" in names
+    assert {o.temp_c for o in unseen.unseen_objects(active)[0]} == {34.0}
