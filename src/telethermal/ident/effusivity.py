@@ -53,8 +53,8 @@ of ``x`` (W/m^2 K)::
   so part of the flux is the pad relaxing, not proportional to the gap),
   and ``A``'s prior is drawn as for a Peltier pad (the set point's 0.05 K
   error instead of the pre-conditioning's): both approximations (in
-  gripper-case-I-pro's seed-0 touches the pad sat up to 0.15 K from its
-  command less the thermocouple's bias).
+  the 8 of gripper-case-I-pro's seed-0 touches looked at, the true pad sat
+  within 0.15 K of its command, the thermocouple's bias included).
 
 The fit: damped Gauss-Newton on the log posterior density in
 ``(log e, log h / h_ref, tau)`` from the best node of a coarse grid (or from
