@@ -179,9 +179,11 @@ def test_foam_with_almost_no_flux_is_estimated(touches, estimates):
 
 
 # ---------------------------------------------------------------- hard cases
-def test_an_object_far_from_room_temperature_is_estimated_at_its_own(scene):
+def test_an_object_far_from_room_temperature_is_estimated_at_its_own(scene, estimator):
     # Glass at 50 C (room 24 C, the pad at 60 C): an estimator whose curves
-    # are at 50 C covers its effusivity.
+    # are at 50 C covers its effusivity. One whose curves are at 24 C gives
+    # nearly the same estimate: the flux is linear in the gap but for the
+    # module's droop, which moves it by under a quarter of the posterior sd.
     hot = dataclasses.replace(scene, objects=(ObjectSpec("glass", 50.0, 0.03),),
                               pad=dataclasses.replace(scene.pad, trials_per_material=3,
                                                       contact_duration_s=0.6))
@@ -190,7 +192,11 @@ def test_an_object_far_from_room_temperature_is_estimated_at_its_own(scene):
                                         n_sessions=5)
     assert est.object_temp_c == 50.0
     e = get_material("glass").effusivity
-    assert all(r.covers(e) for r in est.estimate_contacts(contacts, WINDOW_S))
+    at_50 = est.estimate_contacts(contacts, WINDOW_S)
+    assert all(r.covers(e) for r in at_50)
+    for hot_r, room_r in zip(at_50, estimator.estimate_contacts(contacts, WINDOW_S)):
+        assert abs(math.log(room_r.effusivity_w_s05_m2k / hot_r.effusivity_w_s05_m2k)) \
+            < 0.25 * hot_r.log_sd
 
 
 def _curve(scene, model, rng, noise_w_m2):

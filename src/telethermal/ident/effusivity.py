@@ -48,6 +48,14 @@ of ``x`` (W/m^2 K)::
   variance as if white. A systematic error is not white: the allowance is
   an approximation, on the conservative side where the signal is large.
 
+- The water pad (the second paper's): its curves are those of the pad
+  pre-conditioned to the nominal command (its water warmer than its face,
+  so part of the flux is the pad relaxing, not proportional to the gap),
+  and ``A``'s prior is drawn as for a Peltier pad (the set point's 0.05 K
+  error instead of the pre-conditioning's): both approximations (in
+  the 8 of gripper-case-I-pro's seed-0 touches looked at, the true pad sat
+  within 0.15 K of its command, the thermocouple's bias included).
+
 The fit: damped Gauss-Newton on the log posterior density in
 ``(log e, log h / h_ref, tau)`` from the best node of a coarse grid (or from
 a previous window's estimate, as a live slave would); the interval is
