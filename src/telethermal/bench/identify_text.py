@@ -10,16 +10,18 @@ def _pct(by_window: dict) -> str:
 def _method_lines(method: str, rep: dict) -> list[str]:
     """One method's lines of ``telethermal bench identify``."""
     pad = " " * len(method)
-    t1, ap = rep["table1"], rep["active_passive"]
+    t1, ap = rep["table1"], rep.get("active_passive")
     lines = [f"{method}: Table 1, 7 classes " + _pct(t1["accuracy_7"]),
              f"{pad}  5 classes " + ", ".join(
                  f"{k} s {100 * v:.0f} % (paper {100 * t1['paper_accuracy_5'][k]:.0f} %)"
                  if k in t1["paper_accuracy_5"] else f"{k} s {100 * v:.0f} %"
                  for k, v in t1["accuracy_5"].items()),
              f"{pad}  train {t1['train_s_full_database']:.1f} s; inference "
-             f"p99 {t1['inference_ms_p99']:.3f} ms",
-             f"{pad}  active pad: " + _pct(ap["active_accuracy_by_window_s"])
-             + f"; passive pad unknown {100 * ap['passive_unknown_rate']:.0f} %"]
+             f"p99 {t1['inference_ms_p99']:.3f} ms"]
+    if ap is not None:
+        lines.append(f"{pad}  active pad: " + _pct(ap["active_accuracy_by_window_s"])
+                     + f"; passive pad unknown {100 * ap['passive_unknown_rate']:.0f} %")
+    lines += [f"{pad}  not run: {why}" for why in rep.get("not_run", [])]
     if "temperature" in rep:
         tr = rep["temperature"]
         lines.append(f"{pad}  temperature channel, active pad: "
@@ -27,7 +29,7 @@ def _method_lines(method: str, rep: dict) -> list[str]:
                      + f"; passive unknown {100 * tr['passive_unknown_rate']:.0f} %")
     lines += [f"{pad}  {name}: >= 99 % from {row['first_window_at_99pct_s']} s (paper 100 % "
               f"within {row['paper_100pct_within_s']} s)"
-              for name, row in rep["cross_temperature"].items()]
+              for name, row in rep.get("cross_temperature", {}).items()]
     dec = t1["decision"]
     lines.append(f"{pad}  calibration error {t1['calibration_ece']:.3f}; decisions "
                  f"within 1 s: {100 * dec['commit_rate']:.0f} % committed, "
@@ -45,7 +47,7 @@ def _method_lines(method: str, rep: dict) -> list[str]:
                      f"{100 * lv['wrong_rate_ci'][1]:.1f}]; first commitment p50 "
                      + ("-" if lv["time_s_p50"] is None else f"{lv['time_s_p50']:.2f} s"))
     return lines + [f"{pad}  session shift (1 K), thermometer {mode}: " + _pct(row["accuracy_5"])
-                    for mode, row in rep["session_shift"].items()]
+                    for mode, row in rep.get("session_shift", {}).items()]
 
 
 def text_report(report: dict, json_path, png_path) -> list[str]:

@@ -171,6 +171,12 @@ class Identifier:
 
     method = ""
     streaming = False        # True: one model answers every prefix (recurrent nets)
+    #: Whether the temperature may be under 1 (sharpen). Scores that are not
+    #: probabilities (a network's, a discriminant's) are scaled either way;
+    #: a method whose posterior is a Bayesian predictive may only be
+    #: softened: the mean held-out log loss that would sharpen it is the
+    #: easy touches' say, while commitments are made in the tail.
+    calibration_may_sharpen = True
 
     def __init__(self, channels=(FLUX,), max_window_s: float = 1.0, window_step_s: float = 0.05,
                  threshold: float = 0.99, calibrate: bool = True, seed: int = 0,
@@ -245,6 +251,8 @@ class Identifier:
         if logits is None:
             return
         self.softmax_temperature_ = fit_temperatures(logits, y)
+        if not self.calibration_may_sharpen:
+            self.softmax_temperature_ = np.maximum(self.softmax_temperature_, 1.0)
         z = logits / self.softmax_temperature_[:, None, None]
         z = z - np.nanmax(z, axis=2, keepdims=True)
         post = np.exp(z) / np.exp(z).sum(axis=2, keepdims=True)

@@ -11,21 +11,28 @@ from pathlib import Path
 from telethermal.data.dataset import load_dataset, trial_digest
 from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.base import Identifier, read_model_file
+from telethermal.ident.fitted import EffusivityFit
 from telethermal.ident.methods import EffusivityLda, PcaFnn
 from telethermal.ident.prepare import MIN_GAP_K, from_trials
 from telethermal.ident.recurrent import Lstm, Rnn
 
 log = logging.getLogger(__name__)
-METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, EffusivityLda, Lstm,
-                                                                Rnn)}
+METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, EffusivityLda,
+                                                                EffusivityFit, Lstm, Rnn)}
 
 
-def make(method: str, **kw) -> Identifier:
+def make(method: str, scene: str | None = None, **kw) -> Identifier:
+    """A ``method`` identifier; ``scene`` (the touches' scene, a name or a
+    path) is given to the methods that fit its pad's model and ignored by
+    the others."""
     try:
-        return METHODS[method](**kw)
+        cls = METHODS[method]
     except KeyError as exc:
         raise IdentificationError(f"unknown method {method!r}; methods: "
                                   f"{', '.join(sorted(METHODS))}") from exc
+    if scene is not None and getattr(cls, "needs_scene", False):
+        kw["scene"] = str(scene)
+    return cls(**kw)
 
 
 def load_model(path: str | Path) -> Identifier:
@@ -92,7 +99,8 @@ def train_on_dataset(data: str | Path, method: str, channels, max_window_s: floa
     ``logger`` warns of trials left out."""
     with status(f"reading {data}"):
         trials = load_dataset(data)
-    model = make(method, channels=channels, max_window_s=max_window_s)
+    model = make(method, scene=dataset_scene(data), channels=channels,
+                 max_window_s=max_window_s)
     contacts, skipped = from_trials(trials, model.channels, max_s=max_window_s)
     if skipped:
         logger.warning("%d trial(s) with a gap under %g K left out of training", len(skipped),

@@ -1,0 +1,185 @@
+"""``effusivity-fit``: identification by the touched object's estimated effusivity.
+
+At each window, :class:`~telethermal.ident.effusivity.EffusivityEstimator`
+fits the scene's pad model to the touch: ``ln e`` with the contact
+conductance, the contact instant and the flux amplitude as nuisances (the
+contact conductance bends the first tenths of a second; fitted, it is no
+longer confused with the material, which a window's flux shape alone
+cannot undo: the box features of ``effusivity-lda`` spread each material
+along its own curve of contact conductance). Each material is then one
+number per window: its training touches' estimates, their mean and spread.
+
+The class density is the Bayesian predictive of a normal sample of ``n``
+touches with unknown mean and variance (Student's t with ``n - 1`` degrees
+of freedom, scale ``s sqrt(1 + 1/n)``; Gelman et al., Bayesian Data
+Analysis, 3rd ed., section 3.2): ten touches of a material do not say how
+far its tails reach, and the posteriors do not pretend they do. A touch
+whose estimate lies past every class's ``1 - outlier_p`` quantile is
+outside every class (an unseen material: issue 30).
+
+What it needs that the learned-only methods do not: the pad's own model
+(layers, module, loop, sensor lag: the scene's ``[pad]``), as a lab has it
+from its pad's design and datasheets. The touches' simulator uses the very
+same model, so on simulated touches the pad model is exact; a real pad's
+model is off by its datasheets' tolerances (``bench identify`` says so).
+The estimates do not depend on the training set, so they are computed once
+per touch and window and kept for the process.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+
+import numpy as np
+from scipy.stats import t as student_t
+
+from telethermal.errors import IdentificationError
+from telethermal.ident.base import Identifier
+from telethermal.ident.prepare import FLUX
+
+#: The fewest samples an estimate is made from (the estimator's own floor).
+MIN_SAMPLES = 4
+
+
+#: Estimates kept per model before the cache is emptied (a live slave adds
+#: one per window of every touch).
+CACHE_MAX = 200_000
+#: Fits already made, shared by every model of the process (they do not
+#: depend on the training touches): (scene, max_s, digest of the samples, n)
+#: -> (ln e, u, tau).
+_CACHE: dict = {}
+
+
+@functools.lru_cache(maxsize=4)
+def _estimator(scene_ref: str, max_s: float):
+    """The scene's estimator and its nominal gap, K (its curves take
+    seconds to compute: built once per process and scene)."""
+    from telethermal.ident.effusivity import EffusivityEstimator
+    from telethermal.physics.scene import load_scene
+
+    scene = load_scene(scene_ref)
+    est = EffusivityEstimator.for_scene(scene, max_s=max_s)
+    return est, abs(scene.pad_temp_c(est.object_temp_c) - est.object_temp_c)
+
+
+class EffusivityFit(Identifier):
+    """Classes by the touch's estimated effusivity (see the module).
+
+    Parameters
+    ----------
+    scene : str
+        The scene whose pad made the touches (a package scene's name or a
+        scene file's path): its pad model is what the estimate fits.
+    outlier_p : float
+        A touch beyond every class's two-sided ``1 - outlier_p`` predictive
+        interval is outside every class.
+    """
+
+    method = "effusivity-fit"
+    needs_scene = True
+    calibration_may_sharpen = False
+
+    def __init__(self, channels=(FLUX,), scene: str | None = None, outlier_p: float = 1e-4,
+                 window_step_s: float = 0.02, **kw):
+        super().__init__(channels, window_step_s=window_step_s, **kw)
+        if tuple(self.channels) != (FLUX,):
+            raise IdentificationError(f"effusivity-fit reads the heat flux alone, not "
+                                      f"{self.channels}")
+        self.scene = scene
+        self.outlier_p = outlier_p
+
+    def hyper(self) -> dict:
+        return {**super().hyper(), "scene": self.scene, "outlier_p": self.outlier_p}
+
+    def fit(self, contacts):
+        if not self.scene:
+            raise IdentificationError(
+                "effusivity-fit needs the scene whose pad made the touches (scene=...): its "
+                "estimate fits that pad's model")
+        return super().fit(contacts)
+
+    def estimator(self):
+        return _estimator(str(self.scene), float(self.max_window_s))
+
+    def log_effusivity(self, x: np.ndarray) -> np.ndarray:
+        """``ln e`` of each touch's window ``x`` (N, n, 1), NaN where the
+        window has under :data:`MIN_SAMPLES` samples."""
+        n = x.shape[1]
+        out = np.full(len(x), np.nan)
+        if n < MIN_SAMPLES:
+            return out
+        if len(_CACHE) > CACHE_MAX:
+            _CACHE.clear()
+        for i, row in enumerate(x[:, :, 0]):
+            out[i] = self._theta(np.ascontiguousarray(row), n)[0]
+        return out
+
+    def _key(self, row: np.ndarray, n: int):
+        return (self.scene, self.max_window_s,
+                hashlib.blake2b(row[:n].tobytes(), digest_size=16).digest(), n)
+
+    def update_probe(self, row: np.ndarray, window_index: int) -> None:
+        """One window's estimate made afresh (for timing: a cached one
+        costs nothing), from the previous window's fit when known, as the
+        slave makes it, else from cold (dearer)."""
+        x = np.ascontiguousarray(self._window(row, self.windows_s_[window_index])[0, :, 0])
+        if len(x) < MIN_SAMPLES:
+            return
+        est, gap_k = self.estimator()
+        step = max(1, int(round(self.window_step_s * est.sample_rate_hz)))
+        start = _CACHE.get(self._key(x, len(x) - step))
+        est.estimate(x, gap_k, start=start)
+
+    def _theta(self, row: np.ndarray, n: int):
+        """The fit ``(ln e, u, tau)`` of ``row[:n]``, started from the fit
+        of the previous window's samples, as a live slave walks them: the
+        fit follows its optimum from window to window (from cold, a short
+        window's optimum can be another of a few near-equal ones)."""
+        key = self._key(row, n)
+        theta = _CACHE.get(key)
+        if theta is None:
+            est, gap_k = self.estimator()
+            step = max(1, int(round(self.window_step_s * est.sample_rate_hz)))
+            start = self._theta(row, n - step) if n - step >= MIN_SAMPLES else None
+            # The noise at the scene's gap: x is already over the touch's
+            # measured gap, which a window does not carry.
+            theta = _CACHE[key] = est.estimate(row[:n], gap_k, start=start).theta
+        return theta
+
+    def _fit_window(self, x, y):
+        f = self.log_effusivity(x)
+        classes = np.arange(int(y.max()) + 1)
+        if not np.all(np.isfinite(f)):
+            return {"n": np.zeros(len(classes))}
+        n = np.array([np.sum(y == c) for c in classes], dtype=float)
+        if np.any(n < 2):
+            raise IdentificationError("effusivity-fit needs at least two training touches "
+                                      "of every material")
+        means = np.array([f[y == c].mean() for c in classes])
+        var = np.array([f[y == c].var(ddof=1) for c in classes])
+        # Touches estimated to the same value (noise-free data) still have
+        # a spread: the estimator's resolution, far below any class's.
+        var = np.maximum(var, 1e-12)
+        return {"n": n, "means": means, "var": var}
+
+    def _t_terms(self, params, x):
+        f = self.log_effusivity(x)
+        n = params["n"]
+        scale = np.sqrt(params["var"] * (1.0 + 1.0 / n))
+        z = (f[:, None] - params["means"][None]) / scale[None]
+        return z, n - 1.0, scale
+
+    def _logits(self, params, x):
+        if "means" not in params:
+            return np.zeros((len(x), len(params["n"])))
+        z, dof, scale = self._t_terms(params, x)
+        return student_t.logpdf(z, dof[None]) - np.log(scale)[None]
+
+    def outside_classes(self, x, window_index):
+        params = self.params_[window_index]
+        if "means" not in params:
+            return np.zeros(len(x), dtype=bool)
+        z, dof, _ = self._t_terms(params, self._window(x, self.windows_s_[window_index]))
+        limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
+        return np.all(np.abs(z) > limit[None], axis=1)
