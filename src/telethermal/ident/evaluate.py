@@ -13,19 +13,14 @@ import numpy as np
 from telethermal.data.dataset import Trial, load_dataset, trial_digest
 from telethermal.ident.anytime import Reason, decide, decide_all
 from telethermal.ident.base import Identifier
-from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials
+from telethermal.ident.prepare import (FLUX, MIN_GAP_K, from_trials,  # noqa: F401
+                                      window_key)  # window_key: its old home
 from telethermal.ident.registry import check_scene, dataset_scene, load_model
 from telethermal.jsonfile import write_json
 
 #: The first paper's merged classes (Table 1): metals, and graphite with rubber.
 FIRST_PAPER_MERGE = {"aluminium": "aluminium-steel", "steel": "aluminium-steel",
                      "graphite": "graphite-rubber", "rubber": "graphite-rubber"}
-
-
-def window_key(w: float) -> str:
-    """A window's key in reports: tenths as "0.1" ... "1.0" (as they always
-    were), finer windows as "0.02"."""
-    return f"{w:.1f}" if abs(round(w, 1) - w) < 1e-9 else f"{w:g}"
 
 
 def default_windows(channels) -> list[float]:

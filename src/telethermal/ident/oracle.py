@@ -68,7 +68,7 @@ from scipy.interpolate import RectBivariateSpline
 from scipy.special import logsumexp
 
 from telethermal.errors import IdentificationError
-from telethermal.ident.prepare import FLUX, Contacts
+from telethermal.ident.prepare import FLUX, Contacts, window_key
 
 #: Spacing of the forward model's time grid, s (the spline's knots).
 MODEL_DT_S = 5e-4
@@ -305,7 +305,6 @@ class Oracle:
         """{window key: {"accuracy", "correct", "n", "predicted"}}: the
         maximum a posteriori material against the truth (``merge`` maps
         materials to merged classes, as ``FIRST_PAPER_MERGE``)."""
-        from telethermal.ident.evaluate import window_key
         merge = merge or {}
         out = {}
         for w in windows_s:

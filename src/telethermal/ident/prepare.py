@@ -53,6 +53,12 @@ class Contacts:
                         None if self.force_n is None else self.force_n[index])
 
 
+def window_key(w: float) -> str:
+    """A window's key in reports: tenths as "0.1" ... "1.0" (as they always
+    were), finer windows as "0.02"."""
+    return f"{w:.1f}" if abs(round(w, 1) - w) < 1e-9 else f"{w:g}"
+
+
 def normalise(values: np.ndarray, channel: str, gap_k, t_object_c=None) -> np.ndarray:
     """Divide a channel by the gap (flux), or map it to the crossed fraction
     of the gap (temperature); other channels pass through unchanged.
