@@ -24,7 +24,7 @@ def cmd_demo(args) -> int:
                   [m for m in args.materials.split(",") if m] if args.materials else None,
                   seed=args.seed, contact_s=args.contact_s, record_dir=args.record,
                   view_port=args.view, devices=args.devices, json_path=args.json,
-                  progress=_progress, status=console.status)
+                  progress=_progress, status=console.status, method=args.method)
     if result.view is not None:
         print(f"the view stays up at {result.view.url} (recordings play there); Ctrl-C to "
               "stop", flush=True)
@@ -194,6 +194,10 @@ def add_demo(sub) -> None:
                         "drivers (virtual buses), read through the drivers")
     p.add_argument("--record", metavar="DIR", help="both services record every touch here "
                                                    "(one MCAP file per host; see replay)")
+    p.add_argument("--method", choices=("effusivity-lda", "effusivity-fit"),
+                   default="effusivity-lda",
+                   help="the slave's identifier (default effusivity-lda; effusivity-fit fits "
+                        "the pad's model to each window: telethermal bench identify)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
                    help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
                         "(default 8050); it stays up after the touches until Ctrl-C")

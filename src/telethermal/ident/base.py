@@ -374,6 +374,11 @@ class Identifier:
             return False
         return self.windows_s_[window_index] >= self.commit_from_s_ - 1e-9
 
+    def prepare(self) -> "Identifier":
+        """Make ready whatever the first posterior would otherwise build
+        (a slave calls it at start, not in its first touch's loop)."""
+        return self
+
     # ------------------------------------------------------------ subclass hooks
     def _fit_window(self, x: np.ndarray, y: np.ndarray) -> dict:
         raise NotImplementedError

@@ -100,7 +100,13 @@ class EffusivityFit(Identifier):
         return super().fit(contacts)
 
     def estimator(self):
+        """(the scene's estimator, its nominal gap in K), built once per process."""
         return _estimator(str(self.scene), float(self.max_window_s))
+
+    def prepare(self) -> "EffusivityFit":
+        """The estimator's curves (seconds to build) before the first touch."""
+        self.estimator()
+        return self
 
     def log_effusivity(self, x: np.ndarray) -> np.ndarray:
         """``ln e`` of each touch's window ``x`` (N, n, 1), NaN where the

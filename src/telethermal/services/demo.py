@@ -23,6 +23,7 @@ from telethermal.services.admin import call
 from telethermal.services.viewer import open_view
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
+from telethermal.teleop.models import DEFAULT_METHOD, demo_identify  # noqa: F401 (its old home)
 from telethermal.view.server import ViewServer
 from telethermal.wire.transport import generate_link_keys
 
@@ -414,40 +415,12 @@ def demo_materials(scene, materials=None) -> list[str]:
     return [m for m in DEMO_MATERIALS if m in scene.materials] or scene.materials[:3]
 
 
-def demo_identify(scene, out: Path, seed: int, echo=print):
-    """Train telethermal's identifier on ``out/databases/pad`` and score it
-    on fresh trials of the same scene (seed ``seed + 1``): writes
-    ``identifier.npz``, ``identify.json`` and ``identify.png`` in ``out``,
-    echoes one line; returns the model."""
-    import numpy as np
-
-    from telethermal.data.dataset import load_dataset
-    from telethermal.data.generate import pad_database
-    from telethermal.ident.evaluate import evaluate, plot_accuracy
-    from telethermal.ident.prepare import from_trials
-    from telethermal.ident.registry import make
-
-    model = make("effusivity-lda").fit(from_trials(load_dataset(out / "databases" / "pad"))[0])
-    model.scene_ = scene.name
-    model.save(out / "identifier.npz")
-    report = evaluate(model, pad_database(scene, np.random.default_rng(seed + 1)))
-    write_json(out / "identify.json", report)
-    plot_accuracy({model.method: report}, out / "identify.png",
-                  f"{scene.name}: trained on seed {seed}, tested on seed {seed + 1}")
-    acc = report["accuracy_by_window_s"]
-    echo(f"identification ({model.method}, fresh trials): "
-         + ", ".join(f"{k} s {100 * v:.0f} %" for k, v in acc.items() if k in ("0.2", "0.5", "1.0"))
-         + (f"; 5 merged classes at 1 s {100 * report['accuracy_5_at_end']:.0f} %"
-            if "accuracy_5_at_end" in report else "")
-         + f"; decisions {report['decision_time_s']['n']}/{report['trials']} committed")
-    return model
-
-
 def _no_progress(_total: int, _what: str):
     return nullcontext(None)
 
 
-def _demo_models(scene, out: Path, seed: int, echo, progress, status) -> None:
+def _demo_models(scene, out: Path, seed: int, echo, progress, status,
+                 method: str = DEFAULT_METHOD) -> None:
     """The demo's databases (and their plot), identifier and generator in ``out``."""
     from telethermal.data.dataset import load_dataset
     from telethermal.data.generate import generate_databases
@@ -461,7 +434,7 @@ def _demo_models(scene, out: Path, seed: int, echo, progress, status) -> None:
     echo(f"databases in {time.perf_counter() - start:.1f} s: "
          + ", ".join(f"{k} {v['trials']} trials" for k, v in summary["datasets"].items()))
     echo(f"plot: {plot_datasets(out / 'databases', out / 'databases.png')}")
-    demo_identify(scene, out, seed, echo)
+    demo_identify(scene, out, seed, echo, method)
     with status("training the flux generator on database 2"):
         save_generator(NetworkGenerator().fit(load_dataset(out / "databases" / "finger")),
                        out / "generator.npz")
@@ -470,14 +443,14 @@ def _demo_models(scene, out: Path, seed: int, echo, progress, status) -> None:
 def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed: int = 0,
          contact_s: float = 5.0, record_dir: str | Path | None = None,
          view_port: int | None = None, devices: str = "sim", json_path=None, echo=print,
-         progress=_no_progress, status=nullcontext) -> DemoResult:
+         progress=_no_progress, status=nullcontext, method: str = DEFAULT_METHOD) -> DemoResult:
     """``telethermal demo``: the scene's databases, an identifier and a flux
     generator trained on them, then slave and master as two processes on
     loopback and a touch on each material (:func:`run_demo`); the summary
     goes to ``json_path`` (default ``out/demo.json``). ``echo`` takes each
     line to show; ``progress(total, what)`` and ``status(text)`` are context
     managers held around the long steps (the first yields a callable taking
-    a step's label)."""
+    a step's label); ``method``: the identifier's."""
     from telethermal.physics.scene import describe_models, load_scene
 
     out = Path(out)
@@ -485,7 +458,7 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     echo(f"scene {scene.name}: {scene.description.splitlines()[0]}")
     for side, material, choice in describe_models(scene):
         echo(f"  {side:6s} on {material:10s} {choice.describe()}")
-    _demo_models(scene, out, seed, echo, progress, status)
+    _demo_models(scene, out, seed, echo, progress, status, method)
     report = run_demo(out, scene_name, out / "identifier.npz", out / "generator.npz",
                       demo_materials(scene, materials), seed=seed, contact_s=contact_s,
                       echo=echo, record_dir=Path(record_dir) if record_dir else None,

@@ -70,7 +70,10 @@ class SlaveService:
         if generator is None:
             generator = load_generator(config.generator) if config.generator else \
                 train_generator(self.scene, config.seed)
-        self.identifier, self.generator = identifier, generator
+        # Whatever the identifier builds on first use, built now and not in
+        # the first touch's loop.
+        prepare = getattr(identifier, "prepare", None)
+        self.identifier, self.generator = (prepare() if prepare else identifier), generator
         renderable = [c for c in identifier.classes_ if c in generator.materials]
         self.curves = sample_curves(generator, renderable)
         self.rate_hz = self.scene.sample_rate_hz

@@ -14,10 +14,14 @@ from telethermal.physics.scene import Scene
 from telethermal.render.generator import NetworkGenerator, load_generator
 
 
-def train_identifier(scene: Scene, seed: int = 0, method: str = "effusivity-lda"):
+#: The identifier a session trains when given none.
+DEFAULT_METHOD = "effusivity-lda"
+
+
+def train_identifier(scene: Scene, seed: int = 0, method: str = DEFAULT_METHOD):
     """Database 1 of ``scene`` (seed ``seed``) -> a fitted identifier."""
     trials = pad_database(scene, np.random.default_rng(seed))
-    model = make(method).fit(from_trials(trials)[0])
+    model = make(method, scene=scene.name).fit(from_trials(trials)[0])
     model.scene_ = scene.name
     return model
 
@@ -88,3 +92,33 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
     sums.write_text("".join(f"{hashlib.sha256(p.read_bytes()).hexdigest()}  {p.name}\n"
                             for p in paths))
     return paths + [sums]
+
+
+def demo_identify(scene, out, seed: int, echo=print, method: str = DEFAULT_METHOD):
+    """Train telethermal's identifier on ``out/databases/pad`` and score it
+    on fresh trials of the same scene (seed ``seed + 1``): writes
+    ``identifier.npz``, ``identify.json`` and ``identify.png`` in ``out``,
+    echoes one line; returns the model."""
+    from pathlib import Path
+
+    from telethermal.jsonfile import write_json
+
+    from telethermal.data.dataset import load_dataset
+    from telethermal.ident.evaluate import evaluate, plot_accuracy
+
+    out = Path(out)
+    model = make(method, scene=scene.name).fit(
+        from_trials(load_dataset(out / "databases" / "pad"))[0])
+    model.scene_ = scene.name
+    model.save(out / "identifier.npz")
+    report = evaluate(model, pad_database(scene, np.random.default_rng(seed + 1)))
+    write_json(out / "identify.json", report)
+    plot_accuracy({model.method: report}, out / "identify.png",
+                  f"{scene.name}: trained on seed {seed}, tested on seed {seed + 1}")
+    acc = report["accuracy_by_window_s"]
+    echo(f"identification ({model.method}, fresh trials): "
+         + ", ".join(f"{k} s {100 * v:.0f} %" for k, v in acc.items() if k in ("0.2", "0.5", "1.0"))
+         + (f"; 5 merged classes at 1 s {100 * report['accuracy_5_at_end']:.0f} %"
+            if "accuracy_5_at_end" in report else "")
+         + f"; decisions {report['decision_time_s']['n']}/{report['trials']} committed")
+    return model
