@@ -157,6 +157,27 @@ def test_identify_bench_lines():
         "wrote i.json and i.png"]
 
 
+def test_identify_bench_keeps_a_method_run_on_table1_only(tmp_path):
+    """effusivity-fit runs Table 1 and the session shift, not the rows on
+    another pad: its lines say so, and the plot is made (it had crashed
+    the bench after 11 minutes, before the JSON was written)."""
+    from telethermal.bench.identify import plot
+
+    table1 = {"accuracy_7": {"0.5": 0.9}, "accuracy_5": {"0.5": 0.95},
+              "paper_accuracy_5": {}, "train_s_full_database": 1.5,
+              "inference_ms_p99": 0.1234, "calibration_ece": 0.05,
+              "decision": {"commit_rate": 0.5, "accuracy": None}}
+    rep = {"table1": table1, "not_run": ["active/passive: another pad"],
+           "session_shift": {"raw": {"accuracy_5": {"1": 0.6}}}}
+    report = {"methods": {"m": rep}, "date": "d", "machine": "x",
+              "thermometer_ablation": {"accuracy": {}}}
+    lines = identify_text.text_report(report, "i.json", "i.png")
+    assert "   not run: active/passive: another pad" in lines
+    assert not any("active pad:" in line for line in lines)
+    plot(report, tmp_path / "i.png")
+    assert (tmp_path / "i.png").stat().st_size > 0
+
+
 def test_identify_eval_lines_show_decisions_only_when_some_were_committed():
     report = {"accuracy_by_window_s": {"0.1": 0.5, "1.0": 0.96},
               "decision_time_s": {"n": 0}, "inference_ms_p50": 0.0123, "inference_ms_p99": 0.5}

@@ -447,10 +447,11 @@ def plot(report: dict, out_png) -> None:
         for key, style in (("accuracy_7", "o-"), ("accuracy_5", "s--")):
             axes[0].plot([float(k) for k in t1[key]], [100 * v for v in t1[key].values()],
                          style, label=f"{method}, {key[-1]} classes")
-        act = rep["active_passive"]["active_accuracy_by_window_s"]
-        axes[1].plot([float(k) for k in act], [100 * v for v in act.values()], "o-",
-                     label=f"{method}, active I-pro")
-        for name, row in rep["cross_temperature"].items():
+        act = rep.get("active_passive", {}).get("active_accuracy_by_window_s", {})
+        if act:
+            axes[1].plot([float(k) for k in act], [100 * v for v in act.values()], "o-",
+                         label=f"{method}, active I-pro")
+        for name, row in rep.get("cross_temperature", {}).items():
             acc = row["accuracy_by_window_s"]
             axes[1].plot([float(k) for k in acc], [100 * v for v in acc.values()], ":",
                          label=f"{method}, {name}")
@@ -463,7 +464,8 @@ def plot(report: dict, out_png) -> None:
         ax.set_ylabel("accuracy (%)")
         ax.set_ylim(0, 102)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
         ax.set_title(title, fontsize=9)
     fig.suptitle(f"telethermal bench identify - {report['date']} - {report['machine']}",
                  fontsize=9)
@@ -475,18 +477,19 @@ def plot(report: dict, out_png) -> None:
 def run_and_save(json_path, png_path, seed: int = 0, methods=None, command: str = "",
                  progress: Callable[[str], None] | None = None, scene: str | None = None,
                  sessions: int = 3, with_limit: bool = True) -> dict:
-    """Run the benchmark, plot it to ``png_path`` and write the JSON report
-    (with ``command``); returns the report."""
+    """Run the benchmark, write the JSON report (with ``command``), then
+    plot it to ``png_path`` (a plot that fails loses no figure); returns
+    the report."""
     from telethermal.jsonfile import write_json
 
     report = run(seed=seed, methods=methods, progress=progress, scene=scene, sessions=sessions,
                  with_limit=with_limit and scene is None)
     report["command"] = command
+    write_json(json_path, report)
     if scene is not None:
         from telethermal.ident.evaluate import plot_accuracy
         plot_accuracy(report["methods"], png_path, f"{scene}: each method, 5 folds by group "
                                                     f"(seed {seed})")
     else:
         plot(report, png_path)
-    write_json(json_path, report)
     return report
