@@ -51,6 +51,11 @@ CACHE_MAX = 200_000
 _CACHE: dict = {}
 
 
+def clear_cache() -> None:
+    """Forget every fit made (a timing of a training from nothing)."""
+    _CACHE.clear()
+
+
 @functools.lru_cache(maxsize=4)
 def _estimator(scene_ref: str, max_s: float):
     """The scene's estimator and its nominal gap, K (its curves take
