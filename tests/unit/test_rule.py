@@ -10,41 +10,27 @@ from hypothesis import strategies as st
 from telethermal.ident.anytime import StreamingIdentifier, decide
 from telethermal.ident.base import commit_from_index
 from telethermal.ident.rule import AnytimeRule, Runs
+from test_decisions import _Fixed  # the stand-in identifier, one copy
 
 CLASSES = ("a", "b", "c", "d")
 
 
-class _Model:
-    """A stand-in identifier: posteriors, 'unlike every class' and the
-    calibration's schedule given per window (windows every 0.1 s at 10 Hz)."""
+class _Model(_Fixed):
+    """test_decisions' stand-in identifier (windows every 0.1 s at 10 Hz),
+    with "unlike every class" and the calibration's schedule given per
+    window, and a trained force range."""
 
     def __init__(self, path, unlike, commit_from, confirm, force_range=None):
-        self.path = np.asarray(path, dtype=float)
+        super().__init__(path, CLASSES[:np.shape(path)[1]])
         self.unlike, self.commit_from = list(unlike), commit_from
-        self.classes_ = list(CLASSES[:self.path.shape[1]])
-        self.windows_s_ = [round(0.1 * (i + 1), 6) for i in range(len(path))]
-        self.threshold, self.sample_rate_hz_, self.channels = 0.9, 10.0, ("x",)
-        self.confirm_windows = confirm
+        self.threshold, self.confirm_windows = 0.9, confirm
         self.force_range_n_ = force_range
-
-    def posterior_path(self, x):
-        return self.path[:max(0, len(x) - 1)]
 
     def outside_classes(self, x, i):
         return np.array([self.unlike[i]])
 
     def may_commit(self, i):
         return i >= self.commit_from
-
-    def window_index(self, n):
-        k = n - 2
-        return None if k < 0 else min(k, len(self.path) - 1)
-
-    def proba_normalised(self, x, i):
-        return self.path[i][None]
-
-    def _require_fitted(self):
-        pass
 
 
 def _row(draw, n_classes):
