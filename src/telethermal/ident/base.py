@@ -27,7 +27,7 @@ from scipy.special import log_softmax
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts, normalise
-from telethermal.ident.rule import AnytimeRule, Runs  # noqa: F401 (Runs: its old home)
+from telethermal.ident.rule import AnytimeRule
 from telethermal.npzfile import read_npz, write_npz
 
 FORMAT_VERSION = 1

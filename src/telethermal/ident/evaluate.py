@@ -13,8 +13,7 @@ import numpy as np
 from telethermal.data.dataset import Trial, load_dataset, trial_digest
 from telethermal.ident.anytime import Reason, decide, decide_all
 from telethermal.ident.base import Identifier
-from telethermal.ident.prepare import (FLUX, MIN_GAP_K, from_trials,  # noqa: F401
-                                      window_key)  # window_key: its old home
+from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials, window_key
 from telethermal.ident.registry import check_scene, dataset_scene, load_model
 from telethermal.jsonfile import write_json
 

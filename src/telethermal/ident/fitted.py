@@ -42,7 +42,7 @@ from telethermal.ident.prepare import FLUX
 MIN_SAMPLES = 4
 
 
-#: Estimates kept per model before the cache is emptied (a live slave adds
+#: Fits kept in the process before the cache is emptied (a live slave adds
 #: one per window of every touch).
 CACHE_MAX = 200_000
 #: Fits already made, shared by every model of the process (they do not
@@ -138,9 +138,12 @@ class EffusivityFit(Identifier):
         if len(x) < MIN_SAMPLES:
             return
         est, gap_k = self.estimator()
-        step = max(1, int(round(self.window_step_s * est.sample_rate_hz)))
-        start = _CACHE.get(self._key(x, len(x) - step))
+        start = _CACHE.get(self._key(x, len(x) - self._step_samples(est)))
         est.estimate(x, gap_k, start=start)
+
+    def _step_samples(self, est) -> int:
+        """Samples from one window to the next."""
+        return max(1, int(round(self.window_step_s * est.sample_rate_hz)))
 
     def _theta(self, row: np.ndarray, n: int):
         """The fit ``(ln e, u, tau)`` of ``row[:n]``, started from the fit
@@ -151,7 +154,7 @@ class EffusivityFit(Identifier):
         theta = _CACHE.get(key)
         if theta is None:
             est, gap_k = self.estimator()
-            step = max(1, int(round(self.window_step_s * est.sample_rate_hz)))
+            step = self._step_samples(est)
             start = self._theta(row, n - step) if n - step >= MIN_SAMPLES else None
             # The noise at the scene's gap: x is already over the touch's
             # measured gap, which a window does not carry.

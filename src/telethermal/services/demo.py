@@ -23,7 +23,7 @@ from telethermal.services.admin import call
 from telethermal.services.viewer import open_view
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
-from telethermal.teleop.models import DEFAULT_METHOD, demo_identify  # noqa: F401 (its old home)
+from telethermal.teleop.models import DEFAULT_METHOD, demo_identify
 from telethermal.view.server import ViewServer
 from telethermal.wire.transport import generate_link_keys
 
