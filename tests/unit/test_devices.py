@@ -431,3 +431,35 @@ def test_the_emulated_display_drives_the_touch_with_the_current_the_board_applie
                                         False, _math.nan), 1e-3, 0.0)
     finally:
         d.close()
+
+
+def test_a_stalled_master_loop_is_the_emulated_boards_watchdog_and_an_untrusted_flux():
+    # What test_services allows on a loaded machine, and only with this
+    # explanation: the loop stalls past the Peltier board's watchdog, the
+    # board disables itself, the display reads its flux as untrusted (NaN:
+    # the supervisor's safe state) and its counters say why.
+    import math as _math
+
+    from telethermal.devices.display import EmulatedDisplay
+    from telethermal.teleop.master import MasterStep
+
+    clock, touch = Clock(), FakeTouch()
+    d = EmulatedDisplay(touch, clock=clock)
+
+    def period():
+        reading = d.read(clock.t)
+        d.apply(clock.t, MasterStep(clock.t, "contact", True, _math.nan, 33.0, 33.0, False,
+                                    1.0), 1e-3, 0.0)
+        clock.t += 1e-3
+        return reading
+
+    try:
+        for _ in range(20):
+            reading = period()
+        assert _math.isfinite(reading.flux_w_m2)
+        assert d.counters()["driver_board"]["watchdog_trips"] == 0
+        clock.t += 0.15                                   # the loop stalls 150 ms
+        assert _math.isnan(period().flux_w_m2)
+        assert d.counters()["driver_board"]["watchdog_trips"] == 1
+    finally:
+        d.close()

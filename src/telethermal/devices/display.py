@@ -181,7 +181,11 @@ class EmulatedDisplay:
         self.touch.actuate(t_s, replace(step, current_a=current), dt_s, force_n)
 
     def counters(self) -> dict:
-        return self.hardware.counters()
+        """The drivers' counters, and the emulated Peltier board's own
+        (``driver_board``: its watchdog trips when the loop's commands stop
+        for longer than its watchdog, as a real board's would)."""
+        return {**self.hardware.counters(),
+                "driver_board": dict(self.peltier_emulator.counters)}
 
     def close(self) -> None:
         try:
