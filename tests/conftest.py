@@ -107,3 +107,32 @@ def trained_models(tmp_path_factory):
     yield trained
     changed = trained.changed()
     assert not changed, f"a test changed a shared trained model or its file: {changed}"
+
+
+def pytest_configure(config):
+    """The session's own cache folder (idle policies, the effusivity
+    estimator's curves): the suite never writes into the user's home, and
+    every process it starts (services, the CLI) inherits the variable, so
+    they share what the first one built. Removed at the session's end."""
+    import os
+    import tempfile
+
+    from telethermal.cachedir import CACHE_ENV
+    config._telethermal_cache = (os.environ.get(CACHE_ENV),
+                                 tempfile.mkdtemp(prefix="telethermal-test-cache-"))
+    os.environ[CACHE_ENV] = config._telethermal_cache[1]
+
+
+def pytest_unconfigure(config):
+    import os
+    import shutil
+
+    from telethermal.cachedir import CACHE_ENV
+    before, folder = getattr(config, "_telethermal_cache", (None, None))
+    if folder is None:
+        return
+    shutil.rmtree(folder, ignore_errors=True)
+    if before is None:
+        os.environ.pop(CACHE_ENV, None)
+    else:
+        os.environ[CACHE_ENV] = before
