@@ -110,28 +110,28 @@ def trained_models(tmp_path_factory):
 
 
 def pytest_configure(config):
-    """The session's own cache folder (idle policies, the effusivity
-    estimator's curves): the suite never writes into the user's home, and
-    every process it starts (services, the CLI) inherits the variable, so
-    they share what the first one built. Removed at the session's end."""
+    """The suite's own cache folder (idle policies, the effusivity
+    estimator's curves), in the system's temporary folder, never the
+    user's home: every process the suite starts (services, the CLI)
+    inherits the variable and reads what the first one built. Kept from one
+    run to the next (an idle policy takes minutes to compute; every entry
+    is keyed by what it depends on), one per user."""
     import os
     import tempfile
+    from pathlib import Path
 
     from telethermal.cachedir import CACHE_ENV
-    config._telethermal_cache = (os.environ.get(CACHE_ENV),
-                                 tempfile.mkdtemp(prefix="telethermal-test-cache-"))
-    os.environ[CACHE_ENV] = config._telethermal_cache[1]
+    folder = Path(tempfile.gettempdir()) / f"telethermal-test-cache-{os.getuid()}"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    config._telethermal_cache_before = os.environ.get(CACHE_ENV)
+    os.environ[CACHE_ENV] = str(folder)
 
 
 def pytest_unconfigure(config):
     import os
-    import shutil
 
     from telethermal.cachedir import CACHE_ENV
-    before, folder = getattr(config, "_telethermal_cache", (None, None))
-    if folder is None:
-        return
-    shutil.rmtree(folder, ignore_errors=True)
+    before = getattr(config, "_telethermal_cache_before", None)
     if before is None:
         os.environ.pop(CACHE_ENV, None)
     else:
