@@ -27,7 +27,7 @@ class TrainedModels:
 
     def __init__(self, folder):
         self.folder = folder
-        self._models = {}          # (repr(scene), seed, kind) -> model
+        self._models = {}          # (repr(scene), seed, kind[, method]) -> model
         self._files = {}           # (repr(scene), seed) -> (identifier path, generator path)
         self._digests = {}         # what each model and file was when made
         # Bound now: a test may monkeypatch teleop.models' functions later.
@@ -54,16 +54,17 @@ class TrainedModels:
             model.save(path) if kind == "identifier" else save_generator(model, path)
             return self._npz_digest(path)
 
-    def _model(self, scene, seed, kind):
-        key = (repr(scene), seed, kind)
+    def _model(self, scene, seed, kind, method=None):
+        key = (repr(scene), seed, kind) + ((method,) if method else ())
         if key not in self._models:
-            self._models[key] = self._train[kind](scene, seed)
+            self._models[key] = self._train[kind](scene, seed, *((method,) if method else ()))
             self._digests[key] = self._model_digest(self._models[key], kind)
         return self._models[key]
 
-    def identifier(self, scene, seed: int = 0):
-        """``train_identifier(scene, seed)``: not to be changed by the test."""
-        return self._model(scene, seed, "identifier")
+    def identifier(self, scene, seed: int = 0, method: str | None = None):
+        """``train_identifier(scene, seed[, method])``: not to be changed by
+        the test (``method``: a test about that method's behaviour)."""
+        return self._model(scene, seed, "identifier", method)
 
     def generator(self, scene, seed: int = 0):
         """``train_generator(scene, seed)``: not to be changed by the test."""

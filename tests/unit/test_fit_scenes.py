@@ -1,7 +1,8 @@
-"""Which scenes effusivity-fit serves, and a scene read from a lab's file
-(known to a model file by its name)."""
+"""Which scenes effusivity-fit serves, the default identifier it makes,
+and a scene read from a lab's file (known to a model file by its name)."""
 
 import dataclasses
+import logging
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from telethermal.ident import fitted
 from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import load_model, make
 from telethermal.physics.scene import _shipped, load_scene
+from telethermal.teleop.models import default_method
 
 MAX_S = 0.1
 
@@ -30,6 +32,13 @@ def test_serves_the_scenes_the_estimator_builds_for_and_says_why_not_the_others(
     from telethermal.ident.effusivity import EffusivityEstimator
     with pytest.raises(IdentificationError, match="passive pad"):
         EffusivityEstimator.for_scene(load_scene("gripper-case-I-cnv"))
+
+
+def test_the_default_method_is_effusivity_fit_where_it_serves_and_lda_elsewhere(caplog):
+    assert default_method(load_scene("fingertip-7")) == "effusivity-fit"
+    with caplog.at_level(logging.INFO, logger="telethermal.teleop.models"):
+        assert default_method(load_scene("gripper-case-I-cnv")) == "effusivity-lda"
+    assert "passive pad" in caplog.text and "gripper-case-I-cnv" in caplog.text
 
 
 @pytest.fixture
