@@ -64,11 +64,8 @@ class Slave:
         if not objs:
             raise SceneError(f"scene {scene.name} has no object of {material!r}; it has "
                              f"{', '.join(scene.materials)}")
-        from telethermal.ident.fitted import register_scene
         from telethermal.ident.registry import check_scene
         check_scene(identifier, scene.name, scene_materials=scene.materials)
-        # A model read from a file knows its scene by name: this is it.
-        register_scene(scene)
         if abs(identifier.sample_rate_hz_ - scene.sample_rate_hz) > 1e-9:
             raise SceneError(f"the identifier expects {identifier.sample_rate_hz_:g} Hz samples, "
                              f"the scene's pad gives {scene.sample_rate_hz:g} Hz")
