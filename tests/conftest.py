@@ -27,7 +27,7 @@ class TrainedModels:
 
     def __init__(self, folder):
         self.folder = folder
-        self._models = {}          # (repr(scene), seed, kind) -> model
+        self._models = {}          # (repr(scene), seed, kind[, method]) -> model
         self._files = {}           # (repr(scene), seed) -> (identifier path, generator path)
         self._digests = {}         # what each model and file was when made
         # Bound now: a test may monkeypatch teleop.models' functions later.
@@ -54,16 +54,17 @@ class TrainedModels:
             model.save(path) if kind == "identifier" else save_generator(model, path)
             return self._npz_digest(path)
 
-    def _model(self, scene, seed, kind):
-        key = (repr(scene), seed, kind)
+    def _model(self, scene, seed, kind, method=None):
+        key = (repr(scene), seed, kind) + ((method,) if method else ())
         if key not in self._models:
-            self._models[key] = self._train[kind](scene, seed)
+            self._models[key] = self._train[kind](scene, seed, *((method,) if method else ()))
             self._digests[key] = self._model_digest(self._models[key], kind)
         return self._models[key]
 
-    def identifier(self, scene, seed: int = 0):
-        """``train_identifier(scene, seed)``: not to be changed by the test."""
-        return self._model(scene, seed, "identifier")
+    def identifier(self, scene, seed: int = 0, method: str | None = None):
+        """``train_identifier(scene, seed[, method])``: not to be changed by
+        the test (``method``: a test about that method's behaviour)."""
+        return self._model(scene, seed, "identifier", method)
 
     def generator(self, scene, seed: int = 0):
         """``train_generator(scene, seed)``: not to be changed by the test."""
@@ -107,3 +108,32 @@ def trained_models(tmp_path_factory):
     yield trained
     changed = trained.changed()
     assert not changed, f"a test changed a shared trained model or its file: {changed}"
+
+
+def pytest_configure(config):
+    """The suite's own cache folder (idle policies, the effusivity
+    estimator's curves), in the system's temporary folder, never the
+    user's home: every process the suite starts (services, the CLI)
+    inherits the variable and reads what the first one built. Kept from one
+    run to the next (an idle policy takes minutes to compute; every entry
+    is keyed by what it depends on), one per user."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from telethermal.cachedir import CACHE_ENV
+    folder = Path(tempfile.gettempdir()) / f"telethermal-test-cache-{os.getuid()}"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    config._telethermal_cache_before = os.environ.get(CACHE_ENV)
+    os.environ[CACHE_ENV] = str(folder)
+
+
+def pytest_unconfigure(config):
+    import os
+
+    from telethermal.cachedir import CACHE_ENV
+    before = getattr(config, "_telethermal_cache_before", None)
+    if before is None:
+        os.environ.pop(CACHE_ENV, None)
+    else:
+        os.environ[CACHE_ENV] = before

@@ -23,10 +23,16 @@ def write_npz(path: str | Path, fmt: str, version: int, header: dict, arrays: di
     payload = {"header": np.frombuffer(json.dumps(full).encode(), dtype=np.uint8),
                **{k: np.asarray(v) for k, v in arrays.items()}}
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as fh:
-        np.savez(fh, **payload)
-    os.replace(tmp, path)
+    # One temporary file per process: two processes writing the same file
+    # (a cache) do not write into each other's.
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **payload)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
 
 

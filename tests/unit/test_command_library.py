@@ -258,7 +258,10 @@ def test_demo_identify_writes_its_files_and_one_line(small_scene_db):
     assert {p.name for p in out.iterdir()} >= {"identifier.npz", "identify.json", "identify.png"}
     report = json.loads((out / "identify.json").read_text())
     assert report["trials"] == 4 * len(scene.materials)   # fresh trials: the same count
-    assert len(lines) == 1 and lines[0].startswith("identification (effusivity-lda, fresh "
+    # The default identifier on a scene it can model: effusivity-fit.
+    from telethermal.ident.fitted import serves
+    assert serves(scene) is None and model.method == "effusivity-fit"
+    assert len(lines) == 1 and lines[0].startswith("identification (effusivity-fit, fresh "
                                                    "trials): 0.2 s ")
     assert lines[0].endswith(f"; decisions {report['decision_time_s']['n']}/"
                              f"{report['trials']} committed")

@@ -83,10 +83,21 @@ def test_a_model_of_another_scene_is_refused(model, tmp_path):
         Slave(other, "wood", loaded, slave_rng(0))
 
 
-def test_model_file_keeps_calibration_and_force_range(model, tmp_path):
+@pytest.fixture(scope="module")
+def lda_model(trained_models):
+    return trained_models.identifier(SCENE, 0, "effusivity-lda")
+
+
+@pytest.mark.parametrize("which", ["model", "lda_model"])
+def test_model_file_keeps_calibration_and_force_range(request, which, tmp_path):
+    """The default identifier's file (effusivity-fit) and effusivity-lda's,
+    which also keeps its shrinkage."""
+    model = request.getfixturevalue(which)
     loaded = load_model(model.save(tmp_path / "m.npz"))
     np.testing.assert_array_equal(loaded.softmax_temperature_, model.softmax_temperature_)
-    assert loaded.shrinkage_ == model.shrinkage_ and loaded.force_range_n_ == model.force_range_n_
+    assert loaded.force_range_n_ == model.force_range_n_
+    if which == "lda_model":
+        assert loaded.shrinkage_ == model.shrinkage_
     lo, hi = loaded.force_range_n_[-1]
     # Trained at 10 +- 1.5 N: the touches' range widened by a tenth of its
     # width each side (FORCE_MARGIN), still short of the 4 N and 20 N below.

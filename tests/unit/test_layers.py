@@ -23,7 +23,7 @@ ROOT = Path(telethermal.__file__).parent
 LAYERS = [
     {"__init__"},
     {"errors"},
-    {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder"},
+    {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder", "cachedir"},
     {"physics"},
     {"control", "wire", "faults"},
     {"devices", "data"},

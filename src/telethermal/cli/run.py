@@ -195,9 +195,9 @@ def add_demo(sub) -> None:
     p.add_argument("--record", metavar="DIR", help="both services record every touch here "
                                                    "(one MCAP file per host; see replay)")
     p.add_argument("--method", choices=("effusivity-lda", "effusivity-fit"),
-                   default="effusivity-lda",
-                   help="the slave's identifier (default effusivity-lda; effusivity-fit fits "
-                        "the pad's model to each window: telethermal bench identify)")
+                   help="the slave's identifier (default effusivity-fit, which fits the pad's "
+                        "model to each window, on a scene it can model; else effusivity-lda: "
+                        "telethermal bench identify compares them)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
                    help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
                         "(default 8050); it stays up after the touches until Ctrl-C")

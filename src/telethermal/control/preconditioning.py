@@ -24,12 +24,12 @@ import hashlib
 import json
 import logging
 import math
-import os
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from telethermal.cachedir import cache_dir
 from telethermal.control.display_floor import (  # noqa: F401  (re-exported)
     BOUND_MARGIN, CONTACT_S, GRID_S, Floor, Hardware, JunctionPlant, Touch, Verified,
     best_touch, bounded_fit, direct_skin_c, hardware, idle_hold, nominal_touch,
@@ -225,15 +225,6 @@ def compute_policy(scene: Scene) -> dict:
 def shipped_policy_path(scene_name: str):
     """Where the package keeps a shipped scene's policy."""
     return resources.files("telethermal").joinpath("scenes", f"{scene_name}.idle.json")
-
-
-def cache_dir() -> Path:
-    """The user's cache of computed policies: ``$TELETHERMAL_CACHE``, else
-    ``$XDG_CACHE_HOME/telethermal``, else ``~/.cache/telethermal``."""
-    if os.environ.get("TELETHERMAL_CACHE"):
-        return Path(os.environ["TELETHERMAL_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "telethermal"
 
 
 def _read_policy(path, key: str) -> dict | None:

@@ -91,7 +91,7 @@ from scipy.stats import chi2
 from telethermal.errors import IdentificationError
 from telethermal.ident.oracle import KernelPrior, draw_nuisances, flux_noise_w_m2, \
     marginal_log_likelihood
-from telethermal.ident.prepare import FLUX, Contacts
+from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts
 
 #: The grid's objects: this material with k and rho c scaled together.
 REFERENCE_MATERIAL = "glass"
@@ -107,6 +107,27 @@ FIT_P_MIN = 1e-3
 START_SAMPLES = 101
 #: The interval's normal quantile (95 %).
 Z95 = 1.959963984540054
+
+
+def refusal(scene, object_temp_c: float | None = None) -> str | None:
+    """Why :meth:`EffusivityEstimator.for_scene` refuses ``scene`` (None: it
+    does not), without building anything: objects at several temperatures
+    and no ``object_temp_c`` given (one family of curves is computed at one
+    temperature), or the pad set under :data:`MIN_GAP_K` from the
+    objects (a passive pad at the object's temperature; the identifiers'
+    gap floor)."""
+    if object_temp_c is None:
+        temps = sorted({o.temp_c for o in scene.objects})
+        if len(temps) != 1:
+            return (f"its objects are at {temps} C; give the object temperature the "
+                    "estimator's curves are computed at")
+        object_temp_c = temps[0]
+    gap_k = scene.pad_temp_c(object_temp_c) - object_temp_c
+    if abs(gap_k) < MIN_GAP_K:
+        return (f"the pad is set {gap_k:g} K from an object at {object_temp_c:g} C: too "
+                "little heat flows to estimate anything (a passive pad at the object's "
+                "temperature)")
+    return None
 
 
 @dataclass(frozen=True)
@@ -314,31 +335,28 @@ class EffusivityEstimator:
     @classmethod
     def for_scene(cls, scene, object_temp_c: float | None = None, max_s: float = 1.0,
                   n_e: int = N_E, n_h: int = N_H, n_prior: int = 2000, n_sessions: int = 20,
-                  prior_seed: int = 12345) -> "EffusivityEstimator":
+                  prior_seed: int = 12345, family=None) -> "EffusivityEstimator":
         """The estimator of ``scene``'s pad touches up to ``max_s`` after the
         detected onset, its curves at ``object_temp_c`` (default: the scene's
-        objects' temperature, which must then be one)."""
+        objects' temperature, which must then be one). ``family``: what
+        builds the curves, :func:`effusivity_family`'s signature (default:
+        that function; :func:`telethermal.ident.curvecache.cached_family`
+        reads them from disk when it can)."""
+        reason = refusal(scene, object_temp_c)
+        if reason is not None:
+            raise IdentificationError(f"{scene.name}: {reason}")
         if object_temp_c is None:
-            temps = sorted({o.temp_c for o in scene.objects})
-            if len(temps) != 1:
-                raise IdentificationError(
-                    f"{scene.name}: its objects are at {temps} C; give the object temperature "
-                    "the estimator's curves are computed at")
-            object_temp_c = temps[0]
-        if abs(scene.pad_temp_c(object_temp_c) - object_temp_c) < 2.0:
-            raise IdentificationError(
-                f"{scene.name}: the pad is set {scene.pad_temp_c(object_temp_c) - object_temp_c:g}"
-                f" K from an object at {object_temp_c:g} C: too little heat flows to estimate "
-                "anything (a passive pad at the object's temperature)")
+            object_temp_c = scene.objects[0].temp_c
         rng = np.random.default_rng(prior_seed)
         draws = draw_nuisances(scene, n_prior, rng, None, n_sessions)
         amp = np.concatenate(list(draws["amp"].values()))
         theta = np.column_stack([draws["u"], draws["tau_s"]])
         u_lo, u_hi = float(draws["u"].min()) - 0.1, float(draws["u"].max()) + 0.1
         tau = (float(draws["tau_s"].min()) - 0.003, float(min(draws["tau_s"].max() + 0.003, 0)))
-        family = effusivity_family(scene, object_temp_c, np.linspace(u_lo, u_hi, n_h),
-                                   max_s - tau[0] + 0.01, n_e)
-        return cls(family, KernelPrior.scott(theta), (float(np.mean(amp)), float(np.std(amp))),
+        curves = (family or effusivity_family)(scene, object_temp_c,
+                                               np.linspace(u_lo, u_hi, n_h),
+                                               max_s - tau[0] + 0.01, n_e)
+        return cls(curves, KernelPrior.scott(theta), (float(np.mean(amp)), float(np.std(amp))),
                    flux_noise_w_m2(scene), scene.sample_rate_hz, tau,
                    scene.pad.contact_conductance_w_m2k, object_temp_c, scene.tolerance_rel)
 

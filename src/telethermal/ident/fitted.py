@@ -56,15 +56,58 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-@functools.lru_cache(maxsize=4)
-def _estimator(scene_ref: str, max_s: float):
-    """The scene's estimator and its nominal gap, K (its curves take
-    seconds to compute: built once per process and scene)."""
-    from telethermal.ident.effusivity import EffusivityEstimator
-    from telethermal.physics.scene import load_scene
+#: Scenes given to this process by name (:func:`register_scene`): a scene
+#: read from a file is known by its name, which ``load_scene`` cannot load.
+_SCENES: dict = {}
 
-    scene = load_scene(scene_ref)
-    est = EffusivityEstimator.for_scene(scene, max_s=max_s)
+
+def register_scene(scene) -> None:
+    """Make ``scene`` the one a model naming ``scene.name`` fits its pad's
+    model to, in this process (a scene file's scene: ``load_scene`` knows
+    shipped names and paths only). The slave and ``train_identifier`` call
+    it before a fit or a start."""
+    _SCENES[scene.name] = scene
+
+
+def scene_of(scene_ref: str):
+    """The registered scene of that name, else ``load_scene(scene_ref)``
+    (a shipped scene's name or a scene file's path)."""
+    from telethermal.errors import SceneError
+    from telethermal.physics.scene import load_scene
+    if scene_ref in _SCENES:
+        return _SCENES[scene_ref]
+    try:
+        return load_scene(scene_ref)
+    except SceneError as exc:
+        raise IdentificationError(
+            f"effusivity-fit needs the pad model of scene {scene_ref!r}, which is neither a "
+            f"shipped scene nor a scene file, and no scene of that name was given to this "
+            f"process (ident.fitted.register_scene; the slave gives its own): {exc}") from exc
+
+
+def serves(scene) -> str | None:
+    """None when effusivity-fit can model ``scene``'s touches, else why
+    not (cheap: the checks ``EffusivityEstimator.for_scene`` makes before
+    building anything; :func:`telethermal.ident.effusivity.refusal`)."""
+    from telethermal.ident.effusivity import refusal
+    return refusal(scene)
+
+
+def _estimator(scene, max_s: float):
+    """The estimator of ``scene`` (a Scene, or a name for :func:`scene_of`)
+    and its nominal gap, K."""
+    return _estimator_of(scene_of(scene) if isinstance(scene, str) else scene, max_s)
+
+
+@functools.lru_cache(maxsize=8)
+def _estimator_of(scene, max_s: float):
+    """Its curves take seconds to compute: read from the per-user cache
+    (:mod:`telethermal.ident.curvecache`), or built and cached there; once
+    per process and scene (equal scenes share one)."""
+    from telethermal.ident.curvecache import cached_family
+    from telethermal.ident.effusivity import EffusivityEstimator
+
+    est = EffusivityEstimator.for_scene(scene, max_s=max_s, family=cached_family)
     return est, abs(scene.pad_temp_c(est.object_temp_c) - est.object_temp_c)
 
 
@@ -73,9 +116,12 @@ class EffusivityFit(Identifier):
 
     Parameters
     ----------
-    scene : str
-        The scene whose pad made the touches (a package scene's name or a
-        scene file's path): its pad model is what the estimate fits.
+    scene : Scene or str
+        The scene whose pad made the touches: its pad model is what the
+        estimate fits. A model file keeps its name; a model read from one
+        finds the scene by :func:`scene_of` (the scene registered under
+        that name in the process, else a shipped scene's name or a scene
+        file's path).
     outlier_p : float
         A touch beyond every class's two-sided ``1 - outlier_p`` predictive
         interval is outside every class.
@@ -85,7 +131,7 @@ class EffusivityFit(Identifier):
     needs_scene = True
     calibration_may_sharpen = False
 
-    def __init__(self, channels=(FLUX,), scene: str | None = None, outlier_p: float = 1e-4,
+    def __init__(self, channels=(FLUX,), scene=None, outlier_p: float = 1e-4,
                  window_step_s: float = 0.02, **kw):
         super().__init__(channels, window_step_s=window_step_s, **kw)
         if tuple(self.channels) != (FLUX,):
@@ -94,8 +140,12 @@ class EffusivityFit(Identifier):
         self.scene = scene
         self.outlier_p = outlier_p
 
+    @property
+    def scene_name(self) -> str | None:
+        return getattr(self.scene, "name", self.scene)
+
     def hyper(self) -> dict:
-        return {**super().hyper(), "scene": self.scene, "outlier_p": self.outlier_p}
+        return {**super().hyper(), "scene": self.scene_name, "outlier_p": self.outlier_p}
 
     def fit(self, contacts):
         if not self.scene:
@@ -106,7 +156,7 @@ class EffusivityFit(Identifier):
 
     def estimator(self):
         """(the scene's estimator, its nominal gap in K), built once per process."""
-        return _estimator(str(self.scene), float(self.max_window_s))
+        return _estimator(self.scene, float(self.max_window_s))
 
     def prepare(self) -> "EffusivityFit":
         """The estimator's curves (seconds to build) before the first touch."""
@@ -127,7 +177,9 @@ class EffusivityFit(Identifier):
         return out
 
     def _key(self, row: np.ndarray, n: int):
-        return (self.scene, self.max_window_s,
+        # The estimator itself (equal scenes share one): two scenes of one
+        # name (a variant made in a test) are not mixed up.
+        return (self.estimator()[0], self.max_window_s,
                 hashlib.blake2b(row[:n].tobytes(), digest_size=16).digest(), n)
 
     def update_probe(self, row: np.ndarray, window_index: int) -> None:

@@ -15,6 +15,7 @@ from telethermal.ident.fitted import EffusivityFit
 from telethermal.ident.methods import EffusivityLda, PcaFnn
 from telethermal.ident.prepare import MIN_GAP_K, from_trials
 from telethermal.ident.recurrent import Lstm, Rnn
+from telethermal.physics.scene import Scene
 
 log = logging.getLogger(__name__)
 METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, EffusivityLda,
@@ -22,16 +23,16 @@ METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, Effusivity
 
 
 def make(method: str, scene: str | None = None, **kw) -> Identifier:
-    """A ``method`` identifier; ``scene`` (the touches' scene, a name or a
-    path) is given to the methods that fit its pad's model and ignored by
-    the others."""
+    """A ``method`` identifier; ``scene`` (the touches' scene: a Scene, a
+    name or a path) is given to the methods that fit its pad's model and
+    ignored by the others."""
     try:
         cls = METHODS[method]
     except KeyError as exc:
         raise IdentificationError(f"unknown method {method!r}; methods: "
                                   f"{', '.join(sorted(METHODS))}") from exc
     if scene is not None and getattr(cls, "needs_scene", False):
-        kw["scene"] = str(scene)
+        kw["scene"] = scene if isinstance(scene, Scene) else str(scene)
     return cls(**kw)
 
 

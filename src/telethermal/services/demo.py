@@ -423,7 +423,7 @@ def _no_progress(_total: int, _what: str):
 
 
 def _demo_models(scene, out: Path, seed: int, echo, progress, status,
-                 method: str = DEFAULT_METHOD) -> None:
+                 method: str | None = None) -> None:
     """The demo's databases (and their plot), identifier and generator in ``out``."""
     from telethermal.data.dataset import load_dataset
     from telethermal.data.generate import generate_databases
@@ -446,14 +446,15 @@ def _demo_models(scene, out: Path, seed: int, echo, progress, status,
 def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed: int = 0,
          contact_s: float = 5.0, record_dir: str | Path | None = None,
          view_port: int | None = None, devices: str = "sim", json_path=None, echo=print,
-         progress=_no_progress, status=nullcontext, method: str = DEFAULT_METHOD) -> DemoResult:
+         progress=_no_progress, status=nullcontext, method: str | None = None) -> DemoResult:
     """``telethermal demo``: the scene's databases, an identifier and a flux
     generator trained on them, then slave and master as two processes on
     loopback and a touch on each material (:func:`run_demo`); the summary
     goes to ``json_path`` (default ``out/demo.json``). ``echo`` takes each
     line to show; ``progress(total, what)`` and ``status(text)`` are context
     managers held around the long steps (the first yields a callable taking
-    a step's label); ``method``: the identifier's."""
+    a step's label); ``method``: the identifier's (default:
+    ``teleop.models.default_method``)."""
     from telethermal.physics.scene import describe_models, load_scene
 
     out = Path(out)

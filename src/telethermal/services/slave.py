@@ -52,11 +52,15 @@ def decision_text(pad: Slave, label: str) -> str:
 class SlaveService:
     def __init__(self, config: SlaveConfig, identifier=None, generator=None):
         from telethermal.teleop.models import train_generator, train_identifier
+        from telethermal.ident.fitted import register_scene
         from telethermal.ident.registry import load_model
         from telethermal.render.generator import load_generator
 
         self.config = config
         self.scene = with_finger(load_scene(config.scene))
+        # A model that fits the pad's model finds it by the scene's name
+        # (a scene file's name is not a path load_scene knows).
+        register_scene(self.scene)
         for key, given in (("identifier", identifier), ("generator", generator)):
             value = getattr(config, key)
             if given is None and value and not Path(value).is_file():

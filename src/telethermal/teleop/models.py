@@ -3,25 +3,45 @@ memory), when no saved identifier or generator is given."""
 
 from __future__ import annotations
 
+import logging
 from contextlib import nullcontext
 
 import numpy as np
 
 from telethermal.data.generate import finger_database, pad_database
+from telethermal.ident.fitted import serves
 from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import load_model, make
 from telethermal.physics.scene import Scene
 from telethermal.render.generator import NetworkGenerator, load_generator
 
 
-#: The identifier a session trains when given none.
-DEFAULT_METHOD = "effusivity-lda"
+log = logging.getLogger(__name__)
+
+#: The identifier a session trains when given none, on a scene it can model
+#: (:func:`default_method`).
+DEFAULT_METHOD = "effusivity-fit"
+#: The identifier trained on a scene the default cannot model.
+FALLBACK_METHOD = "effusivity-lda"
 
 
-def train_identifier(scene: Scene, seed: int = 0, method: str = DEFAULT_METHOD):
-    """Database 1 of ``scene`` (seed ``seed``) -> a fitted identifier."""
+def default_method(scene: Scene) -> str:
+    """:data:`DEFAULT_METHOD` where it can model ``scene``'s touches, else
+    :data:`FALLBACK_METHOD` (logged, with the reason)."""
+    reason = serves(scene)
+    if reason is None:
+        return DEFAULT_METHOD
+    log.info("%s: identifier %s, not %s: %s", scene.name, FALLBACK_METHOD, DEFAULT_METHOD,
+             reason)
+    return FALLBACK_METHOD
+
+
+def train_identifier(scene: Scene, seed: int = 0, method: str | None = None):
+    """Database 1 of ``scene`` (seed ``seed``) -> a fitted ``method``
+    identifier (default: :func:`default_method`)."""
+    method = method or default_method(scene)
     trials = pad_database(scene, np.random.default_rng(seed))
-    model = make(method, scene=scene.name).fit(from_trials(trials)[0])
+    model = make(method, scene=scene).fit(from_trials(trials)[0])
     model.scene_ = scene.name
     return model
 
@@ -80,8 +100,10 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
         from telethermal.ident.registry import dataset_scene
         pad = Path(data) / "pad" if (Path(data) / "pad" / MANIFEST).is_file() else Path(data)
         trials = load_dataset(pad)
-        identifier = make("effusivity-lda").fit(from_trials(trials)[0])
-        identifier.scene_ = dataset_scene(pad)          # None when it has no record
+        named = dataset_scene(pad)                      # None when it has no record
+        method, data_scene = _dataset_method(scene, named)
+        identifier = make(method, scene=data_scene).fit(from_trials(trials)[0])
+        identifier.scene_ = named
         identifier.training_digests_ = sorted({trial_digest(t) for t in trials})
         finger = Path(data) / "finger"
         generator = NetworkGenerator().fit(load_dataset(finger)) \
@@ -94,11 +116,31 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
     return paths + [sums]
 
 
-def demo_identify(scene, out, seed: int, echo=print, method: str = DEFAULT_METHOD):
-    """Train telethermal's identifier on ``out/databases/pad`` and score it
-    on fresh trials of the same scene (seed ``seed + 1``): writes
-    ``identifier.npz``, ``identify.json`` and ``identify.png`` in ``out``,
-    echoes one line; returns the model."""
+def _dataset_method(scene: Scene, named: str | None):
+    """(the method, the scene) for a dataset of the scene ``named`` (None:
+    the dataset names none): :func:`default_method` of that scene;
+    :data:`FALLBACK_METHOD` where the dataset names no scene or one this
+    process cannot load (its pad's model is what the default fits)."""
+    from telethermal.errors import IdentificationError
+    from telethermal.ident.fitted import scene_of
+
+    if named is None:
+        log.info("identifier %s: the dataset names no scene, whose pad model %s would fit",
+                 FALLBACK_METHOD, DEFAULT_METHOD)
+        return FALLBACK_METHOD, None
+    try:
+        data_scene = scene if named == scene.name else scene_of(named)
+    except IdentificationError as exc:
+        log.info("identifier %s: %s", FALLBACK_METHOD, exc)
+        return FALLBACK_METHOD, None
+    return default_method(data_scene), data_scene
+
+
+def demo_identify(scene, out, seed: int, echo=print, method: str | None = None):
+    """Train telethermal's identifier (``method``, default: :func:`default_method`)
+    on ``out/databases/pad`` and score it on fresh trials of the same scene
+    (seed ``seed + 1``): writes ``identifier.npz``, ``identify.json`` and
+    ``identify.png`` in ``out``, echoes one line; returns the model."""
     from pathlib import Path
 
     from telethermal.jsonfile import write_json
@@ -107,7 +149,8 @@ def demo_identify(scene, out, seed: int, echo=print, method: str = DEFAULT_METHO
     from telethermal.ident.evaluate import evaluate, plot_accuracy
 
     out = Path(out)
-    model = make(method, scene=scene.name).fit(
+    method = method or default_method(scene)
+    model = make(method, scene=scene).fit(
         from_trials(load_dataset(out / "databases" / "pad"))[0])
     model.scene_ = scene.name
     model.save(out / "identifier.npz")
