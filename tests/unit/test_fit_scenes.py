@@ -12,6 +12,7 @@ from telethermal.errors import IdentificationError
 from telethermal.ident import fitted
 from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import load_model, make
+from telethermal.physics import scene as scene_module
 from telethermal.physics.scene import _shipped, load_scene
 from telethermal.teleop.models import default_method
 
@@ -44,7 +45,8 @@ def test_the_default_method_is_effusivity_fit_where_it_serves_and_lda_elsewhere(
 @pytest.fixture
 def lab_scene(tmp_path, monkeypatch):
     """fingertip-7's pad and objects in a lab's scene file (another name)."""
-    monkeypatch.setattr(fitted, "_SCENES", {})           # this test's registry
+    monkeypatch.setattr(fitted, "_SCENES", {})           # this test's registries
+    monkeypatch.setattr(scene_module, "_FILES_BY_NAME", {})
     text = _shipped().joinpath("fingertip-7.toml").read_text()
     lines = [('name = "lab-pad"' if line.startswith("name =") else line)
              for line in text.splitlines()]
@@ -53,8 +55,8 @@ def lab_scene(tmp_path, monkeypatch):
     return load_scene(path)
 
 
-def test_a_model_of_a_scene_file_finds_its_pad_model_once_the_scene_is_given(lab_scene,
-                                                                              tmp_path):
+def test_a_model_of_a_scene_file_finds_its_pad_model_where_the_file_was_loaded(
+        lab_scene, tmp_path, monkeypatch):
     assert lab_scene.name == "lab-pad"
     contacts = from_trials(list(pad_database(lab_scene, np.random.default_rng(0))),
                            max_s=MAX_S)[0]
@@ -64,10 +66,17 @@ def test_a_model_of_a_scene_file_finds_its_pad_model_once_the_scene_is_given(lab
     held = from_trials(list(pad_database(lab_scene, np.random.default_rng(1))),
                        max_s=MAX_S)[0]
     last = len(model.windows_s_) - 1
-    # In another process, "lab-pad" is neither a shipped scene nor a path:
-    # a clear error, naming it, until the scene is given (the slave does).
-    with pytest.raises(IdentificationError, match="'lab-pad'.*register_scene"):
-        back.proba_normalised(held.x, last)
-    fitted.register_scene(lab_scene)
-    assert np.array_equal(back.proba_normalised(held.x, last),
-                          model.proba_normalised(held.x, last))
+    expected = model.proba_normalised(held.x, last)
+    # This process loaded the scene file: its name finds it.
+    assert np.array_equal(back.proba_normalised(held.x, last), expected)
+    # In a process that did not load it, "lab-pad" is neither a shipped
+    # scene nor a path: a clear error naming it and what to give, until the
+    # file is loaded there (the demo, the slave, --scene FILE do).
+    monkeypatch.setattr(scene_module, "_FILES_BY_NAME", {})
+    fitted._estimator_of.cache_clear()
+    fitted.clear_cache()
+    fresh = load_model(tmp_path / "lab.npz")
+    with pytest.raises(IdentificationError, match="'lab-pad'.*--scene FILE"):
+        fresh.proba_normalised(held.x, last)
+    load_scene(tmp_path / "lab-pad.toml")
+    assert np.array_equal(fresh.proba_normalised(held.x, last), expected)

@@ -56,33 +56,35 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-#: Scenes given to this process by name (:func:`register_scene`): a scene
-#: read from a file is known by its name, which ``load_scene`` cannot load.
+#: Scenes given to this process by name (:func:`register_scene`), before
+#: the scene files it loaded (``physics.scene.loaded_scene_file``).
 _SCENES: dict = {}
 
 
 def register_scene(scene) -> None:
     """Make ``scene`` the one a model naming ``scene.name`` fits its pad's
-    model to, in this process (a scene file's scene: ``load_scene`` knows
-    shipped names and paths only). The slave and ``train_identifier`` call
-    it before a fit or a start."""
+    model to, in this process (the slave service gives the scene of its
+    config; any scene file this process loads is found by name anyway)."""
     _SCENES[scene.name] = scene
 
 
 def scene_of(scene_ref: str):
-    """The registered scene of that name, else ``load_scene(scene_ref)``
-    (a shipped scene's name or a scene file's path)."""
+    """The registered scene of that name, else the scene file of that name
+    this process loaded, else ``load_scene(scene_ref)`` (a shipped scene's
+    name or a scene file's path)."""
     from telethermal.errors import SceneError
-    from telethermal.physics.scene import load_scene
+    from telethermal.physics.scene import load_scene, loaded_scene_file
     if scene_ref in _SCENES:
         return _SCENES[scene_ref]
+    if loaded_scene_file(scene_ref) is not None:
+        return loaded_scene_file(scene_ref)
     try:
         return load_scene(scene_ref)
     except SceneError as exc:
         raise IdentificationError(
             f"effusivity-fit needs the pad model of scene {scene_ref!r}, which is neither a "
-            f"shipped scene nor a scene file, and no scene of that name was given to this "
-            f"process (ident.fitted.register_scene; the slave gives its own): {exc}") from exc
+            f"shipped scene nor a scene file, and no scene file of that name was loaded by "
+            f"this process (give its path: --scene FILE): {exc}") from exc
 
 
 def serves(scene) -> str | None:

@@ -404,8 +404,20 @@ def list_scenes() -> list[str]:
     return sorted(p.name[:-5] for p in _shipped().iterdir() if p.name.endswith(".toml"))
 
 
+#: Scene files this process loaded, by the name inside them: a model file
+#: keeps its scene's name, and a process that loaded the file finds it
+#: again by that name (:func:`loaded_scene_file`).
+_FILES_BY_NAME: dict[str, "Scene"] = {}
+
+
+def loaded_scene_file(name: str) -> "Scene | None":
+    """The scene file of that name this process last loaded, else None."""
+    return _FILES_BY_NAME.get(name)
+
+
 def load_scene(name_or_path: str | Path) -> Scene:
-    """Load a shipped scene by name, or any scene file by path."""
+    """Load a shipped scene by name, or any scene file by path (which this
+    process then also finds by the name in it: :func:`loaded_scene_file`)."""
     path = Path(name_or_path)
     name = str(name_or_path)
     shipped = list_scenes()
@@ -419,6 +431,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
                 f" (did you mean {path.parent / near[0]}?)" if near else "") +
                 ("" if path.suffix == ".toml" else "; a scene file ends in .toml"))
         text, source, ref = path.read_text(), str(path), str(path.resolve())
+        from_file = True
     else:
         if name not in shipped:
             near = difflib.get_close_matches(name, shipped, n=1)
@@ -426,12 +439,15 @@ def load_scene(name_or_path: str | Path) -> Scene:
                 f" (did you mean {near[0]!r}?)" if near else "") +
                 f"; shipped scenes: {', '.join(shipped)}; or give a scene file's path (.toml)")
         text, source = _shipped().joinpath(f"{name}.toml").read_text(), f"{name}.toml"
-        ref = name
+        ref, from_file = name, False
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML: {exc}") from exc
-    return dataclasses.replace(parse_scene(data, source), ref=ref)
+    scene = dataclasses.replace(parse_scene(data, source), ref=ref)
+    if from_file:
+        _FILES_BY_NAME[scene.name] = scene
+    return scene
 
 
 # ---------------------------------------------------------------- models
