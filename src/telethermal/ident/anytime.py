@@ -8,8 +8,13 @@ held-out touches support (``commit_from_s_``, :func:`~telethermal.ident.base.com
 
 "unknown" is the answer, rather than a guess, when the contact exchanged too
 little heat (a gap under ``MIN_GAP_K``: the passive pad at the object's own
-temperature), when the contact lies outside every learnt class, or when the
-confidence never reaches the threshold within the contact.
+temperature), when the contact lies outside every learnt class and the
+identifier has no estimate of the object to report, or when the confidence
+never reaches the threshold within the contact. An identifier that
+estimates the object's effusivity (``effusivity-fit``) reports a touch whose
+estimate lies outside every class at the last window as a **new material**
+with its estimate (:mod:`telethermal.ident.openset`); its estimates carry the
+window's effusivity and 95 % interval throughout.
 
 Two materials may stay ambiguous (the first paper merges aluminium with
 steel, graphite with rubber): when no class passes the threshold but the two
@@ -21,17 +26,19 @@ of its members weighted by the posteriors, as before any decision.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.base import FORCE_SAMPLES, Identifier, force_at, force_in_range
 from telethermal.ident.rule import AnytimeRule
-from telethermal.ident.label import GROUP_SEPARATOR, UNKNOWN, Label, Reason
+from telethermal.ident.label import GROUP_SEPARATOR, NEW_MATERIAL, UNKNOWN, Label, Reason
+from telethermal.ident.openset import new_material_confidence, reading_fields, reading_of
 from telethermal.ident.prepare import MIN_GAP_K
 
-__all__ = ["GROUP_SEPARATOR", "UNKNOWN", "FORCE_OUTSIDE", "Label", "Reason", "Decision",
+__all__ = ["GROUP_SEPARATOR", "UNKNOWN", "NEW_MATERIAL", "FORCE_OUTSIDE", "Label", "Reason",
+           "Decision",
            "Estimate", "StreamingIdentifier", "decide", "decide_all", "group_label", "members"]
 
 FORCE_OUTSIDE = Reason.FORCE_OUTSIDE
@@ -56,6 +63,11 @@ class Decision:
     reason: str                # a Reason: confident | confident group | outside classes
     #                            | gap too small | not confident | force outside trained range
     time_first_s: float | None = None   # first commitment (a group's), when refined later
+    # A new material's estimate (W s^0.5/(m^2 K), 95 % interval) and nearest class.
+    effusivity_w_s05_m2k: float | None = None
+    effusivity_lo_w_s05_m2k: float | None = None
+    effusivity_hi_w_s05_m2k: float | None = None
+    nearest: str | None = None
 
     def __post_init__(self):
         if type(self.label) is not Label:
@@ -104,10 +116,25 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
                          model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
         return group
+    new = _new_material(model, x[None, :n], len(path) - 1) \
+        if len(path) and not rule.force_outside else None
+    if new is not None:
+        t = model.windows_s_[len(path) - 1]
+        return Decision(NEW_MATERIAL, new_material_confidence(new), t, Reason.NEW_MATERIAL, t,
+                        **reading_fields(new, True))
     if rule.unlike and not rule.force_outside:
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+def _new_material(model, x: np.ndarray, window_index: int):
+    """The touch's effusivity reading when its estimate at ``window_index``
+    lies outside every class (a new material), else None (inside a class,
+    or a method without estimates)."""
+    if not bool(model.outside_classes(x, window_index)[0]):
+        return None
+    return reading_of(model, x, window_index)
 
 
 def decide_all(model: Identifier, contacts) -> list[Decision]:
@@ -128,6 +155,13 @@ class Estimate:
     confidence: float
     decided: bool                      # committed (to a class, a group or "unknown")
     reason: str = Reason.UNDECIDED     # a Reason (a peer's unknown one stays its string)
+    # The window's effusivity estimate and its 95 % interval, W s^0.5/(m^2 K),
+    # when the identifier gives one (effusivity-fit); the nearest class, for
+    # a new material (:mod:`telethermal.ident.openset`).
+    effusivity_w_s05_m2k: float | None = None
+    effusivity_lo_w_s05_m2k: float | None = None
+    effusivity_hi_w_s05_m2k: float | None = None
+    nearest: str | None = None
 
     def __post_init__(self):
         if type(self.label) is not Label:
@@ -224,6 +258,7 @@ class StreamingIdentifier:
                                force_outside=outside,
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
         kind, what = step if step is not None else (None, None)
+        reading = None
         if outside and held is None:
             est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
                            last, FORCE_OUTSIDE if last else Reason.UNDECIDED)
@@ -237,10 +272,17 @@ class StreamingIdentifier:
         elif kind == "pair":
             est = Estimate(t_s, tuple(p), Label.of(model.classes_[j] for j in what),
                            float(p[list(what)].sum()), True, Reason.CONFIDENT_GROUP)
+        elif last and (reading := _new_material(model, x, index)) is not None:
+            est = Estimate(t_s, tuple(p), NEW_MATERIAL, new_material_confidence(reading), True,
+                           Reason.NEW_MATERIAL)
         elif last:
             est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True,
                            Reason.OUTSIDE_CLASSES if self._rule.unlike else Reason.NOT_CONFIDENT)
         else:
             est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), False)
+        if not est.label.is_new:
+            reading = reading_of(model, x, index)
+        if reading is not None:
+            est = replace(est, **reading_fields(reading, est.label.is_new))
         self.estimate = est
         return est

@@ -249,3 +249,27 @@ class EffusivityFit(Identifier):
         z, dof, _ = self._t_terms(params, self._window(x, self.windows_s_[window_index]))
         limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
         return np.all(np.abs(z) > limit[None], axis=1)
+
+    def effusivity_reading(self, x, window_index):
+        """The touch's effusivity estimate at window ``window_index`` (``x``
+        (1, n, 1), as ``outside_classes``): an
+        :class:`~telethermal.ident.openset.EffusivityReading`, None on a
+        window under :data:`MIN_SAMPLES` samples. The interval is the
+        estimator's (Laplace, 95 %), refitted from this window's cached fit."""
+        from telethermal.ident.openset import EffusivityReading
+
+        w = self._window(x, self.windows_s_[window_index])
+        row = np.ascontiguousarray(w[0, :, 0])
+        if len(row) < MIN_SAMPLES:
+            return None
+        est, gap_k = self.estimator()
+        theta = self._theta(row, len(row))
+        fit = est.estimate(row, gap_k, start=theta)
+        params = self.params_[window_index]
+        nearest = tail = None
+        if "means" in params:
+            z, dof, _ = self._t_terms(params, w)
+            tail = float(np.max(2.0 * student_t.sf(np.abs(z[0]), dof)))
+            nearest = str(self.classes_[int(np.argmin(np.abs(theta[0] - params["means"])))])
+        lo, hi = fit.interval_w_s05_m2k
+        return EffusivityReading(fit.effusivity_w_s05_m2k, lo, hi, nearest, tail)
