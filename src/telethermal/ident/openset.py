@@ -101,6 +101,32 @@ def describe_estimate(estimate) -> str:
                     estimate.nearest)
 
 
+def touch_text(estimate) -> str:
+    """What a touch ended as, for a person: :func:`describe_estimate` of a
+    decided estimate; "unknown (why)" otherwise (no estimate, undecided)."""
+    if estimate is None:
+        return "unknown (no estimate)"
+    if not estimate.decided:
+        return "unknown (no decision)"
+    return describe_estimate(estimate)
+
+
+#: An estimate's effusivity fields, as the wire, the view and recordings name them.
+EFFUSIVITY_KEYS = ("effusivity_w_s05_m2k", "effusivity_lo_w_s05_m2k", "effusivity_hi_w_s05_m2k",
+                   "nearest")
+
+
+def effusivity_of(estimate) -> dict:
+    """The effusivity fields an estimate (or a decision) holds, None ones
+    left out: what goes on the wire (optional fields, section 6c)."""
+    out = {}
+    for key in EFFUSIVITY_KEYS:
+        value = getattr(estimate, key, None)
+        if value is not None:
+            out[key] = value if key == "nearest" else float(value)
+    return out
+
+
 def reading_fields(reading: EffusivityReading | None, new: bool) -> dict:
     """An estimate's effusivity fields from ``reading`` (``nearest`` only for
     a new material: what it is reported beside)."""
@@ -112,5 +138,5 @@ def reading_fields(reading: EffusivityReading | None, new: bool) -> dict:
             **({"nearest": reading.nearest} if new else {})}
 
 
-__all__ = ["EFFUSIVITY_UNIT", "EffusivityReading", "describe", "describe_effusivity",
+__all__ = ["EFFUSIVITY_KEYS", "EFFUSIVITY_UNIT", "effusivity_of", "touch_text", "EffusivityReading", "describe", "describe_effusivity",
            "describe_estimate", "new_material_confidence", "reading_fields", "reading_of"]
