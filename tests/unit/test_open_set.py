@@ -203,3 +203,13 @@ def test_object_memory_keeps_a_new_material_and_one_wrong_touch_does_not_flip_it
     # Two new-material touches in a row after that: another object under the name.
     assert other.learn("plate", _new(), 5.0, CLASSES) == Verdict.REPLACED
     assert other.recall("plate").material == "new material"
+
+
+def test_the_demos_line_says_a_new_materials_estimate():
+    from telethermal.services.demo import touch_said
+    text = "new material, effusivity 42.4 W s^0.5/(m^2 K) (95 %: 41.6 to 43.1), nearest: wood"
+    assert touch_said({"identified": "new material", "unknown_reason": None,
+                       "decision_text": text}) == text
+    assert touch_said({"identified": "unknown", "unknown_reason": "gap too small",
+                       "decision_text": "unknown (gap too small)"}) == "unknown (gap too small)"
+    assert touch_said({"identified": "wood", "unknown_reason": None}) == "wood"

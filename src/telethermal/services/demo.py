@@ -275,6 +275,15 @@ def master_device_summary(result: dict) -> dict | None:
             "peltier_statuses": c.get("peltier", {}).get("statuses")}
 
 
+def touch_said(s: dict) -> str:
+    """What the demo's line says the slave said: the label; an "unknown"
+    with why; a new material with its estimate and nearest class."""
+    if Label(s["identified"]).is_new and s.get("decision_text"):
+        return s["decision_text"]
+    return s["identified"] if s["unknown_reason"] is None else \
+        f"{s['identified']} ({s['unknown_reason']})"
+
+
 def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, generator,
                 again: bool, echo) -> dict:
     """One touch of the demo over the network, beside the same touch in one
@@ -296,10 +305,7 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
     start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
     memory = "" if s["object_memory"] is None else \
         f"announced from memory as {s['object_memory']}, rendered from {start}; "
-    said = s["identified"] if s["unknown_reason"] is None else \
-        f"{s['identified']} ({s['unknown_reason']})"
-    if Label(s["identified"]).is_new and s.get("decision_text"):
-        said = s["decision_text"]          # with its estimate and nearest class
+    said = touch_said(s)
     echo(f"touch on {material + (' again' if again else ''):16s}: {memory}slave said "
          f"{said} {when}; rendered flux "
          f"{100 * s['flux_rms_error_rel']:.2f} % of peak from the decision on, "
