@@ -110,12 +110,12 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
             # The group's earlier commitment counts only if it held this material.
             first = group.time_s if group and group.label.holds(model.classes_[what]) \
                 else model.windows_s_[i]
-            return Decision(model.classes_[what], best, model.windows_s_[i], Reason.CONFIDENT,
-                            first)
+            return _watched(model, x[:n], len(path), Decision(
+                model.classes_[what], best, model.windows_s_[i], Reason.CONFIDENT, first))
         group = Decision(Label.of(model.classes_[j] for j in what), float(p[list(what)].sum()),
                          model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
-        return group
+        return _watched(model, x[:n], len(path), group)
     new = _new_material(model, x[None, :n], len(path) - 1) \
         if len(path) and not rule.force_outside else None
     if new is not None:
@@ -126,6 +126,22 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decision:
+    """A decision naming a class (or a pair), checked at the model's last
+    window when the touch reaches it: an identifier that estimates the
+    effusivity revises it to a new material where the estimate there lies
+    outside the named class's predictive (:mod:`telethermal.ident.openset`)."""
+    last = len(model.windows_s_) - 1
+    if n_windows != last + 1:
+        return decision
+    reading = reading_of(model, x[None], last)
+    if reading is None or not reading.outside(decision.label):
+        return decision
+    first = decision.time_first_s if decision.time_first_s is not None else decision.time_s
+    return Decision(NEW_MATERIAL, new_material_confidence(reading), model.windows_s_[last],
+                    Reason.NEW_MATERIAL, first, **reading_fields(reading, True))
 
 
 def _new_material(model, x: np.ndarray, window_index: int):
@@ -206,6 +222,9 @@ class StreamingIdentifier:
         self._rows: list[np.ndarray] = []
         self._forces: list[float] = []
         self._window = -1
+        #: A class committed before the last window, by an identifier that
+        #: estimates the effusivity: the touch is watched to the last window.
+        self._watch = False
         self._rule = AnytimeRule(model.threshold, model.confirm_windows)
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
@@ -225,12 +244,13 @@ class StreamingIdentifier:
     def finished(self) -> bool:
         """No estimate will follow: committed for good, or the model's last
         window is past (a group then stands as the contact's answer)."""
-        return self.decided or self._window == len(self.model.windows_s_) - 1
+        return (self.decided and not self._watch) or \
+            self._window == len(self.model.windows_s_) - 1
 
     def push(self, sample, force_n: float | None = None) -> Estimate | None:
         """One sample (the model's channels); ``force_n``, the pressing force
         with it, lets the decision refuse a touch unlike the trained ones."""
-        if self.decided:
+        if self.decided and not self._watch:
             return None
         if force_n is not None:
             self._forces.append(float(force_n))
@@ -246,14 +266,18 @@ class StreamingIdentifier:
         if index is None or index == self._window:
             return None
         self._window = index
+        last = index == len(model.windows_s_) - 1
+        if self._watch and not last:
+            return None
         x = np.stack(self._rows)[None]
         p = model.proba_normalised(x, index)[0]
+        if self._watch:
+            return self._revised(x, p, index)
         k = int(np.argmax(p))
         t_s = model.windows_s_[index]
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
-        last = index == len(model.windows_s_) - 1
         step = self._rule.step(index, p, may_commit=model.may_commit(index),
                                force_outside=outside,
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
@@ -285,4 +309,22 @@ class StreamingIdentifier:
         if reading is not None:
             est = replace(est, **reading_fields(reading, est.label.is_new))
         self.estimate = est
+        if last and est.decided and reading is not None and est.label.members and \
+                not est.label.is_new and reading.outside(est.label):
+            return self._revised(x, p, index)           # a pair or class decided at the last
+        self._watch = est.final and not last and est.label.is_material and \
+            not est.label.is_new and hasattr(model, "effusivity_reading")
         return est
+
+    def _revised(self, x, p, index: int) -> Estimate | None:
+        """The last window of a touch named before: a new material where
+        the estimate lies outside the named class's predictive, else the
+        decision stands (None: nothing new)."""
+        self._watch = False
+        reading = reading_of(self.model, x, index)
+        if reading is None or not reading.outside(self.estimate.label):
+            return None
+        self.estimate = Estimate(self.model.windows_s_[index], tuple(p), NEW_MATERIAL,
+                                 new_material_confidence(reading), True, Reason.NEW_MATERIAL,
+                                 **reading_fields(reading, True))
+        return self.estimate

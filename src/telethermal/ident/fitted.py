@@ -267,9 +267,15 @@ class EffusivityFit(Identifier):
         fit = est.estimate(row, gap_k, start=theta)
         params = self.params_[window_index]
         nearest = tail = None
+        inside = ()
         if "means" in params:
             z, dof, _ = self._t_terms(params, w)
-            tail = float(np.max(2.0 * student_t.sf(np.abs(z[0]), dof)))
+            tails = 2.0 * student_t.sf(np.abs(z[0]), dof)
+            tail = float(np.max(tails))
             nearest = str(self.classes_[int(np.argmin(np.abs(theta[0] - params["means"])))])
+            # as outside_classes: within each class's two-sided 1 - outlier_p predictive
+            limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
+            inside = tuple(str(c) for c, a, b in zip(self.classes_, np.abs(z[0]), limit)
+                           if a <= b)
         lo, hi = fit.interval_w_s05_m2k
-        return EffusivityReading(fit.effusivity_w_s05_m2k, lo, hi, nearest, tail)
+        return EffusivityReading(fit.effusivity_w_s05_m2k, lo, hi, nearest, tail, inside)

@@ -14,15 +14,28 @@ every class is then "unknown" ("outside classes"), there being no estimate
 to report.
 
 The rule (the same code in :func:`~telethermal.ident.anytime.decide` and
-the slave's :class:`~telethermal.ident.anytime.StreamingIdentifier`): a
-touch that committed nothing by its last window, whose force stayed in the
-trained range and whose estimate at that last window lies outside every
-class's ``1 - outlier_p`` predictive (``outside_classes``), is decided
-:data:`~telethermal.ident.label.NEW_MATERIAL` with reason
-:attr:`~telethermal.ident.label.Reason.NEW_MATERIAL`; its confidence is one
-minus the tail probability above (at least ``1 - outlier_p``). "unknown"
-stays for what really is unknown: a gap too small, the force outside the
-trained range, a posterior that never convinced, an estimate-less method.
+the slave's :class:`~telethermal.ident.anytime.StreamingIdentifier`), for an
+identifier that gives readings, at the identifier's last window (the
+longest, whose predictive is the narrowest):
+
+* a touch that committed nothing, whose force stayed in the trained range
+  and whose estimate lies outside every class's ``1 - outlier_p``
+  predictive (``outside_classes``) is decided
+  :data:`~telethermal.ident.label.NEW_MATERIAL` with reason
+  :attr:`~telethermal.ident.label.Reason.NEW_MATERIAL`;
+* a touch committed earlier to a class (or standing as a pair) whose
+  estimate there lies outside the predictive of the class it was named
+  (of both of the pair) is revised to a new material: a change of mind,
+  sent as one (PROTOCOL.md section 6a). An early window's predictive is
+  wide (the contact conductance hides the material in the first tenths of
+  a second): ``bench unseen`` measured copper, carbon steel, brass, glass
+  and concrete committed at 0.06-0.2 s to the trained class next to them,
+  every one outside that class's predictive at 1 s.
+
+A new material's confidence is one minus the likeliest class's tail
+probability. "unknown" stays for what really is unknown: a gap too small,
+the force outside the trained range, a posterior that never convinced, an
+estimate-less method.
 """
 
 from __future__ import annotations
@@ -45,6 +58,12 @@ class EffusivityReading:
     effusivity_hi_w_s05_m2k: float
     nearest: str | None                     # class whose mean ln e is nearest; None untrained
     class_tail_p: float | None              # largest two-sided predictive tail over classes
+    inside: tuple[str, ...] = ()            # the classes whose predictive holds the estimate
+
+    def outside(self, label) -> bool:
+        """The estimate lies outside the predictive of every material
+        ``label`` names (a class, or a pair's two)."""
+        return not any(m in self.inside for m in Label(label).members)
 
 
 def reading_of(model, x, window_index: int) -> EffusivityReading | None:
