@@ -217,3 +217,15 @@ def test_the_demos_line_says_a_new_materials_estimate():
     assert touch_said({"identified": "unknown", "unknown_reason": "gap too small",
                        "decision_text": "unknown (gap too small)"}) == "unknown (gap too small)"
     assert touch_said({"identified": "wood", "unknown_reason": None}) == "wood"
+
+
+def test_a_readings_interval_is_the_estimators_at_the_same_fit(model):
+    """The reading's interval (interval_at: the Hessian at a fit already
+    made) is the estimate's own at that fit, to the bit: the same Laplace
+    interval, without a second fit per window."""
+    held = _unseen("foam")
+    est, gap_k = model.estimator()
+    row = held.x[0, :31, 0]
+    fit = est.estimate(row, gap_k)
+    assert est.interval_at(row, gap_k, fit.theta) == (fit.effusivity_w_s05_m2k,
+                                                      *fit.interval_w_s05_m2k)

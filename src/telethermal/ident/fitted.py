@@ -254,8 +254,8 @@ class EffusivityFit(Identifier):
         """The touch's effusivity estimate at window ``window_index`` (``x``
         (1, n, 1), as ``outside_classes``): an
         :class:`~telethermal.ident.openset.EffusivityReading`, None on a
-        window under :data:`MIN_SAMPLES` samples. The interval is the
-        estimator's (Laplace, 95 %), refitted from this window's cached fit."""
+        window under :data:`MIN_SAMPLES` samples: the window's fit (the one
+        the classes are scored on) and its Laplace 95 % interval there."""
         from telethermal.ident.openset import EffusivityReading
 
         w = self._window(x, self.windows_s_[window_index])
@@ -264,7 +264,7 @@ class EffusivityFit(Identifier):
             return None
         est, gap_k = self.estimator()
         theta = self._theta(row, len(row))
-        fit = est.estimate(row, gap_k, start=theta)
+        e, lo, hi = est.interval_at(row, gap_k, theta)
         params = self.params_[window_index]
         nearest = tail = None
         inside = ()
@@ -277,5 +277,4 @@ class EffusivityFit(Identifier):
             limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
             inside = tuple(str(c) for c, a, b in zip(self.classes_, np.abs(z[0]), limit)
                            if a <= b)
-        lo, hi = fit.interval_w_s05_m2k
-        return EffusivityReading(fit.effusivity_w_s05_m2k, lo, hi, nearest, tail, inside)
+        return EffusivityReading(e, lo, hi, nearest, tail, inside)
