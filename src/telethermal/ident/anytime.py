@@ -61,7 +61,8 @@ class Decision:
     confidence: float          # posterior of the best class when decided (or at the end)
     time_s: float | None       # time after contact of the commitment; None if none
     reason: str                # a Reason: confident | confident group | outside classes
-    #                            | gap too small | not confident | force outside trained range
+    #                            | new material | gap too small | not confident
+    #                            | force outside trained range
     time_first_s: float | None = None   # first commitment (a group's), when refined later
     # A new material's estimate (W s^0.5/(m^2 K), 95 % interval) and nearest class.
     effusivity_w_s05_m2k: float | None = None
@@ -242,8 +243,10 @@ class StreamingIdentifier:
 
     @property
     def finished(self) -> bool:
-        """No estimate will follow: committed for good, or the model's last
-        window is past (a group then stands as the contact's answer)."""
+        """No estimate will follow: committed for good (a class named by an
+        identifier that estimates the effusivity only once the last window
+        has checked it), or the model's last window is past (a group then
+        stands as the contact's answer)."""
         return (self.decided and not self._watch) or \
             self._window == len(self.model.windows_s_) - 1
 
