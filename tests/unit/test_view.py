@@ -254,3 +254,14 @@ def test_a_new_material_on_the_view_stream_carries_its_estimate():
     js = (Path(__file__).resolve().parents[2] / "src" / "telethermal" / "view" / "static" /
           "view.js").read_text()
     assert "e.effusivity_w_s05_m2k" in js and "nearest: ${e.nearest}" in js
+
+
+def test_playback_reads_a_recorded_estimates_effusivity():
+    # recorder._estimate appends [effusivity, lo, hi, nearest] when the
+    # identifier gave them; older recordings hold six items.
+    from telethermal.view.playback import _effusivity
+    e = [1.0, [1.0, 0.0], "new material", 0.9999, True, "new material", 42.5, 41.5, 43.5,
+         "wood"]
+    assert _effusivity(e) == {"effusivity_w_s05_m2k": 42.5, "effusivity_lo_w_s05_m2k": 41.5,
+                              "effusivity_hi_w_s05_m2k": 43.5, "nearest": "wood"}
+    assert _effusivity(e[:6]) == {}
