@@ -70,6 +70,20 @@ def test_an_unknown_touch_says_why():
                                "no decision)")
 
 
+def test_a_new_material_touch_says_its_estimate_and_nearest_class():
+    """A master of issue 30's revision gives the decision's text; an older
+    one gives the label alone, said as it is."""
+    result = {"contact_id": 5, "identified": "new material", "decision_time_s": 1.0,
+              "render_start_s": None, "safety_events": 0, "rtt_s": None, "direct": None,
+              "decision_text": "new material, effusivity 42.4 W s^0.5/(m^2 K) (95 %: 41.6 "
+                               "to 43.1), nearest: wood"}
+    assert describe_touch(result)[0].startswith(
+        "touch 5: identified new material, effusivity 42.4 W s^0.5/(m^2 K) (95 %: 41.6 to "
+        "43.1), nearest: wood (decided at 1.00 s)")
+    del result["decision_text"]
+    assert describe_touch(result)[0].startswith("touch 5: identified new material (decided")
+
+
 def test_unknown_reason_is_none_only_for_a_name():
     from telethermal.ident.anytime import Estimate, Reason, unknown_reason
 

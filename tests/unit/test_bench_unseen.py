@@ -151,3 +151,33 @@ def test_the_unseen_set_from_the_options(tmp_path):
     names = [o.material for o in unseen.unseen_objects(active)[0]]
     assert "glass" not in names and "copper" in names
     assert {o.temp_c for o in unseen.unseen_objects(active)[0]} == {34.0}
+
+
+def test_reported_counts_named_new_and_unknown_from_the_decisions():
+    from telethermal.ident.anytime import Decision
+    from telethermal.ident.label import Reason
+    decisions = [Decision("graphite", 0.999, 0.1, Reason.CONFIDENT),
+                 Decision("aluminium|steel", 0.999, 0.1, Reason.CONFIDENT_GROUP),
+                 Decision("graphite", 0.999, 0.2, Reason.CONFIDENT),
+                 Decision("new material", 0.99999, 1.0, Reason.NEW_MATERIAL),
+                 Decision("unknown", 0.5, None, Reason.NOT_CONFIDENT)]
+    assert unseen.reported(decisions) == {
+        "named": 3, "new": 1, "unknown": 1, "n": 5,
+        "named_as": {"aluminium|steel": 1, "graphite": 2},
+        "unknown_reasons": {"not confident": 1}}
+
+
+def test_within_spread_is_the_classes_t_predictive_at_the_last_window():
+    """A stand-in model whose last window holds graphite at ln 1505 with an
+    sd of 0.02 from ten touches: glass (ln 1620) is 3.5 predictive scales
+    (0.02 sqrt(1.1)) out, within its 1 - 1e-4 predictive (t with 9 degrees
+    of freedom: 6.6 scales); marble's mean at ln 2496 puts glass 21 out."""
+    class Model:
+        classes_ = ["graphite", "marble"]
+        windows_s_ = [0.5, 1.0]
+        outlier_p = 1e-4
+        params_ = [{}, {"n": np.array([10.0, 10.0]),
+                        "means": np.log([1505.0, 2496.0]),
+                        "var": np.array([0.02, 0.02]) ** 2}]
+    assert unseen.within_spread(Model(), "glass", ["graphite", "marble"]) == {
+        "graphite": True, "marble": False}

@@ -97,7 +97,7 @@ def test_estimates_and_decisions_hold_labels():
 
 def test_reason_values_are_the_recorded_strings():
     assert {r.value for r in Reason} == {
-        "", "confident", "confident group", "outside classes", "gap too small",
+        "", "confident", "confident group", "outside classes", "new material", "gap too small",
         "not confident", "force outside trained range", "object memory",
         "sensor board lost", "no object temperature",
         "no estimate", "no decision", "slave restarted"}

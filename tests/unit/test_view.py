@@ -229,3 +229,39 @@ def test_an_unknown_on_the_view_stream_carries_its_reason():
     state = master_state(decode(encode(batch)))
     assert state["estimate"]["reason"] == "force outside trained range"
     assert "reason" not in decode(encode({k: v for k, v in batch.items() if k != "reason"}))
+
+
+def test_a_new_material_on_the_view_stream_carries_its_estimate():
+    # The master's view batch holds the estimate's effusivity fields (issue
+    # 30, optional fields of measurement_batch); the page's state passes
+    # them on, and view.js says them beside the label.
+    from pathlib import Path
+
+    from telethermal.view.feed import master_state
+    from telethermal.wire.codec import encode
+
+    batch = {"kind": "measurement_batch", "v": 1, "seq": 1, "sent_s": 0.0, "contact_id": 2,
+             "t0_s": 0.0, "rate_hz": 500.0, "flux_w_m2": [0.0], "temp_c": [30.0],
+             "force_n": [8.0], "classes": ["steel", "wood"], "posteriors": [0.0, 1.0],
+             "label": "new material", "decided": True, "estimate_t_s": 1.0,
+             "reason": "new material", "effusivity_w_s05_m2k": 42.5,
+             "effusivity_lo_w_s05_m2k": 41.5, "effusivity_hi_w_s05_m2k": 43.5,
+             "nearest": "wood"}
+    est = master_state(decode(encode(batch)))["estimate"]
+    assert (est["label"], est["effusivity_w_s05_m2k"], est["effusivity_lo_w_s05_m2k"],
+            est["effusivity_hi_w_s05_m2k"], est["nearest"]) == ("new material", 42.5, 41.5,
+                                                                43.5, "wood")
+    js = (Path(__file__).resolve().parents[2] / "src" / "telethermal" / "view" / "static" /
+          "view.js").read_text()
+    assert "e.effusivity_w_s05_m2k" in js and "nearest: ${e.nearest}" in js
+
+
+def test_playback_reads_a_recorded_estimates_effusivity():
+    # recorder._estimate appends [effusivity, lo, hi, nearest] when the
+    # identifier gave them; older recordings hold six items.
+    from telethermal.view.playback import _effusivity
+    e = [1.0, [1.0, 0.0], "new material", 0.9999, True, "new material", 42.5, 41.5, 43.5,
+         "wood"]
+    assert _effusivity(e) == {"effusivity_w_s05_m2k": 42.5, "effusivity_lo_w_s05_m2k": 41.5,
+                              "effusivity_hi_w_s05_m2k": 43.5, "nearest": "wood"}
+    assert _effusivity(e[:6]) == {}

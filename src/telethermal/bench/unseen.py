@@ -14,10 +14,16 @@ touches whose 95 % interval holds the true effusivity (with its Wilson
 interval) and the time of one estimate (from the grid's best node, "cold",
 and from the estimate 20 ms before, "warm", as a live slave at 50 Hz).
 
-Not run yet (later parts of the issue, reported as ``not_run`` with the
-reason): what the slave reports (named, new, unknown) and the rendered flux
-and skin error against direct contact for the estimate, the oracle and the
-closed set.
+What the slave reports (part 2): the default identifier (``effusivity-fit``)
+trained on the scene's own materials, one session of its own
+(:data:`TRAIN_SEED`, none of the bench's), decides every touch with the
+code the slave runs (:func:`~telethermal.ident.anytime.decide`, the
+streaming identifier's rule): per material how many touches were named
+(and as what), reported as a new material, or unknown (and why).
+
+Not run yet (part 3, reported as ``not_run`` with the reason): the rendered
+flux and skin error against direct contact for the estimate, the oracle and
+the closed set.
 """
 
 from __future__ import annotations
@@ -43,8 +49,10 @@ LIVE_PERIOD_S = 0.02
 #: The issue's targets (quoted, not tuned): unseen materials' median error by
 #: 0.5 s, and the 95 % intervals' coverage.
 TARGET_REL_ERROR, TARGET_WINDOW_S, TARGET_COVERAGE = 0.10, 0.5, (0.90, 0.98)
+#: The session of touches the identifier is trained on (none of the bench's
+#: seeds 0 .. seeds-1).
+TRAIN_SEED = 1000
 NOT_RUN = {
-    "reported": "not_run: open-set decisions (named/new/unknown) are issue 30 part 2",
     "flux_rms_rel": "not_run: rendering from the estimate (estimate, oracle, closed_set) is "
                     "issue 30 part 3",
     "skin_rms_k": "not_run: rendering from the estimate (estimate, oracle, closed_set) is "
@@ -164,6 +172,54 @@ def _estimates(estimators: dict, scene: Scene, contacts, timed: set) -> list[dic
     return rows
 
 
+def train_identifier(base: Scene, quick: bool):
+    """``effusivity-fit`` trained on ``base``'s touches of session
+    :data:`TRAIN_SEED` (3 per material with ``quick``), windows to the
+    bench's last."""
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.prepare import from_trials
+    from telethermal.ident.registry import make
+
+    scene = dataclasses.replace(base, pad=dataclasses.replace(base.pad, trials_per_material=3)) \
+        if quick else base
+    contacts, _ = from_trials(pad_database(scene, np.random.default_rng(TRAIN_SEED)),
+                              max_s=max(WINDOWS_S))
+    return make("effusivity-fit", scene=base, max_window_s=max(WINDOWS_S)).fit(contacts)
+
+
+def reported(decisions) -> dict:
+    """What the touches were reported as: ``named`` (a class or a pair, by
+    label in ``named_as``), ``new`` (a new material), ``unknown`` (by
+    reason in ``unknown_reasons``), of ``n``."""
+    named = [str(d.label) for d in decisions if not (d.label.is_unknown or d.label.is_new)]
+    why = [str(d.reason) for d in decisions if d.label.is_unknown]
+    return {"named": len(named), "new": sum(d.label.is_new for d in decisions),
+            "unknown": len(why), "n": len(decisions),
+            "named_as": {m: named.count(m) for m in sorted(set(named))},
+            "unknown_reasons": {r: why.count(r) for r in sorted(set(why))}}
+
+
+def within_spread(identifier, material: str, classes) -> dict:
+    """Per class of ``classes``: whether ``material``'s table effusivity lies
+    within that class's two-sided ``1 - outlier_p`` predictive at the last
+    window (what its training touches covered): the issue's exception for
+    an unseen material named as a trained one."""
+    from scipy.stats import t as student_t
+
+    params = identifier.params_[len(identifier.windows_s_) - 1]
+    if "means" not in params:
+        return {}
+    n, names = params["n"], list(identifier.classes_)
+    out = {}
+    for c in classes:
+        for m in c.split("|"):
+            i = names.index(m)
+            scale = np.sqrt(params["var"][i] * (1 + 1 / n[i]))
+            z = (np.log(get_material(material).effusivity) - params["means"][i]) / scale
+            out[m] = bool(abs(z) <= student_t.ppf(1 - identifier.outlier_p / 2, n[i] - 1))
+    return out
+
+
 def _material_summary(name: str, rows: list[dict], trained) -> dict:
     """One material's figures over its touches (every seed)."""
     true_e = get_material(name).effusivity
@@ -171,7 +227,9 @@ def _material_summary(name: str, rows: list[dict], trained) -> dict:
            "source": get_material(name).source, "touches": len(rows),
            "same_as_trained": None if name in trained else same_as_trained(name, trained),
            "effusivity_rel_error": {}, "interval_coverage": {}, "interval_width_rel": {},
-           "at_bound": {}, "fits_rate": {}, **NOT_RUN}
+           "at_bound": {}, "fits_rate": {}, **NOT_RUN,
+           "reported": reported([r["decision"] for r in rows]) if rows and "decision" in rows[0]
+           else "not_run: no identifier"}
     for w in WINDOWS_S:
         ests = [r["windows"][w] for r in rows]
         err = [abs(e.effusivity_w_s05_m2k - true_e) / true_e for e in ests]
@@ -216,7 +274,12 @@ def _targets(materials: dict) -> dict:
     key = f"{TARGET_WINDOW_S:g}"
     unseen = {m: r for m, r in materials.items() if not r["trained"]}
     windows = [f"{w:g}" for w in WINDOWS_S]
-    return {"unseen_rel_error_within_10pct_by_0.5_s": {
+    named = {m: {"named_as": r["reported"]["named_as"],
+                 "within_spread": r["reported"].get("within_spread")}
+             for m, r in unseen.items()
+             if isinstance(r["reported"], dict) and r["reported"]["named"]}
+    return {"unseen_named_as_trained": named,
+            "unseen_rel_error_within_10pct_by_0.5_s": {
                 m: r["effusivity_rel_error"][key] <= TARGET_REL_ERROR for m, r in unseen.items()},
             "coverage_by_window": {k: _pooled_coverage(materials, k) for k in windows},
             "unseen_coverage_by_window": {k: _pooled_coverage(unseen, k) for k in windows}
@@ -231,6 +294,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     scene's own) and the shipped unseen-objects scene. ``quick``: 3 touches
     per material and a coarser prior. Returns the report."""
     from telethermal.data.generate import pad_database
+    from telethermal.ident.anytime import decide_all
     from telethermal.ident.effusivity import EffusivityEstimator
     from telethermal.ident.prepare import from_trials
 
@@ -248,15 +312,24 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         touched, object_temp_c=temp, max_s=max(WINDOWS_S), n_prior=600 if quick else 2000)
         for temp in sorted({o.temp_c for o in touched.objects})}
     build_s = time.perf_counter() - t0
+    step("identifier")
+    identifier = train_identifier(base, quick)
     rows = []
     for seed in range(seeds):
         step(f"seed {seed}")
         contacts, _ = from_trials(pad_database(touched, np.random.default_rng(seed)),
                                   max_s=max(WINDOWS_S))
         first = {m: contacts.labels.index(m) for m in dict.fromkeys(contacts.labels)}
-        rows += _estimates(estimators, touched, contacts, set(first.values()))
+        seed_rows = _estimates(estimators, touched, contacts, set(first.values()))
+        for row, decision in zip(seed_rows, decide_all(identifier, contacts)):
+            row["decision"] = decision
+        rows += seed_rows
     materials = {m: _material_summary(m, [r for r in rows if r["material"] == m], trained)
                  for m in dict.fromkeys(r["material"] for r in rows)}
+    for m, r in materials.items():
+        if not r["trained"] and r["reported"]["named"]:
+            r["reported"]["within_spread"] = within_spread(identifier, m,
+                                                           r["reported"]["named_as"])
     est = next(iter(estimators.values()))
     return {"benchmark": "unseen", "scene": base.name, "seeds": list(range(seeds)),
             "quick": quick, "windows_s": list(WINDOWS_S), "trained": trained,
@@ -266,6 +339,9 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
                           "effusivity_grid_w_s05_m2k": [float(np.exp(est.family.log_e[0])),
                                                         float(np.exp(est.family.log_e[-1]))],
                           "object_temps_c": sorted(estimators)},
+            "identifier": {"method": identifier.method, "trained_on": trained,
+                           "train_seed": TRAIN_SEED, "threshold": identifier.threshold,
+                           "outlier_p": identifier.outlier_p},
             "materials": materials, "time_per_estimate_s": _timing(rows),
             "targets": _targets(materials)}
 
@@ -296,6 +372,13 @@ def text_report(report: dict, json_path) -> list[str]:
     lines.append("  one estimate, ms (cold p50 / warm p50): " + ", ".join(
         f"{k} s {1e3 * v['cold_s_p50']:.1f}/{1e3 * v['warm_s_p50']:.1f}"
         for k, v in report["time_per_estimate_s"].items()))
-    lines.append("  not run: reported, flux_rms_rel, skin_rms_k (issue 30 parts 2 and 3)")
+    lines.append("  reported (named as / new / unknown) by effusivity-fit:")
+    for m, r in report["materials"].items():
+        rep = r["reported"]
+        if isinstance(rep, dict):
+            named = ", ".join(f"{k} {v}" for k, v in rep["named_as"].items()) or "none"
+            lines.append(f"    {m:<13} named {rep['named']} ({named}), new {rep['new']}, "
+                         f"unknown {rep['unknown']} of {rep['n']}")
+    lines.append("  not run: flux_rms_rel, skin_rms_k (issue 30 part 3)")
     lines.append(f"wrote {json_path}")
     return lines

@@ -123,7 +123,7 @@ def cmd_bench_unseen(args) -> int:
     from telethermal.bench import unseen
 
     seeds = args.seeds or (1 if args.quick else 3)
-    with _progress(seeds + 1, "bench unseen") as advance:
+    with _progress(seeds + 2, "bench unseen") as advance:
         report = unseen.run_and_save(args.json, command=_command(), seeds=seeds,
                                      unseen=args.unseen, unseen_scene=args.unseen_scene,
                                      quick=args.quick, scene=args.scene, progress=advance)

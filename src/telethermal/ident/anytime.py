@@ -8,8 +8,13 @@ held-out touches support (``commit_from_s_``, :func:`~telethermal.ident.base.com
 
 "unknown" is the answer, rather than a guess, when the contact exchanged too
 little heat (a gap under ``MIN_GAP_K``: the passive pad at the object's own
-temperature), when the contact lies outside every learnt class, or when the
-confidence never reaches the threshold within the contact.
+temperature), when the contact lies outside every learnt class and the
+identifier has no estimate of the object to report, or when the confidence
+never reaches the threshold within the contact. An identifier that
+estimates the object's effusivity (``effusivity-fit``) reports a touch whose
+estimate lies outside every class at the last window as a **new material**
+with its estimate (:mod:`telethermal.ident.openset`); its estimates carry the
+window's effusivity and 95 % interval throughout.
 
 Two materials may stay ambiguous (the first paper merges aluminium with
 steel, graphite with rubber): when no class passes the threshold but the two
@@ -21,17 +26,19 @@ of its members weighted by the posteriors, as before any decision.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.base import FORCE_SAMPLES, Identifier, force_at, force_in_range
 from telethermal.ident.rule import AnytimeRule
-from telethermal.ident.label import GROUP_SEPARATOR, UNKNOWN, Label, Reason
+from telethermal.ident.label import GROUP_SEPARATOR, NEW_MATERIAL, UNKNOWN, Label, Reason
+from telethermal.ident.openset import new_material_confidence, reading_fields, reading_of
 from telethermal.ident.prepare import MIN_GAP_K
 
-__all__ = ["GROUP_SEPARATOR", "UNKNOWN", "FORCE_OUTSIDE", "Label", "Reason", "Decision",
+__all__ = ["GROUP_SEPARATOR", "UNKNOWN", "NEW_MATERIAL", "FORCE_OUTSIDE", "Label", "Reason",
+           "Decision",
            "Estimate", "StreamingIdentifier", "decide", "decide_all", "group_label", "members"]
 
 FORCE_OUTSIDE = Reason.FORCE_OUTSIDE
@@ -54,8 +61,14 @@ class Decision:
     confidence: float          # posterior of the best class when decided (or at the end)
     time_s: float | None       # time after contact of the commitment; None if none
     reason: str                # a Reason: confident | confident group | outside classes
-    #                            | gap too small | not confident | force outside trained range
+    #                            | new material | gap too small | not confident
+    #                            | force outside trained range
     time_first_s: float | None = None   # first commitment (a group's), when refined later
+    # A new material's estimate (W s^0.5/(m^2 K), 95 % interval) and nearest class.
+    effusivity_w_s05_m2k: float | None = None
+    effusivity_lo_w_s05_m2k: float | None = None
+    effusivity_hi_w_s05_m2k: float | None = None
+    nearest: str | None = None
 
     def __post_init__(self):
         if type(self.label) is not Label:
@@ -98,16 +111,47 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
             # The group's earlier commitment counts only if it held this material.
             first = group.time_s if group and group.label.holds(model.classes_[what]) \
                 else model.windows_s_[i]
-            return Decision(model.classes_[what], best, model.windows_s_[i], Reason.CONFIDENT,
-                            first)
+            return _watched(model, x[:n], len(path), Decision(
+                model.classes_[what], best, model.windows_s_[i], Reason.CONFIDENT, first))
         group = Decision(Label.of(model.classes_[j] for j in what), float(p[list(what)].sum()),
                          model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
-        return group
+        return _watched(model, x[:n], len(path), group)
+    new = _new_material(model, x[None, :n], len(path) - 1) \
+        if len(path) and not rule.force_outside else None
+    if new is not None:
+        t = model.windows_s_[len(path) - 1]
+        return Decision(NEW_MATERIAL, new_material_confidence(new), t, Reason.NEW_MATERIAL, t,
+                        **reading_fields(new, True))
     if rule.unlike and not rule.force_outside:
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decision:
+    """A decision naming a class (or a pair), checked at the model's last
+    window when the touch reaches it: an identifier that estimates the
+    effusivity revises it to a new material where the estimate there lies
+    outside the named class's predictive (:mod:`telethermal.ident.openset`)."""
+    last = len(model.windows_s_) - 1
+    if n_windows != last + 1:
+        return decision
+    reading = reading_of(model, x[None], last)
+    if reading is None or not reading.outside(decision.label):
+        return decision
+    first = decision.time_first_s if decision.time_first_s is not None else decision.time_s
+    return Decision(NEW_MATERIAL, new_material_confidence(reading), model.windows_s_[last],
+                    Reason.NEW_MATERIAL, first, **reading_fields(reading, True))
+
+
+def _new_material(model, x: np.ndarray, window_index: int):
+    """The touch's effusivity reading when its estimate at ``window_index``
+    lies outside every class (a new material), else None (inside a class,
+    or a method without estimates)."""
+    if not bool(model.outside_classes(x, window_index)[0]):
+        return None
+    return reading_of(model, x, window_index)
 
 
 def decide_all(model: Identifier, contacts) -> list[Decision]:
@@ -128,6 +172,13 @@ class Estimate:
     confidence: float
     decided: bool                      # committed (to a class, a group or "unknown")
     reason: str = Reason.UNDECIDED     # a Reason (a peer's unknown one stays its string)
+    # The window's effusivity estimate and its 95 % interval, W s^0.5/(m^2 K),
+    # when the identifier gives one (effusivity-fit); the nearest class, for
+    # a new material (:mod:`telethermal.ident.openset`).
+    effusivity_w_s05_m2k: float | None = None
+    effusivity_lo_w_s05_m2k: float | None = None
+    effusivity_hi_w_s05_m2k: float | None = None
+    nearest: str | None = None
 
     def __post_init__(self):
         if type(self.label) is not Label:
@@ -172,6 +223,9 @@ class StreamingIdentifier:
         self._rows: list[np.ndarray] = []
         self._forces: list[float] = []
         self._window = -1
+        #: A class committed before the last window, by an identifier that
+        #: estimates the effusivity: the touch is watched to the last window.
+        self._watch = False
         self._rule = AnytimeRule(model.threshold, model.confirm_windows)
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
@@ -189,14 +243,17 @@ class StreamingIdentifier:
 
     @property
     def finished(self) -> bool:
-        """No estimate will follow: committed for good, or the model's last
-        window is past (a group then stands as the contact's answer)."""
-        return self.decided or self._window == len(self.model.windows_s_) - 1
+        """No estimate will follow: committed for good (a class named by an
+        identifier that estimates the effusivity only once the last window
+        has checked it), or the model's last window is past (a group then
+        stands as the contact's answer)."""
+        return (self.decided and not self._watch) or \
+            self._window == len(self.model.windows_s_) - 1
 
     def push(self, sample, force_n: float | None = None) -> Estimate | None:
         """One sample (the model's channels); ``force_n``, the pressing force
         with it, lets the decision refuse a touch unlike the trained ones."""
-        if self.decided:
+        if self.decided and not self._watch:
             return None
         if force_n is not None:
             self._forces.append(float(force_n))
@@ -212,18 +269,23 @@ class StreamingIdentifier:
         if index is None or index == self._window:
             return None
         self._window = index
+        last = index == len(model.windows_s_) - 1
+        if self._watch and not last:
+            return None
         x = np.stack(self._rows)[None]
         p = model.proba_normalised(x, index)[0]
+        if self._watch:
+            return self._revised(x, p, index)
         k = int(np.argmax(p))
         t_s = model.windows_s_[index]
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
-        last = index == len(model.windows_s_) - 1
         step = self._rule.step(index, p, may_commit=model.may_commit(index),
                                force_outside=outside,
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
         kind, what = step if step is not None else (None, None)
+        reading = None
         if outside and held is None:
             est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
                            last, FORCE_OUTSIDE if last else Reason.UNDECIDED)
@@ -237,10 +299,35 @@ class StreamingIdentifier:
         elif kind == "pair":
             est = Estimate(t_s, tuple(p), Label.of(model.classes_[j] for j in what),
                            float(p[list(what)].sum()), True, Reason.CONFIDENT_GROUP)
+        elif last and (reading := _new_material(model, x, index)) is not None:
+            est = Estimate(t_s, tuple(p), NEW_MATERIAL, new_material_confidence(reading), True,
+                           Reason.NEW_MATERIAL)
         elif last:
             est = Estimate(t_s, tuple(p), UNKNOWN, float(p[k]), True,
                            Reason.OUTSIDE_CLASSES if self._rule.unlike else Reason.NOT_CONFIDENT)
         else:
             est = Estimate(t_s, tuple(p), model.classes_[k], float(p[k]), False)
+        if not est.label.is_new:
+            reading = reading_of(model, x, index)
+        if reading is not None:
+            est = replace(est, **reading_fields(reading, est.label.is_new))
         self.estimate = est
+        if last and est.decided and reading is not None and est.label.members and \
+                not est.label.is_new and reading.outside(est.label):
+            return self._revised(x, p, index)           # a pair or class decided at the last
+        self._watch = est.final and not last and est.label.is_material and \
+            not est.label.is_new and hasattr(model, "effusivity_reading")
         return est
+
+    def _revised(self, x, p, index: int) -> Estimate | None:
+        """The last window of a touch named before: a new material where
+        the estimate lies outside the named class's predictive, else the
+        decision stands (None: nothing new)."""
+        self._watch = False
+        reading = reading_of(self.model, x, index)
+        if reading is None or not reading.outside(self.estimate.label):
+            return None
+        self.estimate = Estimate(self.model.windows_s_[index], tuple(p), NEW_MATERIAL,
+                                 new_material_confidence(reading), True, Reason.NEW_MATERIAL,
+                                 **reading_fields(reading, True))
+        return self.estimate

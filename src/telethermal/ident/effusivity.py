@@ -423,18 +423,36 @@ class EffusivityEstimator:
         if (n - 1) / self.sample_rate_hz > self.family.t_s[-1] + self.tau_range_s[0]:
             raise IdentificationError(f"a {(n - 1) / self.sample_rate_hz:g} s window is longer "
                                       "than the estimator's curves: build it with a larger max_s")
-        s = (self.noise_w_m2 / gap_k) ** 2 + self.model_error_rel ** 2 * float(np.mean(x * x))
+        s = self._noise_var(x, gap_k)
         theta, hess = self._fit(x, s, start)
-        cov = np.linalg.pinv(-hess)
-        sd = float(math.sqrt(max(cov[0, 0], 0.0)))
-        lo, hi = theta[0] - Z95 * sd, theta[0] + Z95 * sd
-        bound = lo <= self.lo[0] or hi >= self.hi[0]
+        sd, (lo, hi), bound = self._interval(theta, hess)
         return EffusivityEstimate(
-            float(math.exp(theta[0])), (float(math.exp(max(lo, self.lo[0]))),
-                                        float(math.exp(min(hi, self.hi[0])))),
+            float(math.exp(theta[0])), (lo, hi),
             sd, (n - 1) / self.sample_rate_hz, n, self.h_ref_w_m2k * float(math.exp(theta[1])),
             float(theta[2]), *self._goodness(theta, x, s), bool(bound),
             tuple(float(v) for v in theta))
+
+    def _noise_var(self, x: np.ndarray, gap_k: float) -> float:
+        """The samples' variance: the flux noise over the gap and the
+        curves' allowance (see the module)."""
+        return (self.noise_w_m2 / gap_k) ** 2 + self.model_error_rel ** 2 * float(np.mean(x * x))
+
+    def _interval(self, theta, hess):
+        """(sd of ln e, the 95 % interval in e clipped to the grid, at_bound)."""
+        sd = float(math.sqrt(max(np.linalg.pinv(-hess)[0, 0], 0.0)))
+        lo, hi = theta[0] - Z95 * sd, theta[0] + Z95 * sd
+        return sd, (float(math.exp(max(lo, self.lo[0]))), float(math.exp(min(hi, self.hi[0])))), \
+            bool(lo <= self.lo[0] or hi >= self.hi[0])
+
+    def interval_at(self, x: np.ndarray, gap_k: float, theta) -> tuple[float, float, float]:
+        """``(e, lo, hi)`` (W s^0.5/(m^2 K)) of the samples ``x`` at a fit
+        ``theta`` already made of them (:meth:`estimate`'s, or a cache's):
+        the interval from the Hessian there, one evaluation, no refit."""
+        x = np.asarray(x, float)
+        theta = np.asarray(theta, float)
+        _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k))
+        _, (lo, hi), _ = self._interval(theta, hess)
+        return float(math.exp(theta[0])), lo, hi
 
     def _goodness(self, theta, x, s):
         """(chi-square per degree of freedom, fits): the residual after the

@@ -251,3 +251,32 @@ class EffusivityFit(Identifier):
         z, dof, _ = self._t_terms(params, self._window(x, self.windows_s_[window_index]))
         limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
         return np.all(np.abs(z) > limit[None], axis=1)
+
+    def effusivity_reading(self, x, window_index):
+        """The touch's effusivity estimate at window ``window_index`` (``x``
+        (1, n, 1), as ``outside_classes``): an
+        :class:`~telethermal.ident.openset.EffusivityReading`, None on a
+        window under :data:`MIN_SAMPLES` samples: the window's fit (the one
+        the classes are scored on) and its Laplace 95 % interval there."""
+        from telethermal.ident.openset import EffusivityReading
+
+        w = self._window(x, self.windows_s_[window_index])
+        row = np.ascontiguousarray(w[0, :, 0])
+        if len(row) < MIN_SAMPLES:
+            return None
+        est, gap_k = self.estimator()
+        theta = self._theta(row, len(row))
+        e, lo, hi = est.interval_at(row, gap_k, theta)
+        params = self.params_[window_index]
+        nearest = tail = None
+        inside = ()
+        if "means" in params:
+            z, dof, _ = self._t_terms(params, w)
+            tails = 2.0 * student_t.sf(np.abs(z[0]), dof)
+            tail = float(np.max(tails))
+            nearest = str(self.classes_[int(np.argmin(np.abs(theta[0] - params["means"])))])
+            # as outside_classes: within each class's two-sided 1 - outlier_p predictive
+            limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
+            inside = tuple(str(c) for c, a, b in zip(self.classes_, np.abs(z[0]), limit)
+                           if a <= b)
+        return EffusivityReading(e, lo, hi, nearest, tail, inside)

@@ -5,7 +5,9 @@ Both stay the strings the wire and the recordings have always held:
 * A :class:`Label` *is* its text, a ``str`` subclass: one material
   (``"steel"``), a group of materials the identifier is sure of together
   (``"aluminium|steel"``, members sorted, joined by :data:`GROUP_SEPARATOR`),
-  or :data:`UNKNOWN` (``"unknown"``). It equals and hashes as that string, so
+  :data:`UNKNOWN` (``"unknown"``), or :data:`NEW_MATERIAL` (``"new material"``:
+  a touch outside every trained class, reported with its effusivity
+  estimate; issue 30). It equals and hashes as that string, so
   it packs, prints, keys a dict and compares with a recorded label as the
   string did; code asks it :attr:`~Label.members`, :attr:`~Label.is_group`,
   :attr:`~Label.is_unknown` instead of splitting or spelling strings.
@@ -23,6 +25,7 @@ from typing import Iterable
 
 GROUP_SEPARATOR = "|"
 _UNKNOWN_TEXT = "unknown"
+_NEW_TEXT = "new material"
 
 
 class Label(str):
@@ -49,13 +52,21 @@ class Label(str):
         if not names:
             raise ValueError("a label needs at least one material")
         for name in names:
-            if not name or GROUP_SEPARATOR in name or name == _UNKNOWN_TEXT:
+            if not name or GROUP_SEPARATOR in name or name in (_UNKNOWN_TEXT, _NEW_TEXT):
                 raise ValueError(f"{name!r} cannot be a material of a label")
         return cls(GROUP_SEPARATOR.join(names))
 
     @property
     def is_unknown(self) -> bool:
         return self == _UNKNOWN_TEXT
+
+    @property
+    def is_new(self) -> bool:
+        """A material outside every trained class (:data:`NEW_MATERIAL`): a
+        decision, with its effusivity estimate, naming no class. Its one
+        member is itself (the object memory keeps it as one more class),
+        never a class of an identifier's (``within`` any classes: False)."""
+        return self == _NEW_TEXT
 
     @property
     def members(self) -> tuple[str, ...]:
@@ -70,7 +81,7 @@ class Label(str):
 
     @property
     def is_material(self) -> bool:
-        """Exactly one material."""
+        """Exactly one material (a trained class's name, or a new material)."""
         return not self.is_unknown and GROUP_SEPARATOR not in self
 
     def holds(self, material: str) -> bool:
@@ -85,6 +96,10 @@ class Label(str):
 
 #: The label of "no material": the answer rather than a guess.
 UNKNOWN = Label(_UNKNOWN_TEXT)
+#: The label of a touch outside every trained class, its effusivity
+#: estimated (an estimate's ``effusivity_*`` fields): not a class of any
+#: identifier (``Label.of`` refuses it as a material's name).
+NEW_MATERIAL = Label(_NEW_TEXT)
 
 
 class Reason(StrEnum):
@@ -95,6 +110,7 @@ class Reason(StrEnum):
     CONFIDENT = "confident"                     # one class passed the threshold
     CONFIDENT_GROUP = "confident group"         # two together did; may be refined
     OUTSIDE_CLASSES = "outside classes"         # unknown: unlike every learnt class
+    NEW_MATERIAL = "new material"               # new material: its estimate outside every class
     GAP_TOO_SMALL = "gap too small"             # unknown: too little heat exchanged
     NOT_CONFIDENT = "not confident"             # unknown: the last window unconvinced
     FORCE_OUTSIDE = "force outside trained range"   # unknown: a touch unlike the trained

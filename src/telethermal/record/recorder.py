@@ -57,8 +57,17 @@ def model_bytes(identifier, generator) -> dict[str, bytes]:
 
 
 def _estimate(e):
-    return None if e is None else [float(e.t_s), [float(p) for p in e.posteriors], e.label,
-                                   float(e.confidence), bool(e.decided), e.reason]
+    """[t_s, posteriors, label, confidence, decided, reason], and, when the
+    identifier estimated the object's effusivity, [..., effusivity, its 95 %
+    interval's lo and hi (W s^0.5/(m^2 K)), nearest class or None] (issue 30)."""
+    if e is None:
+        return None
+    out = [float(e.t_s), [float(p) for p in e.posteriors], e.label, float(e.confidence),
+           bool(e.decided), e.reason]
+    if getattr(e, "effusivity_w_s05_m2k", None) is not None:
+        out += [float(e.effusivity_w_s05_m2k), float(e.effusivity_lo_w_s05_m2k),
+                float(e.effusivity_hi_w_s05_m2k), e.nearest]
+    return out
 
 
 def open_recorder(config, role: str, identifier=None, generator=None):

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from telethermal.errors import TelethermalError, TransportError
+from telethermal.ident.label import Label
 from telethermal.services.admin import call
 
 DEFAULT = {"slave": 5570, "master": 5571}
@@ -197,7 +198,10 @@ def describe_touch(result: dict) -> list[str]:
         f"decided at {result['decision_time_s']:.2f} s"
     if result.get("unknown_reason"):
         when = f"{result['unknown_reason']}; {when}"
-    lines = [f"touch {result['contact_id']}: identified {result['identified']} ({when}), "
+    # A newer master says what a new material was estimated at (its decision's text).
+    said = (Label(result["identified"]).is_new and result.get("decision_text")) or \
+        result["identified"]
+    lines = [f"touch {result['contact_id']}: identified {said} ({when}), "
              f"rendering from {_s(result.get('render_start_s'))}, safety events "
              f"{result['safety_events']}, rtt {_ms(result.get('rtt_s'))}"]
     d = result.get("direct")

@@ -17,7 +17,8 @@ from pathlib import Path
 
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TelethermalError, TransportError
-from telethermal.ident.anytime import Reason
+from telethermal.ident.anytime import Label, Reason
+from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
 from telethermal.services.viewer import open_view
@@ -241,6 +242,9 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                "decision_reason": report["reason"], "decision_from_s": render_from,
                # why it is "unknown" (None: named), as the slave reports it
                "unknown_reason": report.get("unknown_reason"),
+               # a new material's estimate and nearest class, as the slave reports it
+               **{k: report.get(k) for k in EFFUSIVITY_KEYS},
+               "decision_text": report.get("decision_text"),
                "render_start_s": result["render_start_s"],
                "object_memory": result.get("object_memory"),
                "rate_hz": 1.0 / float(np.median(np.diff(trace["t_s"]))),
@@ -271,6 +275,15 @@ def master_device_summary(result: dict) -> dict | None:
             "peltier_statuses": c.get("peltier", {}).get("statuses")}
 
 
+def touch_said(s: dict) -> str:
+    """What the demo's line says the slave said: the label; an "unknown"
+    with why; a new material with its estimate and nearest class."""
+    if Label(s["identified"]).is_new and s.get("decision_text"):
+        return s["decision_text"]
+    return s["identified"] if s["unknown_reason"] is None else \
+        f"{s['identified']} ({s['unknown_reason']})"
+
+
 def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, generator,
                 again: bool, echo) -> dict:
     """One touch of the demo over the network, beside the same touch in one
@@ -292,8 +305,7 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
     start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
     memory = "" if s["object_memory"] is None else \
         f"announced from memory as {s['object_memory']}, rendered from {start}; "
-    said = s["identified"] if s["unknown_reason"] is None else \
-        f"{s['identified']} ({s['unknown_reason']})"
+    said = touch_said(s)
     echo(f"touch on {material + (' again' if again else ''):16s}: {memory}slave said "
          f"{said} {when}; rendered flux "
          f"{100 * s['flux_rms_error_rel']:.2f} % of peak from the decision on, "
@@ -304,8 +316,8 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
          f"{s['loop']['deadline_misses']} missed deadlines; in one process "
          f"{100 * local['flux_rms_error_rel']:.2f} %")
     return {k: s[k] for k in (
-        "material", "identified", "unknown_reason", "decision_time_s", "render_start_s",
-        "object_memory",
+        "material", "identified", "unknown_reason", *EFFUSIVITY_KEYS, "decision_text",
+        "decision_time_s", "render_start_s", "object_memory",
         "flux_rms_error_rel", "flux_rms_error_rel_first_s", "flux_rms_error_rel_whole",
         "temp_rms_error_c", "time_to_correct_flux_s", "safety_events", "loop_period_p99_us")} | \
         {"again": again, "deadline_misses": s["loop"]["deadline_misses"],

@@ -24,6 +24,7 @@ from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import UNKNOWN, unknown_reason
+from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import open_service_sockets
 from telethermal.services.config import MasterConfig
@@ -240,7 +241,7 @@ class MasterService:
             state.update(classes=list(link.classes), posteriors=[float(p) for p in
                                                                   est.posteriors],
                          label=est.label, decided=bool(est.decided), estimate_t_s=float(est.t_s),
-                         reason=str(est.reason))
+                         reason=str(est.reason), **effusivity_of(est))
         return state
 
     def _touch_period(self, now: float, dt_s: float) -> None:
@@ -287,6 +288,10 @@ class MasterService:
             "master_onset_s": touch.display.last_onset_s,
             "identified": est.label if est is not None and est.decided else UNKNOWN,
             "unknown_reason": unknown_reason(est),
+            # a new material's estimate (W s^0.5/(m^2 K)) and nearest class; the
+            # last window's estimate otherwise (None: the identifier gives none)
+            **dict.fromkeys(EFFUSIVITY_KEYS), **(effusivity_of(est) if est is not None else {}),
+            "decision_text": touch_text(est),
             # when the slave first decided this label (a group that stood
             # until the last window was decided at its first commitment, as
             # the slave reports it)

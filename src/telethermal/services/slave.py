@@ -19,6 +19,7 @@ import zmq
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN, Reason, unknown_reason
+from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
@@ -316,6 +317,10 @@ class SlaveService:
                     self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else Reason.NO_ESTIMATE,
                 "unknown_reason": unknown_reason(est),
+                # a new material's estimate and nearest class (the last window's
+                # estimate otherwise; None: the identifier gives none)
+                **dict.fromkeys(EFFUSIVITY_KEYS), **(effusivity_of(est) if est else {}),
+                "decision_text": touch_text(est),
                 **({"devices": device_report(self.devices, self._touch_counters)}
                    if self.devices is not None else {})}
 

@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from telethermal.ident.anytime import Estimate, Label
+from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.master import SlaveNews
 from telethermal.teleop.memory import Agreement, agreement, remembered_estimate
@@ -134,8 +135,10 @@ class SlaveLink:
         if isinstance(m, FluxTrajectory):
             self._on_trajectory(m, now_s, offset_s)
             return
+        # An older slave sends no effusivity: the fields stay None.
         self._on_estimate(Estimate(m.t_since_contact_s, tuple(m.posteriors), m.label,
-                                   m.confidence, m.decided, m.reason))
+                                   m.confidence, m.decided, m.reason,
+                                   *(given(getattr(m, k)) for k in EFFUSIVITY_KEYS)))
 
     def _on_object(self, m: ContactEvent) -> None:
         if not m.names_object:

@@ -36,7 +36,14 @@ The rules (issue 29, deliverable 4):
 
 A touch given without posteriors over the classes (a label and a
 confidence only) counts as the confidence shared among the label's
-members and the rest shared among the other classes.
+members and the rest shared among the other classes. A new material
+(issue 30: a touch outside every trained class) is kept the same way, as
+one more class ``"new material"`` (its posteriors over the trained classes
+say which class is nearest, not what it is): its confidence, one minus
+the likeliest class's predictive tail, against the trained classes. A
+touch named a class by an identifier that could have said "new material"
+(its estimate carries an effusivity) counts as evidence against a new
+material, at the floor.
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from telethermal.ident.anytime import Estimate, Label, Reason
+from telethermal.ident.anytime import NEW_MATERIAL, Estimate, Label, Reason
 
 log = logging.getLogger(__name__)
 
@@ -108,8 +115,12 @@ def touch_evidence(estimate: Estimate, classes) -> dict:
     """A decided touch's log evidence per class (floored posteriors)."""
     classes = tuple(classes or ())
     label = estimate.label
-    if classes and len(estimate.posteriors) == len(classes):
+    if classes and len(estimate.posteriors) == len(classes) and not label.is_new:
         p = np.asarray(estimate.posteriors, dtype=np.float64)
+        if estimate.effusivity_w_s05_m2k is not None:
+            # An identifier that can say "new material" named a class: the
+            # touch lay inside it, evidence against a new material (floored).
+            classes, p = (*classes, str(NEW_MATERIAL)), np.append(p, 0.0)
     else:
         classes = tuple(dict.fromkeys((*classes, *label.members)))
         inside = [c in label.members for c in classes]
@@ -133,13 +144,16 @@ def _posterior(log_p: dict) -> dict:
 
 
 def supported(log_p: dict, threshold: float) -> tuple[Label | None, float, dict]:
-    """What evidence ``log_p`` supports at ``threshold``: a material, else a
-    pair, else None; with its posterior and the posteriors."""
+    """What evidence ``log_p`` supports at ``threshold``: a material (or a
+    new material), else a pair of materials, else None; with its posterior
+    and the posteriors."""
     post = _posterior(log_p)
     ranked = sorted(post, key=lambda c: (-post[c], c))
     if post[ranked[0]] >= threshold:
         return Label(ranked[0]), post[ranked[0]], post
-    if len(ranked) >= 2 and post[ranked[0]] + post[ranked[1]] >= threshold:
+    # A new material pairs with nothing: "graphite or something new" names nothing.
+    if len(ranked) >= 2 and post[ranked[0]] + post[ranked[1]] >= threshold and \
+            not any(Label(c).is_new for c in ranked[:2]):
         return Label.of(ranked[:2]), post[ranked[0]] + post[ranked[1]], post
     return None, post[ranked[0]], post
 

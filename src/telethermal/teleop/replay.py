@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from telethermal.ident.anytime import UNKNOWN
+from telethermal.ident.openset import touch_text
 from telethermal.jsonfile import write_json
 from telethermal.record.recorder import periods
 from telethermal.record.recording import RecordingError, read_recording
@@ -38,8 +39,17 @@ def _replay_pad(params: dict) -> dict:
 
 
 def _estimate_from(x):
+    """A recorded estimate (recorder._estimate's list; the effusivity and
+    nearest class, x[6:10], in recordings that hold them)."""
     from telethermal.ident.anytime import Estimate
-    return None if x is None else Estimate(x[0], tuple(x[1]), x[2], x[3], x[4], x[5])
+    return None if x is None else Estimate(x[0], tuple(x[1]), x[2], x[3], x[4], x[5],
+                                           *x[6:10])
+
+
+def _same(e):
+    """What a replayed estimate must repeat of the recorded one."""
+    return (tuple(e.posteriors), str(e.label), str(e.reason), e.effusivity_w_s05_m2k,
+            e.effusivity_lo_w_s05_m2k, e.effusivity_hi_w_s05_m2k, e.nearest)
 
 
 def touch_count(path) -> int:
@@ -228,8 +238,11 @@ def _replay_slave(rec, cid, identifier, attached):
             else UNKNOWN,
             "recorded_decision_time_s": last.t_s if last is not None and last.decided else None,
             "estimates": len(slave.events), "recorded_estimates": len(recorded_est),
-            "same_estimates": [tuple(e.estimate.posteriors) for e in slave.events] ==
-            [tuple(e.posteriors) for e in recorded_est],
+            # posteriors, label, reason, and effusivity estimate and nearest class
+            "same_estimates": [_same(e.estimate) for e in slave.events] ==
+            [_same(e) for e in recorded_est],
+            "identified_text": touch_text(est),
+            "recorded_identified_text": touch_text(last),
             "posteriors_max_abs_diff": _posteriors_diff([e.estimate for e in slave.events],
                                                         recorded_est)}
 

@@ -35,6 +35,7 @@ from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, LoopStats, Re
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
+from telethermal.ident.openset import touch_text
 from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_resistance
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
@@ -391,6 +392,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "scene": scene.name, "material": material, "seed": seed,
         "identified": est.label if decided else UNKNOWN,
         "identified_correctly": decided and est.label == material,
+        "decision_text": touch_text(est),      # a new material: with its estimate
         "decision_reason": est.reason if decided else Reason.NO_DECISION,
         "decision_time_s": ((est.t_s if est.label.is_unknown else slave.committed_at_s)
                             if decided else None),

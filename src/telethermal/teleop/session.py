@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from telethermal.errors import WindowFull
+from telethermal.ident.openset import effusivity_of
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
@@ -250,7 +251,8 @@ class SlaveSession:
         return dict(contact_id=self.contact_id, t_since_contact_s=float(e.t_s),
                     classes=list(self.pad.classes), posteriors=[float(p) for p in e.posteriors],
                     label=str(e.label), confidence=float(e.confidence), decided=bool(e.decided),
-                    reason=str(e.reason), object_temp_c=float(self.pad.object_ir_c))
+                    reason=str(e.reason), object_temp_c=float(self.pad.object_ir_c),
+                    **effusivity_of(e))
 
     def _decision(self, t: float, e) -> Send:
         self._decision_sent = e

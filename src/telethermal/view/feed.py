@@ -23,6 +23,7 @@ import time
 import zmq
 
 from telethermal.errors import ProtocolError
+from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.wire.codec import decode
 from telethermal.wire.schema import MessageKind
 
@@ -109,7 +110,8 @@ def master_state(m: dict) -> dict:
     if m.get("posteriors") is not None:
         state["estimate"] = {"classes": m.get("classes", []), "posteriors": m["posteriors"],
                              "label": m.get("label", ""), "decided": m.get("decided", False),
-                             "t_s": m.get("estimate_t_s"), "reason": m.get("reason", "")}
+                             "t_s": m.get("estimate_t_s"), "reason": m.get("reason", ""),
+                             **{k: m[k] for k in EFFUSIVITY_KEYS if k in m}}
     return state
 
 

@@ -117,7 +117,7 @@ def _estimates(rec, offset) -> list[dict]:
             out.append({"t": round(offset(m["contact_id"]) + m["t_s"], 4), "contact_id":
                         m["contact_id"], "classes": m.get("classes", []), "t_s": e[0],
                         "posteriors": e[1], "label": e[2], "decided": e[4],
-                        "reason": e[5] if len(e) > 5 else ""})
+                        "reason": e[5] if len(e) > 5 else "", **_effusivity(e)})
     slave = [m for m in rec.messages("/slave/estimates") if m.get("estimate")]
     if not out and slave:
         classes = _slave_classes(rec, len(slave[0]["estimate"][1]))
@@ -126,8 +126,14 @@ def _estimates(rec, offset) -> list[dict]:
             out.append({"t": round(offset(m["contact_id"]) + e[0], 4), "contact_id":
                         m["contact_id"], "classes": classes,
                         "t_s": e[0], "posteriors": e[1], "label": e[2], "decided": e[4],
-                        "reason": e[5] if len(e) > 5 else ""})
+                        "reason": e[5] if len(e) > 5 else "", **_effusivity(e)})
     return out
+
+
+def _effusivity(e) -> dict:
+    """A recorded estimate's effusivity fields (recorder._estimate), if any."""
+    from telethermal.ident.openset import EFFUSIVITY_KEYS
+    return dict(zip(EFFUSIVITY_KEYS, e[6:10])) if len(e) > 6 else {}
 
 
 def _touch_ends(rec, offset, out) -> list[list]:

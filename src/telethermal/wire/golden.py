@@ -39,6 +39,15 @@ EXAMPLES = {
                           "classes": ["plexiglass", "steel"], "posteriors": [0.125, 0.875],
                           "label": "steel", "confidence": 0.875, "decided": False,
                           "reason": "", "object_temp_c": 24.5},
+    # A new material (issue 30): decided outside every class, with the
+    # effusivity estimate, its 95 % interval and the nearest class.
+    "material_estimate.new": {"contact_id": 3, "t_since_contact_s": 1.0,
+                              "classes": ["plexiglass", "steel"], "posteriors": [1.0, 0.0],
+                              "label": "new material", "confidence": 0.9999847412109375,
+                              "decided": True, "reason": "new material", "object_temp_c": 24.5,
+                              "effusivity_w_s05_m2k": 1390.0,
+                              "effusivity_lo_w_s05_m2k": 1270.0,
+                              "effusivity_hi_w_s05_m2k": 1520.0, "nearest": "plexiglass"},
     "flux_trajectory": {"contact_id": 3, "material": "steel", "object_temp_c": 24.5,
                         "t_s": [0.0, 0.5, 1.0], "g_w_m2k": [0.0, 900.0, 640.0],
                         "valid_s": 60.0},
@@ -47,6 +56,15 @@ EXAMPLES = {
                            "classes": ["plexiglass", "steel"], "posteriors": [0.25, 0.75],
                            "label": "steel", "confidence": 0.75, "decided": False,
                            "reason": "", "object_temp_c": 24.5},
+    # An undecided estimate of an identifier that estimates the effusivity.
+    "posterior_estimate.effusivity": {"contact_id": 3, "t_since_contact_s": 0.125,
+                                      "classes": ["plexiglass", "steel"],
+                                      "posteriors": [0.25, 0.75], "label": "steel",
+                                      "confidence": 0.75, "decided": False, "reason": "",
+                                      "object_temp_c": 24.5,
+                                      "effusivity_w_s05_m2k": 7250.0,
+                                      "effusivity_lo_w_s05_m2k": 5500.0,
+                                      "effusivity_hi_w_s05_m2k": 9600.0},
     # A master's batch on its view stream, with the optional fields (a
     # slave's batch is the same without them).
     "measurement_batch": {"contact_id": 3, "t0_s": 1234.0, "rate_hz": 100.0,

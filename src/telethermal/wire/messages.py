@@ -152,6 +152,10 @@ class _EstimateFields(Message):
     decided: bool
     reason: str
     object_temp_c: float
+    effusivity_w_s05_m2k: float = ABSENT
+    effusivity_lo_w_s05_m2k: float = ABSENT
+    effusivity_hi_w_s05_m2k: float = ABSENT
+    nearest: str = ABSENT
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,6 +218,10 @@ class MeasurementBatch(Message):
     decided: bool = ABSENT
     estimate_t_s: float | None = ABSENT
     reason: str = ABSENT
+    effusivity_w_s05_m2k: float = ABSENT
+    effusivity_lo_w_s05_m2k: float = ABSENT
+    effusivity_hi_w_s05_m2k: float = ABSENT
+    nearest: str = ABSENT
 
 
 @dataclass(frozen=True, slots=True)

@@ -54,6 +54,24 @@ ENVELOPE = (
 )
 
 _T = dict(unit="s")
+_E = "W s^0.5/m^2/K"
+
+
+def _effusivity_fields(whose: str = "") -> tuple:
+    """An estimate's effusivity (section 6c): optional, a later minor revision."""
+    return (
+        Field("effusivity_w_s05_m2k", "float", _E, lo=0, required=False,
+              doc=f"{whose}the touched object's effusivity estimated at that window (by an "
+                  "identifier that estimates it; absent otherwise); a later addition, optional"),
+        Field("effusivity_lo_w_s05_m2k", "float", _E, lo=0, required=False,
+              doc="its 95 % interval's lower end (with effusivity_w_s05_m2k)"),
+        Field("effusivity_hi_w_s05_m2k", "float", _E, lo=0, required=False,
+              doc="its 95 % interval's upper end (with effusivity_w_s05_m2k)"),
+        Field("nearest", "str", required=False,
+              doc="with label 'new material': the class whose effusivity is nearest"),
+    )
+
+
 #: An estimate's fields: ``material_estimate`` (decisions, lossless) and
 #: ``posterior_estimate`` (every window, latest value) carry the same.
 ESTIMATE_FIELDS = (
@@ -62,16 +80,17 @@ ESTIMATE_FIELDS = (
     Field("classes", "list[str]"),
     Field("posteriors", "list[float]", lo=0, hi=1,
           doc="same order and length as classes"),
-    Field("label", "str", doc="best class, 'unknown', or a group of two classes "
-                              "'a|b' (sorted) while committed to the pair"),
+    Field("label", "str", doc="best class, 'unknown', a group of two classes "
+                              "'a|b' (sorted) while committed to the pair, or 'new material' "
+                              "(decided: outside every class, with the effusivity fields)"),
     Field("confidence", "float", lo=0, hi=1),
     Field("decided", "bool", doc="true once committed (to a class, a group or "
                                  "'unknown'); never false again in the contact"),
     Field("reason", "str", doc="confident | confident group | outside classes | "
-                               "gap too small | not confident | force outside trained "
-                               "range | sensor board lost | '' while undecided"),
+                               "new material | gap too small | not confident | force outside "
+                               "trained range | sensor board lost | '' while undecided"),
     Field("object_temp_c", "float", "degC", lo=-50, hi=200),
-)
+) + _effusivity_fields()
 KINDS: dict[str, Kind] = {k.name: k for k in (
     Kind("hello", "control", "both", (
         Field("role", "str", doc="'master' or 'slave'"),
@@ -123,7 +142,8 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
                   "nil: not known"),
         Field("object_material", "str", required=False, nullable=True,
               doc="slave, with object_id: what it decided on this object before (its "
-                  "object memory): a material, or a pair 'a|b'; nil: none remembered"),
+                  "object memory): a material, a pair 'a|b', or 'new material' (section "
+                  "6c); nil: none remembered"),
         Field("object_confidence", "float", lo=0, hi=1, required=False, nullable=True,
               doc="the object memory's posterior of object_material (section 6b); nil "
                   "with object_material"),
@@ -187,7 +207,8 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
               doc="that estimate's t_since_contact_s"),
         Field("reason", "str", required=False,
               doc="master: that estimate's reason (for 'unknown': why); a later addition, optional"),
-    ), "raw samples of the sender's pad, for display and recording (lossy); the three "
+    ) + _effusivity_fields("master: that estimate's: "),
+       "raw samples of the sender's pad, for display and recording (lossy); the three "
        "channels hold one value per sample (equal lengths); the master publishes its own, "
        "with the optional fields, on its view stream"),
     Kind("status", "control", "both", (

@@ -115,12 +115,21 @@ function addEstimate(e, contactId) {
   e.classes.forEach((c, i) => plot.push(c, [[e.t_s, e.posteriors[i]]]));
   showDecision(e, plot);
 }
+// A new material (outside every trained class) with its effusivity estimate
+// and 95 % interval, W s^0.5/(m^2 K), and the nearest class (ident/openset.py).
+function newMaterial(e) {
+  if (e.label !== "new material" || e.effusivity_w_s05_m2k == null) return "";
+  const f = (v) => Number(v.toPrecision(3)).toLocaleString("en-US");
+  const near = e.nearest ? `, nearest: ${e.nearest}` : "";
+  return `, effusivity ${f(e.effusivity_w_s05_m2k)} W s^0.5/(m^2 K) (95 %: ` +
+    `${f(e.effusivity_lo_w_s05_m2k)} to ${f(e.effusivity_hi_w_s05_m2k)})${near}`;
+}
 function showDecision(e, plot) {
   const el = $("decision");
   if (e.decided) {
     // An "unknown" says why (README, the table of reasons).
     const why = e.label === "unknown" && e.reason ? ` (${e.reason})` : "";
-    el.textContent = `${e.label}${why} at ${e.t_s.toFixed(2)} s`;
+    el.textContent = `${e.label}${why}${newMaterial(e)} at ${e.t_s.toFixed(2)} s`;
     el.dataset.label = e.label;
     plot.marker = [e.t_s, `decided: ${e.label}`];
   } else {
