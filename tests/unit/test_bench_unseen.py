@@ -160,11 +160,15 @@ def test_reported_counts_named_new_and_unknown_from_the_decisions():
                  Decision("aluminium|steel", 0.999, 0.1, Reason.CONFIDENT_GROUP),
                  Decision("graphite", 0.999, 0.2, Reason.CONFIDENT),
                  Decision("new material", 0.99999, 1.0, Reason.NEW_MATERIAL),
+                 Decision("new material", 0.99999, 1.0, Reason.NEW_MATERIAL, 0.06,
+                          revised_from="graphite"),
                  Decision("unknown", 0.5, None, Reason.NOT_CONFIDENT)]
     assert unseen.reported(decisions) == {
-        "named": 3, "new": 1, "unknown": 1, "n": 5,
+        "named": 3, "new": 2, "unknown": 1, "n": 6,
         "named_as": {"aluminium|steel": 1, "graphite": 2},
-        "unknown_reasons": {"not confident": 1}}
+        "unknown_reasons": {"not confident": 1},
+        # told graphite from 0.06 s until the last window: counted apart
+        "named_then_new": 1, "named_first_as": {"graphite": 1}}
 
 
 def test_within_spread_is_the_classes_t_predictive_at_the_last_window():

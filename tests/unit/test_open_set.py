@@ -134,6 +134,13 @@ def test_glass_between_graphite_and_marble_is_named_only_inside_graphites_spread
     decisions = decide_all(model, held)
     assert {str(d.label) for d in decisions} <= {"graphite", "new material"}
     _named_only_inside(model, held, decisions)
+    # A new material that had been named before the last window says what
+    # it was named (the operator was told so until then); one that had not,
+    # nothing.
+    for d in decisions:
+        if d.label.is_new:
+            earlier = d.time_first_s is not None and d.time_first_s < d.time_s
+            assert d.revised_from == ("graphite" if earlier else None), d
 
 
 @pytest.mark.parametrize("material", ["foam", "copper"])

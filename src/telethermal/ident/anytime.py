@@ -69,6 +69,9 @@ class Decision:
     effusivity_lo_w_s05_m2k: float | None = None
     effusivity_hi_w_s05_m2k: float | None = None
     nearest: str | None = None
+    # What a decision revised to a new material at the last window had
+    # named before (a class or a pair: told the operator until then).
+    revised_from: str | None = None
 
     def __post_init__(self):
         if type(self.label) is not Label:
@@ -142,7 +145,8 @@ def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decisi
         return decision
     first = decision.time_first_s if decision.time_first_s is not None else decision.time_s
     return Decision(NEW_MATERIAL, new_material_confidence(reading), model.windows_s_[last],
-                    Reason.NEW_MATERIAL, first, **reading_fields(reading, True))
+                    Reason.NEW_MATERIAL, first, **reading_fields(reading, True),
+                    revised_from=str(decision.label))
 
 
 def _new_material(model, x: np.ndarray, window_index: int):
@@ -179,6 +183,9 @@ class Estimate:
     effusivity_lo_w_s05_m2k: float | None = None
     effusivity_hi_w_s05_m2k: float | None = None
     nearest: str | None = None
+    # What a decision revised to a new material at the last window had
+    # named before (a class or a pair: told the operator until then).
+    revised_from: str | None = None
 
     def __post_init__(self):
         if type(self.label) is not Label:
