@@ -38,7 +38,7 @@ test: $(STAMP)
 # Wall times include bench transport's 31 s (its burst no longer stalls: the
 # lossless window waits for room; 10 of 10 runs beside the test suite).
 # The view bench needs Chromium (apt-get install chromium).
-BENCHES := physics identify render transport faults devices record view
+BENCHES := physics identify render transport faults devices record view unseen
 
 BENCH_physics   :=
 BENCH_identify  := --methods effusivity-lda,lstm,pca-fnn
@@ -48,6 +48,7 @@ BENCH_faults    := --seeds 2
 BENCH_devices   :=
 BENCH_record    :=
 BENCH_view      :=
+BENCH_unseen    := --seeds 2
 
 QUICK_physics   := --repeats 1
 QUICK_identify  := --methods effusivity-lda
@@ -57,6 +58,7 @@ QUICK_faults    := --quick --seeds 1
 QUICK_devices   := --samples 500 --slave-trials 2 --contact-s 1
 QUICK_record    := --rounds 1 --contact-s 1
 QUICK_view      := --touches 1 --contact-s 1
+QUICK_unseen    := --quick --seeds 1
 
 # $(call bench-run,NAME,FOLDER,OPTIONS): one bench, its JSON and figure in FOLDER.
 define bench-run

@@ -17,6 +17,7 @@ import numpy as np  # noqa: E402
 
 from telethermal.bench.faults_text import recovery_text  # noqa: E402
 from telethermal.bench.clock_text import real_clock_sentences  # noqa: E402
+from telethermal.bench.unseen import report_section as unseen_section  # noqa: E402
 
 
 def _load(results: Path, name: str) -> dict | None:
@@ -442,9 +443,13 @@ def skin_floor(out: Path, d: dict) -> list[str]:
     return lines
 
 
+def unseen(out: Path, d: dict) -> list[str]:
+    return unseen_section(out, d) + [_provenance(d), ""]
+
+
 SECTIONS = (("physics", physics), ("identify", identify), ("render", render),
             ("transport", transport), ("faults", faults), ("devices", devices),
-            ("record", record), ("view", view))
+            ("record", record), ("view", view), ("unseen", unseen))
 #: Reported when its JSON is there, not run by the Makefile's bench targets:
 #: ``telethermal bench skin-floor`` takes 20 minutes at its defaults (10
 #: with --quick), past bench-quick's 3 and most of bench's 15.

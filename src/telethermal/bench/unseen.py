@@ -362,8 +362,15 @@ def run_and_save(json_path, command: str = "", **kw) -> dict:
     """Run, write the JSON report (with ``command``), return it."""
     from telethermal.jsonfile import write_json
 
+    import datetime
+    import os
+    import platform
+
     report = run(**kw)
-    report["command"] = command
+    now = datetime.datetime.now(datetime.timezone.utc)
+    report.update(machine=f"{platform.node()} ({platform.machine()}, {os.cpu_count()} CPUs, "
+                          f"Python {platform.python_version()})",
+                  date=now.isoformat(timespec="seconds"), command=command)
     write_json(json_path, report)
     return report
 
@@ -396,4 +403,32 @@ def text_report(report: dict, json_path) -> list[str]:
                          + f", unknown {rep['unknown']} of {rep['n']}")
     lines.append("  not run: flux_rms_rel, skin_rms_k (issue 30 part 3)")
     lines.append(f"wrote {json_path}")
+    return lines
+
+
+def report_section(out, d: dict) -> list[str]:
+    """``bench report``'s section: per material its effusivity, the median
+    error and 95 % coverage per window, and what was reported."""
+    windows = [f"{w:g}" for w in d["windows_s"]]
+    lines = ["## Materials the identifier never saw (issue 30)", "",
+             f"Trained on {', '.join(d['trained'])} ({d['scene']}); unseen "
+             f"{', '.join(d['unseen'])}; {len(d['seeds'])} sessions. Median effusivity error "
+             f"and 95 % interval coverage at {', '.join(windows)} s; what "
+             f"{d['identifier']['method']}'s decisions reported (named, new material; a new "
+             "material named a class before the last window counted in brackets; unknown). "
+             "Rendering from the estimate: not run (part 3).", "",
+             "| material | e, W s^0.5/(m^2 K) | error | coverage | named | new | unknown |",
+             "|---|---|---|---|---|---|---|"]
+    for m, r in d["materials"].items():
+        rep = r["reported"] if isinstance(r["reported"], dict) else {}
+        err = " / ".join(f"{100 * r['effusivity_rel_error'][k]:.1f}" for k in windows)
+        cov = " / ".join(f"{100 * r['interval_coverage'][k]['rate']:.0f}" for k in windows)
+        first = rep.get("named_then_new", 0)
+        lines.append(f"| {m}{'' if r['trained'] else ' (unseen)'} | "
+                     f"{r['effusivity_w_s05_m2k']:,.0f} | {err} % | {cov} % | "
+                     f"{rep.get('named', '-')} | {rep.get('new', '-')}"
+                     f"{f' ({first})' if first else ''} | {rep.get('unknown', '-')} |")
+    cov = d["targets"]["coverage_by_window"]
+    lines += ["", "Coverage, every material (target 90-98 %): " + ", ".join(
+        f"{k} s {100 * c['rate']:.1f} %" for k, c in cov.items()) + ".", ""]
     return lines
