@@ -155,7 +155,10 @@ def _new_material(model, x: np.ndarray, window_index: int):
     or a method without estimates)."""
     if not bool(model.outside_classes(x, window_index)[0]):
         return None
-    return reading_of(model, x, window_index)
+    reading = reading_of(model, x, window_index)
+    # Outside every class with the touch's own uncertainty too (the
+    # reading's ``inside``): else "unknown, outside classes", not a claim.
+    return reading if reading is not None and not reading.inside else None
 
 
 def decide_all(model: Identifier, contacts) -> list[Decision]:

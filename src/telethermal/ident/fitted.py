@@ -275,8 +275,31 @@ class EffusivityFit(Identifier):
             tails = 2.0 * student_t.sf(np.abs(z[0]), dof)
             tail = float(np.max(tails))
             nearest = str(self.classes_[int(np.argmin(np.abs(theta[0] - params["means"])))])
-            # as outside_classes: within each class's two-sided 1 - outlier_p predictive
-            limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
-            inside = tuple(str(c) for c, a, b in zip(self.classes_, np.abs(z[0]), limit)
-                           if a <= b)
+            inside = classes_holding(float(theta[0]), log_sd_of_interval(lo, hi), params,
+                                     self.classes_, self.outlier_p)
         return EffusivityReading(e, lo, hi, nearest, tail, inside)
+
+
+def log_sd_of_interval(lo: float, hi: float) -> float:
+    """The standard deviation in ``ln e`` of a 95 % interval [lo, hi] that
+    is normal in ``ln e`` (the estimator's Laplace interval; one clipped at
+    the estimator's grid gives less: a narrower allowance)."""
+    from telethermal.ident.effusivity import Z95
+    return float(np.log(hi / lo) / (2.0 * Z95))
+
+
+def classes_holding(log_e: float, log_sd: float, params: dict, classes, outlier_p: float):
+    """The classes whose two-sided ``1 - outlier_p`` predictive holds a
+    touch's estimate ``log_e`` (ln W s^0.5/(m^2 K)) with its own standard
+    deviation ``log_sd``: ``|log_e - mean| <= t_(n-1) quantile x
+    sqrt(scale^2 + log_sd^2)``, the class's Student t scale widened by the
+    touch's own uncertainty (its interval holds the estimator's noise and
+    model-error allowance). The training touches' spread alone is the
+    spread under their conditions; a touch measured otherwise (frames
+    dropped and held, another session) carries a bias its own interval
+    allows, and is not a new material for it."""
+    n = params["n"]
+    scale = np.sqrt(params["var"] * (1.0 + 1.0 / n) + log_sd ** 2)
+    limit = student_t.ppf(1.0 - outlier_p / 2, n - 1.0)
+    z = np.abs(log_e - params["means"]) / scale
+    return tuple(str(c) for c, a, b in zip(classes, z, limit) if a <= b)
