@@ -69,7 +69,14 @@ def test_admin_operates_a_session_and_reports_the_touch(tmp_path, models, capsys
         # What the master was told is what the slave decided.
         assert report["identified"] == report["slave"]["identified"] != "unknown"
         assert f"identified {report['identified']}" in touch_out
-        assert report["direct"]["flux_rms_error_rel"] < 0.05
+        # Over a window fixed in time (the first second), not "after rendering
+        # began": that window starts at the decision, and an identifier that
+        # decides sooner (effusivity-fit, wood at 0.06 s, rendering from
+        # 0.11 s) puts more of the first transient in it (4.7 % against
+        # effusivity-lda's 3.5 % from 0.15 s, measured on this touch), while
+        # over the first second the two are 8.7 % and 8.3 %. The bound is the
+        # report's own "flux within 10 %" criterion.
+        assert report["direct"]["flux_rms_error_rel_first_s"] < 0.10
         # A touch lifted early is shorter than asked.
         code, out = admin(ports, "touch", "--contact-s", "20", "--no-wait", capsys=capsys)
         assert code == 0 and "started" in out
