@@ -51,12 +51,12 @@ from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
                                         supervise, surface_barrier)
-from telethermal.errors import ControlError, UnknownMaterialError
+from telethermal.errors import ControlError
 from telethermal.ident.anytime import Estimate
-from telethermal.physics.materials import get_material
 from telethermal.physics.thermoelectric import ModuleParams, default_driver
-from telethermal.render.generator import mixture, posterior_weights
+from telethermal.render.generator import posterior_weights
 from telethermal.devices.readings import PadSensors
+from telethermal.teleop.rendering import Handover, blended, generator_flux, inverse_effusivity
 
 log = logging.getLogger(__name__)
 
@@ -176,30 +176,6 @@ class MasterStep:
     contact: ContactEvent | None = None
 
 
-@dataclass(slots=True)
-class Handover:
-    """What the display carries from one way of driving the pad to the next
-    (holding, tracking, the posterior mixture, the decided material, the
-    link lost and back), so none of these changes makes a step."""
-
-    #: The pad was held (not tracking) during this contact.
-    held: bool = False
-    #: The flux PID is running; False: the next tracking period restarts it
-    #: bumplessly from what the pad reads.
-    pid_running: bool = False
-    #: What is left of the step between what was applied and what the
-    #: controller asked for at the hand-over, closed at ``handover_k_s``.
-    offset_k: float = 0.0
-    #: (time it began, weights before it): the blend from the posterior
-    #: mixture (or a material the slave changed its mind about) to the
-    #: decided material, over ``blend_s``; None when no blend runs.
-    blend: tuple[float, dict[str, float]] | None = None
-    #: The posterior mixture's weights at the last tracked period.
-    last_weights: dict[str, float] | None = None
-    #: The phase to return to when a lost link comes back.
-    lost_from: Phase | None = None
-
-
 class MasterDisplay:
     """The display's control logic, one period per :meth:`step`."""
 
@@ -278,23 +254,13 @@ class MasterDisplay:
         if self.rendering is None:
             h.last_weights = self._mixture_weights(news)
             return h.last_weights
-        weights = {self.rendering: 1.0}
-        if h.blend is not None:
-            # Hand-over from the posterior mixture to the decided material:
-            # a linear blend of the weights over blend_s, no setpoint step.
-            t_switch, before = h.blend
-            a = min(1.0, (t_s - t_switch) / self.config.blend_s)
-            weights = {n: (1 - a) * before.get(n, 0.0) + a * weights.get(n, 0.0)
-                       for n in sorted(set(before) | set(weights))}
-            if a >= 1.0:
-                h.blend = None
-        return weights
+        # Hand-over from the posterior mixture to the decided material: a
+        # linear blend of the weights over blend_s, no setpoint step.
+        return blended(h, t_s, {self.rendering: 1.0}, self.config.blend_s)
 
     def _desired(self, t_s: float, t_contact_s: float, news: SlaveNews, gap_k: float):
         """(flux setpoint, flux for the feed-forward) at time since onset."""
-        weights = self._weights(t_s, news)
-        names = list(weights)
-        g, dg = mixture(self.generator, names, [weights[n] for n in names], t_contact_s)
+        g, dg = generator_flux(self.generator, self._weights(t_s, news), t_contact_s)
         q = g * gap_k
         return q, q + self.sensor_lag_s * dg * gap_k
 
@@ -303,10 +269,7 @@ class MasterDisplay:
         mean; None when a material is not in the materials table."""
         weights = {self.rendering: 1.0} if self.rendering is not None else \
             self._mixture_weights(news)
-        try:
-            return sum(w / get_material(n).effusivity for n, w in weights.items())
-        except UnknownMaterialError:
-            return None
+        return inverse_effusivity(weights)
 
     # ------------------------------------------------------------ the phases
     def _on_contact(self, t_s: float, force_n: float) -> ContactEvent | None:
