@@ -5,15 +5,60 @@ Split out of :mod:`telethermal.teleop.master`: the weights over the rendered
 materials (the slave's posterior mixture before a decision, the decided
 material after it), the linear blend of those weights over ``blend_s`` at
 every change, and the flux and ``1/e`` they stand for.
+
+A new material (issue 30) is rendered from the slave's estimate
+(:class:`Estimated`, a key of the weights beside the material names): the
+flux a finger exchanges with a semi-infinite object of that effusivity
+(:func:`~telethermal.physics.contact.contact_flux_sensed_w_m2`, as the pad's
+sensor reads it, the generator's curves being sensor readings too), and its
+``1/e`` for the impedance controller: the same two things a known material
+takes from its generator curve and its table row.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
-from telethermal.errors import UnknownMaterialError
+import numpy as np
+
+from telethermal.errors import ControlError, UnknownMaterialError
+from telethermal.physics.contact import contact_flux_sensed_w_m2
 from telethermal.physics.materials import get_material
 from telethermal.render.generator import mixture
+
+
+@dataclass(frozen=True, slots=True)
+class Estimated:
+    """A new material, rendered from the slave's effusivity estimate."""
+
+    effusivity_w_s05_m2k: float
+
+    def __post_init__(self):
+        if not (math.isfinite(self.effusivity_w_s05_m2k) and self.effusivity_w_s05_m2k > 0):
+            raise ControlError("a new material's effusivity must be finite and > 0, got "
+                               f"{self.effusivity_w_s05_m2k} W s^0.5/(m^2 K)")
+
+    def __str__(self) -> str:
+        return f"new material ({self.effusivity_w_s05_m2k:.0f} W s^0.5/(m^2 K))"
+
+    def normalised(self, t_s, conductance_w_m2k: float, sensor_lag_s: float) -> np.ndarray:
+        """The display's flux per kelvin of (object - finger), W/m^2/K, at
+        times since contact, as the pad's sensor reads it: the nominal skin
+        on this effusivity through the finger's contact conductance."""
+        return contact_flux_sensed_w_m2(t_s, 1.0, 0.0, get_material("skin").effusivity,
+                                        self.effusivity_w_s05_m2k, conductance_w_m2k,
+                                        sensor_lag_s)
+
+
+def estimated_target(estimate) -> Estimated | None:
+    """What a decision of a new material renders: its effusivity estimate;
+    None when it is not one, or carries no usable estimate (an older peer's)."""
+    e = getattr(estimate, "effusivity_w_s05_m2k", None)
+    if estimate is None or not estimate.label.is_new or e is None or \
+            not (math.isfinite(e) and e > 0):
+        return None
+    return Estimated(float(e))
 
 
 @dataclass(slots=True)
@@ -55,17 +100,37 @@ def blended(h: Handover, t_s: float, weights: dict, blend_s: float) -> dict:
     return out
 
 
-def generator_flux(generator, weights: dict, t_s: float) -> tuple[float, float]:
+def has_estimate(weights: dict | None) -> bool:
+    """Whether a new material's estimate is among the weights."""
+    return bool(weights) and any(isinstance(k, Estimated) for k in weights)
+
+
+def generator_flux(generator, weights: dict, t_s: float, conductance_w_m2k: float = math.inf,
+                   sensor_lag_s: float = 0.0, step_s: float = 1e-4) -> tuple[float, float]:
     """(sum of the weighted normalised curves, its time derivative) at ``t_s``
-    since onset, W/m^2/K (and per s)."""
-    names = list(weights)
-    return mixture(generator, names, [weights[n] for n in names], t_s)
+    since onset, W/m^2/K (and per s): the generator's for the materials, the
+    closed form for an estimate (the derivative by the same central
+    difference as :func:`~telethermal.render.generator.mixture`)."""
+    names = [n for n in weights if not isinstance(n, Estimated)]
+    if len(names) == len(weights):
+        return mixture(generator, names, [weights[n] for n in names], t_s, step_s)
+    g, dg = mixture(generator, names, [weights[n] for n in names], t_s, step_s) \
+        if names else (0.0, 0.0)
+    lo, hi = max(t_s - step_s, 0.0), t_s + step_s
+    for key, w in weights.items():
+        if isinstance(key, Estimated) and w:
+            at = key.normalised(np.array([t_s, lo, hi]), conductance_w_m2k, sensor_lag_s)
+            g += w * float(at[0])
+            dg += w * float((at[2] - at[1]) / (hi - lo))
+    return g, dg
 
 
 def inverse_effusivity(weights: dict) -> float | None:
-    """``sum w / e`` over the rendered materials (m^2 K s^-1/2 / W); None
+    """``sum w / e`` over the rendered materials (m^2 K s^-1/2 / W): the
+    table's effusivity for a material, the estimate's for a new one; None
     when a material is not in the materials table."""
     try:
-        return sum(w / get_material(n).effusivity for n, w in weights.items())
+        return sum(w / (n.effusivity_w_s05_m2k if isinstance(n, Estimated)
+                        else get_material(n).effusivity) for n, w in weights.items())
     except UnknownMaterialError:
         return None
