@@ -106,3 +106,5 @@ def test_glass_revised_at_the_last_window_is_rendered_from_its_estimate_without_
                                     SCENE.sensors.flux_lag_s)
     gap = desired[late] / curve
     np.testing.assert_allclose(gap, gap[0], rtol=1e-9)
+    # The recording replays the master's rendering of the estimate bit for bit.
+    assert replay(path)["summary"]["identical"]
