@@ -21,7 +21,8 @@ values, which recordings, the view stream and the status hold):
     posteriors.
 ``render``
     The slave has committed to a material: track the generator's flux for
-    it, timed from the master's own contact onset.
+    it, timed from the master's own contact onset; or to a new material:
+    render its effusivity estimate (:mod:`telethermal.teleop.rendering`).
 ``link lost``
     During a contact, the link is down and nothing held is valid any more
     (``SlaveNews.link_ok``): the pad goes to neutral at the slew limit, and
