@@ -48,7 +48,7 @@ def new_material(e, revised_from=None):
                     e, lo, hi, "steel", revised_from)
 
 
-def run(news_at, seconds, impedance, rate=1000.0, pre_s=0.1):
+def run(news_at, seconds, impedance, rate=1000.0, pre_s=0.1, object_c=OBJECT_C):
     """The master on the simulated display (nominal skin, conductance H);
     returns (master, rows of (t, finger's flux, skin surface, desired,
     junction applied, 1/e handed to the impedance controller))."""
@@ -57,7 +57,7 @@ def run(news_at, seconds, impedance, rate=1000.0, pre_s=0.1):
     config = DisplayConfig(rate_hz=rate) if impedance else \
         DisplayConfig(rate_hz=rate, feedforward_model="static")
     master = MasterDisplay(config, generator(), pad_resistance(layers), TAU, FINGER_C,
-                           idle_c=OBJECT_C, pad_layers=layers if impedance else None,
+                           idle_c=object_c, pad_layers=layers if impedance else None,
                            contact_conductance_w_m2k=H)
     seen = []
     if impedance:
@@ -67,7 +67,7 @@ def run(news_at, seconds, impedance, rate=1000.0, pre_s=0.1):
             seen.append(inverse_e)
             return inner(pad_c, obj_c, inverse_e)
         master.impedance.command_impedance = spy
-    plant, junction, rows = None, OBJECT_C, []
+    plant, junction, rows = None, object_c, []
     for k in range(int(round((pre_s + seconds) * rate))):
         t = k * dt - pre_s
         if t >= 0 and plant is None:
@@ -141,15 +141,19 @@ def test_a_new_material_is_rendered_as_direct_contact_with_its_estimate():
         assert master.safety.events.get("entered safe state", 0) == 0
 
 
-def test_the_flux_loop_tracks_the_closed_form_as_the_sensor_reads_it():
+@pytest.mark.parametrize("object_c", [OBJECT_C, 45.0])
+def test_the_flux_loop_tracks_the_closed_form_as_the_sensor_reads_it(object_c):
     # The static path's setpoint for a new material: the closed form of the
     # finger on the estimate, as the pad's first-order sensor reads it (the
-    # generator's curves are sensor readings too), to rounding.
-    _, rows = run(lambda t: SlaveNews(OBJECT_C, new_material(E_NEW), CLASSES), 1.0, False)
+    # generator's curves are sensor readings too), to rounding; with the
+    # object's temperature as the master holds it (45 C: far above the room
+    # and the finger, the flux into the finger).
+    _, rows = run(lambda t: SlaveNews(object_c, new_material(E_NEW), CLASSES), 1.0, False,
+                  object_c=object_c)
     t = rows[:, 0]
     on = np.isfinite(rows[:, 3])                 # tracking from the debounced onset
     assert on.sum() > 900
-    expected = -contact_flux_sensed_w_m2(t[on], FINGER_C, OBJECT_C, E_SKIN, E_NEW, H, TAU)
+    expected = -contact_flux_sensed_w_m2(t[on], FINGER_C, object_c, E_SKIN, E_NEW, H, TAU)
     np.testing.assert_allclose(rows[on, 3], expected, rtol=1e-12, atol=1e-9)
 
 

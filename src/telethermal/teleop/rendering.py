@@ -13,6 +13,17 @@ flux a finger exchanges with a semi-infinite object of that effusivity
 sensor reads it, the generator's curves being sensor readings too), and its
 ``1/e`` for the impedance controller: the same two things a known material
 takes from its generator curve and its table row.
+
+Why a blend (over ``blend_s``) and not continuity of the curve: both what
+the flux loop tracks and the ``1/e`` the impedance controller renders are
+linear in the weights, so one blend removes the step from both and ends on
+exactly the new model, with no offset left to decay. What it cannot remove:
+a new ``1/e`` is a new object with a new past, its surface target moves by
+``delta(1/e)`` times the flux's half-integral so far; the finger feels that
+move as a transient (measured, glass named graphite then revised at 1 s,
+fingertip-7 seed 2: the flux off direct contact by ~250 W/m^2 RMS over
+1.2-1.5 s, ~28 W/m^2 over 4-5 s and falling, where keeping graphite stays
+~38 W/m^2 off).
 """
 
 from __future__ import annotations
