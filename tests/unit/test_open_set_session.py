@@ -6,11 +6,13 @@ recordings replayed to the same estimates."""
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from telethermal.bench.unseen import package_objects
 from telethermal.physics.scene import load_scene
 from telethermal.record.recording import read_recording
+from telethermal.teleop.rendering import Estimated
 from telethermal.teleop.replay import replay
 from telethermal.teleop.run import run_session, with_finger
 
@@ -77,3 +79,32 @@ def test_glass_named_graphite_early_is_revised_to_a_new_material_at_the_last_win
     assert all(label in ("graphite", "graphite|marble", "new material") for label in labels)
     slave = replay(path)["summary"]["slave"]
     assert slave["same_estimates"] and slave["identified"] == "new material"
+
+
+def test_glass_revised_at_the_last_window_is_rendered_from_its_estimate_without_a_step(glass):
+    """The hard case of an estimate crossing a class boundary mid-contact:
+    the master renders graphite from the slave's early decision and, from
+    its revision at 1 s, the new material's estimate (the finger-on-it
+    closed form as the sensor reads it: the desired flux over that curve is
+    the one gap left, to rounding). The hand-over is the blend: the desired
+    flux moves no faster per period around it than it did on graphite's
+    curve alone before (without the blend it would step ~115 W/m^2 in one
+    period here: graphite's curve against the estimate's at 1 s)."""
+    path, result = glass
+    s, trace = result.summary, result.trace
+    t = trace["t_s"] - s["master_onset_s"]
+    desired, phase = trace["desired_flux_w_m2"], trace["phase"]
+    rendering = (t >= s["render_start_s"] - s["master_onset_s"]) & (phase != "idle")
+    assert set(phase[rendering]) == {"render"}
+    before = (t > 0.6) & (t < 0.95)
+    around = (t > 0.95) & (t < 1.2)
+    assert np.max(np.abs(np.diff(desired[around]))) <= np.max(np.abs(np.diff(desired[before])))
+    e = read_recording(path).messages("/slave/estimates")[-1]["estimate"][6]
+    late = rendering & (t > 1.2)
+    assert late.sum() > 10
+    curve = Estimated(e).normalised(t[late], SCENE.finger.contact_conductance_w_m2k,
+                                    SCENE.sensors.flux_lag_s)
+    gap = desired[late] / curve
+    np.testing.assert_allclose(gap, gap[0], rtol=1e-9)
+    # The recording replays the master's rendering of the estimate bit for bit.
+    assert replay(path)["summary"]["identical"]

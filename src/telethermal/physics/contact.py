@@ -21,7 +21,7 @@ Flux is positive from body ``a`` into body ``b``.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import erfcx
+from scipy.special import erfcx, wofz
 
 from telethermal.errors import ModelError
 
@@ -120,3 +120,41 @@ def semi_infinite_error_bound(thickness_m: float, diffusivity_m2_s: float, durat
     if np.isinf(thickness_m):
         return 0.0
     return float(2.0 * np.exp(-thickness_m**2 / (diffusivity_m2_s * duration_s)))
+
+
+def contact_flux_sensed_w_m2(t_s, temp_a_c, temp_b_c, e_a, e_b, conductance_w_m2k=np.inf,
+                             sensor_lag_s=0.0):
+    """:func:`contact_flux_w_m2` as a first-order sensor (time constant
+    ``sensor_lag_s``, zero reading before contact) reads it, W/m^2.
+
+    In the Laplace domain, with ``p = sqrt(s)`` and ``mu = 1/tau``, the
+    reading per kelvin of gap is ``N mu / (p (p + a) (p^2 + mu))`` (``N = h``)
+    or, for a perfect contact, ``N mu / (p (p^2 + mu))`` (``N = e_a e_b /
+    (e_a + e_b)``). Partial fractions over the roots ``r_k`` of ``p`` and
+    ``L^-1[1 / (sqrt(s) - r)] = 1/sqrt(pi t) + r erfcx(-r sqrt(t))`` give
+    ``sum_k A_k r_k erfcx(-r_k sqrt(t))`` (the ``1/sqrt(pi t)`` terms cancel:
+    ``sum A_k = 0``), with ``erfcx(z) = w(i z)`` (Faddeeva) for the complex
+    roots ``+-i sqrt(mu)``. ``sensor_lag_s = 0``: :func:`contact_flux_w_m2`.
+    """
+    if sensor_lag_s == 0:
+        return contact_flux_w_m2(t_s, temp_a_c, temp_b_c, e_a, e_b, conductance_w_m2k)
+    _check(e_a, e_b, conductance_w_m2k)
+    if not (sensor_lag_s > 0 and np.isfinite(sensor_lag_s)):
+        raise ModelError(f"sensor_lag_s must be >= 0 and finite, got {sensor_lag_s}")
+    t = np.asarray(t_s, dtype=np.float64)
+    gap = float(temp_a_c) - float(temp_b_c)
+    mu = 1.0 / float(sensor_lag_s)
+    h = float(conductance_w_m2k)
+    beta = np.sqrt(mu)
+    if np.isinf(h):
+        scale, roots = e_a * e_b / (e_a + e_b), [0.0, 1j * beta, -1j * beta]
+    else:
+        scale, roots = h, [0.0, -h * (1.0 / e_a + 1.0 / e_b), 1j * beta, -1j * beta]
+    root_t = np.sqrt(np.clip(t, 0.0, None))
+    total = np.zeros(t.shape, dtype=np.complex128)
+    for k, r in enumerate(roots):
+        if r == 0:
+            continue
+        a_k = scale * mu / np.prod([r - q for j, q in enumerate(roots) if j != k])
+        total = total + a_k * r * wofz(1j * (-r) * root_t)
+    return np.where(t > 0, gap * total.real, 0.0)

@@ -21,7 +21,8 @@ values, which recordings, the view stream and the status hold):
     posteriors.
 ``render``
     The slave has committed to a material: track the generator's flux for
-    it, timed from the master's own contact onset.
+    it, timed from the master's own contact onset; or to a new material:
+    render its effusivity estimate (:mod:`telethermal.teleop.rendering`).
 ``link lost``
     During a contact, the link is down and nothing held is valid any more
     (``SlaveNews.link_ok``): the pad goes to neutral at the slew limit, and
@@ -51,12 +52,13 @@ from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid, PidGains
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
                                         supervise, surface_barrier)
-from telethermal.errors import ControlError, UnknownMaterialError
+from telethermal.errors import ControlError
 from telethermal.ident.anytime import Estimate
-from telethermal.physics.materials import get_material
 from telethermal.physics.thermoelectric import ModuleParams, default_driver
-from telethermal.render.generator import mixture, posterior_weights
+from telethermal.render.generator import posterior_weights
 from telethermal.devices.readings import PadSensors
+from telethermal.teleop.rendering import (Estimated, Handover, blended, estimated_target,
+                                          generator_flux, has_estimate, inverse_effusivity)
 
 log = logging.getLogger(__name__)
 
@@ -176,30 +178,6 @@ class MasterStep:
     contact: ContactEvent | None = None
 
 
-@dataclass(slots=True)
-class Handover:
-    """What the display carries from one way of driving the pad to the next
-    (holding, tracking, the posterior mixture, the decided material, the
-    link lost and back), so none of these changes makes a step."""
-
-    #: The pad was held (not tracking) during this contact.
-    held: bool = False
-    #: The flux PID is running; False: the next tracking period restarts it
-    #: bumplessly from what the pad reads.
-    pid_running: bool = False
-    #: What is left of the step between what was applied and what the
-    #: controller asked for at the hand-over, closed at ``handover_k_s``.
-    offset_k: float = 0.0
-    #: (time it began, weights before it): the blend from the posterior
-    #: mixture (or a material the slave changed its mind about) to the
-    #: decided material, over ``blend_s``; None when no blend runs.
-    blend: tuple[float, dict[str, float]] | None = None
-    #: The posterior mixture's weights at the last tracked period.
-    last_weights: dict[str, float] | None = None
-    #: The phase to return to when a lost link comes back.
-    lost_from: Phase | None = None
-
-
 class MasterDisplay:
     """The display's control logic, one period per :meth:`step`."""
 
@@ -235,8 +213,15 @@ class MasterDisplay:
         self.last_onset_s: float | None = None
         self.last_release_s: float | None = None
         self.phase = Phase.IDLE
-        self.rendering: str | None = None       # material being rendered
+        self.rendering: str | None = None       # material being rendered (its label)
+        #: A new material's estimate being rendered (``rendering`` is then
+        #: "new material"); None for a known material or none.
+        self.rendered_estimate: Estimated | None = None
         self.rendered_from_s: float | None = None
+        #: The weights rendered at the last tracked period (the start of a blend).
+        self._period_weights: dict | None = None
+        # The finger's contact conductance, for a new material's closed form.
+        self._conductance_w_m2k = contact_conductance_w_m2k or math.inf
         # The impedance controller needs the pad model (no silent static PID).
         wants_impedance = config.feedforward and config.feedforward_model == "impedance"
         if wants_impedance and not (pad_layers and contact_conductance_w_m2k):
@@ -278,35 +263,30 @@ class MasterDisplay:
         if self.rendering is None:
             h.last_weights = self._mixture_weights(news)
             return h.last_weights
-        weights = {self.rendering: 1.0}
-        if h.blend is not None:
-            # Hand-over from the posterior mixture to the decided material:
-            # a linear blend of the weights over blend_s, no setpoint step.
-            t_switch, before = h.blend
-            a = min(1.0, (t_s - t_switch) / self.config.blend_s)
-            weights = {n: (1 - a) * before.get(n, 0.0) + a * weights.get(n, 0.0)
-                       for n in sorted(set(before) | set(weights))}
-            if a >= 1.0:
-                h.blend = None
-        return weights
+        # Hand-over from the posterior mixture to the decided material: a
+        # linear blend of the weights over blend_s, no setpoint step.
+        return blended(h, t_s, {self._target(): 1.0}, self.config.blend_s)
+
+    def _target(self):
+        """The key of what is rendered: the material, or the new one's estimate."""
+        return self.rendered_estimate if self.rendered_estimate is not None else self.rendering
 
     def _desired(self, t_s: float, t_contact_s: float, news: SlaveNews, gap_k: float):
         """(flux setpoint, flux for the feed-forward) at time since onset."""
-        weights = self._weights(t_s, news)
-        names = list(weights)
-        g, dg = mixture(self.generator, names, [weights[n] for n in names], t_contact_s)
+        self._period_weights = self._weights(t_s, news)
+        g, dg = generator_flux(self.generator, self._period_weights, t_contact_s,
+                               self._conductance_w_m2k, self.sensor_lag_s)
         q = g * gap_k
         return q, q + self.sensor_lag_s * dg * gap_k
 
     def _inverse_effusivity(self, news: SlaveNews) -> float | None:
         """1/e of what is rendered: the decided material's, or the posteriors'
         mean; None when a material is not in the materials table."""
+        if has_estimate(self._period_weights):      # a new material: the blend's own 1/e
+            return inverse_effusivity(self._period_weights)
         weights = {self.rendering: 1.0} if self.rendering is not None else \
             self._mixture_weights(news)
-        try:
-            return sum(w / get_material(n).effusivity for n, w in weights.items())
-        except UnknownMaterialError:
-            return None
+        return inverse_effusivity(weights)
 
     # ------------------------------------------------------------ the phases
     def _on_contact(self, t_s: float, force_n: float) -> ContactEvent | None:
@@ -320,33 +300,43 @@ class MasterDisplay:
         if event.touching:
             self.handover.held = False
             self.onset_s, self.phase, self.rendering = event.t_s, Phase.CONTACT, None
+            self.rendered_estimate, self._period_weights = None, None
             self.last_onset_s, self.rendered_from_s = event.t_s, None
             if self.impedance is not None:
                 applied = self.safety.applied_temp_c
                 self.impedance.start(applied, self.finger_temp_c, t_s - event.t_s, applied)
         else:
             self.onset_s, self.phase, self.rendering = None, Phase.IDLE, None
+            self.rendered_estimate, self._period_weights = None, None
             self.last_release_s = event.t_s
             if self.impedance is not None:
                 self.impedance.reset()
         return event
 
     def _on_decision(self, t_s: float, est: Estimate | None) -> None:
-        """The slave's decision: render it, or blend to a changed one."""
+        """The slave's decision: render it (a known material from its curve, a
+        new one from its estimate), or blend to a changed one."""
         if est is None or not est.decided:
             return
         h = self.handover
-        if self.phase == Phase.CONTACT and not est.label.is_unknown and \
-                self.generator is not None and est.label in self.generator.materials:
+        estimated = estimated_target(est)
+        known = not est.label.is_unknown and self.generator is not None and \
+            est.label in self.generator.materials
+        if not (known or estimated is not None):
+            return
+        target = estimated if estimated is not None else est.label
+        if self.phase == Phase.CONTACT:
             self.phase, self.rendering, self.rendered_from_s = Phase.RENDER, est.label, t_s
+            self.rendered_estimate = estimated
             h.blend = (t_s, h.last_weights) if h.pid_running and h.last_weights else None
-        elif self.phase == Phase.RENDER and not est.label.is_unknown and \
-                est.label != self.rendering and est.label in self.generator.materials:
-            # The slave changed its mind: blend to the new material, no step.
-            log.info("rendering changes from %s to %s at t=%.3f s", self.rendering, est.label, t_s)
-            self._count("decision changed")
-            h.blend = (t_s, {self.rendering: 1.0})
-            self.rendering = est.label
+        elif self.phase == Phase.RENDER and target != self._target():
+            # The slave changed its mind (or its estimate): blend from what
+            # was rendered at the last period to the new target, no step.
+            log.info("rendering changes from %s to %s at t=%.3f s", self._target(), target, t_s)
+            self._count("decision changed" if est.label != self.rendering else
+                        "estimate changed")
+            h.blend = (t_s, self._period_weights or {self._target(): 1.0})
+            self.rendering, self.rendered_estimate = est.label, estimated
 
     def _on_link(self, t_s: float, link_ok: bool) -> None:
         """The link lost mid-contact (to neutral), or back (rendering resumes)."""
