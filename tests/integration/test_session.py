@@ -52,7 +52,16 @@ def test_the_same_seed_gives_the_same_session(models):
     identifier, generator = models
     a = run_session(SCENE, "marble", identifier, generator, contact_s=1.0, seed=3)
     b = run_session(SCENE, "marble", identifier, generator, contact_s=1.0, seed=3)
-    assert a.summary == b.summary
+
+    def outcome(summary):
+        # The loop's garbage collections are the process's, not the
+        # session's: the first run makes effusivity-fit's fits, the second
+        # finds them in its cache, and allocates less (CI, 2026-11-26).
+        loop = {k: v for k, v in summary["loop"].items() if not k.startswith("gc_")}
+        return {**summary, "loop": loop}
+    assert outcome(a.summary) == outcome(b.summary)
+    assert set(a.summary["loop"]) - set(outcome(a.summary)["loop"]) == {"gc_collections",
+                                                                       "gc_max_us"}
     np.testing.assert_array_equal(a.trace["flux_w_m2"], b.trace["flux_w_m2"])
 
 
