@@ -324,17 +324,19 @@ class StreamingIdentifier:
         self.estimate = est
         if last and est.decided and reading is not None and est.label.members and \
                 not est.label.is_new and reading.outside(est.label):
-            return self._revised(x, p, index)           # a pair or class decided at the last
+            return self._revised(x, p, index, reading)  # a pair or class decided at the last
         self._watch = est.final and not last and est.label.is_material and \
             not est.label.is_new and hasattr(model, "effusivity_reading")
         return est
 
-    def _revised(self, x, p, index: int) -> Estimate | None:
+    def _revised(self, x, p, index: int, reading=None) -> Estimate | None:
         """The last window of a touch named before: a new material where
         the estimate lies outside the named class's predictive, else the
-        decision stands (None: nothing new)."""
+        decision stands (None: nothing new). ``reading``: the window's, when
+        the caller has it already."""
         self._watch = False
-        reading = reading_of(self.model, x, index)
+        if reading is None:
+            reading = reading_of(self.model, x, index)
         if reading is None or not reading.outside(self.estimate.label):
             return None
         self.estimate = Estimate(self.model.windows_s_[index], tuple(p), NEW_MATERIAL,
