@@ -37,6 +37,7 @@ import numpy as np
 
 from telethermal.errors import SceneError, UnknownMaterialError
 from telethermal.ident.evaluate import wilson_interval
+from telethermal.ident.fitted import log_sd_of_interval
 from telethermal.physics.materials import get_material, load_materials, object_materials
 from telethermal.physics.scene import ObjectSpec, Scene, load_scene
 
@@ -148,20 +149,29 @@ def unseen_objects(base: Scene, unseen=None, unseen_scene=None) -> tuple[list, s
 
 
 # ---------------------------------------------------------------- measuring
-def _estimates(estimators: dict, scene: Scene, contacts, timed: set) -> list[dict]:
+def _estimates(estimators: dict, scene: Scene, contacts, timed: set,
+               allowance: Callable[[float], float] | None = None) -> list[dict]:
     """Per touch: each window's estimate (dicts), and for the ``timed``
-    touches the cold and warm times of one estimate (s)."""
+    touches the cold and warm times of one estimate (s). ``allowance``:
+    the identifier's calibrated factor on the curves' allowance for a
+    window (s); each estimate's interval is then the calibrated one (what
+    the slave reports), and ``laplace`` keeps the estimator's own."""
     temp_of = {o.material: o.temp_c for o in scene.objects}
     rows = []
     for i, material in enumerate(contacts.labels):
         est = estimators[temp_of[material]]
         x, gap = contacts.x[i, :, 0], contacts.gap_k[i]
-        row = {"material": material, "windows": {}, "cold_s": {}, "warm_s": {}}
+        row = {"material": material, "windows": {}, "cold_s": {}, "warm_s": {}, "laplace": {}}
         for w in WINDOWS_S:
             n = int(round(w * scene.sample_rate_hz)) + 1
             t0 = time.perf_counter()
             e = est.estimate(x[:n], gap)
             cold = time.perf_counter() - t0
+            row["laplace"][w] = e
+            if allowance is not None:
+                _, lo, hi = est.interval_at(x[:n], gap, e.theta, allowance(w))
+                e = dataclasses.replace(e, interval_w_s05_m2k=(lo, hi),
+                                        log_sd=log_sd_of_interval(lo, hi))
             row["windows"][w] = e
             if i in timed:
                 prev = est.estimate(x[:n - int(round(LIVE_PERIOD_S * scene.sample_rate_hz))], gap)
@@ -234,6 +244,7 @@ def _material_summary(name: str, rows: list[dict], trained) -> dict:
            "source": get_material(name).source, "touches": len(rows),
            "same_as_trained": None if name in trained else same_as_trained(name, trained),
            "effusivity_rel_error": {}, "interval_coverage": {}, "interval_width_rel": {},
+           "interval_coverage_laplace": {},
            "at_bound": {}, "fits_rate": {}, **NOT_RUN,
            "reported": reported([r["decision"] for r in rows]) if rows and "decision" in rows[0]
            else "not_run: no identifier"}
@@ -245,6 +256,9 @@ def _material_summary(name: str, rows: list[dict], trained) -> dict:
         out["effusivity_rel_error"][key] = float(np.median(err))
         out["interval_coverage"][key] = {"rate": hit / len(ests), "covered": hit,
                                          "n": len(ests), "ci": wilson_interval(hit, len(ests))}
+        laplace = sum(r["laplace"][w].covers(true_e) for r in rows)
+        out["interval_coverage_laplace"][key] = {"rate": laplace / len(ests), "covered": laplace,
+                                                 "n": len(ests)}
         out["interval_width_rel"][key] = float(np.median(
             [(e.interval_w_s05_m2k[1] - e.interval_w_s05_m2k[0]) / e.effusivity_w_s05_m2k
              for e in ests]))
@@ -332,7 +346,8 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         contacts, _ = from_trials(pad_database(touched, np.random.default_rng(seed)),
                                   max_s=max(WINDOWS_S))
         first = {m: contacts.labels.index(m) for m in dict.fromkeys(contacts.labels)}
-        seed_rows = _estimates(estimators, touched, contacts, set(first.values()))
+        seed_rows = _estimates(estimators, touched, contacts, set(first.values()),
+                               getattr(identifier, "allowance_at_s", None))
         for row, decision in zip(seed_rows, decide_all(identifier, contacts)):
             row["decision"] = decision
         rows += seed_rows
@@ -353,7 +368,8 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
                           "object_temps_c": sorted(estimators)},
             "identifier": {"method": identifier.method, "trained_on": trained,
                            "train_seed": TRAIN_SEED, "threshold": identifier.threshold,
-                           "outlier_p": identifier.outlier_p},
+                           "outlier_p": identifier.outlier_p,
+                           "interval_allowance": identifier.interval_allowance_},
             "materials": materials, "time_per_estimate_s": _timing(rows),
             "targets": _targets(materials)}
 

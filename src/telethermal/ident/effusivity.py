@@ -432,10 +432,13 @@ class EffusivityEstimator:
             float(theta[2]), *self._goodness(theta, x, s), bool(bound),
             tuple(float(v) for v in theta))
 
-    def _noise_var(self, x: np.ndarray, gap_k: float) -> float:
+    def _noise_var(self, x: np.ndarray, gap_k: float, allowance: float = 1.0) -> float:
         """The samples' variance: the flux noise over the gap and the
-        curves' allowance (see the module)."""
-        return (self.noise_w_m2 / gap_k) ** 2 + self.model_error_rel ** 2 * float(np.mean(x * x))
+        curves' allowance (see the module), its variance times
+        ``allowance`` (1: the scene's tolerance as it stands; a calibration
+        on reference touches gives another: :mod:`telethermal.ident.intervals`)."""
+        return (self.noise_w_m2 / gap_k) ** 2 + \
+            allowance * self.model_error_rel ** 2 * float(np.mean(x * x))
 
     def _interval(self, theta, hess):
         """(sd of ln e, the 95 % interval in e clipped to the grid, at_bound)."""
@@ -444,13 +447,16 @@ class EffusivityEstimator:
         return sd, (float(math.exp(max(lo, self.lo[0]))), float(math.exp(min(hi, self.hi[0])))), \
             bool(lo <= self.lo[0] or hi >= self.hi[0])
 
-    def interval_at(self, x: np.ndarray, gap_k: float, theta) -> tuple[float, float, float]:
+    def interval_at(self, x: np.ndarray, gap_k: float, theta,
+                    allowance: float = 1.0) -> tuple[float, float, float]:
         """``(e, lo, hi)`` (W s^0.5/(m^2 K)) of the samples ``x`` at a fit
         ``theta`` already made of them (:meth:`estimate`'s, or a cache's):
-        the interval from the Hessian there, one evaluation, no refit."""
+        the interval from the Hessian there, one evaluation, no refit;
+        ``allowance``: the factor on the curves' allowance's variance
+        (:meth:`_noise_var`; a calibrated one: :mod:`telethermal.ident.intervals`)."""
         x = np.asarray(x, float)
         theta = np.asarray(theta, float)
-        _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k))
+        _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k, allowance))
         _, (lo, hi), _ = self._interval(theta, hess)
         return float(math.exp(theta[0])), lo, hi
 

@@ -132,6 +132,12 @@ class EffusivityFit(Identifier):
     method = "effusivity-fit"
     needs_scene = True
     calibration_may_sharpen = False
+    #: The intervals' calibration on the training touches (:meth:`fit`;
+    #: :func:`telethermal.ident.intervals.calibrate_allowance`):
+    #: ``{"windows_s": [...], "allowance": [...], "reference": why}``, None
+    #: where the classes are not materials of known effusivity (and in a
+    #: model file from before it: the interval is then the estimator's own).
+    interval_allowance_ = None
 
     def __init__(self, channels=(FLUX,), scene=None, outlier_p: float = 1e-4,
                  window_step_s: float = 0.02, **kw):
@@ -154,7 +160,28 @@ class EffusivityFit(Identifier):
             raise IdentificationError(
                 "effusivity-fit needs the scene whose pad made the touches (scene=...): its "
                 "estimate fits that pad's model")
-        return super().fit(contacts)
+        from telethermal.ident.intervals import calibrate_allowance
+
+        super().fit(contacts)
+        self.interval_allowance_ = calibrate_allowance(self, contacts, MIN_SAMPLES)
+        return self
+
+    def learned(self) -> dict:
+        return {**super().learned(), "interval_allowance_": self.interval_allowance_}
+
+    def allowance_at(self, window_index: int) -> float:
+        """The factor on the curves' allowance at window ``window_index``
+        (1: uncalibrated)."""
+        return self.allowance_at_s(self.windows_s_[window_index])
+
+    def allowance_at_s(self, window_s: float) -> float:
+        """The factor on the curves' allowance for a ``window_s`` window,
+        interpolated between the calibration's windows (held before the
+        first; 1: uncalibrated)."""
+        cal = self.interval_allowance_
+        if not cal:
+            return 1.0
+        return float(np.interp(window_s, cal["windows_s"], cal["allowance"]))
 
     def estimator(self):
         """(the scene's estimator, its nominal gap in K), built once per process."""
@@ -266,7 +293,7 @@ class EffusivityFit(Identifier):
             return None
         est, gap_k = self.estimator()
         theta = self._theta(row, len(row))
-        e, lo, hi = est.interval_at(row, gap_k, theta)
+        e, lo, hi = est.interval_at(row, gap_k, theta, self.allowance_at(window_index))
         params = self.params_[window_index]
         nearest = tail = None
         inside = ()
