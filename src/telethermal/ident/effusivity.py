@@ -85,10 +85,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import BSpline, NdBSpline, make_interp_spline
+from scipy.interpolate import NdBSpline, make_interp_spline
 from scipy.stats import chi2
 
 from telethermal.errors import IdentificationError
+from telethermal.ident.bspline import SplineAxis
 from telethermal.ident.oracle import KernelPrior, draw_nuisances, flux_noise_w_m2, \
     marginal_log_likelihood
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts
@@ -190,42 +191,36 @@ class EffusivityFamily:
     def curve(self, theta, times_s: np.ndarray, deriv: bool = False):
         """g at ``times_s - tau`` for ``theta = (ln e, u, tau)``; with
         ``deriv`` also the Jacobian (n, 3) in ``theta``. The tensor spline is
-        first contracted in ``ln e`` and ``u`` (a scalar each) to splines in
-        t, then evaluated once at every sample: the same values as
-        ``spline`` (to rounding), several times cheaper than evaluating it
-        four times."""
-        coef = [self._weights(axis, theta[axis]) for axis in (0, 1)]
-        (i, wi, di), (j, wj, dj) = coef
-        block = self.spline.c[i[0]:i[-1] + 1, j[0]:j[-1] + 1]          # (4, 4, n_t coef)
-        cols = [np.einsum("a,b,abk->k", wi, wj, block)]
-        if deriv:
-            cols += [np.einsum("a,b,abk->k", di, wj, block),
-                     np.einsum("a,b,abk->k", wi, dj, block)]
-        t_spline = BSpline(self.spline.t[2], np.stack(cols, axis=1), 3, extrapolate=True)
+        first contracted in ``ln e`` and ``u`` (a scalar each) to a spline in
+        t, on the coefficients the samples reach, then evaluated once at
+        every sample: the same values as ``spline`` (to rounding), several
+        times cheaper than evaluating it four times. No scipy object is
+        built and checked per call (:mod:`telethermal.ident.bspline`: the
+        same arithmetic as the scipy objects, to the bit)."""
+        (i, wi, di), (j, wj, dj) = [self._weights(axis, theta[axis]) for axis in (0, 1)]
+        axis_t = self._axes[2]
         t = times_s - theta[2]
-        values = t_spline(t)
+        rows = axis_t.rows(t)
+        block = self.spline.c[i[0]:i[-1] + 1, j[0]:j[-1] + 1, rows]      # (4, 4, coef in t)
+        c_g = np.einsum("a,b,abk->k", wi, wj, block)
         if not deriv:
-            return values[:, 0]
-        d_t = BSpline(self.spline.t[2], cols[0], 3, extrapolate=True).derivative()(t)
+            return axis_t.evaluate(c_g, rows, t)
+        cols = np.stack([c_g, np.einsum("a,b,abk->k", di, wj, block),
+                         np.einsum("a,b,abk->k", wi, dj, block)], axis=1)
+        values = axis_t.evaluate(cols, rows, t)
+        d_t = axis_t.evaluate_derivative(c_g, rows, t)
         return values[:, 0], np.column_stack([values[:, 1], values[:, 2], -d_t])
 
     @functools.cached_property
-    def _bases(self):
-        """Every B-spline basis function of the ln e and u axes, and their derivatives."""
-        out = []
-        for knots in self.spline.t[:2]:
-            basis = BSpline(knots, np.eye(len(knots) - 4), 3, extrapolate=True)
-            out.append((knots, basis, basis.derivative()))
-        return out
+    def _axes(self):
+        """The spline's three axes (ln e, u, t): knots and derivative factors."""
+        return [SplineAxis(knots) for knots in self.spline.t]
 
     def _weights(self, axis: int, x: float):
         """The 4 cubic B-spline weights at ``x`` on ``axis`` (0: ln e, 1: u)
         that can be nonzero: (their coefficient indices, weights, derivative
         weights)."""
-        knots, basis, derivative = self._bases[axis]
-        last = int(np.clip(np.searchsorted(knots, x, side="right") - 1, 3, len(knots) - 5))
-        idx = np.arange(last - 3, last + 1)
-        return idx, basis(x)[idx], derivative(x)[idx]
+        return self._axes[axis].weights(float(x))
 
     def nodes(self, times_s: np.ndarray, taus_s: np.ndarray):
         """Every grid node's curve at ``times_s - tau`` for each of ``taus_s``
