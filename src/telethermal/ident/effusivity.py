@@ -85,10 +85,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import BSpline, NdBSpline, make_interp_spline
-from scipy.stats import chi2
+from scipy.interpolate import NdBSpline, make_interp_spline
+from scipy.special import chdtrc
 
 from telethermal.errors import IdentificationError
+from telethermal.ident.bspline import SplineAxis
 from telethermal.ident.oracle import KernelPrior, draw_nuisances, flux_noise_w_m2, \
     marginal_log_likelihood
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts
@@ -105,6 +106,10 @@ N_E, N_H, MODEL_DT_S = 29, 9, 1e-3
 FIT_P_MIN = 1e-3
 #: Samples the coarse start reads at most (a 1 kHz window is strided).
 START_SAMPLES = 101
+#: The fit stops before an undamped Newton step under this many of the
+#: conditional posterior sds in every parameter, and at a step under
+#: ROUNDING_STEP_SD sds that lost less than the objective's resolution.
+STEP_SD_MIN, ROUNDING_STEP_SD = 1e-5, 1e-3
 #: The interval's normal quantile (95 %).
 Z95 = 1.959963984540054
 
@@ -190,42 +195,36 @@ class EffusivityFamily:
     def curve(self, theta, times_s: np.ndarray, deriv: bool = False):
         """g at ``times_s - tau`` for ``theta = (ln e, u, tau)``; with
         ``deriv`` also the Jacobian (n, 3) in ``theta``. The tensor spline is
-        first contracted in ``ln e`` and ``u`` (a scalar each) to splines in
-        t, then evaluated once at every sample: the same values as
-        ``spline`` (to rounding), several times cheaper than evaluating it
-        four times."""
-        coef = [self._weights(axis, theta[axis]) for axis in (0, 1)]
-        (i, wi, di), (j, wj, dj) = coef
-        block = self.spline.c[i[0]:i[-1] + 1, j[0]:j[-1] + 1]          # (4, 4, n_t coef)
-        cols = [np.einsum("a,b,abk->k", wi, wj, block)]
-        if deriv:
-            cols += [np.einsum("a,b,abk->k", di, wj, block),
-                     np.einsum("a,b,abk->k", wi, dj, block)]
-        t_spline = BSpline(self.spline.t[2], np.stack(cols, axis=1), 3, extrapolate=True)
+        first contracted in ``ln e`` and ``u`` (a scalar each) to a spline in
+        t, on the coefficients the samples reach, then evaluated once at
+        every sample: the same values as ``spline`` (to rounding), several
+        times cheaper than evaluating it four times. No scipy object is
+        built and checked per call (:mod:`telethermal.ident.bspline`: the
+        same arithmetic as the scipy objects, to the bit)."""
+        (i, wi, di), (j, wj, dj) = [self._weights(axis, theta[axis]) for axis in (0, 1)]
+        axis_t = self._axes[2]
         t = times_s - theta[2]
-        values = t_spline(t)
+        rows = axis_t.rows(t)
+        block = self.spline.c[i[0]:i[-1] + 1, j[0]:j[-1] + 1, rows]      # (4, 4, coef in t)
+        c_g = np.einsum("a,b,abk->k", wi, wj, block)
         if not deriv:
-            return values[:, 0]
-        d_t = BSpline(self.spline.t[2], cols[0], 3, extrapolate=True).derivative()(t)
+            return axis_t.evaluate(c_g, rows, t)
+        cols = np.stack([c_g, np.einsum("a,b,abk->k", di, wj, block),
+                         np.einsum("a,b,abk->k", wi, dj, block)], axis=1)
+        values = axis_t.evaluate(cols, rows, t)
+        d_t = axis_t.evaluate_derivative(c_g, rows, t)
         return values[:, 0], np.column_stack([values[:, 1], values[:, 2], -d_t])
 
     @functools.cached_property
-    def _bases(self):
-        """Every B-spline basis function of the ln e and u axes, and their derivatives."""
-        out = []
-        for knots in self.spline.t[:2]:
-            basis = BSpline(knots, np.eye(len(knots) - 4), 3, extrapolate=True)
-            out.append((knots, basis, basis.derivative()))
-        return out
+    def _axes(self):
+        """The spline's three axes (ln e, u, t): knots and derivative factors."""
+        return [SplineAxis(knots) for knots in self.spline.t]
 
     def _weights(self, axis: int, x: float):
         """The 4 cubic B-spline weights at ``x`` on ``axis`` (0: ln e, 1: u)
         that can be nonzero: (their coefficient indices, weights, derivative
         weights)."""
-        knots, basis, derivative = self._bases[axis]
-        last = int(np.clip(np.searchsorted(knots, x, side="right") - 1, 3, len(knots) - 5))
-        idx = np.arange(last - 3, last + 1)
-        return idx, basis(x)[idx], derivative(x)[idx]
+        return self._axes[axis].weights(float(x))
 
     def nodes(self, times_s: np.ndarray, taus_s: np.ndarray):
         """Every grid node's curve at ``times_s - tau`` for each of ``taus_s``
@@ -388,7 +387,17 @@ class EffusivityEstimator:
         return thetas[int(np.argmax(logl))].copy()
 
     def _fit(self, x, s, start=None):
-        """Damped Newton steps from ``start`` (else the grid's best node)."""
+        """Damped Newton steps from ``start`` (else the grid's best node).
+
+        Done when a step gains under ``1e-9 |value|`` (the objective's
+        resolution: its value wanders by ~1e-10 between points 1e-9 apart),
+        or before evaluating a step that could not: an undamped step under
+        :data:`STEP_SD_MIN` of the conditional posterior sds in every
+        parameter, or a step that lost under that resolution while under
+        :data:`ROUNDING_STEP_SD` sds (at the optimum to rounding: further
+        steps, ever more damped, only wander within the resolution). The
+        fit's result is that of evaluating those steps to within a fraction
+        of the wander (issue 29; ``tests/unit/test_fit_speed.py``)."""
         theta = self._start(x, s) if start is None else np.clip(np.asarray(start, float),
                                                                  self.lo, self.hi)
         value, grad, hess = self._objective(theta, x, s)
@@ -397,13 +406,19 @@ class EffusivityEstimator:
             scale = np.sqrt(np.maximum(np.abs(np.diag(hess)), 1e-300))
             a = -hess / np.outer(scale, scale) + lam * np.eye(3)
             new = np.clip(theta + np.linalg.solve(a, grad / scale) / scale, self.lo, self.hi)
+            size = float(np.max(np.abs(new - theta) * scale))      # in conditional sds
+            if lam <= 1e-3 and size < STEP_SD_MIN:
+                break
             v_new, g_new, h_new = self._objective(new, x, s)
+            resolution = 1e-9 * max(1.0, abs(value))
             if v_new >= value:
-                done = v_new - value < 1e-9 * max(1.0, abs(value))
+                done = v_new - value < resolution
                 theta, value, grad, hess = new, v_new, g_new, h_new
                 lam = max(lam / 10, 1e-9)
                 if done:
                     break
+            elif value - v_new < resolution and size < ROUNDING_STEP_SD:
+                break
             else:
                 lam *= 10
                 if lam > 1e8:
@@ -468,7 +483,7 @@ class EffusivityEstimator:
         amp = (a0 / sa ** 2 + g @ x / s) / (1 / sa ** 2 + g @ g / s) if sa > 0 else a0
         stat = float(np.sum((x - amp * g) ** 2) / s)
         dof = max(len(x) - 4, 1)
-        return stat / dof, bool(chi2.sf(stat, dof) >= FIT_P_MIN)
+        return stat / dof, bool(chdtrc(dof, stat) >= FIT_P_MIN)      # chi2.sf, unchecked
 
     def estimate_contacts(self, contacts: Contacts, window_s: float) -> list[EffusivityEstimate]:
         """Each touch's estimate at its first ``round(window_s * rate) + 1``
