@@ -448,10 +448,9 @@ class EffusivityEstimator:
             tuple(float(v) for v in theta))
 
     def _noise_var(self, x: np.ndarray, gap_k: float, allowance: float = 1.0) -> float:
-        """The samples' variance: the flux noise over the gap and the
-        curves' allowance (see the module), its variance times
-        ``allowance`` (1: the scene's tolerance as it stands; a calibration
-        on reference touches gives another: :mod:`telethermal.ident.intervals`)."""
+        """The samples' variance: the flux noise over the gap and the curves'
+        allowance (see the module) times ``allowance`` (1: the scene's
+        tolerance; calibrated: :mod:`telethermal.ident.intervals`)."""
         return (self.noise_w_m2 / gap_k) ** 2 + \
             allowance * self.model_error_rel ** 2 * float(np.mean(x * x))
 
