@@ -281,6 +281,9 @@ class StreamingIdentifier:
         self._window = index
         last = index == len(model.windows_s_) - 1
         if self._watch and not last:
+            follow = getattr(model, "follow", None)
+            if follow is not None:      # the watched fit, one window at a time
+                follow(np.stack(self._rows)[None], index)
             return None
         x = np.stack(self._rows)[None]
         p = model.proba_normalised(x, index)[0]
