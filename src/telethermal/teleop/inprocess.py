@@ -55,13 +55,16 @@ class InProcessWire:
         self.finger_c = math.nan
         self.news_filter = news_filter
 
-    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float
-                       ) -> MasterDisplay:
+    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float,
+                       idle_scene: Scene | None = None) -> MasterDisplay:
         """The master's display, idled before this touch at its standby: the
         object's temperature, pre-conditioned for what the slave announced
         it expects (object memory) or, for an unknown object, by the idle
-        policy."""
-        idle, shift = display_idle(scene, config, finger_c, self.slave.pad.object_ir_c,
+        policy of ``idle_scene`` (default ``scene``; the trained materials'
+        scene where the touched object is outside them, as a deployed
+        master's policy knows only those)."""
+        idle, shift = display_idle(idle_scene or scene, config, finger_c,
+                                   self.slave.pad.object_ir_c,
                                    self.master.link.expected_material)
         self.display = MasterDisplay(config, self.master.link.generator,
                                      pad_resistance(scene.pad.layers), scene.sensors.flux_lag_s,

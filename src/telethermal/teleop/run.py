@@ -275,7 +275,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
                 realtime: bool | str = False, devices: str = "sim",
                 record: str | Path | None = None, expected_material: str | None = None,
-                news_filter=None) -> SessionResult:
+                news_filter=None, idle_scene: Scene | None = None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -289,7 +289,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
     time of the slave and the display's plant and sensors: other hardware).
     ``news_filter(news, t)``: what the master reads instead of the slave's
     news (:class:`~telethermal.teleop.inprocess.InProcessWire`; a bench's
-    oracle or closed set), None: as the services run."""
+    oracle or closed set), None: as the services run. ``idle_scene``: the
+    scene whose idle policy the display applies (default ``scene``; a bench
+    touching objects outside the trained ones gives the trained scene)."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
     if realtime == "master" and devices != "sim":   # driver and emulator share the calls
@@ -318,7 +320,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # temperature, pre-conditioned for what the slave announced (object
     # memory) or, for an unknown object, by the idle policy (``config.idle``;
     # control/preconditioning.py).
-    master = wire.set_up_display(scene, config, operator.finger_ir_c)
+    master = wire.set_up_display(scene, config, operator.finger_ir_c,
+                                 idle_scene and with_finger(idle_scene))
     idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
