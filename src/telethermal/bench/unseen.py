@@ -21,9 +21,13 @@ code the slave runs (:func:`~telethermal.ident.anytime.decide`, the
 streaming identifier's rule): per material how many touches were named
 (and as what), reported as a new material, or unknown (and why).
 
-Not run yet (part 3, reported as ``not_run`` with the reason): the rendered
-flux and skin error against direct contact for the estimate, the oracle and
-the closed set.
+What the operator feels (part 4, :mod:`telethermal.bench.unseen_render`):
+each material's flux and skin error against direct contact, rendered by the
+in-process session three ways on the very same touches (the live estimate,
+the oracle, the closed set), on a stated subset of touches per material:
+the first :data:`~telethermal.bench.unseen_render.TOUCHES_PER_SEED` session
+seeds of each bench seed (1 with ``quick``). These are the sessions' own
+touches (their own draws of object, pad and operator), not the estimate's.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from typing import Callable
 
 import numpy as np
 
+from telethermal.bench import unseen_render as ur
 from telethermal.errors import SceneError, UnknownMaterialError
 from telethermal.ident.evaluate import wilson_interval
 from telethermal.ident.fitted import log_sd_of_interval
@@ -54,10 +59,8 @@ TARGET_REL_ERROR, TARGET_WINDOW_S, TARGET_COVERAGE = 0.10, 0.5, (0.90, 0.98)
 #: seeds 0 .. seeds-1).
 TRAIN_SEED = 1000
 NOT_RUN = {
-    "flux_rms_rel": "not_run: rendering from the estimate (estimate, oracle, closed_set) is "
-                    "issue 30 part 3",
-    "skin_rms_k": "not_run: rendering from the estimate (estimate, oracle, closed_set) is "
-                  "issue 30 part 3",
+    "flux_rms_rel": "not_run: rendering not asked (render=False)",
+    "skin_rms_k": "not_run: rendering not asked (render=False)",
 }
 
 
@@ -313,12 +316,15 @@ def _targets(materials: dict) -> dict:
 
 
 def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
-        scene: str = "fingertip-7", progress: Callable[[str], None] | None = None) -> dict:
+        scene: str = "fingertip-7", progress: Callable[[str], None] | None = None,
+        render: bool = True) -> dict:
     """Run the benchmark (``seeds`` sessions, seeds 0 .. seeds-1). The
     unseen set: ``unseen`` (package materials) and the objects of the scene
     file ``unseen_scene``; with neither, :data:`DEFAULT_UNSEEN` (less the
     scene's own) and the shipped unseen-objects scene. ``quick``: 3 touches
-    per material and a coarser prior. Returns the report."""
+    per material and a coarser prior, 1 rendered touch per material and
+    seed. ``render``: the rendered columns (:mod:`~telethermal.bench.unseen_render`).
+    Returns the report."""
     from telethermal.data.generate import pad_database
     from telethermal.ident.anytime import decide_all
     from telethermal.ident.effusivity import EffusivityEstimator
@@ -357,6 +363,8 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         if not r["trained"] and r["reported"]["named"]:
             r["reported"]["within_spread"] = within_spread(identifier, m,
                                                            r["reported"]["named_as"])
+    rendering = _render(base, touched, identifier, materials, seeds, quick, step) \
+        if render else "not_run: render=False"
     est = next(iter(estimators.values()))
     return {"benchmark": "unseen", "scene": base.name, "seeds": list(range(seeds)),
             "quick": quick, "windows_s": list(WINDOWS_S), "trained": trained,
@@ -371,7 +379,34 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
                            "outlier_p": identifier.outlier_p,
                            "interval_allowance": identifier.interval_allowance_},
             "materials": materials, "time_per_estimate_s": _timing(rows),
-            "targets": _targets(materials)}
+            "rendering": rendering,
+            "targets": {**_targets(materials), "rendering": ur.targets(materials)}}
+
+
+def _render(base: Scene, touched: Scene, identifier, materials: dict, seeds: int, quick: bool,
+            step) -> dict:
+    """The rendered columns: every material's touches rendered three ways
+    (:func:`~telethermal.bench.unseen_render.render_all`; the display's
+    idle policy the trained scene's), their medians put in ``materials``;
+    returns how they were run."""
+    from telethermal.teleop.models import train_generator
+    from telethermal.teleop.run import with_finger
+
+    step("generator")
+    t0 = time.perf_counter()
+    generator = train_generator(with_finger(base), 0)
+    per_seed = ur.TOUCHES_PER_SEED_QUICK if quick else ur.TOUCHES_PER_SEED
+    rows = ur.render_all(touched, base, list(materials), identifier, generator, range(seeds),
+                         per_seed, step)
+    for m, r in materials.items():
+        r.update(ur.summarise([x for x in rows if x["material"] == m]))
+    return {"contact_s": ur.CONTACT_S, "touches_per_seed": per_seed,
+            "touches_per_material": per_seed * seeds, "modes": list(ur.MODES),
+            "session_seeds": "1000 * seed + j, j < touches_per_seed",
+            "flux_rms_rel_is": ur.KEYS["flux_rms_rel"], "skin_rms_k_is": ur.KEYS["skin_rms_k"],
+            "generator": "network, trained on the trained scene's finger database (seed 0)",
+            "identifier": "the bench's (effusivity-fit, trained on session TRAIN_SEED)",
+            "idle_policy_scene": base.name, "wall_s": time.perf_counter() - t0}
 
 
 def run_and_save(json_path, command: str = "", **kw) -> dict:
@@ -417,7 +452,7 @@ def text_report(report: dict, json_path) -> list[str]:
                          + (f" ({rep['named_then_new']} named {first} before the last "
                             f"window)" if rep["named_then_new"] else "")
                          + f", unknown {rep['unknown']} of {rep['n']}")
-    lines.append("  not run: flux_rms_rel, skin_rms_k (issue 30 part 3)")
+    lines += ur.text_lines(report)
     lines.append(f"wrote {json_path}")
     return lines
 
@@ -431,8 +466,8 @@ def report_section(out, d: dict) -> list[str]:
              f"{', '.join(d['unseen'])}; {len(d['seeds'])} sessions. Median effusivity error "
              f"and 95 % interval coverage at {', '.join(windows)} s; what "
              f"{d['identifier']['method']}'s decisions reported (named, new material; a new "
-             "material named a class before the last window counted in brackets; unknown). "
-             "Rendering from the estimate: not run (part 3).", "",
+             "material named a class before the last window counted in brackets; unknown).",
+             "",
              "| material | e, W s^0.5/(m^2 K) | error | coverage | named | new | unknown |",
              "|---|---|---|---|---|---|---|"]
     for m, r in d["materials"].items():
@@ -447,4 +482,4 @@ def report_section(out, d: dict) -> list[str]:
     cov = d["targets"]["coverage_by_window"]
     lines += ["", "Coverage, every material (target 90-98 %): " + ", ".join(
         f"{k} s {100 * c['rate']:.1f} %" for k, c in cov.items()) + ".", ""]
-    return lines
+    return lines + ur.section_lines(d)

@@ -1,7 +1,8 @@
 """How every driver sets up its display and reports on it: where the pad
 idles before a touch and the pre-conditioning it keeps applying (the idle
 policy, :mod:`telethermal.control.preconditioning`), and the summaries of
-the module's limits and of the safety events over a touch. The in-process
+the module's limits and of the safety events over a touch; what the
+display's skin controller knows of the display (:func:`display_model_args`). The in-process
 run, the services and the simulated network all call these."""
 
 from __future__ import annotations
@@ -11,6 +12,14 @@ import math
 from telethermal.control.safety import safety_event_count
 from telethermal.physics.scene import Scene
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
+
+
+def display_model_args(scene: Scene) -> dict:
+    """What the display's skin controller knows of the display: the pad's
+    layers and the nominal pad-fingertip contact conductance."""
+    return {"pad_layers": tuple(scene.pad.layers),
+            "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
+            "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2}
 
 
 def precondition_for(scene: Scene, finger_c: float):

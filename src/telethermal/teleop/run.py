@@ -36,28 +36,26 @@ from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
 from telethermal.ident.openset import touch_text
-from telethermal.physics.layered import Boundary, Layer, LayeredContact, pad_resistance
+from telethermal.physics.layered import Boundary, Layer, LayeredContact
+from telethermal.physics.layered import pad_resistance  # noqa: F401  (its importers')
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
 from telethermal.physics.thermoelectric import ModuleState, ThermoelectricStack
 from telethermal.devices.readings import PadSensors
-from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
-from telethermal.teleop.display_setup import display_idle, module_summary, safety_summary
-from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.display_setup import (display_idle, display_model_args,  # noqa: F401
+                                              module_summary, safety_summary)
+from telethermal.teleop.inprocess import PRE_CONTACT_S, InProcessWire
+from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.session import ContactRequest, MasterSession, SlaveSession
 from telethermal.teleop.slave import Slave
-from telethermal.wire.messages import Message
 
 #: The fingertip used where a scene has none (the gripper scenes): the
 #: first paper's operator, nominal skin.
 DEFAULT_FINGER = FingerSpec(temp_c=33.0, temp_sd_c=0.8, persons=5, trials_per_person=10,
                             contact_duration_s=60.0, contact_conductance_w_m2k=5000.0,
                             property_sd=0.12)
-PRE_CONTACT_S = 0.2
 AFTER_RELEASE_S = 0.2
 
 
@@ -82,14 +80,6 @@ def display_model(pad_layers: tuple[Layer, ...], t_max_s: float, t_min_s: float)
     """The display pad (junction behind its layers) on a semi-infinite fingertip."""
     return LayeredContact(pad_layers, (Layer(get_material("skin"), math.inf),),
                           Boundary("isothermal"), Boundary("adiabatic"), t_min_s, t_max_s)
-
-
-def display_model_args(scene: Scene) -> dict:
-    """What the display's skin controller knows of the display: the pad's
-    layers and the nominal pad-fingertip contact conductance."""
-    return {"pad_layers": tuple(scene.pad.layers),
-            "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
-            "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2}
 
 
 @dataclass
@@ -284,8 +274,8 @@ class SessionResult:
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
                 realtime: bool | str = False, devices: str = "sim",
-                record: str | Path | None = None, expected_material: str | None = None
-                ) -> SessionResult:
+                record: str | Path | None = None, expected_material: str | None = None,
+                news_filter=None, idle_scene: Scene | None = None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -296,7 +286,12 @@ def run_session(scene: Scene, material: str, identifier, generator,
     announced, pre-conditioned for and rendered from memory at onset.
     ``realtime``: False (simulated clock), True (real clock, the simulated
     world's time charged to the loop) or "master" (the real clock less the
-    time of the slave and the display's plant and sensors: other hardware)."""
+    time of the slave and the display's plant and sensors: other hardware).
+    ``news_filter(news, t)``: what the master reads instead of the slave's
+    news (:class:`~telethermal.teleop.inprocess.InProcessWire`; a bench's
+    oracle or closed set), None: as the services run. ``idle_scene``: the
+    scene whose idle policy the display applies (default ``scene``; a bench
+    touching objects outside the trained ones gives the trained scene)."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
     if realtime == "master" and devices != "sim":   # driver and emulator share the calls
@@ -320,12 +315,13 @@ def run_session(scene: Scene, material: str, identifier, generator,
         memory.learn(material, Estimate(0.0, (), label, 1.0, True, Reason.CONFIDENT_GROUP
                                         if label.is_group else Reason.CONFIDENT), -PRE_CONTACT_S)
     wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material,
-                         memory=memory)
+                         memory=memory, news_filter=news_filter)
     # The master has idled at its standby before this touch: the object's
     # temperature, pre-conditioned for what the slave announced (object
     # memory) or, for an unknown object, by the idle policy (``config.idle``;
     # control/preconditioning.py).
-    master = wire.set_up_display(scene, config, operator.finger_ir_c)
+    master = wire.set_up_display(scene, config, operator.finger_ir_c,
+                                 idle_scene and with_finger(idle_scene))
     idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
     now = [0.0]
@@ -417,80 +413,3 @@ def run_session(scene: Scene, material: str, identifier, generator,
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
         summary["loop"].update(master_step_summary(master_busy_s, config.rate_hz))
     return SessionResult(summary, touch.trace, stats, tuple(master_busy_s))
-
-
-class InProcessWire:
-    """Both sides' session rules (:mod:`telethermal.teleop.session`) joined
-    by a wire with no delay and no loss, for the in-process run: each
-    period the slave reads what the master sent and sends what its rules
-    say, which the master reads before its display step (``master_step``,
-    on the display made by ``set_up_display``)."""
-
-    def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str,
-                 memory: ObjectMemory | None = None):
-        curves = self.curves = sample_curves(generator, [c for c in identifier.classes_
-                                                         if c in generator.materials])
-        self.slave = SlaveSession(curves, rate_hz, memory=memory, measurements=False)
-        self.slave.place(pad, object_id)
-        self.master = MasterSession(SlaveLink(generator=SampledGenerator(curves),
-                                              classes=tuple(pad.classes)))
-        self.master.on_message(self.slave.announcement(-PRE_CONTACT_S).message, -PRE_CONTACT_S)
-        self._to_slave: list[Message] = []
-        self._to_master: list[Message] = []
-        self.slave_t0_s: float | None = None
-        self.display: MasterDisplay | None = None
-        self.idle_c = math.nan
-        self.finger_c = math.nan
-
-    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float
-                       ) -> MasterDisplay:
-        """The master's display, idled before this touch at its standby: the
-        object's temperature, pre-conditioned for what the slave announced
-        it expects (object memory) or, for an unknown object, by the idle
-        policy."""
-        idle, shift = display_idle(scene, config, finger_c, self.slave.pad.object_ir_c,
-                                   self.master.link.expected_material)
-        self.display = MasterDisplay(config, self.master.link.generator,
-                                     pad_resistance(scene.pad.layers), scene.sensors.flux_lag_s,
-                                     finger_c, idle_c=idle, precondition=shift,
-                                     **display_model_args(scene))
-        self.idle_c, self.finger_c = idle, finger_c
-        return self.display
-
-    def to_master(self, m: Message, t: float) -> None:
-        """One message from the slave reaches the master (no delay, one clock)."""
-        self.master.on_message(m, t, 0.0)
-
-    def slave_period(self, t: float, deliver: bool = True) -> None:
-        """The slave's period; what it sends reaches the master now or, not
-        ``deliver``, at :meth:`deliver` (the master's work when timed apart)."""
-        out = []
-        for m in self._to_slave:
-            request, sends, _ = self.slave.on_contact_event(m, t)
-            if request == ContactRequest.TOUCH:
-                self.slave_t0_s = t
-            out += sends
-        self._to_slave = []
-        self._to_master += [send.message for send in out + self.slave.step(t)]
-        if deliver:
-            self.deliver(t)
-
-    def deliver(self, t: float) -> None:
-        pending, self._to_master = self._to_master, []
-        for m in pending:
-            self.to_master(m, t)
-
-    def master_step(self, t: float, dt: float, sensors: PadSensors):
-        """One display period on ``sensors`` with what the slave has said:
-        returns the news it read and its step; what it tells the slave
-        goes on the wire."""
-        news = self.master.news(t, True)
-        step = self.display.step(t, dt, sensors, news)
-        self._to_slave += [s.message for s in self.master.period(step, 0.0, sensors.force_n,
-                                                                 self.finger_c)]
-        return news, step
-
-    def end(self, t_end: float) -> None:
-        """The session is over: a contact still open is lifted on both sides."""
-        self._to_slave += [s.message for s in self.master.close_contact(t_end, None)]
-        self.slave_period(t_end)
