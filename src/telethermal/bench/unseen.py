@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 
 from telethermal.bench import unseen_render as ur
+from telethermal.bench import unseen_trade as ut
 from telethermal.errors import SceneError, UnknownMaterialError
 from telethermal.ident.evaluate import wilson_interval
 from telethermal.ident.fitted import log_sd_of_interval
@@ -326,7 +327,6 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     seed. ``render``: the rendered columns (:mod:`~telethermal.bench.unseen_render`).
     Returns the report."""
     from telethermal.data.generate import pad_database
-    from telethermal.ident.anytime import decide_all
     from telethermal.ident.effusivity import EffusivityEstimator
     from telethermal.ident.prepare import from_trials
 
@@ -346,7 +346,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     build_s = time.perf_counter() - t0
     step("identifier")
     identifier = train_identifier(base, quick)
-    rows = []
+    rows, trade = [], {w: [] for w in (identifier.unseen_weight, *ut.WEIGHTS)}
     for seed in range(seeds):
         step(f"seed {seed}")
         contacts, _ = from_trials(pad_database(touched, np.random.default_rng(seed)),
@@ -354,7 +354,9 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         first = {m: contacts.labels.index(m) for m in dict.fromkeys(contacts.labels)}
         seed_rows = _estimates(estimators, touched, contacts, set(first.values()),
                                getattr(identifier, "allowance_at_s", None))
-        for row, decision in zip(seed_rows, decide_all(identifier, contacts)):
+        for w in trade:
+            trade[w] += ut.decisions(identifier, contacts, w)
+        for row, decision in zip(seed_rows, trade[identifier.unseen_weight][-len(seed_rows):]):
             row["decision"] = decision
         rows += seed_rows
     materials = {m: _material_summary(m, [r for r in rows if r["material"] == m], trained)
@@ -380,6 +382,8 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
                            "interval_allowance": identifier.interval_allowance_},
             "materials": materials, "time_per_estimate_s": _timing(rows),
             "rendering": rendering,
+            "open_set_trade": {f"{w:g}": ut.summary([r["material"] for r in rows], d, trained)
+                               for w, d in trade.items()},
             "targets": {**_targets(materials), "rendering": ur.targets(materials)}}
 
 
@@ -452,6 +456,7 @@ def text_report(report: dict, json_path) -> list[str]:
                          + (f" ({rep['named_then_new']} named {first} before the last "
                             f"window)" if rep["named_then_new"] else "")
                          + f", unknown {rep['unknown']} of {rep['n']}")
+    lines += ut.text_lines(report)
     lines += ur.text_lines(report)
     lines.append(f"wrote {json_path}")
     return lines

@@ -105,7 +105,8 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         if forces is not None:
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
-        step = rule.step(i, p, may_commit=model.may_commit(i), force_outside=outside,
+        step = rule.step(i, model.rule_posterior(p, x[None, :n], i),
+                         may_commit=model.may_commit(i), force_outside=outside,
                          unlike=lambda i=i: bool(model.outside_classes(x[None, :n], i)[0]))
         if step is None:
             continue
@@ -294,7 +295,8 @@ class StreamingIdentifier:
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
-        step = self._rule.step(index, p, may_commit=model.may_commit(index),
+        step = self._rule.step(index, model.rule_posterior(p, x, index),
+                               may_commit=model.may_commit(index),
                                force_outside=outside,
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
         kind, what = step if step is not None else (None, None)

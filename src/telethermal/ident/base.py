@@ -391,6 +391,12 @@ class Identifier:
         (methods that cannot tell return False)."""
         return np.zeros(len(x), dtype=bool)
 
+    def rule_posterior(self, p: np.ndarray, x: np.ndarray, window_index: int) -> np.ndarray:
+        """The posteriors ``p`` (n_classes,) of the touch ``x`` (1, n, C) the
+        anytime rule commits on: ``p`` itself for a closed set (a method
+        with a density of materials outside its classes gives them less)."""
+        return p
+
     # ------------------------------------------------------------ persistence
     def save(self, path: str | Path) -> Path:
         """Write one ``.npz`` (header JSON + arrays), through a temporary file."""

@@ -124,6 +124,16 @@ class EffusivityFit(Identifier):
         finds the scene by :func:`scene_of` (the scene registered under
         that name in the process, else a shipped scene's name or a scene
         file's path).
+    unseen_weight : float
+        The prior weight of a material outside the classes against one
+        class's (0: a closed set, the default; 1: an unseen material as
+        likely as each trained one): the anytime rule commits on the
+        classes' posteriors times one minus the posterior of "another
+        material", whose estimate is spread evenly in ``ln e`` over the
+        estimator's grid (:meth:`rule_posterior`). Early in a touch a
+        class's predictive is wide and an unseen neighbour lies inside it;
+        with a weight the rule waits until the class's density stands above
+        the spread. ``bench unseen`` reports the trade against time.
     outlier_p : float
         A touch beyond every class's two-sided ``1 - outlier_p`` predictive
         interval is outside every class.
@@ -140,20 +150,25 @@ class EffusivityFit(Identifier):
     interval_allowance_ = None
 
     def __init__(self, channels=(FLUX,), scene=None, outlier_p: float = 1e-4,
-                 window_step_s: float = 0.02, **kw):
+                 window_step_s: float = 0.02, unseen_weight: float = 0.0, **kw):
         super().__init__(channels, window_step_s=window_step_s, **kw)
         if tuple(self.channels) != (FLUX,):
             raise IdentificationError(f"effusivity-fit reads the heat flux alone, not "
                                       f"{self.channels}")
         self.scene = scene
         self.outlier_p = outlier_p
+        if not (np.isfinite(unseen_weight) and unseen_weight >= 0):
+            raise IdentificationError(f"unseen_weight must be a finite number >= 0, got "
+                                      f"{unseen_weight!r}")
+        self.unseen_weight = float(unseen_weight)
 
     @property
     def scene_name(self) -> str | None:
         return getattr(self.scene, "name", self.scene)
 
     def hyper(self) -> dict:
-        return {**super().hyper(), "scene": self.scene_name, "outlier_p": self.outlier_p}
+        return {**super().hyper(), "scene": self.scene_name, "outlier_p": self.outlier_p,
+                "unseen_weight": self.unseen_weight}
 
     def fit(self, contacts):
         if not self.scene:
@@ -282,6 +297,21 @@ class EffusivityFit(Identifier):
             return np.zeros((len(x), len(params["n"])))
         z, dof, scale = self._t_terms(params, x)
         return student_t.logpdf(z, dof[None]) - np.log(scale)[None]
+
+    def rule_posterior(self, p, x, window_index):
+        """``p`` times ``1 - P(another material | estimate)`` at the window:
+        the classes' predictive densities of the touch's ``ln e`` (uniform
+        priors) against ``unseen_weight`` times a density even in ``ln e``
+        over the estimator's grid (:attr:`unseen_weight`)."""
+        params = self.params_[window_index]
+        if self.unseen_weight == 0 or "means" not in params:
+            return p
+        est, _ = self.estimator()
+        log_other = np.log(self.unseen_weight) - np.log(est.hi[0] - est.lo[0])
+        log_f = self._logits(params, self._window(x, self.windows_s_[window_index]))[0]
+        top = max(float(np.max(log_f)), log_other)
+        other = np.exp(log_other - top)
+        return np.asarray(p) * (1.0 - other / (other + float(np.sum(np.exp(log_f - top)))))
 
     def outside_classes(self, x, window_index):
         params = self.params_[window_index]

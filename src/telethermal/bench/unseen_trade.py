@@ -1,0 +1,70 @@
+"""``bench unseen``'s open-set trade: the same touches decided by the same
+identifier with its prior weight of an unseen material at 0 (a closed set,
+the default) and at :data:`WEIGHTS` (``EffusivityFit.unseen_weight``): per
+weight, the trained touches named right and when (the first commitment,
+a pair's included), and the unseen touches named a trained class or pair at
+any time (at the end, or before a revision to a new material). Speed
+against the issue's "no unseen material named as a trained one"."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: The weights reported beside the identifier's own (1: an unseen material
+#: as likely as each trained one).
+WEIGHTS = (1.0,)
+
+
+def decisions(identifier, contacts, weight: float) -> list:
+    """``decide_all`` with the identifier's ``unseen_weight`` set to
+    ``weight`` for the call (its own afterwards)."""
+    from telethermal.ident.anytime import decide_all
+
+    own = identifier.unseen_weight
+    identifier.unseen_weight = float(weight)
+    try:
+        return decide_all(identifier, contacts)
+    finally:
+        identifier.unseen_weight = own
+
+
+def _named_trained(d) -> bool:
+    """Named a trained class or pair at any time."""
+    if d.label.is_new:
+        return bool(getattr(d, "revised_from", None))
+    return not d.label.is_unknown
+
+
+def summary(labels, decided, trained) -> dict:
+    """One weight's figures over ``decided`` (decisions, aligned with
+    ``labels``)."""
+    per = {}
+    for m in dict.fromkeys(labels):
+        ds = [d for lab, d in zip(labels, decided) if lab == m]
+        times = [d.time_first_s if d.time_first_s is not None else d.time_s for d in ds
+                 if d.time_s is not None and not d.label.is_new]
+        per[m] = {"n": len(ds), "named_right": sum(str(d.label) == m for d in ds),
+                  "named_trained_ever": sum(_named_trained(d) for d in ds),
+                  "first_decision_s_p50": float(np.median(times)) if times else None}
+    tr = [r for m, r in per.items() if m in trained]
+    un = [r for m, r in per.items() if m not in trained]
+    return {"materials": per,
+            "trained_named_right": sum(r["named_right"] for r in tr),
+            "trained_n": sum(r["n"] for r in tr),
+            "unseen_named_trained_ever": sum(r["named_trained_ever"] for r in un),
+            "unseen_n": sum(r["n"] for r in un)}
+
+
+def text_lines(report: dict) -> list[str]:
+    trade = report.get("open_set_trade")
+    if not isinstance(trade, dict):
+        return []
+    lines = ["  open-set trade (unseen_weight: trained named right, first decision p50 per "
+             "material; unseen named a trained class at any time):"]
+    for w, s in trade.items():
+        t50 = ", ".join(f"{m} {r['first_decision_s_p50']:.2f}"
+                        for m, r in s["materials"].items()
+                        if m in report["trained"] and r["first_decision_s_p50"] is not None)
+        lines.append(f"    weight {w}: trained {s['trained_named_right']}/{s['trained_n']} "
+                     f"({t50} s); unseen {s['unseen_named_trained_ever']}/{s['unseen_n']}")
+    return lines
