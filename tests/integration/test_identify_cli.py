@@ -177,3 +177,22 @@ def test_bench_identify_on_a_labs_own_scene(tmp_path, capsys):
     # 4 trials of each material, one group each: 4 groups, so 4 folds, said.
     assert "effusivity-lda: 4 folds by group (4 groups, 8 trials)" in printed
     assert "note: 5 folds asked, 4 groups: 4 folds" in printed
+
+
+def test_the_unseen_weight_is_effusivity_fits_and_kept_in_its_model(gripper_db, tmp_path,
+                                                                    capsys):
+    from telethermal.ident.registry import load_model
+
+    capsys.readouterr()
+    assert main(["identify", "train", "--data", str(gripper_db), "--method", "effusivity-lda",
+                 "--unseen-weight", "1", "--out", str(tmp_path / "lda.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "--unseen-weight" in err and "effusivity-lda" in err
+    assert not (tmp_path / "lda.npz").exists()
+    assert main(["identify", "train", "--data", str(gripper_db), "--method", "effusivity-fit",
+                 "--unseen-weight", "-1", "--out", str(tmp_path / "bad.npz")]) == 2
+    assert "unseen_weight" in capsys.readouterr().err
+    assert main(["identify", "train", "--data", str(gripper_db), "--method", "effusivity-fit",
+                 "--max-window-s", "0.2", "--unseen-weight", "1",
+                 "--out", str(tmp_path / "fit.npz")]) == 0
+    assert load_model(tmp_path / "fit.npz").unseen_weight == 1.0

@@ -26,7 +26,8 @@ def cmd_identify_train(args) -> int:
     from telethermal.ident.registry import train_on_dataset
 
     trained = train_on_dataset(args.data, args.method, args.channels, args.max_window_s,
-                               args.out, status=console.status, logger=log)
+                               args.out, status=console.status, logger=log,
+                               unseen_weight=args.unseen_weight)
     model = trained.model
     print(f"{trained.path}: {args.method} on {', '.join(model.classes_)}; "
           f"{len(model.windows_s_)} windows up to {model.windows_s_[-1]} s; "
@@ -73,6 +74,10 @@ def add_parser(sub) -> None:
                    help="comma-separated channels (default heat_flux_W_m2)")
     p.add_argument("--max-window-s", type=_positive(), default=1.0)
     p.add_argument("--out", required=True, help="model file to write (.npz)")
+    p.add_argument("--unseen-weight", type=float, default=None, metavar="W",
+                   help="effusivity-fit: the prior weight of a material outside the classes "
+                        "against one class's (default 0: a closed set; 1: as likely as each; "
+                        "bench unseen shows the trade)")
     p.set_defaults(func=cmd_identify_train)
     p = isub.add_parser("eval", help="score a model on a dataset")
     p.add_argument("--model", required=True)

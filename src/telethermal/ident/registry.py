@@ -93,15 +93,24 @@ class Trained:
 
 
 def train_on_dataset(data: str | Path, method: str, channels, max_window_s: float,
-                     out: str | Path, status=nullcontext, logger=log) -> Trained:
+                     out: str | Path, status=nullcontext, logger=log,
+                     unseen_weight: float | None = None) -> Trained:
     """Fit a ``method`` identifier on the dataset folder ``data`` and save it
     to ``out``, with the dataset's scene (when it has a record of one).
     ``status(text)``: a context manager held while reading and fitting;
-    ``logger`` warns of trials left out."""
+    ``logger`` warns of trials left out. ``unseen_weight``: effusivity-fit's
+    prior weight of a material outside the classes (its default if None)."""
+    extra = {}
+    if unseen_weight is not None:
+        if method != "effusivity-fit":
+            raise IdentificationError(f"--unseen-weight is effusivity-fit's (it weighs a "
+                                      f"material outside the classes by its effusivity "
+                                      f"estimate); {method} has none")
+        extra["unseen_weight"] = unseen_weight
     with status(f"reading {data}"):
         trials = load_dataset(data)
     model = make(method, scene=dataset_scene(data), channels=channels,
-                 max_window_s=max_window_s)
+                 max_window_s=max_window_s, **extra)
     contacts, skipped = from_trials(trials, model.channels, max_s=max_window_s)
     if skipped:
         logger.warning("%d trial(s) with a gap under %g K left out of training", len(skipped),
