@@ -10,25 +10,17 @@ import pytest
 from scipy.stats import t as student_t
 
 from telethermal.bench.unseen import package_objects, touch_scene
-from telethermal.data.generate import pad_database
 from telethermal.errors import IdentificationError
 from telethermal.ident.anytime import decide_all
 from telethermal.ident.fitted import EffusivityFit
-from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import load_model, make
-from telethermal.physics.scene import load_scene
 
-SCENE = load_scene("fingertip-7")
-MAX_S = 0.3
-
-
-def _contacts(scene, seed):
-    return from_trials(list(pad_database(scene, np.random.default_rng(seed))), max_s=MAX_S)[0]
+from fitcases import SCENE, MAX_S, contacts as _contacts
 
 
 @pytest.fixture(scope="module")
-def model():
-    return make("effusivity-fit", scene="fingertip-7", max_window_s=MAX_S).fit(_contacts(SCENE, 0))
+def model(fit_model_0_3s):
+    return fit_model_0_3s
 
 
 def test_the_class_density_is_the_t_predictive_of_the_training_touches(model):

@@ -6,7 +6,7 @@ intervals hold the reference touches' table effusivities, split-conformally
 (``ident.intervals``); the flux noise stays the sensor's.
 
 The model: effusivity-fit on fingertip-7's seed-0 touches, windows up to
-0.3 s (as tests/unit/test_open_set.py)."""
+0.3 s (tests/unit/fitcases.py)."""
 
 import dataclasses
 import math
@@ -14,25 +14,17 @@ import math
 import numpy as np
 import pytest
 
-from telethermal.data.generate import pad_database
 from telethermal.ident.effusivity import Z95
 from telethermal.ident.intervals import (ALLOWANCE_BOUNDS, allowance_factor, log_e_variance,
                                          variance_terms)
-from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import load_model, make
-from telethermal.physics.scene import load_scene
 
-SCENE = load_scene("fingertip-7")
-MAX_S = 0.3
-
-
-def _contacts(seed):
-    return from_trials(list(pad_database(SCENE, np.random.default_rng(seed))), max_s=MAX_S)[0]
+from fitcases import SCENE, contacts as _contacts
 
 
 @pytest.fixture(scope="module")
-def model():
-    return make("effusivity-fit", scene="fingertip-7", max_window_s=MAX_S).fit(_contacts(0))
+def model(fit_model_0_3s):
+    return fit_model_0_3s
 
 
 def _covered(r, vn, va, f):
@@ -102,7 +94,7 @@ def test_the_variance_terms_give_the_estimators_own_interval_at_any_allowance(mo
     0.3 s v(0.05) is over twice v(0) + 0.05 (v(1) - v(0)) on these touches),
     which is why the split keeps the terms, not two variances."""
     est, gap_k = model.estimator()
-    x = _contacts(3).x
+    x = _contacts(SCENE, 3).x
     for i in (0, 25):
         row = np.ascontiguousarray(x[i, :31, 0])
         fit = est.estimate(row, gap_k)
@@ -127,7 +119,7 @@ def test_the_fit_calibrates_every_tenth_of_a_second_and_the_reading_uses_it(mode
     assert model.allowance_at_s(0.02) == cal["allowance"][0]
     assert model.allowance_at_s(0.15) == pytest.approx(np.mean(cal["allowance"][:2]))
     est, gap_k = model.estimator()
-    x = _contacts(3).x[:1]
+    x = _contacts(SCENE, 3).x[:1]
     i = model.windows_s_.index(0.3)
     reading = model.effusivity_reading(x, i)
     row = np.ascontiguousarray(x[0, :31, 0])
@@ -147,7 +139,7 @@ def test_the_calibration_survives_a_model_file_and_an_older_file_reads_uncalibra
 def test_classes_of_no_known_material_are_not_calibrated():
     """A recording's own labels name no material of the table: the
     intervals stay the estimator's own (nothing to calibrate against)."""
-    contacts = _contacts(0)
+    contacts = _contacts(SCENE, 0)
     renamed = dataclasses.replace(contacts,
                                   labels=[f"object-{c}" for c in contacts.labels])
     fitted = make("effusivity-fit", scene="fingertip-7", max_window_s=0.1).fit(renamed)

@@ -7,42 +7,25 @@ The model: effusivity-fit on fingertip-7's seed-0 touches, windows up to
 0.3 s (as tests/unit/test_effusivity_fit.py: the fits are cheap and
 shared); the unseen touches are session 3's of the package's materials."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 from scipy.stats import t as student_t
 
-from telethermal.bench.unseen import TARGET_REL_ERROR, package_objects, touch_scene
-from telethermal.data.generate import pad_database
+from telethermal.bench.unseen import TARGET_REL_ERROR
 from telethermal.ident.anytime import (NEW_MATERIAL, Estimate, StreamingIdentifier, decide,
                                        decide_all)
 from telethermal.ident.label import Label, Reason
 from telethermal.ident.fitted import MIN_SAMPLES
 from telethermal.ident.openset import describe, reading_of
-from telethermal.ident.prepare import from_trials
-from telethermal.ident.registry import make
 from telethermal.physics.materials import get_material
-from telethermal.physics.scene import load_scene
 from telethermal.teleop.memory import ObjectMemory, Verdict
 
-SCENE = load_scene("fingertip-7")
-MAX_S = 0.3
-
-
-def _contacts(scene, seed):
-    return from_trials(list(pad_database(scene, np.random.default_rng(seed))), max_s=MAX_S)[0]
-
-
-def _unseen(material, seed=3):
-    objects = package_objects([material], SCENE.materials, SCENE.objects[0].temp_c,
-                              SCENE.objects[0].thickness_m)
-    return _contacts(touch_scene(dataclasses.replace(SCENE, objects=()), objects), seed)
+from fitcases import unseen as _unseen
 
 
 @pytest.fixture(scope="module")
-def model():
-    return make("effusivity-fit", scene="fingertip-7", max_window_s=MAX_S).fit(_contacts(SCENE, 0))
+def model(fit_model_0_3s):
+    return fit_model_0_3s
 
 
 def _window_at(model, t_s):

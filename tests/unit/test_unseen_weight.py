@@ -6,40 +6,22 @@ estimator's grid. Checked against the closed form, and on touches: copper
 is not committed to aluminium early with the weight, and is without it.
 
 The model: effusivity-fit on fingertip-7's seed-0 touches, windows up to
-0.3 s (as tests/unit/test_open_set.py)."""
-
-import dataclasses
+0.3 s (tests/unit/fitcases.py)."""
 
 import numpy as np
 import pytest
 from scipy.stats import t as student_t
 
-from telethermal.bench.unseen import package_objects, touch_scene
-from telethermal.data.generate import pad_database
 from telethermal.errors import IdentificationError
 from telethermal.ident.anytime import decide
-from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import load_model, make
-from telethermal.physics.scene import load_scene
 
-SCENE = load_scene("fingertip-7")
-MAX_S = 0.3
-
-
-def _contacts(scene, seed):
-    return from_trials(list(pad_database(scene, np.random.default_rng(seed))), max_s=MAX_S)[0]
-
-
-def _unseen(material, seed=3):
-    objects = package_objects([material], SCENE.materials, SCENE.objects[0].temp_c,
-                              SCENE.objects[0].thickness_m)
-    return _contacts(touch_scene(dataclasses.replace(SCENE, objects=()), objects), seed)
+from fitcases import SCENE, contacts as _contacts, unseen as _unseen
 
 
 @pytest.fixture(scope="module")
-def model():
-    return make("effusivity-fit", scene="fingertip-7", max_window_s=MAX_S).fit(
-        _contacts(SCENE, 0))
+def model(fit_model_0_3s):
+    return fit_model_0_3s
 
 
 def test_the_rule_posterior_is_the_closed_form(model):

@@ -5,29 +5,20 @@ last window, and the decisions are the very same (each window's fit starts
 from the previous one's either way). Counted in fits, not timed.
 
 The model: effusivity-fit on fingertip-7's seed-0 touches, windows up to
-0.3 s (as tests/unit/test_open_set.py)."""
+0.3 s (tests/unit/fitcases.py)."""
 
-import numpy as np
 import pytest
 
-from telethermal.data.generate import pad_database
 from telethermal.ident import fitted
 from telethermal.ident.anytime import StreamingIdentifier
 from telethermal.ident.effusivity import EffusivityEstimator
-from telethermal.ident.prepare import from_trials
-from telethermal.ident.registry import make
-from telethermal.physics.scene import load_scene
 
-SCENE = load_scene("fingertip-7")
-
-
-def _contacts(seed):
-    return from_trials(list(pad_database(SCENE, np.random.default_rng(seed))), max_s=0.3)[0]
+from fitcases import SCENE, contacts as _contacts
 
 
 @pytest.fixture(scope="module")
-def model():
-    return make("effusivity-fit", scene="fingertip-7", max_window_s=0.3).fit(_contacts(0))
+def model(fit_model_0_3s):
+    return fit_model_0_3s
 
 
 def _stream(model, x, gap_k, monkeypatch):
@@ -56,7 +47,7 @@ def _stream(model, x, gap_k, monkeypatch):
 
 
 def test_a_watched_touch_fits_one_window_at_a_time_and_decides_the_same(model, monkeypatch):
-    held = _contacts(3)
+    held = _contacts(SCENE, 3)
     checked = 0
     for j in range(len(held)):
         if held.labels[j] not in ("aluminium", "wood"):
