@@ -28,10 +28,9 @@ def scene():
 
 
 @pytest.fixture(scope="module")
-def estimator(scene):
-    """A small estimator (coarse grid and prior: the tests' budget)."""
-    return EffusivityEstimator.for_scene(scene, max_s=WINDOW_S, n_e=21, n_h=5, n_prior=300,
-                                         n_sessions=5)
+def estimator(small_estimator_0_5s):
+    """A small estimator (tests/unit/conftest.py; WINDOW_S its max_s)."""
+    return small_estimator_0_5s
 
 
 def _scaled(material: Material, factor: float) -> Material:
