@@ -260,7 +260,7 @@ def _material_summary(name: str, rows: list[dict], trained) -> dict:
         out["effusivity_rel_error"][key] = float(np.median(err))
         out["interval_coverage"][key] = {"rate": hit / len(ests), "covered": hit,
                                          "n": len(ests), "ci": wilson_interval(hit, len(ests))}
-        laplace = sum(r["laplace"][w].covers(true_e) for r in rows)
+        laplace = sum(r.get("laplace", r["windows"])[w].covers(true_e) for r in rows)
         out["interval_coverage_laplace"][key] = {"rate": laplace / len(ests), "covered": laplace,
                                                  "n": len(ests)}
         out["interval_width_rel"][key] = float(np.median(

@@ -105,7 +105,7 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         if forces is not None:
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
-        step = rule.step(i, model.rule_posterior(p, x[None, :n], i),
+        step = rule.step(i, rule_posterior(model, p, x[None, :n], i),
                          may_commit=model.may_commit(i), force_outside=outside,
                          unlike=lambda i=i: bool(model.outside_classes(x[None, :n], i)[0]))
         if step is None:
@@ -131,6 +131,13 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+def rule_posterior(model, p: np.ndarray, x: np.ndarray, window_index: int) -> np.ndarray:
+    """The posteriors the rule commits on (``Identifier.rule_posterior``;
+    ``p`` itself for a model without it)."""
+    get = getattr(model, "rule_posterior", None)
+    return p if get is None else get(p, x, window_index)
 
 
 def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decision:
@@ -295,7 +302,7 @@ class StreamingIdentifier:
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
-        step = self._rule.step(index, model.rule_posterior(p, x, index),
+        step = self._rule.step(index, rule_posterior(model, p, x, index),
                                may_commit=model.may_commit(index),
                                force_outside=outside,
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
