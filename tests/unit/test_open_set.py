@@ -79,13 +79,15 @@ def test_the_text_of_a_decision():
 
 def test_foam_far_below_every_class_is_a_new_material_with_its_estimate(model):
     """Foam (e 42, wood the lowest trained at 470): every touch a new
-    material at the last window, nearest wood; its estimate inside its own
+    material from its first windows (0.06 s measured: outside every class
+    with its own interval at two windows in a row, ``anytime.EarlyNew``),
+    not at the last window, nearest wood; its estimate inside its own
     interval and within the issue's 10 % (median) of the table's effusivity."""
     held = _unseen("foam")
     decisions = decide_all(model, held)
     assert [str(d.label) for d in decisions] == ["new material"] * len(held)
     assert all(d.reason == Reason.NEW_MATERIAL and d.nearest == "wood" for d in decisions)
-    assert all(d.time_s == model.windows_s_[-1] for d in decisions)
+    assert all(d.time_s <= 0.1 for d in decisions), [d.time_s for d in decisions]
     for d in decisions:
         assert d.effusivity_lo_w_s05_m2k <= d.effusivity_w_s05_m2k <= d.effusivity_hi_w_s05_m2k
         assert d.confidence >= 1 - model.outlier_p

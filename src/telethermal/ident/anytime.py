@@ -99,6 +99,7 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     rule = AnytimeRule(model.threshold, model.confirm_windows)
     group = None
     best = 0.0
+    early = EarlyNew(model.confirm_windows)
     for i, p in enumerate(path):
         best = float(np.max(p))
         outside = False
@@ -108,6 +109,11 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         step = rule.step(i, rule_posterior(model, p, x[None, :n], i),
                          may_commit=model.may_commit(i), force_outside=outside,
                          unlike=lambda i=i: bool(model.outside_classes(x[None, :n], i)[0]))
+        new = early.step(model, x[None, :n], i, step is None and group is None and not outside)
+        if new is not None:
+            t = model.windows_s_[i]
+            return Decision(NEW_MATERIAL, new_material_confidence(new), t, Reason.NEW_MATERIAL,
+                            t, **reading_fields(new, True))
         if step is None:
             continue
         kind, what = step
@@ -131,6 +137,26 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+class EarlyNew:
+    """A new material before the last window: where nothing commits at a
+    window the calibration lets commit and the touch's estimate lies
+    outside every class, with its own uncertainty too (:func:`_new_material`,
+    the last window's test), at ``confirm`` windows in a row. Foam (e 42,
+    wood the lowest class at 470) is one from its first windows; an unseen
+    material inside a class's early predictive is not (it is checked at the
+    last window)."""
+
+    def __init__(self, confirm: int):
+        self.confirm, self.run = max(1, int(confirm)), 0
+
+    def step(self, model, x: np.ndarray, i: int, may: bool):
+        """The reading of a new material decided at window ``i``, else None;
+        ``may``: nothing committed here, no group standing, the force in range."""
+        reading = _new_material(model, x, i) if may and model.may_commit(i) else None
+        self.run = self.run + 1 if reading is not None else 0
+        return reading if self.run >= self.confirm else None
 
 
 def rule_posterior(model, p: np.ndarray, x: np.ndarray, window_index: int) -> np.ndarray:
@@ -245,6 +271,7 @@ class StreamingIdentifier:
         #: estimates the effusivity: the touch is watched to the last window.
         self._watch = False
         self._rule = AnytimeRule(model.threshold, model.confirm_windows)
+        self._early = EarlyNew(model.confirm_windows)
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
                                  False)
@@ -308,7 +335,12 @@ class StreamingIdentifier:
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
         kind, what = step if step is not None else (None, None)
         reading = None
-        if outside and held is None:
+        early = self._early.step(model, x, index, step is None and held is None and not outside)
+        if early is not None:
+            est = Estimate(t_s, tuple(p), NEW_MATERIAL, new_material_confidence(early), True,
+                           Reason.NEW_MATERIAL)
+            reading = early
+        elif outside and held is None:
             est = Estimate(t_s, tuple(p), UNKNOWN if last else model.classes_[k], float(p[k]),
                            last, FORCE_OUTSIDE if last else Reason.UNDECIDED)
         elif outside:
