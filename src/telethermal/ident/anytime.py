@@ -12,8 +12,9 @@ temperature), when the contact lies outside every learnt class and the
 identifier has no estimate of the object to report, or when the confidence
 never reaches the threshold within the contact. An identifier that
 estimates the object's effusivity (``effusivity-fit``) reports a touch whose
-estimate lies outside every class at the last window as a **new material**
-with its estimate (:mod:`telethermal.ident.openset`); its estimates carry the
+estimate lies outside every class at the last window (or, with its own
+interval, at two windows in a row before it: :class:`EarlyNew`) as a **new
+material** with its estimate (:mod:`telethermal.ident.openset`); its estimates carry the
 window's effusivity and 95 % interval throughout.
 
 Two materials may stay ambiguous (the first paper merges aluminium with
