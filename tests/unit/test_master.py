@@ -1,8 +1,6 @@
 """The master's display loop on the simulated plant: tracking against the
 exact direct-contact solution, hand-over, the skin band and the safe state."""
 
-import math
-
 import numpy as np
 import pytest
 
@@ -15,8 +13,9 @@ from telethermal.physics.scene import finger_contact_model, load_scene
 from telethermal.render.generator import NetworkGenerator
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
-from telethermal.teleop.run import display_model, pad_resistance
-from telethermal.devices.sim_plant import DisplayPlant
+from telethermal.teleop.run import pad_resistance
+
+from displayloop import display_periods
 
 SCENE = load_scene("fingertip-7")
 FINGER_C, OBJECT_C, H = 33.0, 24.0, 5000.0
@@ -56,29 +55,12 @@ def decided(material, classes=("plexiglass", "steel")):
 
 def run(gen, news_at, seconds=3.0, config=static(), fault_at=None, pre_s=0.1):
     """Drive the master on the plant; ``news_at(t)`` gives the slave's news."""
-    dt = 1.0 / config.rate_hz
     layers = tuple(SCENE.pad.layers)
     master = MasterDisplay(config, gen, pad_resistance(layers), TAU, FINGER_C, idle_c=OBJECT_C)
-    plant, rows = None, []
-    junction = OBJECT_C
-    for k in range(int(round((pre_s + seconds) * config.rate_hz))):
-        t = k * dt - pre_s
-        touching = t >= 0
-        if touching and plant is None:
-            plant = DisplayPlant(display_model(layers, seconds + 1, dt), junction, FINGER_C, H,
-                                 dt, TAU)
-        r = plant.read() if touching else None
-        flux = r.flux_w_m2 if r else 0.0
-        if fault_at and fault_at[0] <= t < fault_at[1]:
-            flux = math.nan
-        force = 10.0 if touching else 0.0
-        step = master.step(t, dt, PadSensors(flux, r.pad_surface_c if r else junction, force),
-                           news_at(t))
-        junction = step.junction_applied_c
-        if touching:
-            plant.step(junction)
-        rows.append((t, r.contact_flux_w_m2 if r else 0.0, junction, step.safe, step.phase,
-                     r.pad_surface_c if r else junction))
+    rows = [(t, r.contact_flux_w_m2 if r else 0.0, step.junction_applied_c, step.safe,
+             step.phase, r.pad_surface_c if r else step.junction_applied_c)
+            for t, r, step in display_periods(master, news_at, layers, seconds, config.rate_hz,
+                                              pre_s, OBJECT_C, FINGER_C, H, TAU, fault_at)]
     return master, rows
 
 
@@ -293,24 +275,12 @@ def test_the_hand_over_from_the_mixture_to_the_decision_has_no_step():
 
 
 def _desired_trace(gen, news_at, seconds=0.8, pre_s=0.1, rate=1000.0):
-    dt = 1.0 / rate
     layers = tuple(SCENE.pad.layers)
     master = MasterDisplay(static(), gen, pad_resistance(layers), TAU, FINGER_C,
                            idle_c=OBJECT_C)
-    plant, junction, out = None, OBJECT_C, []
-    for k in range(int(round((pre_s + seconds) * rate))):
-        t = k * dt - pre_s
-        if t >= 0 and plant is None:
-            plant = DisplayPlant(display_model(layers, seconds + 1, dt), junction, FINGER_C, H,
-                                 dt, TAU)
-        r = plant.read() if plant else None
-        step = master.step(t, dt, PadSensors(r.flux_w_m2 if r else 0.0,
-                                             r.pad_surface_c if r else junction,
-                                             10.0 if t >= 0 else 0.0), news_at(t))
-        junction = step.junction_applied_c
-        if plant:
-            plant.step(junction)
-        out.append(step.desired_flux_w_m2)
+    out = [step.desired_flux_w_m2
+           for _, _, step in display_periods(master, news_at, layers, seconds, rate, pre_s,
+                                             OBJECT_C, FINGER_C, H, TAU)]
     return out
 
 

@@ -8,8 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from telethermal.devices.readings import PadSensors
-from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import ControlError
 from telethermal.ident.anytime import Estimate
 from telethermal.physics.contact import (contact_flux_sensed_w_m2, contact_flux_w_m2,
@@ -19,7 +17,9 @@ from telethermal.physics.scene import load_scene
 from telethermal.render.generator import ContactGenerator
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
 from telethermal.teleop.rendering import Estimated, estimated_target
-from telethermal.teleop.run import display_model, pad_resistance
+from telethermal.teleop.run import pad_resistance
+
+from displayloop import display_periods
 
 SCENE = load_scene("fingertip-7")
 FINGER_C, OBJECT_C, H = 33.0, 24.0, 5000.0
@@ -52,7 +52,6 @@ def run(news_at, seconds, impedance, rate=1000.0, pre_s=0.1, object_c=OBJECT_C):
     """The master on the simulated display (nominal skin, conductance H);
     returns (master, rows of (t, finger's flux, skin surface, desired,
     junction applied, 1/e handed to the impedance controller))."""
-    dt = 1.0 / rate
     layers = tuple(SCENE.pad.layers)
     config = DisplayConfig(rate_hz=rate) if impedance else \
         DisplayConfig(rate_hz=rate, feedforward_model="static")
@@ -67,23 +66,13 @@ def run(news_at, seconds, impedance, rate=1000.0, pre_s=0.1, object_c=OBJECT_C):
             seen.append(inverse_e)
             return inner(pad_c, obj_c, inverse_e)
         master.impedance.command_impedance = spy
-    plant, junction, rows = None, object_c, []
-    for k in range(int(round((pre_s + seconds) * rate))):
-        t = k * dt - pre_s
-        if t >= 0 and plant is None:
-            plant = DisplayPlant(display_model(layers, seconds + 1, dt), junction, FINGER_C, H,
-                                 dt, TAU)
-        r = plant.read() if plant else None
-        n_seen = len(seen)
-        step = master.step(t, dt, PadSensors(r.flux_w_m2 if r else 0.0,
-                                             r.pad_surface_c if r else junction,
-                                             10.0 if t >= 0 else 0.0), news_at(t))
-        junction = step.junction_applied_c
+    rows, n_seen = [], 0
+    for t, r, step in display_periods(master, news_at, layers, seconds, rate, pre_s, object_c,
+                                      FINGER_C, H, TAU):
         rows.append((t, r.contact_flux_w_m2 if r else 0.0, r.skin_surface_c if r else FINGER_C,
-                     step.desired_flux_w_m2, junction,
+                     step.desired_flux_w_m2, step.junction_applied_c,
                      seen[-1] if len(seen) > n_seen else math.nan))
-        if plant:
-            plant.step(junction)
+        n_seen = len(seen)
     return master, np.array(rows, dtype=float)
 
 

@@ -24,6 +24,14 @@ def model(fit_model_0_3s):
     return fit_model_0_3s
 
 
+@pytest.fixture(autouse=True)
+def _weight_put_back(model):
+    """The model is the session's (fit_model_0_3s): its weight goes back to
+    0 after every test here, whatever failed."""
+    yield
+    model.unseen_weight = 0.0
+
+
 def test_the_rule_posterior_is_the_closed_form(model):
     """q = w u / (w u + sum_k t_(n_k - 1)(z_k) / s_k), u = 1 / (ln e_max -
     ln e_min), at a copper touch's windows (to 1e-12); weight 0 leaves p as
