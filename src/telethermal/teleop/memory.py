@@ -68,6 +68,51 @@ EVIDENCE_FLOOR = 1e-3
 CHANGE_TOUCHES = 2
 #: The threshold of the announcement when none is given (the identifiers' default).
 THRESHOLD = 0.99
+#: The two-sided 95 % point of the normal: an estimate's interval in ``ln e``
+#: is its estimate +- Z95 sd.
+Z95 = 1.959963984540054
+
+
+@dataclass(frozen=True)
+class Effusivity:
+    """A new material's remembered estimate, in ``ln e`` (W s^0.5/(m^2 K))."""
+    log_e: float
+    sd: float                    # of ln e: (ln hi - ln lo) / (2 Z95); pooled: the sharpest
+    weight: float = math.nan     # the sum of the touches' 1 / sd^2 (nan: one touch's)
+
+    @property
+    def total_weight(self) -> float:
+        return self.sd ** -2 if math.isnan(self.weight) else self.weight
+
+    @classmethod
+    def of(cls, estimate) -> "Effusivity | None":
+        """An estimate's effusivity and interval; None without them (or unusable)."""
+        e = getattr(estimate, "effusivity_w_s05_m2k", None)
+        lo = getattr(estimate, "effusivity_lo_w_s05_m2k", None)
+        hi = getattr(estimate, "effusivity_hi_w_s05_m2k", None)
+        if e is None or lo is None or hi is None or \
+                not all(math.isfinite(v) and v > 0 for v in (e, lo, hi)) or not lo <= e <= hi:
+            return None
+        return cls(math.log(e), max((math.log(hi) - math.log(lo)) / (2 * Z95), 1e-9))
+
+    def pooled(self, other: "Effusivity") -> "Effusivity":
+        """The inverse-variance mean of the two; the sharper one's sd (see
+        the module: the touches share errors that averaging cannot remove)."""
+        w1, w2 = self.total_weight, other.total_weight
+        return Effusivity((w1 * self.log_e + w2 * other.log_e) / (w1 + w2),
+                          min(self.sd, other.sd), w1 + w2)
+
+    def consistent(self, other: "Effusivity") -> bool:
+        """The two estimates' difference holds 0 at 95 %."""
+        return abs(self.log_e - other.log_e) <= Z95 * math.hypot(self.sd, other.sd)
+
+    @property
+    def fields(self) -> dict:
+        """Its effusivity and 95 % interval ends, W s^0.5/(m^2 K), by the
+        estimate's field names."""
+        return {"effusivity_w_s05_m2k": math.exp(self.log_e),
+                "effusivity_lo_w_s05_m2k": math.exp(self.log_e - Z95 * self.sd),
+                "effusivity_hi_w_s05_m2k": math.exp(self.log_e + Z95 * self.sd)}
 
 
 class Agreement(StrEnum):
@@ -100,6 +145,8 @@ class Remembered:
     t_s: float
     touches: int
     posteriors: dict = field(default_factory=dict)     # class -> the memory's posterior
+    #: A new material's estimate (``material`` "new material"), else None.
+    effusivity: Effusivity | None = None
 
 
 @dataclass
@@ -107,8 +154,10 @@ class _Evidence:
     log_p: dict                  # class -> summed log evidence
     touches: int
     t_s: float
-    streak: list                 # (label, log evidence) of the disagreeing touches in a row
+    streak: list                 # (label, log evidence, Effusivity | None) of the
+    #                              disagreeing touches in a row
     agreed: Label | None         # the sharpest decision while none disagreed; None after one
+    effusivity: Effusivity | None = None    # the new-material touches' pooled estimate
 
 
 def touch_evidence(estimate: Estimate, classes) -> dict:
@@ -182,8 +231,10 @@ class ObjectMemory:
         if ev.agreed is not None:        # no touch disagreed: what they decided, sharpest
             label = ev.agreed
             conf = sum(post.get(m, 0.0) for m in label.members)
-        return None if label is None else Remembered(str(label), conf, ev.t_s, ev.touches,
-                                                     post)
+        if label is None:
+            return None
+        return Remembered(str(label), conf, ev.t_s, ev.touches, post,
+                          ev.effusivity if label.is_new else None)
 
     def learn(self, object_id: str | None, estimate: Estimate | None, t_s: float,
               classes=None) -> Verdict:
@@ -192,35 +243,42 @@ class ObjectMemory:
         if object_id is None or not learnable(estimate):
             return Verdict.IGNORED
         fresh = touch_evidence(estimate, classes)
+        fresh_e = Effusivity.of(estimate) if estimate.label.is_new else None
         old = self._known.get(object_id)
         if old is None:
-            self._known[object_id] = _Evidence(fresh, 1, t_s, [], Label(estimate.label))
+            self._known[object_id] = _Evidence(fresh, 1, t_s, [], Label(estimate.label),
+                                               fresh_e)
             self.counters[Verdict.LEARNED] += 1
             log.info("object %s: learnt %s (confidence %.3f)", object_id, estimate.label,
                      estimate.confidence)
             return Verdict.LEARNED
         before = self.recall(object_id)
         held = Label(before.material) if before else None
-        disagrees = held is not None and \
-            agreement(held, estimate.label) == Agreement.DISAGREES
-        streak = old.streak + [(estimate.label, fresh)] if disagrees else []
+        disagrees = held is not None and (
+            agreement(held, estimate.label) == Agreement.DISAGREES or
+            _other_new(held, old.effusivity, fresh_e))
+        streak = old.streak + [(estimate.label, fresh, fresh_e)] if disagrees else []
+        last, _, last_e = streak[-1] if streak else (None, None, None)
         if len(streak) >= CHANGE_TOUCHES and all(
-                set(a.members) & set(streak[-1][0].members) for a, _ in streak):
+                set(a.members) & set(last.members) and not _other_new(a, e, last_e)
+                for a, _, e in streak):
             log_p = streak[0][1]
-            for _, ev in streak[1:]:
+            for _, ev, _e in streak[1:]:
                 log_p = _add(log_p, ev)
-            labels = [a for a, _ in streak]
+            labels = [a for a, _, _e in streak]
             agreed = min(labels, key=lambda a: len(a.members)) \
                 if all(agreement(a, b) != Agreement.DISAGREES
                        for a in labels for b in labels) else None
-            self._known[object_id] = _Evidence(log_p, len(streak), t_s, [], agreed)
+            self._known[object_id] = _Evidence(log_p, len(streak), t_s, [], agreed,
+                                               _pool(e for _a, _ev, e in streak))
             verdict = Verdict.REPLACED
         else:
             agreed = None if disagrees or old.agreed is None else (
                 Label(estimate.label) if agreement(old.agreed, estimate.label) ==
                 Agreement.SHARPER else old.agreed)
+            pooled = old.effusivity if disagrees else _pool((old.effusivity, fresh_e))
             self._known[object_id] = _Evidence(_add(old.log_p, fresh), old.touches + 1, t_s,
-                                               streak, agreed)
+                                               streak, agreed, pooled)
             after = self.recall(object_id)
             verdict = _verdict(held, None if after is None else Label(after.material),
                                disagrees)
@@ -248,8 +306,25 @@ class ObjectMemory:
             out[name] = {"material": r.material if r else None,
                          "confidence": r.confidence if r else None, "t_s": ev.t_s,
                          "touches": ev.touches,
-                         "posteriors": {c: round(p, 6) for c, p in sorted(post.items())}}
+                         "posteriors": {c: round(p, 6) for c, p in sorted(post.items())},
+                         **(r.effusivity.fields if r and r.effusivity else {})}
         return out
+
+
+def _other_new(held: Label, held_e: Effusivity | None, fresh_e: Effusivity | None) -> bool:
+    """A new material's touch whose estimate is inconsistent with the held
+    new material's: another new material (a disagreement)."""
+    return Label(held).is_new and held_e is not None and fresh_e is not None and \
+        not held_e.consistent(fresh_e)
+
+
+def _pool(estimates) -> Effusivity | None:
+    """The pooled estimate of those given (None ones skipped)."""
+    out = None
+    for e in estimates:
+        if e is not None:
+            out = e if out is None else out.pooled(e)
+    return out
 
 
 def _verdict(held: Label | None, now: Label | None, disagrees: bool) -> Verdict:
@@ -286,9 +361,17 @@ def agreement(held: str, fresh: str) -> Agreement:
     return Agreement.DISAGREES
 
 
-def remembered_estimate(material: str, confidence: float, classes) -> Estimate:
+def remembered_estimate(material: str, confidence: float, classes,
+                        effusivity: dict | None = None) -> Estimate:
     """The estimate the master renders from an announcement, at t = 0: one
-    material, or a pair's members weighted equally."""
-    these = Label(material).members
+    material, or a pair's members weighted equally; a new material with its
+    ``effusivity`` fields (:attr:`Effusivity.fields`), the classes equally
+    likely (it is none of them)."""
+    label = Label(material)
+    if label.is_new:
+        n = max(len(classes), 1)
+        return Estimate(0.0, (1.0 / n,) * len(classes), NEW_MATERIAL, float(confidence), True,
+                        FROM_MEMORY, **(effusivity or {}))
+    these = label.members
     return Estimate(0.0, tuple(1.0 / len(these) if c in these else 0.0 for c in classes),
                     material, float(confidence), True, FROM_MEMORY)

@@ -269,12 +269,14 @@ class SessionResult:
     #: The loop's record and the master's step times (s): to pool sessions.
     loop_stats: LoopStats | None = None
     master_step_s: tuple = ()
+    #: The slave's final estimate (what its object memory learns of the touch).
+    slave_estimate: Estimate | None = None
 
 
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
                 realtime: bool | str = False, devices: str = "sim",
-                record: str | Path | None = None, expected_material: str | None = None,
+                record: str | Path | None = None, expected_material=None,
                 news_filter=None, idle_scene: Scene | None = None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
@@ -282,8 +284,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     read through the real drivers). ``record``: an MCAP file to record the
     session to (:mod:`telethermal.record.recording`). ``expected_material``:
     the slave's object memory holds it for this object (an earlier touch
-    decided it), so the touch runs as a repeated one does in the services:
-    announced, pre-conditioned for and rendered from memory at onset.
+    decided it; a label, or that touch's decided ``Estimate``: a new
+    material's carries its effusivity), so the touch runs as a repeated one
+    does in the services: announced, pre-conditioned for and rendered from
+    memory at onset.
     ``realtime``: False (simulated clock), True (real clock, the simulated
     world's time charged to the loop) or "master" (the real clock less the
     time of the slave and the display's plant and sensors: other hardware).
@@ -310,7 +314,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # with no delay: the slave's pad goes down when the master's onset
     # reaches it, the master renders what the slave sends (its sampled curves).
     memory = ObjectMemory()
-    if expected_material is not None:   # an earlier touch of this object decided it
+    if isinstance(expected_material, Estimate):     # an earlier touch's own decision
+        memory.learn(material, expected_material, -PRE_CONTACT_S, classes=identifier.classes_)
+    elif expected_material is not None:   # an earlier touch of this object decided it
         label = Label.parse(expected_material)
         memory.learn(material, Estimate(0.0, (), label, 1.0, True, Reason.CONFIDENT_GROUP
                                         if label.is_group else Reason.CONFIDENT), -PRE_CONTACT_S)
@@ -400,7 +406,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "gains": asdict(config.gains), "contact_s": contact_s,
         "operator": asdict(operator), "object_true_c": slave.object_true_c,
         "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
-        "display_idle_c": idle, "expected_material": expected_material,
+        "display_idle_c": idle,
+        "expected_material": None if expected_material is None else
+        str(getattr(expected_material, "label", expected_material)),
         **metrics, **safety_summary(master),
         "clock": {False: "simulated", True: "real", "master": WORLD_PAUSED}[realtime],
         "loop": stats.summary(),
@@ -412,4 +420,4 @@ def run_session(scene: Scene, material: str, identifier, generator,
     if realtime:
         summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
         summary["loop"].update(master_step_summary(master_busy_s, config.rate_hz))
-    return SessionResult(summary, touch.trace, stats, tuple(master_busy_s))
+    return SessionResult(summary, touch.trace, stats, tuple(master_busy_s), est)

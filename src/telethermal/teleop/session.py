@@ -157,9 +157,12 @@ class SlaveSession:
         """The object under the pad and what the memory holds for it (6b):
         the object fields of a :class:`ContactEvent`."""
         known = self.memory.recall(self.object_id)
+        remembered_e = {} if known is None or known.effusivity is None else \
+            {f"object_{k}": v for k, v in known.effusivity.fields.items()}
         return {"object_id": self.object_id,
                 "object_material": None if known is None else str(known.material),
-                "object_confidence": None if known is None else float(known.confidence)}
+                "object_confidence": None if known is None else float(known.confidence),
+                **remembered_e}
 
     def announcement(self, now: float) -> Send:
         """The object announcement (on ``place`` and to a new master)."""

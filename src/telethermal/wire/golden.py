@@ -35,6 +35,15 @@ EXAMPLES = {
     "contact_event.object": {"contact_id": 0, "touching": False, "t_s": 1230.5,
                              "force_n": 0.0, "object_temp_c": 23.75, "object_id": "cup-2",
                              "object_material": "steel", "object_confidence": 0.9921875},
+    # The same for an object remembered as a new material, with the memory's
+    # estimate of it (section 6b).
+    "contact_event.object_new": {"contact_id": 0, "touching": False, "t_s": 1230.5,
+                                 "force_n": 0.0, "object_temp_c": 23.75,
+                                 "object_id": "glass-1", "object_material": "new material",
+                                 "object_confidence": 0.998046875,
+                                 "object_effusivity_w_s05_m2k": 1390.0,
+                                 "object_effusivity_lo_w_s05_m2k": 1270.0,
+                                 "object_effusivity_hi_w_s05_m2k": 1520.0},
     "material_estimate": {"contact_id": 3, "t_since_contact_s": 0.25,
                           "classes": ["plexiglass", "steel"], "posteriors": [0.125, 0.875],
                           "label": "steel", "confidence": 0.875, "decided": False,

@@ -134,6 +134,9 @@ class ContactEvent(Message):
     object_id: str | None = ABSENT
     object_material: str | None = ABSENT
     object_confidence: float | None = ABSENT
+    object_effusivity_w_s05_m2k: float | None = ABSENT
+    object_effusivity_lo_w_s05_m2k: float | None = ABSENT
+    object_effusivity_hi_w_s05_m2k: float | None = ABSENT
 
     @property
     def names_object(self) -> bool:

@@ -147,6 +147,16 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
         Field("object_confidence", "float", lo=0, hi=1, required=False, nullable=True,
               doc="the object memory's posterior of object_material (section 6b); nil "
                   "with object_material"),
+        Field("object_effusivity_w_s05_m2k", "float", _E, lo=0, required=False,
+              nullable=True,
+              doc="with object_material 'new material': the object memory's effusivity "
+                  "estimate of it (section 6b); else nil or absent"),
+        Field("object_effusivity_lo_w_s05_m2k", "float", _E, lo=0, required=False,
+              nullable=True, doc="its 95 % interval's lower end (with "
+                                 "object_effusivity_w_s05_m2k)"),
+        Field("object_effusivity_hi_w_s05_m2k", "float", _E, lo=0, required=False,
+              nullable=True, doc="its 95 % interval's upper end (with "
+                                 "object_effusivity_w_s05_m2k)"),
     ), "the master's operator touched or lifted; the slave's pad touched or left"),
     Kind("material_estimate", "control", "slave->master", ESTIMATE_FIELDS,
          "decisions only: sent each time the decided label changes (a commitment to a class, "
