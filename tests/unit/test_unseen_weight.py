@@ -120,3 +120,31 @@ def test_bench_unseens_trade_counts_what_was_said(model):
     lines = ut.text_lines({"open_set_trade": {"0": s[0.0], "1": s[1.0]},
                            "trained": SCENE.materials})
     assert lines[1].startswith("    weight 0: trained ") and "unseen " in lines[2]
+
+
+def test_inside_at_commit_reads_the_named_classs_predictive_at_the_naming_window(model):
+    """bench unseen's breakdown of the namings: a wood touch named wood at
+    0.06 s (where the rule first commits) lies inside wood's predictive
+    there; a foam touch
+    (ln e 3.7, wood's 6.2 the lowest class) named aluminium at the same
+    window does not; a touch never named gives None."""
+    from telethermal.bench import unseen_trade as ut
+    from telethermal.ident.anytime import Decision
+    from telethermal.ident.label import NEW_MATERIAL, Reason
+
+    wood, foam = _contacts(SCENE, 3), _unseen("foam")
+    t = model.windows_s_[2]
+    assert t == pytest.approx(0.06)
+    named = [Decision(name, 0.999, t, Reason.CONFIDENT, t) for name in ("wood", "aluminium")]
+    got = [ut.inside_at_commit(model, c, [d])[0] for c, d in
+           ((_first(wood, "wood"), named[0]), (_first(foam, "foam"), named[1]))]
+    assert got == [True, False]
+    new = Decision(NEW_MATERIAL, 0.99, t, Reason.NEW_MATERIAL, t)
+    assert ut.inside_at_commit(model, _first(foam, "foam"), [new]) == [None]
+
+
+class _first:
+    """The first touch of ``material`` in ``held``, as inside_at_commit reads it."""
+
+    def __init__(self, held, material):
+        self.x = held.x[list(held.labels).index(material)][None]

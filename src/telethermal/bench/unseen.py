@@ -347,6 +347,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     step("identifier")
     identifier = train_identifier(base, quick)
     rows, trade = [], {w: [] for w in (identifier.unseen_weight, *ut.WEIGHTS)}
+    inside = {w: [] for w in trade}
     for seed in range(seeds):
         step(f"seed {seed}")
         contacts, _ = from_trials(pad_database(touched, np.random.default_rng(seed)),
@@ -355,7 +356,9 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         seed_rows = _estimates(estimators, touched, contacts, set(first.values()),
                                getattr(identifier, "allowance_at_s", None))
         for w in trade:
-            trade[w] += ut.decisions(identifier, contacts, w)
+            decided = ut.decisions(identifier, contacts, w)
+            trade[w] += decided
+            inside[w] += ut.inside_at_commit(identifier, contacts, decided)
         for row, decision in zip(seed_rows, trade[identifier.unseen_weight][-len(seed_rows):]):
             row["decision"] = decision
         rows += seed_rows
@@ -382,7 +385,8 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
                            "interval_allowance": identifier.interval_allowance_},
             "materials": materials, "time_per_estimate_s": _timing(rows),
             "rendering": rendering,
-            "open_set_trade": {f"{w:g}": ut.summary([r["material"] for r in rows], d, trained)
+            "open_set_trade": {f"{w:g}": ut.summary([r["material"] for r in rows], d, trained,
+                                                    inside[w])
                                for w, d in trade.items()},
             "targets": {**_targets(materials), "rendering": ur.targets(materials)}}
 
