@@ -183,3 +183,22 @@ def test_a_class_inconsistent_with_the_remembered_new_material_overrules_it():
     link.on_message(estimate(2, 0.1, label="steel", decided=True, p_steel=0.995), 0.0)
     assert link.estimate.label == "steel" and link.counters["memory_overruled"] == 2
 
+
+
+
+def test_a_new_material_doubting_a_class_keeps_its_estimate_for_later():
+    """One touch named graphite, then two new materials: the first leaves
+    nothing announced (doubted), the second makes the new material what
+    the evidence supports; announced with both touches' pooled estimate,
+    the doubting touch's included."""
+    memory = ObjectMemory(0.99)
+    memory.learn("cup", Estimate(1.0, (0.995, 0.004, 0.001), "graphite", 0.995, True,
+                                 Reason.CONFIDENT), 1.0, TRAINED)
+    a, b = _new(1390.0, 1270.0, 1520.0), _new(1450.0, 1300.0, 1620.0)
+    assert memory.learn("cup", a, 2.0, TRAINED) == Verdict.DOUBTED
+    assert memory.recall("cup") is None
+    memory.learn("cup", b, 3.0, TRAINED)
+    got = memory.recall("cup")
+    assert got is not None and got.material == "new material"
+    want = Effusivity.of(a).pooled(Effusivity.of(b))
+    assert got.effusivity.log_e == pytest.approx(want.log_e, abs=1e-12)

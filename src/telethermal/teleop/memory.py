@@ -276,7 +276,11 @@ class ObjectMemory:
             agreed = None if disagrees or old.agreed is None else (
                 Label(estimate.label) if agreement(old.agreed, estimate.label) ==
                 Agreement.SHARPER else old.agreed)
-            pooled = old.effusivity if disagrees else _pool((old.effusivity, fresh_e))
+            # A new material's estimate is pooled whatever the label's verdict
+            # (one named against a class may yet be what the evidence
+            # supports), unless it is inconsistent with the estimate held.
+            pooled = old.effusivity if old.effusivity is not None and fresh_e is not None \
+                and not old.effusivity.consistent(fresh_e) else _pool((old.effusivity, fresh_e))
             self._known[object_id] = _Evidence(_add(old.log_p, fresh), old.touches + 1, t_s,
                                                streak, agreed, pooled)
             after = self.recall(object_id)
