@@ -4,7 +4,8 @@
 Touches of fingertip-7's 7 trained materials and of materials outside them
 (by default copper, carbon steel, glass and foam from the package's table,
 and brass and concrete from ``unseen_objects/unseen-objects.toml``'s own
-table) are simulated on the same pad and instruments: a copy of the scene
+table, with that file's layered object: a glass slide on aluminium,
+reported by :mod:`telethermal.bench.unseen_layered`) are simulated on the same pad and instruments: a copy of the scene
 whose objects are the trained ones and the unseen ones
 (:func:`touch_scene`), through the generator's own ``pad_database``, one
 session per seed. Each touch's effusivity is estimated by
