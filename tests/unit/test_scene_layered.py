@@ -53,8 +53,8 @@ def test_a_layered_object_is_parsed_with_its_stack_and_name():
 
 
 def test_a_plain_object_may_be_named():
-    scene = parse(HEAD.replace('material = "wood"', 'material = "wood"\nname = "oak block"'))
-    assert scene.materials == ["oak block"] and scene.objects[0].material == "wood"
+    scene = parse(HEAD.replace('material = "wood"', 'material = "wood"\nname = "oak-block"'))
+    assert scene.materials == ["oak-block"] and scene.objects[0].material == "wood"
 
 
 @pytest.mark.parametrize("change,needles", [
@@ -69,8 +69,10 @@ def test_a_plain_object_may_be_named():
     (('[["aluminium", 0.02]]', '[]'), ["'base' must be a non-empty list"]),
     (('[["aluminium", 0.02]]', '"aluminium"'), ["'base' must be a non-empty list"]),
     (('thickness_m = 0.001', 'thickness_m = 0'), ["[[objects]] #2", "'thickness_m'"]),
-    (('name = "plexiglass-on-aluminium"', 'name = "wood"'), ["'wood'", "appear twice"]),
     (('name = "plexiglass-on-aluminium"', 'name = ""'), ["[[objects]] #2", "'name'"]),
+    (('name = "plexiglass-on-aluminium"', 'name = "a|b"'), ["[[objects]] #2", "'|' joins"]),
+    (('name = "plexiglass-on-aluminium"', 'name = "oak block"'), ["'name' = 'oak block'"]),
+    (('name = "plexiglass-on-aluminium"', 'name = "aluminium"'), ["is a material's name"]),
     (('name = "plexiglass-on-aluminium"', 'name = 3'), ["[[objects]] #2", "'name' must be"]),
     (('base =', 'bases ='), ["'bases'", "did you mean 'base'"]),
 ])
@@ -83,9 +85,11 @@ def test_bad_layered_objects_name_the_file_the_object_and_the_field(change, need
         assert needle in message
 
 
-def test_two_plain_objects_of_one_material_are_refused():
+def test_two_objects_of_one_name_are_refused():
     with pytest.raises(SceneError, match=r"lab\.toml: \[\[objects\]\]: the name\(s\) 'wood'"):
         parse(HEAD + '[[objects]]\nmaterial = "wood"\n')
+    with pytest.raises(SceneError, match=r"the name\(s\) 'plexiglass-on-aluminium' appear twice"):
+        parse(HEAD + LAYERED + LAYERED)
 
 
 def test_the_contact_model_is_the_objects_stack_on_the_pad_and_the_finger():

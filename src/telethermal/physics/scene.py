@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -21,8 +22,9 @@ from pathlib import Path
 
 from telethermal.errors import SceneError
 from telethermal.physics.layered import Boundary, Layer
-from telethermal.physics.materials import (get_material, read_table, register_materials,
-                                           shadowed_by, unregister_materials)
+from telethermal.physics.materials import (get_material, load_materials, read_table,
+                                           register_materials, shadowed_by,
+                                           unregister_materials)
 from telethermal.physics.model import ModelChoice, choose_model
 from telethermal.physics.scenereader import TableReader as _Reader
 from telethermal.physics.scenereader import read_layers, read_material
@@ -251,6 +253,9 @@ def _parse_finger(table, source) -> FingerSpec:
 
 #: The keys an ``[[objects]]`` table may hold.
 OBJECT_KEYS = ("material", "temp_c", "thickness_m", "base", "name")
+#: What an object's ``name`` may be: it names trial files and identifier
+#: classes, and is listed with commas and paired with '|'.
+OBJECT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
 #: An object's thickness (and each of its base layers'), m.
 OBJECT_THICKNESS_RANGE_M = (1e-6, 10.0)
 
@@ -289,12 +294,16 @@ def _parse_object(table, r: _Reader, room_c) -> ObjectSpec:
     thickness = r.num("thickness_m", 0.02, lo, hi)
     base = () if "base" not in table else read_layers(
         table["base"], r, "base", roles=("object",), thickness_range_m=(lo, hi))
-    label = "" if "name" not in table else r.text("name").strip()
+    label = "" if "name" not in table else r.text("name")
     r.used.add("name")
     if base and not label:
         r.fail(f"a layered object (material {material!r} with a 'base') needs a 'name'")
-    if "name" in table and not label:
-        r.fail("'name' must not be empty")
+    if "name" in table and not OBJECT_NAME.fullmatch(label):
+        r.fail(f"'name' = {label!r}: a letter or digit, then letters, digits, '_', '-', '.' "
+               "or '+' (it names trial files and labels; '|' joins a pair, ',' lists)")
+    if label and label != material and label in load_materials():
+        r.fail(f"'name' = {label!r} is a material's name; the object (of {material!r}) "
+               "would be read as that material wherever its name is looked up")
     return ObjectSpec(material, float(temp), thickness, base, label)
 
 
