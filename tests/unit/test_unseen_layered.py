@@ -90,3 +90,57 @@ def test_by_the_last_window_it_moved_toward_the_base_beyond_the_intervals(touche
     drift = unseen_layered.drift(rows, EARLY_S, LATE_S, aluminium)
     assert drift["toward_base_beyond_intervals"] == drift["n"] == TOUCHES
     assert drift["ratio_min"] > 1.0
+
+
+# ------------------------------------------------- the bench's figures for it
+def _estimate(e, half_rel=0.05, fits=True):
+    from telethermal.ident.effusivity import EffusivityEstimate
+    return EffusivityEstimate(e, (e * (1 - half_rel), e * (1 + half_rel)), 0.01, 0.5, 51,
+                              3000.0, -0.005, 1.0, fits, False, (np.log(e), 0.0, -0.005))
+
+
+def _rows(late_factors, early=1620.0):
+    """Touches whose estimate is ``early`` until the last window, then
+    ``early * f``."""
+    return [{"windows": {w: _estimate(early * (f if w == unseen.WINDOWS_S[-1] else 1.0))
+                         for w in unseen.WINDOWS_S}} for f in late_factors]
+
+
+def test_the_bench_reports_a_layered_object_by_its_stack_and_drift_not_its_error():
+    slide = layered_object()
+    rows = _rows([1.5, 1.06, 0.8])          # beyond its intervals up; overlapping; down
+    out = unseen._material_summary(slide.name, rows, BASE.materials, slide)
+    assert out["layered"] and out["effusivity_w_s05_m2k"] is None
+    assert [la["material"] for la in out["stack"]] == ["glass", "aluminium"]
+    assert out["surface_effusivity_w_s05_m2k"] == pytest.approx(1620, rel=1e-3)
+    assert out["estimate_p50_w_s05_m2k"]["0.1"] == pytest.approx(1620.0)
+    assert out["estimate_p50_w_s05_m2k"]["1"] == pytest.approx(1620.0 * 1.06)
+    d = out["drift"]
+    assert (d["n"], d["toward_base"], d["intervals_disjoint"],
+            d["toward_base_beyond_intervals"]) == (3, 2, 2, 1)
+    assert out["effusivity_rel_error"].startswith("not_applicable")
+    assert out["interval_coverage"].startswith("not_applicable")
+    # left out of the targets and the pooled coverage, and said so
+    glass = unseen._material_summary("glass", _rows([1.0] * 2), BASE.materials)
+    targets = unseen._targets({slide.name: out, "glass": glass})
+    assert targets["coverage_by_window"]["1"]["n"] == 2
+    assert slide.name not in targets["unseen_rel_error_within_10pct_by_0.5_s"]
+    assert targets["left_out_layered"]["objects"] == [slide.name]
+    line = unseen_layered.text_line(slide.name, out)
+    assert "glass 1 mm (e 1620) on aluminium 30 mm (e 20100)" in line
+    assert "beyond the intervals 1 of 3" in line and "no single true effusivity" in line
+
+
+def test_its_rendering_is_not_judged_against_an_oracle_it_has_not():
+    from telethermal.bench import unseen_render as ur
+    modes = {"estimate": {k: 0.02 for k in ur.KEYS}, "closed_set": {k: 0.021 for k in ur.KEYS}}
+    for m in modes.values():
+        m["safety_events"] = 0
+    row = {"material": "x", "seed": 0, "identified": "new material", "oracle": None,
+           "oracle_not_run": unseen_layered.ORACLE_NOT_RUN, **modes}
+    summary = ur.summarise([row])
+    assert summary["flux_rms_rel"]["oracle"] is None
+    assert summary["rendered"]["oracle_not_run"].startswith("not_run")
+    material = {"trained": False, "layered": True, **summary}
+    verdict = ur.targets({"x": material})["unseen"]["x"]["flux_rms_rel"]
+    assert verdict["not_judged"].startswith("not_run") and "met" not in verdict

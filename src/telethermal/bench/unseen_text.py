@@ -72,6 +72,9 @@ def report_section(out, d: dict) -> list[str]:
                      f"{rep.get('named', '-')} | {rep.get('new', '-')}"
                      f"{f' ({first})' if first else ''} | {rep.get('unknown', '-')} |")
     cov = d["targets"]["coverage_by_window"]
+    left = (d["targets"].get("left_out_layered") or {}).get("objects")
     lines += ["", "Coverage, every material (target 90-98 %): " + ", ".join(
-        f"{k} s {100 * c['rate']:.1f} %" for k, c in cov.items()) + ".", ""]
+        f"{k} s {100 * c['rate']:.1f} %" for k, c in cov.items())
+        + (f" ({', '.join(left)} left out: layered, no single true effusivity)" if left
+           else "") + ".", ""]
     return lines + ur.section_lines(d)
