@@ -88,7 +88,8 @@ def test_bad_layered_objects_name_the_file_the_object_and_the_field(change, need
 def test_two_objects_of_one_name_are_refused():
     with pytest.raises(SceneError, match=r"lab\.toml: \[\[objects\]\]: the name\(s\) 'wood'"):
         parse(HEAD + '[[objects]]\nmaterial = "wood"\n')
-    with pytest.raises(SceneError, match=r"the name\(s\) 'plexiglass-on-aluminium' appear twice"):
+    with pytest.raises(SceneError, match=r"the name\(s\) 'plexiglass-on-aluminium' appear twice "
+                                         r"\('plexiglass-on-aluminium' in #2 and #3; 'name'"):
         parse(HEAD + LAYERED + LAYERED)
 
 

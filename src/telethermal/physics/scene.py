@@ -271,9 +271,11 @@ def _parse_objects(items, source, room_c) -> tuple[ObjectSpec, ...]:
     names = [o.name for o in objects]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
+        where = "; ".join(f"{n!r} in " + " and ".join(
+            f"#{i + 1}" for i, m in enumerate(names) if m == n) for n in twice)
         raise SceneError(f"{source}: [[objects]]: the name(s) {', '.join(map(repr, twice))} "
-                         f"appear twice (an object's name, or its material when it has none, "
-                         f"must be unique): {names}")
+                         f"appear twice ({where}; 'name', else the material, must be "
+                         f"unique): {names}")
     return tuple(objects)
 
 
