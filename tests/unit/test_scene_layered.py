@@ -73,6 +73,7 @@ def test_a_plain_object_may_be_named():
     (('name = "plexiglass-on-aluminium"', 'name = "a|b"'), ["[[objects]] #2", "'|' joins"]),
     (('name = "plexiglass-on-aluminium"', 'name = "oak block"'), ["'name' = 'oak block'"]),
     (('name = "plexiglass-on-aluminium"', 'name = "aluminium"'), ["is a material's name"]),
+    (('name = "plexiglass-on-aluminium"', 'name = "plexiglass"'), ["is a material's name"]),
     (('name = "plexiglass-on-aluminium"', 'name = 3'), ["[[objects]] #2", "'name' must be"]),
     (('base =', 'bases ='), ["'bases'", "did you mean 'base'"]),
 ])

@@ -303,7 +303,7 @@ def _parse_object(table, r: _Reader, room_c) -> ObjectSpec:
     if "name" in table and not OBJECT_NAME.fullmatch(label):
         r.fail(f"'name' = {label!r}: a letter or digit, then letters, digits, '_', '-', '.' "
                "or '+' (it names trial files and labels; '|' joins a pair, ',' lists)")
-    if label and label != material and label in load_materials():
+    if label in load_materials() and (base or label != material):
         r.fail(f"'name' = {label!r} is a material's name; the object (of {material!r}) "
                "would be read as that material wherever its name is looked up")
     return ObjectSpec(material, float(temp), thickness, base, label)
