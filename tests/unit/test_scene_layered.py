@@ -115,3 +115,13 @@ def test_the_shipped_scenes_objects_are_plain_and_named_by_their_material():
         scene = load_scene(name)
         assert all(isinstance(o, ObjectSpec) and o.name == o.material and not o.layered
                    for o in scene.objects)
+
+
+def test_every_key_an_object_may_hold_is_documented():
+    from pathlib import Path
+
+    from telethermal.physics.scene import OBJECT_KEYS
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "scenes.md").read_text()
+    objects = doc[doc.index("## `[[objects]]`"):]
+    assert not [k for k in OBJECT_KEYS if f"| `{k}` |" not in objects]
