@@ -5,10 +5,10 @@ Touches of fingertip-7's 7 trained materials and of materials outside them
 (by default copper, carbon steel, glass and foam from the package's table,
 and brass and concrete from ``unseen_objects/unseen-objects.toml``'s own
 table, with that file's layered object: a glass slide on aluminium,
-reported by :mod:`telethermal.bench.unseen_layered`) are simulated on the same pad and instruments: a copy of the scene
-whose objects are the trained ones and the unseen ones
-(:func:`touch_scene`), through the generator's own ``pad_database``, one
-session per seed. Each touch's effusivity is estimated by
+reported by :mod:`telethermal.bench.unseen_layered`) are simulated on the
+same pad and instruments: a copy of the scene whose objects are the trained
+ones and the unseen ones (:func:`touch_scene`), through the generator's own
+``pad_database``, one session per seed. Each touch's effusivity is estimated by
 :class:`~telethermal.ident.effusivity.EffusivityEstimator` at the windows
 :data:`WINDOWS_S`; per material: the median relative error, the share of
 touches whose 95 % interval holds the true effusivity (with its Wilson
@@ -66,6 +66,10 @@ NOT_RUN = {
     "flux_rms_rel": "not_run: rendering not asked (render=False)",
     "skin_rms_k": "not_run: rendering not asked (render=False)",
 }
+
+
+#: How the report names the shipped unseen scene (not by this machine's path).
+SHIPPED_UNSEEN_SCENE = "shipped: telethermal/bench/unseen_objects/unseen-objects.toml"
 
 
 def default_unseen_scene_path() -> str:
@@ -389,7 +393,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     return {"benchmark": "unseen", "scene": base.name, "seeds": list(range(seeds)),
             "quick": quick, "windows_s": list(WINDOWS_S), "trained": trained,
             "unseen": [o.name for o in objects],
-            "unseen_scene": path,
+            "unseen_scene": SHIPPED_UNSEEN_SCENE if path == default_unseen_scene_path() else path,
             "estimator": {"build_s": build_s, "model_error_rel": est.model_error_rel,
                           "effusivity_grid_w_s05_m2k": [float(np.exp(est.family.log_e[0])),
                                                         float(np.exp(est.family.log_e[-1]))],
