@@ -132,8 +132,8 @@ def test_targets_pool_coverage_per_window_and_judge_the_unseen_error():
 def test_the_unseen_set_from_the_options(tmp_path):
     base = load_scene("fingertip-7")
     default, path = unseen.unseen_objects(base)
-    assert [o.material for o in default] == ["copper", "carbon_steel", "glass", "foam", "brass",
-                                             "concrete"]
+    assert [o.name for o in default] == ["copper", "carbon_steel", "glass", "foam", "brass",
+                                         "concrete", "glass-slide-on-aluminium"]
     assert path == unseen.default_unseen_scene_path()
     (tmp_path / "lab.csv").write_text(
         "name,role,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,source\n"
@@ -148,7 +148,7 @@ def test_the_unseen_set_from_the_options(tmp_path):
     both, _ = unseen.unseen_objects(base, unseen="foam", unseen_scene=str(scene_file))
     assert [o.material for o in both] == ["foam", "cork_lab"]
     active = load_scene("gripper-case-I-pro")          # glass is trained there: left out
-    names = [o.material for o in unseen.unseen_objects(active)[0]]
+    names = [o.name for o in unseen.unseen_objects(active)[0]]
     assert "glass" not in names and "copper" in names
     assert {o.temp_c for o in unseen.unseen_objects(active)[0]} == {34.0}
 

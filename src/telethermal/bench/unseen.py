@@ -4,10 +4,11 @@
 Touches of fingertip-7's 7 trained materials and of materials outside them
 (by default copper, carbon steel, glass and foam from the package's table,
 and brass and concrete from ``unseen_objects/unseen-objects.toml``'s own
-table) are simulated on the same pad and instruments: a copy of the scene
-whose objects are the trained ones and the unseen ones
-(:func:`touch_scene`), through the generator's own ``pad_database``, one
-session per seed. Each touch's effusivity is estimated by
+table, with that file's layered object: a glass slide on aluminium,
+reported by :mod:`telethermal.bench.unseen_layered`) are simulated on the
+same pad and instruments: a copy of the scene whose objects are the trained
+ones and the unseen ones (:func:`touch_scene`), through the generator's own
+``pad_database``, one session per seed. Each touch's effusivity is estimated by
 :class:`~telethermal.ident.effusivity.EffusivityEstimator` at the windows
 :data:`WINDOWS_S`; per material: the median relative error, the share of
 touches whose 95 % interval holds the true effusivity (with its Wilson
@@ -39,8 +40,10 @@ from typing import Callable
 
 import numpy as np
 
+from telethermal.bench import unseen_layered as ul
 from telethermal.bench import unseen_render as ur
 from telethermal.bench import unseen_trade as ut
+from telethermal.bench.unseen_text import report_section, text_report  # noqa: F401 (its API)
 from telethermal.errors import SceneError, UnknownMaterialError
 from telethermal.ident.evaluate import wilson_interval
 from telethermal.ident.fitted import log_sd_of_interval
@@ -63,6 +66,10 @@ NOT_RUN = {
     "flux_rms_rel": "not_run: rendering not asked (render=False)",
     "skin_rms_k": "not_run: rendering not asked (render=False)",
 }
+
+
+#: How the report names the shipped unseen scene (not by this machine's path).
+SHIPPED_UNSEEN_SCENE = "shipped: telethermal/bench/unseen_objects/unseen-objects.toml"
 
 
 def default_unseen_scene_path() -> str:
@@ -97,9 +104,10 @@ def package_objects(names, trained, temp_c: float, thickness_m: float) -> list[O
 
 def scene_objects(path, trained) -> list[ObjectSpec]:
     """The objects of the scene file ``path`` (its own materials table
-    registered for this process); a trained material among them is an error."""
+    registered for this process); a trained material among them is an error
+    (a layered object is its own, whatever its layers)."""
     scene = load_scene(path)
-    clash = [o.material for o in scene.objects if o.material in trained]
+    clash = [o.name for o in scene.objects if o.name in trained]
     if clash:
         raise SceneError(f"--unseen-scene {path}: {', '.join(clash)} is a trained material")
     return list(scene.objects)
@@ -109,7 +117,7 @@ def touch_scene(base: Scene, unseen) -> Scene:
     """``base`` with the unseen objects after its own (the same pad,
     instruments and variability): what ``pad_database`` touches."""
     objects = tuple(base.objects) + tuple(unseen)
-    names = [o.material for o in objects]
+    names = [o.name for o in objects]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise SceneError(f"unseen set: {', '.join(twice)} given twice")
@@ -160,7 +168,7 @@ def _estimates(estimators: dict, scene: Scene, contacts, timed: set,
     the identifier's calibrated factor on the curves' allowance for a
     window (s); each estimate's interval is then the calibrated one (what
     the slave reports), and ``laplace`` keeps the estimator's own."""
-    temp_of = {o.material: o.temp_c for o in scene.objects}
+    temp_of = {o.name: o.temp_c for o in scene.objects}
     rows = []
     for i, material in enumerate(contacts.labels):
         est = estimators[temp_of[material]]
@@ -241,17 +249,24 @@ def within_spread(identifier, material: str, classes) -> dict:
     return out
 
 
-def _material_summary(name: str, rows: list[dict], trained) -> dict:
-    """One material's figures over its touches (every seed)."""
+def _material_summary(name: str, rows: list[dict], trained, obj=None) -> dict:
+    """One material's figures over its touches (every seed); a layered
+    ``obj``'s: :func:`~telethermal.bench.unseen_layered.summary`."""
+    rep = reported([r["decision"] for r in rows]) if rows and "decision" in rows[0] \
+        else "not_run: no identifier"
+    if obj is not None and obj.layered:
+        return {"trained": False, "effusivity_w_s05_m2k": None, "touches": len(rows),
+                "source": "; ".join(la.material.source for la in obj.layers()),
+                "same_as_trained": None, **ul.summary(obj, rows, WINDOWS_S), **NOT_RUN,
+                **{k: ul.NOT_ONE_VALUE for k in ("effusivity_rel_error", "interval_coverage",
+                                                  "interval_coverage_laplace")}, "reported": rep}
     true_e = get_material(name).effusivity
     out = {"trained": name in trained, "effusivity_w_s05_m2k": true_e,
            "source": get_material(name).source, "touches": len(rows),
            "same_as_trained": None if name in trained else same_as_trained(name, trained),
            "effusivity_rel_error": {}, "interval_coverage": {}, "interval_width_rel": {},
            "interval_coverage_laplace": {},
-           "at_bound": {}, "fits_rate": {}, **NOT_RUN,
-           "reported": reported([r["decision"] for r in rows]) if rows and "decision" in rows[0]
-           else "not_run: no identifier"}
+           "at_bound": {}, "fits_rate": {}, **NOT_RUN, "reported": rep}
     for w in WINDOWS_S:
         ests = [r["windows"][w] for r in rows]
         err = [abs(e.effusivity_w_s05_m2k - true_e) / true_e for e in ests]
@@ -295,25 +310,31 @@ def _pooled_coverage(materials: dict, key: str) -> dict:
 
 def _targets(materials: dict) -> dict:
     """The issue's targets: per unseen material its median error at 0.5 s;
-    per window the pooled coverage of every material and of the unseen."""
+    per window the pooled coverage of every material and of the unseen.
+    Layered objects (no single true effusivity) are in neither."""
     key = f"{TARGET_WINDOW_S:g}"
-    unseen = {m: r for m, r in materials.items() if not r["trained"]}
+    layered = sorted(m for m, r in materials.items() if r.get("layered"))
+    every = {m: r for m, r in materials.items() if m not in layered}
+    unseen = {m: r for m, r in every.items() if not r["trained"]}
+    named_in = {m: r for m, r in materials.items() if not r["trained"]}
     windows = [f"{w:g}" for w in WINDOWS_S]
     named = {m: {"named_as": r["reported"]["named_as"],
                  "within_spread": r["reported"].get("within_spread")}
-             for m, r in unseen.items()
+             for m, r in named_in.items()
              if isinstance(r["reported"], dict) and r["reported"]["named"]}
     # A decision revised to a new material at the last window was a
     # decision naming a trained class until then: the issue's 0 counts it.
-    named_first = {m: r["reported"]["named_first_as"] for m, r in unseen.items()
+    named_first = {m: r["reported"]["named_first_as"] for m, r in named_in.items()
                    if isinstance(r["reported"], dict) and r["reported"]["named_then_new"]}
     return {"unseen_named_as_trained": named,
             "unseen_named_as_trained_before_the_last_window": named_first,
             "unseen_rel_error_within_10pct_by_0.5_s": {
                 m: r["effusivity_rel_error"][key] <= TARGET_REL_ERROR for m, r in unseen.items()},
-            "coverage_by_window": {k: _pooled_coverage(materials, k) for k in windows},
+            "coverage_by_window": {k: _pooled_coverage(every, k) for k in windows},
             "unseen_coverage_by_window": {k: _pooled_coverage(unseen, k) for k in windows}
-            if unseen else None}
+            if unseen else None,
+            "left_out_layered": {"objects": layered, "why": ul.NOT_ONE_VALUE} if layered
+            else None}
 
 
 def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
@@ -332,7 +353,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
 
     step = progress or (lambda _label: None)
     base = load_scene(scene)
-    trained = [o.material for o in base.objects]
+    trained = base.materials
     objects, path = unseen_objects(base, unseen, unseen_scene)
     touched = touch_scene(base, objects)
     if quick:
@@ -362,19 +383,20 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         for row, decision in zip(seed_rows, trade[identifier.unseen_weight][-len(seed_rows):]):
             row["decision"] = decision
         rows += seed_rows
-    materials = {m: _material_summary(m, [r for r in rows if r["material"] == m], trained)
+    materials = {m: _material_summary(m, [r for r in rows if r["material"] == m], trained,
+                                      touched.object_named(m))
                  for m in dict.fromkeys(r["material"] for r in rows)}
     for m, r in materials.items():
         if not r["trained"] and r["reported"]["named"]:
-            r["reported"]["within_spread"] = within_spread(identifier, m,
-                                                           r["reported"]["named_as"])
+            r["reported"]["within_spread"] = ul.NOT_ONE_VALUE if r.get("layered") else \
+                within_spread(identifier, m, r["reported"]["named_as"])
     rendering = _render(base, touched, identifier, materials, seeds, quick, step) \
         if render else "not_run: render=False"
     est = next(iter(estimators.values()))
     return {"benchmark": "unseen", "scene": base.name, "seeds": list(range(seeds)),
             "quick": quick, "windows_s": list(WINDOWS_S), "trained": trained,
-            "unseen": [o.material for o in objects],
-            "unseen_scene": path,
+            "unseen": [o.name for o in objects],
+            "unseen_scene": SHIPPED_UNSEEN_SCENE if path == default_unseen_scene_path() else path,
             "estimator": {"build_s": build_s, "model_error_rel": est.model_error_rel,
                           "effusivity_grid_w_s05_m2k": [float(np.exp(est.family.log_e[0])),
                                                         float(np.exp(est.family.log_e[-1]))],
@@ -432,63 +454,3 @@ def run_and_save(json_path, command: str = "", **kw) -> dict:
                   date=now.isoformat(timespec="seconds"), command=command)
     write_json(json_path, report)
     return report
-
-
-def text_report(report: dict, json_path) -> list[str]:
-    """The lines ``telethermal bench unseen`` prints."""
-    lines = [f"bench unseen on {report['scene']}, seeds {report['seeds']}: median |e - e_true|"
-             f"/e_true and 95 % interval coverage at {', '.join(map(str, report['windows_s']))} s"]
-    for m, r in report["materials"].items():
-        tag = "trained" if r["trained"] else "unseen "
-        err = " ".join(f"{100 * v:5.1f}%" for v in r["effusivity_rel_error"].values())
-        cov = " ".join(f"{100 * c['rate']:3.0f}%" for c in r["interval_coverage"].values())
-        lines.append(f"  {tag} {m:<13} e {r['effusivity_w_s05_m2k']:8.0f}  error {err}  "
-                     f"coverage {cov}  (n {r['touches']})")
-    lines.append("  coverage, every material (target 90-98 %): " + ", ".join(
-        f"{k} s {100 * c['rate']:.1f} % [{100 * c['ci'][0]:.1f}, {100 * c['ci'][1]:.1f}]"
-        for k, c in report["targets"]["coverage_by_window"].items()))
-    lines.append("  one estimate, ms (cold p50 / warm p50): " + ", ".join(
-        f"{k} s {1e3 * v['cold_s_p50']:.1f}/{1e3 * v['warm_s_p50']:.1f}"
-        for k, v in report["time_per_estimate_s"].items()))
-    lines.append("  reported (named as / new / unknown) by effusivity-fit:")
-    for m, r in report["materials"].items():
-        rep = r["reported"]
-        if isinstance(rep, dict):
-            named = ", ".join(f"{k} {v}" for k, v in rep["named_as"].items()) or "none"
-            first = ", ".join(f"{k} {v}" for k, v in rep["named_first_as"].items())
-            lines.append(f"    {m:<13} named {rep['named']} ({named}), new {rep['new']}"
-                         + (f" ({rep['named_then_new']} named {first} before the last "
-                            f"window)" if rep["named_then_new"] else "")
-                         + f", unknown {rep['unknown']} of {rep['n']}")
-    lines += ut.text_lines(report)
-    lines += ur.text_lines(report)
-    lines.append(f"wrote {json_path}")
-    return lines
-
-
-def report_section(out, d: dict) -> list[str]:
-    """``bench report``'s section: per material its effusivity, the median
-    error and 95 % coverage per window, and what was reported."""
-    windows = [f"{w:g}" for w in d["windows_s"]]
-    lines = ["## Materials the identifier never saw (issue 30)", "",
-             f"Trained on {', '.join(d['trained'])} ({d['scene']}); unseen "
-             f"{', '.join(d['unseen'])}; {len(d['seeds'])} sessions. Median effusivity error "
-             f"and 95 % interval coverage at {', '.join(windows)} s; what "
-             f"{d['identifier']['method']}'s decisions reported (named, new material; a new "
-             "material named a class before the last window counted in brackets; unknown).",
-             "",
-             "| material | e, W s^0.5/(m^2 K) | error | coverage | named | new | unknown |",
-             "|---|---|---|---|---|---|---|"]
-    for m, r in d["materials"].items():
-        rep = r["reported"] if isinstance(r["reported"], dict) else {}
-        err = " / ".join(f"{100 * r['effusivity_rel_error'][k]:.1f}" for k in windows)
-        cov = " / ".join(f"{100 * r['interval_coverage'][k]['rate']:.0f}" for k in windows)
-        first = rep.get("named_then_new", 0)
-        lines.append(f"| {m}{'' if r['trained'] else ' (unseen)'} | "
-                     f"{r['effusivity_w_s05_m2k']:,.0f} | {err} % | {cov} % | "
-                     f"{rep.get('named', '-')} | {rep.get('new', '-')}"
-                     f"{f' ({first})' if first else ''} | {rep.get('unknown', '-')} |")
-    cov = d["targets"]["coverage_by_window"]
-    lines += ["", "Coverage, every material (target 90-98 %): " + ", ".join(
-        f"{k} s {100 * c['rate']:.1f} %" for k, c in cov.items()) + ".", ""]
-    return lines + ur.section_lines(d)

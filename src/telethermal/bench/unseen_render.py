@@ -47,6 +47,7 @@ import math
 
 import numpy as np
 
+from telethermal.bench.unseen_layered import ORACLE_NOT_RUN
 from telethermal.ident.anytime import NEW_MATERIAL, Estimate, Label, Reason
 from telethermal.physics.materials import get_material
 
@@ -115,7 +116,12 @@ def render_touch(scene, material: str, identifier, generator, seed: int,
     from telethermal.teleop.run import run_session
 
     row = {"material": material, "seed": seed}
+    obj = scene.object_named(material)
     for mode in MODES:
+        if mode == "oracle" and obj is not None and obj.layered:
+            row[mode] = None                 # no one effusivity to render: not run
+            row["oracle_not_run"] = ORACLE_NOT_RUN
+            continue
         s = run_session(scene, material, identifier, generator, contact_s=CONTACT_S, seed=seed,
                         news_filter=news_filter(mode, material), idle_scene=idle_scene).summary
         row[mode] = {k: s[v] for k, v in KEYS.items()}
@@ -141,6 +147,15 @@ def render_all(scene, idle_scene, materials, identifier, generator, seeds,
     return rows
 
 
+def _pct(value, width: int = 5) -> str:
+    """A fraction as a percentage, or ``-`` where it was not run."""
+    return "-".rjust(width) if value is None else f"{100 * value:{width}.2f}"
+
+
+def _k(value) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
 def _finite(values) -> list[float]:
     return [float(v) for v in values if v is not None and math.isfinite(v)]
 
@@ -155,17 +170,20 @@ def summarise(rows: list[dict]) -> dict:
     rend = out["rendered"]
     for r in rows:
         rend["identified"][r["identified"]] = rend["identified"].get(r["identified"], 0) + 1
+        if r.get("oracle_not_run"):
+            rend["oracle_not_run"] = r["oracle_not_run"]
     for key in KEYS:
         medians, spread = {}, {}
         for mode in MODES:
-            vals = _finite(r[mode][key] for r in rows)
+            vals = _finite(r[mode][key] for r in rows if r[mode] is not None)
             medians[mode] = float(np.median(vals)) if vals else None
             spread[mode] = {"min": min(vals), "max": max(vals),
                             "sd": float(np.std(vals, ddof=1)) if len(vals) > 1 else 0.0} \
                 if vals else None
         (out if key in TARGET_KEYS else rend)[key] = medians
         rend["spread"][key] = spread
-    rend["safety_events"] = {m: sum(r[m]["safety_events"] for r in rows) for m in MODES}
+    rend["safety_events"] = {m: sum(r[m]["safety_events"] for r in rows if r[m] is not None)
+                             for m in MODES}
     return out
 
 
@@ -183,6 +201,10 @@ def targets(materials: dict) -> dict:
         per = {}
         for key in TARGET_KEYS:
             est, ora, closed = (r[key][k] for k in MODES)
+            if ora is None and not r["trained"]:      # a layered object: no oracle to judge by
+                per[key] = {"estimate": est, "closed_set": closed,
+                            "not_judged": r["rendered"].get("oracle_not_run", "no oracle")}
+                continue
             if r["trained"]:
                 sd = (r["rendered"]["spread"][key]["closed_set"] or {}).get("sd", 0.0)
                 per[key] = {"estimate": est, "closed_set": closed, "closed_set_sd": sd,
@@ -204,7 +226,9 @@ def _verdict(material: str, t: dict) -> str:
     """One material's verdict on its two figures, as the text says it."""
     out = []
     for key, v in t.items():
-        if "met" in v:
+        if "not_judged" in v:
+            out.append(f"{key} not judged (no oracle: a layered object)")
+        elif "met" in v:
             why = f"{v['estimate_over_oracle']:.2f}x the oracle, closed set " \
                   f"{v['closed_set_over_oracle']:.2f}x"
             out.append(f"{key} {'met' if v['met'] else 'MISSED'} ({why})")
@@ -227,9 +251,9 @@ def text_lines(report: dict) -> list[str]:
         if not isinstance(r.get("rendered"), dict):
             continue
         f, k = r["flux_rms_rel"], r["skin_rms_k"]
-        lines.append(f"    {m:<13} flux {100 * f['estimate']:5.2f} | {100 * f['oracle']:5.2f} | "
-                     f"{100 * f['closed_set']:5.2f} %  skin {k['estimate']:.3f} | "
-                     f"{k['oracle']:.3f} | {k['closed_set']:.3f} K")
+        lines.append(f"    {m:<13} flux {_pct(f['estimate'])} | {_pct(f['oracle'])} | "
+                     f"{_pct(f['closed_set'])} %  skin {_k(k['estimate'])} | "
+                     f"{_k(k['oracle'])} | {_k(k['closed_set'])} K")
     t = report["targets"]["rendering"]
     lines.append("  rendering targets (unseen: <= 1.25x the oracle, below the closed set where "
                  "it is > 1.25x; trained: no worse than the closed set within its sd):")
@@ -256,7 +280,10 @@ def section_lines(d: dict) -> list[str]:
         f, k = r["flux_rms_rel"], r["skin_rms_k"]
         v = t["trained" if r["trained"] else "unseen"].get(m, {})
         ok = all(x.get("met", x.get("no_worse_within_spread")) for x in v.values())
-        lines.append(f"| {m} | {100 * f['estimate']:.2f} / {100 * f['oracle']:.2f} / "
-                     f"{100 * f['closed_set']:.2f} % | {k['estimate']:.3f} / {k['oracle']:.3f} "
-                     f"/ {k['closed_set']:.3f} K | {'met' if ok else 'missed'} |")
+        verdict = "not judged (layered: no oracle)" if any("not_judged" in x for x in
+                                                           v.values()) else \
+            "met" if ok else "missed"
+        lines.append(f"| {m} | {_pct(f['estimate'], 0)} / {_pct(f['oracle'], 0)} / "
+                     f"{_pct(f['closed_set'], 0)} % | {_k(k['estimate'])} / {_k(k['oracle'])} "
+                     f"/ {_k(k['closed_set'])} K | {verdict} |")
     return lines + [""]

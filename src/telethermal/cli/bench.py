@@ -242,9 +242,11 @@ def _add_error(bsub) -> None:
     p.add_argument("--quick", action="store_true", help="3 touches per material, a coarser prior")
     p.add_argument("--unseen", help="comma-separated package materials to touch (default "
                                     "copper,carbon_steel,glass,foam and the shipped "
-                                    "unseen-objects scene's brass and concrete)")
+                                    "unseen-objects scene's brass, concrete and a glass "
+                                    "slide on aluminium)")
     p.add_argument("--unseen-scene", help="a scene file whose objects (with its own materials "
-                                          "table) are touched as unseen materials")
+                                          "table; layered ones too) are touched as unseen "
+                                          "materials")
     _scene_arg(p)
     p.set_defaults(func=cmd_bench_unseen)
 

@@ -204,7 +204,7 @@ def direct_skin_c(scene: Scene, material: str, touch: Touch, n: int,
                   grid_s: float = GRID_S) -> np.ndarray:
     """The finger's surface temperature touching ``material`` directly, at
     slot ends, C; shape (n,)."""
-    obj = next((o for o in scene.objects if o.material == material), None)
+    obj = scene.object_named(material)
     if obj is None:
         raise UnknownMaterialError(f"material {material!r} is not in scene {scene.name} "
                                    f"(its materials: {', '.join(scene.materials)})")

@@ -151,10 +151,9 @@ def minimax_idle(search: FloorSearch, step_k: float = 7.0) -> tuple[float, list[
     the answer is the minimax of all (the maximum over all materials is at
     least the subset's everywhere, and equal to it there). Returns (idle C,
     the subset that decided it)."""
-    from telethermal.physics.materials import get_material
 
     def effusivity(m):
-        mat = get_material(m)
+        mat = search.scene.object_named(m).layers()[0].material   # a layered one's surface
         return mat.conductivity_w_mk * mat.volumetric_heat_j_m3k
 
     materials = search.scene.materials
@@ -186,13 +185,12 @@ def policy_key(scene: Scene) -> str:
     length and its version. Not the slave's gap or sensors, nor the names:
     a scene differing only there shares the policy. A policy stored under
     another key is stale."""
-    from telethermal.physics.materials import get_material
-
     inputs = (POLICY_VERSION, SEARCH_GRID_S, SEARCH_ROUNDS, CONTACT_S,
               repr(hardware(scene)), repr(nominal_touch(scene)), repr(scene.finger),
               repr(scene.objects), repr(scene.variability), scene.room_temp_c,
               scene.sample_rate_hz, scene.tolerance_rel,
-              [repr(get_material(m)) for m in scene.materials], repr(SafetyLimits()))
+              [repr(la.material) for o in scene.objects for la in o.layers()],
+              repr(SafetyLimits()))
     if scene.pad.size_mm is not None:           # a face other than the module's
         inputs += (scene.pad.size_mm,)
     return hashlib.sha256(repr(inputs).encode()).hexdigest()[:32]

@@ -215,7 +215,7 @@ def pad_database(scene: Scene, rng: np.random.Generator,
                                  back_temp_a_c=back_c, sensor_lag_s=scene.sensors.flux_lag_s)
         # T_pad_C is what the pad's thermocouple read just before contact.
         before = Thermocouple(cold_junction_c=scene.room_temp_c, bias_k=tc_bias).read_c(pad_c, rng)
-        trials += _record(scene, result, times, draws, before, rng, None, obj.material,
+        trials += _record(scene, result, times, draws, before, rng, None, obj.name,
                           choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}",
                                                   **{k: f"{v[i]:.4f}" for k, v in extra.items()}},
                           session, scene.pad.contact_duration_s)
@@ -235,7 +235,7 @@ def _held_pad_contact(scene: Scene, obj, model, t_s, pad_c, draws) -> HeldPadRes
     over_i, over_hot = int(result.over_current_periods.sum()), int(result.over_hot_periods.sum())
     if over_i or over_hot:
         raise SceneError(f"{scene.source}: the pad's module {params.spec.name} on "
-                         f"{obj.material}: {over_i} periods above Imax {params.spec.imax_a} A, "
+                         f"{obj.name}: {over_i} periods above Imax {params.spec.imax_a} A, "
                          f"{over_hot} with the hot side above {params.spec.hot_side_max_c} C")
     return result
 
@@ -270,7 +270,7 @@ def finger_database(scene: Scene, rng: np.random.Generator,
                              sensor_lag_s=scene.sensors.flux_lag_s)
         finger_ir = session.measure_c(finger_c, rng)
         trials += _record(scene, result, times, draws, finger_ir, rng,
-                          lambda i: f"person-{person[i]}", obj.material, choice.kind,
+                          lambda i: f"person-{person[i]}", obj.name, choice.kind,
                           lambda i: {"T_finger_true_C": f"{finger_c[i]:.4f}",
                                      "person": str(person[i]),
                                      "skin_effusivity_scale": f"{np.sqrt(k_scale[person[i]] * heat_scale[person[i]]):.4f}"},

@@ -353,7 +353,7 @@ def forward_curves(scene, u_grid, t_max_s: float, dt_s: float = MODEL_DT_S) -> d
         b = len(u)
         draws = _Contacts(np.zeros(b), h, np.zeros(b), np.full(b, obj.temp_c), np.zeros(b))
         result = _held_pad_contact(scene, obj, model, t, np.full(b, pad_c), draws)
-        curves[obj.material] = CurveFamily.from_grid(u, t, result.flux_sensed_w_m2 / gap)
+        curves[obj.name] = CurveFamily.from_grid(u, t, result.flux_sensed_w_m2 / gap)
     return curves
 
 
@@ -390,5 +390,5 @@ def draw_nuisances(scene, n: int, rng: np.random.Generator, seed: int | None = N
                 force = ForceSensor().read_n(times - d.onset_s[i], d.force_n[i], rng)
                 tau.append(d.onset_s[i] - detected_onset_s(times, force))
             u.append(np.log(d.conductance_w_m2k / h_ref))
-        amp[obj.material] = np.concatenate(a_obj)
+        amp[obj.name] = np.concatenate(a_obj)
     return {"u": np.concatenate(u), "tau_s": np.array(tau), "amp": amp}

@@ -14,17 +14,20 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from telethermal.errors import SceneError, UnknownMaterialError
+from telethermal.errors import SceneError
 from telethermal.physics.layered import Boundary, Layer
-from telethermal.physics.materials import (get_material, object_materials, read_table,
+from telethermal.physics.materials import (get_material, load_materials, read_table,
                                            register_materials, shadowed_by,
                                            unregister_materials)
 from telethermal.physics.model import ModelChoice, choose_model
+from telethermal.physics.scenereader import TableReader as _Reader
+from telethermal.physics.scenereader import read_layers, read_material
 
 PAD_KINDS = ("peltier", "water")
 #: Simulated beyond a contact's duration: a recording is cut at the onset its
@@ -84,11 +87,40 @@ class FingerSpec:
     property_sd: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class ObjectSpec:
+    """An object: its surface ``material``, ``thickness_m`` thick, on the
+    layers of ``base`` (from the surface layer outwards; none for a plain
+    object), the last one's back adiabatic. ``label``: the object's name
+    (required in a scene file when layered); a plain object's name is its
+    material, which stands for it wherever an object is named (databases'
+    labels, identifiers' classes, recordings)."""
+
     material: str
     temp_c: float
     thickness_m: float
+    base: tuple[Layer, ...] = ()
+    label: str = ""
+
+    @property
+    def name(self) -> str:
+        """What the object is called: its ``label``, else its material."""
+        return self.label or self.material
+
+    @property
+    def layered(self) -> bool:
+        return bool(self.base)
+
+    def layers(self) -> tuple[Layer, ...]:
+        """The object's stack from its contact surface outwards."""
+        return (Layer(get_material(self.material), self.thickness_m),) + tuple(self.base)
+
+    def __repr__(self) -> str:
+        # A plain object's repr is what it was before layers (cache keys hold it).
+        extra = "" if not (self.base or self.label) else \
+            f", base={self.base!r}, label={self.label!r}"
+        return (f"ObjectSpec(material={self.material!r}, temp_c={self.temp_c!r}, "
+                f"thickness_m={self.thickness_m!r}{extra})")
 
 
 THERMOMETER_KINDS = ("ir", "contact")
@@ -152,7 +184,12 @@ class Scene:
 
     @property
     def materials(self) -> list[str]:
-        return [o.material for o in self.objects]
+        """The objects' names (a plain object's is its material)."""
+        return [o.name for o in self.objects]
+
+    def object_named(self, name: str) -> ObjectSpec | None:
+        """The object called ``name`` (:attr:`ObjectSpec.name`), else None."""
+        return next((o for o in self.objects if o.name == name), None)
 
     def pad_temp_c(self, object_temp_c: float) -> float:
         """The pad's set temperature before contact with an object."""
@@ -160,78 +197,6 @@ class Scene:
 
 
 # ---------------------------------------------------------------- parsing
-class _Reader:
-    """Pulls typed, range-checked values out of a TOML table, naming the key."""
-
-    def __init__(self, table: dict, where: str, source: str):
-        self.table, self.where, self.source = table, where, source
-        self.used: set[str] = set()
-
-    def fail(self, message: str):
-        raise SceneError(f"{self.source}: {self.where}: {message}")
-
-    def num(self, key, default=None, lo=-math.inf, hi=math.inf, integer=False):
-        self.used.add(key)
-        value = self.table.get(key, default)
-        if value is None:
-            self.fail(f"missing '{key}'")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(f"'{key}' must be a number, got {value!r}")
-        if integer and int(value) != value:
-            self.fail(f"'{key}' must be a whole number, got {value!r}")
-        if not (lo <= value <= hi) or math.isnan(value):
-            self.fail(f"'{key}' = {value} is outside [{lo}, {hi}]")
-        return int(value) if integer else float(value)
-
-    def text(self, key, default=None, choices=None):
-        self.used.add(key)
-        value = self.table.get(key, default)
-        if not isinstance(value, str):
-            self.fail(f"'{key}' must be a string, got {value!r}")
-        if choices and value not in choices:
-            self.fail(f"'{key}' = {value!r}; expected one of {', '.join(choices)}")
-        return value
-
-    def done(self):
-        self.only(self.used)
-
-    def only(self, keys) -> None:
-        """Fail on any key of the table outside ``keys``, naming it and the
-        nearest known key (a typo is the likely cause)."""
-        extra = sorted(set(self.table) - set(keys))
-        if extra:
-            hints = []
-            for key in extra:
-                near = difflib.get_close_matches(key, sorted(keys), n=1)
-                hints.append(f"'{key}'" + (f" (did you mean '{near[0]}'?)" if near else ""))
-            self.fail(f"unknown key(s) {', '.join(hints)}; known: {', '.join(sorted(keys))}")
-
-
-def _material(name, reader: _Reader, roles=None):
-    try:
-        mat = get_material(name)
-    except UnknownMaterialError as exc:
-        reader.fail(str(exc))
-    if roles and mat.role not in roles:
-        reader.fail(f"material {name!r} is a {mat.role} material; objects must be one of "
-                    f"{', '.join(object_materials())}")
-    return mat
-
-
-def _layers(raw, reader: _Reader) -> tuple[Layer, ...]:
-    reader.used.add("layers")
-    if not isinstance(raw, list) or not raw:
-        reader.fail("'layers' must be a non-empty list of [material, thickness_m]")
-    layers = []
-    for i, item in enumerate(raw):
-        if (not isinstance(item, list) or len(item) != 2 or not isinstance(item[0], str)
-                or isinstance(item[1], bool) or not isinstance(item[1], (int, float))
-                or not item[1] > 0):
-            reader.fail(f"layers[{i}] must be [material, thickness_m > 0], got {item!r}")
-        layers.append(Layer(_material(item[0], reader), float(item[1])))
-    return tuple(layers)
-
-
 def _parse_pad(table, source) -> PadSpec:
     from telethermal.physics.thermoelectric import (DEFAULT_HEAT_SINK, DEFAULT_MODULE,
                                                     heat_sink_names, module_names)
@@ -239,7 +204,7 @@ def _parse_pad(table, source) -> PadSpec:
     r = _Reader(table, "[pad]", source)
     r.only(PAD_KEYS)              # a typo first: 'gapk' is not a missing 'gap_k'
     kind = r.text("kind", choices=PAD_KINDS)
-    layers = _layers(table.get("layers"), r)
+    layers = read_layers(table.get("layers"), r)
     gap = table.get("gap_k")
     fixed = table.get("temp_c")
     if (gap is None) == (fixed is None):
@@ -286,26 +251,62 @@ def _parse_finger(table, source) -> FingerSpec:
     return spec
 
 
+#: The keys an ``[[objects]]`` table may hold.
+OBJECT_KEYS = ("material", "temp_c", "thickness_m", "base", "name")
+#: What an object's ``name`` may be: it names trial files and identifier
+#: classes, and is listed with commas and paired with '|'.
+OBJECT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
+#: An object's thickness (and each of its base layers'), m.
+OBJECT_THICKNESS_RANGE_M = (1e-6, 10.0)
+
+
 def _parse_objects(items, source, room_c) -> tuple[ObjectSpec, ...]:
     if not isinstance(items, list) or not items:
         raise SceneError(f"{source}: at least one [[objects]] table is needed")
     objects = []
     for i, table in enumerate(items):
         r = _Reader(table, f"[[objects]] #{i + 1}", source)
-        name = r.text("material")
-        _material(name, r, roles=("object",))
-        temp = table.get("temp_c", "room")
-        r.used.add("temp_c")
-        if temp == "room":
-            temp = room_c
-        elif isinstance(temp, bool) or not isinstance(temp, (int, float)) or not -20 <= temp <= 100:
-            r.fail(f"'temp_c' must be 'room' or a number in [-20, 100], got {temp!r}")
-        objects.append(ObjectSpec(name, float(temp), r.num("thickness_m", 0.02, 1e-6, 10)))
+        objects.append(_parse_object(table, r, room_c))
         r.done()
-    names = [o.material for o in objects]
-    if len(set(names)) != len(names):
-        raise SceneError(f"{source}: an object material appears twice: {names}")
+    names = [o.name for o in objects]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        where = "; ".join(f"{n!r} in " + " and ".join(
+            f"#{i + 1}" for i, m in enumerate(names) if m == n) for n in twice)
+        raise SceneError(f"{source}: [[objects]]: the name(s) {', '.join(map(repr, twice))} "
+                         f"appear twice ({where}; 'name', else the material, must be "
+                         f"unique): {names}")
     return tuple(objects)
+
+
+def _parse_object(table, r: _Reader, room_c) -> ObjectSpec:
+    """One ``[[objects]]`` table: ``material``, ``temp_c``, ``thickness_m``,
+    and for a layered object ``base`` (its layers beneath, outwards) and
+    ``name`` (required with ``base``)."""
+    r.only(OBJECT_KEYS)            # a typo first: 'bases' is not a missing 'base'
+    material = r.text("material")
+    read_material(material, r, roles=("object",), field="'material'")
+    temp = table.get("temp_c", "room")
+    r.used.add("temp_c")
+    if temp == "room":
+        temp = room_c
+    elif isinstance(temp, bool) or not isinstance(temp, (int, float)) or not -20 <= temp <= 100:
+        r.fail(f"'temp_c' must be 'room' or a number in [-20, 100], got {temp!r}")
+    lo, hi = OBJECT_THICKNESS_RANGE_M
+    thickness = r.num("thickness_m", 0.02, lo, hi)
+    base = () if "base" not in table else read_layers(
+        table["base"], r, "base", roles=("object",), thickness_range_m=(lo, hi))
+    label = "" if "name" not in table else r.text("name")
+    r.used.add("name")
+    if base and not label:
+        r.fail(f"a layered object (material {material!r} with a 'base') needs a 'name'")
+    if "name" in table and not OBJECT_NAME.fullmatch(label):
+        r.fail(f"'name' = {label!r}: a letter or digit, then letters, digits, '_', '-', '.' "
+               "or '+' (it names trial files and labels; '|' joins a pair, ',' lists)")
+    if label in load_materials() and (base or label != material):
+        r.fail(f"'name' = {label!r} is a material's name; the object (of {material!r}) "
+               "would be read as that material wherever its name is looked up")
+    return ObjectSpec(material, float(temp), thickness, base, label)
 
 
 #: Keys that were replaced, with what replaced them.
@@ -364,8 +365,8 @@ def _parse_scene(data: dict, source: str, own_table: str | None) -> Scene:
         variability=_parse_dataclass(VariabilitySpec, data.get("variability"),
                                      "[variability]", source),
         tolerance_rel=tolerance, source=source, materials_table=own_table)
-    for name in [o.material for o in scene.objects] + [lay.material.name
-                                                       for lay in scene.pad.layers]:
+    for name in [lay.material.name for o in scene.objects for lay in o.layers()] + [
+            lay.material.name for lay in scene.pad.layers]:
         other = shadowed_by(name)
         if other is not None and other != own_table:
             r.fail(f"material {name!r} was redefined in this process by {other}; this "
@@ -473,18 +474,18 @@ def finger_contact_model(scene: Scene, obj: ObjectSpec):
 
 
 def _choose(scene, side_a, obj, back_a, duration_s, conductance):
-    side_b = (Layer(get_material(obj.material), obj.thickness_m),)
+    side_b = obj.layers()
     t_min = min(1.0 / scene.sample_rate_hz, 0.05)
     try:
         return choose_model(side_a, side_b, back_a, Boundary("adiabatic"), t_min, duration_s,
                             scene.tolerance_rel, conductance)
     except Exception as exc:  # a ModelError from deep inside: say which scene and object
-        raise SceneError(f"{scene.source}: cannot model {obj.material}: {exc}") from exc
+        raise SceneError(f"{scene.source}: cannot model {obj.name}: {exc}") from exc
 
 
 def describe_models(scene: Scene) -> list[tuple[str, str, ModelChoice]]:
-    """(side, material, choice) for every contact the scene contains."""
-    rows = [("pad", o.material, pad_contact_model(scene, o)[1]) for o in scene.objects]
+    """(side, object name, choice) for every contact the scene contains."""
+    rows = [("pad", o.name, pad_contact_model(scene, o)[1]) for o in scene.objects]
     if scene.finger is not None:
-        rows += [("finger", o.material, finger_contact_model(scene, o)[1]) for o in scene.objects]
+        rows += [("finger", o.name, finger_contact_model(scene, o)[1]) for o in scene.objects]
     return rows

@@ -434,7 +434,7 @@ def touch_figures(scene, touch: Touch, result: dict) -> dict:
     result["trace"] = {k: v[:n] for k, v in touch.sim.trace.items()}
     truth = touch.truth or {}
     material = truth.get("material")
-    if material not in [o.material for o in scene.objects] or \
+    if material not in scene.materials or \
             truth.get("object_true_c") is None:
         return {"direct": None}
     # From the slave's decision (its time after the master's onset), not

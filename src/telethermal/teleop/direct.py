@@ -26,7 +26,7 @@ def compare_with_direct(scene: Scene, material: str, object_true_c: float, opera
     """The issue's metrics against the same finger (``operator``, a
     :class:`~telethermal.teleop.run.Operator`) touching the object directly;
     adds the direct-contact curves to ``trace``."""
-    obj = next(o for o in scene.objects if o.material == material)
+    obj = next(o for o in scene.objects if o.name == material)
     t = trace["t_s"]
     during = (t >= 0) & (t < contact_s)
     finger_model, _ = finger_contact_model(scene, obj)

@@ -60,7 +60,7 @@ class Slave:
     def __init__(self, scene: Scene, material: str, identifier, rng: np.random.Generator,
                  contact_s: float | None = None, on_n: float = 2.0, off_n: float = 1.0,
                  debounce_s: float = 0.02, session=None, devices=None):
-        objs = [o for o in scene.objects if o.material == material]
+        objs = [o for o in scene.objects if o.name == material]
         if not objs:
             raise SceneError(f"scene {scene.name} has no object of {material!r}; it has "
                              f"{', '.join(scene.materials)}")

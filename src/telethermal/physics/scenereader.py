@@ -1,0 +1,95 @@
+"""Reading a scene's TOML tables: typed, range-checked values, materials and
+stacks of layers, every error naming the file, the table and the key
+(split out of :mod:`telethermal.physics.scene`)."""
+
+from __future__ import annotations
+
+import difflib
+import math
+
+from telethermal.errors import SceneError, UnknownMaterialError
+from telethermal.physics.layered import Layer
+from telethermal.physics.materials import get_material, object_materials
+
+
+class TableReader:
+    """Pulls typed, range-checked values out of a TOML table, naming the key."""
+
+    def __init__(self, table: dict, where: str, source: str):
+        self.table, self.where, self.source = table, where, source
+        self.used: set[str] = set()
+
+    def fail(self, message: str):
+        raise SceneError(f"{self.source}: {self.where}: {message}")
+
+    def num(self, key, default=None, lo=-math.inf, hi=math.inf, integer=False):
+        self.used.add(key)
+        value = self.table.get(key, default)
+        if value is None:
+            self.fail(f"missing '{key}'")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(f"'{key}' must be a number, got {value!r}")
+        if integer and int(value) != value:
+            self.fail(f"'{key}' must be a whole number, got {value!r}")
+        if not (lo <= value <= hi) or math.isnan(value):
+            self.fail(f"'{key}' = {value} is outside [{lo}, {hi}]")
+        return int(value) if integer else float(value)
+
+    def text(self, key, default=None, choices=None):
+        self.used.add(key)
+        value = self.table.get(key, default)
+        if not isinstance(value, str):
+            self.fail(f"'{key}' must be a string, got {value!r}")
+        if choices and value not in choices:
+            self.fail(f"'{key}' = {value!r}; expected one of {', '.join(choices)}")
+        return value
+
+    def done(self):
+        self.only(self.used)
+
+    def only(self, keys) -> None:
+        """Fail on any key of the table outside ``keys``, naming it and the
+        nearest known key (a typo is the likely cause)."""
+        extra = sorted(set(self.table) - set(keys))
+        if extra:
+            hints = []
+            for key in extra:
+                near = difflib.get_close_matches(key, sorted(keys), n=1)
+                hints.append(f"'{key}'" + (f" (did you mean '{near[0]}'?)" if near else ""))
+            self.fail(f"unknown key(s) {', '.join(hints)}; known: {', '.join(sorted(keys))}")
+
+
+def read_material(name, reader: TableReader, roles=None, field: str | None = None):
+    """The material ``name``; unknown, or of a role outside ``roles``, fails
+    naming ``field`` (the key or list item it came from) when given."""
+    where = f"{field}: " if field else ""
+    try:
+        mat = get_material(name)
+    except UnknownMaterialError as exc:
+        reader.fail(f"{where}{exc}")
+    if roles and mat.role not in roles:
+        reader.fail(f"{where}material {name!r} is a {mat.role} material; objects must be one "
+                    f"of {', '.join(object_materials())}")
+    return mat
+
+
+def read_layers(raw, reader: TableReader, key: str = "layers", roles=None,
+                thickness_range_m: tuple[float, float] = (0.0, math.inf)) -> tuple[Layer, ...]:
+    """``key = [[material, thickness_m], ...]``: a non-empty stack of layers,
+    each material of ``roles`` (any when None) and each thickness in
+    ``thickness_range_m`` (both ends included; and above 0), in m."""
+    reader.used.add(key)
+    if not isinstance(raw, list) or not raw:
+        reader.fail(f"'{key}' must be a non-empty list of [material, thickness_m]")
+    lo, hi = thickness_range_m
+    layers = []
+    for i, item in enumerate(raw):
+        if (not isinstance(item, list) or len(item) != 2 or not isinstance(item[0], str)
+                or isinstance(item[1], bool) or not isinstance(item[1], (int, float))
+                or not item[1] > 0):
+            reader.fail(f"{key}[{i}] must be [material, thickness_m > 0], got {item!r}")
+        if not lo <= item[1] <= hi:
+            reader.fail(f"{key}[{i}]: thickness_m = {item[1]} is outside [{lo}, {hi}]")
+        layers.append(Layer(read_material(item[0], reader, roles, f"{key}[{i}]"),
+                            float(item[1])))
+    return tuple(layers)
