@@ -13,19 +13,8 @@ from telethermal.errors import SceneError
 from telethermal.physics.scene import (ObjectSpec, describe_models, finger_contact_model,
                                        load_scene, pad_contact_model, parse_scene)
 
-HEAD = """
-name = "mini"
-room_temp_c = 24.0
-sample_rate_hz = 100.0
-[pad]
-kind = "peltier"
-layers = [["flux_sensor_film", 3.0e-4], ["alumina", 2.5e-4]]
-gap_k = 10.0
-contact_duration_s = 1.0
-trials_per_material = 2
-[[objects]]
-material = "wood"
-"""
+from test_scene import MINIMAL as HEAD     # one minimal scene, wood its object
+
 LAYERED = """
 [[objects]]
 name = "plexiglass-on-aluminium"
