@@ -177,9 +177,16 @@ def pytest_xdist_make_scheduler(config, log):
             return "tests/conformance" if path.startswith("tests/conformance/") else path
 
         def _assign_work_unit(self, node) -> None:
-            for scope in reversed(LONGEST_FIRST):
-                if scope in self.workqueue:
-                    self.workqueue.move_to_end(scope, last=False)
+            # The rest in collection order, not xdist's most-tests-first: the
+            # many short unit test files then come last, the integration
+            # files with one or two long tests before them.
+            first = {scope: i for i, scope in enumerate(LONGEST_FIRST)}
+            place = {}
+            for nodeid in self.collection:
+                place.setdefault(self._split_scope(nodeid), len(place))
+            for scope in sorted(self.workqueue, key=lambda s: (first.get(s, len(first)),
+                                                               place.get(s, 0))):
+                self.workqueue.move_to_end(scope)
             super()._assign_work_unit(node)
 
     return FileScheduling(config, log)
