@@ -19,8 +19,10 @@ $(STAMP): $(PY) pyproject.toml constraints.txt
 demo: $(STAMP)
 	$(VENV)/bin/telethermal demo --out $(OUT)/demo
 
+# Two workers (pytest-xdist; tests/conftest.py gives each a whole test file
+# at a time); the 25 slowest tests in every log.
 test: $(STAMP)
-	$(PY) -m pytest tests
+	$(PY) -m pytest tests -n 2 --durations=25
 
 # The benches, in the report's order, in three sizes (each bench's own
 # options: fewer methods, seeds, trials, rounds or settings; each JSON keeps

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 
@@ -24,7 +25,14 @@ def write_json(path: str | Path, payload: dict) -> Path:
     """Write ``payload`` (indented, one trailing newline) to ``path``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
-    tmp.replace(path)
+    # One temporary file per process: two processes writing the same file
+    # (an idle policy in the cache, two test workers) do not write into
+    # each other's, and a failure leaves no temporary file behind.
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path

@@ -92,10 +92,14 @@ def timings(pytestconfig):
     reporter = pytestconfig.pluginmanager.get_plugin("terminalreporter")
     capture = pytestconfig.pluginmanager.get_plugin("capturemanager")
     if reporter is not None and capture is not None and t:
+        # A pytest-xdist worker's reporter prints nowhere; its stderr is the
+        # run's own.
+        write = reporter.write_line if "PYTEST_XDIST_WORKER" not in os.environ else \
+            (lambda line: print(line, file=sys.stderr, flush=True))
         with capture.global_and_fixture_disabled():       # into the CI log
-            reporter.write_line("")
+            write("")
             for name, seconds in t.items():
-                reporter.write_line(f"compose: {name}: {seconds:.1f} s")
+                write(f"compose: {name}: {seconds:.1f} s")
 
 
 def _engine_answers() -> bool:

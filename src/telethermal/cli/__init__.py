@@ -48,7 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     except TelethermalError as exc:
         # escape: the text is the error's, not markup ("[pad]" is a TOML
         # section a message names, which rich would swallow as a tag).
-        console.print(f"[red]error:[/red] {escape(str(exc))}", highlight=False)
+        # soft_wrap: no line breaks of rich's inside it (a path cut in two
+        # cannot be copied); the terminal wraps the line.
+        console.print(f"[red]error:[/red] {escape(str(exc))}", highlight=False, soft_wrap=True)
         return 2
     except KeyboardInterrupt:
         console.print("interrupted")
