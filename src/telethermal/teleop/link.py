@@ -264,11 +264,11 @@ class SlaveLink:
 
 def _remembered_effusivity(m: ContactEvent) -> dict | None:
     """A remembered new material's estimate from an announcement (the
-    estimate's field names), None when absent or unusable."""
-    keys = ("effusivity_w_s05_m2k", "effusivity_lo_w_s05_m2k", "effusivity_hi_w_s05_m2k")
+    estimate's field names), None when absent or unusable
+    (:meth:`Effusivity.of_fields`)."""
+    keys = EFFUSIVITY_KEYS[:3]
     values = [given(getattr(m, "object_" + k, None)) for k in keys]
-    if any(v is None or not math.isfinite(v) or v <= 0 for v in values) or \
-            not values[1] <= values[0] <= values[2]:
+    if Effusivity.of_fields(*values) is None:
         return None
     return dict(zip(keys, (float(v) for v in values)))
 

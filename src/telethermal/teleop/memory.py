@@ -56,6 +56,7 @@ from enum import StrEnum
 import numpy as np
 
 from telethermal.ident.anytime import NEW_MATERIAL, Estimate, Label, Reason
+from telethermal.ident.openset import EFFUSIVITY_KEYS
 
 log = logging.getLogger(__name__)
 
@@ -78,27 +79,27 @@ class Effusivity:
     """A new material's remembered estimate, in ``ln e`` (W s^0.5/(m^2 K))."""
     log_e: float
     sd: float                    # of ln e: (ln hi - ln lo) / (2 Z95); pooled: the sharpest
-    weight: float = math.nan     # the sum of the touches' 1 / sd^2 (nan: one touch's)
+    weight: float                # the sum of the touches' 1 / sd^2
 
-    @property
-    def total_weight(self) -> float:
-        return self.sd ** -2 if math.isnan(self.weight) else self.weight
+    @classmethod
+    def of_fields(cls, e, lo, hi) -> "Effusivity | None":
+        """From an effusivity and its 95 % interval's ends; None when one is
+        missing or unusable (not finite and > 0, or ``lo <= e <= hi`` not)."""
+        if any(v is None or not math.isfinite(v) or v <= 0 for v in (e, lo, hi)) or \
+                not lo <= e <= hi:
+            return None
+        sd = max((math.log(hi) - math.log(lo)) / (2 * Z95), 1e-9)
+        return cls(math.log(e), sd, sd ** -2)
 
     @classmethod
     def of(cls, estimate) -> "Effusivity | None":
-        """An estimate's effusivity and interval; None without them (or unusable)."""
-        e = getattr(estimate, "effusivity_w_s05_m2k", None)
-        lo = getattr(estimate, "effusivity_lo_w_s05_m2k", None)
-        hi = getattr(estimate, "effusivity_hi_w_s05_m2k", None)
-        if e is None or lo is None or hi is None or \
-                not all(math.isfinite(v) and v > 0 for v in (e, lo, hi)) or not lo <= e <= hi:
-            return None
-        return cls(math.log(e), max((math.log(hi) - math.log(lo)) / (2 * Z95), 1e-9))
+        """An estimate's effusivity and interval (:meth:`of_fields`)."""
+        return cls.of_fields(*(getattr(estimate, k, None) for k in EFFUSIVITY_KEYS[:3]))
 
     def pooled(self, other: "Effusivity") -> "Effusivity":
         """The inverse-variance mean of the two; the sharper one's sd (see
         the module: the touches share errors that averaging cannot remove)."""
-        w1, w2 = self.total_weight, other.total_weight
+        w1, w2 = self.weight, other.weight
         return Effusivity((w1 * self.log_e + w2 * other.log_e) / (w1 + w2),
                           min(self.sd, other.sd), w1 + w2)
 
@@ -279,8 +280,8 @@ class ObjectMemory:
             # A new material's estimate is pooled whatever the label's verdict
             # (one named against a class may yet be what the evidence
             # supports), unless it is inconsistent with the estimate held.
-            pooled = old.effusivity if old.effusivity is not None and fresh_e is not None \
-                and not old.effusivity.consistent(fresh_e) else _pool((old.effusivity, fresh_e))
+            pooled = old.effusivity if _inconsistent(old.effusivity, fresh_e) else \
+                _pool((old.effusivity, fresh_e))
             self._known[object_id] = _Evidence(_add(old.log_p, fresh), old.touches + 1, t_s,
                                                streak, agreed, pooled)
             after = self.recall(object_id)
@@ -318,8 +319,12 @@ class ObjectMemory:
 def _other_new(held: Label, held_e: Effusivity | None, fresh_e: Effusivity | None) -> bool:
     """A new material's touch whose estimate is inconsistent with the held
     new material's: another new material (a disagreement)."""
-    return Label(held).is_new and held_e is not None and fresh_e is not None and \
-        not held_e.consistent(fresh_e)
+    return Label(held).is_new and _inconsistent(held_e, fresh_e)
+
+
+def _inconsistent(a: Effusivity | None, b: Effusivity | None) -> bool:
+    """Both given, and not :meth:`Effusivity.consistent`."""
+    return a is not None and b is not None and not a.consistent(b)
 
 
 def _pool(estimates) -> Effusivity | None:
