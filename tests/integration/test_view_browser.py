@@ -111,8 +111,19 @@ def test_live_session_then_its_recording_in_chromium(tmp_path, models, browser):
         assert page.get_attribute("#decision", "data-label") == MATERIAL
         page.wait_for_function("Number(document.querySelector('#count-slave').dataset.value)"
                                " > 50", timeout=10_000)
-        for canvas in ("temp", "master-flux", "slave-flux", "posterior"):
+        for canvas in ("temp", "master-flux", "slave-flux"):
             assert watch.points(canvas) > 10, canvas
+        # The view stream carries the newest posterior every 20 ms and the page
+        # takes the newest every 50 ms, while a confident touch has a few
+        # estimates 10 ms apart before its commit (then none until the last
+        # window): one to three of them reach the page, by the load. Every one
+        # has a point per class, and the last is the decision's.
+        classes = page.evaluate("posterior.classes.length")
+        assert classes == 7
+        assert watch.points("posterior") >= classes and watch.points("posterior") % classes == 0
+        last_t, marker_t = page.evaluate("""() => { const s = posterior.plot.series[0].pts;
+            return [s[s.length - 1][0], posterior.plot.marker[0]]; }""")
+        assert last_t == pytest.approx(marker_t, abs=1e-9)
         page.wait_for_function("document.querySelector('#lag-p99').dataset.value !== ''")
         shot = tmp_path / "view.png"
         page.screenshot(path=str(shot))
