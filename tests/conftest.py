@@ -25,8 +25,13 @@ class TrainedModels:
     once. Shared read-only: at the session's end each model is saved again
     and each file hashed, and a test that changed one fails the run."""
 
-    def __init__(self, folder):
+    def __init__(self, folder, shared=None):
         self.folder = folder
+        #: Under pytest-xdist, a folder both workers see: the first worker to
+        #: need a model trains it and saves it there (under a lock), the other
+        #: loads it: the same model file, half the training. The file
+        #: round trip is the one a service makes (tests/unit check it).
+        self.shared = shared
         self._models = {}          # (repr(scene), seed, kind[, method]) -> model
         self._files = {}           # (repr(scene), seed) -> (identifier path, generator path)
         self._digests = {}         # what each model and file was when made
@@ -57,9 +62,28 @@ class TrainedModels:
     def _model(self, scene, seed, kind, method=None):
         key = (repr(scene), seed, kind) + ((method,) if method else ())
         if key not in self._models:
-            self._models[key] = self._train[kind](scene, seed, *((method,) if method else ()))
+            self._models[key] = self._trained(key, scene, seed, kind, method)
             self._digests[key] = self._model_digest(self._models[key], kind)
         return self._models[key]
+
+    def _trained(self, key, scene, seed, kind, method):
+        train = lambda: self._train[kind](scene, seed, *((method,) if method else ()))  # noqa: E731
+        if self.shared is None:
+            return train()
+        import fcntl
+        import hashlib
+
+        from telethermal.ident.registry import load_model
+        from telethermal.render.generator import load_generator, save_generator
+        name = hashlib.sha256(repr(key).encode()).hexdigest()[:24]
+        path = self.shared / f"{kind}-{name}.npz"
+        with open(self.shared / f"{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)          # released when the file closes
+            if path.is_file():
+                return load_model(path) if kind == "identifier" else load_generator(path)
+            model = train()
+            model.save(path) if kind == "identifier" else save_generator(model, path)
+            return model
 
     def identifier(self, scene, seed: int = 0, method: str | None = None):
         """``train_identifier(scene, seed[, method])``: not to be changed by
@@ -104,7 +128,13 @@ class TrainedModels:
 @pytest.fixture(scope="session")
 def trained_models(tmp_path_factory):
     """The session's shared trained identifiers and generators (TrainedModels)."""
-    trained = TrainedModels(tmp_path_factory.mktemp("trained-models"))
+    import os
+    shared = None
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        # The workers' base folders share this run's parent folder.
+        shared = tmp_path_factory.getbasetemp().parent / "trained-models-shared"
+        shared.mkdir(exist_ok=True)
+    trained = TrainedModels(tmp_path_factory.mktemp("trained-models"), shared)
     yield trained
     changed = trained.changed()
     assert not changed, f"a test changed a shared trained model or its file: {changed}"
