@@ -45,8 +45,9 @@ of ``x`` (W/m^2 K)::
   allowance for it aluminium's intervals covered 0 of 20 touches at 0.5 s
   and 1 s (seeds 7 and 8). The allowance: ``model_error_rel`` (the scene's
   tolerance) times the rms of the touch's samples, added to the noise's
-  variance as if white. A systematic error is not white: the allowance is
-  an approximation, on the conservative side where the signal is large.
+  variance as if white; and, since a systematic error does not average
+  out over samples, a floor: the ``ln e`` that moves the curve by the
+  tolerance (:func:`~telethermal.ident.intervals.resolution_var`).
 
 - The water pad (the second paper's): its curves are those of the pad
   pre-conditioned to the nominal command (its water warmer than its face,
@@ -67,14 +68,10 @@ False when its p-value is below :data:`FIT_P_MIN` (the object is not what
 the model assumes: a coat on another material fails it; a thin plate's
 slow fall-off does not within 0.5 s, its estimate drifts down instead).
 
-Cost (``telethermal bench unseen``'s ``time_per_estimate_s``): from the
-grid's best node ("cold": the coarse search over every node and 9 onsets,
-on at most :data:`START_SAMPLES` samples) and from the estimate one 50 Hz
-period before ("warm": as a live slave re-estimates); each Newton step
-evaluates the spline once per sample, contracted in (ln e, u) first. The
-curves are built once per scene and object temperature (seconds: the pad's
-loop simulated at 1 kHz for every grid point); a live slave would build
-them at start-up, or load them.
+Cost (``bench unseen``'s ``time_per_estimate_s``): "cold" from the grid's
+best node (every node, 9 onsets, at most :data:`START_SAMPLES` samples),
+"warm" from the estimate one 50 Hz period before, as a live slave. The
+curves: once per scene and object temperature (:mod:`.curvecache`).
 """
 
 from __future__ import annotations
@@ -90,6 +87,7 @@ from scipy.special import chdtrc
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.bspline import SplineAxis
+from telethermal.ident.intervals import resolution_var
 from telethermal.ident.oracle import KernelPrior, draw_nuisances, flux_noise_w_m2, \
     marginal_log_likelihood
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts
@@ -440,7 +438,7 @@ class EffusivityEstimator:
                                       "than the estimator's curves: build it with a larger max_s")
         s = self._noise_var(x, gap_k)
         theta, hess = self._fit(x, s, start)
-        sd, (lo, hi), bound = self._interval(theta, hess)
+        sd, (lo, hi), bound = self._interval(theta, hess, resolution_var(self, theta, n))
         return EffusivityEstimate(
             float(math.exp(theta[0])), (lo, hi),
             sd, (n - 1) / self.sample_rate_hz, n, self.h_ref_w_m2k * float(math.exp(theta[1])),
@@ -454,9 +452,10 @@ class EffusivityEstimator:
         return (self.noise_w_m2 / gap_k) ** 2 + \
             allowance * self.model_error_rel ** 2 * float(np.mean(x * x))
 
-    def _interval(self, theta, hess):
-        """(sd of ln e, the 95 % interval in e clipped to the grid, at_bound)."""
-        sd = float(math.sqrt(max(np.linalg.pinv(-hess)[0, 0], 0.0)))
+    def _interval(self, theta, hess, floor_var: float):
+        """(sd of ln e, the 95 % interval in e clipped to the grid, at_bound):
+        Laplace's variance plus ``floor_var`` (the resolution floor's)."""
+        sd = float(math.sqrt(max(np.linalg.pinv(-hess)[0, 0], 0.0) + floor_var))
         lo, hi = theta[0] - Z95 * sd, theta[0] + Z95 * sd
         return sd, (float(math.exp(max(lo, self.lo[0]))), float(math.exp(min(hi, self.hi[0])))), \
             bool(lo <= self.lo[0] or hi >= self.hi[0])
@@ -471,7 +470,8 @@ class EffusivityEstimator:
         x = np.asarray(x, float)
         theta = np.asarray(theta, float)
         _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k, allowance))
-        _, (lo, hi), _ = self._interval(theta, hess)
+        _, (lo, hi), _ = self._interval(theta, hess,
+                                        allowance * resolution_var(self, theta, len(x)))
         return float(math.exp(theta[0])), lo, hi
 
     def _goodness(self, theta, x, s):
