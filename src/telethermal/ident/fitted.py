@@ -30,12 +30,14 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import math
 
 import numpy as np
 from scipy.stats import t as student_t
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.base import Identifier
+from telethermal.ident.intervals import resolution_var
 from telethermal.ident.prepare import FLUX
 
 #: The fewest samples an estimate is made from (the estimator's own floor).
@@ -335,7 +337,8 @@ class EffusivityFit(Identifier):
             return None
         est, gap_k = self.estimator()
         theta = self._theta(row, len(row))
-        e, lo, hi = est.interval_at(row, gap_k, theta, self.allowance_at(window_index))
+        f = self.allowance_at(window_index)
+        e, lo, hi = est.interval_at(row, gap_k, theta, f)
         params = self.params_[window_index]
         nearest = tail = None
         inside = ()
@@ -344,7 +347,12 @@ class EffusivityFit(Identifier):
             tails = 2.0 * student_t.sf(np.abs(z[0]), dof)
             tail = float(np.max(tails))
             nearest = str(self.classes_[int(np.argmin(np.abs(theta[0] - params["means"])))])
-            inside = classes_holding(float(theta[0]), log_sd_of_interval(lo, hi), params,
+            # Against a class's training touches the resolution floor (the
+            # curves' systematic error, ident/intervals.py) is common to
+            # both: their estimates carry it too. The touch's own part is
+            # its interval less the floor.
+            own = log_sd_of_interval(lo, hi) ** 2 - f * resolution_var(est, theta, len(row))
+            inside = classes_holding(float(theta[0]), math.sqrt(max(own, 0.0)), params,
                                      self.classes_, self.outlier_p)
         return EffusivityReading(e, lo, hi, nearest, tail, inside)
 
