@@ -91,15 +91,14 @@ def test_the_sensitivity_is_the_estimators_curve_differentiated(model):
 
 def test_the_variance_terms_carry_the_floor_times_the_factor(model):
     """log_e_variance (the calibration's) is the interval the estimator
-    reports at any factor f, the floor included; and the floor is the part
-    that does not fall with more samples of the same touch."""
+    reports at any factor f, the floor included, and the floor is f times
+    its own column."""
     est, gap_k = model.estimator()
     x = _touches("copper").x[0, :, 0]
     for n in (51, 101):
         row = np.ascontiguousarray(x[:n])
         fit = est.estimate(row, gap_k)
         terms = variance_terms(est, row, gap_k, fit.theta)
-        assert terms[20] == pytest.approx(resolution_var(est, fit.theta, n), rel=1e-12)
         assert log_e_variance(terms, 1.0)[0] == pytest.approx(fit.log_sd ** 2, rel=1e-9)
         for f in (0.0, 0.03, 1.0):
             _, lo, hi = est.interval_at(row, gap_k, fit.theta, f)
@@ -163,3 +162,37 @@ def test_a_class_is_compared_at_the_touchs_interval_less_the_floor(model, monkey
         floor = f * resolution_var(est, theta, 101)
         assert floor > 0.5 * full ** 2            # copper at 1 s: the floor is most of it
         assert seen[-1] ** 2 == pytest.approx(full ** 2 - floor, rel=1e-9)
+
+
+def test_a_model_file_calibrated_before_the_floor_reads_as_it_was_calibrated(model):
+    """A calibration made before the floor (no "floor" key: its factors
+    hold the references with the Laplace variance alone) gets no floor: its
+    intervals and its class comparisons are what they were; this
+    calibration says it has the floor, and a model file keeps that."""
+    import copy
+
+    assert model.interval_allowance_["floor"] is True
+    old = copy.copy(model)
+    old.interval_allowance_ = {k: v for k, v in model.interval_allowance_.items()
+                               if k != "floor"}
+    k = model.windows_s_.index(1.0)
+    f = model.allowance_at(k)
+    assert old.allowance_at(k) == f and old.floor_at_s(1.0) == 0.0
+    assert model.floor_at_s(1.0) == f
+    est, gap_k = model.estimator()
+    x = _touches("copper").x[:1]
+    row = np.ascontiguousarray(x[0, :101, 0])
+    theta = model._theta(row, 101)
+    now, before = model.effusivity_reading(x, k), old.effusivity_reading(x, k)
+    assert (before.effusivity_lo_w_s05_m2k, before.effusivity_hi_w_s05_m2k) == \
+        est.interval_at(row, gap_k, theta, f, 0.0)[1:]
+    assert (now.effusivity_lo_w_s05_m2k, now.effusivity_hi_w_s05_m2k) == \
+        est.interval_at(row, gap_k, theta, f)[1:]
+    assert now.effusivity_hi_w_s05_m2k > before.effusivity_hi_w_s05_m2k
+
+
+def test_the_calibrations_floor_mark_survives_a_model_file(model, tmp_path):
+    from telethermal.ident.registry import load_model
+    back = load_model(model.save(tmp_path / "fit.npz"))
+    assert back.interval_allowance_["floor"] is True
+    assert back.floor_at_s(1.0) == model.floor_at_s(1.0)

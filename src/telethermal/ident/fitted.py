@@ -200,6 +200,14 @@ class EffusivityFit(Identifier):
             return 1.0
         return float(np.interp(window_s, cal["windows_s"], cal["allowance"]))
 
+    def floor_at_s(self, window_s: float) -> float:
+        """The factor on the resolution floor's variance for a ``window_s``
+        window: the allowance's where the calibration included the floor
+        (or none was made), 0 for a model file calibrated before it had one
+        (its factors hold the references with the Laplace variance alone)."""
+        cal = self.interval_allowance_
+        return self.allowance_at_s(window_s) if not cal or cal.get("floor") else 0.0
+
     def estimator(self):
         """(the scene's estimator, its nominal gap in K), built once per process."""
         return _estimator(self.scene, float(self.max_window_s))
@@ -328,7 +336,8 @@ class EffusivityFit(Identifier):
         (1, n, 1), as ``outside_classes``): an
         :class:`~telethermal.ident.openset.EffusivityReading`, None on a
         window under :data:`MIN_SAMPLES` samples: the window's fit (the one
-        the classes are scored on) and its Laplace 95 % interval there."""
+        the classes are scored on) and its calibrated 95 % interval there
+        (Laplace's and the resolution floor, :mod:`telethermal.ident.intervals`)."""
         from telethermal.ident.openset import EffusivityReading
 
         w = self._window(x, self.windows_s_[window_index])
@@ -338,7 +347,8 @@ class EffusivityFit(Identifier):
         est, gap_k = self.estimator()
         theta = self._theta(row, len(row))
         f = self.allowance_at(window_index)
-        e, lo, hi = est.interval_at(row, gap_k, theta, f)
+        f_floor = self.floor_at_s(self.windows_s_[window_index])
+        e, lo, hi = est.interval_at(row, gap_k, theta, f, f_floor)
         params = self.params_[window_index]
         nearest = tail = None
         inside = ()
@@ -351,7 +361,8 @@ class EffusivityFit(Identifier):
             # curves' systematic error, ident/intervals.py) is common to
             # both: their estimates carry it too. The touch's own part is
             # its interval less the floor.
-            own = log_sd_of_interval(lo, hi) ** 2 - f * resolution_var(est, theta, len(row))
+            own = log_sd_of_interval(lo, hi) ** 2 - f_floor * resolution_var(est, theta,
+                                                                              len(row))
             inside = classes_holding(float(theta[0]), math.sqrt(max(own, 0.0)), params,
                                      self.classes_, self.outlier_p)
         return EffusivityReading(e, lo, hi, nearest, tail, inside)

@@ -92,15 +92,15 @@ def resolution_var(est, theta, n: int) -> float:
 
 
 def variance_terms(est, x: np.ndarray, gap_k: float, theta) -> np.ndarray:
-    """What the Laplace variance of ``ln e`` at the fit ``theta`` of the
-    samples ``x`` depends on, for any factor on the curves' allowance, as
-    one flat row (20) for :func:`log_e_variance`: the estimator's
+    """What the variance of ``ln e`` at the fit ``theta`` of the samples
+    ``x`` depends on, for any factor on the curves' allowance, as one flat
+    row (21) for :func:`log_e_variance`: the estimator's
     (:class:`~telethermal.ident.effusivity.EffusivityEstimator`) Gauss-Newton
     Hessian split into the data's information ``M = J^T J`` (the
     amplitude's mean times the curve's Jacobian), ``b = J^T g``, ``g.g``,
     the nuisances' prior Hessian ``P``, the noise's variance, the
     allowance's variance at factor 1, the amplitude's variance; then the
-    resolution floor's variance at factor 1 (21 in all)."""
+    resolution floor's variance at factor 1."""
     x = np.asarray(x, float)
     theta = np.asarray(theta, float)
     a0, sa = est.amplitude
@@ -201,5 +201,8 @@ def calibrate_allowance(model, contacts, min_samples: int) -> dict | None:
         out_f.append(allowance_factor(np.array(r), lambda f, t=terms: log_e_variance(t, f)))
     if not out_s:
         return None
-    return {"windows_s": out_s, "allowance": out_f,
+    # "floor": the factors hold the references with the resolution floor in
+    # the variance (a file calibrated before it has none: see
+    # EffusivityFit.floor_at_s).
+    return {"windows_s": out_s, "allowance": out_f, "floor": True,
             "reference": "the classes' table effusivities (physics.materials)"}
