@@ -130,9 +130,12 @@ def trained_models(tmp_path_factory):
     """The session's shared trained identifiers and generators (TrainedModels)."""
     import os
     shared = None
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        # The workers' base folders share this run's parent folder.
-        shared = tmp_path_factory.getbasetemp().parent / "trained-models-shared"
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    if os.environ.get("PYTEST_XDIST_WORKER") and run:
+        # The workers' base folders share this run's parent folder; the
+        # run's id (xdist's, the same in every worker) names the folder, so
+        # no other run's models are ever read.
+        shared = tmp_path_factory.getbasetemp().parent / f"trained-models-{run}"
         shared.mkdir(exist_ok=True)
     trained = TrainedModels(tmp_path_factory.mktemp("trained-models"), shared)
     yield trained

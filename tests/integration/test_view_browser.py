@@ -118,12 +118,19 @@ def test_live_session_then_its_recording_in_chromium(tmp_path, models, browser):
         # estimates 10 ms apart before its commit (then none until the last
         # window): one to three of them reach the page, by the load. Every one
         # has a point per class, and the last is the decision's.
-        classes = page.evaluate("posterior.classes.length")
-        assert classes == 7
-        assert watch.points("posterior") >= classes and watch.points("posterior") % classes == 0
-        last_t, marker_t = page.evaluate("""() => { const s = posterior.plot.series[0].pts;
-            return [s[s.length - 1][0], posterior.plot.marker[0]]; }""")
-        assert last_t == pytest.approx(marker_t, abs=1e-9)
+        # Each estimate drawn is a distribution over the 7 classes, and the
+        # last one drawn is the decision's, its largest posterior the class
+        # named.
+        classes, drawn = page.evaluate("""() => [posterior.classes,
+            posterior.plot.series.map((s) => s.pts)]""")
+        assert len(classes) == 7 and len(drawn) == 7
+        times = [t for t, _ in drawn[0]]
+        assert times and all([t for t, _ in s] == times for s in drawn)
+        for j in range(len(times)):
+            assert sum(s[j][1] for s in drawn) == pytest.approx(1.0, abs=1e-6), times[j]
+        last = [s[-1][1] for s in drawn]
+        assert classes[last.index(max(last))] == MATERIAL
+        assert times[-1] == pytest.approx(page.evaluate("posterior.plot.marker[0]"), abs=1e-9)
         page.wait_for_function("document.querySelector('#lag-p99').dataset.value !== ''")
         shot = tmp_path / "view.png"
         page.screenshot(path=str(shot))
