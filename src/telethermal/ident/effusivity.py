@@ -461,17 +461,17 @@ class EffusivityEstimator:
             bool(lo <= self.lo[0] or hi >= self.hi[0])
 
     def interval_at(self, x: np.ndarray, gap_k: float, theta, allowance: float = 1.0,
-                    floor: float | None = None) -> tuple[float, float, float]:
+                    floor_var: float | None = None) -> tuple[float, float, float]:
         """``(e, lo, hi)`` (W s^0.5/(m^2 K)) of the samples ``x`` at a fit
         ``theta`` already made of them (:meth:`estimate`'s, or a cache's):
         the interval from the Hessian there, one evaluation, no refit;
         ``allowance``: the factor on the curves' allowance's variance and,
-        unless ``floor`` is given, on the resolution floor's
-        (:mod:`telethermal.ident.intervals`)."""
+        unless ``floor_var`` (the floor's variance itself) is given, on the
+        resolution floor's (:mod:`telethermal.ident.intervals`)."""
         x, theta = np.asarray(x, float), np.asarray(theta, float)
         _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k, allowance))
-        floor = allowance if floor is None else floor
-        _, (lo, hi), _ = self._interval(theta, hess, floor * resolution_var(self, theta, len(x)))
+        _, (lo, hi), _ = self._interval(theta, hess, allowance * resolution_var(
+            self, theta, len(x)) if floor_var is None else floor_var)
         return float(math.exp(theta[0])), lo, hi
 
     def _goodness(self, theta, x, s):

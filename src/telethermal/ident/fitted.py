@@ -346,9 +346,9 @@ class EffusivityFit(Identifier):
             return None
         est, gap_k = self.estimator()
         theta = self._theta(row, len(row))
-        f = self.allowance_at(window_index)
-        f_floor = self.floor_at_s(self.windows_s_[window_index])
-        e, lo, hi = est.interval_at(row, gap_k, theta, f, f_floor)
+        floor_var = self.floor_at_s(self.windows_s_[window_index]) * \
+            resolution_var(est, theta, len(row))
+        e, lo, hi = est.interval_at(row, gap_k, theta, self.allowance_at(window_index), floor_var)
         params = self.params_[window_index]
         nearest = tail = None
         inside = ()
@@ -361,8 +361,7 @@ class EffusivityFit(Identifier):
             # curves' systematic error, ident/intervals.py) is common to
             # both: their estimates carry it too. The touch's own part is
             # its interval less the floor.
-            own = log_sd_of_interval(lo, hi) ** 2 - f_floor * resolution_var(est, theta,
-                                                                              len(row))
+            own = log_sd_of_interval(lo, hi) ** 2 - floor_var
             inside = classes_holding(float(theta[0]), math.sqrt(max(own, 0.0)), params,
                                      self.classes_, self.outlier_p)
         return EffusivityReading(e, lo, hi, nearest, tail, inside)

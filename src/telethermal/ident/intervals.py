@@ -76,9 +76,9 @@ def sensitivity(est, theta, n: int) -> float:
     g, jac = est.family.curve(np.asarray(theta, float), np.arange(n) / est.sample_rate_hz,
                               deriv=True)
     peak = float(np.max(np.abs(g))) if len(g) else 0.0
-    use = np.abs(g) > SENSITIVE_FRACTION * peak
-    if peak <= 0.0 or not np.any(use):
+    if not peak > 0.0:
         return 0.0
+    use = np.abs(g) > SENSITIVE_FRACTION * peak        # the peak's sample at least
     return float(np.mean(np.abs(jac[use, 0] / g[use])))
 
 
