@@ -74,6 +74,10 @@ def test_material_summary_counts_coverage_and_median_error():
     cov = out["interval_coverage"]["0.5"]
     assert (cov["covered"], cov["n"], cov["rate"]) == (2, 4, 0.5)
     assert cov["ci"][0] < 0.5 < cov["ci"][1]
+    # the standardised error: ln(e_hat / e) over each estimate's sd (0.01)
+    z = np.log([1.0, 1.02, 1.10, 0.90]) / 0.01
+    assert out["interval_z"]["0.5"]["mean"] == pytest.approx(z.mean(), rel=1e-12)
+    assert out["interval_z"]["0.5"]["rms"] == pytest.approx(np.sqrt(np.mean(z * z)), rel=1e-12)
     assert not out["trained"] and out["reported"].startswith("not_run")
     assert out["flux_rms_rel"].startswith("not_run") and out["skin_rms_k"].startswith("not_run")
 

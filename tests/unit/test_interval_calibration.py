@@ -101,7 +101,7 @@ def test_the_variance_terms_give_the_estimators_own_interval_at_any_allowance(mo
         terms = variance_terms(est, row, gap_k, fit.theta)
         assert log_e_variance(terms, 1.0)[0] == pytest.approx(fit.log_sd ** 2, rel=1e-9)
         for f in (0.0, 0.05, 1.0, 3.0):
-            _, lo, hi = est.interval_at(row, gap_k, fit.theta, f)
+            _, lo, hi, _ = est.interval_at(row, gap_k, fit.theta, f)
             sd = math.log(hi / lo) / (2 * Z95)
             assert log_e_variance(terms, f)[0] == pytest.approx(sd ** 2, rel=1e-9), (i, f)
         v0, v1 = log_e_variance(terms, 0.0)[0], log_e_variance(terms, 1.0)[0]
@@ -124,7 +124,7 @@ def test_the_fit_calibrates_every_tenth_of_a_second_and_the_reading_uses_it(mode
     reading = model.effusivity_reading(x, i)
     row = np.ascontiguousarray(x[0, :31, 0])
     assert (reading.effusivity_lo_w_s05_m2k, reading.effusivity_hi_w_s05_m2k) == \
-        est.interval_at(row, gap_k, model._theta(row, 31), cal["allowance"][-1])[1:]
+        est.interval_at(row, gap_k, model._theta(row, 31), cal["allowance"][-1])[1:3]
 
 
 def test_the_calibration_survives_a_model_file_and_an_older_file_reads_uncalibrated(

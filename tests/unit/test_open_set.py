@@ -227,7 +227,7 @@ def test_a_readings_interval_is_the_estimators_at_the_same_fit(model):
     row = held.x[0, :31, 0]
     fit = est.estimate(row, gap_k)
     assert est.interval_at(row, gap_k, fit.theta) == (fit.effusivity_w_s05_m2k,
-                                                      *fit.interval_w_s05_m2k)
+                                                      *fit.interval_w_s05_m2k, fit.log_sd)
 
 
 def test_a_class_holds_an_estimate_within_its_predictive_widened_by_the_touchs_own_sd():

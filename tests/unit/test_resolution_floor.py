@@ -101,7 +101,7 @@ def test_the_variance_terms_carry_the_floor_times_the_factor(model):
         terms = variance_terms(est, row, gap_k, fit.theta)
         assert log_e_variance(terms, 1.0)[0] == pytest.approx(fit.log_sd ** 2, rel=1e-9)
         for f in (0.0, 0.03, 1.0):
-            _, lo, hi = est.interval_at(row, gap_k, fit.theta, f)
+            _, lo, hi, _ = est.interval_at(row, gap_k, fit.theta, f)
             sd = math.log(hi / lo) / (2 * Z95)
             assert log_e_variance(terms, f)[0] == pytest.approx(sd ** 2, rel=1e-9), (n, f)
             no_floor = terms.copy()
@@ -164,6 +164,37 @@ def test_a_class_is_compared_at_the_touchs_interval_less_the_floor(model, monkey
         assert seen[-1] ** 2 == pytest.approx(full ** 2 - floor, rel=1e-9)
 
 
+def test_a_clipped_interval_is_compared_at_its_unclipped_sd(model, monkeypatch):
+    """Early in a copper touch the interval reaches past the estimator's
+    grid (1.2e5) and is clipped there: the interval's ends then understate
+    the sd of ln e. The class comparison takes the sd itself less the floor
+    (from the clipped ends the floor left nothing: a touch compared with no
+    uncertainty of its own). Checked against the estimator's own Laplace
+    variance at the same fit: the comparison's variance plus the floor is
+    the interval's variance to 1e-9."""
+    import telethermal.ident.fitted as fitted
+
+    seen = []
+    real = fitted.classes_holding
+    monkeypatch.setattr(fitted, "classes_holding",
+                        lambda log_e, log_sd, *a: seen.append(log_sd) or real(log_e, log_sd, *a))
+    est, gap_k = model.estimator()
+    touches = _touches("copper")
+    k = model.windows_s_.index(0.1)
+    clipped = 0
+    for i in range(len(touches)):
+        reading = model.effusivity_reading(touches.x[i:i + 1], k)
+        row = np.ascontiguousarray(touches.x[i, :11, 0])
+        theta, e, lo, hi, sd, floor = model.interval_of(row, 0.1)
+        assert (lo, hi) == (reading.effusivity_lo_w_s05_m2k, reading.effusivity_hi_w_s05_m2k)
+        assert seen[-1] ** 2 + floor == pytest.approx(sd ** 2, rel=1e-9)
+        if hi >= math.exp(est.hi[0]) * (1 - 1e-12):
+            clipped += 1
+            from_ends = math.log(hi / lo) / (2 * Z95)
+            assert from_ends < sd and seen[-1] > math.sqrt(max(from_ends ** 2 - floor, 0.0))
+    assert clipped >= 1                           # the case this test is about occurred
+
+
 def test_a_model_file_calibrated_before_the_floor_reads_as_it_was_calibrated(model):
     """A calibration made before the floor (no "floor" key: its factors
     hold the references with the Laplace variance alone) gets no floor: its
@@ -185,9 +216,9 @@ def test_a_model_file_calibrated_before_the_floor_reads_as_it_was_calibrated(mod
     theta = model._theta(row, 101)
     now, before = model.effusivity_reading(x, k), old.effusivity_reading(x, k)
     assert (before.effusivity_lo_w_s05_m2k, before.effusivity_hi_w_s05_m2k) == \
-        est.interval_at(row, gap_k, theta, f, 0.0)[1:]
+        est.interval_at(row, gap_k, theta, f, 0.0)[1:3]
     assert (now.effusivity_lo_w_s05_m2k, now.effusivity_hi_w_s05_m2k) == \
-        est.interval_at(row, gap_k, theta, f)[1:]
+        est.interval_at(row, gap_k, theta, f)[1:3]
     assert now.effusivity_hi_w_s05_m2k > before.effusivity_hi_w_s05_m2k
 
 

@@ -101,5 +101,5 @@ def section_line(name: str, r: dict, windows) -> str:
     first = rep.get("named_then_new", 0)
     return (f"| {name} (unseen, layered: {describe(r)}) | - | median estimate {est} | drift "
             f"x{d['ratio_p50']:.2f}, {d['toward_base_beyond_intervals']} of {d['n']} beyond "
-            f"the intervals | {rep.get('named', '-')} | {rep.get('new', '-')}"
+            f"the intervals | - | {rep.get('named', '-')} | {rep.get('new', '-')}"
             f"{f' ({first})' if first else ''} | {rep.get('unknown', '-')} |")

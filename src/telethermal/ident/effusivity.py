@@ -461,18 +461,18 @@ class EffusivityEstimator:
             bool(lo <= self.lo[0] or hi >= self.hi[0])
 
     def interval_at(self, x: np.ndarray, gap_k: float, theta, allowance: float = 1.0,
-                    floor_var: float | None = None) -> tuple[float, float, float]:
-        """``(e, lo, hi)`` (W s^0.5/(m^2 K)) of the samples ``x`` at a fit
-        ``theta`` already made of them (:meth:`estimate`'s, or a cache's):
-        the interval from the Hessian there, one evaluation, no refit;
+                    floor_var: float | None = None) -> tuple[float, float, float, float]:
+        """``(e, lo, hi, sd)`` of ``x`` at a fit ``theta`` made of them: the
+        interval (W s^0.5/(m^2 K), clipped to the grid) and the sd of ``ln e``
+        (unclipped) from the Hessian there, one evaluation, no refit;
         ``allowance``: the factor on the curves' allowance's variance and,
         unless ``floor_var`` (the floor's variance itself) is given, on the
         resolution floor's (:mod:`telethermal.ident.intervals`)."""
         x, theta = np.asarray(x, float), np.asarray(theta, float)
         _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k, allowance))
-        _, (lo, hi), _ = self._interval(theta, hess, allowance * resolution_var(
+        sd, (lo, hi), _ = self._interval(theta, hess, allowance * resolution_var(
             self, theta, len(x)) if floor_var is None else floor_var)
-        return float(math.exp(theta[0])), lo, hi
+        return float(math.exp(theta[0])), lo, hi, sd
 
     def _goodness(self, theta, x, s):
         """(chi-square per degree of freedom, fits): the residual after the

@@ -323,6 +323,27 @@ class EffusivityFit(Identifier):
         other = np.exp(log_other - top)
         return np.asarray(p) * (1.0 - other / (other + float(np.sum(np.exp(log_f - top)))))
 
+    def interval_of(self, row: np.ndarray, window_s: float):
+        """What the slave reports of a touch's samples ``row`` (1-d, the
+        flux over its measured gap, from the onset) in a ``window_s``
+        window, any length: ``(theta, e, lo, hi, sd, floor_var)``, the fit
+        walked from window to window as the slave makes it
+        (:meth:`_theta`), the calibrated 95 % interval's ends (W
+        s^0.5/(m^2 K), clipped to the estimator's grid), the sd of ``ln e``
+        (unclipped) and the resolution floor's part of its variance (see
+        :mod:`telethermal.ident.intervals`); None under
+        :data:`MIN_SAMPLES` samples. ``bench unseen`` scores this."""
+        n = int(round(window_s * self.sample_rate_hz_)) + 1
+        row = np.ascontiguousarray(np.asarray(row, float)[:n])
+        if len(row) < MIN_SAMPLES:
+            return None
+        est, gap_k = self.estimator()
+        theta = self._theta(row, len(row))
+        floor_var = self.floor_at_s(window_s) * resolution_var(est, theta, len(row))
+        e, lo, hi, sd = est.interval_at(row, gap_k, theta, self.allowance_at_s(window_s),
+                                        floor_var)
+        return theta, e, lo, hi, sd, floor_var
+
     def outside_classes(self, x, window_index):
         params = self.params_[window_index]
         if "means" not in params:
@@ -341,14 +362,10 @@ class EffusivityFit(Identifier):
         from telethermal.ident.openset import EffusivityReading
 
         w = self._window(x, self.windows_s_[window_index])
-        row = np.ascontiguousarray(w[0, :, 0])
-        if len(row) < MIN_SAMPLES:
+        got = self.interval_of(w[0, :, 0], self.windows_s_[window_index])
+        if got is None:
             return None
-        est, gap_k = self.estimator()
-        theta = self._theta(row, len(row))
-        floor_var = self.floor_at_s(self.windows_s_[window_index]) * \
-            resolution_var(est, theta, len(row))
-        e, lo, hi = est.interval_at(row, gap_k, theta, self.allowance_at(window_index), floor_var)
+        theta, e, lo, hi, sd, floor_var = got
         params = self.params_[window_index]
         nearest = tail = None
         inside = ()
@@ -361,7 +378,7 @@ class EffusivityFit(Identifier):
             # curves' systematic error, ident/intervals.py) is common to
             # both: their estimates carry it too. The touch's own part is
             # its interval less the floor.
-            own = log_sd_of_interval(lo, hi) ** 2 - floor_var
+            own = sd ** 2 - floor_var
             inside = classes_holding(float(theta[0]), math.sqrt(max(own, 0.0)), params,
                                      self.classes_, self.outlier_p)
         return EffusivityReading(e, lo, hi, nearest, tail, inside)
