@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from telethermal.data.generate import _Contacts, _held_pad_contact, pad_database
+from telethermal.data.generate import _Contacts, _held_pad_contact, pad_database, \
+    touch_contact_model
 from telethermal.ident.oracle import CurveFamily, KernelPrior, Oracle, marginal_log_likelihood
 from telethermal.ident.prepare import FLUX, Contacts, from_trials
-from telethermal.physics.scene import load_scene, pad_contact_model
+from telethermal.physics.scene import load_scene
 
 RATE_HZ = 10.0
 
@@ -141,7 +142,7 @@ def test_the_flux_is_linear_in_the_gap_to_far_below_the_noise(hard_three):
     # noise of the normalised flux (0.4 W/m^2 over 10 K), so neglected.
     scene, oracle, _, _ = hard_three
     obj = scene.objects[0]
-    model, _ = pad_contact_model(scene, obj)
+    model, _ = touch_contact_model(scene, obj)        # as the touches are solved
     t = np.arange(0.005, 0.3, 0.01)
     h = np.array([2500.0])
     draws = _Contacts(np.zeros(1), h, np.zeros(1), np.array([obj.temp_c - 0.3]), np.zeros(1))

@@ -36,18 +36,18 @@ of ``x`` (W/m^2 K)::
   does not know its instruments' errors); ``A`` is marginalised in closed
   form. The prior on ``log e`` is flat over the grid.
 
-- The curves' own error: the simulator that makes the touches solves the
-  layered conduction to its scene's ``[model] tolerance_rel`` (1e-3), and
-  its grid depends on the object's diffusivity, which the estimator does
-  not know: fingertip-7's aluminium differs from the estimator's curve of
-  the same effusivity by 0.36 W/m^2 K (5e-4 of the flux), ~90 times the
-  flux noise per sample over a 10 K gap (0.004 W/m^2 K). Without an
-  allowance for it aluminium's intervals covered 0 of 20 touches at 0.5 s
-  and 1 s (seeds 7 and 8). The allowance: ``model_error_rel`` (the scene's
-  tolerance) times the rms of the touch's samples, added to the noise's
-  variance as if white; and, since a systematic error does not average
-  out over samples, a floor: the ``ln e`` that moves the curve by the
-  tolerance (:func:`~telethermal.ident.intervals.resolution_var`).
+- The curves' own error: they are solved to the scene's ``[model]
+  tolerance_rel`` (1e-3) on a grid sized for :data:`REFERENCE_MATERIAL`,
+  the simulated touches to a quarter of it on one sized for the object
+  (:func:`~telethermal.data.generate.touch_contact_model`): the curves
+  differ from fingertip-7's touches by 3-5e-4 of the flux early in the
+  contact, of one sign: up to 0.3 W/m^2 K, 5-9 times the flux noise per
+  sample over a 10 K gap (0.04 W/m^2 K) but on the lowest effusivities.
+  The allowance: ``model_error_rel`` (the scene's tolerance) times the rms
+  of the touch's samples, added to the noise's variance as if white; and,
+  since a systematic error does not average out over samples, a floor: the
+  ``ln e`` that moves the curve by the tolerance
+  (:func:`~telethermal.ident.intervals.resolution_var`).
 
 - The water pad (the second paper's): its curves are those of the pad
   pre-conditioned to the nominal command (its water warmer than its face,

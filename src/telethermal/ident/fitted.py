@@ -20,8 +20,9 @@ outside every class (an unseen material: issue 30).
 What it needs that the learned-only methods do not: the pad's own model
 (layers, module, loop, sensor lag: the scene's ``[pad]``), as a lab has it
 from its pad's design and datasheets. The touches' simulator uses the very
-same model, so on simulated touches the pad model is exact; a real pad's
-model is off by its datasheets' tolerances (``bench identify`` says so).
+same model (solved to a quarter of the curves' tolerance), so on simulated
+touches the pad model is exact but for the curves' discretisation; a real
+pad's model is off by its datasheets' tolerances (``bench identify`` says so).
 The estimates do not depend on the training set, so they are computed once
 per touch and window and kept for the process.
 """

@@ -28,14 +28,16 @@ recording's own labels) nothing is calibrated and the interval stays the
 estimator's.
 
 The allowance as white noise shrinks like one over the number of samples,
-and a systematic error does not: measured on ``bench unseen``'s touches
-(fingertip-7, seeds 0-2), the simulator solves a high-diffusivity metal's
-touch on a coarser grid than the estimator's curves (both within the 1e-3
-tolerance), a curve error of ~3e-4 that no number of samples removes.
-Late in a metal's touch the flux hardly depends on ``e`` (the contact
-conductance limits it), so that error is a bias in ``ln e`` of ~1.5 of its
-white-noise sd: copper's intervals held 24 of 30 touches at 1 s, every
-error of the same sign. So the variance has a second term besides the
+and a systematic error does not: the estimator's curves are solved to the
+scene's 1e-3 tolerance, the simulated touches to a quarter of it
+(:func:`~telethermal.data.generate.touch_contact_model`), a curve error of
+3-5e-4 of the flux early in the contact, of one sign, that no number of
+samples removes. Late in a metal's touch the flux hardly depends on ``e``
+(the contact conductance limits it), so that error is a bias in ``ln e``
+of about one of its white-noise sd (``bench unseen``, fingertip-7, seeds
+0-2). When the touches of a metal were solved on a coarser grid than the
+curves, copper's intervals held 24 of 30 touches at 1 s, every error of
+the same sign. So the variance has a second term besides the
 Laplace one: the **resolution floor** (:func:`resolution_var`), the
 square of the ``ln e`` that moves the curve by the tolerance,
 ``(tol / S)^2`` with ``S`` the curve's sensitivity ``|d ln g / d ln e|``

@@ -15,7 +15,8 @@ What a touch of material ``m`` is, in the units of ``x`` (W/m^2 K)::
   kelvin of true gap, ``t`` after the true contact, for contact conductance
   ``h``: the scene's Peltier pad on its module and heat sink, the junction
   held by the pad's 1 kHz loop (:class:`~telethermal.physics.held_pad.HeldPad`
-  through ``generate._held_pad_contact``: pad layers, the object's finite
+  through ``generate._held_pad_contact``, on the touches' own grid,
+  :func:`~telethermal.data.generate.touch_contact_model`: pad layers, the object's finite
   thickness, the junction's droop, the sensor's lag), computed noise-free at
   the nominal temperatures (object at its ``temp_c``, pad ``gap_k`` above)
   on a grid of ``log h`` and of ``t`` and interpolated by a bicubic spline
@@ -340,14 +341,13 @@ def forward_curves(scene, u_grid, t_max_s: float, dt_s: float = MODEL_DT_S) -> d
     [0, t_max_s]: the generator's own held-pad contact at the nominal
     temperatures (object at its ``temp_c``, pad at the scene's set point
     for it), divided by that gap."""
-    from telethermal.data.generate import _Contacts, _held_pad_contact
-    from telethermal.physics.scene import pad_contact_model
+    from telethermal.data.generate import _Contacts, _held_pad_contact, touch_contact_model
     u = np.asarray(u_grid, float)
     h = scene.pad.contact_conductance_w_m2k * np.exp(u)
     t = np.arange(int(np.ceil(t_max_s / dt_s)) + 1) * dt_s
     curves = {}
     for obj in scene.objects:
-        model, _ = pad_contact_model(scene, obj)
+        model, _ = touch_contact_model(scene, obj)
         pad_c = scene.pad_temp_c(obj.temp_c)
         gap = pad_c - obj.temp_c
         b = len(u)
