@@ -189,3 +189,34 @@ def test_within_spread_is_the_classes_t_predictive_at_the_last_window():
                         "var": np.array([0.02, 0.02]) ** 2}]
     assert unseen.within_spread(Model(), "glass", ["graphite", "marble"]) == {
         "graphite": True, "marble": False}
+
+
+def test_the_bench_scores_what_the_slave_reports(fit_model_0_3s, monkeypatch):
+    """Each window's estimate in the bench is the identifier's own
+    (EffusivityFit.interval_of: the fit walked as the slave walks, the
+    calibrated interval): at the slave's 0.1 and 0.3 s windows it is the
+    reading the slave sends (effusivity_reading's ends), its sd the one
+    the interval is made of, and the uncalibrated column the estimator's
+    own interval at the same fit."""
+    from fitcases import SCENE, contacts
+
+    monkeypatch.setattr(unseen, "WINDOWS_S", (0.1, 0.3))
+    touches = contacts(SCENE, 3)
+    timed = {0}
+    rows = unseen._estimates(fit_model_0_3s, touches, timed)
+    est, gap_k = fit_model_0_3s.estimator()
+    assert len(rows) == len(touches.labels)
+    for i in (0, 7, len(rows) - 1):
+        x = touches.x[i, :, 0]
+        for w in (0.1, 0.3):
+            got = rows[i]["windows"][w]
+            theta, e, lo, hi, sd, _ = fit_model_0_3s.interval_of(x, w)
+            reading = fit_model_0_3s.effusivity_reading(touches.x[i:i + 1],
+                                                        fit_model_0_3s.windows_s_.index(w))
+            assert (got.effusivity_w_s05_m2k, *got.interval_w_s05_m2k, got.log_sd) == \
+                (e, lo, hi, sd)
+            assert (reading.effusivity_lo_w_s05_m2k, reading.effusivity_hi_w_s05_m2k) == (lo, hi)
+            n = int(round(w * est.sample_rate_hz)) + 1
+            assert rows[i]["laplace"][w].interval_w_s05_m2k == \
+                est.interval_at(x[:n], gap_k, theta)[1:3]
+    assert set(rows[0]["cold_s"]) == {0.1, 0.3} and not rows[1]["cold_s"]

@@ -23,8 +23,9 @@ def _new(e, lo, hi):
                     e, lo, hi, "graphite")
 
 
-def _sd(lo, hi):
-    return (math.log(hi) - math.log(lo)) / (2 * Z95)
+def _sd(e, lo, hi):
+    """The sd of ln e an interval says: its wider half over the quantile."""
+    return max(math.log(e / lo), math.log(hi / e)) / Z95
 
 
 def test_the_remembered_estimate_is_the_inverse_variance_mean_with_the_sharpest_interval():
@@ -34,9 +35,9 @@ def test_the_remembered_estimate_is_the_inverse_variance_mean_with_the_sharpest_
         memory.learn("glass-1", _new(e, lo, hi), float(t), TRAINED)
     got = memory.recall("glass-1")
     assert got.material == "new material" and got.touches == 3
-    w = [_sd(lo, hi) ** -2 for _, lo, hi in touches]
+    w = [_sd(e, lo, hi) ** -2 for e, lo, hi in touches]
     mean = sum(wi * math.log(e) for wi, (e, _, _) in zip(w, touches)) / sum(w)
-    sharpest = min(_sd(lo, hi) for _, lo, hi in touches)
+    sharpest = min(_sd(e, lo, hi) for e, lo, hi in touches)
     # Closed form, to rounding.
     assert got.effusivity.log_e == pytest.approx(mean, abs=1e-12)
     assert got.effusivity.sd == pytest.approx(sharpest, rel=1e-12)
@@ -45,6 +46,16 @@ def test_the_remembered_estimate_is_the_inverse_variance_mean_with_the_sharpest_
     assert fields["effusivity_hi_w_s05_m2k"] == pytest.approx(math.exp(mean + Z95 * sharpest))
     # What status shows carries it too.
     assert memory.to_dict()["glass-1"]["effusivity_w_s05_m2k"] == pytest.approx(math.exp(mean))
+
+
+def test_an_interval_clipped_at_the_grid_keeps_its_sd():
+    """A metal early in its touch: its interval reaches past the estimator's
+    grid (1.2e5) and is clipped there; the sd is its lower half's, not the
+    clipped width's (0.65 here: a weight 16 % too large)."""
+    e, sd = 37_000.0, 0.7
+    lo, hi = e * math.exp(-Z95 * sd), 1.2e5            # e exp(+Z95 sd) would be 1.46e5
+    got = Effusivity.of_fields(e, lo, hi)
+    assert got.sd == pytest.approx(sd, rel=1e-12) and got.weight == pytest.approx(sd ** -2)
 
 
 def test_a_remembered_class_carries_no_estimate_and_a_touch_without_one_adds_nothing():

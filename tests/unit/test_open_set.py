@@ -253,6 +253,9 @@ def test_a_class_holds_an_estimate_within_its_predictive_widened_by_the_touchs_o
         assert got == expect, (k, s, got)
         bound = limit * np.sqrt(scale ** 2 + s ** 2)
         assert (abs(k * scale) <= bound) == bool(got)
-    # the sd of a 95 % interval normal in ln e
-    assert log_sd_of_interval(np.exp(-1.959963984540054 * 0.02),
-                              np.exp(1.959963984540054 * 0.02)) == pytest.approx(0.02, rel=1e-12)
+    # the sd of a 95 % interval normal in ln e, and of one clipped at its top
+    z = 1.959963984540054
+    assert log_sd_of_interval(1.0, np.exp(-z * 0.02), np.exp(z * 0.02)) == \
+        pytest.approx(0.02, rel=1e-12)
+    assert log_sd_of_interval(1.0, np.exp(-z * 0.02), np.exp(z * 0.005)) == \
+        pytest.approx(0.02, rel=1e-12)

@@ -50,7 +50,7 @@ from telethermal.bench import unseen_layered as ul
 from telethermal.bench import unseen_render as ur
 from telethermal.bench import unseen_trade as ut
 from telethermal.bench.unseen_text import report_section, text_report  # noqa: F401 (its API)
-from telethermal.errors import SceneError, UnknownMaterialError
+from telethermal.errors import IdentificationError, SceneError, UnknownMaterialError
 from telethermal.ident.evaluate import wilson_interval
 from telethermal.ident.effusivity import Z95, EffusivityEstimate
 from telethermal.physics.materials import get_material, load_materials, object_materials
@@ -173,7 +173,11 @@ def _estimates(identifier, contacts, timed: set) -> list[dict]:
     identifier's estimator, its fit walked from window to window, its
     calibrated interval), ``laplace`` the estimator's own interval at the
     same fit (the allowance and the floor at factor 1), and for the
-    ``timed`` touches the cold and warm times of one estimate (s)."""
+    ``timed`` touches the cold and warm times of one estimate (s). The
+    slave's windows are every 20 ms: 0.25 s is not one of them, and is
+    walked to as the slave walks (from 0.03 s, 20 ms apart), its allowance
+    interpolated. The times are the fit's alone (not the interval's one
+    more Hessian), "warm" from a cold fit of the samples 20 ms shorter."""
     est, gap_k = identifier.estimator()
     rows = []
     for i, material in enumerate(contacts.labels):
@@ -181,7 +185,12 @@ def _estimates(identifier, contacts, timed: set) -> list[dict]:
         row = {"material": material, "windows": {}, "cold_s": {}, "warm_s": {}, "laplace": {}}
         for w in WINDOWS_S:
             n = int(round(w * est.sample_rate_hz)) + 1
-            theta, e, lo, hi, sd, _ = identifier.interval_of(x, w)
+            got = identifier.interval_of(x, w)
+            if got is None:
+                raise IdentificationError(
+                    f"bench unseen: a {w:g} s window at {est.sample_rate_hz:g} Hz holds {n} "
+                    "samples, fewer than an estimate needs (a scene sampled faster, please)")
+            theta, e, lo, hi, sd, _ = got
             _, lap_lo, lap_hi, lap_sd = est.interval_at(x[:n], gap_k, theta)
             chi2, fits = est._goodness(theta, x[:n], est._noise_var(x[:n], gap_k))
             row["windows"][w], row["laplace"][w] = [
@@ -357,8 +366,9 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
     unseen set: ``unseen`` (package materials) and the objects of the scene
     file ``unseen_scene``; with neither, :data:`DEFAULT_UNSEEN` (less the
     scene's own) and the shipped unseen-objects scene. ``quick``: 3 touches
-    per material, 1 rendered touch per material and seed. ``render``: the rendered columns (:mod:`~telethermal.bench.unseen_render`).
-    Returns the report."""
+    per material, 1 rendered touch per material and seed. ``render``: the
+    rendered columns (:mod:`~telethermal.bench.unseen_render`). Returns the
+    report."""
     from telethermal.data.generate import pad_database
     from telethermal.ident.fitted import _estimator as fitted_estimator
     from telethermal.ident.prepare import from_trials
@@ -408,7 +418,10 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
             "estimator": {"build_s": build_s, "model_error_rel": est.model_error_rel,
                           "effusivity_grid_w_s05_m2k": [float(np.exp(est.family.log_e[0])),
                                                         float(np.exp(est.family.log_e[-1]))],
-                          "object_temps_c": [est.object_temp_c]},
+                          "object_temps_c": [est.object_temp_c],
+                          "touched_object_temps_c": sorted({o.temp_c for o in touched.objects}),
+                          "build_s_is": "the slave's estimator built, or its curves read "
+                                        "where the curve cache holds them"},
             "identifier": {"method": identifier.method, "trained_on": trained,
                            "train_seed": TRAIN_SEED, "threshold": identifier.threshold,
                            "outlier_p": identifier.outlier_p,

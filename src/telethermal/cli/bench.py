@@ -239,7 +239,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--json", required=True)
     p.add_argument("--seeds", type=_positive(int),
                    help="sessions (seeds 0 .. N-1; default 3, 1 with --quick)")
-    p.add_argument("--quick", action="store_true", help="3 touches per material, a coarser prior")
+    p.add_argument("--quick", action="store_true", help="3 touches per material")
     p.add_argument("--unseen", help="comma-separated package materials to touch (default "
                                     "copper,carbon_steel,glass,foam and the shipped "
                                     "unseen-objects scene's brass, concrete and a glass "

@@ -41,7 +41,9 @@ quantisation.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -60,6 +62,8 @@ from telethermal.physics.thermoelectric import default_driver
 from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, Instruments,
                                          Thermocouple, draw_instruments)
 from telethermal.physics.waterpad import precondition
+
+log = logging.getLogger(__name__)
 
 #: Standard deviation of a Peltier pad's set-point error, K.
 PELTIER_SETPOINT_SD_K = 0.05
@@ -82,13 +86,25 @@ TOUCH_TOLERANCE_FACTOR = 0.25
 
 def touch_contact_model(scene: Scene, obj: ObjectSpec):
     """The pad touching ``obj`` as the simulated touches are solved: to
-    :data:`TOUCH_TOLERANCE_FACTOR` of the scene's tolerance, or to the
-    scene's own where the grid cannot refine that far (a scene whose
-    tolerance is already near the grid's limit); (model, ModelChoice)."""
-    fine = dataclasses.replace(scene, tolerance_rel=scene.tolerance_rel * TOUCH_TOLERANCE_FACTOR)
+    :data:`TOUCH_TOLERANCE_FACTOR` of the scene's tolerance; where the
+    layered grid cannot refine that far (a scene whose own tolerance is
+    near the grid's limit), to the scene's tolerance, said once in the log
+    (every shipped scene reaches it: ``tests/unit/test_touch_model.py``).
+    (model, ModelChoice), remembered per scene and object."""
+    return _touch_model(scene, obj, float(TOUCH_TOLERANCE_FACTOR))
+
+
+@functools.lru_cache(maxsize=256)
+def _touch_model(scene: Scene, obj: ObjectSpec, factor: float):
+    fine = dataclasses.replace(scene, tolerance_rel=scene.tolerance_rel * factor)
     try:
         return pad_contact_model(fine, obj)
-    except SceneError:
+    except SceneError as exc:
+        if not isinstance(exc.__cause__, ModelError):
+            raise
+        log.warning("%s: %s's touches are solved to the scene's tolerance %g, not %g: %s",
+                    scene.source or scene.name, obj.name, scene.tolerance_rel,
+                    fine.tolerance_rel, exc.__cause__)
         return pad_contact_model(scene, obj)
 
 

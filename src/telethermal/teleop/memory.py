@@ -78,7 +78,7 @@ Z95 = 1.959963984540054
 class Effusivity:
     """A new material's remembered estimate, in ``ln e`` (W s^0.5/(m^2 K))."""
     log_e: float
-    sd: float                    # of ln e: (ln hi - ln lo) / (2 Z95); pooled: the sharpest
+    sd: float                    # of ln e: the interval's wider half / Z95; pooled: the sharpest
     weight: float                # the sum of the touches' 1 / sd^2
 
     @classmethod
@@ -88,7 +88,9 @@ class Effusivity:
         if any(v is None or not math.isfinite(v) or v <= 0 for v in (e, lo, hi)) or \
                 not lo <= e <= hi:
             return None
-        sd = max((math.log(hi) - math.log(lo)) / (2 * Z95), 1e-9)
+        # The wider half: an interval clipped at the estimator's grid (a
+        # metal early in its touch) keeps its sd on the other side.
+        sd = max(math.log(e / lo), math.log(hi / e), 1e-9 * Z95) / Z95
         return cls(math.log(e), sd, sd ** -2)
 
     @classmethod
