@@ -220,3 +220,24 @@ def test_the_bench_scores_what_the_slave_reports(fit_model_0_3s, monkeypatch):
             assert rows[i]["laplace"][w].interval_w_s05_m2k == \
                 est.interval_at(x[:n], gap_k, theta)[1:3]
     assert set(rows[0]["cold_s"]) == {0.1, 0.3} and not rows[1]["cold_s"]
+
+
+@pytest.mark.parametrize("typed, kept", [
+    ("telethermal bench unseen --json /work/x/u.json", "telethermal bench unseen --json u.json"),
+    ("telethermal bench render --json=/srv/a/r.json --png out/r.png",
+     "telethermal bench render --json=r.json --png out/r.png"),
+    ("telethermal bench unseen --json bench/results/u.json",
+     "telethermal bench unseen --json bench/results/u.json"),
+])
+def test_a_reports_command_names_no_folder_of_the_machine(typed, kept):
+    """The command kept in a bench's JSON (and so in bench/report.md): an
+    absolute path is shortened to its file's name, a relative one kept."""
+    from telethermal.cli._common import portable_command
+    assert portable_command(typed) == kept
+
+
+def test_the_command_typed_keeps_a_path_with_a_space_whole(monkeypatch):
+    from telethermal.cli._common import _command
+    monkeypatch.setattr("sys.argv", ["telethermal", "bench", "unseen", "--json",
+                                     "/tmp/run 4/u.json", "--seeds", "2"])
+    assert _command() == "telethermal bench unseen --json u.json --seeds 2"

@@ -31,8 +31,22 @@ def _progress(total: int, what: str):
 
 
 def _command() -> str:
-    """The command line as typed, for the reports."""
-    return "telethermal " + " ".join(sys.argv[1:])
+    """The command line as typed, for the reports, absolute paths
+    shortened to their file's name (:func:`portable_command`)."""
+    return "telethermal " + " ".join(_portable_word(w) for w in sys.argv[1:])
+
+
+def _portable_word(word: str) -> str:
+    """An absolute path (``/...``, or ``--option=/...``) as its file's name."""
+    key, eq, value = word.partition("=") if word.startswith("--") else ("", "", word)
+    return key + eq + Path(value).name if value.startswith("/") else word
+
+
+def portable_command(command: str) -> str:
+    """A stored ``command`` with every absolute path shortened to its
+    file's name (words split at spaces): a report kept in the project names
+    no folder of the machine it was run on."""
+    return " ".join(_portable_word(w) for w in command.split(" "))
 
 
 def _png(args) -> Path:
