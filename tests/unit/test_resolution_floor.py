@@ -138,19 +138,27 @@ def test_copper_beyond_every_reference_is_covered_at_1_s(model):
     assert covered_no_floor < covered, (covered_no_floor, covered)
 
 
-def test_a_class_is_compared_at_the_touchs_interval_less_the_floor(model, monkeypatch):
-    """A class's predictive comes from its training touches' estimates,
-    which carry the same systematic curve error as a touch of a nearby
-    material: the floor is common to both, so the comparison widens the
-    class by the touch's interval less the floor (with the floor in it,
-    bench unseen named 15 of 30 brass touches aluminium at 1 s, brass 6 %
-    below aluminium; without, 0). The reported interval keeps the floor."""
+@pytest.fixture
+def compared_sds(monkeypatch) -> list:
+    """The touch's own sd each class comparison receives (classes_holding
+    spied on), in order."""
     import telethermal.ident.fitted as fitted
 
     seen = []
     real = fitted.classes_holding
     monkeypatch.setattr(fitted, "classes_holding",
                         lambda log_e, log_sd, *a: seen.append(log_sd) or real(log_e, log_sd, *a))
+    return seen
+
+
+def test_a_class_is_compared_at_the_touchs_interval_less_the_floor(model, compared_sds):
+    """A class's predictive comes from its training touches' estimates,
+    which carry the same systematic curve error as a touch of a nearby
+    material: the floor is common to both, so the comparison widens the
+    class by the touch's interval less the floor (with the floor in it,
+    bench unseen named 15 of 30 brass touches aluminium at 1 s, brass 6 %
+    below aluminium; without, 0). The reported interval keeps the floor."""
+    seen = compared_sds
     est, gap_k = model.estimator()
     touches = _touches("copper")
     k = model.windows_s_.index(1.0)
@@ -166,7 +174,7 @@ def test_a_class_is_compared_at_the_touchs_interval_less_the_floor(model, monkey
         assert seen[-1] ** 2 == pytest.approx(full ** 2 - floor, rel=1e-9)
 
 
-def test_a_clipped_interval_is_compared_at_its_unclipped_sd(model, monkeypatch):
+def test_a_clipped_interval_is_compared_at_its_unclipped_sd(model, compared_sds):
     """Early in a copper touch the interval reaches past the estimator's
     grid (1.2e5) and is clipped there: the interval's ends then understate
     the sd of ln e. The class comparison takes the sd itself less the floor
@@ -174,12 +182,7 @@ def test_a_clipped_interval_is_compared_at_its_unclipped_sd(model, monkeypatch):
     uncertainty of its own). Checked against the estimator's own Laplace
     variance at the same fit: the comparison's variance plus the floor is
     the interval's variance to 1e-9."""
-    import telethermal.ident.fitted as fitted
-
-    seen = []
-    real = fitted.classes_holding
-    monkeypatch.setattr(fitted, "classes_holding",
-                        lambda log_e, log_sd, *a: seen.append(log_sd) or real(log_e, log_sd, *a))
+    seen = compared_sds
     est, gap_k = model.estimator()
     touches = _touches("copper")
     k = model.windows_s_.index(0.1)
