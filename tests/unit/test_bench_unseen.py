@@ -223,7 +223,8 @@ def test_the_bench_scores_what_the_slave_reports(fit_model_0_3s, monkeypatch):
 
 
 @pytest.mark.parametrize("typed, kept", [
-    ("telethermal bench unseen --json /work/x/u.json", "telethermal bench unseen --json u.json"),
+    ("telethermal bench unseen --json /home/ada/runs/u.json",
+     "telethermal bench unseen --json u.json"),
     ("telethermal bench render --json=/srv/a/r.json --png out/r.png",
      "telethermal bench render --json=r.json --png out/r.png"),
     ("telethermal bench unseen --json bench/results/u.json",
@@ -239,5 +240,5 @@ def test_a_reports_command_names_no_folder_of_the_machine(typed, kept):
 def test_the_command_typed_keeps_a_path_with_a_space_whole(monkeypatch):
     from telethermal.cli._common import _command
     monkeypatch.setattr("sys.argv", ["telethermal", "bench", "unseen", "--json",
-                                     "/tmp/run 4/u.json", "--seeds", "2"])
+                                     "/home/ada/run 4/u.json", "--seeds", "2"])
     assert _command() == "telethermal bench unseen --json u.json --seeds 2"

@@ -239,7 +239,8 @@ def test_a_class_holds_an_estimate_within_its_predictive_widened_by_the_touchs_o
     one 40 scales out stays outside (a new material)."""
     from scipy.stats import t as student_t
 
-    from telethermal.ident.fitted import classes_holding, log_sd_of_interval
+    from telethermal.ident.fitted import classes_holding
+    from telethermal.ident.openset import log_sd_of_interval
 
     n, v, p = 10.0, 1e-6, 1e-4
     params = {"n": np.array([n, n]), "means": np.array([np.log(470.0), np.log(1505.0)]),

@@ -385,16 +385,6 @@ class EffusivityFit(Identifier):
         return EffusivityReading(e, lo, hi, nearest, tail, inside)
 
 
-def log_sd_of_interval(e: float, lo: float, hi: float) -> float:
-    """The standard deviation in ``ln e`` of an estimate ``e`` and its 95 %
-    interval [lo, hi], normal in ``ln e`` about ``ln e`` (the estimator's
-    Laplace interval): its wider half over the quantile, so an interval
-    clipped at one end of the estimator's grid gives its sd all the same
-    (clipped at both, less)."""
-    from telethermal.ident.effusivity import Z95
-    return float(max(np.log(e / lo), np.log(hi / e)) / Z95)
-
-
 def classes_holding(log_e: float, log_sd: float, params: dict, classes, outlier_p: float):
     """The classes whose two-sided ``1 - outlier_p`` predictive holds a
     touch's estimate ``log_e`` (ln W s^0.5/(m^2 K)) with its own standard

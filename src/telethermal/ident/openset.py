@@ -66,6 +66,21 @@ class EffusivityReading:
         return not any(m in self.inside for m in Label(label).members)
 
 
+#: The two-sided 95 % point of the normal (the estimator's
+#: :data:`~telethermal.ident.effusivity.Z95`): an estimate's interval in
+#: ``ln e`` is its estimate +- Z95 sd.
+Z95 = 1.959963984540054
+
+
+def log_sd_of_interval(e: float, lo: float, hi: float) -> float:
+    """The standard deviation in ``ln e`` of an estimate ``e`` and its 95 %
+    interval [lo, hi], normal in ``ln e`` about ``ln e`` (the estimator's
+    Laplace interval): its wider half over the 95 % quantile, so an
+    interval clipped at one end of the estimator's grid (a metal early in
+    its touch) gives its sd all the same (clipped at both, less)."""
+    return max(math.log(e / lo), math.log(hi / e)) / Z95
+
+
 def reading_of(model, x, window_index: int) -> EffusivityReading | None:
     """``model``'s effusivity reading of the touch ``x`` (1, n, C) at its
     window ``window_index``; None when the method gives none."""

@@ -56,7 +56,7 @@ from enum import StrEnum
 import numpy as np
 
 from telethermal.ident.anytime import NEW_MATERIAL, Estimate, Label, Reason
-from telethermal.ident.openset import EFFUSIVITY_KEYS
+from telethermal.ident.openset import EFFUSIVITY_KEYS, Z95, log_sd_of_interval
 
 log = logging.getLogger(__name__)
 
@@ -69,9 +69,6 @@ EVIDENCE_FLOOR = 1e-3
 CHANGE_TOUCHES = 2
 #: The threshold of the announcement when none is given (the identifiers' default).
 THRESHOLD = 0.99
-#: The two-sided 95 % point of the normal: an estimate's interval in ``ln e``
-#: is its estimate +- Z95 sd.
-Z95 = 1.959963984540054
 
 
 @dataclass(frozen=True)
@@ -88,9 +85,7 @@ class Effusivity:
         if any(v is None or not math.isfinite(v) or v <= 0 for v in (e, lo, hi)) or \
                 not lo <= e <= hi:
             return None
-        # The wider half: an interval clipped at the estimator's grid (a
-        # metal early in its touch) keeps its sd on the other side.
-        sd = max(math.log(e / lo), math.log(hi / e), 1e-9 * Z95) / Z95
+        sd = max(log_sd_of_interval(e, lo, hi), 1e-9)
         return cls(math.log(e), sd, sd ** -2)
 
     @classmethod
