@@ -105,6 +105,10 @@ class AdminServer:
 
     def close(self):
         self.sock.close(linger=0)
+        if isinstance(self.port, int):
+            from telethermal.wire.sockets import wait_released
+
+            wait_released("127.0.0.1", [self.port])     # closed means free, as the endpoint's
 
 
 def call(port, cmd: str, timeout_s: float = 10.0, context=None, **args) -> dict:
