@@ -23,7 +23,8 @@ ROOT = Path(telethermal.__file__).parent
 LAYERS = [
     {"__init__"},
     {"errors"},
-    {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder", "cachedir"},
+    {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder", "cachedir",
+     "ports"},
     {"physics"},
     {"control", "wire", "faults"},
     {"devices", "data"},

@@ -8,7 +8,7 @@ import socket
 import zmq
 
 from telethermal.services.admin import AdminServer
-from telethermal.wire.sockets import wait_released
+from telethermal.ports import wait_released
 from telethermal.wire.transport import Endpoint, TransportConfig
 
 
@@ -55,4 +55,25 @@ def test_an_admin_sockets_port_is_free_when_close_returns():
         admin.close()
         if not _bindable(admin.port):
             taken.append(admin.port)
+    assert taken == []
+
+
+def test_a_view_publishers_and_a_fault_proxys_ports_are_free_when_close_returns():
+    from telethermal.faults.channel import Direction
+    from telethermal.faults.proxy import FaultProfile, FaultProxy, Link
+    from telethermal.services.demo import free_ports
+    from telethermal.view.stream import ViewPublisher
+
+    taken = []
+    for _ in range(50):
+        view = ViewPublisher(0, conductance_w_m2k=1000.0)
+        view.close()
+        taken += [view.port] if not _bindable(view.port) else []
+    control, stream, slave_control, slave_stream = free_ports(4)
+    link = Link(control_port=control, stream_port=stream, slave_control_port=slave_control,
+                slave_stream_port=slave_stream, seed=3)
+    for _ in range(50):
+        proxy = FaultProxy(FaultProfile(link, Direction(), Direction()))
+        proxy.close()
+        taken += [p for p in (control, stream) if not _bindable(p)]
     assert taken == []

@@ -27,6 +27,7 @@ import zmq
 from telethermal.errors import TransportError
 from telethermal.faults.channel import Channel, Direction, FaultProfileError
 from telethermal.tomltables import read_toml, table_values
+from telethermal.ports import wait_released
 
 log = logging.getLogger("telethermal.faults")
 
@@ -182,3 +183,5 @@ class FaultProxy:
     def close(self) -> None:
         for s in self._socks:
             s.close(linger=0)
+        link = self.profile.link                   # closed means free, as the slave's
+        wait_released(link.listen_host, [link.control_port, link.stream_port])

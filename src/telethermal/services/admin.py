@@ -14,6 +14,7 @@ import numpy as np
 import zmq
 
 from telethermal.errors import TelethermalError, TransportError
+from telethermal.ports import wait_released
 
 
 def _plain(value):
@@ -106,8 +107,6 @@ class AdminServer:
     def close(self):
         self.sock.close(linger=0)
         if isinstance(self.port, int):
-            from telethermal.wire.sockets import wait_released
-
             wait_released("127.0.0.1", [self.port])     # closed means free, as the endpoint's
 
 

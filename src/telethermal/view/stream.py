@@ -21,6 +21,7 @@ from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TransportError
 from telethermal.wire.codec import encode
 from telethermal.wire.schema import PROTOCOL_VERSION
+from telethermal.ports import wait_released
 
 log = logging.getLogger(__name__)
 
@@ -110,3 +111,4 @@ class ViewPublisher:
 
     def close(self) -> None:
         self.sock.close(linger=0)
+        wait_released("127.0.0.1", [self.port])       # closed means free, as the slave's

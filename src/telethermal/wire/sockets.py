@@ -8,15 +8,13 @@ while no session comes up the likely cause is named (``diagnosis``).
 
 from __future__ import annotations
 
-import errno
 import logging
-import socket
-import time
 from pathlib import Path
 
 import zmq
 
 from telethermal.errors import TransportError
+from telethermal.ports import wait_released
 from telethermal.wire.handshake import AllowedKeys, HandshakeWatch, diagnose, fingerprint
 from telethermal.wire.keys import load_public, load_secret
 from telethermal.wire.schema import MAX_MESSAGE_BYTES
@@ -40,46 +38,6 @@ RECONNECT_IVL_MAX_S = 0.5
 REFUSED_RETRY_S = 0.25
 #: A master socket whose connect nothing answered this long is recreated.
 UNANSWERED_S = 2.0
-#: :func:`wait_released`'s longest wait for a closed listener's port.
-RELEASE_WAIT_S = 2.0
-
-
-def wait_released(host: str, ports, timeout_s: float = RELEASE_WAIT_S) -> list[int]:
-    """Wait until each TCP ``port`` on ``host`` can be bound again; returns
-    the ports still taken after ``timeout_s`` (logged, never raised).
-
-    libzmq closes a socket in its I/O thread, after ``close()`` returned: a
-    listener's port stays taken for a moment, and a service started again
-    on it at once was refused "Address already in use" (2 of 300 immediate
-    rebinds, measured). A probe bound with SO_REUSEADDR, as libzmq binds,
-    succeeds once the listener is gone (connections in TIME_WAIT do not
-    count) and fails while it still listens."""
-    host = "0.0.0.0" if host in ("*", "") else host
-    deadline = time.monotonic() + timeout_s
-    taken = []
-    for port in ports:
-        if not port:
-            continue
-        try:
-            family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
-        except OSError:
-            continue                                # a name no probe can bind: nothing to wait on
-        while True:
-            with socket.socket(family, socket.SOCK_STREAM) as probe:
-                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                try:
-                    probe.bind((host, port))
-                    break
-                except OSError as exc:
-                    if exc.errno != errno.EADDRINUSE or time.monotonic() >= deadline:
-                        if exc.errno == errno.EADDRINUSE:
-                            taken.append(port)
-                        break
-            time.sleep(0.002)
-    if taken:
-        log.warning("ports %s on %s still taken %.1f s after their sockets closed", taken, host,
-                    timeout_s)
-    return taken
 
 
 class EndpointSockets:
