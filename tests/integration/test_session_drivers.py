@@ -132,6 +132,25 @@ def test_placing_another_object_during_a_contact_lifts_the_pad_first(models):
         service.shutdown()
 
 
+def test_a_touch_on_the_slave_service_keeps_no_fits_of_an_earlier_touch(models):
+    # A simulated pad's repeated seed gives the same samples, whose fits the
+    # effusivity fit keeps for the process: a live slave makes its own.
+    from telethermal.ident import fitted
+
+    identifier, generator = models
+    control, stream, admin = free_ports(3)
+    config = SlaveConfig(place="wood", seed=5, admin_port=admin, transport=TransportConfig(
+        security="plain", control_port=control, stream_port=stream))
+    service = SlaveService(config, identifier, generator)
+    try:
+        fitted._CACHE[("an earlier touch",)] = (0.0, 0.0, 0.0)
+        service._on_message(master_events(1.0)[0], 100.0)
+        assert service.touch_t0 is not None
+        assert ("an earlier touch",) not in fitted._CACHE
+    finally:
+        service.shutdown()
+
+
 def test_a_slave_refused_for_a_busy_port_writes_no_recording(models, tmp_path):
     # It left a 99 KB recording of nothing, which the view then listed.
     import socket

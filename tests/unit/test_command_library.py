@@ -43,11 +43,15 @@ def test_record_lines():
               "deadline_misses": {"without": 1, "with": 2},
               "steps": {"without": 3000, "with": 3000}}
     assert record.text_report(report, "r.json") == [
-        "master loop busy per period: 300 us without recording, 311 us with: +10.2 us = 1.0 % "
+        "master loop busy per period: 300 us without recording, 311 us with: +10.2 us = +1.0 % "
         "of the 1 ms budget",
         "recorder call per period: p50 2.0 us, p99 5.4 us; deadline misses 1 of 3000 without, "
         "2 of 3000 with",
         "wrote r.json"]
+    # Cheaper with than without (the spread between runs): one sign, not "+-".
+    report.update(extra_busy_per_period_us=-47.1, cost_of_period_budget=-0.0471)
+    assert record.text_report(report, "r.json")[0].endswith("with: -47.1 us = -4.7 % of the "
+                                                            "1 ms budget")
 
 
 def test_transport_lines_name_the_slowest_kind_and_a_skipped_part():

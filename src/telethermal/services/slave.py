@@ -19,6 +19,7 @@ import zmq
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
 from telethermal.ident.anytime import UNKNOWN, Reason, unknown_reason
+from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
@@ -240,6 +241,10 @@ class SlaveService:
                     self.place(self.material, self._seed + 1)
                 except TelethermalError as exc:
                     log.error("touch on an unprepared pad: %s", exc)
+            # A live slave fits every window of a touch afresh: none kept
+            # from an earlier touch (a simulated pad's repeated seed gives
+            # the same samples, whose fits would then cost nothing).
+            clear_fits()
             # The operator touched: the slave's pad goes down on the object now.
             self.session.touch(m.contact_id, now, given(m.finger_temp_c),
                                owner=self.endpoint.peer_session)

@@ -35,6 +35,7 @@ from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, LoopStats, Re
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
+from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import touch_text
 from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.layered import pad_resistance  # noqa: F401  (its importers')
@@ -298,6 +299,13 @@ def run_session(scene: Scene, material: str, identifier, generator,
     touching objects outside the trained ones gives the trained scene)."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
+    if realtime:
+        # Timed: the slave fits every window as a live slave does. The
+        # effusivity fit keeps the process's fits, so a second run of one
+        # touch made none (bench record's runs without recording paid them,
+        # those with it did not; bench devices' sim run paid them for the
+        # emulated one).
+        clear_fits()
     if realtime == "master" and devices != "sim":   # driver and emulator share the calls
         raise SceneError(f"realtime='master' needs devices='sim' (got {devices!r}): the "
                          "driver's time and its emulator's cannot be told apart")
