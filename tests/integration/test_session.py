@@ -152,6 +152,13 @@ def test_a_real_clock_session_makes_its_fits_as_a_live_slave_does(models, monkey
     # real clock the count varies by a window (12 or 13 seen; not traced),
     # so within two of the simulated run's.
     assert made[0] > 2 and all(m >= made[0] - 2 for m in made[1:]), made
+    # A simulated-clock run whose CPU is measured (bench render) asks for
+    # them afresh: exactly as many; without asking, none.
+    for fresh, expected in ((True, made[0]), (False, 0)):
+        calls.clear()
+        run_session(SCENE, "wood", identifier, generator, DisplayConfig(rate_hz=200.0),
+                    contact_s=0.3, seed=1, fresh_fits=fresh)
+        assert len(calls) == expected, (fresh, len(calls), made)
 
 
 def test_session_command_writes_json_and_plot(tmp_path, models, capsys):
