@@ -31,20 +31,23 @@ def wait_released(host: str, ports, timeout_s: float = RELEASE_WAIT_S) -> list[i
         if not port:
             continue
         try:
-            family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
-        except OSError:
-            continue                                # a name no probe can bind: nothing to wait on
+            # Numeric only: an interface name (libzmq binds "eth0") would be
+            # a DNS query here, unbounded by the wait; it is not waited on.
+            family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM,
+                                        flags=socket.AI_NUMERICHOST)[0][0]
+        except (OSError, ValueError):
+            continue                                # nothing a probe can bind: not waited on
         while True:
-            with socket.socket(family, socket.SOCK_STREAM) as probe:
-                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                try:
+            try:
+                with socket.socket(family, socket.SOCK_STREAM) as probe:
+                    probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                     probe.bind((host, port))
+                break
+            except OSError as exc:
+                if exc.errno != errno.EADDRINUSE or time.monotonic() >= deadline:
+                    if exc.errno == errno.EADDRINUSE:
+                        taken.append(port)
                     break
-                except OSError as exc:
-                    if exc.errno != errno.EADDRINUSE or time.monotonic() >= deadline:
-                        if exc.errno == errno.EADDRINUSE:
-                            taken.append(port)
-                        break
             time.sleep(0.002)
     if taken:
         log.warning("ports %s on %s still taken %.1f s after their sockets closed", taken, host,

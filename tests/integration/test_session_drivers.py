@@ -106,15 +106,19 @@ def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
     np.testing.assert_equal(service.memory.to_dict(), sim.session.memory.to_dict())
 
 
+def wood_slave(models) -> SlaveService:
+    """A slave service on free loopback ports, wood placed (seed 5)."""
+    control, stream, admin = free_ports(3)
+    config = SlaveConfig(place="wood", seed=5, admin_port=admin, transport=TransportConfig(
+        security="plain", control_port=control, stream_port=stream))
+    return SlaveService(config, *models)
+
+
 def test_placing_another_object_during_a_contact_lifts_the_pad_first(models):
     # Under delay, the operator's next `place` can reach the slave before the
     # master's lift: the contact going on ends (its lift and final decision
     # sent, counted), then the new object is placed (bench faults hit this).
-    identifier, generator = models
-    control, stream, admin = free_ports(3)
-    config = SlaveConfig(place="wood", seed=5, admin_port=admin, transport=TransportConfig(
-        security="plain", control_port=control, stream_port=stream))
-    service = SlaveService(config, identifier, generator)
+    service = wood_slave(models)
     sent = []
     service.endpoint.send = lambda kind, **fields: sent.append((kind, fields)) or 0
     replies = []
@@ -137,11 +141,7 @@ def test_a_touch_on_the_slave_service_keeps_no_fits_of_an_earlier_touch(models):
     # effusivity fit keeps for the process: a live slave makes its own.
     from telethermal.ident import fitted
 
-    identifier, generator = models
-    control, stream, admin = free_ports(3)
-    config = SlaveConfig(place="wood", seed=5, admin_port=admin, transport=TransportConfig(
-        security="plain", control_port=control, stream_port=stream))
-    service = SlaveService(config, identifier, generator)
+    service = wood_slave(models)
     try:
         fitted._CACHE[("an earlier touch",)] = (0.0, 0.0, 0.0)
         service._on_message(master_events(1.0)[0], 100.0)

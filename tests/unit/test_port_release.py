@@ -77,3 +77,19 @@ def test_a_view_publishers_and_a_fault_proxys_ports_are_free_when_close_returns(
         proxy.close()
         taken += [p for p in (control, stream) if not _bindable(p)]
     assert taken == []
+
+
+def test_a_name_is_not_waited_on_and_a_second_close_does_not_wait(caplog):
+    # An interface name (libzmq binds "eth0") is not resolved: nothing waited.
+    assert wait_released("lo", [1]) == []
+    # Closed once, the port taken by another listener since: closing again
+    # neither waits for that listener nor warns about it.
+    admin = AdminServer(0)
+    admin.close()
+    with socket.socket() as other:
+        other.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        other.bind(("127.0.0.1", admin.port))
+        other.listen()
+        with caplog.at_level("WARNING", logger="telethermal.ports"):
+            admin.close()
+    assert "still taken" not in caplog.text

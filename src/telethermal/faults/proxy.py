@@ -181,6 +181,8 @@ class FaultProxy:
             self.step(0.01)
 
     def close(self) -> None:
+        if all(s.closed for s in self._socks):
+            return                                   # once: no second wait on a port reused since
         for s in self._socks:
             s.close(linger=0)
         link = self.profile.link                   # closed means free, as the slave's

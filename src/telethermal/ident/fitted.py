@@ -24,7 +24,10 @@ same model (solved to a quarter of the curves' tolerance), so on simulated
 touches the pad model is exact but for the curves' discretisation; a real
 pad's model is off by its datasheets' tolerances (``bench identify`` says so).
 The estimates do not depend on the training set, so they are computed once
-per touch and window and kept for the process.
+per touch and window and kept for the process, until :func:`clear_cache`:
+a timed run and every touch on the slave service make theirs afresh (a
+simulated pad's repeated seed gives the same samples, whose kept fits cost
+nothing).
 """
 
 from __future__ import annotations
@@ -45,8 +48,8 @@ from telethermal.ident.prepare import FLUX
 MIN_SAMPLES = 4
 
 
-#: Fits kept in the process before the cache is emptied (a live slave adds
-#: one per window of every touch).
+#: Fits kept in the process before the cache is emptied (the slave service
+#: empties it at every touch).
 CACHE_MAX = 200_000
 #: Fits already made, shared by every model of the process (they do not
 #: depend on the training touches): (scene, max_s, digest of the samples, n)

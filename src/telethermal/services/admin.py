@@ -105,6 +105,8 @@ class AdminServer:
         self.pending = False
 
     def close(self):
+        if self.sock.closed:
+            return                                   # once: no second wait on a port reused since
         self.sock.close(linger=0)
         if isinstance(self.port, int):
             wait_released("127.0.0.1", [self.port])     # closed means free, as the endpoint's

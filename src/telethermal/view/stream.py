@@ -110,5 +110,7 @@ class ViewPublisher:
             self.counters["dropped"] += 1
 
     def close(self) -> None:
+        if self.sock.closed:
+            return                                   # once: no second wait on a port reused since
         self.sock.close(linger=0)
         wait_released("127.0.0.1", [self.port])       # closed means free, as the slave's
