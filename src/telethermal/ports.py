@@ -1,4 +1,4 @@
-"""Closed means free: wait until a closed listener's TCP ports can be bound
+"""Closed means free: close a listener and wait until its TCP ports can be bound
 again (libzmq closes sockets in its I/O thread, after ``close()``)."""
 
 from __future__ import annotations
@@ -53,3 +53,15 @@ def wait_released(host: str, ports, timeout_s: float = RELEASE_WAIT_S) -> list[i
         log.warning("ports %s on %s still taken %.1f s after their sockets closed", taken, host,
                     timeout_s)
     return taken
+
+
+def close_listeners(socks, host: str, ports) -> None:
+    """Close ZeroMQ ``socks`` (linger 0), then wait until the TCP ``ports``
+    they bound on ``host`` can be bound again (:func:`wait_released`).
+    Once: when every socket is closed already, nothing is closed or waited
+    on (a port reused since is not this owner's)."""
+    if all(s.closed for s in socks):
+        return
+    for s in socks:
+        s.close(linger=0)
+    wait_released(host, ports)

@@ -27,7 +27,7 @@ import zmq
 from telethermal.errors import TransportError
 from telethermal.faults.channel import Channel, Direction, FaultProfileError
 from telethermal.tomltables import read_toml, table_values
-from telethermal.ports import wait_released
+from telethermal.ports import close_listeners
 
 log = logging.getLogger("telethermal.faults")
 
@@ -181,9 +181,5 @@ class FaultProxy:
             self.step(0.01)
 
     def close(self) -> None:
-        if all(s.closed for s in self._socks):
-            return                                   # once: no second wait on a port reused since
-        for s in self._socks:
-            s.close(linger=0)
         link = self.profile.link                   # closed means free, as the slave's
-        wait_released(link.listen_host, [link.control_port, link.stream_port])
+        close_listeners(self._socks, link.listen_host, [link.control_port, link.stream_port])

@@ -88,6 +88,7 @@ from scipy.special import chdtrc
 from telethermal.errors import IdentificationError
 from telethermal.ident.bspline import SplineAxis
 from telethermal.ident.intervals import resolution_var
+from telethermal.ident.openset import Z95  # the interval's normal quantile (95 %)
 from telethermal.ident.oracle import KernelPrior, draw_nuisances, flux_noise_w_m2, \
     marginal_log_likelihood
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts
@@ -108,8 +109,6 @@ START_SAMPLES = 101
 #: conditional posterior sds in every parameter, and at a step under
 #: ROUNDING_STEP_SD sds that lost less than the objective's resolution.
 STEP_SD_MIN, ROUNDING_STEP_SD = 1e-5, 1e-3
-#: The interval's normal quantile (95 %).
-Z95 = 1.959963984540054
 
 
 def refusal(scene, object_temp_c: float | None = None) -> str | None:

@@ -66,9 +66,8 @@ class EffusivityReading:
         return not any(m in self.inside for m in Label(label).members)
 
 
-#: The two-sided 95 % point of the normal (the estimator's
-#: :data:`~telethermal.ident.effusivity.Z95`): an estimate's interval in
-#: ``ln e`` is its estimate +- Z95 sd.
+#: The two-sided 95 % point of the normal (the estimator's intervals' too):
+#: an estimate's interval in ``ln e`` is its estimate +- Z95 sd.
 Z95 = 1.959963984540054
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import zmq
 
 from telethermal.errors import TelethermalError, TransportError
-from telethermal.ports import wait_released
+from telethermal.ports import close_listeners
 
 
 def _plain(value):
@@ -105,11 +105,9 @@ class AdminServer:
         self.pending = False
 
     def close(self):
-        if self.sock.closed:
-            return                                   # once: no second wait on a port reused since
-        self.sock.close(linger=0)
-        if isinstance(self.port, int):
-            wait_released("127.0.0.1", [self.port])     # closed means free, as the endpoint's
+        # Closed means free, as the endpoint's (an ipc:// path has no port).
+        close_listeners([self.sock], "127.0.0.1", [self.port] if isinstance(self.port, int)
+                        else [])
 
 
 def call(port, cmd: str, timeout_s: float = 10.0, context=None, **args) -> dict:

@@ -21,7 +21,7 @@ from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TransportError
 from telethermal.wire.codec import encode
 from telethermal.wire.schema import PROTOCOL_VERSION
-from telethermal.ports import wait_released
+from telethermal.ports import close_listeners
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +110,4 @@ class ViewPublisher:
             self.counters["dropped"] += 1
 
     def close(self) -> None:
-        if self.sock.closed:
-            return                                   # once: no second wait on a port reused since
-        self.sock.close(linger=0)
-        wait_released("127.0.0.1", [self.port])       # closed means free, as the slave's
+        close_listeners([self.sock], "127.0.0.1", [self.port])   # closed means free
