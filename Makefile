@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 OUT ?= out
 TT := $(VENV)/bin/telethermal
 
-.PHONY: demo test bench bench-quick bench-full clean
+.PHONY: demo test test-all bench bench-quick bench-full clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
