@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 OUT ?= out
 TT := $(VENV)/bin/telethermal
 
-.PHONY: demo test test-all bench bench-quick bench-full clean
+.PHONY: demo test test-all docs bench bench-quick bench-full clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ demo: $(STAMP)
 # at a time); the 25 slowest tests in every log.
 test: $(STAMP)
 	$(PY) -m pytest tests -n 2 --durations=25
+
+# The docs site (mkdocs.yml) into $(OUT)/site, warnings as errors.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir $(OUT)/site
 
 # The benches, in the report's order, in three sizes (each bench's own
 # options: fewer methods, seeds, trials, rounds or settings; each JSON keeps
