@@ -32,22 +32,14 @@ docs: $(STAMP)
 # options: fewer methods, seeds, trials, rounds or settings; each JSON keeps
 # its command and the report names every reduced run):
 #   bench-full   every bench at its defaults into bench/results/ and
-#                bench/report.md: the committed figures (not run whole since
-#                2026-11-26; its parts, 2026-11-27: identify 8, render 8-10.5,
-#                faults 8.5-9, unseen 4.5, devices 1, view 1, record 0.5
-#                minutes: over 30)
+#                bench/report.md: the committed figures (the longest run)
 #   bench        reduced, into $(OUT)/bench/ and $(OUT)/bench/report.md:
-#                aimed at <= 15 minutes, measured 26 (2026-11-27, the 2-core
-#                machine otherwise idle, 28 CPU minutes): over the aim.
-#                identify: the default methods (the slave's effusivity-fit
-#                among them) on one session, 5.2 minutes; render at its
-#                defaults takes 7-8; faults on 2 seeds, unseen on 2
-#   bench-quick  reduced further, into $(OUT)/bench-quick/: <= 3 minutes
-#                (about 2.2); every bench and every section of each, bar
-#                render's generator comparison and identify's methods other
-#                than effusivity-lda (identify has no smaller knob)
-# Wall times include bench transport's 31 s (its burst no longer stalls: the
-# lossless window waits for room; 10 of 10 runs beside the test suite).
+#                identify on the default methods (the slave's effusivity-fit
+#                among them) and one session, faults and unseen on 2 seeds
+#   bench-quick  reduced further, into $(OUT)/bench-quick/: every bench and
+#                every section of each, bar render's generator comparison
+#                and identify's methods other than effusivity-lda (identify
+#                has no smaller knob)
 # The view bench needs Chromium (apt-get install chromium).
 BENCHES := physics identify render transport faults devices record view unseen
 
