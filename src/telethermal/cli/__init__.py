@@ -15,10 +15,23 @@ from telethermal.cli._common import console
 from telethermal.errors import TelethermalError
 
 
+#: What ``telethermal --help`` says the tool is.
+DESCRIPTION = """\
+telethermal: thermal telepresence. An operator touches a Peltier display (the
+master) and feels what touching a remote object would feel like: a sensing pad
+(the slave) touches the object, identifies its material from the first fraction
+of a second of heat flux, and sends the flux the operator's finger would exchange
+with it. A physics simulator stands in for the pads, the finger and the objects.
+
+Start with `telethermal demo` (a whole session on two processes); each command
+below has its own --help. Heat flux is positive from the pad into the object."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Every command, each group's from its module (in the order ``--help``
     lists them)."""
-    parser = argparse.ArgumentParser(prog="telethermal", description=__doc__)
+    parser = argparse.ArgumentParser(prog="telethermal", description=DESCRIPTION,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"telethermal {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = parser.add_subparsers(dest="command", required=True)

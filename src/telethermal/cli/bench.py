@@ -136,12 +136,13 @@ def _add_speed(bsub) -> None:
     p = bsub.add_parser("physics", help="contact models: error against runtime")
     p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--png", help="plot (default: beside the JSON)")
-    p.add_argument("--repeats", type=_positive(int), default=3)
+    p.add_argument("--repeats", type=_positive(int), default=3,
+                   help="how many times each model is timed (the fastest counts; default 3)")
     p.set_defaults(func=cmd_bench_physics)
 
     p = bsub.add_parser("transport", help="codec cost; one-way latency beside raw pyzmq on "
                                           "loopback and across network namespaces")
-    p.add_argument("--json", required=True)
+    p.add_argument("--json", required=True, help="JSON report to write")
     p.set_defaults(func=cmd_bench_transport)
 
     p = bsub.add_parser("report", help="every benchmark's JSON in one Markdown report with "
@@ -151,17 +152,21 @@ def _add_speed(bsub) -> None:
     p.set_defaults(func=cmd_bench_report)
 
     p = bsub.add_parser("record", help="what recording costs the master's loop")
-    p.add_argument("--json", required=True)
-    p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--contact-s", type=_positive(), default=3.0)
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--rounds", type=int, default=3,
+                   help="rounds of touches without and with recording (default 3)")
+    p.add_argument("--contact-s", type=_positive(), default=3.0,
+                   help="each touch's contact time, seconds (default 3)")
     p.set_defaults(func=cmd_bench_record)
 
     p = bsub.add_parser("devices", help="both sides' latencies through the emulated serial "
                                         "and CAN paths beside the direct simulator, and the "
                                         "slave's identification through its drivers")
-    p.add_argument("--json", required=True)
-    p.add_argument("--samples", type=int, default=3000)
-    p.add_argument("--contact-s", type=_positive(), default=3.0)
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--samples", type=int, default=3000,
+                   help="readings timed on each serial and CAN path (default 3000)")
+    p.add_argument("--contact-s", type=_positive(), default=3.0,
+                   help="each touch's contact time, seconds (default 3)")
     p.add_argument("--slave-trials", type=int, default=10,
                    help="touches per material on the slave's side (simulated and through the "
                         "emulated drivers, the same trials)")
@@ -171,7 +176,7 @@ def _add_speed(bsub) -> None:
 def _add_faults(bsub) -> None:
     p = bsub.add_parser("faults", help="rendering under network faults, compensated beside "
                                        "naive (processes and the fault proxy)")
-    p.add_argument("--json", required=True)
+    p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--png", help="the Jepsen-style plot (default: next to the JSON)")
     p.add_argument("--quick", action="store_true",
                    help="the zero-delay and 200 ms rows, 2 seeds; processes on one material")
@@ -201,8 +206,8 @@ def _add_error(bsub) -> None:
     """render, identify, view."""
     p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "
                                        "the loop on the real clock")
-    p.add_argument("--json", required=True)
-    p.add_argument("--png")
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--png", help="plot (default: beside the JSON)")
     p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
     _scene_arg(p)
     p.set_defaults(func=cmd_bench_render)
@@ -210,17 +215,18 @@ def _add_error(bsub) -> None:
     p = bsub.add_parser("skin-floor", help="the best any current trajectory within the "
                                            "Peltier module's limits can do on the skin, per "
                                            "material and idle; a Qmax and flux-film sweep")
-    p.add_argument("--json", required=True)
-    p.add_argument("--png")
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--png", help="plot (default: beside the JSON)")
     p.add_argument("--quick", action="store_true",
                    help="a coarser idle search and a 2 x 2 sweep")
     _scene_arg(p)
     p.set_defaults(func=cmd_bench_skin_floor)
 
     p = bsub.add_parser("identify", help="the papers' identification tables, ours beside")
-    p.add_argument("--json", required=True)
-    p.add_argument("--png")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--png", help="plot (default: beside the JSON)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the first session's seed: sessions SEED .. SEED+SESSIONS-1 (default 0)")
     p.add_argument("--methods", help="comma-separated (default: those whose calibration error "
                                      "is within 0.05: effusivity-lda, pca-fnn)")
     p.add_argument("--scene", help="a scene (name or path, a lab's own): each method's grouped "
@@ -236,7 +242,7 @@ def _add_error(bsub) -> None:
 
     p = bsub.add_parser("unseen", help="materials the identifiers never saw: the live "
                                        "effusivity estimate's error and interval coverage")
-    p.add_argument("--json", required=True)
+    p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--seeds", type=_positive(int),
                    help="sessions (seeds 0 .. N-1; default 3, 1 with --quick)")
     p.add_argument("--quick", action="store_true", help="3 touches per material")
@@ -252,9 +258,10 @@ def _add_error(bsub) -> None:
 
     p = bsub.add_parser("view", help="the view's first paint, its lag behind a session, and the "
                                      "master's loop timing with and without the page")
-    p.add_argument("--json", required=True)
-    p.add_argument("--touches", type=int, default=3)
-    p.add_argument("--contact-s", type=float, default=3.0)
+    p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--touches", type=int, default=3, help="touches per mode (default 3)")
+    p.add_argument("--contact-s", type=float, default=3.0,
+                   help="each touch's contact time, seconds (default 3)")
     p.add_argument("--realtime-priority", type=int, default=20,
                    help="the master loop's SCHED_FIFO priority, as in the demo (0: normal "
                         "scheduling, where the browser competes with the loop for the CPU)")

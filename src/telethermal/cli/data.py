@@ -60,10 +60,11 @@ def cmd_dataset_show(args) -> int:
 
 
 def cmd_dataset_validate(args) -> int:
-    from telethermal.data.dataset import load_dataset
+    from telethermal.data.dataset import check_identifier_channels, load_dataset
 
     with console.status(f"reading {args.dir}"):
         trials = load_dataset(args.dir)
+    check_identifier_channels(trials, args.dir)
     materials = sorted({t.material for t in trials})
     channels = sorted({c for t in trials for c in t.channels})
     print(f"{args.dir}: {len(trials)} trials, materials {', '.join(materials)}; "
@@ -129,15 +130,16 @@ def add_dataset(sub) -> None:
     p = dsub.add_parser("generate", help="write a scene's databases (pad/ and finger/)")
     p.add_argument("--scene", required=True, help="shipped scene name or TOML path")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the sensors' errors and the trials (default 0)")
     p.add_argument("--force", action="store_true", help="replace a non-empty --out")
     p.set_defaults(func=cmd_dataset_generate)
     p = dsub.add_parser("show", help="plot a dataset (or a folder of datasets)")
-    p.add_argument("dir")
+    p.add_argument("dir", help="dataset folder (manifest.csv and its trial files)")
     p.add_argument("--out", required=True, help="PNG to write")
     p.set_defaults(func=cmd_dataset_show)
     p = dsub.add_parser("validate", help="read and check every file of a dataset")
-    p.add_argument("dir")
+    p.add_argument("dir", help="dataset folder (manifest.csv and its trial files)")
     p.set_defaults(func=cmd_dataset_validate)
 
     p = dsub.add_parser("import", help="add contacts to a dataset (identification database): "
@@ -168,14 +170,20 @@ def add_simulate(sub) -> None:
     p = sub.add_parser("simulate", help="one contact between two semi-infinite bodies")
     p.add_argument("--pad", required=True, help="material of the pad (or finger: skin)")
     p.add_argument("--object", required=True, help="material of the object")
-    p.add_argument("--pad-temp-c", type=_finite, required=True)
-    p.add_argument("--object-temp-c", type=_finite, required=True)
-    p.add_argument("--seconds", type=_positive(), required=True)
-    p.add_argument("--rate-hz", type=_positive(), required=True)
+    p.add_argument("--pad-temp-c", type=_finite, required=True,
+                   help="the pad's (or finger's) temperature before contact, C")
+    p.add_argument("--object-temp-c", type=_finite, required=True,
+                   help="the object's temperature before contact, C")
+    p.add_argument("--seconds", type=_positive(), required=True,
+                   help="contact time to simulate, seconds")
+    p.add_argument("--rate-hz", type=_positive(), required=True,
+                   help="sample rate of the written trial, Hz")
     p.add_argument("--out", required=True, help="output dataset folder")
     p.add_argument("--ideal", action="store_true",
                    help="perfect contact, no sensor, no noise: the closed form")
-    p.add_argument("--contact-conductance-w-m2k", type=_positive(), default=3000.0)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--contact-conductance-w-m2k", type=_positive(), default=3000.0,
+                   help="pad-object contact conductance, W/(m^2 K) (default 3000)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the sensors' noise (default 0)")
     p.add_argument("--force", action="store_true", help="replace a non-empty --out")
     p.set_defaults(func=cmd_simulate)

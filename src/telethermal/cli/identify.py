@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import inspect
+import re
+import sys
+import textwrap
 
 from telethermal.cli._common import _command, _png, _positive, _print_lines, console, log
 
@@ -14,11 +18,28 @@ def _channels(text: str) -> tuple[str, ...]:
     return names
 
 
+def method_description(cls) -> str:
+    """The first paragraph of an identifier's docstring, whole, on one line;
+    where it refers to its module, the module's first paragraph after its
+    title as well."""
+    paragraph = inspect.cleandoc(cls.__doc__ or "").split("\n\n")[0]
+    if "see the module" in paragraph:
+        module = inspect.cleandoc(sys.modules[cls.__module__].__doc__ or "").split("\n\n")
+        paragraph = paragraph.replace(" (see the module)", "") + " " + " ".join(module[1:2])
+    text = re.sub(r":\w+:`~?(?:\w+\.)*(\w+)`", r"\1", " ".join(paragraph.split()))
+    return text.replace("``", "`")
+
+
 def cmd_identify_methods(args) -> int:
     from telethermal.ident.registry import METHODS
+    from telethermal.teleop.models import DEFAULT_METHOD, FALLBACK_METHOD
 
+    marks = {DEFAULT_METHOD: "[default] ",
+             FALLBACK_METHOD: f"[default where {DEFAULT_METHOD} cannot model the scene] "}
     for name, cls in sorted(METHODS.items()):
-        print(f"{name:16s} {cls.__doc__.strip().splitlines()[0]}")
+        text = textwrap.fill(marks.get(name, "") + method_description(cls), width=88,
+                             initial_indent="  ", subsequent_indent="  ")
+        print(f"{name}\n{text}\n")
     return 0
 
 
@@ -69,10 +90,12 @@ def add_parser(sub) -> None:
     p.set_defaults(func=cmd_identify_methods)
     p = isub.add_parser("train", help="fit an identifier on a dataset")
     p.add_argument("--data", required=True, help="dataset folder")
-    p.add_argument("--method", required=True)
+    p.add_argument("--method", required=True,
+                   help="identifier: see `telethermal identify methods`")
     p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),
                    help="comma-separated channels (default heat_flux_W_m2)")
-    p.add_argument("--max-window-s", type=_positive(), default=1.0)
+    p.add_argument("--max-window-s", type=_positive(), default=1.0,
+                   help="longest window after contact the model learns, seconds (default 1)")
     p.add_argument("--out", required=True, help="model file to write (.npz)")
     p.add_argument("--unseen-weight", type=float, default=None, metavar="W",
                    help="effusivity-fit: the prior weight of a material outside the classes "
@@ -80,20 +103,24 @@ def add_parser(sub) -> None:
                         "bench unseen shows the trade)")
     p.set_defaults(func=cmd_identify_train)
     p = isub.add_parser("eval", help="score a model on a dataset")
-    p.add_argument("--model", required=True)
-    p.add_argument("--data", required=True)
-    p.add_argument("--json", required=True)
-    p.add_argument("--png")
+    p.add_argument("--model", required=True, help="a model file from `identify train` (.npz)")
+    p.add_argument("--data", required=True,
+                   help="dataset folder to score the model on (held-out contacts)")
+    p.add_argument("--json", required=True,
+                   help="JSON report to write: accuracy per window, decisions, calibration")
+    p.add_argument("--png", help="plot of accuracy against time after contact")
     p.set_defaults(func=cmd_identify_eval)
     p = isub.add_parser("cv", help="grouped k-fold cross-validation of a method on a dataset: "
                                    "accuracy per window with 95 %% intervals, the decisions "
                                    "(commit rate, accuracy, named alone, confusion), calibration")
     p.add_argument("--data", required=True, help="dataset folder")
-    p.add_argument("--method", required=True)
+    p.add_argument("--method", required=True,
+                   help="identifier: see `telethermal identify methods`")
     p.add_argument("--folds", type=int, default=5,
                    help="folds; each holds whole groups (default 5)")
     p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),
                    help="comma-separated channels (default heat_flux_W_m2)")
-    p.add_argument("--max-window-s", type=_positive(), default=1.0)
+    p.add_argument("--max-window-s", type=_positive(), default=1.0,
+                   help="longest window after contact the models learn, seconds (default 1)")
     p.add_argument("--json", help="write the report here")
     p.set_defaults(func=cmd_identify_cv)

@@ -24,13 +24,15 @@ def add_parsers(sub) -> None:
                                       "(from a scene, or a dataset) with a checksum file")
     p.add_argument("--out", required=True, help="folder for identifier.npz, generator.npz, "
                                                 "SHA256SUMS")
-    p.add_argument("--scene", default="fingertip-7")
+    p.add_argument("--scene", default="fingertip-7",
+                   help="shipped scene name or TOML path (default fingertip-7)")
     p.add_argument("--data", help="a dataset folder with pad/ and finger/ (e.g. from "
                                   "`dataset generate`), or one dataset of pad contacts (a "
                                   "lab's `dataset import`: the generator is then the scene's "
                                   "direct-contact model), instead of the scene's simulated "
                                   "databases")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the simulated databases (default 0)")
     p.set_defaults(func=cmd_models)
 
 
@@ -45,20 +47,24 @@ def _admin_parser(sub) -> None:
     asub = p.add_subparsers(dest="admin_command", required=True)
     q = asub.add_parser("status", help="each reachable service's state, peer, counters and, "
                                        "with no session, the likely cause")
-    q.add_argument("role", nargs="?", choices=("slave", "master", "both"), default="both")
+    q.add_argument("role", nargs="?", choices=("slave", "master", "both"), default="both",
+                   help="which service to ask (default both)")
     q.add_argument("--wait", type=float, default=0.0, metavar="S",
                    help="wait up to S seconds for the services to answer and the "
                         "master to have a live session (exit 1 if not); without it, "
                         "exit 1 if a role asked for does not answer (a healthcheck)")
     q = asub.add_parser("place", help="put an object under the slave pad (simulation)")
-    q.add_argument("material")
-    q.add_argument("--seed", type=int)
+    q.add_argument("material", help="the object's material (one of the slave's scene)")
+    q.add_argument("--seed", type=int,
+                   help="seed of the object's touch (default: the slave's next)")
     q.add_argument("--object-id", help="the object's name, its key in the slave's object "
                                        "memory (default: the scene object of MATERIAL)")
     q = asub.add_parser("touch", help="the simulated operator touches the master's pad; "
                                       "prints the touch's figures")
-    q.add_argument("--contact-s", type=float, default=5.0)
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--contact-s", type=float, default=5.0,
+                   help="contact time, seconds (default 5)")
+    q.add_argument("--seed", type=int, default=0,
+                   help="seed of the simulated operator's touch (default 0)")
     q.add_argument("--no-wait", action="store_true", help="return at once (then lift, report)")
     q.add_argument("--session-wait", type=float, default=30.0, metavar="S",
                    help="wait up to S seconds for the master's session with the slave "
@@ -69,10 +75,13 @@ def _admin_parser(sub) -> None:
     asub.add_parser("lift", help="end the touch in progress now")
     asub.add_parser("report", help="the last touch's figures (master and slave)")
     q = asub.add_parser("send", help="any admin request: send ROLE CMD [key=value ...]")
-    q.add_argument("role", choices=("slave", "master"))
-    q.add_argument("cmd")
-    q.add_argument("args", nargs="*", metavar="key=value")
-    q.add_argument("--timeout-s", type=float, default=10.0)
+    q.add_argument("role", choices=("slave", "master"), help="the service to ask")
+    q.add_argument("cmd",
+                   help="the admin request's name (its list: proto/PROTOCOL.md, admin requests)")
+    q.add_argument("args", nargs="*", metavar="key=value",
+                   help="the request's arguments, each key=value")
+    q.add_argument("--timeout-s", type=float, default=10.0,
+                   help="how long to wait for the reply, seconds (default 10)")
     p.set_defaults(func=cmd_admin)
 
 

@@ -141,8 +141,10 @@ def _replay_one(args, touch: int, out: Path) -> None:
 def add_replay(sub) -> None:
     p = sub.add_parser("replay", help="re-run the rendering and the identifier on a recording "
                                       "(new models or gains) and plot the session")
-    p.add_argument("file")
-    p.add_argument("--out", required=True)
+    p.add_argument("file",
+                   help="an MCAP recording (from session --record, demo --record or a "
+                        "service's record_dir)")
+    p.add_argument("--out", required=True, help="folder for the replay's plots and JSON")
     p.add_argument("--identifier", help="identifier model instead of the recorded one")
     p.add_argument("--generator", help="generator model instead of the recorded one")
     p.add_argument("--gains", help="kp,ki,kd instead of the recorded gains")
@@ -169,8 +171,9 @@ def add_session(sub) -> None:
     p.add_argument("--controller", choices=("impedance", "static"), default="impedance",
                    help="impedance: the pad's surface behaves as the object's (default); "
                         "static: the flux PID on the generator's flux")
-    p.add_argument("--contact-s", type=_positive(), default=5.0)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--contact-s", type=_positive(), default=5.0,
+                   help="contact time, seconds (default 5)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the touch (default 0)")
     p.add_argument("--realtime", action="store_true",
                    help="run the master loop on the real clock and report its timing")
     p.add_argument("--record", help="record the session to this MCAP file")
@@ -183,12 +186,16 @@ def add_session(sub) -> None:
 def add_demo(sub) -> None:
     p = sub.add_parser("demo", help="run the main job on the default scene: master and slave "
                                     "as two processes on loopback, a touch per material")
-    p.add_argument("--scene", default="fingertip-7")
-    p.add_argument("--out", default="out/demo")
+    p.add_argument("--scene", default="fingertip-7",
+                   help="shipped scene name or TOML path (default fingertip-7)")
+    p.add_argument("--out", default="out/demo",
+                   help="output folder: plots, demo.json, models, logs (default out/demo)")
     p.add_argument("--json", help="per-touch summary (default: OUT/demo.json)")
     p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
-    p.add_argument("--contact-s", type=_positive(), default=5.0)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--contact-s", type=_positive(), default=5.0,
+                   help="each touch's contact time, seconds (default 5)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the databases and the touches (default 0)")
     p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
                    help="emulated: master and slave each on emulated boards (ptys) and CAN "
                         "drivers (virtual buses), read through the drivers")

@@ -188,6 +188,34 @@ def trial_digest(trial: Trial) -> str:
     return h.hexdigest()[:16]
 
 
+#: The channels the identifiers read (``ident/prepare.py``): heat flux always,
+#: the pad's temperature and the pressing force when a model is given them.
+FLUX_CHANNEL = "heat_flux_W_m2"
+IDENTIFIER_CHANNELS = (FLUX_CHANNEL, "temperature_C", "force_N")
+
+
+def check_identifier_channels(trials: list[Trial], root: str | Path = "") -> None:
+    """Refuse trials an identifier could not read: every trial needs the
+    heat-flux column, and a column named like one the identifiers read but
+    not the same (``heatflux_W_m2``) is taken for a typo, with the name
+    meant. Other channels are kept as they are."""
+    import difflib
+
+    for trial in trials:
+        where = Path(root) / trial.file
+        names = [c for c in trial.channels if c != TIME]
+        for name in names:
+            if name in IDENTIFIER_CHANNELS:
+                continue
+            meant = difflib.get_close_matches(name, IDENTIFIER_CHANNELS, n=1, cutoff=0.8)
+            if meant and meant[0] not in names:
+                raise DatasetError(f"{where}: column '{name}' is not one the identifiers "
+                                   f"read (did you mean '{meant[0]}'?)")
+        if FLUX_CHANNEL not in names:
+            raise DatasetError(f"{where}: no '{FLUX_CHANNEL}' column, which every "
+                               f"identifier reads (columns: {', '.join(names) or 'none'})")
+
+
 def load_dataset(root: str | Path) -> list[Trial]:
     """Read the manifest and every trial file, fully checked."""
     root = Path(root)
@@ -224,7 +252,7 @@ def staged_dir(root: str | Path, overwrite: bool = False):
     removed and ``root`` is left as it was."""
     root = Path(root)
     if root.exists() and (not root.is_dir() or any(root.iterdir())) and not overwrite:
-        raise DatasetError(f"{root} exists and is not empty (pass overwrite / --force)")
+        raise DatasetError(f"{root} exists and is not empty: give --force to replace it")
     root.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
     try:
