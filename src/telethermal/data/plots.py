@@ -16,7 +16,10 @@ import numpy as np  # noqa: E402
 from telethermal.data.dataset import MANIFEST, Trial, load_dataset  # noqa: E402
 from telethermal.errors import DatasetError  # noqa: E402
 
-PANELS = (("heat_flux_W_m2", "heat flux (W/m$^2$)"), ("temperature_C", "temperature (°C)"))
+#: (channel, axis label); ``{who}`` is the dataset's pad, or the finger for a
+#: finger database: flux is positive from it into the object, as in the files.
+PANELS = (("heat_flux_W_m2", "heat flux {who} -> object (W/m$^2$),\npositive into the object"),
+          ("temperature_C", "{who} temperature (°C)"))
 
 
 def _dataset_dirs(root: Path) -> list[Path]:
@@ -41,6 +44,18 @@ def _mean_band(trials: list[Trial], channel: str):
 
 def plot_datasets(root: str | Path, out_png: str | Path) -> Path:
     """Plot one dataset, or every dataset in a folder (one row each)."""
+    fig = datasets_figure(root)
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_png.with_name(f".{out_png.name}.tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(out_png)
+    return out_png
+
+
+def datasets_figure(root: str | Path):
+    """The figure :func:`plot_datasets` writes."""
     dirs = _dataset_dirs(Path(root))
     fig, axes = plt.subplots(len(dirs), 2, figsize=(12, 4.2 * len(dirs)), squeeze=False)
     for row, folder in zip(axes, dirs):
@@ -58,16 +73,10 @@ def plot_datasets(root: str | Path, out_png: str | Path) -> Path:
                 ax.fill_between(axis, mean - std, mean + std, color=colour, alpha=0.2, lw=0)
             ax.axvline(0.0, color="0.5", lw=0.8, ls=":")
             ax.set_xlabel("time after contact (s)")
-            ax.set_ylabel(label)
+            ax.set_ylabel(label.format(who="finger" if folder.name == "finger" else "pad"))
             ax.set_title(f"{folder.name}: {len(trials)} trials; line: mean, band: +- 1 sd "
                          f"across the trials of a material", fontsize=9)
             ax.grid(alpha=0.3)
         row[0].legend(fontsize=8, ncol=2)
     fig.tight_layout()
-    out_png = Path(out_png)
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_png.with_name(f".{out_png.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(out_png)
-    return out_png
+    return fig

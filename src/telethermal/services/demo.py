@@ -293,10 +293,9 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
     result = networked_touch(scene, material, ports[:4], seed, contact_s)
     s = result.summary
     name = f"{material}-again" if again else material
-    plot_session(result, out / f"touch-{name}.png",
+    plot_session(result, out / f"touch-{name}.png",       # its errors: plots.error_windows
                  f"{scene.name}: {material}{' again' if again else ''} over the network (two "
-                 f"processes); flux error {100 * s['flux_rms_error_rel']:.2f} % of peak after "
-                 f"identification, skin {s['temp_rms_error_c']:.2f} K RMS")
+                 "processes)")
     local = run_session(scene, material, identifier, generator, contact_s=contact_s,
                         seed=seed).summary
     when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"

@@ -1,0 +1,75 @@
+"""The demo's plots: one flux sign convention (positive from the pad, or the
+finger, into the object) stated on every flux axis and drawn that way; the
+decision marked at ``decision_time_s``; the title's errors on the windows
+``demo.json`` reports."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from telethermal.teleop.plots import FLUX_KEYS, error_windows, session_figure
+
+
+def _session():
+    t = np.linspace(-0.2, 1.0, 121)
+    into_finger = np.where(t >= 0, -5e3 / np.sqrt(np.clip(t, 1e-2, None)), 0.0)  # a cold object
+    trace = {k: into_finger.copy() for k in FLUX_KEYS}
+    trace.update(t_s=t, direct_skin_c=33 - t, skin_surface_c=33 - t, pad_surface_c=30 + 0 * t,
+                 junction_c=28 + 0 * t)
+    summary = dict(scene="fingertip-7", material="aluminium", identified="aluminium",
+                   rate_hz=500.0, decision_time_s=0.06, render_start_s=0.098,
+                   flux_rms_error_rel=0.009, flux_rms_error_rel_first_s=0.0675,
+                   flux_rms_error_rel_whole=0.052, temp_rms_error_c=0.79)
+    return SimpleNamespace(summary=summary, trace=trace)
+
+
+def test_touch_plot_draws_flux_out_of_the_finger_positive_and_says_so():
+    fig = session_figure(_session())
+    try:
+        ax_q = fig.axes[0]
+        assert "finger -> object" in ax_q.get_ylabel() and "positive" in ax_q.get_ylabel()
+        direct = next(line for line in ax_q.get_lines() if line.get_label().startswith("direct contact"))
+        t, q = direct.get_data()
+        # A finger touching a colder object loses heat: positive out of it.
+        assert np.all(q[t >= 0] > 0) and np.all(q[t < 0] == 0)
+    finally:
+        plt.close(fig)
+
+
+def test_touch_plot_marks_the_decision_at_decision_time_and_the_windows_in_its_title():
+    s = _session()
+    fig = session_figure(s, "fingertip-7: aluminium over the network")
+    try:
+        for ax in fig.axes:
+            vertical = {line.get_xdata()[0]: line.get_linestyle() for line in ax.get_lines()
+                        if len(set(np.atleast_1d(line.get_xdata()))) == 1}
+            assert vertical.get(0.06) == "-", vertical           # the decision, solid
+            assert vertical.get(0.098) == ":", vertical          # rendering from, dotted
+        title = fig._suptitle.get_text()
+        assert "0.90 % from the decision on" in title
+        assert "6.75 % over the first second" in title and "5.20 % over the whole contact" in title
+        assert title == f"fingertip-7: aluminium over the network\n{error_windows(s.summary)}"
+    finally:
+        plt.close(fig)
+
+
+def test_database_plot_states_the_convention_on_each_flux_axis(tmp_path):
+    from telethermal.cli import main
+    from telethermal.data.plots import datasets_figure
+
+    for name, pad in (("pad", "alumina"), ("finger", "skin")):
+        assert main(["simulate", "--pad", pad, "--object", "aluminium", "--pad-temp-c", "33",
+                     "--object-temp-c", "23", "--seconds", "0.3", "--rate-hz", "100",
+                     "--out", str(tmp_path / name)]) == 0
+    fig = datasets_figure(tmp_path)
+    try:
+        labels = [ax.get_ylabel() for ax in fig.axes]
+        assert [lab.split("\n")[0] for lab in labels[::2]] == [
+            "heat flux finger -> object (W/m$^2$),", "heat flux pad -> object (W/m$^2$),"]
+        flux = fig.axes[0].get_lines()[0].get_ydata()
+        assert np.nanmax(flux) > 0 and np.nanmin(flux) >= -1.0   # warmer finger: positive
+    finally:
+        plt.close(fig)
