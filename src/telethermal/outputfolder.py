@@ -12,7 +12,7 @@ from telethermal.errors import OutputFolderError
 
 FIX = ("if this runs in the compose demo, make ./out yourself (`mkdir -p out`) and run the "
        "container as its owner: `echo TELETHERMAL_UID=$(id -u) >> .env; echo "
-       "TELETHERMAL_GID=$(id -g) >> .env` beside docker-compose.yml (README, \"Containers\"); "
+       "TELETHERMAL_GID=$(id -g) >> .env` beside docker-compose.yml (docs/deployment.md); "
        "else choose another --out or chown the folder")
 
 

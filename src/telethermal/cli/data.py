@@ -144,7 +144,7 @@ def add_dataset(sub) -> None:
 
     p = dsub.add_parser("import", help="add contacts to a dataset (identification database): "
                                        "MCAP recordings, or a lab's CSV files (one contact each; "
-                                       "README, Dataset format)")
+                                       "docs/concepts/databases.md, Dataset format)")
     p.add_argument("files", nargs="*", help="MCAP recordings or CSV files, told by content")
     p.add_argument("--into", required=True, help="dataset folder (created if absent)")
     p.add_argument("--material", help="the material touched (required for lab files)")

@@ -6,7 +6,7 @@ columns are called and in which units, where the contact begins, which
 material was touched and what the temperatures were before contact are
 given by the call (or a manifest of many files); every value is checked and
 an error names the file, the line and the column. What each dataset column
-means (README.md, "Dataset format"):
+means (docs/concepts/databases.md, "Dataset format"):
 
 * ``t_s``: time, s; 0 at the first contact sample, negative before.
   Pre-contact samples are optional (the identifiers read from contact on).

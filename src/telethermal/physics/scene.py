@@ -129,7 +129,7 @@ THERMOMETER_KINDS = ("ir", "contact")
 @dataclass(frozen=True)
 class SensorSpec:
     """Every sensor's error, each figure from a datasheet or paper (the table
-    in README.md, "Sensor errors"). ``*_limit_*`` figures are bounds drawn
+    in docs/concepts/databases.md, "Sensor errors"). ``*_limit_*`` figures are bounds drawn
     uniformly per instrument or session (:func:`~telethermal.physics.sensors.draw_instruments`)."""
 
     flux_lag_s: float = 0.15
