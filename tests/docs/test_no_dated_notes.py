@@ -1,5 +1,6 @@
 """Measurements live in bench/results/ and the benchmark page, dated there
-only: README.md, the Makefile and the comments and docstrings of src/ say
+only: README.md, the Makefile, the user guide's pages (bar the changelog)
+and the comments and docstrings of src/ say
 what things do, not when or on which machine they were timed. A date
 (2026-11-27), or a "measured ... on <date or machine>" note, fails here with
 its file and line."""
@@ -52,9 +53,15 @@ def _python_notes(path: Path) -> list[tuple[int, str]]:
     return notes
 
 
+#: The user guide too, bar the changelog (the project's history, dated by
+#: nature) and the benchmark page (bench/report.md, not under docs/).
+DOC_PAGES = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").rglob("*.md")
+                   if p.name != "changelog.md")
+
+
 def dated_notes() -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
-    for name in ("README.md", "Makefile"):
+    for name in ("README.md", "Makefile", *DOC_PAGES):
         for n, line in enumerate((ROOT / name).read_text(encoding="utf-8").splitlines(), 1):
             for _, f in findings(line):
                 out.setdefault(name, []).append(f"{name}:{n}: {f}")
@@ -91,3 +98,12 @@ def test_each_pending_note_is_still_there(rel):
 ])
 def test_the_patterns_find_dates_and_notes_and_nothing_else(text, hits):
     assert [f for _, f in findings(text)] == hits
+
+
+def test_the_readme_is_a_front_page_whose_links_resolve():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.splitlines()) <= 150
+    targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", readme)
+    assert len(targets) >= 10
+    broken = [t for t in targets if "://" not in t and not (ROOT / t).exists()]
+    assert broken == [], f"README links to missing files: {broken}"
