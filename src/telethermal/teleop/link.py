@@ -184,8 +184,8 @@ class SlaveLink:
             if verdict == Agreement.DISAGREES and mem.label.is_new and _consistent(mem, e):
                 # A class named early by a touch whose own estimate holds the
                 # remembered new material's: the closed set's early guess
-                # (bench unseen: glass named graphite at 0.06 s, revised at
-                # 1 s), not evidence against the memory, which stands.
+                # (an unseen material named as its nearest class, revised
+                # later), not evidence against the memory, which stands.
                 self.counters["memory_kept"] += 1
                 verdict = None
             if verdict == Agreement.DISAGREES:
