@@ -80,6 +80,19 @@ def test_every_block_of_the_page_runs(name, tmp_path, monkeypatch):
             pytest.fail(f"{where}: a ```{lang} block neither runs nor is a named file: "
                         "console ($ lines), pycon, sh (make targets) or title=\"FILE\"")
     assert ran >= 3, f"docs/{name}: only {ran} blocks ran"
+    if name == "getting-started.md":
+        missing = [f for f in demo_files_named(page.read_text()) if not list((tmp_path / "demo").glob(f))]
+        assert missing == [], f"docs/{name}: the demo wrote none of {missing}"
+
+
+def demo_files_named(text: str) -> list[str]:
+    """The files "What the demo writes" names (`touch-<material>.png` as a
+    glob), each a pattern under the demo's folder."""
+    section = text[text.index("## What the demo writes"):]
+    section = section[:section.index("\n## ", 1)]
+    names = re.findall(r"`([\w<>./-]+(?:\.\w+|/))`", section)
+    return sorted({re.sub(r"<\w+>", "*", n).rstrip("/") for n in names
+                   if n not in ("demo/", "out/demo/") and ("." in n or n.endswith("/"))})
 
 
 def _make_targets(body: str, where: str) -> None:
@@ -89,6 +102,12 @@ def _make_targets(body: str, where: str) -> None:
     assert targets, f"{where}: an sh block without a make target"
     r = subprocess.run(["make", "-n", "-C", str(ROOT), *targets], capture_output=True, text=True)
     assert r.returncode == 0, f"{where}: make -n {' '.join(targets)}: {r.stderr}"
+
+
+def test_the_demo_files_the_page_names_are_read_as_patterns():
+    text = (ROOT / "docs" / "getting-started.md").read_text()
+    names = demo_files_named(text)
+    assert {"demo.json", "databases", "touch-*.png", "identifier.npz", "keys"} <= set(names)
 
 
 def test_the_block_reader_sees_titles_and_languages(tmp_path):
