@@ -20,8 +20,13 @@ demo: $(STAMP)
 	$(VENV)/bin/telethermal demo --out $(OUT)/demo
 
 # Two workers (pytest-xdist; tests/conftest.py gives each a whole test file
-# at a time); the 25 slowest tests in every log.
+# at a time); the 25 slowest tests in every log. `test` leaves out the tests
+# behind the `compose` marker (an image build and a Docker stack: minutes of
+# their own); `test-all` runs every test, as .ci/run does.
 test: $(STAMP)
+	$(PY) -m pytest tests -n 2 --durations=25 -m "not compose"
+
+test-all: $(STAMP)
 	$(PY) -m pytest tests -n 2 --durations=25
 
 # The docs site (mkdocs.yml) into $(OUT)/site, warnings as errors.
