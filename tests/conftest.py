@@ -181,7 +181,8 @@ def pytest_unconfigure(config):
 #: loop stalled over its 1 s liveness and logged the warning the test
 #: forbids). Order only: a file missing or renamed here is merely
 #: scheduled with the rest.
-LONGEST_FIRST = ("tests/integration/test_compose_up.py", "tests/conformance",
+LONGEST_FIRST = ("tests/integration/test_compose_up.py", "tests/docs/test_tutorials.py",
+                 "tests/conformance",
                  "tests/unit/test_decisions.py",
                  "tests/integration/test_services.py",
                  "tests/integration/test_unseen_render_sessions.py",

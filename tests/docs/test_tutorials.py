@@ -54,6 +54,7 @@ def _doctest(body: str, cwd: Path, where: str, monkeypatch) -> None:
     assert runner.tries >= 5, f"{where}: the example has {runner.tries} lines to check"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", PAGES)
 def test_every_block_of_the_page_runs(name, tmp_path, monkeypatch):
     page = ROOT / "docs" / name
