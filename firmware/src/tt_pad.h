@@ -25,6 +25,9 @@
 #define TT_PAD_HEARTBEAT_ID (0x700u + TT_PAD_NODE)
 #define TT_PAD_CMD_DLC 5u
 #define TT_PAD_STATUS_DLC 8u
+/* The heater duty's full scale: raw 250 = 1.0 (CAN.md: 0..1); a command
+ * of raw 251..255 is clamped to it by the driver. */
+#define TT_PAD_HEATER_FULL_RAW 250u
 
 typedef struct {
     uint8_t enable;          /* 0 or 1 */

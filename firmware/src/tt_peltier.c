@@ -187,6 +187,7 @@ void tt_peltier_init(tt_peltier_driver *drv, const tt_peltier_config *cfg)
     drv->pump_on = false;
     drv->heater_duty_raw = 0;
     drv->commands = drv->bad_commands = drv->watchdog_trips = drv->send_failed = 0;
+    drv->clamped = 0;
     disable(drv);
 }
 
@@ -269,9 +270,15 @@ static void handle_command(tt_peltier_driver *drv, const uint8_t *data, uint8_t 
         drv->faults &= (uint8_t)(TT_FAULT_WATCHDOG | protection_faults(drv));
     }
     if (cmd.enable && drv->faults == 0) {
-        apply(drv, true, clamp(cmd.current_ma, (int16_t)-drv->cfg.current_limit_ma,
-                               drv->cfg.current_limit_ma),
-              cmd.pump != 0, cmd.heater_duty_raw);
+        int16_t current_ma = clamp(cmd.current_ma, (int16_t)-drv->cfg.current_limit_ma,
+                                   drv->cfg.current_limit_ma);
+        /* The heater's duty is 0..1 (CAN.md): raw 251..255 would be 100.4..102 %. */
+        uint8_t duty_raw = cmd.heater_duty_raw > TT_PAD_HEATER_FULL_RAW
+                               ? (uint8_t)TT_PAD_HEATER_FULL_RAW : cmd.heater_duty_raw;
+        if (current_ma != cmd.current_ma || duty_raw != cmd.heater_duty_raw) {
+            drv->clamped++;
+        }
+        apply(drv, true, current_ma, cmd.pump != 0, duty_raw);
     } else if (drv->enabled || !cmd.enable) {
         disable(drv);
     }

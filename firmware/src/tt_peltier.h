@@ -118,8 +118,10 @@ typedef struct {
     uint32_t last_cmd_ms;
     uint32_t last_heartbeat_ms;
     tt_peltier_measure measured;
-    /* Counters, for a lab's debugger or its own diagnostics frame. */
-    uint32_t commands, bad_commands, watchdog_trips, send_failed;
+    /* Counters, for a lab's debugger or its own diagnostics frame;
+     * `clamped`: commands whose current or heater duty was outside the
+     * limits and was applied clamped. */
+    uint32_t commands, bad_commands, watchdog_trips, send_failed, clamped;
 } tt_peltier_driver;
 
 /* Start (after a restart): disabled, 0 A. */

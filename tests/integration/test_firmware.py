@@ -534,3 +534,21 @@ def test_the_sink_saturated_warning_keeps_the_element_driven(tt_host):
     assert status[1]["sink_saturated"] == 0
     assert status[2]["sink_saturated"] == 1 and status[2]["enabled"] == 1
     assert not any(status[2][f] for f in ("over_temp", "over_current", "sensor_fault"))
+
+
+def test_a_heater_duty_past_full_scale_is_applied_clamped_and_counted(tt_host):
+    """Golden vector ``pad_cmd_heater_over_range``: raw 255 (1.02) is past
+    CAN.md's 0..1; the active pad applies raw 250 (full duty) and counts the
+    command as clamped; raw 250 itself is applied as sent, not counted."""
+    data, fields = vectors("can")["pad_cmd_heater_over_range"]
+    assert fields["raw"]["heater_duty"] == 255
+    full = bytearray(data)
+    full[3] = 250
+    script = f"t 0\nrx 102 {data.hex()}\nt 1\nrx 102 {bytes(full).hex()}\nt 2\n"
+    done = subprocess.run([str(tt_host), "peltier", "--pad"], input=script,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    water = [line.split() for line in done.stdout.splitlines() if line.startswith("water")]
+    assert water == [["water", "0", "0", "0"], ["water", "1", "1", "250"],
+                     ["water", "2", "1", "250"]]
+    assert "1 clamped" in done.stderr

@@ -45,7 +45,7 @@ def test_can_vector_both_ways(name):
     message = DB.get_message_by_name(fields["message"])
     assert (message.frame_id, message.length) == (fields["frame_id"], fields["dlc"]) == \
         (fields["frame_id"], len(data))
-    assert message.encode(fields["signals"], strict=True) == data
+    assert message.encode(fields["signals"], strict=name not in golden.OUT_OF_RANGE) == data
     assert message.decode(data, decode_choices=False) == fields["signals"]
     assert message.decode(data, decode_choices=False, scaling=False) == fields["raw"]
 

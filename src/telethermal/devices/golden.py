@@ -193,10 +193,19 @@ CAN_EXAMPLES: dict[str, tuple[str, dict]] = {
                                            "watchdog": 1, "pump_on": 0, "heater_on": 0,
                                            "counter": 255, "actuator_c": 33.0, "drive": 0.0,
                                            "heatsink_c": 24.0}),
+    # A heater duty of raw 255 (1.02, past the DBC's 0..1): a driver applies
+    # it clamped to raw 250, full duty (CAN.md), and counts it.
+    "pad_cmd_heater_over_range": ("PAD_CMD", {"enable": 1, "pump": 1, "counter": 6,
+                                              "current_a": 0.0, "heater_duty": 1.02,
+                                              "version": 2}),
     "pad_heartbeat_operational": ("PAD_HEARTBEAT", {"state": 5, "version": 2}),
     "pad_heartbeat_boot": ("PAD_HEARTBEAT", {"state": 0, "version": 2}),
 }
 
+
+#: CAN vectors outside the DBC's ranges on purpose (encoded without
+#: cantools' range check): what a driver must clamp.
+OUT_OF_RANGE = frozenset({"pad_cmd_heater_over_range"})
 
 #: Fields a version-1 frame does not carry (left out of its JSON).
 V2_FIELDS = ("ir_object_c", "ir_ambient_c", "pad_drive")
@@ -217,7 +226,7 @@ def can_vectors() -> dict[str, tuple[bytes, dict]]:
     out = {}
     for name, (message_name, signals) in CAN_EXAMPLES.items():
         message = DB.get_message_by_name(message_name)
-        data = message.encode(signals, strict=True)
+        data = message.encode(signals, strict=name not in OUT_OF_RANGE)
         out[name] = (data, {
             "message": message_name, "frame_id": message.frame_id, "dlc": message.length,
             "signals": message.decode(data, decode_choices=False),
