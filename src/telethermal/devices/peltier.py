@@ -203,6 +203,11 @@ class PeltierDriver:
             except can.CanError as exc:
                 self._bus_failed(exc)
                 return n
+            except ValueError as exc:      # a line the interface could not parse (slcan)
+                self.counters["undecodable"] += 1
+                log.warning("CAN %s: unreadable frame (%s)", self.spec, exc)
+                timeout = 0.0
+                continue
             if msg is None:
                 return n
             timeout = 0.0

@@ -1,0 +1,200 @@
+/* The STM32F405's clock tree, SysTick and USARTs at register level
+ * (RM0090 sections 6, 8, 30; ARMv7-M B3.3 for SysTick). */
+#include "board.h"
+
+#include "../src/hal.h"
+#include "regs.h"
+
+static volatile uint32_t millis;
+static bool emulated;
+
+#define RING 512u
+
+typedef struct {
+    volatile uint8_t buf[RING];
+    volatile uint32_t head, tail; /* written by the interrupt / by the loop */
+    volatile uint32_t overruns;
+} uart;
+
+static uart uarts[2];
+static const uint32_t bases[2] = {USART1_BASE, USART2_BASE};
+
+static bool wait_set(uint32_t mask)
+{
+    for (uint32_t i = 0; i < 1000000u; i++) {
+        if (RCC_CR & mask) {
+            return true;
+        }
+    }
+    return false;
+}
+
+static bool clock_init(void)
+{
+    if (!(RCC_CR & RCC_CR_HSIRDY)) {
+        emulated = true; /* no clock controller: see board.h */
+        return true;
+    }
+    RCC_CR |= RCC_CR_HSEON;
+    if (!wait_set(RCC_CR_HSERDY)) {
+        return false;
+    }
+    /* 5 wait states at 168 MHz and 3.3 V (RM0090 table 10); caches, prefetch. */
+    FLASH_ACR = 5u | (1u << 8) | (1u << 9) | (1u << 10);
+    /* VCO = 8 MHz / M 8 * N 336 = 336 MHz; SYSCLK = VCO / P 2 = 168 MHz;
+     * USB/SDIO = VCO / Q 7 = 48 MHz; source HSE. */
+    RCC_PLLCFGR = 8u | (336u << 6) | (0u << 16) | (1u << 22) | (7u << 24);
+    /* AHB /1, APB1 /4 (42 MHz), APB2 /2 (84 MHz). */
+    RCC_CFGR = (5u << 10) | (4u << 13);
+    RCC_CR |= RCC_CR_PLLON;
+    if (!wait_set(RCC_CR_PLLRDY)) {
+        return false;
+    }
+    RCC_CFGR = (RCC_CFGR & ~3u) | 2u; /* SYSCLK from the PLL */
+    for (uint32_t i = 0; i < 1000000u; i++) {
+        if (((RCC_CFGR >> 2) & 3u) == 2u) {
+            return true;
+        }
+    }
+    return false;
+}
+
+/* PA9/PA10 and PA2/PA3: alternate function 7 (USART1, USART2). */
+static void pins_init(void)
+{
+    RCC_AHB1ENR |= RCC_AHB1ENR_GPIOA;
+    uint32_t moder = GPIO_MODER(GPIOA_BASE);
+    moder &= ~((3u << 18) | (3u << 20) | (3u << 4) | (3u << 6));
+    moder |= (2u << 18) | (2u << 20) | (2u << 4) | (2u << 6);
+    GPIO_MODER(GPIOA_BASE) = moder;
+    GPIO_AFRH(GPIOA_BASE) = (GPIO_AFRH(GPIOA_BASE) & ~0xFF0u) | (7u << 4) | (7u << 8);
+    GPIO_AFRL(GPIOA_BASE) = (GPIO_AFRL(GPIOA_BASE) & ~0xFF00u) | (7u << 8) | (7u << 12);
+    GPIO_PUPDR(GPIOA_BASE) |= (1u << 20) | (1u << 6); /* RX lines pulled up: idle high */
+}
+
+static void uart_init(uint32_t base, uint32_t pclk_hz, uint32_t baud, uint32_t irqn)
+{
+    USART_CR1(base) = 0;
+    /* Oversampling by 16: BRR = f_pclk / baud, rounded (RM0090 30.4.4). */
+    USART_BRR(base) = (pclk_hz + baud / 2u) / baud;
+    USART_CR2(base) = 0; /* 1 stop bit */
+    USART_CR3(base) = 0;
+    USART_CR1(base) = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE | USART_CR1_RXNEIE;
+    NVIC_ISER(irqn / 32u) = 1u << (irqn % 32u);
+}
+
+bool board_init(void)
+{
+    bool ok = clock_init();
+    RCC_APB2ENR |= RCC_APB2ENR_USART1;
+    RCC_APB1ENR |= RCC_APB1ENR_USART2;
+    pins_init();
+    uart_init(bases[0], BOARD_APB2_HZ, BOARD_LINK_BAUD, USART1_IRQN);
+    uart_init(bases[1], BOARD_APB1_HZ, BOARD_PLANT_BAUD, USART2_IRQN);
+    SYST_RVR = BOARD_SYSCLK_HZ / 1000u - 1u;
+    SYST_CVR = 0;
+    SYST_CSR = SYST_CSR_CLKSOURCE | SYST_CSR_TICKINT | SYST_CSR_ENABLE;
+    __asm__ volatile("cpsie i" ::: "memory");
+    return ok;
+}
+
+bool board_emulated(void)
+{
+    return emulated;
+}
+
+void board_fault(void)
+{
+    __asm__ volatile("cpsid i" ::: "memory");
+    for (;;) {
+        __asm__ volatile("wfi");
+    }
+}
+
+void systick_handler(void)
+{
+    millis++;
+}
+
+uint32_t board_cycles(void)
+{
+    return SYST_RVR - SYST_CVR;
+}
+
+uint32_t hal_millis(void)
+{
+    return millis;
+}
+
+uint32_t hal_micros(void)
+{
+    /* The millisecond count and SysTick's down-counter, read again if the
+     * tick's interrupt came in between. */
+    uint32_t ms, cycles;
+    do {
+        ms = millis;
+        cycles = SYST_RVR - SYST_CVR;
+    } while (ms != millis);
+    return ms * 1000u + cycles / (BOARD_SYSCLK_HZ / 1000000u);
+}
+
+static void uart_irq(int port)
+{
+    uart *u = &uarts[port];
+    uint32_t base = bases[port];
+    uint32_t sr = USART_SR(base);
+    if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
+        uint8_t byte = (uint8_t)USART_DR(base); /* clears RXNE and ORE */
+        uint32_t next = (u->head + 1u) % RING;
+        if (sr & USART_SR_ORE) {
+            u->overruns++;
+        }
+        if (next == u->tail) {
+            u->overruns++;
+        } else {
+            u->buf[u->head] = byte;
+            u->head = next;
+        }
+    }
+}
+
+void usart1_handler(void)
+{
+    uart_irq(0);
+}
+
+void usart2_handler(void)
+{
+    uart_irq(1);
+}
+
+int board_uart_getc(int port)
+{
+    uart *u = &uarts[port];
+    if (u->tail == u->head) {
+        return -1;
+    }
+    uint8_t byte = u->buf[u->tail];
+    u->tail = (u->tail + 1u) % RING;
+    return byte;
+}
+
+uint32_t board_uart_overruns(int port)
+{
+    return uarts[port].overruns;
+}
+
+void board_uart_write(int port, const uint8_t *data, size_t len)
+{
+    uint32_t base = bases[port];
+    for (size_t i = 0; i < len; i++) {
+        while (!(USART_SR(base) & USART_SR_TXE)) {
+        }
+        USART_DR(base) = data[i];
+    }
+}
+
+void board_wait(void)
+{
+    __asm__ volatile("wfi");
+}

@@ -1,0 +1,58 @@
+/* The STM32F405 port's own functions (not part of the portable HAL): the
+ * clock, the UARTs and the interrupt handlers the vector table names.
+ *
+ * Pins (the Olimex STM32-H405's headers; any STM32F405RG board has them):
+ *   USART1 PA9 TX, PA10 RX, 921600 baud: the link to the PC (the sensor
+ *          board's frames; the Peltier driver's SLCAN; the codec image's text)
+ *   USART2 PA2 TX, PA3 RX, 460800 baud: the plant link (processor in the
+ *          loop: the analog readings in, the H-bridge command out) */
+#ifndef TT_STM32F4_BOARD_H
+#define TT_STM32F4_BOARD_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+/* The core clock the port runs at: 168 MHz from the 8 MHz crystal through
+ * the PLL (the part's maximum); APB1 42 MHz, APB2 84 MHz. */
+#define BOARD_SYSCLK_HZ 168000000u
+#define BOARD_HSE_HZ 8000000u
+#define BOARD_APB1_HZ (BOARD_SYSCLK_HZ / 4u)
+#define BOARD_APB2_HZ (BOARD_SYSCLK_HZ / 2u)
+#define BOARD_LINK_BAUD 921600u
+#define BOARD_PLANT_BAUD 460800u
+
+/* Clocks, SysTick (1 kHz), both UARTs. Returns false if the crystal or the
+ * PLL did not start (the caller parks in board_fault). On an emulator
+ * without a clock controller (QEMU's STM32F405 reads RCC as 0: HSI never
+ * "ready", impossible on silicon) the core already runs at 168 MHz and the
+ * clock tree is left alone; board_emulated() then says true. */
+bool board_init(void);
+bool board_emulated(void);
+
+/* Never returns: interrupts off, the core parked (a stray interrupt, a
+ * clock that did not start). */
+void board_fault(void) __attribute__((noreturn));
+
+/* SysTick's count within the current millisecond (0 .. BOARD_SYSCLK_HZ/1000
+ * - 1): core cycles, for the loop-time measurement. */
+uint32_t board_cycles(void);
+
+/* The UARTs: 0 = USART1 (the link to the PC), 1 = USART2 (the plant). */
+enum { BOARD_LINK = 0, BOARD_PLANT = 1 };
+/* Write `len` bytes (waits for the transmitter, byte by byte). */
+void board_uart_write(int port, const uint8_t *data, size_t len);
+/* The next received byte, or -1 if none is waiting. Received bytes wait in
+ * a 512-byte ring filled by the receive interrupt; `board_uart_overruns`
+ * counts the bytes lost when it was full or the UART overran. */
+int board_uart_getc(int port);
+uint32_t board_uart_overruns(int port);
+
+/* Sleep until the next interrupt (SysTick each millisecond, or a byte). */
+void board_wait(void);
+
+void systick_handler(void);
+void usart1_handler(void);
+void usart2_handler(void);
+
+#endif

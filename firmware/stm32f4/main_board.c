@@ -1,0 +1,25 @@
+/* The sensor board on the STM32F405: the portable application
+ * (src/tt_board.c), its frames on USART1, its samples from plant.c. The
+ * frame version is TT_BOARD_VERSION (1, the display's board) unless built
+ * with -DTT_BOARD_FRAME_VERSION=2 (the slave's). */
+#include "../src/tt_board.h"
+#include "board.h"
+
+#ifndef TT_BOARD_FRAME_VERSION
+#define TT_BOARD_FRAME_VERSION TT_BOARD_VERSION
+#endif
+
+static tt_board_app app;
+
+int main(void)
+{
+    if (!board_init()) {
+        board_fault();
+    }
+    tt_board_app_start(&app, TT_BOARD_FRAME_VERSION, 25.0f);
+    for (;;) {
+        if (tt_board_app_poll(&app) == 0) {
+            board_wait();
+        }
+    }
+}

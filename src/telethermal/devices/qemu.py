@@ -1,0 +1,227 @@
+"""The reference firmware's STM32F405 images on an emulated core:
+``qemu-system-arm -M netduinoplus2`` (the STM32F405 of QEMU 7.2), with
+deterministic instruction timing (``-icount``), its two UARTs bridged to
+pseudo-terminals so that the project's drivers open them by path as they
+would open ``/dev/ttyUSB0``.
+
+* USART1, the link to the PC: the sensor board's frames, the Peltier
+  driver's SLCAN (python-can's ``slcan`` interface opens
+  ``slcan:<link_path>``), the codec image's text;
+* USART2, the plant link (``firmware/stm32f4/plant.c``): the analog
+  readings in, the H-bridge's command out.
+
+QEMU serves each UART on a loopback TCP socket and waits for both to be
+connected before the core starts, so nothing the firmware sends at reset is
+lost; a thread copies bytes between each socket and the master side of a
+pty (``os.openpty``), which keeps what the core sends until a driver opens
+the pty. :func:`missing` names what is not installed, with the Debian
+package that provides it.
+"""
+
+from __future__ import annotations
+
+import os
+import selectors
+import shutil
+import socket
+import subprocess
+import threading
+import time
+import tty
+from pathlib import Path
+
+from telethermal.devices.board import DeviceError
+
+QEMU = "qemu-system-arm"
+#: QEMU 7.2's STM32F405 machine (the Olimex STM32-H405, the board the port
+#: names, is a QEMU 8.0 machine; the SoC and its peripherals are the same).
+MACHINE = "netduinoplus2"
+#: Virtual nanoseconds per instruction, as 2**shift: 2**3 = 8 ns, 125 M
+#: instructions per emulated second (the part runs 168 MHz; QEMU models no
+#: pipeline, one instruction is one step of its clock).
+ICOUNT_SHIFT = 3
+FIRMWARE = Path(__file__).resolve().parents[3] / "firmware"
+IMAGES = ("tt_board", "tt_peltier", "tt_pad", "tt_codec")
+
+
+def missing() -> list[tuple[str, str]]:
+    """What the processor-in-the-loop needs and is not installed, as
+    (what, the apt package that provides it)."""
+    out = []
+    if shutil.which(QEMU) is None:
+        out.append((QEMU, "qemu-system-arm"))
+    gcc = shutil.which("arm-none-eabi-gcc")
+    if gcc is None:
+        out.append(("arm-none-eabi-gcc", "gcc-arm-none-eabi"))
+    else:
+        found = subprocess.run([gcc, "-print-file-name=picolibc.specs"], capture_output=True,
+                               text=True).stdout.strip()
+        if not os.path.isabs(found):
+            out.append(("picolibc for arm-none-eabi", "picolibc-arm-none-eabi"))
+    if shutil.which("make") is None:
+        out.append(("make", "make"))
+    return out
+
+
+def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, Path]:
+    """``make -C firmware TARGET=stm32f405 BUILD=build_dir``: image name ->
+    its ELF file. ``DeviceError`` with the compiler's output if it fails."""
+    done = subprocess.run(["make", "-C", str(firmware), "TARGET=stm32f405",
+                           f"BUILD={Path(build_dir).resolve()}"],
+                          capture_output=True, text=True, timeout=300)
+    if done.returncode != 0:
+        raise DeviceError(f"the STM32F405 build failed:\n{done.stdout}\n{done.stderr}")
+    out = Path(build_dir).resolve() / "stm32f405"
+    return {name: out / f"{name}.elf" for name in IMAGES}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class _PtyBridge:
+    """Bytes both ways between a connected socket and a pty's master side;
+    the slave side's path is what a driver opens."""
+
+    def __init__(self, sock: socket.socket):
+        self.sock = sock
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(self.slave)
+
+    def pump(self, sel: selectors.BaseSelector) -> None:
+        sel.register(self.sock, selectors.EVENT_READ, (self.sock, self.master))
+        sel.register(self.master, selectors.EVENT_READ, (self.master, self.sock))
+
+    def close(self) -> None:
+        self.sock.close()
+        os.close(self.master)
+        os.close(self.slave)
+
+
+class QemuCore:
+    """One emulated STM32F405 running ``image`` (an ELF file).
+
+    ``link_path`` and ``plant_path``: the ptys of USART1 and USART2. The
+    core starts when both are connected (in the constructor) and stops in
+    :meth:`close`. :meth:`reset` restarts the firmware (QEMU's
+    ``system_reset``), as a watchdog or a power cycle would."""
+
+    def __init__(self, image: str | Path, icount_shift: int = ICOUNT_SHIFT,
+                 start_timeout_s: float = 20.0):
+        qemu = shutil.which(QEMU)
+        if qemu is None:
+            raise DeviceError(f"{QEMU} not found: apt-get install qemu-system-arm")
+        self.image = Path(image)
+        if not self.image.is_file():
+            raise DeviceError(f"firmware image {self.image} not found: build it with "
+                              "make -C firmware TARGET=stm32f405")
+        ports = [_free_port() for _ in range(3)]
+        serials = []
+        for name, port in zip(("link", "plant", "mon"), ports):
+            serials += ["-chardev", f"socket,id={name},host=127.0.0.1,port={port},"
+                        f"server=on,wait={'on' if name != 'mon' else 'off'}"]
+        self.proc = subprocess.Popen(
+            [qemu, "-M", MACHINE, "-nodefaults", "-display", "none",
+             "-icount", f"shift={icount_shift},align=off,sleep=on", "-kernel", str(self.image),
+             *serials, "-serial", "chardev:link", "-serial", "chardev:plant",
+             "-mon", "chardev=mon,mode=readline"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        self._bridges: list[_PtyBridge] = []
+        self._monitor: socket.socket | None = None
+        self._stop = threading.Event()
+        self.dropped_bytes = 0
+        try:
+            for port in ports[:2]:
+                self._bridges.append(_PtyBridge(self._connect(port, start_timeout_s)))
+            self._monitor = self._connect(ports[2], start_timeout_s)
+        except BaseException:
+            self.close()
+            raise
+        self.link_path, self.plant_path = (b.path for b in self._bridges)
+        self._thread = threading.Thread(target=self._pump, name="qemu-uarts", daemon=True)
+        self._thread.start()
+
+    def _connect(self, port: int, timeout_s: float) -> socket.socket:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if self.proc.poll() is not None:
+                raise DeviceError(f"{QEMU} exited with {self.proc.returncode}: "
+                                  f"{self.proc.stderr.read().decode(errors='replace')}")
+            try:
+                return socket.create_connection(("127.0.0.1", port), timeout=1.0)
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise DeviceError(f"{QEMU} did not open its UART socket on "
+                                      f"127.0.0.1:{port} within {timeout_s} s") from None
+                time.sleep(0.02)
+
+    def _pump(self) -> None:
+        with selectors.DefaultSelector() as sel:
+            for bridge in self._bridges:
+                bridge.pump(sel)
+            while not self._stop.is_set():
+                for key, _ in sel.select(0.05):
+                    src, dst = key.data
+                    try:
+                        data = src.recv(4096) if isinstance(src, socket.socket) \
+                            else os.read(src, 4096)
+                    except OSError:
+                        data = b""
+                    if not data:                # QEMU gone, or a pty closed
+                        sel.unregister(key.fileobj)
+                        continue
+                    self._send_all(dst, data)
+
+    def _send_all(self, dst, data: bytes) -> None:
+        try:
+            if isinstance(dst, socket.socket):
+                dst.sendall(data)
+            else:
+                while data:
+                    data = data[os.write(dst, data):]
+        except BlockingIOError:
+            self.dropped_bytes += len(data)     # nobody reads the pty: a UART overrun
+        except OSError:
+            self.dropped_bytes += len(data)     # the other side went away
+
+    def reset(self) -> None:
+        """The firmware restarts from its reset vector (RAM is not cleared
+        by QEMU's reset; the startup code sets up .data and .bss)."""
+        self._monitor.sendall(b"system_reset\n")
+
+    def close(self) -> None:
+        self._stop.set()
+        if getattr(self, "_thread", None) is not None:
+            self._thread.join(timeout=5)
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.proc.stderr.close()
+        for bridge in self._bridges:
+            bridge.close()
+        if self._monitor is not None:
+            self._monitor.close()
+
+    def __enter__(self) -> QemuCore:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def image_size(elf: str | Path) -> dict[str, int]:
+    """``arm-none-eabi-size`` of an image: text, data, bss in bytes; flash
+    = text + data (the initial values live in flash), ram = data + bss (the
+    4 KB stack reserved by the linker script is not counted)."""
+    done = subprocess.run(["arm-none-eabi-size", str(elf)], capture_output=True, text=True,
+                          check=True)
+    text, data, bss = (int(v) for v in done.stdout.splitlines()[1].split()[:3])
+    return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}

@@ -1,0 +1,289 @@
+"""The reference firmware built for the STM32F405 (``make -C firmware
+TARGET=stm32f405``) and run on QEMU's emulated core (``netduinoplus2``,
+``-icount``), its UARTs on ptys (:mod:`telethermal.devices.qemu`):
+
+* the golden vectors, serial and CAN, through the codec image: the same
+  scripts as the host build's tests, answered by the core;
+* the Peltier driver with CAN over SLCAN on USART1: python-can's own
+  ``slcan`` interface under the project's ``PeltierDriver``; the watchdog
+  timed by the core's own clock (SLCAN timestamps and the plant link's
+  H-bridge lines carry ``hal_millis``), never by the wall clock; corrupted
+  SLCAN lines both ways; a command past the current limit; a restart.
+
+Skipped, saying what is missing and the apt package, without QEMU or the
+cross toolchain; a failure instead under ``TELETHERMAL_REQUIRE_QEMU=1``
+(``.ci/run`` sets it)."""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+
+import pytest
+
+from telethermal.devices import qemu
+from telethermal.devices.peltier import CMD, DB, PeltierDriver
+from test_firmware import WATCHDOG_MS, message_of, serial_line, vectors
+
+pytestmark = pytest.mark.qemu
+REQUIRE = os.environ.get("TELETHERMAL_REQUIRE_QEMU") == "1"
+#: The pace at which a master commands (100 Hz); wall-clock pacing only.
+PERIOD_S = 0.01
+
+
+@pytest.fixture(scope="module")
+def images(tmp_path_factory):
+    gone = qemu.missing()
+    if gone:
+        reason = "the processor-in-the-loop tests need " + ", ".join(
+            f"{what} (apt-get install {package})" for what, package in gone)
+        if REQUIRE:
+            pytest.fail(f"TELETHERMAL_REQUIRE_QEMU=1 but {reason}")
+        pytest.skip(reason)
+    return qemu.build_images(tmp_path_factory.mktemp("stm32f405"))
+
+
+class Line:
+    """One end of a UART pty: bytes in, whole lines (split at ``end``) out."""
+
+    def __init__(self, path: str, end: bytes):
+        self.fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        self.end, self.buf = end, b""
+        self.log = b""                  # every byte read, for the analysis at the end
+
+    def write(self, data: bytes) -> None:
+        while data:
+            try:
+                data = data[os.write(self.fd, data):]
+            except BlockingIOError:
+                time.sleep(0.001)
+
+    def read(self, wait_s: float = 0.0) -> bytes:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                got = os.read(self.fd, 65536)
+                self.buf += got
+                self.log += got
+            except BlockingIOError:
+                pass
+            if time.monotonic() >= deadline:
+                return self.buf
+            time.sleep(0.002)
+
+    def until(self, pattern: bytes, guard_s: float = 30.0) -> re.Match:
+        """Read until ``pattern`` matches (``guard_s``: a hang guard, not a
+        measurement); the bytes up to the match's end are consumed."""
+        deadline = time.monotonic() + guard_s
+        while (m := re.search(pattern, self.buf, re.S)) is None:
+            assert time.monotonic() < deadline, f"no {pattern!r} from the core: {self.buf!r}"
+            self.read(0.005)
+        self.buf = self.buf[m.end():]
+        return m
+
+    def close(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+
+# ------------------------------------------------------------ the codec image
+@pytest.fixture(scope="module")
+def codec(images):
+    with qemu.QemuCore(images["tt_codec"]) as core:
+        link = Line(core.link_path, b"\n")
+        link.until(rb"\x1eready\n")
+        yield link
+        link.close()
+
+
+def run_codec(link: Line, mode: str, script: str) -> str:
+    link.write(f"{mode}\n{script}".encode() + b"\x04")
+    m = link.until(rb"(.*?)\x1eexit (\d+)\n")
+    out = m.group(1).decode()
+    assert m.group(2) == b"0", f"{mode} on the core: {out}"
+    return out
+
+
+def test_the_arm_build_is_warning_free_and_small(images):
+    """The build is -Wall -Wextra -Werror (the fixture fails otherwise);
+    each image fits the part's 1 MB of flash and 128 KB of SRAM with room
+    to spare: a tenth of each, the budget the README states."""
+    for name, elf in images.items():
+        size = qemu.image_size(elf)
+        assert 0 < size["flash"] <= 1024 * 1024 // 10, (name, size)
+        assert 0 < size["ram"] <= 128 * 1024 // 10, (name, size)
+
+
+def test_selftest_on_the_core(codec):
+    assert run_codec(codec, "selftest", "").strip() == "selftest: 27 checks, 0 failed"
+
+
+def test_every_serial_golden_vector_on_the_core(codec):
+    golden = vectors("serial")
+    out = run_codec(codec, "serial-encode",
+                    "".join(serial_line(f) + "\n" for _, f in golden.values()))
+    made = [bytes.fromhex(line) for line in out.split()]
+    assert len(made) == len(golden) == 20
+    differ = [name for (name, (wire, _)), mine in zip(golden.items(), made) if wire != mine]
+    assert not differ, f"the core's frames differ from the golden vectors: {differ}"
+
+
+def test_every_can_golden_vector_both_ways_on_the_core(codec):
+    golden = vectors("can")
+    decoded = run_codec(codec, "can-codec", "".join(
+        f"decode {f['frame_id']:x} {data.hex()}\n" for data, f in golden.values())).splitlines()
+    encoded = run_codec(codec, "can-codec", "".join(
+        f"encode {f['frame_id']:x} " + " ".join(str(f["raw"][s.name])
+                                               for s in message_of(f).signals) + "\n"
+        for _, f in golden.values())).split()
+    assert len(decoded) == len(encoded) == len(golden) >= 27
+    for (name, (data, fields)), line, mine in zip(golden.items(), decoded, encoded):
+        message, *pairs = line.split()
+        assert message == fields["message"], name
+        assert {k: int(v) for k, v in (p.split("=") for p in pairs)} == fields["raw"], name
+        assert bytes.fromhex(mine) == data, name
+
+
+def test_a_corrupted_vector_is_caught_on_the_core(codec):
+    data, fields = vectors("can")["cmd_cool"]
+    bad = bytearray(data)
+    bad[1] ^= 0x01
+    line = run_codec(codec, "can-codec", f"decode 101 {bytes(bad).hex()}\n")
+    decoded = {k: int(v) for k, v in (p.split("=") for p in line.split()[1:])}
+    assert decoded["current_a"] == fields["raw"]["current_a"] ^ 1
+
+
+# ------------------------------------------------------------ the Peltier driver
+def slcan_cmd(counter: int, current_a: float, enable: int = 1) -> bytes:
+    data = CMD.encode({"enable": enable, "counter": counter & 0xF, "current_a": current_a,
+                       "version": 2}, strict=False)
+    return f"t{CMD.frame_id:03X}{len(data)}{data.hex().upper()}\r".encode()
+
+
+def frames(text: bytes) -> list[tuple[int, str, dict]]:
+    """The core's SLCAN frames sent with timestamps (after Z1) as (core ms
+    mod 60000, message name, signals decoded by cantools from the DBC)."""
+    out = []
+    for line in re.split(rb"[\r\x07]", text):          # BEL ends a refused line
+        m = re.fullmatch(rb"t([0-9A-F]{3})([0-8])([0-9A-F]*)", line)
+        if m is None or len(m.group(3)) != 2 * int(m.group(2)) + 4:
+            continue
+        body = m.group(3)
+        message = DB.get_message_by_frame_id(int(m.group(1), 16))
+        out.append((int(body[-4:], 16), message.name,
+                    message.decode(bytes.fromhex(body[:-4].decode()), decode_choices=False)))
+    return out
+
+
+@pytest.fixture
+def peltier(images):
+    with qemu.QemuCore(images["tt_peltier"]) as core:
+        link, plant = Line(core.link_path, b"\r"), Line(core.plant_path, b"\n")
+        link.until(rb"t70120002\r")                   # the boot heartbeat: the core is up
+        plant.until(rb"set 0 0 0\n")                  # the H-bridge off from reset
+        link.write(b"Z1\r")                           # timestamps: the core's milliseconds
+        link.until(rb"^[^\x07]*?\r")
+        yield core, link, plant
+        link.close()
+        plant.close()
+
+
+def test_the_watchdog_disables_the_element_within_100_ms_and_a_period_over_20_trials(peltier):
+    """Bursts of commands at about 100 Hz, then silence, 20 times. Timed by
+    the core: each command's status answer and each change of the H-bridge
+    carry ``hal_millis``. Every disable comes more than 100 ms and at most
+    100 ms + one 10 ms command period after the last command before it,
+    flagged ``watchdog``; the element is never disabled otherwise."""
+    _, link, plant = peltier
+    for trial in range(20):
+        for k in range(6):
+            link.write(slcan_cmd(k, 1.25))
+            time.sleep(PERIOD_S)
+        plant.until(rb"set \d+ 0 0\n", guard_s=30)
+    link.read(0.05)
+    sent = frames(link.log)
+    changes = [tuple(map(int, m)) for m in re.findall(rb"set (\d+) (\d) (-?\d+)\n", plant.log)]
+    trips, delays, last_ms = [], [], None
+    for ms, name, status in sent:                     # in the order the core sent them
+        if name == "PELTIER_STATUS" and status["enabled"]:
+            last_ms = ms                              # the answer to a command
+        elif name == "PELTIER_STATUS" and status["watchdog"]:
+            trips.append((ms, status))
+            delays.append((ms - last_ms) % 60_000)    # the timestamps wrap at 60 s
+    offs = [ms for ms, enabled, _ in changes[1:] if not enabled]
+    assert len(trips) == len(offs) >= 20, (trips, changes)
+    assert [ms for ms, _ in trips] == offs             # each disable is a watchdog trip
+    assert {(e, ma) for _, e, ma in changes[1:]} == {(1, 1250), (0, 0)}
+    assert all(s["enabled"] == 0 and s["current_a"] == 0.0 for _, s in trips)
+    assert all(WATCHDOG_MS < d <= WATCHDOG_MS + 1000 * PERIOD_S for d in delays), delays
+    assert all(d == WATCHDOG_MS + 1 for d in delays), delays   # polled every millisecond
+
+
+def test_python_can_slcan_and_the_projects_driver_trust_the_core(peltier):
+    """``PeltierDriver`` on ``slcan:<pty>`` (python-can's own interface):
+    healthy while it commands, every command answered, a command past the
+    8.5 A limit applied clamped; the heartbeat stops being operational and
+    ``watchdog`` is flagged once it stops."""
+    core, link, plant = peltier
+    link.close()                                  # python-can takes the link
+    driver = PeltierDriver(f"slcan:{core.link_path}")
+    try:
+        healthy = []
+        for k in range(40):
+            driver.command(20.0 if k == 20 else 1.25)
+            time.sleep(PERIOD_S)
+            driver.poll()
+            healthy.append(driver.healthy)
+        clamped = driver.status
+        time.sleep(0.3)
+        driver.poll()
+        counters = dict(driver.counters)
+        assert all(healthy[5:]), healthy
+        assert driver.status.faults == ("watchdog",) and not driver.status.enabled
+        assert not driver.healthy and driver.state == 128
+        assert counters["undecodable"] == counters["error_frames"] == 0
+        assert counters["statuses"] >= 40 and driver.peer_version == 2
+    finally:
+        driver.close()
+    sets = [tuple(map(int, m)) for m in re.findall(rb"set (\d+) (\d) (-?\d+)\n", plant.read())]
+    assert (1, 8500) in {s[1:] for s in sets}     # 20 A asked, 8.5 A driven
+    assert driver.commanded_a <= 8.5 and clamped is not None
+
+
+def test_corrupted_slcan_lines_are_refused_and_the_driver_goes_on(peltier):
+    """Lines the core cannot read (a bad digit, a wrong length, an overlong
+    line, an unknown command) are each answered BEL and change nothing;
+    the command after them is answered as usual."""
+    _, link, _ = peltier
+    for bad in (b"t10Z4E2040002\r", b"t1014E20402\r", b"t" + b"1" * 60 + b"\r", b"Q\r",
+                b"t1019" + b"00" * 9 + b"\r"):
+        link.write(bad)
+        link.until(rb"\x07")
+    assert link.buf.count(b"\x07") == 0                # one BEL each, no more
+    link.write(slcan_cmd(1, 0.5))
+    link.until(rb"t181")
+    link.read(0.05)
+    status = [s for _, name, s in frames(link.log) if name == "PELTIER_STATUS"]
+    assert len(status) == 1 and status[0]["enabled"] == 1 and status[0]["current_a"] == 0.5, link.log
+
+
+def test_a_restarted_core_says_boot_and_the_driver_counts_the_reboot(peltier):
+    core, link, _ = peltier
+    link.close()
+    driver = PeltierDriver(f"slcan:{core.link_path}")
+    try:
+        for k in range(20):
+            driver.command(1.0)
+            time.sleep(PERIOD_S)
+            driver.poll()
+        core.reset()
+        for k in range(40):
+            driver.command(1.0)
+            time.sleep(PERIOD_S)
+            driver.poll()
+        assert driver.counters["reboots"] == 1
+        assert driver.healthy and driver.peer_version == 2
+    finally:
+        driver.close()
