@@ -43,8 +43,9 @@ enum { BOARD_LINK = 0, BOARD_PLANT = 1 };
 /* Write `len` bytes (waits for the transmitter, byte by byte). */
 void board_uart_write(int port, const uint8_t *data, size_t len);
 /* The next received byte, or -1 if none is waiting. Received bytes wait in
- * a 512-byte ring filled by the receive interrupt; `board_uart_overruns`
- * counts the bytes lost when it was full or the UART overran. */
+ * a 512-byte ring filled by the receive interrupt; when it is full the
+ * interrupt waits for room, and `board_uart_overruns` counts the bytes the
+ * UART lost meanwhile (its overrun flag). */
 int board_uart_getc(int port);
 uint32_t board_uart_overruns(int port);
 

@@ -89,6 +89,7 @@
 #define SYST_CSR_TICKINT (1u << 1)
 #define SYST_CSR_CLKSOURCE (1u << 2)
 #define NVIC_ISER(n) REG32(0xE000E100u + 4u * (n))
+#define NVIC_ICER(n) REG32(0xE000E180u + 4u * (n))
 #define SCB_CPACR REG32(0xE000ED88u)
 #define SCB_VTOR REG32(0xE000ED08u)
 

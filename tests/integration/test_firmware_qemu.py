@@ -23,8 +23,10 @@ import time
 import pytest
 
 from telethermal.devices import qemu
+from telethermal.devices.board import SensorBoard
 from telethermal.devices.peltier import CMD, DB, PeltierDriver
-from test_firmware import WATCHDOG_MS, message_of, serial_line, vectors
+from test_firmware import (WATCHDOG_MS, expected_keys, float_arg, frame_key, message_of,
+                           random_samples, serial_line, vectors)
 
 pytestmark = pytest.mark.qemu
 REQUIRE = os.environ.get("TELETHERMAL_REQUIRE_QEMU") == "1"
@@ -287,3 +289,90 @@ def test_a_restarted_core_says_boot_and_the_driver_counts_the_reboot(peltier):
         assert driver.healthy and driver.peer_version == 2
     finally:
         driver.close()
+
+
+def test_python_can_counts_a_corrupted_line_from_the_core_and_goes_on(peltier):
+    """The link garbles one of the core's lines (a hex digit becomes 'G'):
+    python-can's slcan cannot parse it, PeltierDriver counts it as
+    undecodable and stays healthy on the lines after it."""
+    core, link, _ = peltier
+    link.close()
+    driver = PeltierDriver(f"slcan:{core.link_path}")
+    garbled = []
+
+    def garble_once(uart: int, data: bytes) -> bytes:
+        at = data.find(b"t181")
+        if uart == 0 and not garbled and at >= 0:
+            garbled.append(data)
+            return data[:at + 5] + b"G" + data[at + 6:]
+        return data
+
+    try:
+        for k in range(60):
+            if k == 20:
+                core.line_fault = garble_once
+            driver.command(1.0)
+            time.sleep(PERIOD_S)
+            driver.poll()
+        assert garbled and driver.counters["undecodable"] == 1
+        assert driver.healthy and driver.counters["statuses"] >= 50
+    finally:
+        driver.close()
+
+
+# ------------------------------------------------------------ the sensor board
+def test_the_board_frames_every_sample_of_the_plant_and_survives_a_truncated_frame(images):
+    """The sensor board image: samples in on the plant link, frames out on
+    USART1 read by the project's SensorBoard driver from the pty. 120
+    seeded samples of every float kind arrive bit for bit with the core's
+    own microsecond stamps, rising; one frame cut short on the line is
+    counted by the driver, which reads on."""
+    samples = random_samples(120, seed=48)
+    with qemu.QemuCore(images["tt_board"]) as core:
+        plant = Line(core.plant_path, b"\n")
+        board = SensorBoard(core.link_path)
+        got = []
+        feed = board.reader.feed
+
+        def capture(data: bytes):
+            frames = feed(data)
+            got.extend(frames)
+            return frames
+
+        board.reader.feed = capture
+        cut = []
+
+        def truncate_once(uart: int, data: bytes) -> bytes:
+            end = data.find(b"\x00")
+            if uart == 0 and not cut and len(got) >= 60 and end > 8:
+                cut.append(data[:end + 1])
+                return data[:end - 6] + data[end:]      # the frame's last 6 bytes lost
+            return data
+
+        core.line_fault = truncate_once
+        try:
+            guard = time.monotonic() + 30                     # a hang guard
+            while not got:                                    # the boot frame: UARTs up
+                assert time.monotonic() < guard, board.all_counters
+                board.poll(wait_s=0.01)
+            for i in range(0, len(samples), 20):            # a window of 20 lines at a time
+                plant.write("".join(
+                    "s " + " ".join(float_arg(s[k]) for k in ("flux_uv", "tc_uv", "cj_c",
+                                                              "force_n"))
+                    + f" {s['status']}\n" for s in samples[i:i + 20]).encode())
+                guard = time.monotonic() + 30                 # a hang guard
+                while len(got) < min(i + 20, len(samples)) + 1 - len(cut):
+                    assert time.monotonic() < guard, (len(got), board.all_counters)
+                    board.poll(wait_s=0.01)
+            counters = board.all_counters
+        finally:
+            board.close()
+            plant.close()
+    lost = {i for i, f in enumerate(expected_keys(samples, 25.0))} - {f.seq for f in got}
+    assert len(cut) == 1 and len(lost) == 1
+    assert counters["seq_gaps"] == counters["lost_frames"] == 1
+    assert counters["crc"] + counters["garbage"] == 1
+    keys = [k[:3] + k[4:] for i, k in enumerate(expected_keys(samples, 25.0)) if i not in lost]
+    assert [frame_key(f)[:3] + frame_key(f)[4:] for f in got] == keys
+    stamps = [f.t_us for f in got[1:]]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))    # the core's clock, rising

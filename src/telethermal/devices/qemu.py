@@ -14,7 +14,9 @@ QEMU serves each UART on a loopback TCP socket and waits for both to be
 connected before the core starts, so nothing the firmware sends at reset is
 lost; a thread copies bytes between each socket and the master side of a
 pty (``os.openpty``), which keeps what the core sends until a driver opens
-the pty. :func:`missing` names what is not installed, with the Debian
+the pty. Bytes sent to the core before its firmware has set up the UART
+are lost, as on silicon: wait for its first output (the boot frame, the
+boot heartbeat, the codec's ``ready``). :func:`missing` names what is not installed, with the Debian
 package that provides it.
 """
 
@@ -93,8 +95,8 @@ class _PtyBridge:
         self.path = os.ttyname(self.slave)
 
     def pump(self, sel: selectors.BaseSelector) -> None:
-        sel.register(self.sock, selectors.EVENT_READ, (self.sock, self.master))
-        sel.register(self.master, selectors.EVENT_READ, (self.master, self.sock))
+        sel.register(self.sock, selectors.EVENT_READ, (self, self.sock, self.master))
+        sel.register(self.master, selectors.EVENT_READ, (None, self.master, self.sock))
 
     def close(self) -> None:
         self.sock.close()
@@ -134,6 +136,10 @@ class QemuCore:
         self._monitor: socket.socket | None = None
         self._stop = threading.Event()
         self.dropped_bytes = 0
+        self.bytes = {"to_core": 0, "from_core": 0}     # through the bridges, both UARTs
+        #: Line noise, for tests: ``fault(uart, data) -> data`` is applied to
+        #: what the core sends (uart 0 the link, 1 the plant) before the pty.
+        self.line_fault = None
         try:
             for port in ports[:2]:
                 self._bridges.append(_PtyBridge(self._connect(port, start_timeout_s)))
@@ -165,7 +171,7 @@ class QemuCore:
                 bridge.pump(sel)
             while not self._stop.is_set():
                 for key, _ in sel.select(0.05):
-                    src, dst = key.data
+                    from_core, src, dst = key.data
                     try:
                         data = src.recv(4096) if isinstance(src, socket.socket) \
                             else os.read(src, 4096)
@@ -174,6 +180,11 @@ class QemuCore:
                     if not data:                # QEMU gone, or a pty closed
                         sel.unregister(key.fileobj)
                         continue
+                    fault = self.line_fault
+                    if from_core is not None and fault is not None:
+                        data = fault(self._bridges.index(from_core), data)
+                    way = "from_core" if from_core is not None else "to_core"
+                    self.bytes[way] += len(data)
                     self._send_all(dst, data)
 
     def _send_all(self, dst, data: bytes) -> None:
