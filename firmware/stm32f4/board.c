@@ -14,6 +14,8 @@ typedef struct {
     volatile uint8_t buf[RING];
     volatile uint32_t head, tail; /* written by the interrupt / by the loop */
     volatile uint32_t overruns;
+    volatile uint8_t tx[RING];
+    volatile uint32_t tx_head, tx_tail; /* written by the loop / by the interrupt */
 } uart;
 
 static uart uarts[2];
@@ -144,25 +146,52 @@ uint32_t hal_micros(void)
  * taken a byte (the NVIC mask works alike on silicon and in QEMU's model):
  * on silicon the next byte then overruns (counted when read); QEMU holds
  * its input while the register is full, so nothing is lost there. */
-static void uart_irq(int port)
+static void uart_rx(int port, uint32_t sr)
 {
     uart *u = &uarts[port];
-    uint32_t base = bases[port];
-    uint32_t sr = USART_SR(base);
-    if (!(sr & (USART_SR_RXNE | USART_SR_ORE))) {
-        return;
-    }
     uint32_t next = (u->head + 1u) % RING;
     if (next == u->tail) {
         NVIC_ICER(irqns[port] / 32u) = 1u << (irqns[port] % 32u);
         return;
     }
-    uint8_t byte = (uint8_t)USART_DR(base); /* clears RXNE and ORE */
+    uint8_t byte = (uint8_t)USART_DR(bases[port]); /* clears RXNE and ORE */
     if (sr & USART_SR_ORE) {
         u->overruns++;
     }
     u->buf[u->head] = byte;
     u->head = next;
+}
+
+/* Queued bytes into the data register while it is empty; the interrupt
+ * off when nothing is left. Called by the transmit interrupt and, with
+ * interrupts masked, after queuing: on silicon the register takes a byte
+ * or two and the interrupt sends the rest as the line frees it; QEMU's
+ * model has the register empty at once and raises no interrupt for it, so
+ * there the call after queuing sends everything. */
+static void uart_tx(int port)
+{
+    uart *u = &uarts[port];
+    uint32_t base = bases[port];
+    while (USART_SR(base) & USART_SR_TXE) {
+        if (u->tx_tail == u->tx_head) {
+            USART_CR1(base) &= ~USART_CR1_TXEIE;
+            return;
+        }
+        USART_DR(base) = u->tx[u->tx_tail];
+        u->tx_tail = (u->tx_tail + 1u) % RING;
+    }
+}
+
+static void uart_irq(int port)
+{
+    uint32_t base = bases[port];
+    uint32_t sr = USART_SR(base);
+    if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
+        uart_rx(port, sr);
+    }
+    if ((sr & USART_SR_TXE) && (USART_CR1(base) & USART_CR1_TXEIE)) {
+        uart_tx(port);
+    }
 }
 
 void usart1_handler(void)
@@ -192,13 +221,43 @@ uint32_t board_uart_overruns(int port)
     return uarts[port].overruns;
 }
 
+static uint32_t tx_room(const uart *u)
+{
+    return (u->tx_tail + RING - u->tx_head - 1u) % RING;
+}
+
+bool board_uart_try_write(int port, const uint8_t *data, size_t len)
+{
+    uart *u = &uarts[port];
+    if (len > tx_room(u)) {
+        return false;
+    }
+    uint32_t head = u->tx_head;
+    for (size_t i = 0; i < len; i++) {
+        u->tx[head] = data[i];
+        head = (head + 1u) % RING;
+    }
+    uint32_t primask;
+    __asm__ volatile("mrs %0, primask\n\tcpsid i" : "=r"(primask)::"memory");
+    u->tx_head = head;
+    USART_CR1(bases[port]) |= USART_CR1_TXEIE; /* the interrupt sends the rest */
+    uart_tx(port);
+    __asm__ volatile("msr primask, %0" ::"r"(primask) : "memory");
+    return true;
+}
+
 void board_uart_write(int port, const uint8_t *data, size_t len)
 {
-    uint32_t base = bases[port];
-    for (size_t i = 0; i < len; i++) {
-        while (!(USART_SR(base) & USART_SR_TXE)) {
+    while (len) {
+        size_t room = tx_room(&uarts[port]);
+        size_t n = len < room ? len : room;
+        if (n == 0) {
+            board_wait(); /* the transmit interrupt makes room */
+            continue;
         }
-        USART_DR(base) = data[i];
+        board_uart_try_write(port, data, n);
+        data += n;
+        len -= n;
     }
 }
 

@@ -40,7 +40,10 @@ uint32_t board_cycles(void);
 
 /* The UARTs: 0 = USART1 (the link to the PC), 1 = USART2 (the plant). */
 enum { BOARD_LINK = 0, BOARD_PLANT = 1 };
-/* Write `len` bytes (waits for the transmitter, byte by byte). */
+/* Queue `len` bytes for the transmit interrupt (a 512-byte ring): false,
+ * and nothing queued, if they do not fit whole. */
+bool board_uart_try_write(int port, const uint8_t *data, size_t len);
+/* The same, waiting for room (the loop sleeps while the interrupt sends). */
 void board_uart_write(int port, const uint8_t *data, size_t len);
 /* The next received byte, or -1 if none is waiting. Received bytes wait in
  * a 512-byte ring filled by the receive interrupt; when it is full the

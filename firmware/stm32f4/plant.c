@@ -203,6 +203,7 @@ int hal_sensor_read(tt_board_sample *out)
 
 int hal_uart_write(const uint8_t *data, size_t len)
 {
-    board_uart_write(BOARD_LINK, data, len);
-    return 0;
+    /* A frame that does not fit whole is refused (HAL contract): the
+     * driver counts the gap in the sequence. */
+    return board_uart_try_write(BOARD_LINK, data, len) ? 0 : -1;
 }
