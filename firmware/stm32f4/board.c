@@ -119,9 +119,25 @@ void systick_handler(void)
     millis++;
 }
 
-uint32_t board_cycles(void)
+volatile uint32_t board_loop_worst_cycles, board_loop_count;
+
+uint32_t board_stamp(void)
 {
-    return SYST_RVR - SYST_CVR;
+    uint32_t ms, cycles;
+    do {
+        ms = millis;
+        cycles = SYST_RVR - SYST_CVR;
+    } while (ms != millis);
+    return ms * (BOARD_SYSCLK_HZ / 1000u) + cycles;
+}
+
+void board_loop_done(uint32_t start)
+{
+    uint32_t cycles = board_stamp() - start;
+    if (cycles > board_loop_worst_cycles) {
+        board_loop_worst_cycles = cycles;
+    }
+    board_loop_count++;
 }
 
 uint32_t hal_millis(void)

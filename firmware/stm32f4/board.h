@@ -34,9 +34,16 @@ bool board_emulated(void);
  * clock that did not start). */
 void board_fault(void) __attribute__((noreturn));
 
-/* SysTick's count within the current millisecond (0 .. BOARD_SYSCLK_HZ/1000
- * - 1): core cycles, for the loop-time measurement. */
-uint32_t board_cycles(void);
+/* Core cycles since the start, from SysTick (wraps every 25.6 s; take
+ * differences). */
+uint32_t board_stamp(void);
+
+/* The loop-time measurement: one iteration that began at `start`
+ * (board_stamp) has ended. The worst iteration so far, in core cycles, is
+ * kept in board_loop_worst_cycles (a debugger, or QEMU's monitor, reads
+ * it), their number in board_loop_count. */
+void board_loop_done(uint32_t start);
+extern volatile uint32_t board_loop_worst_cycles, board_loop_count;
 
 /* The UARTs: 0 = USART1 (the link to the PC), 1 = USART2 (the plant). */
 enum { BOARD_LINK = 0, BOARD_PLANT = 1 };

@@ -1,9 +1,11 @@
 /* The sensor board on the STM32F405: the portable application
  * (src/tt_board.c), its frames on USART1, its samples from plant.c. The
  * frame version is TT_BOARD_VERSION (1, the display's board) unless built
- * with -DTT_BOARD_FRAME_VERSION=2 (the slave's). */
+ * with -DTT_BOARD_FRAME_VERSION=2 (the slave's). Each iteration's length
+ * in core cycles is measured (board_loop_done). */
 #include "../src/tt_board.h"
 #include "board.h"
+#include "plant.h"
 
 #ifndef TT_BOARD_FRAME_VERSION
 #define TT_BOARD_FRAME_VERSION TT_BOARD_VERSION
@@ -18,7 +20,11 @@ int main(void)
     }
     tt_board_app_start(&app, TT_BOARD_FRAME_VERSION, 25.0f);
     for (;;) {
-        if (tt_board_app_poll(&app) == 0) {
+        plant_poll(); /* the analog side: outside the measurement (plant.h) */
+        uint32_t start = board_stamp();
+        int sent = tt_board_app_poll(&app);
+        board_loop_done(start);
+        if (sent == 0) {
             board_wait();
         }
     }

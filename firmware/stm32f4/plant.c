@@ -20,6 +20,8 @@
  * heat sink at 25 degC, the junction 2 K per ampere below it. */
 #include <stdlib.h>
 
+#include "plant.h"
+
 #include "../src/hal.h"
 #include "board.h"
 
@@ -139,9 +141,7 @@ static void handle_line(void)
     }
 }
 
-/* Take the bytes the plant sent; stop after a sample line so that one
- * sample is handed over per hal_sensor_read. */
-static void plant_poll(void)
+void plant_poll(void)
 {
     int c;
     while (!sample_ready && (c = board_uart_getc(BOARD_PLANT)) >= 0) {

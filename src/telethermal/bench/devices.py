@@ -23,16 +23,24 @@ pty, COBS, CRC, conversion, the slave's sample bookkeeping and the
 identifier's own step), of which serial (to the driver's decoded reading);
 and the pad's CAN controller-to-actuator latency (``PAD_CMD`` sent to the
 pad driver applying it).
+
+The reference firmware on QEMU's STM32F405 (``qemu``,
+:mod:`telethermal.bench.firmware`): each image's flash and RAM, each
+loop's worst iteration counted by the core, the Peltier driver's watchdog
+over 20 trials timed by the core; the reason instead when QEMU or the
+cross toolchain is missing.
 """
 
 from __future__ import annotations
 
 import datetime
 import platform
+import tempfile
 import time
 
 import numpy as np
 
+from telethermal.bench import firmware
 from telethermal.devices.display import EmulatedDisplay, SimDisplay
 from telethermal.ident.anytime import members
 from telethermal.jsonfile import write_json
@@ -220,7 +228,10 @@ def run(n: int = 3000, contact_s: float = 3.0, progress=None,
     sessions = _sessions(contact_s)
     step("slave")
     slave = _slave(slave_trials)
-    return {"paths": paths, "sessions_real_clock": sessions, "slave": slave,
+    step("qemu")
+    with tempfile.TemporaryDirectory(prefix="telethermal-qemu-") as build:
+        on_core = firmware.measure(build)
+    return {"paths": paths, "sessions_real_clock": sessions, "slave": slave, "qemu": on_core,
             # The machine's load (1, 5, 15 min) before and after: p99 figures
             # on a shared machine carry the other jobs' scheduling.
             "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
@@ -280,4 +291,5 @@ def text_report(report: dict, json_path) -> list[str]:
               f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %"
               for kind, r in report["sessions_real_clock"].items()]
     # An empty line where there is no slave part, as the command always printed.
-    return lines + (slave_lines(report) or [""]) + [f"wrote {json_path}"]
+    qemu_lines = firmware.lines(report["qemu"]) if "qemu" in report else []
+    return lines + (slave_lines(report) or [""]) + qemu_lines + [f"wrote {json_path}"]

@@ -23,6 +23,7 @@ package that provides it.
 from __future__ import annotations
 
 import os
+import re
 import selectors
 import shutil
 import socket
@@ -199,6 +200,19 @@ class QemuCore:
         except OSError:
             self.dropped_bytes += len(data)     # the other side went away
 
+    def read_u32(self, address: int, guard_s: float = 10.0) -> int:
+        """A word of the core's memory (QEMU's monitor, ``xp``): a variable
+        the firmware keeps, found by :func:`symbols`."""
+        self._monitor.sendall(f"xp /1wx {address:#x}\n".encode())
+        pattern = re.compile(rf"^0*{address:x}: 0x([0-9a-f]{{8}})", re.M)
+        text, deadline = "", time.monotonic() + guard_s
+        while (m := pattern.search(text)) is None:
+            if time.monotonic() > deadline:
+                raise DeviceError(f"QEMU's monitor did not answer xp {address:#x}")
+            self._monitor.settimeout(guard_s)
+            text += self._monitor.recv(65536).decode(errors="replace")
+        return int(m.group(1), 16)
+
     def reset(self) -> None:
         """The firmware restarts from its reset vector (RAM is not cleared
         by QEMU's reset; the startup code sets up .data and .bss)."""
@@ -236,3 +250,63 @@ def image_size(elf: str | Path) -> dict[str, int]:
                           check=True)
     text, data, bss = (int(v) for v in done.stdout.splitlines()[1].split()[:3])
     return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}
+
+
+def symbols(elf: str | Path) -> dict[str, int]:
+    """The image's symbols (``arm-none-eabi-nm``): name -> address."""
+    done = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True,
+                          check=True)
+    out = {}
+    for line in done.stdout.splitlines():
+        parts = line.split()
+        if len(parts) == 3:
+            out[parts[2]] = int(parts[0], 16)
+    return out
+
+
+class PtyLine:
+    """One end of a core's UART pty, opened by path: bytes in; what came
+    back kept in ``buf`` (consumed by :meth:`until`) and ``log`` (all)."""
+
+    def __init__(self, path: str):
+        self.fd: int | None = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        self.buf = self.log = b""
+
+    def write(self, data: bytes) -> None:
+        while data:
+            try:
+                data = data[os.write(self.fd, data):]
+            except BlockingIOError:
+                time.sleep(0.001)
+
+    def read(self, wait_s: float = 0.0) -> bytes:
+        """What has arrived, after ``wait_s`` more seconds of listening."""
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                got = os.read(self.fd, 65536)
+                self.buf += got
+                self.log += got
+            except BlockingIOError:
+                pass
+            if time.monotonic() >= deadline:
+                return self.buf
+            time.sleep(0.002)
+
+    def until(self, pattern: bytes, guard_s: float = 30.0) -> re.Match:
+        """Read until ``pattern`` matches; the bytes up to the match's end
+        are consumed. ``guard_s`` guards against a hang (DeviceError); it
+        times nothing."""
+        deadline = time.monotonic() + guard_s
+        while (m := re.search(pattern, self.buf, re.S)) is None:
+            if time.monotonic() > deadline:
+                raise DeviceError(f"no {pattern!r} from the core within {guard_s} s: "
+                                  f"{self.buf[-200:]!r}")
+            self.read(0.005)
+        self.buf = self.buf[m.end():]
+        return m
+
+    def close(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
