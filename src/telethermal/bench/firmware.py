@@ -7,9 +7,9 @@
   ``-icount shift=3`` QEMU advances the core's clock 8 ns per instruction,
   so SysTick's 168 MHz count is 1.344 per instruction: the figure is an
   instruction count. QEMU models no pipeline or wait states; on silicon an
-  instruction takes 1 cycle (most data processing) to about 3 (loads,
-  stores and taken branches with flash wait states; ARM DDI 0439 table
-  3-1), so the budget is checked at 3 cycles per instruction;
+  instruction takes 1 cycle (most data processing), 2 (a load or store)
+  or up to 4 (a taken branch; ARM DDI 0439 table 3-1), so the budget is
+  checked at 3 cycles per instruction, a pessimistic mean;
 * the Peltier driver's watchdog: bursts of commands at 100 Hz, then
   silence, ``trials`` times; the delay from the answer to the last command
   to the watchdog's status, both stamped by the core (SLCAN timestamps).
