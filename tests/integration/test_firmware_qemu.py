@@ -149,20 +149,18 @@ def test_the_watchdog_disables_the_element_within_100_ms_and_a_period_over_20_tr
 
 def test_python_can_slcan_and_the_projects_driver_trust_the_core(peltier):
     """``PeltierDriver`` on ``slcan:<pty>`` (python-can's own interface):
-    healthy while it commands, every command answered, a command past the
-    8.5 A limit applied clamped; the heartbeat stops being operational and
-    ``watchdog`` is flagged once it stops."""
+    healthy while it commands, every command answered; the heartbeat stops
+    being operational and ``watchdog`` is flagged once it stops."""
     core, link, plant = peltier
     link.close()                                  # python-can takes the link
     driver = PeltierDriver(f"slcan:{core.link_path}")
     try:
         healthy = []
-        for k in range(40):
-            driver.command(20.0 if k == 20 else 1.25)
+        for _ in range(40):
+            driver.command(1.25)
             time.sleep(PERIOD_S)
             driver.poll()
             healthy.append(driver.healthy)
-        clamped = driver.status
         time.sleep(0.3)
         driver.poll()
         counters = dict(driver.counters)
@@ -174,8 +172,21 @@ def test_python_can_slcan_and_the_projects_driver_trust_the_core(peltier):
     finally:
         driver.close()
     sets = [tuple(map(int, m)) for m in re.findall(rb"set (\d+) (\d) (-?\d+)\n", plant.read())]
-    assert (1, 8500) in {s[1:] for s in sets}     # 20 A asked, 8.5 A driven
-    assert driver.commanded_a <= 8.5 and clamped is not None
+    assert {s[1:] for s in sets} == {(1, 1250), (0, 0)}
+
+
+def test_a_command_past_the_current_limit_is_driven_clamped_and_reported(peltier):
+    """20 A and -20 A asked on the line (past the driver's 8.5 A, the
+    TM-31-1.4-8.5's Imax; PeltierDriver would have clamped them itself):
+    the core drives +-8.5 A and its status says so."""
+    _, link, plant = peltier
+    for k, current_a in enumerate((20.0, -20.0)):
+        link.write(firmware.slcan_cmd(k, current_a))
+        plant.until(rb"set \d+ 1 -?8500\n")
+    link.read(0.05)
+    status = [s for _, name, s in firmware.slcan_frames(link.log) if name == "PELTIER_STATUS"]
+    assert [s["current_a"] for s in status] == [8.5, -8.5]
+    assert all(s["enabled"] == 1 and not s["over_current"] for s in status)
 
 
 def test_corrupted_slcan_lines_are_refused_and_the_driver_goes_on(peltier):

@@ -35,3 +35,11 @@ def test_the_row_says_what_is_missing():
 def test_the_instruction_clock_is_the_parts_clock_times_the_icount_step():
     # 168 MHz SysTick counts over 2**3 ns per instruction.
     assert abs(firmware.SYSTICK_PER_INSTRUCTION - 168e6 * 8e-9) < 1e-12
+
+
+def test_missing_tools_are_named_with_their_apt_packages(monkeypatch):
+    from telethermal.devices import qemu
+
+    monkeypatch.setattr(qemu.shutil, "which", lambda name: None)
+    assert qemu.missing() == [("qemu-system-arm", "qemu-system-arm"),
+                              ("arm-none-eabi-gcc", "gcc-arm-none-eabi"), ("make", "make")]
