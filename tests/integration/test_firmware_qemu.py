@@ -164,7 +164,7 @@ def test_python_can_slcan_and_the_projects_driver_trust_the_core(peltier):
         time.sleep(0.3)
         driver.poll()
         counters = dict(driver.counters)
-        assert all(healthy[5:]), healthy
+        assert all(healthy[15:]), healthy   # from the first heartbeat (100 ms) on
         assert driver.status.faults == ("watchdog",) and not driver.status.enabled
         assert not driver.healthy and driver.state == 128
         assert counters["undecodable"] == counters["error_frames"] == 0
@@ -311,3 +311,40 @@ def test_the_board_frames_every_sample_of_the_plant_and_survives_a_truncated_fra
     assert [frame_key(f)[:3] + frame_key(f)[4:] for f in got] == keys
     stamps = [f.t_us for f in got[1:]]
     assert all(b > a for a, b in zip(stamps, stamps[1:]))    # the core's clock, rising
+
+
+def test_a_link_cut_mid_touch_puts_the_element_safe_and_the_master_sees_it(peltier):
+    """The line between the PC and the core is cut while the driver
+    commands 1.25 A: the core's watchdog turns the H-bridge off, the
+    driver hears no heartbeat and stops trusting the actuator (the
+    display's supervisor then holds the safe state); the line back, both
+    recover."""
+    core, link, plant = peltier
+    link.close()
+    driver = PeltierDriver(f"slcan:{core.link_path}")
+    try:
+        def run(periods: int) -> list[bool]:
+            out = []
+            for _ in range(periods):
+                driver.command(1.25)
+                time.sleep(PERIOD_S)
+                driver.poll()
+                out.append(driver.healthy)
+            return out
+
+        before = run(30)
+        core.cut.add(0)
+        cut = run(70)                     # about 0.7 s of commands into the void
+        heard_during_cut = driver.alive
+        core.cut.discard(0)
+        after = run(40)
+        assert all(before[15:]) and not any(cut[-10:]) and not heard_during_cut
+        assert all(after[-10:]) and driver.alive
+        assert core.bytes["cut"] > 0
+    finally:
+        driver.close()
+    plant.read(0.2)
+    changes = [tuple(map(int, m)) for m in re.findall(rb"set (\d+) (\d) (-?\d+)\n",
+                                                      plant.log)]
+    offs = [c for c in changes if c[1:] == (0, 0)]
+    assert len(offs) >= 2 and changes[-1] == offs[-1]   # the watchdog in the cut, then close()

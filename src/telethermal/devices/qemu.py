@@ -137,7 +137,10 @@ class QemuCore:
         self._monitor: socket.socket | None = None
         self._stop = threading.Event()
         self.dropped_bytes = 0
-        self.bytes = {"to_core": 0, "from_core": 0}     # through the bridges, both UARTs
+        self.bytes = {"to_core": 0, "from_core": 0, "cut": 0}   # through the bridges
+        #: UARTs whose line is cut (0 the link, 1 the plant): bytes lost both
+        #: ways, as with a cable pulled, until removed from the set.
+        self.cut: set[int] = set()
         #: Line noise, for tests: ``fault(uart, data) -> data`` is applied to
         #: what the core sends (uart 0 the link, 1 the plant) before the pty.
         self.line_fault = None
@@ -180,6 +183,11 @@ class QemuCore:
                         data = b""
                     if not data:                # QEMU gone, or a pty closed
                         sel.unregister(key.fileobj)
+                        continue
+                    bridge = from_core if from_core is not None else \
+                        next(b for b in self._bridges if b.master == src)
+                    if self._bridges.index(bridge) in self.cut:
+                        self.bytes["cut"] += len(data)      # the line is cut: lost
                         continue
                     fault = self.line_fault
                     if from_core is not None and fault is not None:
