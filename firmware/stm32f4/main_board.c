@@ -18,6 +18,7 @@ int main(void)
     if (!board_init()) {
         board_fault();
     }
+    plant_start();
     tt_board_app_start(&app, TT_BOARD_FRAME_VERSION, 25.0f);
     for (;;) {
         plant_poll(); /* the analog side: outside the measurement (plant.h) */

@@ -19,6 +19,7 @@ int main(void)
     if (!board_init()) {
         board_fault();
     }
+    plant_start();
     tt_peltier_config cfg;
     if (TT_ACTIVE_PAD) {
         tt_pad_default_config(&cfg);

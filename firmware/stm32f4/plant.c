@@ -12,6 +12,7 @@
  *                      hal_micros() when the board takes it (floats in any
  *                      strtof form, hexadecimal ones exact)
  * board -> plant:
+ *   ready                                at start, the UARTs set up
  *   set <ms> <enabled> <current_ma>      every change of the H-bridge
  *   water <ms> <pump_on> <duty_raw>      every change of pump and heater
  *
@@ -162,6 +163,11 @@ void plant_poll(void)
         line_len = 0;
         line_overlong = false;
     }
+}
+
+void plant_start(void)
+{
+    put_str("ready\n");
 }
 
 void hal_peltier_set(bool enabled, int16_t current_ma)

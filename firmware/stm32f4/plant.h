@@ -10,4 +10,8 @@
  * which on silicon are the converters' and their interrupt's work. */
 void plant_poll(void);
 
+/* Says "ready" on the plant link: the UARTs are set up (main, after
+ * board_init; bytes sent to a UART before that are lost). */
+void plant_start(void);
+
 #endif

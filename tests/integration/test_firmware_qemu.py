@@ -348,3 +348,32 @@ def test_a_link_cut_mid_touch_puts_the_element_safe_and_the_master_sees_it(pelti
                                                       plant.log)]
     offs = [c for c in changes if c[1:] == (0, 0)]
     assert len(offs) >= 2 and changes[-1] == offs[-1]   # the watchdog in the cut, then close()
+
+
+# ------------------------------------------------------------ processor in the loop
+def test_a_session_with_the_firmware_as_the_displays_boards_matches_the_emulated_one(
+        images, trained_models):
+    """``run_session(devices="qemu")``: the display's sensor board and
+    Peltier driver are the firmware on two emulated cores, the bridge
+    feeding them the simulated plant's readings and driving the module with
+    the current the core's H-bridge reports. On the same seed: the touch
+    named right within 1 s, no safety event, flux and skin errors within
+    10 % of the emulated boards' (the issue's target); every period's frame
+    and answer arrived."""
+    from telethermal.physics.scene import load_scene
+    from telethermal.teleop.run import run_session, with_finger
+
+    scene = with_finger(load_scene("fingertip-7"))
+    ident, gen = trained_models.pair(scene, 0)
+    out = {kind: run_session(scene, "wood", ident, gen, contact_s=0.3, seed=3,
+                             devices=kind).summary for kind in ("emulated", "qemu")}
+    emu, pil = out["emulated"], out["qemu"]
+    assert pil["devices"] == "qemu" and pil["identified_correctly"]
+    assert pil["decision_time_s"] is not None and pil["decision_time_s"] <= 1.0
+    assert pil["safety_events"] == emu["safety_events"] == 0
+    for key in ("flux_rms_error_rel_whole", "temp_rms_error_c"):
+        assert pil[key] == pytest.approx(emu[key], rel=0.10), key
+    c = pil["device_counters"]
+    assert c["board_waits_missed"] == c["answers_missed"] == c["untrusted_periods"] == 0
+    assert c["board"]["crc"] == c["board"]["seq_gaps"] == 0 and c["board"]["frames"] > 0
+    assert c["peltier"]["statuses"] == c["peltier"]["sent"] > 0

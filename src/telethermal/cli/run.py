@@ -177,9 +177,11 @@ def add_session(sub) -> None:
     p.add_argument("--realtime", action="store_true",
                    help="run the master loop on the real clock and report its timing")
     p.add_argument("--record", help="record the session to this MCAP file")
-    p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
+    p.add_argument("--devices", choices=("sim", "emulated", "qemu"), default="sim",
                    help="sim: the simulator directly; emulated: the display's sensor board on "
-                        "a pty and its Peltier driver on a virtual CAN bus, through the drivers")
+                        "a pty and its Peltier driver on a virtual CAN bus, through the drivers; "
+                        "qemu: the reference firmware as those boards on emulated STM32F405 "
+                        "cores (qemu-system-arm, gcc-arm-none-eabi, picolibc-arm-none-eabi)")
     p.set_defaults(func=cmd_session)
 
 

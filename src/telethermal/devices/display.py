@@ -205,12 +205,18 @@ class Display(Protocol):
     def close(self) -> None: ...
 
 
+def _qemu_display(touch, clock, realtime, seed) -> Display:
+    from telethermal.devices.qemu_display import QemuDisplay
+    return QemuDisplay(touch, clock, realtime, seed)
+
+
 #: A simulated touch's display devices by kind (python-can's ``BACKENDS``
 #: shape): ``factory(touch, clock, realtime, seed)``. The hardware display
 #: has no simulated touch (``HardwareDisplay``, the master service opens it).
 DISPLAYS: dict[DeviceKind, Callable[..., Display]] = {
     DeviceKind.SIM: lambda touch, clock, realtime, seed: SimDisplay(touch),
     DeviceKind.EMULATED: EmulatedDisplay,
+    DeviceKind.QEMU: _qemu_display,
 }
 
 

@@ -13,6 +13,9 @@ class DeviceKind(StrEnum):
     EMULATED = "emulated"
     #: The real boards at ``board_url`` and ``can_bus``.
     HARDWARE = "hardware"
+    #: The reference firmware as the boards, on emulated STM32F405 cores
+    #: (qemu-system-arm), the simulator behind them: processor in the loop.
+    QEMU = "qemu"
 
 
 def parse_device_kind(value: str) -> DeviceKind:
@@ -29,6 +32,10 @@ def device_kind(value: str, board_url: str, can_bus: str,
     """A service config's kind: :func:`parse_device_kind`, and hardware
     with both its ports."""
     kind = parse_device_kind(value)
+    if kind == DeviceKind.QEMU:
+        raise ValueError("devices = 'qemu' runs the master's display in the in-process "
+                         "session (telethermal session --devices qemu); the services do not "
+                         "run it yet (the slave's pad has no QEMU bridge): use 'emulated'")
     if kind == DeviceKind.HARDWARE and not (board_url and can_bus):
         raise ValueError(f"devices = 'hardware' needs board_url (e.g. {example_tty}) and "
                          "can_bus (e.g. socketcan:can0)")

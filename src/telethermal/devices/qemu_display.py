@@ -1,0 +1,150 @@
+"""The master's display with the reference firmware as its boards,
+processor in the loop (``devices = "qemu"``): the sensor board image and
+the Peltier driver image each on an emulated STM32F405
+(:mod:`telethermal.devices.qemu`), read and commanded through the project's
+drivers exactly as the real boards would be (``SensorBoard`` on the board's
+USART1 pty, ``PeltierDriver`` on python-can's ``slcan`` over the driver's
+USART1), and a bridge that, each control period, in step with the
+simulated clock:
+
+* writes the touch's analog readings on each core's plant link (USART2):
+  the sample the board's ADCs would convert (the flux sensor's and the
+  thermocouple's microvolts through the calibration, the force), and the
+  thermistors and current the driver would measure;
+* waits for the board's frame, and after the command for the driver's
+  answer, and takes the H-bridge's current back from the driver's plant
+  link, which drives the simulated module.
+
+The cores keep their own clocks (the watchdog, the heartbeat, the
+frames' ``t_us``); the loop waits for each of their answers, so a period
+takes as long as the cores need to hear and answer it (the emulated UART
+takes a byte in about 0.4 ms of the host's time).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tempfile
+import time
+from dataclasses import replace
+
+from telethermal.devices import qemu
+from telethermal.devices.board import Calibration, DeviceError
+from telethermal.devices.display import HardwareDisplay
+from telethermal.devices.kinds import DeviceKind
+from telethermal.devices.readings import PadSensors
+
+#: How long the bridge waits for a core's answer before it counts a miss
+#: (s of the host's time; a hang guard, nothing is timed by it).
+ANSWER_WAIT_S = 0.5
+COLD_JUNCTION_C = 25.0          # the board's boot frame says so (main_board.c)
+
+
+class QemuDisplay:
+    kind = DeviceKind.QEMU
+
+    def __init__(self, touch, clock=time.monotonic, realtime: bool = False, seed: int = 0,
+                 calibration: Calibration = Calibration()):
+        del realtime, seed              # the cores keep their own time; no noise added here
+        gone = qemu.missing()
+        if gone:
+            raise DeviceError("devices = 'qemu' needs " + ", ".join(
+                f"{what} (apt-get install {package})" for what, package in gone))
+        self.touch, self.calibration = touch, calibration
+        self._build = tempfile.TemporaryDirectory(prefix="telethermal-qemu-")
+        self.cores: list[qemu.QemuCore] = []
+        self.plants: list[qemu.PtyLine] = []
+        self.hardware = None
+        self.counters_ = {"board_waits_missed": 0, "answers_missed": 0}
+        self._applied_ma = 0
+        try:
+            images = qemu.build_images(self._build.name)
+            for name in ("tt_board", "tt_peltier"):
+                core = qemu.QemuCore(images[name])
+                self.cores.append(core)
+                self.plants.append(qemu.PtyLine(core.plant_path))
+                self.plants[-1].until(rb"ready\n")          # its UARTs are up
+            self.hardware = HardwareDisplay(self.cores[0].link_path,
+                                            f"slcan:{self.cores[1].link_path}",
+                                            calibration, clock=clock, wait_s=ANSWER_WAIT_S)
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------ the bridge
+    def _sample_line(self, s: PadSensors) -> bytes:
+        """The board's ADC channels for the touch's reading, as a plant line;
+        status bits cleared for a channel with no reading (NaN)."""
+        cal, status, values = self.calibration, 0, []
+        for bit, value in ((1, s.flux_w_m2), (2, s.pad_temp_c), (4, s.force_n)):
+            status |= bit if math.isfinite(value) else 0
+        values.append(cal.flux_uv(s.flux_w_m2) if status & 1 else 0.0)
+        values.append(cal.tc_uv(s.pad_temp_c, COLD_JUNCTION_C) if status & 2 else 0.0)
+        values.append(COLD_JUNCTION_C)
+        values.append(s.force_n if status & 4 else 0.0)
+        # Nine significant digits: every float32 exactly, in a short line
+        # (the emulated UART takes about 0.4 ms a byte).
+        return ("s " + " ".join(f"{v:.9g}" for v in values) + f" {status}\n").encode()
+
+    def _measure_line(self) -> bytes:
+        junction_c, heatsink_c, current_a = self.touch.module_state()
+        ok = all(math.isfinite(v) for v in (junction_c, heatsink_c, current_a))
+        cc = [round(100 * v) if ok else 0 for v in (junction_c, heatsink_c)]
+        ma = round(1000 * current_a) if ok else 0
+        return f"m {cc[0]} {cc[1]} {ma} 0 {int(ok)}\n".encode()
+
+    def _latest_current_ma(self) -> int:
+        """The H-bridge's current from the driver's plant link: its last
+        ``set`` line (the driver reports every change)."""
+        plant = self.plants[1]
+        plant.read()
+        sets = re.findall(rb"set \d+ (\d) (-?\d+)\n", plant.buf)
+        if sets:
+            enabled, ma = sets[-1]
+            self._applied_ma = int(ma) if enabled == b"1" else 0
+            plant.buf = plant.buf[plant.buf.rindex(b"\n") + 1:]
+        return self._applied_ma
+
+    # ------------------------------------------------------------ the display
+    def read(self, t_s: float) -> PadSensors:
+        s = self.touch.sense(t_s)
+        self.plants[1].write(self._measure_line())
+        self.plants[0].write(self._sample_line(s))
+        before = self.hardware.board.latest
+        sensors = self.hardware.read(t_s)
+        if self.hardware.board.latest is before:
+            self.counters_["board_waits_missed"] += 1
+        return sensors
+
+    def module_readings(self) -> tuple[float, float, float]:
+        return self.hardware.module_readings()
+
+    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        """The master's current through PeltierDriver and SLCAN to the
+        driver's core; the current its H-bridge drives to the touch."""
+        driver = self.hardware.peltier
+        answered = driver.counters["statuses"]
+        self.hardware.apply(t_s, step, dt_s, force_n)
+        deadline = time.monotonic() + ANSWER_WAIT_S
+        while driver.counters["statuses"] == answered and time.monotonic() < deadline:
+            driver.poll(wait_s=0.002)
+        if driver.counters["statuses"] == answered:
+            self.counters_["answers_missed"] += 1
+        current_a = self._latest_current_ma() / 1000.0
+        self.touch.actuate(t_s, replace(step, current_a=current_a), dt_s, force_n)
+
+    def counters(self) -> dict:
+        return {**self.hardware.counters(), **self.counters_,
+                "bridge_bytes": dict(self.cores[0].bytes)}
+
+    def close(self) -> None:
+        try:
+            if self.hardware is not None:
+                self.hardware.close()
+        finally:
+            for line in self.plants:
+                line.close()
+            for core in self.cores:
+                core.close()
+            self._build.cleanup()
