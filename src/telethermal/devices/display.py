@@ -23,6 +23,7 @@ safety supervisor puts the pad in its safe state in that very period.
 
 from __future__ import annotations
 
+import importlib
 import itertools
 import math
 import tempfile
@@ -205,9 +206,13 @@ class Display(Protocol):
     def close(self) -> None: ...
 
 
-def _qemu_display(touch, clock, realtime, seed) -> Display:
-    from telethermal.devices.qemu_display import QemuDisplay
-    return QemuDisplay(touch, clock, realtime, seed)
+def _by_name(module: str, name: str) -> Callable[..., Display]:
+    """A display class reached by name, as python-can's ``BACKENDS`` reach
+    an interface: imported when chosen (``qemu_display`` builds on
+    :class:`HardwareDisplay` here, so this module does not import it)."""
+    def factory(touch, clock, realtime, seed) -> Display:
+        return getattr(importlib.import_module(module), name)(touch, clock, realtime, seed)
+    return factory
 
 
 #: A simulated touch's display devices by kind (python-can's ``BACKENDS``
@@ -216,7 +221,7 @@ def _qemu_display(touch, clock, realtime, seed) -> Display:
 DISPLAYS: dict[DeviceKind, Callable[..., Display]] = {
     DeviceKind.SIM: lambda touch, clock, realtime, seed: SimDisplay(touch),
     DeviceKind.EMULATED: EmulatedDisplay,
-    DeviceKind.QEMU: _qemu_display,
+    DeviceKind.QEMU: _by_name("telethermal.devices.qemu_display", "QemuDisplay"),
 }
 
 

@@ -18,24 +18,28 @@ class DeviceKind(StrEnum):
     QEMU = "qemu"
 
 
-def parse_device_kind(value: str) -> DeviceKind:
-    """``value`` as a :class:`DeviceKind`; ``ValueError`` naming the kinds."""
-    try:
-        return DeviceKind(value)
-    except ValueError:
-        *first, last = (repr(k.value) for k in DeviceKind)
-        raise ValueError(f"devices must be {', '.join(first)} or {last}, got {value!r}") from None
+#: The kinds the services run (``device_kind``); QEMU runs in-process only.
+SERVICE_KINDS = (DeviceKind.SIM, DeviceKind.EMULATED, DeviceKind.HARDWARE)
+
+
+def parse_device_kind(value: str, kinds: tuple = tuple(DeviceKind)) -> DeviceKind:
+    """``value`` as one of ``kinds``; ``ValueError`` naming them."""
+    kind = next((k for k in kinds if k.value == value), None)
+    if kind is None:
+        *first, last = (repr(k.value) for k in kinds)
+        raise ValueError(f"devices must be {', '.join(first)} or {last}, got {value!r}")
+    return kind
 
 
 def device_kind(value: str, board_url: str, can_bus: str,
                 example_tty: str = "/dev/ttyUSB0") -> DeviceKind:
-    """A service config's kind: :func:`parse_device_kind`, and hardware
+    """A service config's kind: one of :data:`SERVICE_KINDS`, and hardware
     with both its ports."""
-    kind = parse_device_kind(value)
-    if kind == DeviceKind.QEMU:
+    if value == DeviceKind.QEMU.value:
         raise ValueError("devices = 'qemu' runs the master's display in the in-process "
                          "session (telethermal session --devices qemu); the services do not "
                          "run it yet (the slave's pad has no QEMU bridge): use 'emulated'")
+    kind = parse_device_kind(value, SERVICE_KINDS)
     if kind == DeviceKind.HARDWARE and not (board_url and can_bus):
         raise ValueError(f"devices = 'hardware' needs board_url (e.g. {example_tty}) and "
                          "can_bus (e.g. socketcan:can0)")
