@@ -351,6 +351,7 @@ def test_a_link_cut_mid_touch_puts_the_element_safe_and_the_master_sees_it(pelti
 
 
 # ------------------------------------------------------------ processor in the loop
+@pytest.mark.slow          # two sessions and their models: 1-9 minutes on a shared machine
 def test_a_session_with_the_firmware_as_the_displays_boards_matches_the_emulated_one(
         images, trained_models):
     """``run_session(devices="qemu")``: the display's sensor board and
