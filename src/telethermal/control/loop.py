@@ -35,21 +35,18 @@ from telethermal.errors import ControlError
 #: A lateness above this is a stall of the machine, reported apart (s).
 STALL_S = 3e-3
 #: The share of each period :meth:`RealClock.for_period` busy-waits: 200 us
-#: at 1 kHz (50-100 us of sleep overshoot covered), 1 ms at 200 Hz. An empty
-#: 200 Hz loop here (1,600 periods each, 2026-11-26) was late by 381 us at
-#: p99 with 200 us spun (a 4.8 ms sleep) and by 19 us with 1 ms spun (a 4 ms
-#: sleep). A fifth of a core at any rate.
+#: at 1 kHz (50-100 us of sleep overshoot covered), 1 ms at 200 Hz. Spinning
+#: the last fifth of the period rather than sleeping through it absorbs the
+#: operating system's wake-up delay (``bench render``'s real-clock rows give
+#: the lateness it leaves). A fifth of a core at any rate.
 SPIN_FRACTION = 0.2
 
 #: The display loop's rate, chosen from ``bench render``'s error against
-#: rate (fingertip-7, 7 materials x 5 seeds, 2026-11-26): the skin error is
-#: flat from 100 Hz to 2 kHz (0.413-0.416 K); the flux error over the first
-#: second falls 6.5 / 5.6 / 4.9 / 4.7 / 4.6 % of peak at 100 / 200 / 500 /
-#: 1,000 / 2,000 Hz, so 500 Hz has all but 0.3 points of it; and on this
-#: 2-core virtual machine the master's loop holds 500 Hz (3 deadlines of
-#: 6,800 missed, bench/results/render.json) where at 1 kHz it missed 36
-#: (its sleeps are too short to absorb the machine's wake-up delays). The
-#: first paper's dSPACE ran at 100 Hz.
+#: rate (bench/results/render.json): the skin error is flat from 100 Hz to
+#: 2 kHz, the flux error over the first second falls with the rate and 500 Hz
+#: has all but a fraction of a point of it, and a 2-core machine's master
+#: loop holds 500 Hz where at 1 kHz its sleeps are too short to absorb the
+#: wake-up delays. The first paper's dSPACE ran at 100 Hz.
 DEFAULT_RATE_HZ = 500.0
 
 

@@ -158,8 +158,8 @@ def _wait_pad_up(slave_admin: int, timeout_s: float) -> bool:
     """Until the slave's pad is up (its contact over); False on timeout or
     when the slave does not answer by then (killed: the caller's fallback
     applies). A slave that answers late is not dead: after a lift it
-    prepares its next touch (the simulated pad's next trial, 0.2-0.7 s
-    measured on this machine) before it serves its admin socket again."""
+    prepares its next touch (the simulated pad's next trial: a fraction
+    of a second) before it serves its admin socket again."""
     end = time.monotonic() + timeout_s
     while (remaining := end - time.monotonic()) > 0:
         try:

@@ -20,10 +20,8 @@ linear in the weights, so one blend removes the step from both and ends on
 exactly the new model, with no offset left to decay. What it cannot remove:
 a new ``1/e`` is a new object with a new past, its surface target moves by
 ``delta(1/e)`` times the flux's half-integral so far; the finger feels that
-move as a transient (measured, glass named graphite then revised at 1 s,
-fingertip-7 seed 2: the flux off direct contact by ~250 W/m^2 RMS over
-1.2-1.5 s, ~28 W/m^2 over 4-5 s and falling, where keeping graphite stays
-~38 W/m^2 off).
+move as a transient, largest just after the revision and decaying over the
+following seconds.
 """
 
 from __future__ import annotations
