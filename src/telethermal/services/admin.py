@@ -9,12 +9,19 @@ bound on loopback only, msgpack requests ``{"cmd": ..., ...}`` and replies
 
 from __future__ import annotations
 
+import logging
+import time
+
 import msgpack
 import numpy as np
 import zmq
 
 from telethermal.errors import TelethermalError, TransportError
 from telethermal.ports import close_listeners
+from telethermal.services.requests import check_request
+from telethermal.wire.loglimit import LogLimiter
+
+log = logging.getLogger(__name__)
 
 
 def _plain(value):
@@ -30,6 +37,22 @@ def _plain(value):
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
     return value
+
+
+class ErrorCount:
+    """A service's unexpected errors (one message's, one touch's, one
+    request's): counted in ``counters["internal_errors"]`` and logged with
+    the traceback, at most a few lines per 10 s per kind; the service goes on."""
+
+    def __init__(self, counters: dict, logger: logging.Logger):
+        self.counters = counters
+        self.counters.setdefault("internal_errors", 0)
+        self._limiter = LogLimiter(logger)
+
+    def __call__(self, what: str, exc: BaseException) -> None:
+        self.counters["internal_errors"] += 1
+        self._limiter.warn(what, time.monotonic(), "%s: unexpected %s: %s", what,
+                           type(exc).__name__, exc, exc_info=exc)
 
 
 def admin_address(where) -> str:
@@ -58,6 +81,10 @@ class AdminServer:
             self.sock.close()
             raise TransportError(f"admin socket {address}: {exc}") from exc
         self.pending = False
+        #: Requests refused (a bad field, an unknown command, a handler's
+        #: error) and requests that met an unexpected error (logged).
+        self.counters = {"refused": 0, "internal_errors": 0}
+        self._internal_error = ErrorCount(self.counters, log)
 
     def receive(self) -> dict | None:
         """A request, if one is waiting (never blocks)."""
@@ -75,16 +102,22 @@ class AdminServer:
             return request
         except (ValueError, msgpack.exceptions.ExtraData, msgpack.exceptions.FormatError,
                 TypeError) as exc:
-            self.reply(ok=False, error=f"bad request: {exc}")
+            self.counters["refused"] += 1
+            self.reply(ok=False, error=f"bad request: {str(exc)[:200]}")
             return None
 
-    def handle(self, request: dict, service, handlers: dict) -> None:
-        """Run one request: ``handlers[cmd](request)`` returns the reply's
-        fields, or None when the reply comes later (a touch); "status" and
-        "stop" are served for every service; errors become ``ok: false``."""
-
+    def handle(self, request: dict, service, handlers: dict, schema: dict | None = None) -> None:
+        """Run one request: its fields checked against ``schema`` (a table of
+        ``services/requests.py``; None: not checked), then
+        ``handlers[cmd](fields)`` returns the reply's fields, or None when the
+        reply comes later (a touch); "status" and "stop" are served for every
+        service. A refused request is answered ``ok: false`` with the reason;
+        an unexpected error is logged with its traceback (rate-limited),
+        counted and answered, and the service goes on."""
         cmd = request["cmd"]
         try:
+            if schema is not None:
+                request = check_request(request, schema)
             if cmd == "status":
                 self.reply(ok=True, **service.status())
             elif cmd == "stop":
@@ -98,7 +131,13 @@ class AdminServer:
                 self.reply(ok=False, error=f"unknown command {cmd!r}; commands: "
                                            f"{', '.join(['status', 'stop', *handlers])}")
         except (TelethermalError, KeyError, ValueError, TypeError) as exc:
-            self.reply(ok=False, error=f"{cmd}: {exc}")
+            self.counters["refused"] += 1
+            self.reply(ok=False, error=f"{cmd[:64]}: {str(exc)[:400]}")
+        except Exception as exc:                # a bug: one request's, not the service's
+            self._internal_error(f"admin {cmd[:64]!r}", exc)
+            if self.pending:
+                self.reply(ok=False, error=f"{cmd[:64]}: internal error ({type(exc).__name__}: "
+                                           f"{str(exc)[:200]}); logged, the service goes on")
 
     def reply(self, **payload) -> None:
         self.sock.send(msgpack.packb(_plain(payload), use_bin_type=True))

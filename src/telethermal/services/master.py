@@ -26,7 +26,8 @@ from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import UNKNOWN, unknown_reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
-from telethermal.services.admin import open_service_sockets
+from telethermal.services.admin import ErrorCount, open_service_sockets
+from telethermal.services.requests import MASTER as MASTER_REQUESTS
 from telethermal.services.config import MasterConfig
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
@@ -138,6 +139,9 @@ class MasterService:
         self.stop_requested = False
         self.state = ServiceState.IDLE
         self.last_touch: dict = {}
+        #: Unexpected errors in one message, one touch or one figure (status).
+        self.counters = self.endpoint.extra_counters
+        self._internal_error = ErrorCount(self.counters, log)
 
     @property
     def link(self) -> SlaveLink:
@@ -213,14 +217,20 @@ class MasterService:
     def step(self, t_loop: float, dt_s: float) -> bool:
         now = time.monotonic()
         for message in self.endpoint.poll(0.0):
-            self._on_message(message, now)
+            try:
+                self._on_message(message, now)
+            except Exception as exc:            # one message's, not the service's
+                self._internal_error("message from the slave", exc)
         request = self.admin.receive()
         if request is not None:
             self._on_admin(request, now)
         if self.hardware is not None:
             self._hardware_period(now, dt_s)
         elif self.touch is not None:
-            self._touch_period(now, dt_s)
+            try:
+                self._touch_period(now, dt_s)
+            except Exception as exc:            # the touch's, not the service's
+                self._abort_touch(exc)
         elif self.view is not None:
             self.view.idle(now, lambda: self._view_state(None, None, 0))
         self.endpoint.state = self.state          # status: on change and every second
@@ -266,6 +276,26 @@ class MasterService:
         if touch.sim.done:
             self._finish_touch()
 
+    def _abort_touch(self, exc: BaseException) -> None:
+        """A touch ended by an unexpected error: its pad safe first (the Peltier
+        driver disabled), the slave told of the lift, the request answered."""
+        touch, self.touch, self.state = self.touch, None, ServiceState.IDLE
+        self._internal_error(f"touch contact_id={touch.contact_id}", exc)
+        error = f"{type(exc).__name__}: {str(exc)[:200]}"
+        try:
+            touch.devices.close()
+        finally:
+            try:
+                if self.recorder is not None:
+                    self.recorder.touch_end({"contact_id": touch.contact_id, "error": error}, {})
+                self._send(self.session.close_contact(time.monotonic(),
+                                                      touch.operator.finger_ir_c))
+            except Exception as send_exc:
+                self._internal_error("lift after an error", send_exc)
+            if touch.reply_when_done and self.admin.pending:
+                self.admin.reply(ok=False, error=f"touch {touch.contact_id} ended by an "
+                                 f"internal error ({error}); the pad is safe")
+
     def _finish_touch(self) -> None:
         touch, stats = self.touch, self.loop.stats
         devices = touch.devices.counters()
@@ -304,7 +334,11 @@ class MasterService:
             **safety_summary(touch.display), "loop": loop,
             "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
         }
-        result.update(touch_figures(self.scene, touch, result))
+        try:
+            result.update(touch_figures(self.scene, touch, result))
+        except Exception as exc:                # the figures', not the touch's
+            self._internal_error("figures against direct contact", exc)
+            result.update(direct=None, direct_error=f"{type(exc).__name__}: {exc}"[:200])
         if self.recorder is not None:
             self.recorder.touch_end({k: v for k, v in result.items() if k != "trace"},
                                     touch.sim.trace)
@@ -324,9 +358,7 @@ class MasterService:
                 raise ValueError("no slave session yet" + (
                     f": {d['problem']}; likely: {d['fix']}" if d else
                     " (not connected or no session_config)"))
-            contact_s = float(r.get("contact_s", 5.0))
-            if not (0 < contact_s <= 60):
-                raise ValueError(f"contact_s must be in (0, 60], got {contact_s}")
+            contact_s = float(r.get("contact_s", 5.0))       # (0, 60]: MASTER_REQUESTS
             if self.touch is not None:
                 raise ValueError(f"touch {self.touch.contact_id} is still in progress "
                                  "(lift it first)")
@@ -352,7 +384,8 @@ class MasterService:
             return {k: v for k, v in self.last_touch.items()
                     if k != "trace" or r.get("trace")}
 
-        self.admin.handle(request, self, {"touch": touch, "lift": lift, "report": report})
+        self.admin.handle(request, self, {"touch": touch, "lift": lift, "report": report},
+                          MASTER_REQUESTS)
 
     def status(self) -> dict:
         e = self.endpoint
@@ -365,7 +398,8 @@ class MasterService:
                 "object_id": self.link.object_id,
                 "object_material": (self.link.remembered or (None,))[0],
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
-                "counters": dict(e.counters), "devices": self.config.devices,
+                "counters": e.all_counters(), "admin": dict(self.admin.counters),
+                "devices": self.config.devices,
                 **({"device_counters": self.hardware.counters(),
                     "display_phase": self.display.phase, "contact_id": self.session.contact_id}
                    if self.hardware is not None else {})}

@@ -24,7 +24,8 @@ from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
-from telethermal.services.admin import open_service_sockets
+from telethermal.services.admin import ErrorCount, open_service_sockets
+from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
@@ -97,6 +98,7 @@ class SlaveService:
         self.counters = self.endpoint.extra_counters
         self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
                              memory_overruled=0, lifted_by_place=0)
+        self._count_error = ErrorCount(self.counters, log)
         self.object_id: str | None = None
         self.material = ""                          # under the pad (``place``)
         self.sensors = None                         # this process's instruments
@@ -303,6 +305,35 @@ class SlaveService:
         self.counters["contacts_superseded"] += 1
         self._lift(now)
 
+    def _place_lift_cause(self) -> str:
+        """The counter of a contact a ``place`` ends (PROTOCOL.md 5a): its
+        owner replaced by a new session (``contacts_superseded``), its owner
+        silent for two heartbeats or more (``masters_lost``: a master killed
+        and restarted is refused "busy" until it is declared dead, and the
+        operator's place can come first), or the operator's move before a
+        live master's lift (``lifted_by_place``)."""
+        e = self.endpoint
+        if e.peer_session != self.session.owner:
+            return "contacts_superseded"
+        silent_s = e.silent_s
+        if silent_s is not None and silent_s >= 2 * self.config.transport.heartbeat_s:
+            return "masters_lost"
+        return "lifted_by_place"
+
+    def _internal_error(self, what: str, exc: BaseException) -> None:
+        """An unexpected error in one message, request or sample period:
+        counted, logged with its traceback (a few lines per 10 s); a contact
+        going on is lifted (the pad to its safe state); the service goes on."""
+        self._count_error(what, exc)
+        if self.touch_t0 is not None:
+            try:
+                self._lift(time.monotonic())
+            except Exception as lift_exc:       # the pad safe whatever the lift did
+                self._count_error("lift after an error", lift_exc)
+                self.session.touch_t0 = self.session.owner = None
+                if self.devices is not None:
+                    self.devices.safe()
+
     def _sample(self, now: float) -> None:
         self._send(self.session.step(now))
 
@@ -339,9 +370,12 @@ class SlaveService:
             if self.touch_t0 is not None:
                 # The pad is moved to another object: the contact going on
                 # ends first (its lift may still be on the way from the master).
-                log.warning("place during contact_id=%d: the pad is lifted first",
-                            self.contact_id)
-                self.counters["lifted_by_place"] += 1
+                cause = self._place_lift_cause()
+                log.warning("place during contact_id=%d: the pad is lifted first (%s)",
+                            self.contact_id, cause)
+                self.counters[cause] += 1
+                if cause == "masters_lost":
+                    self.masters_lost += 1
                 self._lift(time.monotonic())
             self.place(str(r["material"]), int(r.get("seed", self._seed + 1)), object_id)
             # object_true_c: the simulator's truth, for comparing with direct contact
@@ -362,7 +396,7 @@ class SlaveService:
 
         self.admin.handle(request, self, {
             "place": place, "report": lambda r: dict(self.last_touch),
-            "calibrate_thermometer": calibrate, "forget": forget})
+            "calibrate_thermometer": calibrate, "forget": forget}, SLAVE_REQUESTS)
 
     def _close_devices(self) -> None:
         """The active pad to its safe state, the devices released."""
@@ -387,6 +421,7 @@ class SlaveService:
                 "contact_id": self.contact_id if self.touch_t0 is not None else None,
                 "peer_session": e.peer_session,
                 "offset_s": e.offset.offset_s, "counters": e.all_counters(),
+                "admin": dict(self.admin.counters),
                 "devices": {"kind": self.config.devices,
                             **({"counters": self.devices.all_counters()}
                                if self.devices is not None else {})}}
@@ -400,24 +435,38 @@ class SlaveService:
         deadline = time.monotonic()
         try:
             while not self.stop_requested:
-                now = time.monotonic()
-                if now >= deadline:
-                    deadline = max(deadline + period, now)
-                    if self.touch_t0 is None and self.devices is not None:
-                        self.devices.hold()      # the pad held at temperature, frames read
-                    if self.touch_t0 is not None and not self.endpoint.peer_alive:
-                        self._master_lost(now)
-                    if self.touch_t0 is not None:
-                        self._sample(now)
-                for message in self.endpoint.poll(max(0.0, min(deadline - time.monotonic(),
-                                                               self.config.transport.heartbeat_s))):
-                    self._on_message(message, time.monotonic())
-                request = self.admin.receive()
-                if request is not None:
-                    self._on_admin(request)
-                self.endpoint.state = self.state
+                deadline = self._step(deadline, period)
         finally:
             self.shutdown()
+
+    def _step(self, deadline: float, period: float) -> float:
+        """One wake of :meth:`run`: the sample period if due, the messages and
+        the admin request waiting; an unexpected error in any of them is the
+        piece's (``_internal_error``), not the service's. Returns the next
+        sample deadline."""
+        now = time.monotonic()
+        if now >= deadline:
+            deadline = max(deadline + period, now)
+            try:
+                if self.touch_t0 is None and self.devices is not None:
+                    self.devices.hold()      # the pad held at temperature, frames read
+                if self.touch_t0 is not None and not self.endpoint.peer_alive:
+                    self._master_lost(now)
+                if self.touch_t0 is not None:
+                    self._sample(now)
+            except Exception as exc:
+                self._internal_error("sample period", exc)
+        for message in self.endpoint.poll(max(0.0, min(deadline - time.monotonic(),
+                                                       self.config.transport.heartbeat_s))):
+            try:
+                self._on_message(message, time.monotonic())
+            except Exception as exc:
+                self._internal_error(f"message {str(message.get('kind'))[:32]}", exc)
+        request = self.admin.receive()
+        if request is not None:
+            self._on_admin(request)
+        self.endpoint.state = self.state
+        return deadline
 
     def shutdown(self) -> None:
         # The sensing pad to its safe state first (simulated: nothing to hold).

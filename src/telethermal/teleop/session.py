@@ -101,6 +101,13 @@ def send_through(endpoint, sends: list[Send], log) -> list[Send]:
         except WindowFull as exc:
             log.error("%s", exc)
             continue
+        except Exception as exc:        # one message's (unencodable, a socket's error)
+            # Counted with the service's own counters; the loop goes on.
+            counters = endpoint.extra_counters
+            counters["send_errors"] = counters.get("send_errors", 0) + 1
+            log.error("%s not sent: %s: %s", s.kind, type(exc).__name__, str(exc)[:200],
+                      exc_info=counters["send_errors"] <= 3)
+            continue
         sent.append(s)
     return sent
 

@@ -21,8 +21,9 @@ class LogLimiter:
         self._last_s: dict[str, float] = {}          # when the key last logged
         self._quiet: dict[str, int] = {}             # occurrences not logged since
 
-    def warn(self, key: str, now_s: float, fmt: str, *args) -> bool:
-        """Log at WARNING if allowed; returns whether a line was written."""
+    def warn(self, key: str, now_s: float, fmt: str, *args, exc_info=None) -> bool:
+        """Log at WARNING if allowed (with ``exc_info``'s traceback if given);
+        returns whether a line was written."""
         seen = self._seen.get(key, 0) + 1
         self._seen[key] = seen
         if seen > self.burst and now_s - self._last_s.get(key, -1e18) < self.period_s:
@@ -33,5 +34,5 @@ class LogLimiter:
         if quiet:
             fmt += " (and %d more like it not logged in the last %.0f s)"
             args = (*args, quiet, self.period_s)
-        self.logger.warning(fmt, *args)
+        self.logger.warning(fmt, *args, exc_info=exc_info)
         return True

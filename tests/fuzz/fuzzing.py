@@ -1,0 +1,50 @@
+"""The fuzz suite's two hypothesis profiles and its tally.
+
+Both are bounded by the number of examples, never by wall time (the
+machine is shared): ``fuzz-short`` runs in the normal suite, ``fuzz-long``
+under ``make fuzz`` (``TELETHERMAL_FUZZ=long``). Each reader's test counts
+its cases and how they ended in :data:`TALLY`; the run's end prints it
+and, with ``TELETHERMAL_FUZZ_STATS=FILE``, writes it as JSON."""
+
+from __future__ import annotations
+
+import atexit
+import json
+import os
+from collections import Counter, defaultdict
+
+from hypothesis import HealthCheck, settings
+
+settings.register_profile("fuzz-short", max_examples=40, deadline=None, derandomize=True,
+                          suppress_health_check=[HealthCheck.too_slow,
+                                                 HealthCheck.data_too_large])
+settings.register_profile("fuzz-long", max_examples=2000, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow,
+                                                 HealthCheck.data_too_large])
+
+PROFILE = "fuzz-long" if os.environ.get("TELETHERMAL_FUZZ") == "long" else "fuzz-short"
+
+
+def fuzz_settings(scale: float = 1.0) -> settings:
+    """The profile's settings, ``scale`` times its examples (a reader whose
+    case costs more runs fewer)."""
+    parent = settings.get_profile(PROFILE)
+    return settings(parent, max_examples=max(1, int(parent.max_examples * scale)))
+
+
+#: reader -> outcome -> cases ("served", "refused", ...).
+TALLY: dict[str, Counter] = defaultdict(Counter)
+
+
+@atexit.register
+def _report() -> None:
+    """At the end of the run (no conftest here: another test folder's
+    conftest is imported by name), the tally printed and written."""
+    if not TALLY:
+        return
+    stats = {"profile": PROFILE, "readers": {k: dict(v) for k, v in sorted(TALLY.items())}}
+    print("\nfuzz", json.dumps(stats))
+    path = os.environ.get("TELETHERMAL_FUZZ_STATS")
+    if path:
+        with open(path, "w") as f:
+            json.dump(stats, f, indent=1)
