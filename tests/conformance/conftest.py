@@ -70,6 +70,7 @@ def curve_keys(tmp_path_factory):
     for name in ("slave", "a", "b", "stranger"):
         (root / name).mkdir()
         public, secret = zmq.auth.create_certificates(str(root / name), name)
+        os.chmod(secret, 0o600)         # a slave refuses a secret others can read
         pairs[name] = zmq.auth.load_certificate(secret)
     (root / "allowed").mkdir()
     for name in ("a", "b"):

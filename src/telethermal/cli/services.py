@@ -131,10 +131,10 @@ def cmd_keys(args) -> int:
 
     public, secret = generate_keys(args.out, args.name)
     print(f"wrote {public} (give it to the peer; fingerprint {key_file_fingerprint(public)}) "
-          f"and {secret} (keep it here, mode 600)")
+          f"and {secret} (keep it here: mode 600, its folder 700)")
     if args.name == "slave":                 # where the masters' public keys go
-        allowed = Path(args.out) / "allowed"
-        allowed.mkdir(exist_ok=True)
+        from telethermal.wire.keys import make_allowed_folder
+        allowed = make_allowed_folder(Path(args.out) / "allowed")    # 700
         print(f"made {allowed}/: copy each master's master.key into it")
     return 0
 

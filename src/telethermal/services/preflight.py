@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import errno
 import hashlib
-import os
 import socket
 import time
 from dataclasses import dataclass
@@ -23,9 +22,10 @@ from pathlib import Path
 import zmq
 import zmq.auth
 
-from telethermal.errors import TelethermalError
+from telethermal.errors import TelethermalError, TransportError
 from telethermal.tomltables import read_toml
 from telethermal.wire.handshake import HandshakeWatch, diagnose, key_file_fingerprint
+from telethermal.wire.keys import check_allowed_folder, check_secret_private
 
 
 @dataclass(frozen=True)
@@ -84,8 +84,10 @@ def _key_pair(t, name: str) -> list[Finding]:
     except (OSError, ValueError) as exc:
         return [Finding(False, f"{secret}: unreadable ({exc})", make)]
     out = []
-    if os.stat(secret).st_mode & 0o077:
-        out.append(Finding(False, f"{secret}: readable by others", f"chmod 600 {secret}"))
+    try:
+        check_secret_private(secret)
+    except TransportError as exc:
+        out.append(Finding(False, str(exc).split("; fix: ")[0], f"chmod 600 {secret}"))
     if public.is_file():
         out.append(Finding(True, f"key pair {name} in {t.keys_dir}, public key "
                                  f"{key_file_fingerprint(public)}"))
@@ -108,7 +110,11 @@ def _allowed(t) -> list[Finding]:
     if not folder.is_dir():
         return [Finding(False, f"allowed_dir {folder}: no such folder",
                         f"mkdir -p {folder}, then copy each master's master.key into it")]
-    keys = sorted(folder.glob("*.key"))
+    try:
+        keys = check_allowed_folder(folder)
+    except TransportError as exc:
+        what, _, fix = str(exc).partition("; fix: ")
+        return [Finding(False, what, fix)]
     if not keys:
         return [Finding(False, f"allowed_dir {folder}: holds no public key, so every master "
                                "is refused", f"copy each master's keys/master.key into {folder}")]

@@ -12,11 +12,13 @@ import logging
 from pathlib import Path
 
 import zmq
+from zmq.utils.monitor import recv_monitor_message
 
 from telethermal.errors import TransportError
 from telethermal.ports import wait_released
 from telethermal.wire.handshake import AllowedKeys, HandshakeWatch, diagnose, fingerprint
-from telethermal.wire.keys import load_public, load_secret
+from telethermal.wire.keys import check_allowed_folder, load_public, load_secret
+from telethermal.wire.loglimit import LogLimiter
 from telethermal.wire.schema import MAX_MESSAGE_BYTES
 
 # The endpoint's one log, named as before its code was split in modules
@@ -57,6 +59,9 @@ class EndpointSockets:
         self.ports: list[int] = []                  # slave: the ports bound
         self.poller: zmq.Poller | None = None
         self._auth: AllowedKeys | None = None
+        #: Slave (CURVE): monitors of handshakes refused before a key was offered.
+        self._refusals: dict[str, zmq.Socket] = {}
+        self._limiter = LogLimiter(log)
         self._watch: dict[str, HandshakeWatch] = {}   # master: per socket
         self._unlinked_since: float | None = self.clock()
         self._diagnosed_at = -1e9
@@ -69,7 +74,7 @@ class EndpointSockets:
         if cfg.security != "curve":
             return
         if server:
-            public, secret = load_secret(cfg.keys_dir, cfg.server_key)
+            public, secret = load_secret(cfg.keys_dir, cfg.server_key, private=True)
             sock.curve_publickey, sock.curve_secretkey = public, secret
             sock.curve_server = True
         else:
@@ -118,8 +123,7 @@ class EndpointSockets:
         cfg = self.config
         if cfg.security == "curve":
             allowed = Path(cfg.allowed_dir)
-            if not allowed.is_dir():
-                raise TransportError(f"{allowed}: allowed-keys folder does not exist")
+            check_allowed_folder(allowed)        # no other user may add a master
             self._auth = AllowedKeys(self.ctx, allowed, self.counters)
             self._auth.start()
         self.control = self.ctx.socket(zmq.ROUTER)
@@ -132,6 +136,26 @@ class EndpointSockets:
         self.stream.sndhwm = cfg.stream_hwm
         self._secure(self.stream, server=True)
         self.ports.append(self._bind(self.stream, cfg.stream_port))
+        if cfg.security == "curve":
+            self._refusals = {name: getattr(self, name).get_monitor_socket(
+                zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL | zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL)
+                for name in ("control", "stream")}
+
+    def watch_refusals(self, now: float) -> None:
+        """Slave: connections whose handshake failed before any key was
+        offered (a plain client, a wrong mechanism, not ZeroMQ): counted
+        (``handshake_refused``) and logged, rate-limited. libzmq's monitor
+        gives the listening address only, not the peer's."""
+        for name, monitor in self._refusals.items():
+            while monitor.poll(0):
+                event = recv_monitor_message(monitor, zmq.NOBLOCK)
+                self.counters["handshake_refused"] += 1
+                self._limiter.warn("handshake_refused", now, "slave: refused a connection on "
+                                   "%s (%s socket): handshake failed (%s): a plain or "
+                                   "non-CURVE client; %d refused so far",
+                                   event["endpoint"].decode("ascii", "replace"), name,
+                                   zmq.Event(event["event"]).name,
+                                   self.counters["handshake_refused"])
 
     def _connect(self, name: str) -> None:
         """The master's control DEALER or stream SUB, connected and watched."""
@@ -204,9 +228,12 @@ class EndpointSockets:
         for name in ("control", "stream"):
             sock = getattr(self, name)
             watch = self._watch.get(name)
+            monitor = self._refusals.pop(name, None)
             if sock is not None:
                 if watch is not None:
                     watch.close(sock)
+                if monitor is not None:
+                    HandshakeWatch(name, monitor).close(sock)
                 sock.close(linger=0)
         if self._auth is not None:
             self._auth.stop()

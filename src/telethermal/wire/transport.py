@@ -55,7 +55,7 @@ COUNTERS = ("lossless_sent", "lossless_received", "duplicates", "gaps", "recover
             "refused_by_window", "stream_lost", "invalid", "unknown_kind", "heartbeats_missed",
             "reconnects", "duplicate_hellos", "oversized", "version_mismatch", "before_hello",
             "not_peer", "wrong_direction", "out_of_window", "skipped", "resend_throttled",
-            "refused", "curve_rejected", "sockets_recreated")
+            "refused", "curve_rejected", "handshake_refused", "sockets_recreated")
 
 
 @dataclass
@@ -331,6 +331,8 @@ class Endpoint:
         if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
             if self.role == "master":
                 self.sockets.watch_handshakes(now, alive)
+            else:
+                self.sockets.watch_refusals(now)
             if self.role == "master" and (not alive or self.peer_version is None):
                 self.hello.send()
             if self.peer_version is not None:
