@@ -207,3 +207,29 @@ def test_line_numbers_count_blank_lines_and_one_file_is_imported_once(tmp_path, 
                  "--units", UNITS, "--material", "glass", "--group", "g1", "--object-c", "24",
                  "--pad-c", "34", "--room-c", "22"]) == 2
     assert "imported before?" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("damage, options, message", [
+    # A 200 KB quoted cell: over the csv module's 128 KiB (a bare _csv.Error before).
+    (lambda s: _cell(s, 6, 3, '"' + "x" * 200_000 + '"'), [], r"line 6: not CSV: field larger"),
+    # 1e308 kW/m^2: inf once converted; 1e307 W/m^2 would be finite, still refused.
+    (lambda s: _cell(s, 9, 1, "1e308"), [],
+     r"line 9, column 'q_kW': heat_flux_W_m2 = inf is outside \[-1e\+06, 1e\+06\]"),
+    (lambda s: _cell(s, 9, 1, "5e3"), [],
+     r"line 9, column 'q_kW': heat_flux_W_m2 = 5e\+06 is outside"),
+    (lambda s: _cell(s, 7, 2, "-300"), [], r"line 7, column 'T_pad': temperature_C = -300"),
+    (lambda s: s, ["--material", "m" * 10_000], r"material 'm+'\.\.\.: 10000 characters, over 64"),
+])
+def test_limits_of_a_lab_file_are_named(tmp_path, capsys, damage, options, message):
+    import re
+    f = tmp_path / "lab.csv"
+    lab_file(f)
+    f.write_text(damage(f.read_text()))
+    into = tmp_path / "ds"
+    args = ["dataset", "import", str(f), "--into", str(into), "--columns", COLUMNS,
+            "--units", UNITS, "--material", "glass", "--group", "g", "--object-c", "24",
+            "--pad-c", "34", "--room-c", "22", *options]
+    assert main(args) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "lab.csv" in err and re.search(message, err), err[:500]
+    assert not into.exists()                                       # nothing half-written

@@ -50,6 +50,14 @@ UNITS = {
     "force_N": {"N": (1.0, 0.0), "kN": (1e3, 0.0), "gf": (9.80665e-3, 0.0)},
 }
 REQUIRED = (TIME, "heat_flux_W_m2")
+#: Limits of a lab file (docs/limits.md): its size, a cell's length (the
+#: csv module's own limit, 128 KiB, raised a bare _csv.Error), each
+#: channel's physical range in the dataset's unit (far beyond a pad's:
+#: 1e308 W/m^2 was accepted), and a material's name (a folder of the dataset).
+MAX_CSV_BYTES = 256 * 1024 * 1024
+RANGES = {"t_s": (-1e6, 1e6), "heat_flux_W_m2": (-1e6, 1e6), "temperature_C": (-273.15, 1000.0),
+          "force_N": (-1e5, 1e5)}
+MAX_MATERIAL_CHARS = 64
 MCAP_MAGIC = b"\x89MCAP"
 #: The per-trial values a manifest of lab files may give, by the names the
 #: project's own manifest uses.
@@ -102,6 +110,7 @@ def read_lab_csv(path: str | Path, spec: CsvSpec) -> dict[str, np.ndarray]:
     """The file's mapped channels in the dataset's names and units, in file
     order (time not yet shifted to the contact)."""
     path = Path(path)
+    _check_size(path)
     try:
         text = path.read_bytes().decode("utf-8-sig")           # a BOM is dropped
     except UnicodeDecodeError as exc:
@@ -115,7 +124,12 @@ def read_lab_csv(path: str | Path, spec: CsvSpec) -> dict[str, np.ndarray]:
     delimiter = ";" if lines[0].count(";") > lines[0].count(",") else \
         "\t" if "\t" in lines[0] else ","
     decimal_comma = delimiter != ","
-    rows = list(csv.reader(lines, delimiter=delimiter))
+    rows = []
+    try:
+        for row in csv.reader(lines, delimiter=delimiter):
+            rows.append(row)
+    except csv.Error as exc:                     # a cell over csv's 128 KiB, a stray quote
+        raise DatasetError(f"{path} line {file_line[len(rows)]}: not CSV: {exc}") from None
     header = [h.strip() for h in rows[0]]
     wanted = {name: spec.columns.get(name, name) for name in UNITS}
     missing = [f"{n} (column {c!r})" for n, c in wanted.items() if n in REQUIRED and
@@ -147,7 +161,14 @@ def read_lab_csv(path: str | Path, spec: CsvSpec) -> dict[str, np.ndarray]:
             out[n][k - 1] = value
     for n in out:
         factor, offset = UNITS[n][spec.units.get(n, next(iter(UNITS[n])))]
-        out[n] = out[n] * factor + offset
+        with np.errstate(over="ignore"):           # an overflow is inf, refused below
+            out[n] = out[n] * factor + offset
+        lo, hi = RANGES[n]
+        bad = np.flatnonzero((out[n] < lo) | (out[n] > hi))
+        if bad.size:
+            raise DatasetError(f"{path} line {file_line[bad[0] + 1]}, column "
+                               f"{header[index[n]]!r}: {n} = {out[n][bad[0]]:g} is outside "
+                               f"[{lo:g}, {hi:g}] (docs/limits.md)")
     steps = np.diff(out[TIME])
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0))
@@ -201,10 +222,7 @@ def lab_trial(path: str | Path, spec: CsvSpec, values: dict, index: int) -> Tria
     channels = {TIME: t, **{n: v for n, v in channels.items() if n != TIME}}
     rate = 1.0 / float(np.median(np.diff(t)))
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", path.stem).strip(".") or f"trial-{index}"
-    material = str(values["material"]).strip()
-    if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_ .|+-]*", material) or ".." in material:
-        raise DatasetError(f"{path}: material {material!r}: letters, digits and _ . - + | only "
-                           f"(it names a folder of the dataset)")
+    material = check_material(str(values["material"]).strip(), path)
     trial = Trial("", material, "", round(rate, 6), _number(values, "T_object_C", path),
                   _number(values, "T_pad_C", path), _number(values, "T_room_C", path),
                   str(values["group"]).strip(), extra={"source": path.name}, channels=channels)
@@ -213,6 +231,18 @@ def lab_trial(path: str | Path, spec: CsvSpec, values: dict, index: int) -> Tria
     trial.trial_id = f"{stem}-{trial_digest(trial)[:8]}"
     trial.file = f"{material}/{trial.trial_id}.csv"
     return trial
+
+
+def check_material(material: str, path) -> str:
+    """A material's name as a folder of the dataset: at most
+    ``MAX_MATERIAL_CHARS`` of letters, digits and ``_ . - + |``."""
+    if len(material) > MAX_MATERIAL_CHARS:
+        raise DatasetError(f"{path}: material {material[:32]!r}...: {len(material)} characters, "
+                           f"over {MAX_MATERIAL_CHARS} (it names a folder of the dataset)")
+    if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_ .|+-]*", material) or ".." in material:
+        raise DatasetError(f"{path}: material {material!r}: letters, digits and _ . - + | only "
+                           f"(it names a folder of the dataset)")
+    return material
 
 
 def _option(key: str) -> str:
@@ -233,6 +263,26 @@ def read_lab_manifest(path: str | Path) -> dict[str, dict]:
     """A lab's manifest: ``file`` and any of ``PER_TRIAL`` per row; the
     files relative to the manifest. Returns {resolved file path: values}."""
     path = Path(path)
+    _check_size(path)
+    try:
+        return _manifest_rows(path)
+    except csv.Error as exc:
+        raise DatasetError(f"{path}: not CSV: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+
+
+def _check_size(path: Path) -> None:
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read: {exc}") from exc
+    if size > MAX_CSV_BYTES:
+        raise DatasetError(f"{path}: {size} bytes, over the {MAX_CSV_BYTES}-byte limit of a "
+                           "lab file (docs/limits.md)")
+
+
+def _manifest_rows(path: Path) -> dict[str, dict]:
     with path.open(newline="", encoding="utf-8-sig") as fh:
         reader = csv.DictReader(fh)
         header = [h.strip() for h in reader.fieldnames or []]

@@ -25,10 +25,10 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.special import log_softmax
 
-from telethermal.errors import IdentificationError
+from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts, normalise
 from telethermal.ident.rule import AnytimeRule
-from telethermal.npzfile import read_npz, write_npz
+from telethermal.npzfile import check_names, read_npz, write_npz
 
 FORMAT_VERSION = 1
 
@@ -432,5 +432,46 @@ class Identifier:
 
 
 def read_model_file(path: str | Path) -> tuple[dict, dict]:
-    """Header and arrays of a model file, with clear errors for anything else."""
-    return read_npz(path, "telethermal-identifier", FORMAT_VERSION, "model")
+    """Header and arrays of a model file, with clear errors for anything else
+    (the limits of ``docs/limits.md``, checked before anything runs)."""
+    header, arrays = read_npz(path, "telethermal-identifier", FORMAT_VERSION, "model")
+    check_identifier_header(Path(path), header)
+    return header, arrays
+
+
+def _number(path: Path, value, field: str, lo: float, hi: float, open_lo=True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not (lo < float(value) if open_lo else lo <= float(value)) or not float(value) <= hi:
+        raise ModelFileError(f"{path}: {field} must be a number in {'(' if open_lo else '['}"
+                             f"{lo:g}, {hi:g}], got {str(value)[:64]}")
+    return float(value)
+
+
+def check_identifier_header(path: Path, header: dict) -> None:
+    """What an identifier's header must hold before it is restored: its
+    classes and channels (names of at most 256 bytes), a sample rate, its
+    windows, temperatures, a threshold in (0, 1], learned values named as
+    learned attributes (ending in ``_``)."""
+    check_names(path, header.get("classes"), "classes", "model")
+    check_names(path, header.get("channels"), "channels", "model")
+    _number(path, header.get("sample_rate_hz"), "sample_rate_hz", 0.0, 1e6)
+    windows = header.get("windows_s")
+    if not isinstance(windows, list) or not windows:
+        raise ModelFileError(f"{path}: windows_s must be a non-empty list of times")
+    for i, w in enumerate(windows):
+        _number(path, w, f"windows_s[{i}]", 0.0, 3600.0, open_lo=False)
+    temperature = header.get("temperature")
+    for i, t in enumerate(temperature if isinstance(temperature, list) else [temperature]):
+        _number(path, t, f"temperature[{i}]", 0.0, 1e12)
+    hyper = header.get("hyper")
+    if not isinstance(hyper, dict):
+        raise ModelFileError(f"{path}: hyper must be a map of the method's settings")
+    if "threshold" in hyper:
+        _number(path, hyper["threshold"], "hyper.threshold", 0.0, 1.0)
+    learned = header.get("learned") or {}
+    if not isinstance(learned, dict):
+        raise ModelFileError(f"{path}: learned must be a map")
+    for key in learned:
+        if not (key.isidentifier() and key.endswith("_") and not key.startswith("_")):
+            raise ModelFileError(f"{path}: learned.{key[:64]}: not a learned value's name "
+                                 "(a learned attribute's name ends in '_')")

@@ -15,7 +15,6 @@ import dataclasses
 import difflib
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -26,6 +25,7 @@ from telethermal.physics.materials import (get_material, load_materials, read_ta
                                            register_materials, shadowed_by,
                                            unregister_materials)
 from telethermal.physics.model import ModelChoice, choose_model
+from telethermal.physics.scenefile import MAX_OBJECTS, UPPER_BOUNDS, parse_toml, read_scene_text
 from telethermal.physics.scenereader import TableReader as _Reader
 from telethermal.physics.scenereader import read_layers, read_material
 
@@ -263,6 +263,9 @@ OBJECT_THICKNESS_RANGE_M = (1e-6, 10.0)
 def _parse_objects(items, source, room_c) -> tuple[ObjectSpec, ...]:
     if not isinstance(items, list) or not items:
         raise SceneError(f"{source}: at least one [[objects]] table is needed")
+    if len(items) > MAX_OBJECTS:
+        raise SceneError(f"{source}: {len(items)} [[objects]], over the limit of {MAX_OBJECTS} "
+                         "(docs/limits.md: each is modelled at load)")
     objects = []
     for i, table in enumerate(items):
         r = _Reader(table, f"[[objects]] #{i + 1}", source)
@@ -327,9 +330,10 @@ def _parse_dataclass(cls, table, where, source):
         if f == "object_thermometer":
             values[f] = r.text(f, default, choices=THERMOMETER_KINDS)
         else:
-            values[f] = r.num(f, default, lo=0)
+            values[f] = r.num(f, default, lo=0, hi=UPPER_BOUNDS.get(f, 1e6))
     r.done()
     return cls(**values)
+
 
 
 def parse_scene(data: dict, source: str = "<scene>") -> Scene:
@@ -355,7 +359,7 @@ def _parse_scene(data: dict, source: str, own_table: str | None) -> Scene:
     tolerance = mr.num("tolerance_rel", 1e-3, 1e-9, 0.5)
     mr.done()
     scene = Scene(
-        name=r.text("name"), description=r.text("description", ""),
+        name=r.text("name"), description=r.text("description", "", max_bytes=4096),
         room_temp_c=room, sample_rate_hz=r.num("sample_rate_hz", lo=1, hi=1e6),
         pre_contact_s=r.num("pre_contact_s", 0.5, 0, 60),
         pad=_parse_pad(data["pad"], source),
@@ -431,7 +435,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
             raise SceneError(f"scene file {path} does not exist" + (
                 f" (did you mean {path.parent / near[0]}?)" if near else "") +
                 ("" if path.suffix == ".toml" else "; a scene file ends in .toml"))
-        text, source, ref = path.read_text(), str(path), str(path.resolve())
+        text, source, ref = read_scene_text(path), str(path), str(path.resolve())
         from_file = True
     else:
         if name not in shipped:
@@ -441,10 +445,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
                 f"; shipped scenes: {', '.join(shipped)}; or give a scene file's path (.toml)")
         text, source = _shipped().joinpath(f"{name}.toml").read_text(), f"{name}.toml"
         ref, from_file = name, False
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{source}: not valid TOML: {exc}") from exc
+    data = parse_toml(text, source)
     scene = dataclasses.replace(parse_scene(data, source), ref=ref)
     if from_file:
         _FILES_BY_NAME[scene.name] = scene

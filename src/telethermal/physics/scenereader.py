@@ -12,6 +12,10 @@ from telethermal.physics.layered import Layer
 from telethermal.physics.materials import get_material, object_materials
 
 
+#: A name's length in UTF-8 bytes: the wire caps every string at 256.
+MAX_NAME_BYTES = 256
+
+
 class TableReader:
     """Pulls typed, range-checked values out of a TOML table, naming the key."""
 
@@ -31,15 +35,21 @@ class TableReader:
             self.fail(f"'{key}' must be a number, got {value!r}")
         if integer and int(value) != value:
             self.fail(f"'{key}' must be a whole number, got {value!r}")
-        if not (lo <= value <= hi) or math.isnan(value):
-            self.fail(f"'{key}' = {value} is outside [{lo}, {hi}]")
+        if not (lo <= value <= hi) or not math.isfinite(value):
+            self.fail(f"'{key}' = {value} is outside [{lo}, {hi}]" if math.isfinite(value)
+                      else f"'{key}' = {value}: a number must be finite")
         return int(value) if integer else float(value)
 
-    def text(self, key, default=None, choices=None):
+    def text(self, key, default=None, choices=None, max_bytes=MAX_NAME_BYTES):
+        """A string of at most ``max_bytes`` UTF-8 bytes (a name: the wire's
+        cap on a string, 256)."""
         self.used.add(key)
         value = self.table.get(key, default)
         if not isinstance(value, str):
-            self.fail(f"'{key}' must be a string, got {value!r}")
+            self.fail(f"'{key}' must be a string, got {str(value)[:64]!r}")
+        if len(value.encode("utf-8")) > max_bytes:
+            self.fail(f"'{key}' is {len(value.encode('utf-8'))} bytes long, over the "
+                      f"{max_bytes}-byte limit (docs/limits.md)")
         if choices and value not in choices:
             self.fail(f"'{key}' = {value!r}; expected one of {', '.join(choices)}")
         return value

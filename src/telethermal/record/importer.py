@@ -27,6 +27,8 @@ def trials_from_recording(path, material: str | None = None, group: str = "recor
     if not label:
         raise DatasetError(f"{path}: the recording does not say which material was touched; "
                            "pass --material")
+    from telethermal.data.csv_import import check_material
+    label = check_material(str(label), path)
     samples = rec.messages("/slave/samples")
     if not samples:
         raise DatasetError(f"{path}: no slave samples recorded (role {rec.role!r})")

@@ -31,7 +31,7 @@ from telethermal.data.dataset import Trial
 from telethermal.errors import IdentificationError, ModelFileError
 from telethermal.ident.lm import MLP, train_lm
 from telethermal.ident.prepare import FLUX, MIN_GAP_K
-from telethermal.npzfile import read_npz, write_npz
+from telethermal.npzfile import check_names, read_npz, write_npz
 from telethermal.physics.materials import get_material
 from telethermal.render.sampled import SampledGenerator
 
@@ -300,8 +300,28 @@ def load_generator(path: str | Path):
                               "generator")
     cls = GENERATORS.get(header.get("kind"))
     if cls is None:
-        raise ModelFileError(f"{path}: unknown generator kind {header.get('kind')!r}")
+        raise ModelFileError(f"{path}: unknown generator kind {str(header.get('kind'))[:64]!r}")
     try:
-        return cls._restore(header, arrays)
-    except (KeyError, TypeError, ValueError) as exc:
+        gen = cls._restore(header, arrays)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFileError(f"{path}: generator file is incomplete: {exc}") from exc
+    check_names(Path(path), list(gen.materials), "materials", "generator")
+    _check_runs(Path(path), gen)
+    return gen
+
+
+def _check_runs(path: Path, gen) -> None:
+    """The restored generator run once per material on its own time range:
+    finite curves, or a ModelFileError naming the material (weights of
+    mismatched shapes, a zero scale), before anything uses it."""
+    t_s = np.linspace(1e-3, 1.0, 8)
+    for material in gen.materials:
+        try:
+            curve = np.asarray(gen.normalised(material, t_s), dtype=float)
+        except (ValueError, TypeError, ZeroDivisionError, FloatingPointError) as exc:
+            raise ModelFileError(f"{path}: material {material!r}: the generator cannot run: "
+                                 f"{exc}") from exc
+        if curve.shape != t_s.shape or not np.isfinite(curve).all():
+            raise ModelFileError(f"{path}: material {material!r}: the generator gives "
+                                 f"{'non-finite values' if curve.shape == t_s.shape else 'shape ' + str(curve.shape)}"
+                                 f" (weights or scales out of range)")
