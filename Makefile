@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 OUT ?= out
 TT := $(VENV)/bin/telethermal
 
-.PHONY: demo test test-all docs bench bench-quick bench-full clean
+.PHONY: demo test test-all docs fuzz bench bench-quick bench-full clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +33,12 @@ test-all: $(STAMP)
 # The docs site (mkdocs.yml) into $(OUT)/site, warnings as errors.
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir $(OUT)/site
+
+# The fuzz suite's long profile (tests/fuzz/fuzzing.py: 2000 cases per
+# reader, bounded by count, not time); prints the cases per reader, their
+# outcomes and the loads' peak memory. `make test` runs its short profile.
+fuzz: $(STAMP)
+	TELETHERMAL_FUZZ=long $(PY) -m pytest tests/fuzz -q -s
 
 # The benches, in the report's order, in three sizes (each bench's own
 # options: fewer methods, seeds, trials, rounds or settings; each JSON keeps

@@ -34,6 +34,19 @@ def fuzz_settings(scale: float = 1.0) -> settings:
 
 #: reader -> outcome -> cases ("served", "refused", ...).
 TALLY: dict[str, Counter] = defaultdict(Counter)
+#: reader -> {"largest": (peak bytes, file bytes) of the load with the
+#: largest peak; "ratio": (peak / size, peak, size) of the largest ratio
+#: among files of at least RATIO_FROM_BYTES (below, the fixed cost of a
+#: load, tens of KB, is no ratio to speak of)}.
+PEAKS: dict[str, dict] = defaultdict(dict)
+RATIO_FROM_BYTES = 4096
+
+
+def keep_peak(reader: str, peak: int, size: int) -> None:
+    kept = PEAKS[reader]
+    kept["largest"] = max(kept.get("largest", (0, 0)), (peak, size))
+    if size >= RATIO_FROM_BYTES:
+        kept["ratio"] = max(kept.get("ratio", (0.0, 0, 0)), (round(peak / size, 2), peak, size))
 
 
 @atexit.register
@@ -42,7 +55,8 @@ def _report() -> None:
     conftest is imported by name), the tally printed and written."""
     if not TALLY:
         return
-    stats = {"profile": PROFILE, "readers": {k: dict(v) for k, v in sorted(TALLY.items())}}
+    stats = {"profile": PROFILE, "readers": {k: dict(v) for k, v in sorted(TALLY.items())},
+             "peak_memory": {k: v for k, v in sorted(PEAKS.items())}}
     print("\nfuzz", json.dumps(stats))
     path = os.environ.get("TELETHERMAL_FUZZ_STATS")
     if path:

@@ -125,12 +125,15 @@ def _replay_one(args, touch: int, out: Path) -> None:
               "with (a lab's recording, or a slave's)")
     if "periods" in s:
         verdict = "identical to the recording, sample for sample" if s["identical"] else \
+            "not compared whole: the recording is damaged" if s.get("damaged") else \
             f"junction differs from the recording by up to {s['junction_max_abs_diff_c']:.3g} K"
         print(f"{s['periods']} periods replayed: {verdict}")
     if s.get("slave"):
         sl = s["slave"]
         print(f"slave: now {sl['identified']} at {sl['decision_time_s']}, recorded "
               f"{sl['recorded_identified']} at {sl['recorded_decision_time_s']}")
+    if s.get("damaged"):
+        print(f"the recording is damaged (what could not be read was skipped): {s['damaged']}")
     if s["truncated"]:
         print(f"the recording was cut: read up to the cut ({s['truncated']})")
     for note in s["notes"]:

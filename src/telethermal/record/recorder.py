@@ -118,6 +118,8 @@ class SessionRecorder:
         self._k = 0
         self.contact_id = 0
         self._cols = {k: [] for k in PERIOD_FIELDS}
+        #: The slave's stream: (contact_id, pad, samples logged, estimates logged).
+        self._slave_at: tuple = (None, None, 0, 0)
 
     @classmethod
     def open(cls, path, scene, material, identifier, generator, config, operator, idle_c,
@@ -178,16 +180,40 @@ class SessionRecorder:
     def wire(self, t_s: float, direction: str, message: dict) -> None:
         self.rec.log(f"/wire/{direction}/{message['kind']}", t_s, _plain(message))
 
-    def slave(self, slave, contact_id: int = 0) -> None:
+    def slave_stream(self, slave, contact_id: int = 0, final: bool = False) -> None:
+        """The pad's samples and estimates as they come: the samples read
+        since the last batch once they span ``PERIOD_BATCH_S`` (or at once,
+        ``final``), each new estimate at once. A new ``contact_id`` (or a new
+        pad) starts from its first sample."""
+        if (contact_id, id(slave)) != self._slave_at[:2]:
+            self._slave_at = (contact_id, id(slave), 0, 0)
+        k0, e0 = self._slave_at[2:]
         n = slave.samples_read
-        self.rec.log("/slave/samples", 0.0, {
-            **{k: [float(v) for v in np.asarray(c)[:n]] for k, c in slave.channels.items()},
-            "contact_id": contact_id, "object_ir_c": slave.object_ir_c,
-            "object_true_c": slave.object_true_c, "pad_before_c": slave.pad_before_c,
-            "gap_k": slave.gap_k})
-        for ev in slave.events:
+        t_s = slave.channels.get("t_s")
+        if n > k0 and (final or t_s is None or
+                       t_s[n - 1] - t_s[k0] >= PERIOD_BATCH_S * (1.0 - 1e-6)):
+            self.rec.log("/slave/sample_batch", float(t_s[k0]) if t_s is not None else 0.0, {
+                **{k: [float(v) for v in np.asarray(c)[k0:n]] for k, c in slave.channels.items()},
+                "contact_id": contact_id, "k0": k0, **self._slave_scalars(slave)})
+            k0 = n
+        for ev in slave.events[e0:]:
             self.rec.log("/slave/estimates", ev.t_s, {"contact_id": contact_id, "t_s": ev.t_s,
                                                       "estimate": _estimate(ev.estimate)})
+        self._slave_at = (contact_id, id(slave), k0, len(slave.events))
+
+    @staticmethod
+    def _slave_scalars(slave) -> dict:
+        return {"object_ir_c": slave.object_ir_c, "object_true_c": slave.object_true_c,
+                "pad_before_c": slave.pad_before_c, "gap_k": slave.gap_k}
+
+    def slave(self, slave, contact_id: int = 0) -> None:
+        """The contact's end: what is left of its samples and estimates, and
+        its final values (``/slave/contact_end``)."""
+        self.slave_stream(slave, contact_id, final=True)
+        self.rec.log("/slave/contact_end", 0.0, {"contact_id": contact_id,
+                                                 "samples": slave.samples_read,
+                                                 **self._slave_scalars(slave)})
+        self._slave_at = (None, None, 0, 0)
 
     def touch_end(self, summary: dict, trace: dict) -> None:
         self._flush_periods()

@@ -7,8 +7,13 @@ other; the index at the end is optional), it is self-describing (a schema
 per channel, metadata and attachments in the file) and other tools open it
 (the ``mcap`` CLI, Foxglove). An HDF5 file cut mid-write is usually not
 readable at all, and HDF5's writer is not built for a streaming log. The
-files are written unchunked, so everything written before a cut is
-readable (at most the record being written is lost).
+messages are written in uncompressed chunks, each with the CRC of its
+records, closed and flushed to the file every ``FLUSH_S`` (0.1 s) while
+messages come: a process killed mid-write loses at most the last 0.1 s of
+what it had queued. Reading (:mod:`telethermal.record.mcapread`) checks each
+chunk's CRC, skips and counts what is damaged and goes on; the ``mcap``
+library's non-seeking reader reads a cut file up to the cut, and its
+seeking reader (``make_reader``) reads every file that was closed.
 
 Layout of a recording (one file per host and run):
 
@@ -20,7 +25,9 @@ Layout of a recording (one file per host and run):
 * one channel per topic, message encoding ``msgpack``, each with a JSON
   schema (``jsonschema``) of its fields. Topics: ``/<role>/period`` (one per
   control period), ``/<role>/news`` (what the master knew of the slave,
-  when it changed), ``/<role>/samples`` (the slave pad's samples),
+  when it changed), ``/slave/sample_batch`` (the slave pad's samples as
+  they come, 20 ms a batch; read back as one ``/slave/samples`` message per
+  contact), ``/slave/contact_end`` (a contact's end),
   ``/<role>/wire/<kind>`` (protocol messages sent and received), ``/<role>/touch``
   (a touch's summary).
 
@@ -43,16 +50,23 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgpack
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from telethermal.errors import TelethermalError
+from telethermal.record.mcapread import MAX_RECORDING_BYTES, Damage, iter_records
 
 log = logging.getLogger(__name__)
 
 RECORDING_VERSION = 1
-#: Messages written between two flushes by the writer thread.
+#: Messages written at a time by the writer thread (it yields between).
 SLICE = 16
+#: The writer closes its chunk (CRC'd) and flushes it to the file at least
+#: this often while messages come: a process killed with -9 loses at most
+#: the messages queued in the last FLUSH_S (plus what its caller had not
+#: yet handed over: a master's or a slave's batch, 20 ms).
+FLUSH_S = 0.1
+#: A chunk is also closed when it reaches this size.
+CHUNK_BYTES = 256 * 1024
 PROFILE = "telethermal"
 
 
@@ -80,6 +94,10 @@ TOPIC_FIELDS = {
              "classes": "array", "setpoint_w_m2": "number", "link_ok": "boolean"},
     "samples": {"t_s": "array", "heat_flux_W_m2": "array", "temperature_C": "array",
                 "force_N": "array"},
+    "sample_batch": {"contact_id": "integer", "k0": "integer", "t_s": "array",
+                     "heat_flux_W_m2": "array", "temperature_C": "array", "force_N": "array"},
+    "contact_end": {"contact_id": "integer", "samples": "integer", "object_ir_c": "number",
+                    "pad_before_c": "number", "gap_k": "number"},
     "touch": {"summary": "object"},
     "thermometer_calibration": {"calibrated": "boolean", "offset_k": "number", "gain": "number",
                                 "residual_k": "number", "offset_sd_k": "number",
@@ -106,8 +124,8 @@ class Recorder:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = _open(self.path, "wb")
-            self._writer = Writer(self._file, use_chunking=False,
-                                  compression=CompressionType.NONE)
+            self._writer = Writer(self._file, chunk_size=CHUNK_BYTES,
+                                  compression=CompressionType.NONE, enable_crcs=True)
             self._writer.start(profile=PROFILE, library=f"telethermal {__version__}")
             self._writer.add_metadata("telethermal", {
                 "recording_version": str(RECORDING_VERSION),
@@ -118,7 +136,7 @@ class Recorder:
                                                                     default=str)})
             for name, data in (attachments or {}).items():
                 self._writer.add_attachment(0, 0, name, "application/octet-stream", data)
-            self._file.flush()
+            self._writer.flush()
         except OSError as exc:
             if self._file is not None:   # opened, then its start could not be written:
                 try:                     # nothing half-written is left behind
@@ -144,6 +162,15 @@ class Recorder:
             return False
         self.counters["queued"] += 1
         return True
+
+    def sync(self, timeout_s: float = 10.0) -> bool:
+        """Wait until everything queued so far is written and flushed (its
+        chunk closed): what a ``kill -9`` after this returns cannot lose."""
+        done = threading.Event()
+        if self._closed or self.error is not None:
+            return False
+        self._queue.put(done)
+        return done.wait(timeout_s)
 
     def close(self) -> dict:
         """Write what is queued, the summary, and close; returns the counters
@@ -189,37 +216,59 @@ class Recorder:
         log.error("%s; the session goes on without it", self.error)
 
     def _run(self) -> None:
-        """Drain the queue in slices of ``SLICE`` messages, flushing (a system
-        call, which lets the control loop's thread have the GIL) after each,
-        so the loop never waits behind a long encoding run."""
+        """Drain the queue in slices of ``SLICE`` messages (yielding the GIL
+        between them, so the loop never waits behind a long encoding run);
+        close the chunk and flush it to the file every ``FLUSH_S`` while
+        messages come, at once when the queue runs dry, and on ``sync``."""
+        last_flush, pending = time.monotonic(), False
         while True:
-            item = self._queue.get()
-            batch = [item]
-            while item is not None and len(batch) < SLICE:
+            try:
+                item = self._queue.get(timeout=FLUSH_S)
+            except queue.Empty:
+                item = []                         # nothing new: flush what is pending
+            batch = [item] if item != [] else []
+            while item is not None and not isinstance(item, threading.Event) and \
+                    len(batch) < SLICE:
                 try:
                     item = self._queue.get_nowait()
                 except queue.Empty:
                     break
                 batch.append(item)
-            if self.error is None:
-                try:
-                    for entry in batch:
-                        if entry is None:
-                            break
-                        topic, t_s, message = entry
-                        t_ns = max(0, int(t_s * 1e9))
-                        self._writer.add_message(self._channel(topic), t_ns,
-                                                 msgpack.packb(message, use_bin_type=True),
-                                                 t_ns)
-                        self.counters["written"] += 1
-                    self._file.flush()
-                except (OSError, ValueError, TypeError) as exc:
-                    self._fail(exc)
-            else:
-                self.counters["dropped_after_error"] += sum(e is not None for e in batch)
-            if batch[-1] is None:
+            pending = self._write(batch) or pending
+            now = time.monotonic()
+            if pending and (not batch or now - last_flush >= FLUSH_S or
+                            isinstance(batch[-1], threading.Event)):
+                self._flush()
+                last_flush, pending = now, False
+            if batch and isinstance(batch[-1], threading.Event):
+                batch[-1].set()
+            if batch and batch[-1] is None:
                 return
             time.sleep(0)                        # and yield the GIL between slices
+
+    def _write(self, batch: list) -> bool:
+        """The messages of ``batch`` (up to a None or a sync marker) into the
+        open chunk; whether any was written."""
+        entries = [e for e in batch if isinstance(e, tuple)]
+        if self.error is not None:
+            self.counters["dropped_after_error"] += len(entries)
+            return False
+        try:
+            for topic, t_s, message in entries:
+                t_ns = max(0, int(t_s * 1e9))
+                self._writer.add_message(self._channel(topic), t_ns,
+                                         msgpack.packb(message, use_bin_type=True), t_ns)
+                self.counters["written"] += 1
+        except (OSError, ValueError, TypeError, OverflowError) as exc:
+            self._fail(exc)
+        return bool(entries)
+
+    def _flush(self) -> None:
+        if self.error is None:
+            try:
+                self._writer.flush()              # the chunk closed with its CRC, written
+            except OSError as exc:
+                self._fail(exc)
 
 
 @dataclass
@@ -230,6 +279,22 @@ class Recording:
     topics: dict[str, list[tuple[float, dict]]] = field(default_factory=dict)
     truncated: str | None = None        # why reading stopped early, if it did
     notes: list[str] = field(default_factory=list)
+    damage: Damage = field(default_factory=Damage)     # chunks and bytes skipped
+    bad_messages: int = 0               # messages that did not unpack, skipped
+
+    @property
+    def damaged(self) -> str | None:
+        """What was skipped, in words (None: nothing): such a recording is
+        never replayed as identical."""
+        d, parts = self.damage, []
+        if d.corrupt_chunks:
+            parts.append(f"{len(d.corrupt_chunks)} chunk(s) failed their CRC "
+                         f"({'; '.join(d.corrupt_chunks[:3])})")
+        if d.skipped_bytes:
+            parts.append(f"{d.skipped_bytes} unreadable bytes skipped")
+        if self.bad_messages:
+            parts.append(f"{self.bad_messages} message(s) did not unpack")
+        return "; ".join(parts) or None
 
     @property
     def role(self) -> str:
@@ -237,7 +302,13 @@ class Recording:
 
     @property
     def config(self) -> dict:
-        return json.loads(self.metadata.get("config", {}).get("json", "{}"))
+        try:
+            config = json.loads(self.metadata.get("config", {}).get("json", "{}"))
+        except (ValueError, RecursionError) as exc:
+            raise RecordingError(f"{self.path}: its config metadata is not JSON: {exc}") from exc
+        if not isinstance(config, dict):
+            raise RecordingError(f"{self.path}: its config metadata is not a JSON object")
+        return config
 
     def messages(self, topic: str) -> list[dict]:
         return [m for _, m in self.topics.get(topic, [])]
@@ -245,7 +316,10 @@ class Recording:
 
 def read_recording(path: str | Path) -> Recording:
     """Everything readable in ``path``. A file cut mid-write is read up to
-    the cut (``truncated`` says where it stopped); a file of another
+    the cut (``truncated`` says where it stopped); a chunk whose CRC fails
+    or a record that does not parse is skipped, counted and named in
+    ``damage`` (the records after it are read); a message that does not
+    unpack is skipped and counted (``bad_messages``). A file of another
     recording version, or not a recording, is a :class:`RecordingError`."""
     from mcap.records import Attachment, Channel, Message, Metadata
 
@@ -253,35 +327,86 @@ def read_recording(path: str | Path) -> Recording:
     rec = Recording(path)
     channels: dict[int, str] = {}
     try:
-        stream = open(path, "rb")
+        size = path.stat().st_size
+        if size > MAX_RECORDING_BYTES:
+            raise RecordingError(f"{path}: {size} bytes, over the {MAX_RECORDING_BYTES}-byte "
+                                 "limit of a recording (docs/limits.md)")
+        data = path.read_bytes()
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc}") from exc
-    with stream:
-        try:
-            for record in StreamReader(stream).records:
-                if isinstance(record, Metadata):
-                    rec.metadata[record.name] = dict(record.metadata)
-                    if record.name == "telethermal":
-                        rec.notes += _check_version(path, record.metadata)
-                elif isinstance(record, Attachment):
-                    rec.attachments[record.name] = bytes(record.data)
-                elif isinstance(record, Channel):
-                    channels[record.id] = record.topic
-                elif isinstance(record, Message):
-                    topic = channels.get(record.channel_id)
-                    if topic is None:
-                        continue
-                    rec.topics.setdefault(topic, []).append(
-                        (record.log_time / 1e9, msgpack.unpackb(record.data, raw=False)))
-        except RecordingError:
-            raise
-        except Exception as exc:                # noqa: BLE001 - any damage: stop at the cut
-            if "telethermal" not in rec.metadata:
-                raise RecordingError(f"{path} is not a telethermal recording: {exc}") from exc
-            rec.truncated = f"{type(exc).__name__}: {exc}"
+    try:
+        for record in iter_records(data, rec.damage):
+            if isinstance(record, Metadata):
+                rec.metadata[record.name] = dict(record.metadata)
+                if record.name == "telethermal":
+                    rec.notes += _check_version(path, record.metadata)
+            elif isinstance(record, Attachment):
+                rec.attachments[record.name] = bytes(record.data)
+            elif isinstance(record, Channel):
+                channels[record.id] = record.topic
+            elif isinstance(record, Message):
+                _add_message(rec, channels.get(record.channel_id), record)
+    except ValueError as exc:                   # no MCAP magic
+        raise RecordingError(f"{path} is not a telethermal recording: {exc}") from exc
     if "telethermal" not in rec.metadata:
         raise RecordingError(f"{path} is not a telethermal recording (no telethermal metadata)")
+    rec.truncated = rec.damage.cut
+    for what in rec.damage.corrupt_chunks:
+        log.warning("%s: %s: its records skipped", path, what)
+    if rec.damage.skipped_bytes:
+        log.warning("%s: %d unreadable bytes skipped", path, rec.damage.skipped_bytes)
+    merge_sample_batches(rec)
     return rec
+
+
+def _add_message(rec: Recording, topic: str | None, record) -> None:
+    """One message into ``rec.topics``; a message on no known channel or
+    that does not unpack to a map is skipped and counted."""
+    try:
+        if topic is None:
+            raise ValueError(f"channel {record.channel_id} was never announced")
+        message = msgpack.unpackb(record.data, raw=False)
+        if not isinstance(message, dict):
+            raise ValueError(f"a {type(message).__name__}, not a map")
+    except (ValueError, msgpack.exceptions.ExtraData, msgpack.exceptions.FormatError,
+            msgpack.exceptions.StackError, TypeError) as exc:
+        rec.bad_messages += 1
+        if rec.bad_messages <= 3:
+            log.warning("%s: message on %s at %d ns skipped: %s", rec.path, topic,
+                        record.log_time, exc)
+        return
+    rec.topics.setdefault(topic, []).append((record.log_time / 1e9, message))
+
+
+def merge_sample_batches(rec: Recording) -> None:
+    """The slave's streamed batches (``/slave/sample_batch``) as one
+    ``/slave/samples`` message per contact, as older recordings hold it: its
+    channels concatenated in order, its scalars from ``/slave/contact_end``
+    (or, for a contact cut mid-touch, from its last batch: noted)."""
+    batches = rec.topics.pop("/slave/sample_batch", [])
+    ends = {m.get("contact_id"): m for m in rec.messages("/slave/contact_end")}
+    by_contact: dict = {}
+    for t_s, m in batches:
+        by_contact.setdefault(m.get("contact_id", 0), []).append((t_s, m))
+    for cid, items in by_contact.items():
+        items.sort(key=lambda x: x[1].get("k0", 0))
+        merged: dict = {}
+        k = 0
+        for _, m in items:
+            if m.get("k0") != k:
+                rec.notes.append(f"contact {cid}: samples {k}-{m.get('k0')} missing "
+                                 "(a damaged part of the file)")
+            for key, value in m.items():
+                if isinstance(value, list):
+                    merged.setdefault(key, []).extend(value)
+                    k = m.get("k0", 0) + len(value)
+        last = ends.get(cid)
+        if last is None:
+            last = items[-1][1]
+            rec.notes.append(f"contact {cid}: cut mid-touch; {k} samples up to the cut")
+        merged.update({key: v for key, v in last.items() if not isinstance(v, list)})
+        merged["contact_id"] = cid
+        rec.topics.setdefault("/slave/samples", []).append((items[0][0], merged))
 
 
 def _check_version(path: Path, meta: dict) -> list[str]:

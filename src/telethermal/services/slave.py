@@ -336,6 +336,8 @@ class SlaveService:
 
     def _sample(self, now: float) -> None:
         self._send(self.session.step(now))
+        if self.recorder is not None:           # streamed: a kill -9 keeps what came
+            self.recorder.slave_stream(self.pad, self.contact_id)
 
     def _report(self) -> dict:
         pad = self.pad

@@ -42,8 +42,11 @@ def _estimate_from(x):
     """A recorded estimate (recorder._estimate's list; the effusivity and
     nearest class, x[6:10], in recordings that hold them)."""
     from telethermal.ident.anytime import Estimate
-    return None if x is None else Estimate(x[0], tuple(x[1]), x[2], x[3], x[4], x[5],
-                                           *x[6:10])
+    if x is None:
+        return None
+    if not isinstance(x, list) or len(x) not in (6, 10) or not isinstance(x[1], list):
+        raise ValueError(f"an estimate is a list of 6 or 10 fields, got {str(x)[:64]}")
+    return Estimate(x[0], tuple(x[1]), x[2], x[3], x[4], x[5], *x[6:10])
 
 
 def _same(e):
@@ -68,13 +71,40 @@ def touch_count(path) -> int:
 DIRECT_KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c")
 
 
+#: The fastest display loop a recording may claim (the services run at up
+#: to a few kHz).
+MAX_RATE_HZ = 1e5
+#: What a well-formed recording holding wrong values raises while it is
+#: replayed (a field missing, of the wrong type, of the wrong length or out
+#: of range): each becomes a RecordingError naming the file.
+CONTENT_ERRORS = (KeyError, TypeError, ValueError, AttributeError, IndexError,
+                  ZeroDivisionError, OverflowError, FloatingPointError)
+
+
 def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) -> dict:
     """Re-run the master's rendering (open loop, on the recorded sensor
     readings and news) and the slave's identifier (on the recorded samples)
     of one touch of a recording. ``identifier``/``generator``: models to use
     instead of the recorded ones; ``gains``: a :class:`PidGains` instead of
     the recorded. Returns the replayed series beside the recorded ones and a
-    summary."""
+    summary. A recording whose content is not what the recorder writes is a
+    :class:`RecordingError` naming the file and what was wrong; a damaged
+    one (``Recording.damaged``) is replayed but never called identical."""
+    from telethermal.errors import ModelFileError, TelethermalError
+    try:
+        return _replay(path, identifier, generator, gains, touch)
+    except (RecordingError, ModelFileError):
+        raise
+    except TelethermalError as exc:             # a recorded value a part refused
+        raise RecordingError(f"{path}: holds a value that cannot be replayed: {exc}") from exc
+    except CONTENT_ERRORS as exc:
+        what = f"missing field {exc}" if isinstance(exc, KeyError) else \
+            f"{type(exc).__name__}: {str(exc)[:300]}"
+        raise RecordingError(f"{path}: holds a value the recorder does not write, so it cannot "
+                             f"be replayed ({what})") from exc
+
+
+def _replay(path, identifier, generator, gains, touch: int) -> dict:
     rec = read_recording(path)
     same_models = identifier is None and generator is None
     starts = rec.messages("/master/touch_start")
@@ -102,7 +132,8 @@ def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) ->
             return loader(f)
 
     summary = {"file": str(path), "role": rec.role, "contact_id": cid,
-               "truncated": rec.truncated, "notes": rec.notes, "same_models": same_models}
+               "truncated": rec.truncated, "notes": rec.notes, "same_models": same_models,
+               "damaged": rec.damaged}
     out = recorded = None
     if "display" in params:
         out, recorded, master_summary = _replay_master(rec, params, cid, generator, gains,
@@ -113,6 +144,8 @@ def replay(path, identifier=None, generator=None, gains=None, touch: int = 0) ->
     slave = _replay_slave(rec, cid, identifier, attached)
     if slave is not None:
         summary["slave"] = slave
+    if rec.damaged and summary.get("identical"):
+        summary["identical"] = False            # what was skipped was not compared
     ends = [m for m in rec.messages("/master/touch") if m.get("contact_id", 0) == cid]
     trace = [m for m in rec.messages("/sim/trace") if m.get("contact_id", 0) == cid]
     pad = [m for m in rec.messages("/slave/samples") if m.get("contact_id", 0) == cid]
@@ -162,6 +195,8 @@ def _replay_master(rec, params, cid, generator, gains, attached):
                              f"{d['feedforward_model']!r} controller, which does not use the "
                              "flux PID's gains; replay with other gains needs a touch "
                              "recorded with feedforward_model 'static'")
+    if not 0 < float(d["rate_hz"]) <= MAX_RATE_HZ:
+        raise ValueError(f"display rate_hz {d['rate_hz']} outside (0, {MAX_RATE_HZ:g}]")
     recorded_gains = PidGains(**d["gains"])
     config = DisplayConfig(rate_hz=d["rate_hz"], before=d["before"], source=d["source"],
                            gains=gains or recorded_gains, feedforward=d["feedforward"],
@@ -222,6 +257,10 @@ def _replay_slave(rec, cid, identifier, attached):
     if not samples:
         return None
     s = samples[0]
+    for key in ("object_ir_c", "gap_k", "pad_before_c"):
+        if isinstance(s.get(key), bool) or not isinstance(s.get(key), (int, float)):
+            raise ValueError(f"/slave/samples of contact {cid}: {key} is "
+                             f"{str(s.get(key))[:32]}, not a number")
     identifier = identifier or attached("identifier.npz", load_model)
     channels = {k: v for k, v in s.items() if isinstance(v, list)}
     slave = Slave.from_samples(channels, identifier, s["object_ir_c"], s["gap_k"],
