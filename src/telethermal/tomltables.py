@@ -9,16 +9,51 @@ from pathlib import Path
 
 from telethermal.errors import TelethermalError
 
+#: A TOML file's size, read before parsing (the project's: a few KB).
+MAX_TOML_BYTES = 1024 * 1024
+#: Parts of one dotted key (``a.b.c`` has 3): ``tomllib`` keeps every prefix
+#: of a dotted key, so its memory grows with the square of their number
+#: (a 40 KB key took 1.58 GB).
+MAX_KEY_PARTS = 32
+
+
 def read_toml(path: str | Path, what: str, error=TelethermalError) -> dict:
     """The TOML file at ``path`` (a ``what``: "config file", ...) as a dict;
-    a missing file or bad TOML is ``error``, naming the file."""
+    a missing file, one over ``MAX_TOML_BYTES``, not UTF-8, or bad TOML is
+    ``error``, naming the file (``docs/limits.md``)."""
     path = Path(path)
     if not path.is_file():
         raise error(f"{path}: no such {what}")
+    size = path.stat().st_size
+    if size > MAX_TOML_BYTES:
+        raise error(f"{path}: {size} bytes, over the {MAX_TOML_BYTES}-byte limit of a {what}")
+    data = path.read_bytes()
     try:
-        return tomllib.loads(path.read_text())
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start}: "
+                    f"{data[exc.start:exc.start + 1]!r})") from None
+    return loads_checked(text, str(path), error)
+
+
+def loads_checked(text: str, source: str, error=TelethermalError) -> dict:
+    """``tomllib.loads`` after the dotted keys' check (no key or table header
+    of more than ``MAX_KEY_PARTS`` parts, counted before a line's ``=`` or
+    within its ``[header]``: a quoted key's dots count too, erring on the side
+    of refusing); bad TOML or nesting too deep for the parser is ``error``."""
+    for number, line in enumerate(text.splitlines(), 1):
+        stripped = line.lstrip()
+        key = stripped.split("]", 1)[0] if stripped.startswith("[") else \
+            stripped.split("=", 1)[0] if "=" in stripped else ""
+        if key.count(".") >= MAX_KEY_PARTS:
+            raise error(f"{source}: line {number}: a key of {key.count('.') + 1} dotted parts, "
+                        f"over the limit of {MAX_KEY_PARTS}")
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise error(f"{path}: not valid TOML: {exc}") from exc
+        raise error(f"{source}: not valid TOML: {exc}") from exc
+    except RecursionError as exc:
+        raise error(f"{source}: arrays or tables nested too deep to read") from exc
 
 
 _KINDS = {"int": int, "float": (int, float), "str": str, "bool": bool}
