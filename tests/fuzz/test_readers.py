@@ -24,6 +24,9 @@ from telethermal.render.generator import load_generator
 from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
+#: A load's peak memory (tracemalloc) may be 20 times its file's size, or
+#: this much whatever the file (docs/limits.md): a reader's fixed cost.
+MEMORY_FLOOR_BYTES = 1024 * 1024
 
 
 def mutations(data: bytes):
@@ -72,6 +75,7 @@ def _load(reader: str, load, path, errors) -> None:
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
     keep_peak(reader, peak, size)
+    assert peak <= max(20 * size, MEMORY_FLOOR_BYTES), (reader, peak, size)
 
 
 @pytest.fixture(scope="module")
