@@ -65,8 +65,10 @@ SLICE = 16
 #: the messages queued in the last FLUSH_S (plus what its caller had not
 #: yet handed over: a master's or a slave's batch, 20 ms).
 FLUSH_S = 0.1
-#: A chunk is also closed when it reaches this size.
-CHUNK_BYTES = 256 * 1024
+#: A chunk is also closed when it reaches this size: a file cut anywhere
+#: loses at most this much of what was written before the cut (a writer
+#: faster than real time, an in-process session, fills it before FLUSH_S).
+CHUNK_BYTES = 16 * 1024
 PROFILE = "telethermal"
 
 
