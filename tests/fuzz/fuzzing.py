@@ -15,10 +15,13 @@ from collections import Counter, defaultdict
 
 from hypothesis import HealthCheck, settings
 
+# No example database: each run stands alone (a file made in one run, a
+# model's bytes, is not the next run's, so its saved examples would not replay).
 settings.register_profile("fuzz-short", max_examples=40, deadline=None, derandomize=True,
+                          database=None,
                           suppress_health_check=[HealthCheck.too_slow,
                                                  HealthCheck.data_too_large])
-settings.register_profile("fuzz-long", max_examples=2000, deadline=None,
+settings.register_profile("fuzz-long", max_examples=2000, deadline=None, database=None,
                           suppress_health_check=[HealthCheck.too_slow,
                                                  HealthCheck.data_too_large])
 
