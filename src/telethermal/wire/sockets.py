@@ -124,6 +124,8 @@ class EndpointSockets:
         if cfg.security == "curve":
             allowed = Path(cfg.allowed_dir)
             check_allowed_folder(allowed)        # no other user may add a master
+            # A secret others can read refused before the authenticator starts.
+            load_secret(cfg.keys_dir, cfg.server_key, private=True)
             self._auth = AllowedKeys(self.ctx, allowed, self.counters)
             self._auth.start()
         self.control = self.ctx.socket(zmq.ROUTER)
