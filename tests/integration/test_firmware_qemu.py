@@ -124,6 +124,56 @@ def peltier(images):
         plant.close()
 
 
+class CoreClock:
+    """The Peltier core's clock as its own SLCAN timestamps tell it (the
+    ``tap`` on its TX pin; stamps unwrapped past 60 s): the clock the
+    driver under test judges heartbeats by, so that a stall of this shared
+    host is a stall on both sides, never a timeout on one. ``frames``: every
+    frame the core sent, (core ms, name, signals), cut or not."""
+
+    def __init__(self, core: qemu.QemuCore):
+        self.frames: list[tuple[int, str, dict]] = []
+        self._buf, self._epoch_ms = b"", 0
+        core.tap = self._tap
+        guard = time.monotonic() + 30                     # a hang guard
+        while not self.frames:                            # a heartbeat within 100 ms
+            assert time.monotonic() < guard, "no stamped frame from the core"
+            time.sleep(0.01)
+
+    def _tap(self, uart: int, data: bytes) -> None:
+        if uart != 0:
+            return
+        *lines, self._buf = re.split(rb"[\r\x07]", self._buf + data)
+        for ms, name, signals in firmware.slcan_frames(b"\r".join(lines) + b"\r"):
+            if self.frames and ms + self._epoch_ms < self.frames[-1][0] - 30_000:
+                self._epoch_ms += 60_000                  # the stamps wrap at 60 s
+            self.frames.append((ms + self._epoch_ms, name, signals))
+
+    def __call__(self) -> float:
+        return self.frames[-1][0] / 1000
+
+    def answers_and_trips(self) -> tuple[list[int], list[tuple[int, int]]]:
+        """The core ms of each answer to a command (an enabled status) and
+        each watchdog trip with its delay after the answer before it."""
+        answers, trips = [], []
+        for ms, name, s in self.frames:
+            if name == "PELTIER_STATUS" and s["enabled"]:
+                answers.append(ms)
+            elif name == "PELTIER_STATUS" and s["watchdog"] and answers:
+                trips.append((ms, ms - answers[-1]))
+        return answers, trips
+
+
+def healthy_or_stalled(polls: list[tuple[bool, tuple]], trips: list[tuple[int, int]]) -> bool:
+    """Every poll healthy, save those that saw a watchdog status, provided
+    each trip the core logged came 100 or 101 ms (core clock) after the
+    answer before it: a gap in the commands the core itself timed, which a
+    stall of the shared host makes (the driver cannot tell it from a cut
+    line, and must not trust the element then)."""
+    return all(WATCHDOG_MS <= d <= WATCHDOG_MS + 1 for _, d in trips) and \
+        all(h or faults == ("watchdog",) for h, faults in polls)
+
+
 def test_the_watchdog_disables_the_element_within_100_ms_and_a_period_over_20_trials(
         peltier, images):
     """Bursts of commands at about 100 Hz, then silence, 20 times. Timed by
@@ -148,23 +198,31 @@ def test_the_watchdog_disables_the_element_within_100_ms_and_a_period_over_20_tr
 
 
 def test_python_can_slcan_and_the_projects_driver_trust_the_core(peltier):
-    """``PeltierDriver`` on ``slcan:<pty>`` (python-can's own interface):
-    healthy while it commands, every command answered; the heartbeat stops
-    being operational and ``watchdog`` is flagged once it stops."""
+    """``PeltierDriver`` on ``slcan:<pty>`` (python-can's own interface),
+    judging heartbeats by the core's clock: healthy while it commands
+    (save after a gap the core timed, see :func:`healthy_or_stalled`),
+    every command answered; once commands stop, the core trips 100-101 ms
+    after the last answer (its clock), the heartbeat stops being
+    operational and ``watchdog`` is flagged."""
     core, link, plant = peltier
     link.close()                                  # python-can takes the link
-    driver = PeltierDriver(f"slcan:{core.link_path}")
+    clock = CoreClock(core)
+    driver = PeltierDriver(f"slcan:{core.link_path}", clock=clock)
     try:
-        healthy = []
+        polls = []
         for _ in range(40):
             driver.command(1.25)
-            time.sleep(PERIOD_S)
+            time.sleep(PERIOD_S)                  # pacing only
             driver.poll()
-            healthy.append(driver.healthy)
-        time.sleep(0.3)
-        driver.poll()
+            polls.append((driver.healthy, driver.status.faults if driver.status else None))
+        guard = time.monotonic() + 30             # a hang guard
+        while driver.state != 128 or not driver.status.faults:
+            assert time.monotonic() < guard, (driver.state, driver.status)
+            driver.poll(wait_s=0.02)
         counters = dict(driver.counters)
-        assert all(healthy[15:]), healthy   # from the first heartbeat (100 ms) on
+        answers, trips = clock.answers_and_trips()
+        assert len(answers) == 40 and trips and trips[-1][0] > answers[-1], (answers, trips)
+        assert healthy_or_stalled(polls[15:], trips), (polls, trips)   # from the first heartbeat
         assert driver.status.faults == ("watchdog",) and not driver.status.enabled
         assert not driver.healthy and driver.state == 128
         assert counters["undecodable"] == counters["error_frames"] == 0
@@ -316,30 +374,41 @@ def test_the_board_frames_every_sample_of_the_plant_and_survives_a_truncated_fra
 def test_a_link_cut_mid_touch_puts_the_element_safe_and_the_master_sees_it(peltier):
     """The line between the PC and the core is cut while the driver
     commands 1.25 A: the core's watchdog turns the H-bridge off, the
-    driver hears no heartbeat and stops trusting the actuator (the
-    display's supervisor then holds the safe state); the line back, both
-    recover."""
+    driver (judging heartbeats by the core's clock) hears none for longer
+    than its timeout and stops trusting the actuator (the display's
+    supervisor then holds the safe state); the line back, both recover.
+    The cut lasts 0.7 s of the core's clock, however long the host takes."""
     core, link, plant = peltier
     link.close()
-    driver = PeltierDriver(f"slcan:{core.link_path}")
+    clock = CoreClock(core)
+    driver = PeltierDriver(f"slcan:{core.link_path}", clock=clock)
     try:
-        def run(periods: int) -> list[bool]:
+        def run(periods: int = 1) -> list[tuple[bool, tuple | None]]:
             out = []
             for _ in range(periods):
                 driver.command(1.25)
-                time.sleep(PERIOD_S)
+                time.sleep(PERIOD_S)              # pacing only
                 driver.poll()
-                out.append(driver.healthy)
+                out.append((driver.healthy, driver.status.faults if driver.status else None))
             return out
 
         before = run(30)
         core.cut.add(0)
-        cut = run(70)                     # about 0.7 s of commands into the void
+        cut_s, guard = clock(), time.monotonic() + 60          # a hang guard
+        while clock() < cut_s + 0.7:                           # commands into the void
+            assert time.monotonic() < guard, clock() - cut_s
+            run()
+        cut = run(10)
         heard_during_cut = driver.alive
         core.cut.discard(0)
         after = run(40)
-        assert all(before[15:]) and not any(cut[-10:]) and not heard_during_cut
-        assert all(after[-10:]) and driver.alive
+        answers, trips = clock.answers_and_trips()
+        gap = max(zip(answers, answers[1:]), key=lambda a: a[1] - a[0])   # the cut
+        assert gap[1] - gap[0] >= 700 and any(gap[0] < ms < gap[1] for ms, _ in trips)
+        assert healthy_or_stalled(before[15:], trips), (before, trips)
+        assert not any(h for h, _ in cut) and not heard_during_cut
+        assert healthy_or_stalled(after[-10:], trips) and driver.alive, (after, trips)
+        assert any(h for h, _ in after[-10:]), after
         assert core.bytes["cut"] > 0
     finally:
         driver.close()

@@ -144,6 +144,11 @@ class QemuCore:
         #: Line noise, for tests: ``fault(uart, data) -> data`` is applied to
         #: what the core sends (uart 0 the link, 1 the plant) before the pty.
         self.line_fault = None
+        #: A probe on the core's TX pins, for tests: ``tap(uart, data)`` sees
+        #: every byte the core sends, as sent (before a cut or a fault), once
+        #: whatever of it reaches the pty is there (so a clock read from the
+        #: core's stamps never runs ahead of what a driver can read).
+        self.tap = None
         try:
             for port in ports[:2]:
                 self._bridges.append(_PtyBridge(self._connect(port, start_timeout_s)))
@@ -186,15 +191,18 @@ class QemuCore:
                         continue
                     bridge = from_core if from_core is not None else \
                         next(b for b in self._bridges if b.master == src)
+                    sent, tap = data, self.tap
                     if self._bridges.index(bridge) in self.cut:
                         self.bytes["cut"] += len(data)      # the line is cut: lost
-                        continue
-                    fault = self.line_fault
-                    if from_core is not None and fault is not None:
-                        data = fault(self._bridges.index(from_core), data)
-                    way = "from_core" if from_core is not None else "to_core"
-                    self.bytes[way] += len(data)
-                    self._send_all(dst, data)
+                    else:
+                        fault = self.line_fault
+                        if from_core is not None and fault is not None:
+                            data = fault(self._bridges.index(from_core), data)
+                        way = "from_core" if from_core is not None else "to_core"
+                        self.bytes[way] += len(data)
+                        self._send_all(dst, data)
+                    if from_core is not None and tap is not None:
+                        tap(self._bridges.index(from_core), sent)
 
     def _send_all(self, dst, data: bytes) -> None:
         try:
