@@ -63,13 +63,16 @@ class Driver:
         self.sock.linger = 0
         self.sock.connect(f"tcp://127.0.0.1:{service.admin.port}")
 
-    def ask(self, request: dict) -> dict:
-        self.sock.send(msgpack.packb(request, use_bin_type=True))
+    def ask(self, request) -> dict:
+        return self.ask_raw(msgpack.packb(request, use_bin_type=True))
+
+    def ask_raw(self, data: bytes) -> dict:
+        self.sock.send(data)
         for _ in range(2000):
             assert self.step() is not False, "the service stopped"
             if self.sock.poll(1):
                 return msgpack.unpackb(self.sock.recv(), raw=False)
-        raise AssertionError(f"no reply to {request!r:.200}")
+        raise AssertionError(f"no reply to {data!r:.200}")
 
     def close(self):
         self.sock.close(linger=0)
@@ -139,6 +142,61 @@ def test_the_slave_refuses_hostile_admin_requests_and_goes_on(slave, request):
 def test_the_master_refuses_hostile_admin_requests_and_goes_on(master, request):
     _check_reply("admin-master", MASTER, request, master.ask(request))
     _still_serving(master, "admin-master")
+
+
+#: Requests of the wrong shape, as the admin socket's guard
+#: (``AdminSocket.receive``) and the command table meet them: not a map, a
+#: map without ``cmd`` or with one that is not a string, an unknown command
+#: (huge ones too), and bytes that are not msgpack at all (cut, an unused
+#: code, a string that is not UTF-8, nesting past msgpack's stack, an
+#: integer key).
+HUGE = "x" * 1_000_000
+SHAPES = (
+    (HOSTILE.filter(lambda v: not isinstance(v, dict))
+     | st.dictionaries(st.text(max_size=12).filter(lambda k: k != "cmd"), HOSTILE, max_size=3)
+     | st.builds(lambda cmd, rest: {**rest, "cmd": cmd},
+                 HOSTILE.filter(lambda v: not isinstance(v, str)),
+                 st.dictionaries(st.text(max_size=12), HOSTILE, max_size=2))
+     | st.builds(lambda cmd: {"cmd": cmd},
+                 st.text(max_size=40).filter(lambda c: c not in {*SLAVE, *MASTER, "status",
+                                                                  "stop"})
+                 | st.sampled_from([HUGE, "\x00" * 5000, "status" * 100_000])))
+    .map(lambda request: msgpack.packb(request, use_bin_type=True))
+    | st.sampled_from([b"", b"\xc1", b"\x92\x01", b"\xa2\xff\xfe", b"\x91" * 5000,
+                       b"\x81\x01\x02\x03", b"\x81\xa3cmd\xa4wo", b"\xdb\xff\xff\xff\xff"])
+    | st.binary(max_size=64))
+
+
+def _refused_and_serving(driver, reader: str, data: bytes) -> None:
+    """Answered ok: false with a short error naming what was wrong, never an
+    internal error; then ``status`` is served."""
+    try:
+        request = msgpack.unpackb(data, raw=False)
+    except ValueError:
+        request = None                        # not msgpack: the guard's to refuse
+    reply = driver.ask_raw(data)
+    assert isinstance(reply, dict) and reply.get("ok") is False, (data[:80], reply)
+    error = reply.get("error")
+    assert isinstance(error, str) and error and len(error) <= 1000, reply
+    assert "internal error" not in error, error
+    if isinstance(request, dict) and isinstance(request.get("cmd"), str):
+        assert "unknown command" in error, error
+    else:
+        assert error.startswith("bad request"), error
+    TALLY[reader]["refused"] += 1
+    _still_serving(driver, reader)
+
+
+@fuzz_settings(scale=0.5)
+@given(data=SHAPES)
+def test_the_slave_refuses_requests_of_every_wrong_shape_and_goes_on(slave, data):
+    _refused_and_serving(slave, "admin-slave", data)
+
+
+@fuzz_settings(scale=0.5)
+@given(data=SHAPES)
+def test_the_master_refuses_requests_of_every_wrong_shape_and_goes_on(master, data):
+    _refused_and_serving(master, "admin-master", data)
 
 
 def test_after_the_fuzz_the_slave_places_and_reports(slave):
