@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from telethermal.teleop.display_setup import add_limits
+
 from telethermal.control.loop import combined_summary, master_step_summary
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.run import run_session
@@ -32,9 +34,7 @@ def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s
     while sum(len(r.starts_s) for r in runs) < periods:
         res = run_session(scene, material, identifier, generator, config, contact_s=contact_s,
                           seed=len(runs) + 1, realtime=mode)
-        for key in ("current_exceeded", "hot_side_exceeded"):
-            limits[key] += int(res.summary["module"][key])
-        limits["sessions"] += 1
+        add_limits(limits, res.summary["module"])
         runs.append(res.loop_stats)
         steps_s.extend(res.master_step_s)
         flux.append(res.summary["flux_rms_error_rel"])

@@ -25,8 +25,9 @@ from typing import Callable
 
 import numpy as np
 
-from telethermal.bench.clock_text import real_clock_sentences
+from telethermal.bench.render_text import text_report  # noqa: F401  (the CLI's)
 from telethermal.bench.real_clock import REAL_CLOCK_PERIODS, REAL_CLOCK_RATES_HZ, real_clock_row
+from telethermal.control.dew import DEW_MARGIN_K, dew_point_c
 from telethermal.control.loop import DEFAULT_RATE_HZ, FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
@@ -35,6 +36,7 @@ from telethermal.physics.scene import load_scene
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
 from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
 from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.teleop.display_setup import add_limits, limits_report, new_limit_totals
 from telethermal.teleop.run import run_session, with_finger
 
 RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
@@ -54,8 +56,11 @@ GAIN_SETS = {
 }
 KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
         "time_to_correct_flux_s", "safety_events", "flux_rms_error_rel_whole")
-#: Every session's module limits, summed over the whole bench (must stay 0).
-_LIMITS = {"current_exceeded": 0, "hot_side_exceeded": 0, "sessions": 0}
+#: Every session's module limits over the whole bench, counted on the
+#: controller's request before any clamp (teleop/display_setup.add_limits).
+_LIMITS = new_limit_totals()
+#: The pad's idle against the room's dew point over every simulated-clock session.
+_DEW = {"sessions": 0, "min_idle_minus_dew_k": float("inf")}
 
 
 def _session_row(scene, material, identifier, generator, config, seed,
@@ -68,16 +73,31 @@ def _session_row(scene, material, identifier, generator, config, seed,
                     seed=seed, expected_material=expected_material, fresh_fits=True).summary
     cpu = time.process_time() - start
     module = s["module"]
-    for key in ("current_exceeded", "hot_side_exceeded"):
-        _LIMITS[key] += int(module[key])
-    _LIMITS["sessions"] += 1
+    add_limits(_LIMITS, module)
+    if s["dew_point_c"] is not None:
+        _DEW["sessions"] += 1
+        _DEW["min_idle_minus_dew_k"] = min(_DEW["min_idle_minus_dew_k"],
+                                           s["display_idle_c"] - s["dew_point_c"])
     row = {"material": material, "seed": seed, "identified": s["identified"],
            **{k: s[k] for k in KEYS}, "decision_from_s": s["decision_from_s"],
            "display_idle_c": s["display_idle_c"], "object_ir_c": s["object_ir_c"],
+           "heat_extraction_ratio_first_s": s["heat_extraction_ratio_first_s"],
+           "skin_above_threshold_s": s["skin_above_threshold_s"],
            "module_max_current_a": module["max_current_a"],
            "module_saturated_periods": module["saturated_periods"],
+           "module_reversals_per_s": module["reversals_per_s"],
+           "module_ripple_rms_a": module["ripple_rms_a"],
+           "module_largest_request_a": (module["requested"] or {}).get("largest_request_a"),
            "cpu_s_per_simulated_s": cpu / (CONTACT_S + 0.4)}
     return row
+
+
+def junction_sensor_report(scene) -> dict:
+    """The display's junction sensor as configured: name, stated lag as
+    mounted, source (physics/modules.toml)."""
+    from telethermal.teleop.display_setup import display_model_args
+    js = display_model_args(scene)["junction_sensor"]
+    return {"name": js.name, "tau_s": js.tau_s, "source": js.source}
 
 
 def _mean(rows, key):
@@ -122,6 +142,13 @@ def _materials(first: list[dict], repeat: list[dict], at_object: list[dict]) -> 
             "skin_rms_k": _mean(mine, "temp_rms_error_c"),
             "skin_rms_max_k": float(max(r["temp_rms_error_c"] for r in mine)),
             "skin_rms_repeat_k": _mean(again, "temp_rms_error_c"),
+            # Perceptual units (teleop/perception.py): the first second's heat
+            # extraction against direct contact (discriminated beyond 1 +- 0.43)
+            # and the seconds the skin is off by more than a fingertip detects.
+            "heat_extraction_ratio_first_s": _mean(mine, "heat_extraction_ratio_first_s"),
+            "skin_above_threshold_s": _mean(mine, "skin_above_threshold_s"),
+            "heat_extraction_ratio_first_s_repeat": _mean(again, "heat_extraction_ratio_first_s"),
+            "skin_above_threshold_s_repeat": _mean(again, "skin_above_threshold_s"),
             "flux_rms_from_decision_rel": _mean(mine, "flux_rms_error_rel"),
             "flux_rms_first_second_rel": _mean(mine, "flux_rms_error_rel_first_s"),
             "flux_rms_whole_rel": _mean(mine, "flux_rms_error_rel_whole"),
@@ -259,6 +286,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
 
     for key in _LIMITS:
         _LIMITS[key] = 0
+    _DEW.update(sessions=0, min_idle_minus_dew_k=float("inf"))
     report = {"scene": scene.name, "contact_s": CONTACT_S, "seeds": list(seeds),
               "materials": {m: {} for m in materials}, "training_s": training_s}
     seeds5 = SEEDS_5[:1] if quick else SEEDS_5
@@ -320,7 +348,11 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
             report[key].append(real_clock_row(
                 scene, identifier, generator, rate, mode, CONTACT_S, _LIMITS,
                 periods=340 if quick else REAL_CLOCK_PERIODS))
-    report["limits"] = dict(_LIMITS)
+    report["limits"] = limits_report(_LIMITS)
+    report["junction_sensor"] = junction_sensor_report(scene)
+    report["dew"] = {"humidity": scene.room_humidity_pct, "room_c": scene.room_temp_c,
+                     "dew_point_c": dew_point_c(scene.room_temp_c, scene.room_humidity_pct),
+                     "margin_k": DEW_MARGIN_K, **_DEW}
     report.update(_safety_counts(report, repeat + at_object))
     report["default_gains"] = {"kp": DEFAULT_GAINS.kp, "ki": DEFAULT_GAINS.ki,
                                "kd": DEFAULT_GAINS.kd}
@@ -436,64 +468,3 @@ def run_and_save(json_path: str | Path, png_path: str | Path, quick: bool = Fals
     report["png"] = str(plot(report, png_path))
     write_json(json_path, report)
     return report
-
-
-def _controller_line(c: dict) -> str:
-    return f"controller {c['feedforward_model']} (mean/worst): " + ", ".join(
-        f"{m} flux {100 * v['mean_flux_rms_error_rel']:.2f}/"
-        f"{100 * v['max_flux_rms_error_rel']:.2f} % skin "
-        f"{v['mean_temp_rms_error_c']:.2f}/{v['max_temp_rms_error_c']:.2f} K"
-        for m, v in c["per_material"].items())
-
-
-def text_report(report: dict, json_path: str | Path) -> list[str]:
-    """What ``telethermal bench render`` prints of ``report``."""
-    lines = [f"{r['rate_hz']:6.0f} Hz: flux error after identification "
-             f"{100 * r['mean_flux_rms_error_rel']:.2f} % (max "
-             f"{100 * r['max_flux_rms_error_rel']:.2f} %), first second "
-             f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
-             f"{r['mean_temp_rms_error_c']:.2f} K, CPU {r['mean_cpu_s_per_simulated_s']:.3f} s/s, "
-             f"safety events {r['safety_events']}" for r in report["rate"]]
-    lines += [_controller_line(c) for c in report["controller"]]
-    lines += [f"gains {r['gains']:20s} pad model x{r['pad_resistance_belief']:.1f}: flux "
-              f"{100 * r['mean_flux_rms_error_rel']:.2f} %, skin "
-              f"{r['mean_temp_rms_error_c']:.2f} K" for r in report["gains"]]
-    lines += [f"before identification {r['before']:5s}: first second "
-              f"{100 * r['mean_flux_rms_error_rel_first_s']:.2f} %, skin "
-              f"{r['mean_temp_rms_error_c']:.2f} K" for r in report["before"]]
-    if report["generator"]:
-        g = report["generator"]["rms_error_rel_of_peak"]
-        lines.append(f"generators on held-out persons: network {100 * g['network']:.2f} %, "
-                     f"closed form {100 * g['contact']:.2f} % RMS of peak")
-    per = report.get("materials")
-    if isinstance(per, dict):
-        lines += [f"{m:10s}: first touch skin {v['skin_rms_k']:.2f} K (idling at the object "
-                  f"{v['skin_rms_idle_at_object_k']:.2f} K), repeated (pre-conditioned) "
-                  f"{v['skin_rms_repeat_k']:.2f} K; flux from the decision "
-                  f"{100 * v['flux_rms_from_decision_rel']:.2f} %, first second "
-                  f"{100 * v['flux_rms_first_second_rel']:.2f} % of peak"
-                  for m, v in per.items() if v]
-    d = report.get("decision_floor")
-    if isinstance(d, dict) and "floor_worst_k" in d:
-        lines.append(f"floor (nominal touch, this model) of a display learning each material "
-                     f"only at the slave's decision "
-                     f"({', '.join(f'{m} {t:.3f} s' for m, t in d['decision_s'].items())}): "
-                     f"worst {d['floor_worst_k']:.3f} K; the worst first touch "
-                     f"({d['first_touch_worst_material']}) {d['first_touch_worst_k']:.3f} K, "
-                     f"{d['ratio']:.2f}x it; no display learning then has every material "
-                     f"under {d['least_worst_ratio_to_floor_k']:.2f}x its floor known at "
-                     f"contact (this one: "
-                     f"{max(d['first_touch_ratio_to_floor_k'].values()):.2f}x)")
-    if "limits" in report:
-        lim = report["limits"]
-        lines.append(f"module limits over {lim['sessions']} sessions: current exceeded "
-                     f"{lim['current_exceeded']}, hot side exceeded {lim['hot_side_exceeded']}; "
-                     f"safety events {report['safety_events']} in "
-                     f"{report.get('safety_events_sessions', '?')} sessions with the "
-                     f"product's gains")
-        study = {k: n for k, n in report.get("safety_events_gain_study", {}).items() if n}
-        if study:
-            lines.append("the gain study's other gains (not shipped): " + "; ".join(
-                f"{k}: {n} safety events" for k, n in study.items()))
-    lines += real_clock_sentences(report)
-    return lines + [f"wrote {json_path} and {report['png']}"]

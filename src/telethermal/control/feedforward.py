@@ -98,15 +98,31 @@ class ImpedanceController:
         The junction command is held over this long in the prediction.
     t_max_s : float
         Longest contact the skin memory is accurate for.
+    flux_inverse_s : float
+        The flux sensor's lag is inverted as ``(tau s + 1) / (flux_inverse_s
+        s + 1)``: its noise gain ``tau / flux_inverse_s`` instead of the
+        exact inverse's ``tau / dt`` (0: the exact inverse, for the tests
+        that check it).
+    bias_filter_s : float
+        The offsets between what is measured (flux, surface) and what the
+        model predicts are low-pass filtered over this long before they
+        correct the prediction (a disturbance estimate, slow by nature; 0:
+        taken raw). The thermocouple's 0.025 K of noise per reading would
+        otherwise reach the junction command amplified by the model's
+        inverse (1 / surface gain over the horizon).
     """
 
     def __init__(self, layers, conductance_w_m2k: float, sensor_lag_s: float, dt_s: float,
-                 horizon_s: float = 0.05, t_max_s: float = 120.0):
-        if not (dt_s > 0 and horizon_s > 0 and conductance_w_m2k > 0 and sensor_lag_s >= 0):
+                 horizon_s: float = 0.05, t_max_s: float = 120.0, flux_inverse_s: float = 0.0,
+                 bias_filter_s: float = 0.0):
+        if not (dt_s > 0 and horizon_s > 0 and conductance_w_m2k > 0 and sensor_lag_s >= 0
+                and flux_inverse_s >= 0 and bias_filter_s >= 0):
             raise ControlError("ImpedanceController needs dt_s, horizon_s, conductance > 0 and "
                                f"sensor_lag_s >= 0 (got {dt_s}, {horizon_s}, "
                                f"{conductance_w_m2k}, {sensor_lag_s})")
         self.dt_s, self.tau_s = dt_s, sensor_lag_s
+        self.flux_inverse_s, self.bias_filter_s = flux_inverse_s, bias_filter_s
+        self._smoothed_w_m2: float | None = None      # the reading through flux_inverse_s
         self.n_ahead = max(1, int(round(horizon_s / dt_s)))
         skin = (Layer(get_material("skin"), math.inf),)
         model = LayeredContact(tuple(layers), skin, Boundary("isothermal"),
@@ -153,6 +169,7 @@ class ImpedanceController:
         """No contact: forget the model state and the flux memory."""
         self._w = None
         self._ref_c = math.nan
+        self._bias: tuple[float, float] | None = None       # (flux, surface), filtered
         # The half-integral of the flux since contact, on the kernel's modes.
         self._flux_memory = np.zeros_like(self._s_in)
 
@@ -167,8 +184,17 @@ class ImpedanceController:
             return
         last = self._last_sensed_w_m2
         self._last_sensed_w_m2 = sensed_flux_w_m2
-        slope = (sensed_flux_w_m2 - last) / dt_s if last is not None and dt_s > 0 else 0.0
-        self.true_flux_w_m2 = sensed_flux_w_m2 + self.tau_s * slope
+        if self.flux_inverse_s > 0:
+            # (tau s + 1) / (tf s + 1) = tau/tf + (1 - tau/tf) / (tf s + 1).
+            smooth = self._smoothed_w_m2
+            smooth = sensed_flux_w_m2 if smooth is None or not dt_s > 0 else \
+                smooth - math.expm1(-dt_s / self.flux_inverse_s) * (sensed_flux_w_m2 - smooth)
+            self._smoothed_w_m2 = smooth
+            ratio = self.tau_s / self.flux_inverse_s
+            self.true_flux_w_m2 = ratio * sensed_flux_w_m2 + (1.0 - ratio) * smooth
+        else:
+            slope = (sensed_flux_w_m2 - last) / dt_s if last is not None and dt_s > 0 else 0.0
+            self.true_flux_w_m2 = sensed_flux_w_m2 + self.tau_s * slope
         self._recent.append(self.true_flux_w_m2)
         if self._w is not None:
             self._flux_memory = self._s_decay * self._flux_memory + self._s_in * self.true_flux_w_m2
@@ -200,6 +226,16 @@ class ImpedanceController:
     def model_flux_w_m2(self) -> float:
         return float(self._m_flux @ self._w)
 
+    def _offsets(self, flux_w_m2: float, surface_k: float) -> tuple[float, float]:
+        """The measured-minus-model offsets, through ``bias_filter_s``."""
+        if self.bias_filter_s <= 0 or self._bias is None:
+            self._bias = (flux_w_m2, surface_k)
+            return self._bias
+        g = -math.expm1(-self.dt_s / self.bias_filter_s)
+        q, s = self._bias
+        self._bias = (q + g * (flux_w_m2 - q), s + g * (surface_k - s))
+        return self._bias
+
     def command_impedance(self, pad_temp_c: float, object_temp_c: float,
                           inverse_effusivity: float) -> float:
         """The junction temperature (C) that makes the pad's surface behave as
@@ -216,8 +252,8 @@ class ImpedanceController:
         """
         if self._w is None:
             raise ControlError("ImpedanceController.command_impedance before start()")
-        bias_q = self.true_flux_w_m2 - self.model_flux_w_m2()
-        bias_s = pad_temp_c - (self._ref_c + float(self._m_surface @ self._w))
+        bias_q, bias_s = self._offsets(self.true_flux_w_m2 - self.model_flux_w_m2(),
+                                       pad_temp_c - (self._ref_c + float(self._m_surface @ self._w)))
         memory = float(self._past_decay @ self._flux_memory) + \
             float(self._future_free @ self._w) + self._future_sum * bias_q
         surface_free = self._ref_c + float(self._surface_free @ self._w) + bias_s

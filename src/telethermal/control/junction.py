@@ -82,3 +82,150 @@ class JunctionLoop:
         if cut:
             self.saturated_periods += 1
         return JunctionOutput(current, cut)
+
+
+# ---------------------------------------------------------------- the display's loop
+#: The share of the driver's current the smoothed target may use; the rest
+#: is the PI's, to correct what the model misses.
+HEADROOM = 0.8
+
+@dataclass(frozen=True, slots=True)
+class DisplayJunctionStep:
+    current_a: float           # what the driver is asked for (inside every limit)
+    saturated: bool            # a limit (slew, Imax, supply) cut the request
+    requested_a: float         # the controller's request before any limit
+    #: The junction the controller expects over the coming period: the
+    #: smoothed target corrected by what the sensor reads against what it
+    #: would read on that target (what the display's models advance with).
+    estimate_c: float
+
+
+@dataclass
+class LimitCounts:
+    """Where the display's limits bind, counted on the controller's request
+    before any clamp (the driver's clamp would make them 0 by construction)."""
+
+    periods: int = 0
+    requested_over_imax_periods: int = 0
+    largest_request_a: float = 0.0
+    #: ``|S (Th - Tc) + I R|`` of the request over the driver's supply / the module's Vmax.
+    voltage_over_supply_periods: int = 0
+    voltage_over_vmax_periods: int = 0
+    largest_request_v: float = 0.0
+    slew_limited_periods: int = 0
+    saturated_periods: int = 0
+
+
+class DisplayJunctionLoop:
+    """The display's junction loop, designed for its bonded sensor
+    (:mod:`telethermal.control.junction_design`): a target smoothed over
+    ``reference_tau_s``; the feed-forward current that holds the smoothed
+    target under the load and moves the modelled heat capacity at its rate;
+    a PI on the sensor's reading against the sensor model's reading of the
+    smoothed target (anti-windup: it integrates only while the output is
+    free or the error takes it back inside); the current's slew bounded at
+    ``slew_a_s``; then the H-bridge's limits. Every constant comes from the
+    configuration it is given (module parameters, design model).
+    One :meth:`update` per period; pure (no device, no clock).
+    """
+
+    #: The sensor disagreeing with what its model expects by more than this
+    #: for longer than ``IMPLAUSIBLE_S``: the loop stops (0 A, latched until
+    #: :meth:`reset`); a debonded sensor lags many times its stated value.
+    IMPLAUSIBLE_K = 3.0
+    IMPLAUSIBLE_S = 0.5
+
+    def __init__(self, params: ModuleParams, driver: HBridge, model, gains: JunctionGains,
+                 reference_tau_s: float = 0.02, slew_a_s: float = 100.0):
+        if not (reference_tau_s > 0 and slew_a_s > 0):
+            raise ControlError(f"reference_tau_s and slew_a_s must be > 0, got "
+                               f"{reference_tau_s}, {slew_a_s}")
+        self.params, self.driver, self.model, self.gains = params, driver, model, gains
+        self.reference_tau_s, self.slew_a_s = reference_tau_s, slew_a_s
+        self.limits = LimitCounts()
+        #: Latched by an implausible sensor (not by reset(): rearm() clears it).
+        self.stopped = False
+        self.reset()
+
+    def rearm(self) -> None:
+        """Clear a stop (the sensor has been checked) and start afresh."""
+        self.stopped = False
+        self.reset()
+
+    @property
+    def saturated_periods(self) -> int:
+        return self.limits.saturated_periods
+
+    def reset(self) -> None:
+        """Forget the loop's state (not its counts): the next update starts afresh."""
+        self.integral_a = 0.0
+        self.implausible_s = 0.0                   # how long the sensor has disagreed
+        self.reference_c: float | None = None      # the smoothed target
+        self.sensor_model_c = math.nan             # what the sensor would read on it
+        self.current_a = 0.0                       # the last current asked for
+
+    def _count(self, requested_a: float, sensed_c: float, hot_c: float) -> None:
+        lim, spec = self.limits, self.params.spec
+        volts = abs(float(self.params.voltage_v(requested_a, sensed_c, hot_c)))
+        lim.periods += 1
+        lim.requested_over_imax_periods += int(abs(requested_a) > spec.imax_a)
+        lim.largest_request_a = max(lim.largest_request_a, abs(requested_a))
+        lim.voltage_over_supply_periods += int(volts > self.driver.supply_v)
+        lim.voltage_over_vmax_periods += int(volts > spec.vmax_v)
+        lim.largest_request_v = max(lim.largest_request_v, volts)
+
+    def _feasible_rates_k_s(self, junction_c: float, hot_c: float, load_w: float):
+        """(fastest cooling, fastest heating) of the junction, K/s, with
+        ``HEADROOM`` of the current the driver can force: the smoothed
+        target moves no faster, so the feed-forward stays inside the limits
+        and the PI keeps the rest (a target the module cannot follow would
+        leave the lagging sensor to stop the junction: overshoot)."""
+        p, d = self.params, self.driver
+        emf = p.seebeck_v_k * (hot_c - junction_c)
+        cool = HEADROOM * min(d.current_limit_a, (d.supply_v - emf) / p.resistance_ohm)
+        heat = HEADROOM * min(d.current_limit_a, (d.supply_v + emf) / p.resistance_ohm)
+        qc_cool, _, _ = p.heat_w(max(cool, 0.0), junction_c, hot_c)
+        qc_heat, _, _ = p.heat_w(-max(heat, 0.0), junction_c, hot_c)
+        c = self.model.heat_j_k
+        return min((load_w - float(qc_cool)) / c, 0.0), max((load_w - float(qc_heat)) / c, 0.0)
+
+    def update(self, target_c: float, sensed_c: float, hot_c: float, dt_s: float,
+               load_w: float = 0.0) -> DisplayJunctionStep:
+        """This period's current. ``sensed_c``: the junction sensor's reading;
+        ``hot_c``: the hot side's (the heat sink's thermistor); ``load_w``:
+        heat into the junction from the pad as far as the caller knows it.
+        A reading that is not finite gives 0 A and a fresh start."""
+        if not (dt_s > 0 and math.isfinite(dt_s)):
+            raise ControlError(f"junction loop needs a positive period, got {dt_s}")
+        if not all(math.isfinite(v) for v in (target_c, sensed_c, hot_c, load_w)):
+            self.reset()
+            return DisplayJunctionStep(0.0, False, 0.0, math.nan)
+        if self.reference_c is None:
+            self.reference_c, self.sensor_model_c = sensed_c, sensed_c
+        previous = self.reference_c
+        rate_k_s = -math.expm1(-dt_s / self.reference_tau_s) * (target_c - previous) / dt_s
+        lo, hi = self._feasible_rates_k_s(previous, hot_c, load_w)
+        rate_k_s = min(max(rate_k_s, lo), hi)
+        self.reference_c = previous + rate_k_s * dt_s
+        tau = self.model.sensor_tau_s
+        self.sensor_model_c += (1.0 if tau <= 0 else -math.expm1(-dt_s / tau)) * \
+            (self.reference_c - self.sensor_model_c)
+        error = sensed_c - self.sensor_model_c          # positive: warmer than meant, cool
+        self.implausible_s = self.implausible_s + dt_s if abs(error) > self.IMPLAUSIBLE_K else 0.0
+        if self.stopped or self.implausible_s > self.IMPLAUSIBLE_S:
+            self.stopped, self.current_a, self.integral_a = True, 0.0, 0.0
+            return DisplayJunctionStep(0.0, True, 0.0, math.nan)
+        ff = hold_current_a(self.params, self.reference_c, hot_c,
+                            load_w - self.model.heat_j_k * rate_k_s)
+        requested = ff + self.gains.kp_a_k * error + self.integral_a
+        self._count(requested, sensed_c, hot_c)
+        step = self.slew_a_s * dt_s
+        slewed = min(max(requested, self.current_a - step), self.current_a + step)
+        current, cut = self.driver.limit(self.params, slewed, sensed_c, hot_c)
+        cut = cut or slewed != requested
+        self.limits.slew_limited_periods += int(slewed != requested)
+        self.limits.saturated_periods += int(cut)
+        if not cut or (requested > current) != (error > 0):
+            self.integral_a += self.gains.ki_a_ks * error * dt_s
+        self.current_a = current
+        return DisplayJunctionStep(current, cut, requested, self.reference_c + error)

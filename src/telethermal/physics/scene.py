@@ -181,6 +181,10 @@ class Scene:
     #: What loads this scene again in another process: a shipped scene's
     #: name, or a scene file's absolute path ("" when parsed from a table).
     ref: str = ""
+    #: The room's relative humidity, % (the display keeps its pad above the
+    #: dew point: control/dew.py). Default 50 %: the middle of the 30-70 %
+    #: ISO 7730 (Ergonomics of the thermal environment, annex) recommends indoors.
+    room_humidity_pct: float = 50.0
 
     @property
     def materials(self) -> list[str]:
@@ -368,7 +372,8 @@ def _parse_scene(data: dict, source: str, own_table: str | None) -> Scene:
         sensors=_parse_dataclass(SensorSpec, data.get("sensors"), "[sensors]", source),
         variability=_parse_dataclass(VariabilitySpec, data.get("variability"),
                                      "[variability]", source),
-        tolerance_rel=tolerance, source=source, materials_table=own_table)
+        tolerance_rel=tolerance, source=source, materials_table=own_table,
+        room_humidity_pct=r.num("room_humidity_pct", 50.0, 0, 100))
     for name in [lay.material.name for o in scene.objects for lay in o.layers()] + [
             lay.material.name for lay in scene.pad.layers]:
         other = shadowed_by(name)

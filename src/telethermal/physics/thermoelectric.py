@@ -198,9 +198,42 @@ def get_heat_sink(name: str) -> HeatSinkSpec:
     return HeatSinkSpec(name=name, **table[name])
 
 
+@dataclass(frozen=True)
+class JunctionSensorSpec:
+    """The sensor on the module's cold plate that the junction loop reads:
+    its time constant as mounted, bias limit, noise and resolution (K)."""
+
+    name: str
+    source: str
+    tau_s: float
+    bias_limit_k: float
+    noise_k: float
+    lsb_k: float
+
+    def __post_init__(self):
+        for key in ("tau_s", "bias_limit_k", "noise_k", "lsb_k"):
+            value = getattr(self, key)
+            if not (value >= 0 and math.isfinite(value)) or (key == "lsb_k" and value == 0):
+                raise SceneError(f"junction sensor {self.name}: {key} must be finite and "
+                                 f"{'> 0' if key == 'lsb_k' else '>= 0'}, got {value!r}")
+
+
+def junction_sensor_names() -> list[str]:
+    return sorted(_table()["junction_sensors"])
+
+
+def get_junction_sensor(name: str) -> JunctionSensorSpec:
+    table = _table()["junction_sensors"]
+    if name not in table:
+        raise SceneError(f"unknown junction sensor {name!r}; known: {', '.join(sorted(table))}")
+    return JunctionSensorSpec(name=name, **table[name])
+
+
 #: A Peltier scene that names no module gets these (the first paper's pad).
 DEFAULT_MODULE = "TM-31-1.4-8.5"
 DEFAULT_HEAT_SINK = "fan-40"
+#: The display's junction sensor (physics/modules.toml, README's parts table).
+DEFAULT_JUNCTION_SENSOR = "NTCG103JF103F-bonded"
 
 
 # ---------------------------------------------------------------- the driver

@@ -7,11 +7,20 @@ run, the services and the simulated network all call these."""
 
 from __future__ import annotations
 
+import logging
 import math
+from dataclasses import asdict
 
+import numpy as np
+
+from telethermal.control.current_quality import ripple_rms_a, sign_reversals
+from telethermal.control.dew import DEW_MARGIN_K, idle_floor_c
 from telethermal.control.safety import safety_event_count
 from telethermal.physics.scene import Scene
+from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
+
+log = logging.getLogger(__name__)
 
 
 def display_model_args(scene: Scene) -> dict:
@@ -19,7 +28,9 @@ def display_model_args(scene: Scene) -> dict:
     layers and the nominal pad-fingertip contact conductance."""
     return {"pad_layers": tuple(scene.pad.layers),
             "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
-            "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2}
+            "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2,
+            "junction_sensor": get_junction_sensor(DEFAULT_JUNCTION_SENSOR),
+            "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct)}
 
 
 def precondition_for(scene: Scene, finger_c: float):
@@ -42,7 +53,14 @@ def display_idle(scene: Scene, config: DisplayConfig, finger_c: float,
     obj = object_temp_c
     if shift is not None and obj is not None and math.isfinite(obj):
         obj = obj + shift(expected_material, obj)
-    return MasterDisplay.standby_c_for(config.limits, obj), shift
+    idle = MasterDisplay.standby_c_for(config.limits, obj)
+    floor = idle_floor_c(scene.room_temp_c, scene.room_humidity_pct)
+    if idle < floor:
+        log.info("idle lifted from %.2f C to %.2f C: the dew point of the room (%.1f C, "
+                 "%.0f %% RH) plus %.1f K", idle, floor, scene.room_temp_c,
+                 scene.room_humidity_pct, DEW_MARGIN_K)
+        idle = floor
+    return idle, shift
 
 
 def module_summary(touch, master: MasterDisplay) -> dict:
@@ -51,11 +69,72 @@ def module_summary(touch, master: MasterDisplay) -> dict:
     (``touch``: a :class:`~telethermal.teleop.run.DisplayTouch`)."""
     spec = touch.module.spec
     loop = master.junction_loop
+    js = touch.junction_sensor
     return {"name": spec.name, **touch.limit_counts,
             "max_current_a": round(touch.max_current_a, 4), "imax_a": spec.imax_a,
             "max_hot_c": round(touch.max_hot_c, 3), "hot_side_max_c": spec.hot_side_max_c,
             "max_sink_c": round(touch.max_sink_c, 3),
-            "saturated_periods": loop.saturated_periods if loop is not None else 0}
+            "saturated_periods": loop.saturated_periods if loop is not None else 0,
+            "junction_sensor": {"name": js.name, "tau_s": js.tau_s, "source": js.source,
+                                "true_tau_s": touch.junction_lag_s},
+            "requested": asdict(loop.limits) if loop is not None else None,
+            "supply_v": loop.driver.supply_v if loop is not None else None,
+            "vmax_v": spec.vmax_v, **current_quality(touch)}
+
+
+#: The module's limits over many sessions (``bench render``'s ``limits``):
+#: sums, the largest request, and the totals reversals and ripple pool from.
+LIMIT_TOTALS = ("sessions", "current_exceeded", "hot_side_exceeded",
+                "current_requested_over_imax_periods", "largest_request_a", "voltage_exceeded",
+                "voltage_over_vmax_periods", "reversals", "contact_s", "ripple_sum_sq_a2",
+                "ripple_sessions")
+
+
+def new_limit_totals() -> dict:
+    return dict.fromkeys(LIMIT_TOTALS, 0)
+
+
+def add_limits(totals: dict, module: dict) -> None:
+    """Add one session's ``module`` summary to ``totals`` (new_limit_totals)."""
+    req = module.get("requested") or {}
+    totals["sessions"] += 1
+    for key in ("current_exceeded", "hot_side_exceeded", "reversals"):
+        totals[key] += int(module[key])
+    totals["contact_s"] += module["contact_s"]
+    totals["current_requested_over_imax_periods"] += req.get("requested_over_imax_periods", 0)
+    totals["voltage_exceeded"] += req.get("voltage_over_supply_periods", 0)
+    totals["voltage_over_vmax_periods"] += req.get("voltage_over_vmax_periods", 0)
+    totals["largest_request_a"] = max(totals["largest_request_a"],
+                                      req.get("largest_request_a", 0.0))
+    if math.isfinite(module["ripple_rms_a"]):
+        totals["ripple_sum_sq_a2"] += module["ripple_rms_a"] ** 2
+        totals["ripple_sessions"] += 1
+
+
+def limits_report(totals: dict) -> dict:
+    """The pooled limits: the sums, reversals per second of contact and the
+    ripple's RMS over the sessions that rendered."""
+    out = {k: v for k, v in totals.items() if k not in ("ripple_sum_sq_a2", "ripple_sessions")}
+    out["reversals_per_s"] = totals["reversals"] / totals["contact_s"] \
+        if totals["contact_s"] else 0.0
+    out["ripple_rms_a"] = math.sqrt(totals["ripple_sum_sq_a2"] / totals["ripple_sessions"]) \
+        if totals["ripple_sessions"] else math.nan
+    return out
+
+
+def current_quality(touch) -> dict:
+    """The current's sign reversals per second of contact and its ripple
+    while rendering (control/current_quality.py), from the touch's trace."""
+    trace, dt = touch.trace, touch.dt_s
+    phase = np.array([str(p) for p in trace["phase"]])
+    current = trace["current_a"]
+    contact = np.isin(phase, ("contact", "render", "link lost")) & np.isfinite(current)
+    render = (phase == "render") & np.isfinite(current)
+    seconds = contact.sum() * dt
+    return {"contact_s": float(seconds),
+            "reversals": sign_reversals(current[contact]),
+            "reversals_per_s": sign_reversals(current[contact]) / seconds if seconds else 0.0,
+            "ripple_rms_a": ripple_rms_a(current[render], dt) if render.any() else math.nan}
 
 
 def safety_summary(master: MasterDisplay) -> dict:

@@ -42,21 +42,24 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from enum import StrEnum
 
 from telethermal.control.contact import ContactDetector, ContactEvent
-from telethermal.control.junction import JunctionLoop
-from telethermal.control.loop import DEFAULT_RATE_HZ
+from telethermal.control.junction_design import design_display_loop
 from telethermal.control.feedforward import ImpedanceController
-from telethermal.control.pid import Pid, PidGains
+from telethermal.control.pid import Pid
 from telethermal.control.safety import (Reading, Request, SafetyLimits, initial_state,
                                         supervise, surface_barrier)
 from telethermal.errors import ControlError
 from telethermal.ident.anytime import Estimate
-from telethermal.physics.thermoelectric import ModuleParams, default_driver
+from telethermal.physics.thermoelectric import (DEFAULT_JUNCTION_SENSOR, JunctionSensorSpec,
+                                                ModuleParams, get_junction_sensor)
 from telethermal.render.generator import posterior_weights
 from telethermal.devices.readings import PadSensors
+from telethermal.teleop.display_config import (  # noqa: F401  (re-exported)
+    BEFORE_MODES, DEFAULT_GAINS, FEEDFORWARD_MODELS, IDLES, JUNCTION_STOPPED, SOURCES,
+    DisplayConfig)
 from telethermal.teleop.rendering import (Estimated, Handover, blended, estimated_target,
                                           generator_flux, has_estimate, inverse_effusivity)
 
@@ -71,74 +74,6 @@ class Phase(StrEnum):
     CONTACT = "contact"
     RENDER = "render"
     LINK_LOST = "link lost"
-
-
-BEFORE_MODES = ("hold", "prior")
-#: "trajectory": render the slave's curves from the master's own onset (the
-#: compensated path); "setpoints": track the latest flux setpoint streamed
-#: by the slave sample by sample (the naive baseline of the fault benchmark).
-SOURCES = ("trajectory", "setpoints")
-FEEDFORWARD_MODELS = ("static", "impedance")
-#: Before a touch: "policy", the object's temperature shifted by the scene's
-#: idle policy (control/preconditioning.py), for the material the slave
-#: expects or, unknown, the minimax idle; "object": at the object's.
-IDLES = ("policy", "object")
-
-#: PID gains of the flux loop (K of junction per W/m^2 of flux error), from ``bench render``:
-#: the lowest mean flux error with the pad model right and 30 % off; more integral rings
-#: through the sensor's 0.15 s lag after a late hand-over; the derivative bought nothing.
-DEFAULT_GAINS = PidGains(kp=1e-3, ki=3e-3, kd=0.0, derivative_filter_s=0.01,
-                         output_min=-25.0, output_max=25.0)
-
-
-@dataclass(frozen=True)
-class DisplayConfig:
-    rate_hz: float = DEFAULT_RATE_HZ
-    gains: PidGains = DEFAULT_GAINS
-    feedforward: bool = True
-    #: "impedance": the pad's surface made to behave as the rendered object's
-    #: (control/feedforward.py; needs the pad's layers, else "static");
-    #: "static": ``T_pad + q R_pad`` plus the flux PID on the generator's flux.
-    feedforward_model: str = "impedance"
-    #: The impedance controller's prediction horizon.
-    impedance_horizon_s: float = 0.1
-    before: str = "prior"
-    source: str = "trajectory"
-    idle: str = "policy"
-    #: The controller's own slew limit on the junction command; the
-    #: supervisor's rate limit above it is the independent backstop.
-    slew_k_s: float = 100.0
-    #: After a hand-over (hold -> render), the step between what was applied
-    #: and what the controller asks for is closed at this slope.
-    handover_k_s: float = 50.0
-    #: From the posterior mixture to the decided material: weights blended over this long.
-    blend_s: float = 0.1
-    limits: SafetyLimits = field(default_factory=lambda: SafetyLimits(
-        max_rate_k_s=200.0, max_flux_w_m2=20_000.0))
-    #: For robustness studies: the controller's pad resistance relative to
-    #: the true one (1: the model is right).
-    r_pad_belief: float = 1.0
-    contact_on_n: float = 2.0
-    contact_off_n: float = 1.0
-    debounce_s: float = 0.02
-
-    def __post_init__(self):
-        if not (self.rate_hz > 0 and math.isfinite(self.rate_hz)):
-            raise ControlError(f"display rate_hz must be > 0, got {self.rate_hz}")
-        if not (self.slew_k_s > 0 and self.handover_k_s > 0 and self.blend_s > 0):
-            raise ControlError("slew_k_s, handover_k_s and blend_s must be > 0")
-        if self.source not in SOURCES:
-            raise ControlError(f"source must be one of {SOURCES}, got {self.source!r}")
-        if self.feedforward_model not in FEEDFORWARD_MODELS:
-            raise ControlError(f"feedforward_model must be one of {FEEDFORWARD_MODELS}, "
-                               f"got {self.feedforward_model!r}")
-        if not self.impedance_horizon_s > 0:
-            raise ControlError("impedance_horizon_s must be > 0, got "
-                               f"{self.impedance_horizon_s}")
-        for name, value, allowed in (("before", self.before, BEFORE_MODES),
-                                     ("idle", self.idle, IDLES)):
-            if value not in allowed:
-                raise ControlError(f"{name} must be one of {allowed}, got {value!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,13 +119,22 @@ class MasterDisplay:
     def __init__(self, config: DisplayConfig, generator, pad_resistance_m2k_w: float,
                  sensor_lag_s: float, finger_temp_c: float, idle_c: float | None = None,
                  pad_layers=None, contact_conductance_w_m2k: float | None = None,
-                 module: ModuleParams | None = None, precondition=None, pad_area_m2=None):
+                 module: ModuleParams | None = None, precondition=None, pad_area_m2=None,
+                 junction_sensor: JunctionSensorSpec | None = None,
+                 dew_floor_c: float | None = None):
         self.config = config
         self.generator = generator
-        #: junction target -> module current (control/junction.py); None: no module model.
-        self.junction_loop = JunctionLoop(module, default_driver(module)) if module else None
+        self.nominal_dt_s = 1.0 / config.rate_hz
+        #: The lowest standby: the room's dew point plus its margin (control/dew.py).
+        self.dew_floor_c = -math.inf if dew_floor_c is None else dew_floor_c
+        self._lifted = False            # the last standby was lifted to the dew floor
         # The face the module pumps over: the scene's size_mm, or the module's.
         self._module_area_m2 = 0.0 if module is None else (pad_area_m2 or module.spec.area_m2)
+        #: The junction sensor as the configuration states it (its lag is what
+        #: the junction loop is designed for).
+        self.junction_sensor = junction_sensor or get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
+        #: junction target -> module current (control/junction.py); None: no module model.
+        self.junction_loop = self._junction_loop(module, pad_layers or ()) if module else None
         #: ``precondition(material or None, object_temp_c) -> idle offset, K``:
         #: where the pad idles relative to the object before (and, holding,
         #: during) a touch (control/preconditioning.py); None: at the object.
@@ -198,7 +142,6 @@ class MasterDisplay:
         self.r_pad_m2k_w = pad_resistance_m2k_w * config.r_pad_belief   # as believed
         self.sensor_lag_s = sensor_lag_s
         self.finger_temp_c = finger_temp_c           # measured before contact
-        self.nominal_dt_s = 1.0 / config.rate_hz
         self.pid = Pid(config.gains, self.nominal_dt_s)
         self.detector = ContactDetector(config.contact_on_n, config.contact_off_n,
                                         config.debounce_s)
@@ -231,8 +174,18 @@ class MasterDisplay:
                                "contact conductance); give both, or choose 'static'")
         self.impedance = ImpedanceController(pad_layers, contact_conductance_w_m2k,
                                              sensor_lag_s, self.nominal_dt_s,
-                                             config.impedance_horizon_s) \
+                                             config.impedance_horizon_s,
+                                             flux_inverse_s=config.flux_inverse_s,
+                                             bias_filter_s=config.impedance_bias_filter_s) \
             if wants_impedance else None
+
+    def _junction_loop(self, module: ModuleParams, pad_layers):
+        """The junction loop designed on the configured module, pad and sensor
+        (control/junction_design.py); its design kept in :attr:`junction_design`."""
+        loop, self.junction_design = design_display_loop(
+            module, pad_layers, self._module_area_m2, self.junction_sensor.tau_s,
+            self.nominal_dt_s, self.config.junction_reference_s, self.config.current_slew_a_s)
+        return loop
 
     # ------------------------------------------------------------ pieces
     @staticmethod
@@ -248,7 +201,14 @@ class MasterDisplay:
         obj = news.object_temp_c
         if self.precondition is not None and obj is not None and math.isfinite(obj):
             obj = obj + self.precondition(news.expected_material, obj)
-        return self.standby_c_for(self.config.limits, obj)
+        standby = self.standby_c_for(self.config.limits, obj)
+        lifted = standby < self.dew_floor_c
+        if lifted and not self._lifted:
+            self._count("idle lifted above the dew point")
+            log.info("standby lifted from %.2f C to %.2f C (the dew point plus its margin)",
+                     standby, self.dew_floor_c)
+        self._lifted = lifted
+        return max(standby, self.dew_floor_c)
 
     def _count(self, event: str) -> None:
         self.events[event] = self.events.get(event, 0) + 1
@@ -437,28 +397,38 @@ class MasterDisplay:
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
         applied, self.safety = supervise(self.safety, reading, request, self.config.limits, dt_s)
+        current_a, junction_c = self._current(applied.temp_c, sensors, dt_s)
         if self.impedance is not None:
-            self.impedance.advance(applied.temp_c, dt_s)
+            # The model advances with the junction as the loop measures it.
+            self.impedance.advance(junction_c if math.isfinite(junction_c) else applied.temp_c,
+                                   dt_s)
         if self.handover.pid_running:
             self.pid.limited_downstream(wanted, applied.temp_c)
         return MasterStep(t_s, self.phase, self.detector.touching, desired, command,
-                          applied.temp_c, applied.safe,
-                          self._current(applied.temp_c, sensors, dt_s), contact)
+                          applied.temp_c, applied.safe, current_a, contact)
 
-    def _current(self, junction_c: float, sensors: PadSensors, dt_s: float) -> float:
-        """The module's current that brings the junction to ``junction_c``
-        (the inner loop; 0 A without a module model or junction reading).
-        The pad's heat into the junction is estimated from the measured
-        flux (what the pad gives the finger, it takes from the junction)."""
+    def _current(self, junction_c: float, sensors: PadSensors, dt_s: float
+                 ) -> tuple[float, float]:
+        """(the module's current that brings the junction to ``junction_c``,
+        the junction expected over the period as the loop measures it): the
+        inner loop; (0 A, ``junction_c``) without a module model, (0 A, nan)
+        without a junction reading. The pad's heat into the junction is
+        estimated from the measured flux (what the pad gives the finger, it
+        takes from the junction)."""
         if self.junction_loop is None:
-            return 0.0
+            return 0.0, junction_c
         load = -self._module_area_m2 * sensors.flux_w_m2 \
             if math.isfinite(sensors.flux_w_m2) else 0.0
         out = self.junction_loop.update(junction_c, sensors.junction_c, sensors.heatsink_c,
                                         min(dt_s, 2 * self.nominal_dt_s), load)
         if out.saturated:
             self._count("module current limited")
-        return out.current_a
+        if self.junction_loop.stopped and not self.events.get(JUNCTION_STOPPED):
+            self._count(JUNCTION_STOPPED)
+            log.error("the junction sensor disagrees with its model by over %.1f K for %.1f s: "
+                      "module current stopped (0 A) until the sensor is checked",
+                      self.junction_loop.IMPLAUSIBLE_K, self.junction_loop.IMPLAUSIBLE_S)
+        return out.current_a, out.estimate_c
 
     # ------------------------------------------------------------ the period
     def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:

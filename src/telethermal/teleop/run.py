@@ -32,6 +32,7 @@ import numpy as np
 
 from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, LoopStats, RealClock,
                                       SimClock, WorldPausedClock, master_step_summary)
+from telethermal.control.dew import dew_point_c
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
@@ -42,7 +43,9 @@ from telethermal.physics.layered import pad_resistance  # noqa: F401  (its impor
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
-from telethermal.physics.thermoelectric import ModuleState, ThermoelectricStack
+from telethermal.physics.thermoelectric import (DEFAULT_JUNCTION_SENSOR, JunctionSensorSpec,
+                                                ModuleState, ThermoelectricStack,
+                                                get_junction_sensor)
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
 from telethermal.teleop.display_setup import (display_idle, display_model_args,  # noqa: F401
@@ -50,6 +53,7 @@ from telethermal.teleop.display_setup import (display_idle, display_model_args, 
 from telethermal.teleop.inprocess import PRE_CONTACT_S, InProcessWire
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
 from telethermal.teleop.slave import Slave
 
 #: The fingertip used where a scene has none (the gripper scenes): the
@@ -131,15 +135,20 @@ class DisplayTouch:
     and the exact layered plant takes over, the module's state carried on.
     """
 
-    #: The module's thermistors (junction on the cold plate, heat sink):
-    #: NTC 10 kOhm, +-1 % at 25 C (TDK/EPCOS B57861S: about +-0.25 K, a bias
-    #: per instrument), read at 0.01 K with 0.01 K of noise per reading.
+    #: The heat sink's thermistor: NTC 10 kOhm, +-1 % at 25 C (TDK/EPCOS
+    #: B57861S: about +-0.25 K, a bias per instrument), read at 0.01 K with
+    #: 0.01 K of noise per reading; its lag (seconds) is far under the
+    #: sink's own (36 J/K on 1 K/W). The junction's sensor is the pad's
+    #: part (``junction_sensor``, physics/modules.toml): bonded to the cold
+    #: plate, it reads the junction through its own first-order lag.
     THERMISTOR_BIAS_LIMIT_K = 0.25
     THERMISTOR_NOISE_K = 0.01
     THERMISTOR_LSB_K = 0.01
 
     def __init__(self, scene: Scene, operator: Operator, rate_hz: float, contact_s: float,
-                 idle_c: float, rng: np.random.Generator):
+                 idle_c: float, rng: np.random.Generator,
+                 junction_sensor: JunctionSensorSpec | None = None,
+                 junction_lag_scale: float = 1.0):
         self.scene, self.operator, self.contact_s = scene, operator, contact_s
         self.dt_s = 1.0 / rate_hz
         self.layers = tuple(scene.pad.layers)
@@ -167,7 +176,18 @@ class DisplayTouch:
                                                      scene.room_temp_c))
         self._pad_heat_j_k = self.area_m2 * sum(
             layer.material.volumetric_heat_j_m3k * layer.thickness_m for layer in self.layers)
-        self.thermistor_bias_k = rng.uniform(-1, 1, 2) * self.THERMISTOR_BIAS_LIMIT_K
+        self.junction_sensor = junction_sensor or get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
+        if not (junction_lag_scale >= 0 and math.isfinite(junction_lag_scale)):
+            raise SceneError(f"junction_lag_scale must be finite and >= 0, got "
+                             f"{junction_lag_scale!r}")
+        #: The junction sensor's true lag in this session (its stated one
+        #: times ``junction_lag_scale``: a part off its datasheet, a bond
+        #: thicker than designed).
+        self.junction_lag_s = self.junction_sensor.tau_s * junction_lag_scale
+        self._junction_sensed_c = idle_c       # the bonded chip's own temperature
+        js = self.junction_sensor
+        self.thermistor_bias_k = rng.uniform(-1, 1, 2) * (js.bias_limit_k,
+                                                          self.THERMISTOR_BIAS_LIMIT_K)
         self.thermistor_noise = rng.normal(size=(self.n_total + 1, 2))
         #: Periods past the module's datasheet limits (current above Imax,
         #: hot side above its rating): the driver bounds the current, so
@@ -214,9 +234,11 @@ class DisplayTouch:
         force = (op.force_n * -math.expm1(-t / self.force_sensor.rise_s) if touching else 0.0) \
             + self.force_sensor.noise_n_rms * noise[2]
         st, tn = self.stack.state, self.thermistor_noise[min(self.k, self.n_total)]
-        junction, sink = (round((true + bias + self.THERMISTOR_NOISE_K * n) / self.THERMISTOR_LSB_K)
-                          * self.THERMISTOR_LSB_K for true, bias, n in
-                          zip((st.cold_c, st.sink_c), self.thermistor_bias_k, tn))
+        js = self.junction_sensor
+        junction, sink = (quantise(true + bias + noise_k * n, lsb) for true, bias, noise_k, lsb, n
+                          in zip((self._junction_sensed_c, st.sink_c), self.thermistor_bias_k,
+                                 (js.noise_k, self.THERMISTOR_NOISE_K),
+                                 (js.lsb_k, self.THERMISTOR_LSB_K), tn))
         self._module_reading = (float(junction), float(sink))
         return PadSensors(float(flux), float(pad), float(force), float(junction), float(sink))
 
@@ -235,6 +257,10 @@ class DisplayTouch:
             c = self._pad_heat_j_k / self.dt_s
             heat = self.stack.step(current_a, self.dt_s, c * self.stack.state.cold_c, -c)
         st = self.stack.state
+        # The bonded sensor's exact first-order step toward the period's end value.
+        lag = self.junction_lag_s
+        gain = 1.0 if lag <= 0 else -math.expm1(-self.dt_s / lag)
+        self._junction_sensed_c += gain * (st.cold_c - self._junction_sensed_c)
         self.limit_counts["current_exceeded"] += int(abs(heat.current_a) > self.module.spec.imax_a)
         self.limit_counts["hot_side_exceeded"] += int(st.hot_c > self.module.spec.hot_side_max_c)
         self.max_current_a = max(self.max_current_a, abs(heat.current_a))
@@ -279,7 +305,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 realtime: bool | str = False, devices: str = "sim",
                 record: str | Path | None = None, expected_material=None,
                 news_filter=None, idle_scene: Scene | None = None,
-                fresh_fits: bool = False) -> SessionResult:
+                fresh_fits: bool = False, junction_lag_scale: float = 1.0) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -299,7 +325,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     scene whose idle policy the display applies (default ``scene``; a bench
     touching objects outside the trained ones gives the trained scene).
     ``fresh_fits``: the slave's fits made afresh, none of the process's
-    kept ones (a run whose CPU is measured; always on the real clock)."""
+    kept ones (a run whose CPU is measured; always on the real clock).
+    ``junction_lag_scale``: the display's junction sensor lags this many
+    times its stated time constant (the controller is designed for the
+    stated one: a robustness study)."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
     if realtime or fresh_fits:
@@ -340,7 +369,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     master = wire.set_up_display(scene, config, operator.finger_ir_c,
                                  idle_scene and with_finger(idle_scene))
     idle = wire.idle_c
-    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng)
+    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng,
+                         master.junction_sensor, junction_lag_scale)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=bool(realtime),
                            seed=seed)
@@ -401,6 +431,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         render_from = slave_t0 + slave.onset_s + est.t_s
     metrics = compare_with_direct(scene, material, slave.object_true_c, operator, touch.trace,
                                   contact_s, render_from)
+    metrics["heat_extraction_ratio_first_s"] = heat_extraction_ratio(touch.trace)
+    metrics["skin_above_threshold_s"] = skin_above_threshold_s(touch.trace)
     summary = {
         "scene": scene.name, "material": material, "seed": seed,
         "identified": est.label if decided else UNKNOWN,
@@ -418,6 +450,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "operator": asdict(operator), "object_true_c": slave.object_true_c,
         "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
         "display_idle_c": idle,
+        "dew_point_c": dew_point_c(scene.room_temp_c, scene.room_humidity_pct)
+        if scene.room_humidity_pct > 0 else None,
+        "room_humidity_pct": scene.room_humidity_pct,
         "expected_material": None if expected_material is None else
         str(getattr(expected_material, "label", expected_material)),
         **metrics, **safety_summary(master),

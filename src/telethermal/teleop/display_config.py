@@ -1,0 +1,105 @@
+"""The display's configuration (:class:`DisplayConfig`) and its choices;
+the master (:mod:`telethermal.teleop.master`) re-exports them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from telethermal.control.loop import DEFAULT_RATE_HZ
+from telethermal.control.pid import PidGains
+from telethermal.control.safety import SafetyLimits
+from telethermal.errors import ControlError
+
+BEFORE_MODES = ("hold", "prior")
+#: The display's event when the junction loop stops on an implausible sensor.
+JUNCTION_STOPPED = "junction sensor implausible: module stopped"
+#: "trajectory": render the slave's curves from the master's own onset (the
+#: compensated path); "setpoints": track the latest flux setpoint streamed
+#: by the slave sample by sample (the naive baseline of the fault benchmark).
+SOURCES = ("trajectory", "setpoints")
+FEEDFORWARD_MODELS = ("static", "impedance")
+#: Before a touch: "policy", the object's temperature shifted by the scene's
+#: idle policy (control/preconditioning.py), for the material the slave
+#: expects or, unknown, the minimax idle; "object": at the object's.
+IDLES = ("policy", "object")
+
+#: PID gains of the flux loop (K of junction per W/m^2 of flux error), from ``bench render``:
+#: the lowest mean flux error with the pad model right and 30 % off; more integral rings
+#: through the sensor's 0.15 s lag after a late hand-over; the derivative bought nothing.
+DEFAULT_GAINS = PidGains(kp=1e-3, ki=3e-3, kd=0.0, derivative_filter_s=0.01,
+                         output_min=-25.0, output_max=25.0)
+
+
+@dataclass(frozen=True)
+class DisplayConfig:
+    rate_hz: float = DEFAULT_RATE_HZ
+    gains: PidGains = DEFAULT_GAINS
+    feedforward: bool = True
+    #: "impedance": the pad's surface made to behave as the rendered object's
+    #: (control/feedforward.py; needs the pad's layers, else "static");
+    #: "static": ``T_pad + q R_pad`` plus the flux PID on the generator's flux.
+    feedforward_model: str = "impedance"
+    #: The impedance controller's prediction horizon: no shorter than the
+    #: junction loop takes to move the junction (its target moves no faster
+    #: than the module can follow: a 10 K step takes 0.3-0.4 s), else the
+    #: outer loop re-plans faster than the inner one follows and the two
+    #: oscillate (0.1 s did: +-8 A at about 2 Hz on plexiglass with the
+    #: bonded sensor; docs/display-loop.md).
+    impedance_horizon_s: float = 0.2
+    before: str = "prior"
+    source: str = "trajectory"
+    idle: str = "policy"
+    #: The controller's own slew limit on the junction command; the
+    #: supervisor's rate limit above it is the independent backstop.
+    slew_k_s: float = 100.0
+    #: After a hand-over (hold -> render), the step between what was applied
+    #: and what the controller asks for is closed at this slope.
+    handover_k_s: float = 50.0
+    #: From the posterior mixture to the decided material: weights blended over this long.
+    blend_s: float = 0.1
+    limits: SafetyLimits = field(default_factory=lambda: SafetyLimits(
+        max_rate_k_s=200.0, max_flux_w_m2=20_000.0))
+    #: For robustness studies: the controller's pad resistance relative to
+    #: the true one (1: the model is right).
+    r_pad_belief: float = 1.0
+    #: The junction loop: its target smoothed over this long (the feed-forward
+    #: differentiates the smoothed target), and the module current's slew
+    #: bound (8.5 A in 85 ms: under the junction sensor's lag; module makers
+    #: warn against fast reversals and ripple).
+    junction_reference_s: float = 0.02
+    current_slew_a_s: float = 100.0
+    #: The impedance controller's inversion of the flux sensor's lag is
+    #: regularised: ``(tau s + 1) / (flux_inverse_s s + 1)``, its noise gain
+    #: ``tau / flux_inverse_s`` (7.5 with the shipped 0.15 s sensor) instead
+    #: of ``tau / dt`` (75 at 500 Hz).
+    flux_inverse_s: float = 0.02
+    #: The impedance controller's measured-minus-model offsets (its
+    #: disturbance estimate) are filtered over this long.
+    impedance_bias_filter_s: float = 0.05
+    contact_on_n: float = 2.0
+    contact_off_n: float = 1.0
+    debounce_s: float = 0.02
+
+    def __post_init__(self):
+        if not (self.rate_hz > 0 and math.isfinite(self.rate_hz)):
+            raise ControlError(f"display rate_hz must be > 0, got {self.rate_hz}")
+        if not (self.slew_k_s > 0 and self.handover_k_s > 0 and self.blend_s > 0):
+            raise ControlError("slew_k_s, handover_k_s and blend_s must be > 0")
+        if self.source not in SOURCES:
+            raise ControlError(f"source must be one of {SOURCES}, got {self.source!r}")
+        if self.feedforward_model not in FEEDFORWARD_MODELS:
+            raise ControlError(f"feedforward_model must be one of {FEEDFORWARD_MODELS}, "
+                               f"got {self.feedforward_model!r}")
+        if not (self.junction_reference_s > 0 and self.current_slew_a_s > 0
+                and self.flux_inverse_s > 0):
+            raise ControlError("junction_reference_s, current_slew_a_s and flux_inverse_s must "
+                               f"be > 0, got {self.junction_reference_s}, "
+                               f"{self.current_slew_a_s}, {self.flux_inverse_s}")
+        if not self.impedance_horizon_s > 0:
+            raise ControlError("impedance_horizon_s must be > 0, got "
+                               f"{self.impedance_horizon_s}")
+        for name, value, allowed in (("before", self.before, BEFORE_MODES),
+                                     ("idle", self.idle, IDLES)):
+            if value not in allowed:
+                raise ControlError(f"{name} must be one of {allowed}, got {value!r}")

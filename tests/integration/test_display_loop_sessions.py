@@ -1,0 +1,78 @@
+"""The display's junction loop in whole sessions (simulated clock) with its
+bonded sensor's lag off its stated value: the hard cases of the display
+loop (docs/display-loop.md)."""
+
+import numpy as np
+import pytest
+
+from telethermal.physics.scene import load_scene
+from telethermal.teleop.master import JUNCTION_STOPPED
+from telethermal.teleop.run import run_session
+
+SCENE = load_scene("fingertip-7")
+
+
+@pytest.fixture(scope="module")
+def models(trained_models):
+    return trained_models.pair(SCENE, 0)
+
+
+def touch(models, lag_scale, material="aluminium", seed=1):
+    identifier, generator = models
+    return run_session(SCENE, material, identifier, generator, contact_s=3.0, seed=seed,
+                       junction_lag_scale=lag_scale)
+
+
+def at_the_limit_after(result, t0_s):
+    """Periods after ``t0_s`` of contact with the current at the driver's limit."""
+    tr, imax = result.trace, result.summary["module"]["imax_a"]
+    late = tr["t_s"] >= t0_s
+    return int(np.sum(np.abs(tr["current_a"][late]) >= 0.999 * imax))
+
+
+@pytest.mark.parametrize("lag_scale", [0.5, 2.0])
+def test_aluminium_with_the_sensor_at_half_and_twice_its_lag(models, lag_scale):
+    """Regression of the review's case (a 50 ms sensor lag: the old 10 A/K
+    loop oscillated at +-8.5 A about 6 Hz, 1,205 periods saturated) and its
+    2x: no safety event, the loop never stopped, no period at the current
+    limit after the first second (the metal's onset may use it), and the
+    current's sign reversals under 4 per second of contact."""
+    res = touch(models, lag_scale)
+    s, module = res.summary, res.summary["module"]
+    assert module["junction_sensor"]["true_tau_s"] == pytest.approx(
+        lag_scale * module["junction_sensor"]["tau_s"])
+    assert s["safety_events"] == 0
+    assert JUNCTION_STOPPED not in s["display_event_counts"]
+    assert at_the_limit_after(res, 1.0) == 0
+    assert module["reversals_per_s"] < 4.0
+
+
+def test_a_sensor_ten_times_slower_is_made_safe_or_stable(models):
+    """The sensor at 10x its lag (1 s: a debonded chip): either the loop
+    stays off the current limit after the first second, or it stops the
+    module (0 A, latched, logged as a display event); never a limit cycle."""
+    res = touch(models, 10.0)
+    stopped = JUNCTION_STOPPED in res.summary["display_event_counts"]
+    tr = res.trace
+    if stopped:
+        k = int(np.flatnonzero(tr["current_a"] != 0.0).max()) + 1
+        assert np.all(tr["current_a"][k:] == 0.0)
+    else:
+        assert at_the_limit_after(res, 1.0) == 0
+
+
+def test_a_humid_room_lifts_a_remembered_metals_idle_above_the_dew_point(models):
+    """80 % RH at 24 C (dew point 20.4 C): aluminium remembered idles at the
+    dew point plus its margin instead of its pre-conditioned 15.6 C; the
+    display says so (an event and the log) and the touch stays safe."""
+    from dataclasses import replace
+
+    from telethermal.control.dew import DEW_MARGIN_K
+
+    identifier, generator = models
+    humid = replace(SCENE, room_humidity_pct=80.0)
+    s = run_session(humid, "aluminium", identifier, generator, contact_s=2.0, seed=1,
+                    expected_material="aluminium").summary
+    assert s["display_idle_c"] >= s["dew_point_c"] + DEW_MARGIN_K - 1e-9
+    assert s["display_event_counts"].get("idle lifted above the dew point", 0) >= 1
+    assert s["safety_events"] == 0

@@ -1,0 +1,192 @@
+"""The display's junction loop on its bonded sensor (control/junction.py,
+control/junction_design.py): the design's margins on its own model, the
+closed loop on the module with the sensor's lag (simulated clock), and the
+limits counted on the request before any clamp."""
+
+import math
+
+import numpy as np
+import pytest
+
+from telethermal.control.current_quality import ripple_rms_a, sign_reversals
+from telethermal.control.junction import DisplayJunctionLoop, JunctionGains
+from telethermal.control.junction_design import (PHASE_MARGIN_DEG, design_gains, loop_margins,
+                                                 plant_model)
+from telethermal.physics.scene import load_scene
+from telethermal.physics.thermoelectric import (DEFAULT_JUNCTION_SENSOR, HBridge, ModuleState,
+                                                ThermoelectricStack, default_driver,
+                                                get_junction_sensor)
+
+SCENE = load_scene("fingertip-7")
+PARAMS, SINK = SCENE.pad.module_params()
+SENSOR = get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
+DT = 0.002
+MODEL = plant_model(PARAMS, SCENE.pad.layers, SCENE.pad.area_m2, 0.0, SENSOR.tau_s, DT)
+
+
+def designed_loop(driver=None, model=MODEL):
+    kp, ki, _ = design_gains(model)
+    return DisplayJunctionLoop(PARAMS, driver or default_driver(PARAMS), model,
+                               JunctionGains(kp, ki))
+
+
+def test_the_sensor_is_a_part_with_a_lag_as_mounted():
+    """The chip's bonded time constant from its size and the bond (the
+    table's derivation: (rho c) h d / k), not 0."""
+    assert SENSOR.tau_s == pytest.approx(3.6e6 * 0.5e-3 * 50e-6 / 0.9, rel=0.05)
+    assert SENSOR.bias_limit_k > 0 and SENSOR.noise_k > 0 and SENSOR.lsb_k > 0
+    assert "NTCG103JF103F" in SENSOR.source
+
+
+def test_the_design_meets_its_phase_margin_on_its_own_model():
+    """python-control's margin on the design model equals the margin the
+    analytic design asked for (to 0.5 deg: the Pade delay against the exact
+    one, at a crossover of 5 rad/s and a 2 ms delay, differs by < 1e-6 rad),
+    and the loop stays stable with the sensor's lag at half, twice and ten
+    times its stated value."""
+    kp, ki, wc = design_gains(MODEL)
+    m = loop_margins(MODEL, kp, ki)
+    assert m.phase_margin_deg == pytest.approx(PHASE_MARGIN_DEG, abs=0.5)
+    assert m.crossover_rad_s == pytest.approx(wc, rel=1e-3)
+    # The stated design: crossover 4.9 rad/s, closed-loop bandwidth 1.26 Hz.
+    assert 0.5 < m.bandwidth_hz < 3.0
+    assert loop_margins(MODEL, kp, ki, 0.5 * SENSOR.tau_s).phase_margin_deg > PHASE_MARGIN_DEG
+    assert loop_margins(MODEL, kp, ki, 2 * SENSOR.tau_s).phase_margin_deg > 40.0
+    assert loop_margins(MODEL, kp, ki, 10 * SENSOR.tau_s).phase_margin_deg > 10.0
+
+
+class PadInAir:
+    """The module under the pad's layers in air (lumped with the junction,
+    as DisplayTouch idles them), read through the bonded sensor's lag, on
+    the simulated clock (physics steps of DT)."""
+
+    def __init__(self, start_c, lag_s):
+        self.stack = ThermoelectricStack(PARAMS, SINK, SCENE.room_temp_c,
+                                         ModuleState(start_c, SCENE.room_temp_c,
+                                                     SCENE.room_temp_c))
+        self.heat = SCENE.pad.area_m2 * sum(layer.material.volumetric_heat_j_m3k *
+                                            layer.thickness_m for layer in SCENE.pad.layers)
+        self.sensed_c, self.lag_s = start_c, lag_s
+
+    def step(self, current_a):
+        c = self.heat / DT
+        self.stack.step(current_a, DT, c * self.stack.state.cold_c, -c)
+        self.sensed_c += -math.expm1(-DT / self.lag_s) * (self.stack.state.cold_c - self.sensed_c)
+
+
+def run_step(lag_scale, seconds=4.0, start_c=24.0, target_c=14.0):
+    pad, loop = PadInAir(start_c, SENSOR.tau_s * lag_scale), designed_loop()
+    true, current = [], []
+    for _ in range(int(seconds / DT)):
+        out = loop.update(target_c, pad.sensed_c, pad.stack.state.sink_c, DT)
+        pad.step(out.current_a)
+        true.append(pad.stack.state.cold_c)
+        current.append(out.current_a)
+    return np.array(true), np.array(current), loop
+
+
+def test_a_10_k_step_with_the_sensors_lag_settles_with_little_overshoot():
+    """A 10 K step down of the junction target, the sensor at its stated lag:
+    the true junction reaches the target (within 0.1 K from 2 s on) and
+    overshoots it by under 5 % of the step (measured 0.20 K, 2 %: the
+    smoothed target moves no faster than the module can follow, the
+    feed-forward moves the junction, the PI only trims)."""
+    true, current, loop = run_step(1.0)
+    assert 14.0 - true.min() < 0.5
+    assert abs(true[int(2.0 / DT):] - 14.0).max() < 0.1
+    assert np.abs(current).max() <= PARAMS.spec.imax_a and not loop.stopped
+
+
+@pytest.mark.parametrize("lag_scale", [0.5, 2.0])
+def test_a_sensor_off_its_datasheet_settles(lag_scale):
+    """The sensor lagging half or twice its stated value: the loop settles
+    (from 2 s on within 0.1 K; overshoot measured 0.04 K and 1.6 K), never
+    stopped, no sign reversal in the last seconds."""
+    true, current, loop = run_step(lag_scale, seconds=6.0)
+    assert abs(true[int(2.0 / DT):] - 14.0).max() < 0.1
+    assert not loop.stopped
+    assert sign_reversals(current[int(2.0 / DT):]) == 0
+
+
+def test_a_sensor_ten_times_slower_stops_the_module_never_a_limit_cycle():
+    """The sensor lagging ten times its stated value (a debonded chip): the
+    sensor and its model disagree by over 3 K for 0.5 s and the loop stops,
+    0 A latched (the module only conducts: the pad drifts to its sink);
+    no period at the current limit after the stop, no reversal."""
+    true, current, loop = run_step(10.0, seconds=8.0)
+    assert loop.stopped
+    stop = int(np.flatnonzero(current != 0.0).max()) + 1
+    assert stop * DT < 2.0
+    assert np.all(current[stop:] == 0.0)
+    # After the stop the junction relaxes toward the sink, monotonically.
+    assert np.all(np.diff(true[stop + 50:]) >= -1e-9)
+
+
+def test_a_request_of_three_times_imax_is_counted_before_the_clamp():
+    """Holding 10 C, the sensor suddenly reads 40 K over the target: the PI
+    asks for far over Imax (kp 0.85 A/K x 40 K); the driver sends Imax, and
+    the count says so (largest request >= 3 Imax)."""
+    loop = designed_loop()
+    imax = PARAMS.spec.imax_a
+    for _ in range(10):
+        loop.update(10.0, 10.0, 30.0, DT)
+    assert loop.limits.requested_over_imax_periods == 0
+    cut_before = loop.limits.saturated_periods
+    outs = [loop.update(10.0, 50.0, 30.0, DT) for _ in range(10)]
+    assert all(abs(o.current_a) <= imax for o in outs)
+    assert loop.limits.requested_over_imax_periods == 10
+    assert loop.limits.largest_request_a >= 3 * imax
+    assert loop.limits.voltage_over_supply_periods == 10      # 3 Imax R alone is 8 V
+    assert loop.limits.saturated_periods - cut_before == 10
+
+
+def test_the_voltage_limit_binds_on_a_4_v_supply():
+    """A driver rated 15 A on a 4 V supply, the shipped module (R 0.32 ohm):
+    holding 15 C, the sensor then reads 25 K over the target; the current
+    the driver can force is ``(4 V - S (Th - Tc)) / R`` (12.2 A here),
+    under its own limit: what flows sits on the supply, and the request's
+    voltage is counted over it. (With the driver's limit at Imax, 8.5 A,
+    a 4 V supply binds only when ``S (Th - Tc)`` exceeds 1.25 V, a 105 K
+    difference: the current limit binds first.)"""
+    driver = HBridge(15.0, 4.0)
+    loop = designed_loop(driver)
+    hot = 45.0
+    for _ in range(10):
+        loop.update(15.0, 15.0, hot, DT)
+    for _ in range(100):
+        out = loop.update(15.0, 40.0, hot, DT)
+    bound = (4.0 - PARAMS.seebeck_v_k * (hot - 40.0)) / PARAMS.resistance_ohm
+    assert out.current_a == pytest.approx(bound, rel=1e-9) and bound < 15.0
+    assert float(PARAMS.voltage_v(out.current_a, 40.0, hot)) == pytest.approx(4.0)
+    assert loop.limits.voltage_over_supply_periods > 0
+    assert loop.limits.largest_request_v > 4.0
+
+
+def test_the_current_slew_is_bounded():
+    loop = designed_loop()
+    last = 0.0
+    for _ in range(100):
+        out = loop.update(0.0, 30.0, 30.0, DT)
+        assert abs(out.current_a - last) <= loop.slew_a_s * DT + 1e-12
+        last = out.current_a
+    assert loop.limits.slew_limited_periods > 0
+
+
+def test_a_missing_reading_gives_0_a_and_a_fresh_start():
+    loop = designed_loop()
+    loop.update(14.0, 24.0, 24.0, DT)
+    out = loop.update(14.0, math.nan, 24.0, DT)
+    assert out.current_a == 0.0 and math.isnan(out.estimate_c)
+    assert loop.integral_a == 0.0 and loop.reference_c is None
+
+
+def test_reversals_and_ripple_are_counted_as_stated():
+    """Reversals: a square wave of +-1 A at 2 Hz for 1 s has 3 sign changes
+    (4 half-periods); a +-0.05 A dither none (inside the hysteresis). Ripple:
+    a 0.5 A sine at 50 Hz (5 periods in the 0.1 s window: its moving mean is
+    0) has RMS 0.5/sqrt(2)."""
+    t = np.arange(0, 1.0, DT)
+    assert sign_reversals(np.where((t * 4).astype(int) % 2, -1.0, 1.0)) == 3
+    assert sign_reversals(0.05 * np.sin(2 * np.pi * 40 * t)) == 0
+    sine = 3.0 + 0.5 * np.sin(2 * np.pi * 50 * t)
+    assert ripple_rms_a(sine, DT) == pytest.approx(0.5 / math.sqrt(2), rel=0.02)
