@@ -50,3 +50,23 @@ def test_at_80_percent_a_remembered_metal_idles_above_the_dew_point_and_says_so(
     assert lifted == pytest.approx(floor, abs=1e-12)
     assert "idle lifted" in caplog.text and "dew point" in caplog.text
     assert normal > idle_floor_c(24.0, 50.0)    # not lifted at 50 %
+
+
+def test_a_scenes_humidity_is_read_and_checked(tmp_path):
+    """``room_humidity_pct`` in a scene file is read; one outside 0-100 is
+    refused with the key named."""
+    from importlib import resources
+
+    from telethermal.errors import SceneError
+    from telethermal.physics.scene import load_scene as load
+
+    text = resources.files("telethermal").joinpath("scenes", "fingertip-7.toml").read_text()
+    good = tmp_path / "humid.toml"
+    good.write_text(text.replace("room_temp_c = 24.0",
+                                 "room_temp_c = 24.0\nroom_humidity_pct = 80"))
+    assert load(good).room_humidity_pct == 80.0
+    bad = tmp_path / "wet.toml"
+    bad.write_text(text.replace("room_temp_c = 24.0",
+                                "room_temp_c = 24.0\nroom_humidity_pct = 120"))
+    with pytest.raises(SceneError, match="room_humidity_pct"):
+        load(bad)

@@ -203,8 +203,9 @@ def test_every_key_a_scene_may_hold_is_documented():
     from telethermal.physics.scene import FingerSpec, SensorSpec, VariabilitySpec
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "scenes.md").read_text()
-    keys = {"name", "description", "room_temp_c", "sample_rate_hz", "pre_contact_s",
-            "materials", "tolerance_rel", "material", "thickness_m"} | set(PAD_KEYS)
+    keys = {"name", "description", "room_temp_c", "room_humidity_pct", "sample_rate_hz",
+            "pre_contact_s", "materials", "tolerance_rel", "material",
+            "thickness_m"} | set(PAD_KEYS)
     for spec in (FingerSpec, SensorSpec, VariabilitySpec):
         keys |= set(spec.__dataclass_fields__)
     missing = sorted(k for k in keys if f"| `{k}` |" not in doc)
