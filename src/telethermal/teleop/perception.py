@@ -14,8 +14,9 @@ rendered touch against the same finger's direct contact.
   cooling and 0.5 K for warming (Stevens and Choo, "Temperature sensitivity
   of the body surface over the life span", Somatosensory & Motor Research
   15(1), 1998: every region detects cold better than warmth); they hold for
-  changes faster than about 0.1 K/s and rise below it (Kenshalo, "Correlations
-  of temperature sensitivity in man and monkey", 1976). The time counted
+  changes faster than about 0.1 K/s and rise below it (Kenshalo's
+  measurements, as the issue cites them; the exact paper not checked
+  here). The time counted
   here takes the thresholds at every rate, so it over-counts an error that
   drifts slower than 0.1 K/s: an upper bound.
 
