@@ -57,6 +57,8 @@ from telethermal.physics.scene import (ONSET_MARGIN_S, ObjectSpec, Scene, Sensor
 from telethermal.control.contact import ContactDetector
 from telethermal.control.thermometer_calibration import (UNCALIBRATED, ThermometerCalibration,
                                                         calibrate_simulated)
+from telethermal.physics.as_built import (flux_gain_factor, simulated_module,
+                                          simulated_pad_scene)
 from telethermal.physics.held_pad import HeldPad, HeldPadResult
 from telethermal.physics.thermoelectric import default_driver
 from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, Instruments,
@@ -230,12 +232,15 @@ def pad_database(scene: Scene, rng: np.random.Generator,
     trials are the same but for what the devices change."""
     session = session or sensor_session(scene, rng)
     tc_bias = session.instruments.pad_tc_bias_k
+    # The pad as built ([as_built.pad]; the scene itself without one): its
+    # layers, contact conductance, lag, module and flux gain.
+    built, recorded = simulated_pad_scene(scene), _built_session(scene, session)
     trials = []
     n = scene.pad.trials_per_material
     times = _time_axis(scene, scene.pad.contact_duration_s + ONSET_MARGIN_S)
     for obj in scene.objects:
-        model, choice = touch_contact_model(scene, obj)
-        draws = _draw(scene, obj, n, scene.pad.contact_conductance_w_m2k, rng, session, measure)
+        model, choice = touch_contact_model(built, obj)
+        draws = _draw(scene, obj, n, built.pad.contact_conductance_w_m2k, rng, session, measure)
         command = np.array([scene.pad_temp_c(t) for t in draws.object_ir_c])
         # The pad's loop holds its thermocouple's reading at the command: the
         # pad itself sits the thermocouple's bias below it.
@@ -247,30 +252,44 @@ def pad_database(scene: Scene, rng: np.random.Generator,
                 pad_c = pad_loop(command)           # the loop's own error instead
             # The junction is a node of the module, held at the set point by
             # the pad's 1 kHz loop; it droops when the object pulls heat.
-            result = _held_pad_contact(scene, obj, model, t_s, pad_c, draws)
+            result = _held_pad_contact(built, obj, model, t_s, pad_c, draws,
+                                       simulated_module(scene, _pad_module(scene)[0]))
             extra = {"junction_droop_k": result.peak_droop_k,
                      "module_peak_current_a": result.peak_current_a}
         else:
             run = precondition(command - tc_bias, scene.room_temp_c, PRECONDITION_S)
             pad_c, back_c = run.final_pad_c, run.final_water_c
             result = model.solve(t_s, pad_c, draws.object_true_c, draws.conductance_w_m2k,
-                                 back_temp_a_c=back_c, sensor_lag_s=scene.sensors.flux_lag_s)
+                                 back_temp_a_c=back_c, sensor_lag_s=built.sensors.flux_lag_s)
         # T_pad_C is what the pad's thermocouple read just before contact.
         before = Thermocouple(cold_junction_c=scene.room_temp_c, bias_k=tc_bias).read_c(pad_c, rng)
-        trials += _record(scene, result, times, draws, before, rng, None, obj.name,
+        trials += _record(built, result, times, draws, before, rng, None, obj.name,
                           choice.kind, lambda i: {"T_pad_true_C": f"{pad_c[i]:.4f}",
                                                   **{k: f"{v[i]:.4f}" for k, v in extra.items()}},
-                          session, scene.pad.contact_duration_s)
+                          recorded, scene.pad.contact_duration_s)
     return trials
 
 
-def _held_pad_contact(scene: Scene, obj, model, t_s, pad_c, draws) -> HeldPadResult:
+def _built_session(scene: Scene, session: SensorSession) -> SensorSession:
+    """The session whose flux sensor has the gain of the pad as built
+    (its instrument's drawn error times ``[as_built.pad] flux_gain``)."""
+    factor = flux_gain_factor(scene)
+    if factor == 1.0:
+        return session
+    inst = session.instruments
+    return dataclasses.replace(session, instruments=dataclasses.replace(
+        inst, flux_gain=inst.flux_gain * factor))
+
+
+def _held_pad_contact(scene: Scene, obj, model, t_s, pad_c, draws,
+                      module=None) -> HeldPadResult:
     """The scene's Peltier pad on its module and heat sink, its junction held
     at ``pad_c`` by the pad's loop (:mod:`telethermal.physics.held_pad`),
     touching ``obj``; settled at the set point before contact. A contact
     that takes the module past its datasheet's limits is an error (the
     database would hold touches the pad cannot make)."""
     params, sink = _pad_module(scene)
+    params = module or params             # the module as built (the simulator's)
     plant = HeldPad(model, params, sink, default_driver(params), scene.room_temp_c,
                     sensor_lag_s=scene.sensors.flux_lag_s, area_m2=scene.pad.area_m2)
     result = plant.run(t_s, pad_c, draws.object_true_c, draws.conductance_w_m2k)
@@ -328,6 +347,9 @@ def generate_databases(scene: Scene, out: str | Path, seed: int = 0, overwrite: 
     thermometer calibration, or none when ``calibrate`` is False)."""
     rng = np.random.default_rng(seed)
     summary = {"scene": scene.name, "seed": seed, "datasets": {}}
+    if scene.as_built is not None:
+        log.warning("%s: the simulated touches are of %s", scene.name, scene.as_built.describe())
+        summary["as_built"] = scene.as_built.to_dict()
     with staged_dir(out, overwrite) as staging:
         parts = [("pad", pad_database)]
         if scene.finger is not None:

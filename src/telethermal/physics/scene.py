@@ -20,6 +20,7 @@ from importlib import resources
 from pathlib import Path
 
 from telethermal.errors import SceneError
+from telethermal.physics.as_built import AsBuilt, read_as_built
 from telethermal.physics.layered import Boundary, Layer
 from telethermal.physics.materials import (get_material, load_materials, read_table,
                                            register_materials, shadowed_by,
@@ -185,6 +186,8 @@ class Scene:
     #: dew point: control/dew.py). Default 50 %: the middle of the 30-70 %
     #: ISO 7730 (Ergonomics of the thermal environment, annex) recommends indoors.
     room_humidity_pct: float = 50.0
+    #: The pads as really built (``[as_built]``): the simulator's alone (physics/as_built.py).
+    as_built: AsBuilt | None = None
 
     @property
     def materials(self) -> list[str]:
@@ -354,7 +357,7 @@ def _parse_scene(data: dict, source: str, own_table: str | None) -> Scene:
     r = _Reader(data, "top level", source)
     r.used.add("materials")
     room = r.num("room_temp_c", lo=-20, hi=60)
-    for table in ("pad", "finger", "objects", "sensors", "variability", "model"):
+    for table in ("pad", "finger", "objects", "sensors", "variability", "model", "as_built"):
         r.used.add(table)
     if not isinstance(data.get("pad"), dict):
         r.fail("a [pad] table is needed")
@@ -362,7 +365,7 @@ def _parse_scene(data: dict, source: str, own_table: str | None) -> Scene:
     mr = _Reader(model, "[model]", source)
     tolerance = mr.num("tolerance_rel", 1e-3, 1e-9, 0.5)
     mr.done()
-    scene = Scene(
+    scene = read_as_built(Scene(
         name=r.text("name"), description=r.text("description", "", max_bytes=4096),
         room_temp_c=room, sample_rate_hz=r.num("sample_rate_hz", lo=1, hi=1e6),
         pre_contact_s=r.num("pre_contact_s", 0.5, 0, 60),
@@ -373,7 +376,7 @@ def _parse_scene(data: dict, source: str, own_table: str | None) -> Scene:
         variability=_parse_dataclass(VariabilitySpec, data.get("variability"),
                                      "[variability]", source),
         tolerance_rel=tolerance, source=source, materials_table=own_table,
-        room_humidity_pct=r.num("room_humidity_pct", 50.0, 0, 100))
+        room_humidity_pct=r.num("room_humidity_pct", 50.0, 0, 100)), data.get("as_built"), source)
     for name in [lay.material.name for o in scene.objects for lay in o.layers()] + [
             lay.material.name for lay in scene.pad.layers]:
         other = shadowed_by(name)

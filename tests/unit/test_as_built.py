@@ -1,0 +1,147 @@
+"""Pads built off their datasheet (``[as_built]``): read by the simulator
+only (issue 44, deliverable 1)."""
+
+from __future__ import annotations
+
+import copy
+import logging
+import tomllib
+from importlib import resources
+
+import numpy as np
+import pytest
+
+from telethermal.errors import SceneError
+from telethermal.physics.as_built import (PART_KEYS, SCALAR_KEYS, draw_as_built,
+                                          simulated_module, simulated_pad_scene)
+from telethermal.physics.scene import ObjectSpec, parse_scene, pad_contact_model
+
+
+def _data(objects=("aluminium", "plexiglass"), trials=1) -> dict:
+    data = tomllib.loads(resources.files("telethermal").joinpath(
+        "scenes/fingertip-7.toml").read_text())
+    data["objects"] = [o for o in data["objects"] if o["material"] in objects]
+    data["pad"]["trials_per_material"] = trials
+    return data
+
+
+def _scene(as_built=None, **kw):
+    data = _data(**kw)
+    if as_built is not None:
+        data["as_built"] = as_built
+    return parse_scene(data, "variant.toml")
+
+
+def test_factors_given_are_read_and_missing_ones_are_one():
+    scene = _scene({"pad": {"layer_thickness": [1.2, 1.5, 1.0], "flux_lag_s": 1.2}})
+    f = scene.as_built.pad
+    assert f.layer_thickness == (1.2, 1.5, 1.0) and f.flux_lag_s == 1.2
+    assert f.flux_gain == 1.0 and scene.as_built.display.nominal
+
+
+def test_drawn_factors_are_reproducible_and_lognormal():
+    a, b = draw_as_built(0.15, 3, 3), draw_as_built(0.15, 3, 3)
+    assert a == b and a != draw_as_built(0.15, 4, 3)
+    # 2000 draws of ln(factor): mean 0, sd 0.15 (standard errors 0.0034 and 0.0024; 5 of them)
+    logs = np.log([getattr(draw_as_built(0.15, s, 1).pad, k)
+                   for s in range(250) for k in SCALAR_KEYS[:4]] +
+                  [draw_as_built(0.15, s, 1).pad.layer_thickness[0] for s in range(1000)])
+    assert abs(logs.mean()) < 0.017 and abs(logs.std() - 0.15) < 0.012
+
+
+@pytest.mark.parametrize("raw, words", [
+    ({"pad": {"layer_thickness": [1.1]}}, "3 factor(s)"),
+    ({"pad": {"flux_lagg_s": 1.1}}, "unknown key(s) flux_lagg_s"),
+    ({"pad": {"flux_gain": 0.0}}, "'flux_gain' = 0.0"),
+    ({"sd": 0.1, "seed": 1, "pad": {}}, "not both"),
+    ({"sd": 0.1}, "missing seed"),
+    ({"sd": 2.0, "seed": 1}, "'sd' = 2.0"),
+    ({}, "empty"),
+])
+def test_bad_tables_are_refused_by_name(raw, words):
+    with pytest.raises(SceneError, match="variant.toml: \\[as_built") as err:
+        _scene(raw)
+    assert words in str(err.value)
+
+
+def test_a_scene_with_them_says_so_in_the_log(caplog):
+    with caplog.at_level(logging.WARNING):
+        _scene({"sd": 0.15, "seed": 0})
+    assert "pads built off their datasheet" in caplog.text and "sd 0.15, seed 0" in caplog.text
+
+
+def test_removing_the_tables_changes_no_model_the_product_builds():
+    """Every model the product builds from a scene (the pad's contact
+    model, the effusivity estimator's curves, its priors and noise) is the
+    same, to the bit, with and without ``[as_built]``."""
+    from telethermal.ident.effusivity import effusivity_family
+    from telethermal.ident.oracle import draw_nuisances, flux_noise_w_m2
+
+    plain, built = _scene(), _scene({"sd": 0.3, "seed": 7})
+    assert not built.as_built.pad.nominal
+    obj = ObjectSpec("plexiglass", 24.0, 0.03)
+    t = np.linspace(0, 0.5, 51)
+    a, b = (pad_contact_model(s, obj)[0].solve(t, 34.0, 24.0, 3000.0) for s in (plain, built))
+    assert np.array_equal(a.flux_sensed_w_m2, b.flux_sensed_w_m2)
+    fa, fb = (effusivity_family(s, 24.0, np.linspace(-0.3, 0.3, 4), 0.06, n_e=4)
+              for s in (plain, built))
+    assert np.array_equal(fa.g, fb.g)
+    na, nb = (draw_nuisances(s, 40, np.random.default_rng(1), n_sessions=2)
+              for s in (plain, built))
+    assert np.array_equal(na["u"], nb["u"]) and np.array_equal(na["tau_s"], nb["tau_s"])
+    assert all(np.array_equal(na["amp"][k], nb["amp"][k]) for k in na["amp"])
+    assert flux_noise_w_m2(plain) == flux_noise_w_m2(built)
+
+
+def test_the_simulated_pad_is_the_scene_written_with_the_built_values():
+    """Touches of a pad built with factors on its layers, contact conductance
+    and lag equal those of a scene that names the built values as nominal
+    (same draws: equal to rounding)."""
+    from telethermal.data.generate import pad_database
+    factors = {"layer_thickness": [1.3, 1.5, 0.8], "flux_lag_s": 1.2,
+               "contact_conductance_w_m2k": 0.85}
+    built = _scene({"pad": factors})
+    data = _data()
+    data["pad"]["layers"] = [[m, t * f] for (m, t), f in
+                             zip(data["pad"]["layers"], factors["layer_thickness"])]
+    data["pad"]["contact_conductance_w_m2k"] *= 0.85
+    data["sensors"]["flux_lag_s"] *= 1.2
+    written = parse_scene(data, "written.toml")
+    a = pad_database(built, np.random.default_rng(0))
+    b = pad_database(written, np.random.default_rng(0))
+    plain = pad_database(_scene(), np.random.default_rng(0))
+    for x, y, z in zip(a, b, plain):
+        fx, fy = x.channels["heat_flux_W_m2"], y.channels["heat_flux_W_m2"]
+        assert np.allclose(fx, fy, rtol=0, atol=1e-9)
+        assert not np.allclose(fx, z.channels["heat_flux_W_m2"], atol=1.0)
+
+
+def test_the_flux_gain_and_module_factors_reach_the_simulator():
+    """A flux gain 5 % high reads every sample 5 % high (the same noise
+    draws: the ratio of sums over 0.5-2 s is 1.05 to 1e-4, quantisation);
+    the module's factors scale its derived S, R, K."""
+    from telethermal.data.generate import _pad_module, pad_database
+    plain, built = _scene(), _scene({"pad": {"flux_gain": 1.05}})
+    for x, y in zip(pad_database(plain, np.random.default_rng(0)),
+                    pad_database(built, np.random.default_rng(0))):
+        m = (x.channels["t_s"] > 0.5)
+        ratio = y.channels["heat_flux_W_m2"][m].sum() / x.channels["heat_flux_W_m2"][m].sum()
+        assert ratio == pytest.approx(1.05, abs=1e-4)
+    mod = _scene({"pad": {"module_seebeck": 1.1, "module_resistance": 0.9,
+                          "module_conductance": 1.2}})
+    nominal = _pad_module(mod)[0]
+    got = simulated_module(mod, nominal)
+    assert got.seebeck_v_k == pytest.approx(1.1 * nominal.seebeck_v_k)
+    assert got.resistance_ohm == pytest.approx(0.9 * nominal.resistance_ohm)
+    assert got.conductance_w_k == pytest.approx(1.2 * nominal.conductance_w_k)
+    assert simulated_pad_scene(plain) is plain and set(PART_KEYS) > set(SCALAR_KEYS)
+
+
+def test_generation_json_records_the_pads_as_built(tmp_path):
+    from telethermal.data.generate import generate_databases
+    data = _data(objects=("plexiglass",))
+    data.pop("finger")
+    data["as_built"] = {"sd": 0.1, "seed": 2}
+    summary = generate_databases(parse_scene(copy.deepcopy(data), "v.toml"), tmp_path / "db")
+    assert summary["as_built"]["sd"] == 0.1
+    assert "as_built" in (tmp_path / "db" / "generation.json").read_text()
