@@ -43,12 +43,43 @@ def cmd_identify_methods(args) -> int:
     return 0
 
 
+def _scene(args):
+    """``--scene`` loaded (a shipped name or a scene file) and given to this
+    process's pad models by its name; None when not given."""
+    if not getattr(args, "scene", None):
+        return None
+    from telethermal.ident.fitted import register_scene
+    from telethermal.physics.scene import load_scene
+    scene = load_scene(args.scene)
+    register_scene(scene)
+    return scene
+
+
+def _method(args, scene) -> str:
+    """``--method``, else the slave's own for the touches' scene (effusivity-fit
+    where it can model the scene's pad, else effusivity-lda; said why)."""
+    if args.method:
+        return args.method
+    from telethermal.ident.fitted import scene_of
+    from telethermal.ident.registry import dataset_scene, pad_dataset
+    from telethermal.teleop.models import FALLBACK_METHOD, method_and_reason
+    scene = scene or dataset_scene(pad_dataset(args.data))
+    if scene is None:
+        method, why = FALLBACK_METHOD, "the dataset names no scene (give --scene)"
+    else:
+        method, why = method_and_reason(scene_of(scene) if isinstance(scene, str) else scene)
+    print(f"method {method}: {why}")
+    return method
+
+
 def cmd_identify_train(args) -> int:
     from telethermal.ident.registry import train_on_dataset
 
+    scene = _scene(args)
+    args.method = _method(args, scene)
     trained = train_on_dataset(args.data, args.method, args.channels, args.max_window_s,
                                args.out, status=console.status, logger=log,
-                               unseen_weight=args.unseen_weight)
+                               unseen_weight=args.unseen_weight, scene=scene)
     model = trained.model
     print(f"{trained.path}: {args.method} on {', '.join(model.classes_)}; "
           f"{len(model.windows_s_)} windows up to {model.windows_s_[-1]} s; "
@@ -61,7 +92,7 @@ def cmd_identify_eval(args) -> int:
 
     png = _png(args)
     report = evaluate_saved(args.model, args.data, args.json, png, command=_command(),
-                            status=console.status)
+                            status=console.status, scene=_scene(args))
     _print_lines(text_report(report, args.json, png))
     return 0
 
@@ -69,18 +100,30 @@ def cmd_identify_eval(args) -> int:
 def cmd_identify_cv(args) -> int:
     from telethermal.data.dataset import load_dataset
     from telethermal.ident.crossval import cross_validate, text_report
+    from telethermal.ident.registry import pad_dataset, touches_scene
     from telethermal.jsonfile import write_json
 
-    with console.status(f"reading {args.data}"):
-        trials = load_dataset(args.data)
+    scene = _scene(args)
+    method = _method(args, scene)
+    data = pad_dataset(args.data)
+    touched = touches_scene(data, scene)
+    with console.status(f"reading {data}"):
+        trials = load_dataset(data)
     with console.status("cross-validating") as status:
-        report = cross_validate(trials, args.method, args.folds, args.channels,
-                                args.max_window_s, progress=status.update)
+        report = cross_validate(trials, method, args.folds, args.channels,
+                                args.max_window_s, progress=status.update, scene=touched)
     report["data"], report["command"] = str(args.data), _command()
     if args.json:
         write_json(args.json, report)
     _print_lines(text_report(report, args.json))
     return 0
+
+
+DATA_HELP = "dataset folder (a generated one's pad/, or the folder holding pad/ and finger/)"
+METHOD_HELP = ("identifier: see `telethermal identify methods` (default: the slave's own for "
+               "the scene: effusivity-fit where it can model the pad, else effusivity-lda)")
+SCENE_HELP = ("the scene whose pad made the touches: a shipped name or a scene file (default: "
+              "the one the dataset's generation.json names)")
 
 
 def add_parser(sub) -> None:
@@ -89,9 +132,9 @@ def add_parser(sub) -> None:
     p = isub.add_parser("methods", help="list the identification methods")
     p.set_defaults(func=cmd_identify_methods)
     p = isub.add_parser("train", help="fit an identifier on a dataset")
-    p.add_argument("--data", required=True, help="dataset folder")
-    p.add_argument("--method", required=True,
-                   help="identifier: see `telethermal identify methods`")
+    p.add_argument("--data", required=True, help=DATA_HELP)
+    p.add_argument("--method", help=METHOD_HELP)
+    p.add_argument("--scene", help=SCENE_HELP)
     p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),
                    help="comma-separated channels (default heat_flux_W_m2)")
     p.add_argument("--max-window-s", type=_positive(), default=1.0,
@@ -109,13 +152,14 @@ def add_parser(sub) -> None:
     p.add_argument("--json", required=True,
                    help="JSON report to write: accuracy per window, decisions, calibration")
     p.add_argument("--png", help="plot of accuracy against time after contact")
+    p.add_argument("--scene", help=SCENE_HELP)
     p.set_defaults(func=cmd_identify_eval)
     p = isub.add_parser("cv", help="grouped k-fold cross-validation of a method on a dataset: "
                                    "accuracy per window with 95 %% intervals, the decisions "
                                    "(commit rate, accuracy, named alone, confusion), calibration")
-    p.add_argument("--data", required=True, help="dataset folder")
-    p.add_argument("--method", required=True,
-                   help="identifier: see `telethermal identify methods`")
+    p.add_argument("--data", required=True, help=DATA_HELP)
+    p.add_argument("--method", help=METHOD_HELP)
+    p.add_argument("--scene", help=SCENE_HELP)
     p.add_argument("--folds", type=int, default=5,
                    help="folds; each holds whole groups (default 5)")
     p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),

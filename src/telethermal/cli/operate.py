@@ -183,7 +183,7 @@ def cmd_check(args) -> int:
 def cmd_models(args) -> int:
     from telethermal.teleop.models import write_models
 
-    paths = write_models(args.out, args.scene, args.data, args.seed)
+    paths = write_models(args.out, args.scene, args.data, args.seed, echo=print)
     for path in paths:
         print(f"wrote {path}")
     print(f"copy them to the slave host and check them there with `sha256sum -c SHA256SUMS` "

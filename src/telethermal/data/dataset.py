@@ -74,7 +74,11 @@ def read_manifest(root: str | Path) -> list[Trial]:
     root = Path(root)
     path = root / MANIFEST
     if not path.is_file():
-        raise DatasetError(f"{path}: no manifest (is {root} a dataset folder?)")
+        parts = [p for p in ("pad", "finger") if (root / p / MANIFEST).is_file()]
+        raise DatasetError(f"{path}: no manifest (is {root} a dataset folder?)" + (
+            f"; {root} holds the databases {' and '.join(p + '/' for p in parts)}: give "
+            + " or ".join(f"{root / p}" for p in parts) + " (pad/: the pad's touches, "
+            "for identification; finger/: the finger's, for the generator)" if parts else ""))
     with path.open(newline="") as fh:
         reader = csv.DictReader(fh)
         header = reader.fieldnames or []

@@ -251,15 +251,24 @@ def plot_accuracy(reports: dict[str, dict], out_png, title: str = "") -> None:
 
 
 def evaluate_saved(model_path: str | Path, data: str | Path, json_path: str | Path,
-                   png_path: str | Path, command: str = "", status=nullcontext) -> dict:
+                   png_path: str | Path, command: str = "", status=nullcontext,
+                   scene=None) -> dict:
     """Score the saved model ``model_path`` on the dataset folder ``data``
-    (refused when the dataset names another scene than the model's); the
-    report, with ``command``, goes to ``json_path``, the accuracy plot to
-    ``png_path``. ``status(text)``: a context manager held while evaluating."""
+    (or its ``pad/``; refused when the dataset, or ``scene``, names another
+    scene than the model's); the report, with ``command``, goes to
+    ``json_path``, the accuracy plot to ``png_path``. ``status(text)``: a
+    context manager held while evaluating. ``scene``: the touches' Scene
+    (a ``--scene`` file: the model finds its pad model by that name)."""
+    from telethermal.ident.registry import pad_dataset, scene_name, touches_scene
+
     model = load_model(model_path)
-    scene_name = dataset_scene(data)
-    if scene_name is not None:
-        check_scene(model, scene_name, str(model_path))
+    data = pad_dataset(data)
+    named = scene_name(touches_scene(data, scene))
+    if scene is not None:
+        from telethermal.ident.fitted import register_scene
+        register_scene(scene)
+    if named is not None:
+        check_scene(model, named, str(model_path))
     trials = load_dataset(data)
     with status(f"evaluating on {data}"):
         report = evaluate(model, trials)

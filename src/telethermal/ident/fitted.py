@@ -90,7 +90,7 @@ def scene_of(scene_ref: str):
         raise IdentificationError(
             f"effusivity-fit needs the pad model of scene {scene_ref!r}, which is neither a "
             f"shipped scene nor a scene file, and no scene file of that name was loaded by "
-            f"this process (give its path: --scene FILE): {exc}") from exc
+            f"this process (give the scene file: --scene FILE): {exc}") from exc
 
 
 def serves(scene) -> str | None:
@@ -179,8 +179,9 @@ class EffusivityFit(Identifier):
     def fit(self, contacts):
         if not self.scene:
             raise IdentificationError(
-                "effusivity-fit needs the scene whose pad made the touches (scene=...): its "
-                "estimate fits that pad's model")
+                "effusivity-fit needs the scene whose pad made the touches (--scene NAME|FILE; "
+                "scene=... in Python): its estimate fits that pad's model, and these touches "
+                "name no scene (a lab's import has no generation.json)")
         from telethermal.ident.intervals import calibrate_allowance
 
         super().fit(contacts)

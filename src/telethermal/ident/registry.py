@@ -82,6 +82,38 @@ def check_scene(model: Identifier, scene_name: str, where: str = "the identifier
                 f"Give the scene those objects, or train on contacts of its materials")
 
 
+def pad_dataset(data: str | Path) -> Path:
+    """``data``, or ``data/pad`` where ``data`` holds a generated scene's
+    databases (``pad/`` and ``finger/``: identification reads the pad's)."""
+    from telethermal.data.dataset import MANIFEST
+
+    root = Path(data)
+    if not (root / MANIFEST).is_file() and (root / "pad" / MANIFEST).is_file():
+        log.info("%s holds the databases pad/ and finger/: identification reads %s", root,
+                 root / "pad")
+        return root / "pad"
+    return root
+
+
+def touches_scene(data: str | Path, scene: Scene | None):
+    """The scene whose pad made the touches of ``data``: ``scene`` (a
+    user's ``--scene``; refused when the dataset records another), else the
+    one the dataset records (its name; None for a lab's import)."""
+    named = dataset_scene(data)
+    if scene is None:
+        return named
+    if named is not None and named != scene.name:
+        raise IdentificationError(
+            f"{data} was generated from scene {named!r} (its generation.json), not "
+            f"{scene.name!r}: give --scene {named} (or that scene's file)")
+    return scene
+
+
+def scene_name(scene) -> str | None:
+    """A scene's name (a Scene, or a name already), None for none."""
+    return getattr(scene, "name", scene)
+
+
 @dataclass(frozen=True)
 class Trained:
     """A model fitted and saved by :func:`train_on_dataset`."""
@@ -94,12 +126,15 @@ class Trained:
 
 def train_on_dataset(data: str | Path, method: str, channels, max_window_s: float,
                      out: str | Path, status=nullcontext, logger=log,
-                     unseen_weight: float | None = None) -> Trained:
-    """Fit a ``method`` identifier on the dataset folder ``data`` and save it
-    to ``out``, with the dataset's scene (when it has a record of one).
+                     unseen_weight: float | None = None, scene: Scene | None = None) -> Trained:
+    """Fit a ``method`` identifier on the dataset folder ``data`` (or its
+    ``pad/``) and save it to ``out``, with the touches' scene: ``scene``,
+    else the dataset's record of one (:func:`touches_scene`).
     ``status(text)``: a context manager held while reading and fitting;
     ``logger`` warns of trials left out. ``unseen_weight``: effusivity-fit's
     prior weight of a material outside the classes (its default if None)."""
+    data = pad_dataset(data)
+    scene = touches_scene(data, scene)
     extra = {}
     if unseen_weight is not None:
         if method != "effusivity-fit":
@@ -109,7 +144,7 @@ def train_on_dataset(data: str | Path, method: str, channels, max_window_s: floa
         extra["unseen_weight"] = unseen_weight
     with status(f"reading {data}"):
         trials = load_dataset(data)
-    model = make(method, scene=dataset_scene(data), channels=channels,
+    model = make(method, scene=scene, channels=channels,
                  max_window_s=max_window_s, **extra)
     contacts, skipped = from_trials(trials, model.channels, max_s=max_window_s)
     if skipped:
@@ -118,9 +153,8 @@ def train_on_dataset(data: str | Path, method: str, channels, max_window_s: floa
     start = time.perf_counter()
     with status(f"training {method} on {len(contacts)} trials"):
         model.fit(contacts)
-    scene_name = dataset_scene(data)
-    if scene_name is not None:
-        model.scene_ = scene_name
+    if scene is not None:
+        model.scene_ = scene_name(scene)
     keep = {id(t) for t in trials} - {id(t) for t in skipped}
     model.training_digests_ = sorted({trial_digest(t) for t in trials if id(t) in keep})
     path = model.save(out)

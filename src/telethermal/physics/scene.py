@@ -28,6 +28,7 @@ from telethermal.physics.materials import (get_material, load_materials, read_ta
 from telethermal.physics.model import ModelChoice, choose_model
 from telethermal.physics.scenefile import MAX_OBJECTS, UPPER_BOUNDS, parse_toml, read_scene_text
 from telethermal.physics.scenereader import TableReader as _Reader
+from telethermal.physics.scene_names import check_own_name
 from telethermal.physics.scenereader import read_layers, read_material
 
 PAD_KINDS = ("peltier", "water")
@@ -456,6 +457,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
     data = parse_toml(text, source)
     scene = dataclasses.replace(parse_scene(data, source), ref=ref)
     if from_file:
+        check_own_name(scene)                  # a shipped name on other content: refused
         _FILES_BY_NAME[scene.name] = scene
     return scene
 

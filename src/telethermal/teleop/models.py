@@ -28,12 +28,19 @@ FALLBACK_METHOD = "effusivity-lda"
 def default_method(scene: Scene) -> str:
     """:data:`DEFAULT_METHOD` where it can model ``scene``'s touches, else
     :data:`FALLBACK_METHOD` (logged, with the reason)."""
+    method, why = method_and_reason(scene)
+    if method != DEFAULT_METHOD:
+        log.info("%s: identifier %s, not %s: %s", scene.name, FALLBACK_METHOD, DEFAULT_METHOD,
+                 why)
+    return method
+
+
+def method_and_reason(scene: Scene) -> tuple[str, str]:
+    """(:func:`default_method`'s method for ``scene``, why: one line)."""
     reason = serves(scene)
     if reason is None:
-        return DEFAULT_METHOD
-    log.info("%s: identifier %s, not %s: %s", scene.name, FALLBACK_METHOD, DEFAULT_METHOD,
-             reason)
-    return FALLBACK_METHOD
+        return DEFAULT_METHOD, f"it fits {scene.name}'s pad model to each touch"
+    return FALLBACK_METHOD, f"{DEFAULT_METHOD} cannot model {scene.name}'s touches: {reason}"
 
 
 def train_identifier(scene: Scene, seed: int = 0, method: str | None = None):
@@ -73,7 +80,8 @@ def session_models(scene: Scene, identifier_path=None, generator_path=None, seed
     return identifier, generator
 
 
-def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0) -> list:
+def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
+                 echo=log.info) -> list:
     """A slave host's ``identifier.npz`` and ``generator.npz`` in ``out``,
     with ``SHA256SUMS`` (``sha256sum -c`` checks a copy). Trained on the
     scene's simulated databases (as the slave does at start when its config
@@ -81,7 +89,8 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
     ``finger/`` (a generated or a recorded one), or one dataset of pad
     contacts (a lab's import). Without a finger database the generator is
     the scene's direct-contact model (its simulated finger database: the
-    closed forms and layered solutions the simulator is checked against)."""
+    closed forms and layered solutions the simulator is checked against).
+    ``echo(line)``: told which identifier was trained and why."""
     import hashlib
     from pathlib import Path
 
@@ -94,20 +103,23 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
     out.mkdir(parents=True, exist_ok=True)
     scene = with_finger(load_scene(scene_name))
     if data is None:
-        identifier, generator = train_identifier(scene, seed), train_generator(scene, seed)
+        method, why = method_and_reason(scene)
+        identifier = train_identifier(scene, seed, method)
+        generator = train_generator(scene, seed)
     else:
         from telethermal.data.dataset import MANIFEST, trial_digest
         from telethermal.ident.registry import dataset_scene
         pad = Path(data) / "pad" if (Path(data) / "pad" / MANIFEST).is_file() else Path(data)
         trials = load_dataset(pad)
         named = dataset_scene(pad)                      # None when it has no record
-        method, data_scene = _dataset_method(scene, named)
+        method, data_scene, why = _dataset_method(scene, named)
         identifier = make(method, scene=data_scene).fit(from_trials(trials)[0])
         identifier.scene_ = named
         identifier.training_digests_ = sorted({trial_digest(t) for t in trials})
         finger = Path(data) / "finger"
         generator = NetworkGenerator().fit(load_dataset(finger)) \
             if (finger / MANIFEST).is_file() else train_generator(scene, seed)
+    echo(f"identifier: {method} on {', '.join(identifier.classes_)}: {why}")
     paths = [Path(identifier.save(out / "identifier.npz")),
              Path(save_generator(generator, out / "generator.npz"))]
     sums = out / "SHA256SUMS"
@@ -117,23 +129,24 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0)
 
 
 def _dataset_method(scene: Scene, named: str | None):
-    """(the method, the scene) for a dataset of the scene ``named`` (None:
-    the dataset names none): :func:`default_method` of that scene;
+    """(the method, the scene, why) for a dataset of the scene ``named``
+    (None: the dataset names none): :func:`default_method` of that scene;
     :data:`FALLBACK_METHOD` where the dataset names no scene or one this
     process cannot load (its pad's model is what the default fits)."""
     from telethermal.errors import IdentificationError
     from telethermal.ident.fitted import scene_of
 
     if named is None:
-        log.info("identifier %s: the dataset names no scene, whose pad model %s would fit",
-                 FALLBACK_METHOD, DEFAULT_METHOD)
-        return FALLBACK_METHOD, None
+        return FALLBACK_METHOD, None, (
+            f"the dataset names no scene, whose pad model {DEFAULT_METHOD} would fit (a lab's "
+            f"import: give it a generation.json naming its scene, or use `identify train "
+            f"--scene`)")
     try:
         data_scene = scene if named == scene.name else scene_of(named)
     except IdentificationError as exc:
-        log.info("identifier %s: %s", FALLBACK_METHOD, exc)
-        return FALLBACK_METHOD, None
-    return default_method(data_scene), data_scene
+        return FALLBACK_METHOD, None, str(exc)
+    method, why = method_and_reason(data_scene)
+    return method, data_scene, why
 
 
 def demo_identify(scene, out, seed: int, echo=print, method: str | None = None):
