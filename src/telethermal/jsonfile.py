@@ -23,6 +23,12 @@ def json_safe(value):
 
 def write_json(path: str | Path, payload: dict) -> Path:
     """Write ``payload`` (indented, one trailing newline) to ``path``."""
+    return write_text(path, json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically: all of it or, on any failure,
+    nothing (the old file kept)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     # One temporary file per process: two processes writing the same file
@@ -30,7 +36,7 @@ def write_json(path: str | Path, payload: dict) -> Path:
     # each other's, and a failure leaves no temporary file behind.
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        tmp.write_text(json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
+        tmp.write_text(text)
         tmp.replace(path)
     except BaseException:
         tmp.unlink(missing_ok=True)

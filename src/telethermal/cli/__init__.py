@@ -10,7 +10,7 @@ import sys
 from rich.markup import escape
 
 from telethermal import __version__
-from telethermal.cli import bench, data, identify, operate, run, services, view
+from telethermal.cli import bench, calibrate, data, identify, operate, run, services, view
 from telethermal.cli._common import console
 from telethermal.errors import TelethermalError
 
@@ -42,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_simulate(sub)
     bench.add_parser(sub)
     identify.add_parser(sub)
+    calibrate.add_parser(sub)
     run.add_session(sub)
     services.add_parsers(sub)                # slave, master, faults, keys
     operate.add_parsers(sub)                 # admin, check, models

@@ -55,6 +55,22 @@ def _scene(args):
     return scene
 
 
+def _calibration(args, scene):
+    """``--calibration CAL.toml`` read and checked against the touches' scene
+    (a Scene or a name); None when not given."""
+    if not getattr(args, "calibration", None):
+        return None
+    from telethermal.errors import CalibrationError
+    from telethermal.ident.fitted import scene_of
+    from telethermal.ident.pad_calibration import read_calibration
+    cal = read_calibration(args.calibration)
+    if scene is None:
+        raise CalibrationError(f"--calibration {args.calibration}: the touches name no scene; "
+                               "give --scene, the scene whose pad it calibrates")
+    cal.check(scene_of(scene) if isinstance(scene, str) else scene)
+    return cal
+
+
 def _method(args, scene) -> str:
     """``--method``, else the slave's own for the touches' scene (effusivity-fit
     where it can model the scene's pad, else effusivity-lda; said why)."""
@@ -77,9 +93,11 @@ def cmd_identify_train(args) -> int:
 
     scene = _scene(args)
     args.method = _method(args, scene)
+    from telethermal.ident.registry import dataset_scene, pad_dataset
+    cal = _calibration(args, scene or dataset_scene(pad_dataset(args.data)))
     trained = train_on_dataset(args.data, args.method, args.channels, args.max_window_s,
                                args.out, status=console.status, logger=log,
-                               unseen_weight=args.unseen_weight, scene=scene)
+                               unseen_weight=args.unseen_weight, scene=scene, calibration=cal)
     model = trained.model
     print(f"{trained.path}: {args.method} on {', '.join(model.classes_)}; "
           f"{len(model.windows_s_)} windows up to {model.windows_s_[-1]} s; "
@@ -91,8 +109,18 @@ def cmd_identify_eval(args) -> int:
     from telethermal.ident.evaluate import evaluate_saved, text_report
 
     png = _png(args)
+    scene = _scene(args)
+    if getattr(args, "calibration", None):
+        from telethermal.errors import ModelFileError
+        from telethermal.ident.pad_calibration import read_calibration
+        from telethermal.ident.registry import load_model
+        trained = getattr(load_model(args.model), "calibration", None)
+        if trained is None or trained.to_dict() != read_calibration(args.calibration).to_dict():
+            raise ModelFileError(f"{args.model} was trained with "
+                                 f"{'no pad calibration' if trained is None else 'another'} "
+                                 f"than {args.calibration}: train it with that calibration")
     report = evaluate_saved(args.model, args.data, args.json, png, command=_command(),
-                            status=console.status, scene=_scene(args))
+                            status=console.status, scene=scene)
     _print_lines(text_report(report, args.json, png))
     return 0
 
@@ -111,7 +139,8 @@ def cmd_identify_cv(args) -> int:
         trials = load_dataset(data)
     with console.status("cross-validating") as status:
         report = cross_validate(trials, method, args.folds, args.channels,
-                                args.max_window_s, progress=status.update, scene=touched)
+                                args.max_window_s, progress=status.update, scene=touched,
+                                calibration=_calibration(args, touched))
     report["data"], report["command"] = str(args.data), _command()
     if args.json:
         write_json(args.json, report)
@@ -126,6 +155,10 @@ SCENE_HELP = ("the scene whose pad made the touches: a shipped name or a scene f
               "the one the dataset's generation.json names)")
 
 
+CAL_HELP = ("the pad's calibration (telethermal calibrate pad): effusivity-fit's pad model "
+            "as calibrated, recorded in the model file")
+
+
 def add_parser(sub) -> None:
     ident = sub.add_parser("identify", help="material identification")
     isub = ident.add_subparsers(dest="identify_command", required=True)
@@ -135,6 +168,7 @@ def add_parser(sub) -> None:
     p.add_argument("--data", required=True, help=DATA_HELP)
     p.add_argument("--method", help=METHOD_HELP)
     p.add_argument("--scene", help=SCENE_HELP)
+    p.add_argument("--calibration", metavar="CAL.toml", help=CAL_HELP)
     p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),
                    help="comma-separated channels (default heat_flux_W_m2)")
     p.add_argument("--max-window-s", type=_positive(), default=1.0,
@@ -153,6 +187,7 @@ def add_parser(sub) -> None:
                    help="JSON report to write: accuracy per window, decisions, calibration")
     p.add_argument("--png", help="plot of accuracy against time after contact")
     p.add_argument("--scene", help=SCENE_HELP)
+    p.add_argument("--calibration", metavar="CAL.toml", help=CAL_HELP)
     p.set_defaults(func=cmd_identify_eval)
     p = isub.add_parser("cv", help="grouped k-fold cross-validation of a method on a dataset: "
                                    "accuracy per window with 95 %% intervals, the decisions "
@@ -160,6 +195,7 @@ def add_parser(sub) -> None:
     p.add_argument("--data", required=True, help=DATA_HELP)
     p.add_argument("--method", help=METHOD_HELP)
     p.add_argument("--scene", help=SCENE_HELP)
+    p.add_argument("--calibration", metavar="CAL.toml", help=CAL_HELP)
     p.add_argument("--folds", type=int, default=5,
                    help="folds; each holds whole groups (default 5)")
     p.add_argument("--channels", type=_channels, default=("heat_flux_W_m2",),

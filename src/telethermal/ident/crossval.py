@@ -33,14 +33,16 @@ from telethermal.ident.registry import make
 
 
 def cross_validate(trials, method: str, folds: int = 5, channels=("heat_flux_W_m2",),
-                   max_window_s: float = 1.0, progress=None, scene: str | None = None) -> dict:
+                   max_window_s: float = 1.0, progress=None, scene: str | None = None,
+                   calibration=None) -> dict:
     """Grouped ``folds``-fold cross-validation of ``method`` on ``trials``;
     the report described in the module docstring. ``progress(text)``:
     called before each fold; ``scene``: the trials' scene, for the methods
-    that fit its pad's model."""
+    that fit its pad's model, and ``calibration`` that pad's (a PadCalibration)."""
     if folds < 2:
         raise IdentificationError(f"--folds {folds}: cross-validation needs at least 2 folds")
-    probe = make(method, scene=scene, channels=channels, max_window_s=max_window_s)
+    probe = make(method, scene=scene, calibration=calibration, channels=channels,
+                 max_window_s=max_window_s)
     contacts, skipped = from_trials(trials, probe.channels, max_s=max_window_s)
     groups = sorted(set(contacts.groups))
     if len(groups) < 2:
@@ -57,7 +59,8 @@ def cross_validate(trials, method: str, folds: int = 5, channels=("heat_flux_W_m
         train = np.setdiff1d(np.arange(len(contacts)), test)
         held = contacts.subset(test)
         start = time.perf_counter()
-        model = make(method, scene=scene, channels=channels, max_window_s=max_window_s)
+        model = make(method, scene=scene, calibration=calibration, channels=channels,
+                     max_window_s=max_window_s)
         model.fit(contacts.subset(train))
         fit_s.append(time.perf_counter() - start)
         unseen = sorted(set(held.labels) - set(model.classes_))

@@ -101,21 +101,28 @@ def serves(scene) -> str | None:
     return refusal(scene)
 
 
-def _estimator(scene, max_s: float):
-    """The estimator of ``scene`` (a Scene, or a name for :func:`scene_of`)
+def _estimator(scene, max_s: float, calibration=None):
+    """The estimator of ``scene`` (a Scene, or a name for :func:`scene_of`),
+    its pad as ``calibration`` has it (a PadCalibration; None: as designed),
     and its nominal gap, K."""
-    return _estimator_of(scene_of(scene) if isinstance(scene, str) else scene, max_s)
+    return _estimator_of(scene_of(scene) if isinstance(scene, str) else scene, max_s,
+                         calibration)
 
 
 @functools.lru_cache(maxsize=8)
-def _estimator_of(scene, max_s: float):
+def _estimator_of(scene, max_s: float, calibration=None):
     """Its curves take seconds to compute: read from the per-user cache
     (:mod:`telethermal.ident.curvecache`), or built and cached there; once
-    per process and scene (equal scenes share one)."""
+    per process, scene and calibration (equal scenes share one)."""
     from telethermal.ident.curvecache import cached_family
     from telethermal.ident.effusivity import EffusivityEstimator
 
-    est = EffusivityEstimator.for_scene(scene, max_s=max_s, family=cached_family)
+    gain = None
+    if calibration is not None:
+        scene = calibration.apply(scene)            # refused for another scene's pad
+        gain = (calibration.flux_gain, calibration.flux_gain_sd)
+    est = EffusivityEstimator.for_scene(scene, max_s=max_s, family=cached_family,
+                                        flux_gain=gain)
     return est, abs(scene.pad_temp_c(est.object_temp_c) - est.object_temp_c)
 
 
@@ -156,7 +163,8 @@ class EffusivityFit(Identifier):
     interval_allowance_ = None
 
     def __init__(self, channels=(FLUX,), scene=None, outlier_p: float = 1e-4,
-                 window_step_s: float = 0.02, unseen_weight: float = 0.0, **kw):
+                 window_step_s: float = 0.02, unseen_weight: float = 0.0,
+                 calibration=None, **kw):
         super().__init__(channels, window_step_s=window_step_s, **kw)
         if tuple(self.channels) != (FLUX,):
             raise IdentificationError(f"effusivity-fit reads the heat flux alone, not "
@@ -167,6 +175,7 @@ class EffusivityFit(Identifier):
             raise IdentificationError(f"unseen_weight must be a finite number >= 0, got "
                                       f"{unseen_weight!r}")
         self.unseen_weight = float(unseen_weight)
+        self.calibration = _calibration(calibration)
 
     @property
     def scene_name(self) -> str | None:
@@ -174,7 +183,8 @@ class EffusivityFit(Identifier):
 
     def hyper(self) -> dict:
         return {**super().hyper(), "scene": self.scene_name, "outlier_p": self.outlier_p,
-                "unseen_weight": self.unseen_weight}
+                "unseen_weight": self.unseen_weight,
+                "calibration": None if self.calibration is None else self.calibration.to_dict()}
 
     def fit(self, contacts):
         if not self.scene:
@@ -215,7 +225,7 @@ class EffusivityFit(Identifier):
 
     def estimator(self):
         """(the scene's estimator, its nominal gap in K), built once per process."""
-        return _estimator(self.scene, float(self.max_window_s))
+        return _estimator(self.scene, float(self.max_window_s), self.calibration)
 
     def prepare(self) -> "EffusivityFit":
         """The estimator's curves (seconds to build) before the first touch."""
@@ -387,6 +397,19 @@ class EffusivityFit(Identifier):
             inside = classes_holding(float(theta[0]), math.sqrt(max(own, 0.0)), params,
                                      self.classes_, self.outlier_p)
         return EffusivityReading(e, lo, hi, nearest, tail, inside)
+
+
+def _calibration(value):
+    """A pad calibration from what a model is given or its file holds: a
+    PadCalibration, its dict (a model file's header), a CAL.toml path, or None."""
+    if value is None:
+        return None
+    from telethermal.ident.pad_calibration import (PadCalibration, read_calibration)
+    if isinstance(value, PadCalibration):
+        return value
+    if isinstance(value, dict):
+        return PadCalibration.from_dict(value, "the model file's calibration")
+    return read_calibration(value)
 
 
 def classes_holding(log_e: float, log_sd: float, params: dict, classes, outlier_p: float):

@@ -358,13 +358,15 @@ def forward_curves(scene, u_grid, t_max_s: float, dt_s: float = MODEL_DT_S) -> d
 
 
 def draw_nuisances(scene, n: int, rng: np.random.Generator, seed: int | None = None,
-                   n_sessions: int = 20) -> dict:
+                   n_sessions: int = 20, flux_gain: tuple[float, float] | None = None) -> dict:
     """Monte Carlo draws of a pad touch's nuisances through the generator's
     own code (``pad_database``, ``_draw``, ``_record``): ``u = log(h /
     h_ref)`` and ``tau_s`` (the true contact on the recorded axis), pooled,
     and per material the amplitude ``A = gain * true gap / measured gap``.
     ``seed``: the session of ``pad_database(scene, default_rng(seed))``;
-    else ``n_sessions`` sessions drawn from ``rng``."""
+    else ``n_sessions`` sessions drawn from ``rng``. ``flux_gain``: (mean,
+    relative sd) of the flux sensor's gain from a calibration, drawn per
+    session instead of the datasheet's limit (the scene's instruments)."""
     from telethermal.data.generate import (PELTIER_SETPOINT_SD_K, _draw, _time_axis,
                                            detected_onset_s, sensor_session)
     from telethermal.physics.scene import ONSET_MARGIN_S
@@ -385,7 +387,9 @@ def draw_nuisances(scene, n: int, rng: np.random.Generator, seed: int | None = N
             before = Thermocouple(cold_junction_c=scene.room_temp_c,
                                   bias_k=inst.pad_tc_bias_k).read_c(pad_c, rng)
             measured = np.round(before, 3) - np.round(d.object_ir_c, 3)
-            a_obj.append(inst.flux_gain * (pad_c - d.object_true_c) / measured)
+            gain = inst.flux_gain if flux_gain is None else \
+                flux_gain[0] * (1.0 + flux_gain[1] * rng.standard_normal())
+            a_obj.append(gain * (pad_c - d.object_true_c) / measured)
             for i in range(per):
                 force = ForceSensor().read_n(times - d.onset_s[i], d.force_n[i], rng)
                 tau.append(d.onset_s[i] - detected_onset_s(times, force))

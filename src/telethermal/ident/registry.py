@@ -22,9 +22,10 @@ METHODS: dict[str, type[Identifier]] = {m.method: m for m in (PcaFnn, Effusivity
                                                                 EffusivityFit, Lstm, Rnn)}
 
 
-def make(method: str, scene: str | None = None, **kw) -> Identifier:
+def make(method: str, scene: str | None = None, calibration=None, **kw) -> Identifier:
     """A ``method`` identifier; ``scene`` (the touches' scene: a Scene, a
-    name or a path) is given to the methods that fit its pad's model and
+    name or a path) and ``calibration`` (its pad's: a PadCalibration or a
+    CAL.toml path) are given to the methods that fit its pad's model and
     ignored by the others."""
     try:
         cls = METHODS[method]
@@ -33,6 +34,8 @@ def make(method: str, scene: str | None = None, **kw) -> Identifier:
                                   f"{', '.join(sorted(METHODS))}") from exc
     if scene is not None and getattr(cls, "needs_scene", False):
         kw["scene"] = scene if isinstance(scene, Scene) else str(scene)
+    if calibration is not None and getattr(cls, "needs_scene", False):
+        kw["calibration"] = calibration
     return cls(**kw)
 
 
@@ -126,7 +129,8 @@ class Trained:
 
 def train_on_dataset(data: str | Path, method: str, channels, max_window_s: float,
                      out: str | Path, status=nullcontext, logger=log,
-                     unseen_weight: float | None = None, scene: Scene | None = None) -> Trained:
+                     unseen_weight: float | None = None, scene: Scene | None = None,
+                     calibration=None) -> Trained:
     """Fit a ``method`` identifier on the dataset folder ``data`` (or its
     ``pad/``) and save it to ``out``, with the touches' scene: ``scene``,
     else the dataset's record of one (:func:`touches_scene`).
@@ -144,7 +148,7 @@ def train_on_dataset(data: str | Path, method: str, channels, max_window_s: floa
         extra["unseen_weight"] = unseen_weight
     with status(f"reading {data}"):
         trials = load_dataset(data)
-    model = make(method, scene=scene, channels=channels,
+    model = make(method, scene=scene, calibration=calibration, channels=channels,
                  max_window_s=max_window_s, **extra)
     contacts, skipped = from_trials(trials, model.channels, max_s=max_window_s)
     if skipped:

@@ -1,0 +1,246 @@
+"""A pad calibration: made from reference touches (:func:`calibrate_pad`,
+the fit of :mod:`telethermal.ident.calibration`), written as a TOML file
+(``CAL.toml``), read back, checked against the scene it is applied to, and
+applied: the product's pad model with the calibrated factors, the contact
+conductance the touches had, and the flux sensor's gain as the amplitude
+prior of the effusivity estimator."""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from telethermal.errors import CalibrationError
+from telethermal.ident.calibration import (CHI2_MAX, WINDOW_S, PadModelFit, ReferenceTouches,
+                                           candidates, describe, marginal_sds,
+                                           projected_columns, scaled_scene, select)
+from telethermal.ident.openset import Z95
+
+log = logging.getLogger(__name__)
+
+#: A material's mean amplitude this many standard errors from the others'
+#: is refused (normal tails: 6e-5 of materials with a right table value).
+Z_MAX = 4.0
+
+FORMAT, FORMAT_VERSION = "telethermal-pad-calibration", 1
+
+
+def pad_digest(scene) -> str:
+    """What a calibration was made for: the scene's nominal pad and sensors."""
+    text = repr((scene.pad, scene.sensors, scene.sample_rate_hz, scene.room_temp_c))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class CalibratedParameter:
+    """One fitted parameter: the candidates it scales together, its factor on
+    the design value and the 95 % interval of the factor."""
+
+    names: tuple[str, ...]
+    label: str
+    factor: float
+    lo: float
+    hi: float
+
+
+@dataclass(frozen=True)
+class PadCalibration:
+    """The calibration of a scene's sensing pad (see the module)."""
+
+    scene: str
+    pad_digest: str
+    parameters: tuple[CalibratedParameter, ...]
+    not_identifiable: tuple[str, ...]
+    contact_conductance_w_m2k: float
+    flux_gain: float
+    flux_gain_sd: float
+    chi2_per_dof: float
+    touches: int
+    materials: tuple[str, ...]
+    source: str = ""
+
+    def factors(self) -> dict:
+        """Candidate name -> factor on its design value (the gain apart)."""
+        return {n: p.factor for p in self.parameters for n in p.names if n != "flux_gain"}
+
+    def check(self, scene) -> None:
+        """Refuse a calibration made for another scene (or another pad)."""
+        where = self.source or "the calibration"
+        if scene.name != self.scene:
+            raise CalibrationError(f"{where} calibrates scene {self.scene!r}'s pad; this runs "
+                                   f"scene {scene.name!r}: calibrate its own pad "
+                                   f"(telethermal calibrate pad --scene {scene.name})")
+        if pad_digest(scene) != self.pad_digest:
+            raise CalibrationError(f"{where} was made for another pad or sensors of scene "
+                                   f"{scene.name!r} (the scene file changed since): calibrate "
+                                   "again")
+
+    def apply(self, scene):
+        """The product's model of ``scene``'s pad as calibrated."""
+        self.check(scene)
+        return scaled_scene(scene, self.factors(), self.contact_conductance_w_m2k)
+
+    def describe(self) -> list[str]:
+        lines = [f"pad calibration of {self.scene}: {self.touches} touches of "
+                 f"{', '.join(self.materials)}; residual chi2/dof {self.chi2_per_dof:.2f} "
+                 f"(the sensor's noise and the curves' error allow {CHI2_MAX:g})"]
+        for p in self.parameters:
+            lumped = " (lumped: " + ", ".join(p.names) + ")" if len(p.names) > 1 else ""
+            lines.append(f"  {p.label}: x{p.factor:.3f} [{p.lo:.3f}, {p.hi:.3f}] 95 %{lumped}")
+        lines.append(f"  contact conductance: {self.contact_conductance_w_m2k:.0f} W/m^2K "
+                     "(the touches' geometric mean)")
+        if self.not_identifiable:
+            lines.append("  not identifiable from these touches (design value kept): "
+                         + ", ".join(self.not_identifiable))
+        return lines
+
+    # ------------------------------------------------------------ the file
+    def to_toml(self) -> str:
+        out = [f'format = "{FORMAT}"', f"format_version = {FORMAT_VERSION}",
+               f'scene = "{self.scene}"', f'pad_digest = "{self.pad_digest}"',
+               f"contact_conductance_w_m2k = {self.contact_conductance_w_m2k!r}",
+               f"flux_gain = {self.flux_gain!r}", f"flux_gain_sd = {self.flux_gain_sd!r}",
+               f"chi2_per_dof = {self.chi2_per_dof!r}", f"touches = {self.touches}",
+               "materials = [" + ", ".join(f'"{m}"' for m in self.materials) + "]",
+               "not_identifiable = [" + ", ".join(f'"{m}"' for m in self.not_identifiable)
+               + "]"]
+        for p in self.parameters:
+            out += ["", "[[parameters]]", "names = [" + ", ".join(f'"{n}"' for n in p.names)
+                    + "]", f'label = "{p.label}"', f"factor = {p.factor!r}",
+                    f"lo = {p.lo!r}", f"hi = {p.hi!r}"]
+        return "\n".join(out) + "\n"
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "") -> "PadCalibration":
+        try:
+            if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
+                raise CalibrationError(f"{source}: not a {FORMAT} file of version "
+                                       f"{FORMAT_VERSION}")
+            params = tuple(CalibratedParameter(tuple(p["names"]), str(p["label"]),
+                                               float(p["factor"]), float(p["lo"]),
+                                               float(p["hi"]))
+                           for p in data.get("parameters", []))
+            return cls(str(data["scene"]), str(data["pad_digest"]), params,
+                       tuple(data["not_identifiable"]),
+                       float(data["contact_conductance_w_m2k"]), float(data["flux_gain"]),
+                       float(data["flux_gain_sd"]), float(data["chi2_per_dof"]),
+                       int(data["touches"]), tuple(data["materials"]), source)
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, CalibrationError):
+                raise
+            raise CalibrationError(f"{source}: not a pad calibration: {exc!r}") from exc
+
+    def to_dict(self) -> dict:
+        return tomllib.loads(self.to_toml())
+
+
+def read_calibration(path: str | Path) -> PadCalibration:
+    """A ``CAL.toml`` written by ``telethermal calibrate pad``."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise CalibrationError(f"{path}: cannot read a pad calibration: {exc}") from exc
+    return PadCalibration.from_dict(data, str(path))
+
+
+def write_calibration(cal: PadCalibration, path: str | Path) -> Path:
+    """Write ``cal`` to ``path`` atomically."""
+    from telethermal.jsonfile import write_text
+    return write_text(path, cal.to_toml())
+
+
+# ---------------------------------------------------------------- the fit
+def amplitude_sd(scene) -> float:
+    """The per-touch relative spread of the true over the measured gap: the
+    thermometers' per-reading noise over the scene's gap (one session of
+    the scene's instruments, drawn through the generator's own code; its
+    gain and bias are common to the touches and are what the fit finds)."""
+    from telethermal.ident.oracle import draw_nuisances
+    draws = draw_nuisances(scene, 400, np.random.default_rng(20261129), n_sessions=1)
+    return float(np.mean([np.std(a) / np.mean(a) for a in draws["amp"].values()]))
+
+
+def calibrate_pad(scene, trials, window_s: float = WINDOW_S) -> PadCalibration:
+    """Fit ``scene``'s pad model to reference ``trials`` (see
+    :mod:`telethermal.ident.calibration`); refused with the reason when
+    the touches cannot calibrate it."""
+    return calibrate_touches(scene, ReferenceTouches.from_trials(trials, window_s))
+
+
+def calibrate_touches(scene, touches: ReferenceTouches) -> PadCalibration:
+    """:func:`calibrate_pad` of touches already read."""
+    from telethermal.ident.oracle import flux_noise_w_m2
+
+    start = time.process_time()
+    fit = PadModelFit(scene, touches, amplitude_sd(scene), flux_noise_w_m2(scene))
+    n = len(touches.labels)
+    first = fit.solve([("flux_gain",)], np.zeros(1 + 3 * n), max_nfev=10)
+    names = candidates(scene)
+    z_all = np.concatenate([[first.x[0]], np.zeros(len(names) - 1), first.x[1:]])
+    cols = projected_columns(fit.jacobian(z_all, [(m,) for m in names]), len(names))
+    free, fixed = select(cols, names)
+    z0 = np.concatenate([[first.x[0] if g == ("flux_gain",) else 0.0 for g in free],
+                         first.x[1:]])
+    result = fit.solve(free, z0, max_nfev=25)
+    dof = max(len(result.fun) - len(result.x), 1)
+    chi2 = 2.0 * result.cost / dof
+    log.info("pad calibration: %d touches, %d evaluations, %.1f s of CPU, chi2/dof %.3f",
+             n, result.nfev, time.process_time() - start, chi2)
+    _refuse_misfit(fit, result, touches, chi2, fit.split(result.x, free)[4])
+    sds = marginal_sds(result.jac, len(free)) * math.sqrt(max(1.0, chi2))
+    params = tuple(CalibratedParameter(g, " + ".join(describe(scene, m) for m in g),
+                                       math.exp(v), math.exp(v - Z95 * sd), math.exp(v + Z95 * sd))
+                   for g, v, sd in zip(free, result.x, sds))
+    gain = next((p for p in params if p.names == ("flux_gain",)), None)
+    log_h = fit.split(result.x, free)[2]
+    return PadCalibration(
+        scene.name, pad_digest(scene), params, tuple(describe(scene, m) for m in fixed),
+        float(scene.pad.contact_conductance_w_m2k * math.exp(float(np.mean(log_h)))),
+        gain.factor if gain else 1.0,
+        float((math.log(gain.hi) - math.log(gain.lo)) / (2 * Z95)) if gain else 0.0,
+        float(chi2), n, tuple(sorted(set(touches.labels))))
+
+
+def amplitude_z(touches: ReferenceTouches, log_a: np.ndarray, sd: float) -> dict:
+    """Per material, the mean of its touches' fitted ``ln a`` (true over
+    measured gap, the gain apart) in standard errors of the thermometers'
+    per-touch noise: a material whose table effusivity is off shifts all of
+    its touches' amplitudes one way."""
+    out = {}
+    for label in sorted(set(touches.labels)):
+        rows = [i for i, lab in enumerate(touches.labels) if lab == label]
+        out[label] = float(np.mean(log_a[rows]) / (sd / math.sqrt(len(rows))))
+    return out
+
+
+def _refuse_misfit(fit: PadModelFit, result, touches: ReferenceTouches, chi2: float,
+                   log_a: np.ndarray) -> None:
+    """A material whose touches' amplitudes stand out (past :data:`Z_MAX`
+    standard errors) named, its table value likely wrong (with two
+    materials, which of them cannot be told: both named); a residual past
+    :data:`CHI2_MAX`: the model itself cannot fit."""
+    z = amplitude_z(touches, log_a, fit.amplitude_sd)
+    table = ", ".join(f"{k} {v:+.1f}" for k, v in z.items())
+    out = [k for k, v in z.items() if abs(v) > Z_MAX]
+    if out:
+        worst = max(z, key=lambda k: abs(z[k]))
+        named = worst if len(z) > 2 else " or ".join(sorted(z))
+        raise CalibrationError(
+            f"the touches of {named} do not fit {'its' if len(z) > 2 else 'their'} table "
+            f"value{'' if len(z) > 2 else 's'}: each material's mean amplitude against the "
+            f"others' in standard errors of the thermometers' noise: {table} (beyond +-{Z_MAX:g}"
+            f"{'' if len(z) > 2 else '; two materials cannot say which is off'}): check "
+            f"{named}'s entry in the materials table, or leave its touches out")
+    if chi2 > CHI2_MAX:
+        raise CalibrationError(
+            f"the pad model cannot fit these touches: residual chi2/dof {chi2:.2f} against "
+            f"{CHI2_MAX:g} from the sensor's noise and the curves' error; the pad differs "
+            "from its model by more than its parameters can take (a layer missing or extra?)")

@@ -1,0 +1,133 @@
+"""The sensing pad's model calibrated from reference touches (issue 44,
+deliverable 2): the hard cases."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from telethermal.errors import CalibrationError
+from telethermal.physics.as_built import AsBuilt, BuiltFactors, with_as_built
+from telethermal.physics.scene import load_scene
+
+WINDOW_S = 0.5
+
+
+def _scene(materials=("steel", "wood"), trials=3):
+    s = load_scene("fingertip-7")
+    return dataclasses.replace(
+        s, finger=None, pad=dataclasses.replace(s.pad, trials_per_material=trials),
+        objects=tuple(o for o in s.objects if o.material in materials))
+
+
+@pytest.fixture(scope="module")
+def off_pad():
+    """A pad 30 % off on every factor but its flux gain, 5 % off, touched
+    3 times on each of two reference materials; (scene, trials, truth)."""
+    from telethermal.data.generate import pad_database, sensor_session
+    scene = _scene()
+    f = 1.3
+    built = with_as_built(scene, AsBuilt(BuiltFactors(
+        (f, f, f), flux_lag_s=f, contact_conductance_w_m2k=f, flux_gain=1.05,
+        module_seebeck=f, module_resistance=f, module_conductance=f), BuiltFactors((1, 1, 1))))
+    trials = pad_database(built, np.random.default_rng(0))
+    gain = 1.05 * sensor_session(scene, np.random.default_rng(0)).instruments.flux_gain
+    truth = {"flux_gain": gain, "flux_lag_s": f,
+             **{f"layers[{i}].{k}": f for i in range(3) for k in ("resistance", "heat_capacity")}}
+    return scene, trials, truth
+
+
+@pytest.fixture(scope="module")
+def calibrated(off_pad):
+    from telethermal.ident.pad_calibration import calibrate_pad
+    scene, trials, _ = off_pad
+    return calibrate_pad(scene, trials, WINDOW_S)
+
+
+def test_a_pad_30_percent_off_from_two_materials_is_recovered_within_its_intervals(
+        off_pad, calibrated):
+    """Every parameter fitted (the lag, the gain 5 % off, the layers'
+    resistances and heat capacities, lumped where the Jacobian cannot tell
+    them apart) holds its true factor within its 95 % interval, and the
+    lag and the gain are among them; the module's factors are not
+    candidates (the loop holds the junction) and the fit still holds."""
+    _, _, truth = off_pad
+    names = {n for p in calibrated.parameters for n in p.names}
+    assert {"flux_gain", "flux_lag_s"} <= names
+    for p in calibrated.parameters:
+        want = math.prod(truth[n] for n in p.names) ** (1 / len(p.names))
+        assert p.lo <= want <= p.hi, (p, want)
+        assert p.hi / p.lo < 1.5                 # a confident parameter, not a shrug
+    assert calibrated.chi2_per_dof < 2.0
+    # The contact conductance is the touches' own (true 1.3 x 3000 at 10 +- 1.5 N).
+    assert calibrated.contact_conductance_w_m2k == pytest.approx(3900, rel=0.1)
+    # Thickness and conductivity are never two parameters: resistance and
+    # heat capacity per layer (the module's docstring).
+    assert not any("thickness" in n or "conductivity" in n for n in names)
+
+
+def test_a_reference_material_whose_table_value_is_wrong_is_named():
+    """Its touches' amplitudes all stand out one way (10 % of effusivity
+    against the thermometers' ~1 % per touch), named among three materials.
+    (With two, the pad's free parameters can take the error up: measured,
+    10 % on wood against steel was not flagged; docs/calibration.md says
+    to calibrate on three.)"""
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.calibration import ReferenceTouches
+    from telethermal.ident.pad_calibration import calibrate_touches
+    scene = _scene(("steel", "plexiglass", "wood"))
+    touches = ReferenceTouches.from_trials(pad_database(scene, np.random.default_rng(3)),
+                                           WINDOW_S)
+    wood = np.array([label == "wood" for label in touches.labels])
+    touches.effusivity = np.where(wood, touches.effusivity * 1.1, touches.effusivity)
+    with pytest.raises(CalibrationError, match="the touches of wood do not fit its table"):
+        calibrate_touches(scene, touches)
+
+
+def test_too_few_touches_or_materials_are_refused(off_pad):
+    from telethermal.ident.pad_calibration import calibrate_pad
+    scene, trials, _ = off_pad
+    with pytest.raises(CalibrationError, match="at least 3 touches.*steel: 3"):
+        calibrate_pad(scene, [t for t in trials if t.material == "steel"], WINDOW_S)
+    two_each = [t for t in trials if not t.trial_id.endswith("-02")]
+    with pytest.raises(CalibrationError, match="steel: 2, wood: 2"):
+        calibrate_pad(scene, two_each, WINDOW_S)
+
+
+def test_the_file_round_trips_and_another_scenes_is_refused(calibrated, tmp_path):
+    from telethermal.ident.pad_calibration import read_calibration, write_calibration
+    path = write_calibration(calibrated, tmp_path / "cal.toml")
+    back = read_calibration(path)
+    assert back.to_dict() == calibrated.to_dict() and back.source == str(path)
+    back.check(_scene())
+    with pytest.raises(CalibrationError, match="calibrates scene 'fingertip-7'.*gripper"):
+        back.apply(load_scene("gripper-case-II"))
+    other = dataclasses.replace(_scene(), sensors=dataclasses.replace(
+        _scene().sensors, flux_lag_s=0.2))
+    with pytest.raises(CalibrationError, match="another pad"):
+        back.apply(other)
+    (tmp_path / "bad.toml").write_text('format = "something else"\n')
+    with pytest.raises(CalibrationError, match="bad.toml"):
+        read_calibration(tmp_path / "bad.toml")
+
+
+def test_the_calibrated_model_and_a_model_file_record_it(calibrated, tmp_path):
+    """The product's pad model takes the calibrated factors; the amplitude
+    prior takes the calibrated gain (not the scene's instruments); a model
+    file keeps the calibration it was trained with."""
+    from telethermal.ident.fitted import EffusivityFit
+    from telethermal.ident.oracle import draw_nuisances
+    scene = _scene()
+    applied = calibrated.apply(scene)
+    lag = next(p.factor for p in calibrated.parameters if p.names == ("flux_lag_s",))
+    assert applied.sensors.flux_lag_s == pytest.approx(scene.sensors.flux_lag_s * lag)
+    draws = draw_nuisances(scene, 200, np.random.default_rng(0), n_sessions=4,
+                           flux_gain=(calibrated.flux_gain, calibrated.flux_gain_sd))
+    mean_amp = np.mean(np.concatenate(list(draws["amp"].values())))
+    assert mean_amp == pytest.approx(calibrated.flux_gain, rel=0.01)
+    model = EffusivityFit(scene="fingertip-7", calibration=calibrated)
+    again = EffusivityFit(**model.hyper())
+    assert again.calibration.to_dict() == calibrated.to_dict()
