@@ -87,6 +87,8 @@ def cmd_bench_faults(args) -> int:
 def cmd_bench_identify(args) -> int:
     from telethermal.bench import identify, identify_text
 
+    if args.as_built is not None:
+        return _bench_identify_as_built(args)
     methods = args.methods.split(",") if args.methods else None
     png = _png(args)
     with _progress(5 * len(methods or identify.DEFAULT_METHODS) + 4, "bench identify") as advance:
@@ -94,6 +96,19 @@ def cmd_bench_identify(args) -> int:
                                        command=_command(), progress=advance, scene=args.scene,
                                        sessions=args.sessions, with_limit=not args.no_limit)
     _print_lines(identify_text.text_report(report, args.json, png))
+    return 0
+
+
+def _bench_identify_as_built(args) -> int:
+    from telethermal.bench import identify_as_built as ab
+    from telethermal.jsonfile import write_json
+
+    with _progress(1 + 3 * args.pads, "bench identify --as-built") as advance:
+        section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
+                         progress=advance, partial=lambda part: write_json(
+                             args.json, {"as_built": part, "command": _command()}))
+    write_json(args.json, {"as_built": section, "command": _command()})
+    _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
     return 0
 
 
@@ -238,6 +253,12 @@ def _add_error(bsub) -> None:
     p.add_argument("--no-limit", action="store_true",
                    help="skip the physical limit (the oracle on every session's touches, "
                         "a few minutes)")
+    p.add_argument("--as-built", type=float, metavar="SD",
+                   help="instead: the default identifier on pads built off their datasheet "
+                        "(every factor drawn log-normal with this sd), as modelled, "
+                        "uncalibrated and calibrated (telethermal calibrate pad)")
+    p.add_argument("--pads", type=_positive(int), default=5,
+                   help="with --as-built: how many pads are drawn (default 5)")
     p.set_defaults(func=cmd_bench_identify)
 
     p = bsub.add_parser("unseen", help="materials the identifiers never saw: the live "

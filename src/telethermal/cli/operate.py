@@ -33,6 +33,9 @@ def add_parsers(sub) -> None:
                                   "databases")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the simulated databases (default 0)")
+    p.add_argument("--calibration", metavar="CAL.toml",
+                   help="the sensing pad's calibration (telethermal calibrate pad): the "
+                        "identifier fits the pad's model as calibrated, and records it")
     p.set_defaults(func=cmd_models)
 
 
@@ -183,7 +186,8 @@ def cmd_check(args) -> int:
 def cmd_models(args) -> int:
     from telethermal.teleop.models import write_models
 
-    paths = write_models(args.out, args.scene, args.data, args.seed, echo=print)
+    paths = write_models(args.out, args.scene, args.data, args.seed, echo=print,
+                         calibration=args.calibration)
     for path in paths:
         print(f"wrote {path}")
     print(f"copy them to the slave host and check them there with `sha256sum -c SHA256SUMS` "

@@ -107,6 +107,10 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         if forces is not None:
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
+        if not outside and pad_model_misfit(model, x[None, :n], i):
+            return Decision(UNKNOWN, best, model.windows_s_[i], Reason.PAD_MODEL_MISFIT,
+                            group.time_s if group else None,
+                            revised_from=str(group.label) if group else None)
         step = rule.step(i, rule_posterior(model, p, x[None, :n], i),
                          may_commit=model.may_commit(i), force_outside=outside,
                          unlike=lambda i=i: bool(model.outside_classes(x[None, :n], i)[0]))
@@ -167,6 +171,14 @@ def rule_posterior(model, p: np.ndarray, x: np.ndarray, window_index: int) -> np
     return p if get is None else get(p, x, window_index)
 
 
+def pad_model_misfit(model, x: np.ndarray, window_index: int) -> bool:
+    """True where ``model`` fits a pad model to the touch ``x`` (1, n, C)
+    and its fit at the window leaves a residual past what the noise allows
+    (``EffusivityFit.misfit``): the touch is not named by that model."""
+    check = getattr(model, "misfit", None)
+    return bool(check is not None and check(x, window_index))
+
+
 def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decision:
     """A decision naming a class (or a pair), checked at the model's last
     window when the touch reaches it: an identifier that estimates the
@@ -175,6 +187,10 @@ def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decisi
     last = len(model.windows_s_) - 1
     if n_windows != last + 1:
         return decision
+    if pad_model_misfit(model, x[None], last):
+        return Decision(UNKNOWN, decision.confidence, model.windows_s_[last],
+                        Reason.PAD_MODEL_MISFIT, decision.time_first_s or decision.time_s,
+                        revised_from=str(decision.label))
     reading = reading_of(model, x[None], last)
     if reading is None or not reading.outside(decision.label):
         return decision
@@ -330,6 +346,8 @@ class StreamingIdentifier:
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
+        if not outside and pad_model_misfit(model, x, index):
+            return self._misfit(p, index)
         step = self._rule.step(index, rule_posterior(model, p, x, index),
                                may_commit=model.may_commit(index),
                                force_outside=outside,
@@ -374,12 +392,21 @@ class StreamingIdentifier:
             not est.label.is_new and hasattr(model, "effusivity_reading")
         return est
 
+    def _misfit(self, p, index: int) -> Estimate:
+        """The touch not named by the pad model, for good (see :func:`pad_model_misfit`)."""
+        self._watch = False
+        self.estimate = Estimate(self.model.windows_s_[index], tuple(p), UNKNOWN,
+                                 float(np.max(p)), True, Reason.PAD_MODEL_MISFIT)
+        return self.estimate
+
     def _revised(self, x, p, index: int, reading=None) -> Estimate | None:
         """The last window of a touch named before: a new material where
         the estimate lies outside the named class's predictive, else the
         decision stands (None: nothing new). ``reading``: the window's, when
         the caller has it already."""
         self._watch = False
+        if pad_model_misfit(self.model, x, index):
+            return self._misfit(p, index)
         if reading is None:
             reading = reading_of(self.model, x, index)
         if reading is None or not reading.outside(self.estimate.label):

@@ -51,7 +51,6 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from telethermal.errors import CalibrationError
-from telethermal.ident.openset import Z95
 
 #: Reference materials (at least) and touches of each (at least) a calibration needs.
 MIN_MATERIALS, MIN_TOUCHES = 2, 3

@@ -14,7 +14,7 @@ from telethermal.data.dataset import Trial, load_dataset, trial_digest
 from telethermal.ident.anytime import Reason, decide, decide_all
 from telethermal.ident.base import Identifier
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, from_trials, window_key
-from telethermal.ident.registry import check_scene, dataset_scene, load_model
+from telethermal.ident.registry import check_scene, load_model
 from telethermal.jsonfile import write_json
 
 #: The first paper's merged classes (Table 1): metals, and graphite with rubber.

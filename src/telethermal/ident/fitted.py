@@ -359,6 +359,22 @@ class EffusivityFit(Identifier):
                                         floor_var)
         return theta, e, lo, hi, sd, floor_var
 
+    def misfit(self, x, window_index: int) -> bool:
+        """The window's fit of the touch ``x`` (1, n, 1) leaves a residual
+        chi-square per degree of freedom past
+        :data:`~telethermal.ident.calibration.CHI2_MAX` (against the flux
+        noise and the curves' own error, as the pad calibration's): the pad
+        is not the model the estimate fits (a pad off its model by a sensor
+        lag 20 % off reads 7-45 from 0.25 s; as modelled, under 0.05)."""
+        from telethermal.ident.calibration import CHI2_MAX
+        row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
+        if len(row) < MIN_SAMPLES:
+            return False
+        est, gap_k = self.estimator()
+        theta = np.asarray(self._theta(row, len(row)), float)
+        chi2, _ = est._goodness(theta, row, est._noise_var(row, gap_k))
+        return chi2 > CHI2_MAX
+
     def outside_classes(self, x, window_index):
         params = self.params_[window_index]
         if "means" not in params:

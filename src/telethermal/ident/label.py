@@ -117,6 +117,8 @@ class Reason(StrEnum):
     OBJECT_MEMORY = "object memory"             # recalled, not sensed
     BOARD_LOST = "sensor board lost"            # unknown: the board went silent
     NO_OBJECT_TEMPERATURE = "no object temperature"     # unknown: its thermometer refused
+    # unknown: the pad model's fit leaves a residual past what the noise allows
+    PAD_MODEL_MISFIT = "pad model does not fit: recalibrate"
     # A touch's report only (no estimate carries these):
     NO_ESTIMATE = "no estimate"
     NO_DECISION = "no decision"

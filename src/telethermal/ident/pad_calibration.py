@@ -157,6 +157,31 @@ def write_calibration(cal: PadCalibration, path: str | Path) -> Path:
     return write_text(path, cal.to_toml())
 
 
+def pad_calibration(path: str, scene) -> PadCalibration | None:
+    """A service's ``pad_calibration`` (a CAL.toml path; "": none), checked
+    against its scene."""
+    if not path:
+        return None
+    cal = read_calibration(path)
+    cal.check(scene)
+    return cal
+
+
+def check_model_calibration(model, cal: PadCalibration | None, where: str) -> None:
+    """Refuse an identifier that fits the pad's model with another
+    calibration than the service's (a model file records its own)."""
+    if not hasattr(model, "calibration"):
+        return                                   # a method that fits no pad model
+    mine = None if cal is None else cal.to_dict()
+    theirs = None if model.calibration is None else model.calibration.to_dict()
+    if mine != theirs:
+        from telethermal.errors import ModelFileError
+        raise ModelFileError(
+            f"{where} was trained with {'no' if theirs is None else 'another'} pad calibration"
+            f" than the config's pad_calibration ({cal.source if cal else 'none'}): train it "
+            "with that calibration (identify train --calibration), or give the one it has")
+
+
 # ---------------------------------------------------------------- the fit
 def amplitude_sd(scene) -> float:
     """The per-touch relative spread of the true over the measured gap: the

@@ -45,6 +45,9 @@ class SlaveConfig:
     board_url: str = ""             # pyserial URL of the slave's sensor board (hardware)
     can_bus: str = ""               # interface:channel of its active pad's driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
+    #: The sensing pad's model calibration (``telethermal calibrate pad``,
+    #: docs/calibration.md); empty: the scene's design values.
+    pad_calibration: str = ""
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):
@@ -115,7 +118,7 @@ def load_config(path: str | Path, role: str):
         value = getattr(transport, key)
         if value and not Path(value).is_absolute():
             transport = replace(transport, **{key: str(base / value)})
-    for key in ("identifier", "generator", "record_dir", "calibration"):
+    for key in ("identifier", "generator", "record_dir", "calibration", "pad_calibration"):
         value = getattr(config, key, "")
         if value and not Path(value).is_absolute():
             setattr(config, key, str(base / value))

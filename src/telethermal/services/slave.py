@@ -56,6 +56,7 @@ class SlaveService:
     def __init__(self, config: SlaveConfig, identifier=None, generator=None):
         from telethermal.teleop.models import train_generator, train_identifier
         from telethermal.ident.fitted import register_scene
+        from telethermal.ident.pad_calibration import check_model_calibration, pad_calibration
         from telethermal.ident.registry import load_model
         from telethermal.render.generator import load_generator
 
@@ -71,9 +72,11 @@ class SlaveService:
                                      "config): make both with `telethermal models --out DIR` "
                                      "(deploy/README.md, step 3), or leave it empty to train "
                                      "at start")
+        pad_cal = pad_calibration(config.pad_calibration, self.scene)
         if identifier is None:
             identifier = load_model(config.identifier) if config.identifier else \
-                train_identifier(self.scene, config.seed)
+                train_identifier(self.scene, config.seed, calibration=pad_cal)
+        check_model_calibration(identifier, pad_cal, config.identifier or "the identifier")
         if generator is None:
             generator = load_generator(config.generator) if config.generator else \
                 train_generator(self.scene, config.seed)

@@ -43,12 +43,14 @@ def method_and_reason(scene: Scene) -> tuple[str, str]:
     return FALLBACK_METHOD, f"{DEFAULT_METHOD} cannot model {scene.name}'s touches: {reason}"
 
 
-def train_identifier(scene: Scene, seed: int = 0, method: str | None = None):
+def train_identifier(scene: Scene, seed: int = 0, method: str | None = None,
+                     calibration=None):
     """Database 1 of ``scene`` (seed ``seed``) -> a fitted ``method``
-    identifier (default: :func:`default_method`)."""
+    identifier (default: :func:`default_method`); ``calibration``: the
+    pad's (a PadCalibration), for the methods that fit its model."""
     method = method or default_method(scene)
     trials = pad_database(scene, np.random.default_rng(seed))
-    model = make(method, scene=scene).fit(from_trials(trials)[0])
+    model = make(method, scene=scene, calibration=calibration).fit(from_trials(trials)[0])
     model.scene_ = scene.name
     return model
 
@@ -81,7 +83,7 @@ def session_models(scene: Scene, identifier_path=None, generator_path=None, seed
 
 
 def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
-                 echo=log.info) -> list:
+                 echo=log.info, calibration: str | None = None) -> list:
     """A slave host's ``identifier.npz`` and ``generator.npz`` in ``out``,
     with ``SHA256SUMS`` (``sha256sum -c`` checks a copy). Trained on the
     scene's simulated databases (as the slave does at start when its config
@@ -90,7 +92,8 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     contacts (a lab's import). Without a finger database the generator is
     the scene's direct-contact model (its simulated finger database: the
     closed forms and layered solutions the simulator is checked against).
-    ``echo(line)``: told which identifier was trained and why."""
+    ``echo(line)``: told which identifier was trained and why;
+    ``calibration``: the pad's CAL.toml (``telethermal calibrate pad``)."""
     import hashlib
     from pathlib import Path
 
@@ -101,10 +104,12 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    from telethermal.ident.pad_calibration import pad_calibration
     scene = with_finger(load_scene(scene_name))
+    cal = pad_calibration(calibration or "", scene)
     if data is None:
         method, why = method_and_reason(scene)
-        identifier = train_identifier(scene, seed, method)
+        identifier = train_identifier(scene, seed, method, calibration=cal)
         generator = train_generator(scene, seed)
     else:
         from telethermal.data.dataset import MANIFEST, trial_digest
@@ -113,7 +118,8 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
         trials = load_dataset(pad)
         named = dataset_scene(pad)                      # None when it has no record
         method, data_scene, why = _dataset_method(scene, named)
-        identifier = make(method, scene=data_scene).fit(from_trials(trials)[0])
+        identifier = make(method, scene=data_scene, calibration=cal).fit(
+            from_trials(trials)[0])
         identifier.scene_ = named
         identifier.training_digests_ = sorted({trial_digest(t) for t in trials})
         finger = Path(data) / "finger"

@@ -1,0 +1,161 @@
+"""``telethermal bench identify --as-built SD``: the default identifier on
+pads built off their datasheet (issue 44, deliverable 6).
+
+``pads`` pads are drawn (``[as_built] sd = SD``, seeds 0, 1, ...: every
+factor of the sensing pad log-normal). For each, the same touches (the
+scene's pad database, one seed for every pad: only the pad differs) are
+cross-validated (grouped, 5 folds) three ways:
+
+- ``as_modelled``: the touches of the pad as designed (the product's model
+  is the simulator's pad: every headline figure so far);
+- ``uncalibrated``: the drawn pad's touches, the product's model the
+  design's;
+- ``calibrated``: the drawn pad's touches, the product's model calibrated
+  (``telethermal calibrate pad``) from reference touches of that pad on
+  :data:`REFERENCE_MATERIALS`, :data:`REFERENCE_TOUCHES` each (another
+  seed: not the touches scored).
+
+Each row: accuracy at 0.5 s and 1 s, the live decisions (named alone, pair,
+unknown, wrong). The calibration's: each fitted parameter against the drawn
+truth (whether its 95 % interval holds it: the coverage) and its CPU time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from telethermal.data.generate import pad_database, sensor_session
+from telethermal.ident.crossval import cross_validate
+from telethermal.physics.as_built import draw_as_built, with_as_built
+from telethermal.physics.scene import load_scene
+
+REFERENCE_MATERIALS = ("steel", "plexiglass", "wood")
+REFERENCE_TOUCHES = 5
+#: Seeds: the scored touches', and the reference touches' (another session).
+TOUCH_SEED, REFERENCE_SEED = 0, 1000
+METHOD = "effusivity-fit"
+MISFIT = "pad model does not fit: recalibrate"
+
+
+def _row(report: dict) -> dict:
+    """The figures of one cross-validation that the issue's targets name."""
+    d = report["decisions"]
+    committed = d["committed"] or 0
+    right = round((d["accuracy"] or 0.0) * committed)
+    acc = report["accuracy_by_window_s"]
+    return {"accuracy_0.5": acc.get("0.5"), "accuracy_1.0": acc.get("1"),
+            "named_rate": d["named_rate"], "pair_rate": d["pair_rate"],
+            "unknown_rate": d["unknown_rate"],
+            "misfit_rate": (d["unknown_reasons"] or {}).get(MISFIT, 0) / d["touches"]
+            if d["touches"] else None,
+            "wrong_rate": (committed - right) / d["touches"] if d["touches"] else None,
+            "touches": d["touches"]}
+
+
+def truth_of(as_built, gain: float) -> dict:
+    """Each calibration candidate's true factor on the drawn pad: a layer's
+    resistance and heat capacity both scale with its thickness; the gain
+    is the drawn factor times the reference session's instrument."""
+    f = as_built.pad
+    out = {"flux_lag_s": f.flux_lag_s, "flux_gain": f.flux_gain * gain}
+    for i, k in enumerate(f.layer_thickness):
+        out[f"layers[{i}].resistance"] = out[f"layers[{i}].heat_capacity"] = k
+    return out
+
+
+def calibrate_drawn(scene, built) -> tuple:
+    """(the calibration of ``built``'s pad from its reference touches, CPU s, truth)."""
+    from telethermal.ident.pad_calibration import calibrate_pad
+    ref_scene = dataclasses.replace(
+        built, pad=dataclasses.replace(built.pad, trials_per_material=REFERENCE_TOUCHES),
+        objects=tuple(o for o in built.objects if o.material in REFERENCE_MATERIALS))
+    trials = pad_database(ref_scene, np.random.default_rng(REFERENCE_SEED))
+    gain = sensor_session(ref_scene, np.random.default_rng(REFERENCE_SEED)).instruments.flux_gain
+    start = time.process_time()
+    cal = calibrate_pad(scene, trials)
+    return cal, time.process_time() - start, truth_of(built.as_built, gain)
+
+
+def coverage(cal, truth: dict) -> list[dict]:
+    """Each fitted parameter: its factor, interval, the truth (a lumped
+    one's: the geometric mean of its members'), held or not."""
+    rows = []
+    for p in cal.parameters:
+        want = math.exp(np.mean([math.log(truth[n]) for n in p.names]))
+        rows.append({"names": list(p.names), "factor": p.factor, "lo": p.lo, "hi": p.hi,
+                     "truth": want, "held": bool(p.lo <= want <= p.hi)})
+    return rows
+
+
+def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7", folds: int = 5,
+        progress=None, partial=None) -> dict:
+    """The ``as_built`` section of ``bench identify``'s report (see the
+    module); ``partial(section)``: called after each pad with the section
+    so far (a long run's figures kept as they come)."""
+    step = progress or (lambda _m: None)
+    scene = load_scene(scene_name)
+    step(f"as modelled: {folds} folds on {scene.name}")
+    touches = list(pad_database(scene, np.random.default_rng(TOUCH_SEED)))
+    out = {"sd": sd, "pads": pads, "scene": scene.name, "method": METHOD, "folds": folds,
+           "reference": {"materials": list(REFERENCE_MATERIALS),
+                         "touches_each": REFERENCE_TOUCHES},
+           "as_modelled": _row(cross_validate(touches, METHOD, folds, scene=scene)),
+           "uncalibrated": [], "calibrated": [], "calibrations": []}
+    for k in range(pads):
+        built = with_as_built(scene, draw_as_built(sd, k, len(scene.pad.layers)))
+        drawn = list(pad_database(built, np.random.default_rng(TOUCH_SEED)))
+        step(f"pad {k}: uncalibrated")
+        out["uncalibrated"].append(_row(cross_validate(drawn, METHOD, folds, scene=scene)))
+        step(f"pad {k}: calibrating")
+        cal, cpu_s, truth = calibrate_drawn(scene, built)
+        out["calibrations"].append({"seed": k, "as_built": built.as_built.pad.to_dict(),
+                                    "cpu_s": cpu_s, "chi2_per_dof": cal.chi2_per_dof,
+                                    "parameters": coverage(cal, truth),
+                                    "not_identifiable": list(cal.not_identifiable)})
+        step(f"pad {k}: calibrated")
+        out["calibrated"].append(_row(cross_validate(drawn, METHOD, folds, scene=scene,
+                                                     calibration=cal)))
+        out["summary"] = summary(out)
+        if partial is not None:
+            partial({**out, "pads_done": k + 1})
+    return out
+
+
+def summary(out: dict) -> dict:
+    """Means over the drawn pads of each row's figures; the calibrations'
+    coverage (parameters held / fitted) and CPU time."""
+    def mean(rows, key):
+        vals = [r[key] for r in rows if r[key] is not None]
+        return float(np.mean(vals)) if vals else None
+    keys = ("accuracy_0.5", "accuracy_1.0", "named_rate", "pair_rate", "unknown_rate",
+            "misfit_rate", "wrong_rate")
+    held = [p["held"] for c in out["calibrations"] for p in c["parameters"]]
+    return {"uncalibrated": {k: mean(out["uncalibrated"], k) for k in keys},
+            "calibrated": {k: mean(out["calibrated"], k) for k in keys},
+            "as_modelled": {k: out["as_modelled"][k] for k in keys},
+            "coverage": float(np.mean(held)) if held else None,
+            "parameters_fitted": len(held),
+            "calibrate_cpu_s_max": max((c["cpu_s"] for c in out["calibrations"]), default=None)}
+
+
+def text_lines(out: dict) -> list[str]:
+    """What ``bench identify --as-built`` prints."""
+    def pct(x):
+        return "-" if x is None else f"{100 * x:.1f} %"
+    s = out["summary"]
+    lines = [f"pads built off their datasheet: {out['pads']} drawn at sd {out['sd']:g} "
+             f"({out['method']}, {out['folds']} folds, mean over the pads)"]
+    for key in ("as_modelled", "uncalibrated", "calibrated"):
+        r = s[key]
+        lines.append(f"  {key:13s} 0.5 s {pct(r['accuracy_0.5'])}, 1 s {pct(r['accuracy_1.0'])};"
+                     f" named {pct(r['named_rate'])}, pair {pct(r['pair_rate'])}, unknown "
+                     f"{pct(r['unknown_rate'])} (misfit {pct(r['misfit_rate'])}), wrong "
+                     f"{pct(r['wrong_rate'])}")
+    lines.append(f"  calibration: {pct(s['coverage'])} of {s['parameters_fitted']} fitted "
+                 f"parameters within their 95 % interval; CPU up to "
+                 f"{s['calibrate_cpu_s_max']:.0f} s per pad")
+    return lines

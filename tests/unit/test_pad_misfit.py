@@ -1,0 +1,66 @@
+"""A pad model that does not fit the pad is caught (issue 44, deliverable
+4): the touch is not named by the pad model ("pad model does not fit:
+recalibrate"), never a confident wrong name."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from telethermal.data.generate import pad_database
+from telethermal.ident.anytime import StreamingIdentifier, decide_all
+from telethermal.ident.label import Reason
+from telethermal.ident.prepare import from_trials
+from telethermal.ident.registry import make
+from telethermal.physics.as_built import AsBuilt, BuiltFactors, with_as_built
+from telethermal.physics.scene import load_scene
+
+MATERIALS = ("steel", "plexiglass", "wood")
+
+
+def _scene(trials):
+    s = load_scene("fingertip-7")
+    return dataclasses.replace(
+        s, finger=None, pad=dataclasses.replace(s.pad, trials_per_material=trials),
+        objects=tuple(o for o in s.objects if o.material in MATERIALS))
+
+
+@pytest.fixture(scope="module")
+def model():
+    scene = _scene(6)
+    return make("effusivity-fit", scene=load_scene("fingertip-7")).fit(
+        from_trials(pad_database(scene, np.random.default_rng(1)))[0])
+
+
+def test_a_sensor_lag_20_percent_off_is_flagged_and_never_named_wrong(model):
+    """The fit's residual against the noise: a lag of 0.18 s fitted with a
+    model of 0.15 s reads chi2/dof 7-45 from 0.25 s (as modelled: under
+    0.05; the limit 2). Target (issue 44): flagged on >= 90 % of touches,
+    none committed wrong."""
+    lagged = with_as_built(_scene(6), AsBuilt(BuiltFactors((1, 1, 1), flux_lag_s=1.2),
+                                              BuiltFactors((1, 1, 1))))
+    contacts = from_trials(pad_database(lagged, np.random.default_rng(2)))[0]
+    decisions = decide_all(model, contacts)
+    flagged = [d.reason == Reason.PAD_MODEL_MISFIT for d in decisions]
+    assert np.mean(flagged) >= 0.9
+    wrong = [(t, str(d.label)) for d, t in zip(decisions, contacts.labels)
+             if not d.label.is_unknown and not d.label.holds(t)]
+    assert not wrong
+    # The slave's sample-by-sample decision is the same.
+    i = int(np.argmax(flagged))
+    stream = StreamingIdentifier(model, contacts.gap_k[i])
+    for row in contacts.x[i, :contacts.lengths[i]]:
+        stream.push(row * contacts.gap_k[i])
+        if stream.finished:
+            break
+    assert stream.estimate.reason == Reason.PAD_MODEL_MISFIT
+    assert stream.estimate.label.is_unknown
+
+
+def test_touches_of_the_pad_as_modelled_are_not_flagged(model):
+    contacts = from_trials(pad_database(_scene(6), np.random.default_rng(3)))[0]
+    decisions = decide_all(model, contacts)
+    assert not [d for d in decisions if d.reason == Reason.PAD_MODEL_MISFIT]
+    assert all(d.label.holds(t) for d, t in zip(decisions, contacts.labels))
