@@ -331,16 +331,14 @@ class EffusivityEstimator:
     @classmethod
     def for_scene(cls, scene, object_temp_c: float | None = None, max_s: float = 1.0,
                   n_e: int = N_E, n_h: int = N_H, n_prior: int = 2000, n_sessions: int = 20,
-                  prior_seed: int = 12345, family=None,
-                  flux_gain: tuple[float, float] | None = None) -> "EffusivityEstimator":
+                  prior_seed: int = 12345, family=None, flux_gain=None) -> "EffusivityEstimator":
         """The estimator of ``scene``'s pad touches up to ``max_s`` after the
         detected onset, its curves at ``object_temp_c`` (default: the scene's
         objects' temperature, which must then be one). ``family``: what
         builds the curves, :func:`effusivity_family`'s signature (default:
         that function; :func:`telethermal.ident.curvecache.cached_family`
-        reads them from disk when it can). ``flux_gain``: the flux sensor's
-        gain (mean, relative sd) from a calibration, for the amplitude's
-        prior (default: the scene's datasheet limit)."""
+        reads them from disk when it can). ``flux_gain``: (mean, relative sd)
+        of a calibration, the amplitude prior's gain (default: the datasheet's)."""
         reason = refusal(scene, object_temp_c)
         if reason is not None:
             raise IdentificationError(f"{scene.name}: {reason}")

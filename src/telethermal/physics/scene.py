@@ -457,7 +457,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
     data = parse_toml(text, source)
     scene = dataclasses.replace(parse_scene(data, source), ref=ref)
     if from_file:
-        check_own_name(scene)                  # a shipped name on other content: refused
+        check_own_name(scene, shipped, load_scene)     # a shipped name, other content: refused
         _FILES_BY_NAME[scene.name] = scene
     return scene
 

@@ -19,15 +19,14 @@ def _content(scene):
     return dataclasses.replace(scene, **_PROVENANCE)
 
 
-def check_own_name(scene) -> None:
-    """Refuse a scene file that names a shipped scene but differs from it
+def check_own_name(scene, shipped_names, load_shipped) -> None:
+    """Refuse a scene file that names a shipped scene (one of
+    ``shipped_names``; ``load_shipped(name)`` loads it) but differs from it
     (any key but its description; ``[as_built]`` included), naming the
-    first section that differs and the fix."""
-    from telethermal.physics.scene import list_scenes, load_scene
-
-    if scene.name not in list_scenes():
+    sections that differ and the fix."""
+    if scene.name not in shipped_names:
         return
-    shipped = load_scene(scene.name)
+    shipped = load_shipped(scene.name)
     if _content(scene) == _content(shipped):
         return
     differs = [f.name for f in dataclasses.fields(scene) if f.name not in _PROVENANCE
