@@ -82,3 +82,30 @@ def test_validate_of_the_folder_says_which_database_to_give(generated, capsys):
     assert main(["dataset", "validate", str(generated)]) != 0
     err = " ".join(capsys.readouterr().err.split())
     assert "holds the databases pad/" in err and f"give {generated / 'pad'}" in err
+
+
+def test_calibrate_pad_writes_its_file_and_another_scenes_is_refused(tmp_path, capsys):
+    scene = load_scene("fingertip-7")
+    refs = tmp_path / "refs"
+    generate_databases(dataclasses.replace(
+        scene, finger=None, pad=dataclasses.replace(scene.pad, trials_per_material=3),
+        objects=tuple(o for o in scene.objects if o.material in ("steel", "wood"))),
+        refs, seed=4)
+    cal = tmp_path / "cal.toml"
+    assert main(["calibrate", "pad", "--scene", "fingertip-7", "--data", str(refs),
+                 "--out", str(cal), "--window-s", "0.5"]) == 0, capsys.readouterr().err
+    printed = capsys.readouterr().out
+    assert "pad calibration of fingertip-7: 6 touches of steel, wood" in printed
+    assert "flux sensor lag: x" in printed and f"wrote {cal}" in printed
+    from telethermal.ident.pad_calibration import read_calibration
+    assert read_calibration(cal).scene == "fingertip-7"
+    imported = tmp_path / "imported"                     # no record of its scene
+    shutil.copytree(refs / "pad", imported)
+    assert main(["identify", "cv", "--data", str(imported), "--scene", "gripper-case-II",
+                 "--calibration", str(cal)]) != 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert "calibrates scene 'fingertip-7'" in err and "gripper-case-II" in err
+    assert main(["calibrate", "pad", "--scene", "fingertip-7", "--data", str(refs / "pad"),
+                 "--out", str(tmp_path / "x.toml"), "--window-s", "5"]) != 0
+    assert "at least 3 touches (5 s long)" in capsys.readouterr().err
+    assert not (tmp_path / "x.toml").exists()

@@ -63,4 +63,5 @@ def test_touches_of_the_pad_as_modelled_are_not_flagged(model):
     contacts = from_trials(pad_database(_scene(6), np.random.default_rng(3)))[0]
     decisions = decide_all(model, contacts)
     assert not [d for d in decisions if d.reason == Reason.PAD_MODEL_MISFIT]
-    assert all(d.label.holds(t) for d, t in zip(decisions, contacts.labels))
+    assert all(d.label.is_unknown or d.label.holds(t) for d, t in zip(decisions,
+                                                                       contacts.labels))

@@ -1,0 +1,52 @@
+"""bench identify --as-built: the truth a calibration is scored against,
+the coverage and the summary (the run itself is the bench's)."""
+
+from __future__ import annotations
+
+import pytest
+
+from telethermal.bench.identify_as_built import coverage, summary, text_lines, truth_of
+from telethermal.ident.pad_calibration import CalibratedParameter, PadCalibration
+from telethermal.physics.as_built import draw_as_built
+
+
+def test_the_truth_of_a_drawn_pad():
+    ab = draw_as_built(0.15, 3, 3)
+    truth = truth_of(ab, 1.01)
+    # A layer's thickness scales its resistance and its heat capacity alike
+    # (its conductivity and volumetric heat unchanged).
+    assert truth["layers[1].resistance"] == truth["layers[1].heat_capacity"] == \
+        ab.pad.layer_thickness[1]
+    assert truth["flux_gain"] == pytest.approx(ab.pad.flux_gain * 1.01)
+    assert truth["flux_lag_s"] == ab.pad.flux_lag_s
+
+
+def _cal(params):
+    return PadCalibration("s", "d", tuple(CalibratedParameter(*p) for p in params), (),
+                          3000.0, 1.0, 0.01, 0.1, 15, ("steel", "wood"))
+
+
+def test_coverage_counts_each_parameter_against_its_first_members_truth():
+    truth = {"flux_lag_s": 1.1, "layers[0].resistance": 1.2, "layers[1].resistance": 1.5}
+    rows = coverage(_cal([(("flux_lag_s",), "lag", 1.09, 1.05, 1.12),
+                          (("layers[0].resistance", "layers[1].resistance"), "R", 1.21,
+                           1.19, 1.23)]), truth)
+    assert [r["held"] for r in rows] == [True, True] and rows[1]["truths"] == [1.2, 1.5]
+    rows = coverage(_cal([(("flux_lag_s",), "lag", 1.2, 1.15, 1.25)]), truth)
+    assert rows[0]["held"] is False
+
+
+def test_summary_means_over_the_pads_and_prints_them():
+    row = {"accuracy_0.5": 1.0, "accuracy_1.0": 1.0, "named_rate": 0.9, "pair_rate": 0.0,
+           "unknown_rate": 0.1, "misfit_rate": 0.05, "wrong_rate": 0.0, "touches": 70}
+    other = {**row, "named_rate": 0.7, "unknown_rate": 0.3}
+    out = {"sd": 0.15, "pads": 2, "method": "effusivity-fit", "folds": 5, "as_modelled": row,
+           "uncalibrated": [row, other], "calibrated": [row, row],
+           "calibrations": [{"cpu_s": 20.0, "parameters": [{"held": True}, {"held": False}]},
+                            {"cpu_s": 30.0, "parameters": [{"held": True}]}]}
+    s = summary(out)
+    assert s["uncalibrated"]["named_rate"] == pytest.approx(0.8)
+    assert s["coverage"] == pytest.approx(2 / 3) and s["calibrate_cpu_s_max"] == 30.0
+    out["summary"] = s
+    text = "\n".join(text_lines(out))
+    assert "uncalibrated" in text and "named 80.0 %" in text and "66.7 % of 3" in text
