@@ -131,3 +131,28 @@ def test_the_calibrated_model_and_a_model_file_record_it(calibrated, tmp_path):
     model = EffusivityFit(scene="fingertip-7", calibration=calibrated)
     again = EffusivityFit(**model.hyper())
     assert again.calibration.to_dict() == calibrated.to_dict()
+
+
+def test_a_service_refuses_a_model_trained_with_another_calibration(tmp_path):
+    """The slave's ``pad_calibration`` and its identifier's must agree (a
+    model file records the calibration it was trained with); a method that
+    fits no pad model is not asked."""
+    from telethermal.errors import ModelFileError
+    from telethermal.ident.fitted import EffusivityFit
+    from telethermal.ident.methods import EffusivityLda
+    from telethermal.ident.pad_calibration import (CalibratedParameter, PadCalibration,
+                                                   check_model_calibration, pad_calibration,
+                                                   pad_digest, write_calibration)
+    scene = load_scene("fingertip-7")
+    cal = PadCalibration("fingertip-7", pad_digest(scene), (CalibratedParameter(
+        ("flux_lag_s",), "flux sensor lag", 1.1, 1.05, 1.15),), (), 3000.0, 1.0, 0.01, 0.1,
+        15, ("steel", "wood"))
+    path = write_calibration(cal, tmp_path / "cal.toml")
+    assert pad_calibration("", scene) is None
+    mine = pad_calibration(str(path), scene)
+    check_model_calibration(EffusivityFit(scene="fingertip-7", calibration=mine), mine, "m")
+    check_model_calibration(EffusivityLda(), mine, "lda")
+    with pytest.raises(ModelFileError, match="trained with no pad calibration"):
+        check_model_calibration(EffusivityFit(scene="fingertip-7"), mine, "m.npz")
+    with pytest.raises(CalibrationError, match="gripper-case-II"):
+        pad_calibration(str(path), load_scene("gripper-case-II"))
