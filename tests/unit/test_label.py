@@ -99,7 +99,7 @@ def test_reason_values_are_the_recorded_strings():
     assert {r.value for r in Reason} == {
         "", "confident", "confident group", "outside classes", "new material", "gap too small",
         "not confident", "force outside trained range", "object memory",
-        "sensor board lost", "no object temperature",
+        "sensor board lost", "no object temperature", "pad model does not fit: recalibrate",
         "no estimate", "no decision", "slave restarted"}
     assert Reason("confident group") is Reason.CONFIDENT_GROUP
     assert not Reason.UNDECIDED and str(Reason.OBJECT_MEMORY) == "object memory"

@@ -88,7 +88,8 @@ ESTIMATE_FIELDS = (
                                  "'unknown'); never false again in the contact"),
     Field("reason", "str", doc="confident | confident group | outside classes | "
                                "new material | gap too small | not confident | force outside "
-                               "trained range | sensor board lost | '' while undecided"),
+                               "trained range | sensor board lost | pad model does not "
+                               "fit: recalibrate | '' while undecided"),
     Field("object_temp_c", "float", "degC", lo=-50, hi=200),
 ) + _effusivity_fields()
 KINDS: dict[str, Kind] = {k.name: k for k in (
