@@ -69,7 +69,10 @@ def test_an_unseen_material_is_outside_every_class_not_named(model, material):
     held = _contacts(scene, 3)
     assert set(held.labels) == {material}
     decisions = decide_all(model, held)
-    assert all(d.label.is_new for d in decisions), [str(d.label) for d in decisions]
+    # A new material, or (issue 44) not named because the pad model's fit
+    # leaves a residual past the noise's limit: never a trained material.
+    assert all(d.label.is_new or d.reason == "pad model does not fit: recalibrate"
+               for d in decisions), [(str(d.label), d.reason) for d in decisions]
     assert model.outside_classes(held.x, len(model.windows_s_) - 1).all()
 
 
