@@ -28,8 +28,7 @@ from telethermal.physics.materials import (get_material, load_materials, read_ta
 from telethermal.physics.model import ModelChoice, choose_model
 from telethermal.physics.scenefile import MAX_OBJECTS, UPPER_BOUNDS, parse_toml, read_scene_text
 from telethermal.physics.scenereader import TableReader as _Reader
-from telethermal.physics.scene_names import check_own_name
-from telethermal.physics.scenereader import read_layers, read_material
+from telethermal.physics.scenereader import check_own_name, read_layers, read_material
 
 PAD_KINDS = ("peltier", "water")
 #: Simulated beyond a contact's duration: a recording is cut at the onset its
@@ -187,8 +186,7 @@ class Scene:
     #: dew point: control/dew.py). Default 50 %: the middle of the 30-70 %
     #: ISO 7730 (Ergonomics of the thermal environment, annex) recommends indoors.
     room_humidity_pct: float = 50.0
-    #: The pads as really built (``[as_built]``): the simulator's alone (physics/as_built.py).
-    as_built: AsBuilt | None = None
+    as_built: AsBuilt | None = None     # [as_built]: the simulator's alone (physics/as_built.py)
 
     @property
     def materials(self) -> list[str]:
