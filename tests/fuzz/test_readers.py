@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from fuzzing import TALLY, fuzz_settings, keep_peak
 from telethermal.data.csv_import import CsvSpec, read_lab_csv
-from telethermal.errors import DatasetError, ModelFileError, SceneError
+from telethermal.errors import CalibrationError, DatasetError, ModelFileError, SceneError
 from telethermal.ident.registry import load_model
 from telethermal.physics.scene import load_scene
 from telethermal.record.recording import Recorder, RecordingError, read_recording
@@ -150,3 +150,31 @@ def test_lab_csv_files(tmp_path_factory, data):
     path.write_bytes(data.draw(st.one_of(mutations(_csv_text()),
                                          st.text(max_size=400).map(str.encode))))
     _load("csv", lambda p: read_lab_csv(p, CsvSpec({}, {})), path, DatasetError)
+
+
+def _calibration_text() -> bytes:
+    from telethermal.ident.pad_calibration import (CalibratedParameter, PadCalibration,
+                                                   pad_digest)
+    return PadCalibration(
+        SCENE.name, pad_digest(SCENE),
+        (CalibratedParameter(("flux_gain",), "flux sensor gain", 1.02, 1.0, 1.04),
+         CalibratedParameter(("flux_lag_s",), "flux sensor lag", 1.1, 1.0, 1.2),
+         CalibratedParameter(("layers[0].resistance", "layers[1].resistance"),
+                             "resistances", 0.9, 0.8, 1.0)),
+        ("layers[2].heat_capacity",), 3000.0, 1.02, 0.01, 0.03, 6,
+        ("steel", "wood")).to_toml().encode()
+
+
+def _load_calibration(path):
+    """Read and checked against the scene, as a service takes it."""
+    from telethermal.ident.pad_calibration import pad_calibration
+    pad_calibration(str(path), SCENE)
+
+
+@fuzz_settings()
+@given(data=st.data())
+def test_calibration_files(tmp_path_factory, data):
+    path = tmp_path_factory.mktemp("k") / "cal.toml"
+    path.write_bytes(data.draw(st.one_of(mutations(_calibration_text()),
+                                         st.text(max_size=400).map(str.encode))))
+    _load("calibration", _load_calibration, path, CalibrationError)

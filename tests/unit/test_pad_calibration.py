@@ -156,3 +156,81 @@ def test_a_service_refuses_a_model_trained_with_another_calibration(tmp_path):
         check_model_calibration(EffusivityFit(scene="fingertip-7"), mine, "m.npz")
     with pytest.raises(CalibrationError, match="gripper-case-II"):
         pad_calibration(str(path), load_scene("gripper-case-II"))
+
+
+def _hand_made(scene):
+    """A calibration written by hand for ``scene`` (no fit: the file's checks)."""
+    from telethermal.ident.pad_calibration import (CalibratedParameter, PadCalibration,
+                                                   pad_digest)
+    return PadCalibration(
+        scene.name, pad_digest(scene),
+        (CalibratedParameter(("flux_gain",), "flux sensor gain", 1.02, 1.0, 1.04),
+         CalibratedParameter(("flux_lag_s",), "flux sensor lag", 1.1, 1.0, 1.2)),
+        (), 3000.0, 1.02, 0.01, 0.03, 6, ("steel", "wood"))
+
+
+@pytest.mark.parametrize("edit, field", [
+    (("factor = 1.1", "factor = nan"), r"parameters\[1\].factor: nan"),
+    (("factor = 1.1", "factor = inf"), r"parameters\[1\].factor: inf"),
+    (("flux_gain = 1.02", "flux_gain = -1.02"), "flux_gain: -1.02; must be a finite number > 0"),
+    (("contact_conductance_w_m2k = 3000.0", "contact_conductance_w_m2k = 0"),
+     "contact_conductance_w_m2k: 0"),
+    (("flux_gain_sd = 0.01", "flux_gain_sd = -0.01"), "flux_gain_sd: -0.01; .* >= 0"),
+    (('names = ["flux_lag_s"]', 'names = "flux_lag_s"'),
+     r"parameters\[1\].names: expected list, got 'flux_lag_s'"),
+    (('names = ["flux_lag_s"]', 'names = [1]'), r"parameters\[1\].names: expected a list of str"),
+    (('names = ["flux_lag_s"]', 'names = []'), r"parameters\[1\].names: empty"),
+    (("touches = 6", 'touches = "6"'), "touches: expected int"),
+    (("touches = 6", "touches = 0"), "touches: 0"),
+    (('materials = ["steel", "wood"]', 'materials = "steel"'), "materials: expected list"),
+    (("factor = 1.1", "factor = 1.5"), r"parameters\[1\]: factor 1.5 outside"),
+    (("flux_gain = 1.02\n", ""), "flux_gain: missing"),
+])
+def test_a_calibration_file_with_a_bad_field_is_refused_naming_it(tmp_path, edit, field):
+    """Every number finite and > 0 (a standard deviation >= 0), the lists
+    lists of strings (a string alone is not split into letters): refused
+    with the file and the field named (issue 47's contract)."""
+    import re
+
+    from telethermal.ident.pad_calibration import read_calibration
+    text = _hand_made(_scene()).to_toml()
+    old, new = edit
+    assert text.count(old) == 1
+    path = tmp_path / "cal.toml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(CalibrationError) as err:
+        read_calibration(path)
+    assert str(path) in str(err.value) and re.search(field, str(err.value)), err.value
+
+
+def test_a_calibration_naming_no_parameter_of_the_scene_is_refused(tmp_path):
+    """A name the pad's model does not have would be ignored by the scaled
+    scene: refused against the scene, naming it and the known ones."""
+    from telethermal.ident.pad_calibration import read_calibration
+    scene = _scene()
+    path = tmp_path / "cal.toml"
+    path.write_text(_hand_made(scene).to_toml().replace('"flux_lag_s"', '"flux_lag"'))
+    cal = read_calibration(path)
+    with pytest.raises(CalibrationError, match=r"cal.toml: parameters\[1\].names: 'flux_lag' "
+                                               r"is not a parameter.*flux_lag_s"):
+        cal.apply(scene)
+    path.write_text(_hand_made(scene).to_toml())
+    read_calibration(path).apply(scene)          # the file as written is taken
+
+
+def test_a_calibration_file_past_the_readers_limits_is_refused_by_the_cli(tmp_path):
+    """Read through the TOML reader's limits (size, UTF-8, dotted keys);
+    the command exits 2 with the file named."""
+    from telethermal.cli import main
+    from telethermal.tomltables import MAX_KEY_PARTS, MAX_TOML_BYTES
+    bad = {"big.toml": b"#" * (MAX_TOML_BYTES + 1), "latin.toml": b'scene = "\xe9"\n',
+           "dotted.toml": ".".join(["a"] * (MAX_KEY_PARTS + 1)).encode() + b" = 1\n"}
+    for name, data in bad.items():
+        (tmp_path / name).write_bytes(data)
+        assert main(["models", "--out", str(tmp_path / "out"), "--calibration",
+                     str(tmp_path / name)]) == 2, name
+    from telethermal.ident.pad_calibration import read_calibration
+    for name, why in (("big.toml", "byte limit"), ("latin.toml", "not UTF-8"),
+                      ("dotted.toml", "dotted parts")):
+        with pytest.raises(CalibrationError, match=f"{name}: .*{why}"):
+            read_calibration(tmp_path / name)

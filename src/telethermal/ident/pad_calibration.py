@@ -81,6 +81,13 @@ class PadCalibration:
             raise CalibrationError(f"{where} was made for another pad or sensors of scene "
                                    f"{scene.name!r} (the scene file changed since): calibrate "
                                    "again")
+        known = candidates(scene)
+        for i, p in enumerate(self.parameters):
+            for name in p.names:
+                if name not in known:
+                    raise CalibrationError(f"{where}: parameters[{i}].names: {name!r} is not a "
+                                           f"parameter of scene {scene.name!r}'s pad; its "
+                                           f"parameters: {', '.join(known)}")
 
     def apply(self, scene):
         """The product's model of ``scene``'s pad as calibrated."""
@@ -119,23 +126,38 @@ class PadCalibration:
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "") -> "PadCalibration":
-        try:
-            if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
-                raise CalibrationError(f"{source}: not a {FORMAT} file of version "
-                                       f"{FORMAT_VERSION}")
-            params = tuple(CalibratedParameter(tuple(p["names"]), str(p["label"]),
-                                               float(p["factor"]), float(p["lo"]),
-                                               float(p["hi"]))
-                           for p in data.get("parameters", []))
-            return cls(str(data["scene"]), str(data["pad_digest"]), params,
-                       tuple(data["not_identifiable"]),
-                       float(data["contact_conductance_w_m2k"]), float(data["flux_gain"]),
-                       float(data["flux_gain_sd"]), float(data["chi2_per_dof"]),
-                       int(data["touches"]), tuple(data["materials"]), source)
-        except (KeyError, TypeError, ValueError) as exc:
-            if isinstance(exc, CalibrationError):
-                raise
-            raise CalibrationError(f"{source}: not a pad calibration: {exc!r}") from exc
+        """The calibration a ``CAL.toml``'s table holds; every field checked
+        (its type; a number finite and > 0, a standard deviation >= 0; the
+        names lists of strings), a bad one refused naming it."""
+        if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
+            raise CalibrationError(f"{source}: not a {FORMAT} file of version "
+                                   f"{FORMAT_VERSION}")
+        rows = _field(data, "parameters", list, source, ())
+        params = []
+        for i, p in enumerate(rows):
+            if not isinstance(p, dict):
+                raise CalibrationError(f"{source}: parameters[{i}]: expected a table, got {p!r}")
+            where = f"parameters[{i}]"
+            names = _strings(p, "names", source, where)
+            if not names:
+                raise CalibrationError(f"{source}: {where}.names: empty; at least one parameter")
+            factor, lo, hi = (_number(p, k, source, where) for k in ("factor", "lo", "hi"))
+            if not lo <= factor <= hi:
+                raise CalibrationError(f"{source}: {where}: factor {factor!r} outside its "
+                                       f"interval [{lo!r}, {hi!r}]")
+            params.append(CalibratedParameter(names, _field(p, "label", str, source,
+                                                            where=where), factor, lo, hi))
+        touches = _field(data, "touches", int, source)
+        if touches < 1:
+            raise CalibrationError(f"{source}: touches: {touches}; must be at least 1")
+        return cls(_field(data, "scene", str, source), _field(data, "pad_digest", str, source),
+                   tuple(params), _strings(data, "not_identifiable", source),
+                   _number(data, "contact_conductance_w_m2k", source),
+                   _number(data, "flux_gain", source),
+                   _number(data, "flux_gain_sd", source, positive=False),
+                   _number(data, "chi2_per_dof", source, positive=False),
+                   touches, _strings(data, "materials", source),
+                   source)
 
     def to_dict(self) -> dict:
         return tomllib.loads(self.to_toml())
@@ -143,12 +165,51 @@ class PadCalibration:
 
 def read_calibration(path: str | Path) -> PadCalibration:
     """A ``CAL.toml`` written by ``telethermal calibrate pad``."""
-    path = Path(path)
+    from telethermal.tomltables import read_toml
     try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        data = read_toml(path, "pad calibration", CalibrationError)
+    except OSError as exc:
         raise CalibrationError(f"{path}: cannot read a pad calibration: {exc}") from exc
     return PadCalibration.from_dict(data, str(path))
+
+
+_MISSING = object()
+
+
+def _field(table: dict, key: str, kind, source: str, default=_MISSING, where: str = ""):
+    """``table[key]`` of type ``kind`` (a bool is no int), else
+    CalibrationError naming the file and the field."""
+    name = f"{where}.{key}" if where else key
+    value = table.get(key, default)
+    if value is _MISSING:
+        raise CalibrationError(f"{source}: {name}: missing")
+    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+        raise CalibrationError(f"{source}: {name}: expected {getattr(kind, '__name__', kind)},"
+                               f" got {value!r}"[:300])
+    return value
+
+
+def _number(table: dict, key: str, source: str, where: str = "",
+            positive: bool = True) -> float:
+    """A finite number > 0 (``positive``), else >= 0."""
+    name = f"{where}.{key}" if where else key
+    value = _field(table, key, (int, float), source, where=where)
+    if isinstance(value, bool) or not math.isfinite(value) or value < 0 or \
+            (positive and value == 0):
+        raise CalibrationError(f"{source}: {name}: {value!r}; must be a finite number "
+                               f"{'> 0' if positive else '>= 0'}")
+    return float(value)
+
+
+def _strings(table: dict, key: str, source: str, where: str = "") -> tuple[str, ...]:
+    """A list of strings (a string alone is refused, not split into letters)."""
+    value = _field(table, key, list, source, where=where)
+    name = f"{where}.{key}" if where else key
+    for v in value:
+        if not isinstance(v, str):
+            raise CalibrationError(f"{source}: {name}: expected a list of strings, "
+                                   f"got {v!r} in it"[:300])
+    return tuple(value)
 
 
 def write_calibration(cal: PadCalibration, path: str | Path) -> Path:
