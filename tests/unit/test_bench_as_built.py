@@ -26,13 +26,27 @@ def _cal(params):
                           3000.0, 1.0, 0.01, 0.1, 15, ("steel", "wood"))
 
 
-def test_coverage_counts_each_parameter_against_its_first_members_truth():
-    truth = {"flux_lag_s": 1.1, "layers[0].resistance": 1.2, "layers[1].resistance": 1.5}
+def test_coverage_scores_a_lumped_parameter_against_its_groups_total():
+    """A lumped parameter scales its members' total by its factor: scored
+    against the true factor of that total (the members' factors weighted by
+    their design values), not its first member's. fingertip-7's film and
+    alumina: the factors 1.2 and 1.5 on their heat capacities C0, C2 make
+    the total (1.2 C0 + 1.5 C2) / (C0 + C2) times its design value."""
+    from telethermal.physics.scene import load_scene
+    scene = load_scene("fingertip-7")
+    c = [lay.thickness_m * lay.material.volumetric_heat_j_m3k for lay in scene.pad.layers]
+    total = (1.2 * c[0] + 1.5 * c[2]) / (c[0] + c[2])
+    assert 1.25 < total < 1.45                   # neither member's (464, 818 J/(m^2 K))
+    truth = {"flux_lag_s": 1.1, "layers[0].heat_capacity": 1.2, "layers[2].heat_capacity": 1.5}
+    lumped = ("layers[0].heat_capacity", "layers[2].heat_capacity")
     rows = coverage(_cal([(("flux_lag_s",), "lag", 1.09, 1.05, 1.12),
-                          (("layers[0].resistance", "layers[1].resistance"), "R", 1.21,
-                           1.19, 1.23)]), truth)
+                          (lumped, "R", total, total - 0.005, total + 0.005)]), truth, scene)
     assert [r["held"] for r in rows] == [True, True] and rows[1]["truths"] == [1.2, 1.5]
-    rows = coverage(_cal([(("flux_lag_s",), "lag", 1.2, 1.15, 1.25)]), truth)
+    assert rows[1]["truth"] == pytest.approx(total, rel=1e-12)
+    # An interval round the first member's truth alone does not hold it.
+    rows = coverage(_cal([(lumped, "R", 1.2, 1.19, 1.21)]), truth, scene)
+    assert rows[0]["held"] is (1.19 <= total <= 1.21) is False
+    rows = coverage(_cal([(("flux_lag_s",), "lag", 1.2, 1.15, 1.25)]), truth, scene)
     assert rows[0]["held"] is False
 
 

@@ -79,14 +79,35 @@ def calibrate_drawn(scene, built) -> tuple:
     return cal, time.process_time() - start, truth_of(built.as_built, gain)
 
 
-def coverage(cal, truth: dict) -> list[dict]:
-    """Each fitted parameter: its factor, interval, the truth, held or not.
-    A lumped parameter's truth is its first member's (the one the Jacobian
-    kept; the others were lumped in for lack of information of their own,
-    and their truths are listed beside)."""
+def design_value(scene, name: str) -> float:
+    """A layer candidate's design value: its resistance per area ``L / k``
+    (m^2 K/W) or heat capacity per area ``L rho c`` (J/(m^2 K))."""
+    lay = scene.pad.layers[int(name[7:name.index("]")])]
+    if name.endswith(".resistance"):
+        return lay.thickness_m / lay.material.conductivity_w_mk
+    return lay.thickness_m * lay.material.volumetric_heat_j_m3k
+
+
+def lumped_truth(scene, names, truth: dict) -> float:
+    """The true factor of the quantity a parameter scales. One member: its
+    truth. Lumped (layers' resistances together, or heat capacities
+    together: ``ident/calibration.py`` lumps only one kind), the fit scales
+    every member by one factor, so it scales the group's total ``sum x_i``
+    (the layers in series: their resistance, their heat capacity) by it;
+    the true factor of that total is ``sum x_i f_i / sum x_i``, the
+    members' factors weighted by their design values ``x_i``."""
+    if len(names) == 1:
+        return truth[names[0]]
+    x = [design_value(scene, n) for n in names]
+    return sum(xi * truth[n] for xi, n in zip(x, names)) / sum(x)
+
+
+def coverage(cal, truth: dict, scene) -> list[dict]:
+    """Each fitted parameter: its factor, interval, the true factor of what
+    it scales (:func:`lumped_truth`; the members' own beside), held or not."""
     rows = []
     for p in cal.parameters:
-        want = truth[p.names[0]]
+        want = lumped_truth(scene, p.names, truth)
         rows.append({"names": list(p.names), "factor": p.factor, "lo": p.lo, "hi": p.hi,
                      "truth": want, "truths": [truth[n] for n in p.names],
                      "held": bool(p.lo <= want <= p.hi)})
@@ -116,7 +137,7 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7", folds:
         cal, cpu_s, truth = calibrate_drawn(scene, built)
         out["calibrations"].append({"seed": k, "as_built": built.as_built.pad.to_dict(),
                                     "cpu_s": cpu_s, "chi2_per_dof": cal.chi2_per_dof,
-                                    "parameters": coverage(cal, truth),
+                                    "parameters": coverage(cal, truth, scene),
                                     "not_identifiable": list(cal.not_identifiable)})
         step(f"pad {k}: calibrated")
         out["calibrated"].append(_row(cross_validate(drawn, METHOD, folds, scene=scene,
