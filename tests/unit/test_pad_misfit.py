@@ -65,3 +65,23 @@ def test_touches_of_the_pad_as_modelled_are_not_flagged(model):
     assert not [d for d in decisions if d.reason == Reason.PAD_MODEL_MISFIT]
     assert all(d.label.is_unknown or d.label.holds(t) for d, t in zip(decisions,
                                                                        contacts.labels))
+
+
+def test_the_misfit_statistic_is_given_against_the_sensor_noise_alone_too(model):
+    """``misfit_chi2``: the statistic the misfit tests (against the flux
+    noise plus the curves' allowance) and the same residual against the
+    noise alone, whose variance is smaller: larger, by the ratio of the two
+    variances where the amplitude's prior moves nothing (within 5 %, the
+    prior's pull on the amplitude). The misfit is the first past 2."""
+    from telethermal.ident.calibration import CHI2_MAX
+    contacts = from_trials(pad_database(_scene(1), np.random.default_rng(3)))[0]
+    est, gap_k = model.estimator()
+    last = len(model.windows_s_) - 1
+    for i in range(len(contacts.labels)):
+        x = contacts.x[i:i + 1, :contacts.lengths[i]]
+        chi2, chi2_noise = model.misfit_chi2(x, last)
+        row = model._window(x, model.windows_s_[last])[0, :, 0]
+        ratio = est._noise_var(row, gap_k) / est._noise_var(row, gap_k, allowance=0.0)
+        assert ratio > 1.5                       # the allowance dominates the denominator
+        assert chi2_noise == pytest.approx(chi2 * ratio, rel=0.05)
+        assert model.misfit(x, last) is (chi2 > CHI2_MAX)

@@ -362,18 +362,31 @@ class EffusivityFit(Identifier):
     def misfit(self, x, window_index: int) -> bool:
         """The window's fit of the touch ``x`` (1, n, 1) leaves a residual
         chi-square per degree of freedom past
-        :data:`~telethermal.ident.calibration.CHI2_MAX` (against the flux
-        noise and the curves' own error, as the pad calibration's): the pad
-        is not the model the estimate fits (a pad off its model by a sensor
-        lag 20 % off reads 7-45 from 0.25 s; as modelled, under 0.05)."""
+        :data:`~telethermal.ident.calibration.CHI2_MAX` (:meth:`misfit_chi2`'s
+        first): the pad is not the model the estimate fits."""
         from telethermal.ident.calibration import CHI2_MAX
+        chi2 = self.misfit_chi2(x, window_index)
+        return chi2 is not None and chi2[0] > CHI2_MAX
+
+    def misfit_chi2(self, x, window_index: int) -> tuple[float, float] | None:
+        """The residual of the window's fit of the touch ``x`` (1, n, 1), as
+        chi-square per degree of freedom (n - 4), against two denominators,
+        one variance for every sample of the window: ``(chi2, chi2_noise)``.
+        ``chi2``, what :meth:`misfit` tests: the flux noise over the touch's
+        gap plus the curves' allowance (the scene's ``tolerance_rel`` times
+        the window's rms flux over gap, squared), the estimator's own
+        variance; the allowance dominates, so a pad as modelled reads far
+        under 1. ``chi2_noise``: the sensor's noise alone (the same fit and
+        residual), for comparison with the noise. None under the window's
+        minimum of samples (docs/calibration.md)."""
         row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
         if len(row) < MIN_SAMPLES:
-            return False
+            return None
         est, gap_k = self.estimator()
         theta = np.asarray(self._theta(row, len(row)), float)
         chi2, _ = est._goodness(theta, row, est._noise_var(row, gap_k))
-        return chi2 > CHI2_MAX
+        chi2_noise, _ = est._goodness(theta, row, est._noise_var(row, gap_k, allowance=0.0))
+        return chi2, chi2_noise
 
     def outside_classes(self, x, window_index):
         params = self.params_[window_index]
