@@ -139,6 +139,8 @@ class MasterService:
         self.stop_requested = False
         self.state = ServiceState.IDLE
         self.last_touch: dict = {}
+        #: The display's clock at its last control period (s; None before one).
+        self.last_period_t_s: float | None = None
         #: Unexpected errors in one message, one touch or one figure (status).
         self.counters = self.endpoint.extra_counters
         self._internal_error = ErrorCount(self.counters, log)
@@ -175,6 +177,7 @@ class MasterService:
 
     def _hardware_period(self, now: float, dt_s: float) -> None:
         display, t, session = self.display, now - self.t0, self.session
+        self.last_period_t_s = t
         news = session.news(now, self.endpoint.peer_alive)
         sensors = self.hardware.read(t)
         step = display.step(t, dt_s, sensors, news)
@@ -256,7 +259,7 @@ class MasterService:
 
     def _touch_period(self, now: float, dt_s: float) -> None:
         touch, session = self.touch, self.session
-        t = now - touch.origin_s
+        t = self.last_period_t_s = now - touch.origin_s
         news = session.news(now, self.endpoint.peer_alive)
         sensors = touch.devices.read(t)
         step = touch.display.step(t, dt_s, sensors, news)
@@ -399,7 +402,7 @@ class MasterService:
                 "object_material": (self.link.remembered or (None,))[0],
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
                 "counters": e.all_counters(), "admin": dict(self.admin.counters),
-                "devices": self.config.devices,
+                "devices": self.config.devices, "last_period_t_s": self.last_period_t_s,
                 **({"device_counters": self.hardware.counters(),
                     "display_phase": self.display.phase, "contact_id": self.session.contact_id}
                    if self.hardware is not None else {})}

@@ -412,6 +412,14 @@ class SlaveService:
                 self.devices.close()
                 self.devices = None
 
+    def _last_sample_t_s(self) -> float | None:
+        """The touch's last sample read (its ``t_s``), while the pad is down."""
+        pad = self.pad
+        if self.touch_t0 is None or pad is None or not pad.samples_read or \
+                "t_s" not in pad.channels:
+            return None
+        return float(pad.channels["t_s"][pad.samples_read - 1])
+
     def status(self) -> dict:
         e = self.endpoint
         return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
@@ -424,6 +432,7 @@ class SlaveService:
                                             "error": self.calibration_error},
                 "pad_down": self.touch_t0 is not None,
                 "contact_id": self.contact_id if self.touch_t0 is not None else None,
+                "last_sample_t_s": self._last_sample_t_s(),
                 "peer_session": e.peer_session,
                 "offset_s": e.offset.offset_s, "counters": e.all_counters(),
                 "admin": dict(self.admin.counters),
