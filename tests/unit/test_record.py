@@ -210,7 +210,14 @@ def test_a_recording_written_before_the_session_core_replays_sample_for_sample()
     # allowed here (1e-9 K, 1e-6 W/m^2: nine orders under the sensors'
     # resolution); replays on the machine that recorded stay bit for bit
     # (the other tests of this file).
-    assert s["junction_max_abs_diff_c"] <= 1e-9 and s["desired_max_abs_diff_w_m2"] <= 1e-6
+    # The flux it asked for replays to that rounding. Its junction commands
+    # do not: the recording's display ran the impedance controller as it was
+    # before the junction sensor's loop (an exact inversion of the flux
+    # sensor's lag, its model advanced with the setpoint); the replay runs
+    # today's (a regularised inversion, advanced with the measured junction),
+    # so it differs by design. Replay still reads and runs the old file.
+    assert s["desired_max_abs_diff_w_m2"] <= 1e-6
+    assert not s["identical"] and 0 < s["junction_max_abs_diff_c"] < 10.0
     # The slave's estimates: the same labels at the same times, posteriors
     # equal to 1e-9 (they too differ in the last bits here).
     assert s["slave"]["posteriors_max_abs_diff"] is not None

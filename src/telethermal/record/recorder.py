@@ -25,7 +25,11 @@ from telethermal.record.recording import Recorder
 #: mid-write loses.
 PERIOD_BATCH_S = 0.020
 PERIOD_FIELDS = ("t_s", "dt_s", "flux_w_m2", "pad_temp_c", "force_n", "phase",
-                 "desired_flux_w_m2", "junction_cmd_c", "junction_applied_c", "safe")
+                 "desired_flux_w_m2", "junction_cmd_c", "junction_applied_c", "safe",
+                 "junction_c", "heatsink_c")
+#: Fields a recording made before the junction sensor's loop does not hold
+#: (the module's junction and heat sink as the driver reported them): nan.
+LATER_PERIOD_FIELDS = ("junction_c", "heatsink_c")
 
 
 def periods(rec, contact_id: int | None = None) -> list[dict]:
@@ -37,7 +41,8 @@ def periods(rec, contact_id: int | None = None) -> list[dict]:
             continue
         n = len(batch["t_s"])
         for i in range(n):
-            row = {k: batch[k][i] for k in PERIOD_FIELDS}
+            row = {k: batch[k][i] if k in batch or k not in LATER_PERIOD_FIELDS
+                   else float("nan") for k in PERIOD_FIELDS}
             row["k"], row["contact_id"] = batch["k0"] + i, cid
             out.append(row)
     return out
@@ -85,8 +90,12 @@ def open_recorder(config, role: str, identifier=None, generator=None):
 
 
 def display_params(scene, config, operator, idle_c) -> dict:
-    """What a replay needs to rebuild the display of one touch."""
+    """What a replay needs to rebuild the display of one touch (the module,
+    the junction sensor and the dew floor the display's loop was given:
+    its models, from the scene as the product builds them)."""
+    from telethermal.control.dew import idle_floor_c
     from telethermal.control.preconditioning import policy_fractions
+    from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
 
     return {"display": {"rate_hz": config.rate_hz, "before": config.before,
                         "idle": config.idle,
@@ -104,7 +113,15 @@ def display_params(scene, config, operator, idle_c) -> dict:
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
             # The idle policy the display applied (fractions of finger - object).
             "idle_policy": policy_fractions(scene) if config.idle == "policy" else None,
-            "operator": asdict(operator)}
+            "operator": asdict(operator),
+            "module": asdict(scene.pad.module_params()[0]), "pad_area_m2": scene.pad.area_m2,
+            "junction_sensor": asdict(get_junction_sensor(DEFAULT_JUNCTION_SENSOR)),
+            "dew_floor_c": _finite_or_none(idle_floor_c(scene.room_temp_c,
+                                                        scene.room_humidity_pct))}
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 class SessionRecorder:
@@ -157,7 +174,9 @@ class SessionRecorder:
                            ("phase", step.phase), ("desired_flux_w_m2", step.desired_flux_w_m2),
                            ("junction_cmd_c", step.junction_cmd_c),
                            ("junction_applied_c", step.junction_applied_c),
-                           ("safe", bool(step.safe))):
+                           ("safe", bool(step.safe)),
+                           ("junction_c", sensors.junction_c),
+                           ("heatsink_c", sensors.heatsink_c)):
             cols[key].append(value)
         self._k += 1
         if t_s + dt_s - self._t0 >= PERIOD_BATCH_S * (1.0 - 1e-6):

@@ -38,6 +38,23 @@ def _replay_pad(params: dict) -> dict:
 
 
 
+def _replay_module(params: dict) -> dict:
+    """The module, junction sensor and dew floor the display's loop was
+    given (none in recordings older than the junction sensor's loop: the
+    display is rebuilt without its inner loop, as it was recorded)."""
+    from telethermal.physics.thermoelectric import JunctionSensorSpec, ModuleParams, ModuleSpec
+
+    if not params.get("module"):
+        return {}
+    m = dict(params["module"])
+    spec = dict(m.pop("spec"))
+    spec["size_mm"] = tuple(spec["size_mm"])
+    return {"module": ModuleParams(spec=ModuleSpec(**spec), **m),
+            "pad_area_m2": params.get("pad_area_m2"),
+            "junction_sensor": JunctionSensorSpec(**params["junction_sensor"]),
+            "dew_floor_c": params.get("dew_floor_c")}
+
+
 def _estimate_from(x):
     """A recorded estimate (recorder._estimate's list; the effusivity and
     nearest class, x[6:10], in recordings that hold them)."""
@@ -211,6 +228,7 @@ def _replay_master(rec, params, cid, generator, gains, attached):
     master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
                            params["sensor_lag_s"], params["finger_ir_c"],
                            idle_c=params["idle_c"], **_replay_pad(params),
+                           **_replay_module(params),
                            precondition=precondition_from(fractions, params["finger_ir_c"])
                            if fractions else None)
     rows = periods(rec, cid)
@@ -224,8 +242,10 @@ def _replay_master(rec, params, cid, generator, gains, attached):
             news = SlaveNews(n["object_temp_c"], _estimate_from(n["estimate"]),
                              tuple(n["classes"]), n["setpoint_w_m2"], n["link_ok"],
                              expected_material=n.get("expected_material"))
-        step = master.step(p["t_s"], p["dt_s"], PadSensors(p["flux_w_m2"], p["pad_temp_c"],
-                                                           p["force_n"]), news)
+        step = master.step(p["t_s"], p["dt_s"],
+                           PadSensors(p["flux_w_m2"], p["pad_temp_c"], p["force_n"],
+                                      junction_c=p["junction_c"], heatsink_c=p["heatsink_c"]),
+                           news)
         out["t_s"].append(p["t_s"])
         out["desired_flux_w_m2"].append(step.desired_flux_w_m2)
         out["junction_applied_c"].append(step.junction_applied_c)
