@@ -36,7 +36,8 @@ def test_aluminium_with_the_sensor_at_half_and_twice_its_lag(models, lag_scale):
     loop oscillated at +-8.5 A about 6 Hz, 1,205 periods saturated) and its
     2x: no safety event, the loop never stopped, no period at the current
     limit after the first second (the metal's onset may use it), and the
-    current's sign reversals under 4 per second of contact."""
+    current's sign reversals within issue 43's target, <= 2 per second of
+    contact (aluminium, seed 1)."""
     res = touch(models, lag_scale)
     s, module = res.summary, res.summary["module"]
     assert module["junction_sensor"]["true_tau_s"] == pytest.approx(
@@ -44,20 +45,27 @@ def test_aluminium_with_the_sensor_at_half_and_twice_its_lag(models, lag_scale):
     assert s["safety_events"] == 0
     assert JUNCTION_STOPPED not in s["display_event_counts"]
     assert at_the_limit_after(res, 1.0) == 0
-    assert module["reversals_per_s"] < 4.0
+    assert module["reversals_per_s"] <= 2.0
 
 
 def test_a_sensor_ten_times_slower_is_made_safe_or_stable(models):
-    """The sensor at 10x its lag (1 s: a debonded chip): either the loop
-    stays off the current limit after the first second, or it stops the
-    module (0 A, latched, logged as a display event); never a limit cycle."""
+    """The sensor at 10x its lag (1 s: a debonded chip) from the session's
+    start (-PRE_CONTACT_S): either the loop stays off the current limit
+    after the first second, or it stops the module within 1.5 s of contact
+    (the stop time the master records, not read off the current), with no
+    period at the current limit in the 0.5 s before the stop and 0 A from
+    it on (logged as a display event); never a limit cycle."""
     res = touch(models, 10.0)
-    stopped = JUNCTION_STOPPED in res.summary["display_event_counts"]
+    stopped_at = res.summary["module"]["junction_stopped_at_s"]
     tr = res.trace
-    if stopped:
-        k = int(np.flatnonzero(tr["current_a"] != 0.0).max()) + 1
-        assert np.all(tr["current_a"][k:] == 0.0)
+    if JUNCTION_STOPPED in res.summary["display_event_counts"]:
+        assert stopped_at is not None and stopped_at < 1.5
+        before = (tr["t_s"] >= stopped_at - 0.5) & (tr["t_s"] < stopped_at)
+        imax = res.summary["module"]["imax_a"]
+        assert not np.any(np.abs(tr["current_a"][before]) >= 0.999 * imax)
+        assert np.all(tr["current_a"][tr["t_s"] > stopped_at] == 0.0)
     else:
+        assert stopped_at is None
         assert at_the_limit_after(res, 1.0) == 0
 
 

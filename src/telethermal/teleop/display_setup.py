@@ -75,6 +75,7 @@ def module_summary(touch, master: MasterDisplay) -> dict:
             "max_hot_c": round(touch.max_hot_c, 3), "hot_side_max_c": spec.hot_side_max_c,
             "max_sink_c": round(touch.max_sink_c, 3),
             "saturated_periods": loop.saturated_periods if loop is not None else 0,
+            "junction_stopped_at_s": master.junction_stopped_at_s,
             "junction_sensor": {"name": js.name, "tau_s": js.tau_s, "source": js.source,
                                 "true_tau_s": touch.junction_lag_s},
             "requested": asdict(loop.limits) if loop is not None else None,

@@ -135,6 +135,9 @@ class MasterDisplay:
         self.junction_sensor = junction_sensor or get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
         #: junction target -> module current (control/junction.py); None: no module model.
         self.junction_loop = self._junction_loop(module, pad_layers or ()) if module else None
+        #: When (session clock, s) the junction loop last stopped on an
+        #: implausible sensor; None: it has not.
+        self.junction_stopped_at_s: float | None = None
         #: ``precondition(material or None, object_temp_c) -> idle offset, K``:
         #: where the pad idles relative to the object before (and, holding,
         #: during) a touch (control/preconditioning.py); None: at the object.
@@ -398,6 +401,9 @@ class MasterDisplay:
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
         applied, self.safety = supervise(self.safety, reading, request, self.config.limits, dt_s)
         current_a, junction_c = self._current(applied.temp_c, sensors, dt_s)
+        if self.junction_loop is not None and self.junction_loop.stopped \
+                and self.junction_stopped_at_s is None:
+            self.junction_stopped_at_s = t_s
         if self.impedance is not None:
             # The model advances with the junction as the loop measures it.
             self.impedance.advance(junction_c if math.isfinite(junction_c) else applied.temp_c,
