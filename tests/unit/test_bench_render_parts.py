@@ -24,3 +24,32 @@ def test_the_product_count_holds_every_default_gains_session_and_no_study_row():
     assert out["safety_events"] == 15 and out["safety_events_sessions"] == 6
     assert out["safety_events_gain_study"] == {"PI 1e-3/3e-2, pad model x1.3": 13,
                                                "P 1e-4, pad model x1": 0}
+
+
+def _limit_row(largest_a, over_imax, reversals):
+    requested = {"requested_over_imax_periods": over_imax, "largest_request_a": largest_a,
+                 "voltage_over_supply_periods": 0, "voltage_over_vmax_periods": 0}
+    return {"module_limits": {"current_exceeded": 0, "hot_side_exceeded": 0,
+                              "reversals": reversals, "contact_s": 2.0, "ripple_rms_a": 0.1,
+                              "requested": requested}}
+
+
+def test_the_limits_key_is_the_shipped_displays_alone():
+    """The static controller's and the gain study's requests (not shipped)
+    stay in their rows: ``limits`` pools only the default controller's
+    sessions (issue 43's targets are on the shipped display)."""
+    from telethermal.bench.render import limits_of, shipped_limits
+    from telethermal.teleop.display_config import DisplayConfig
+
+    shipped = DisplayConfig().feedforward_model
+    other = next(m for m in ("static", "impedance") if m != shipped)
+    report = {"controller": [{"feedforward_model": other, "rows": [_limit_row(10.78, 400, 40)]},
+                             {"feedforward_model": shipped,
+                              "rows": [_limit_row(6.0, 0, 2), _limit_row(7.0, 0, 4)]}],
+              "gains": [{"rows": [_limit_row(12.0, 50, 30)]}]}
+    lim = shipped_limits(report)
+    assert lim["sessions"] == 2 and lim["current_requested_over_imax_periods"] == 0
+    assert lim["largest_request_a"] == 7.0
+    assert lim["reversals_per_s"] == 6 / 4.0
+    assert shipped in lim["configuration"]
+    assert limits_of(report["controller"][0]["rows"])["largest_request_a"] == 10.78

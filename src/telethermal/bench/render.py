@@ -56,9 +56,14 @@ GAIN_SETS = {
 }
 KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
         "time_to_correct_flux_s", "safety_events", "flux_rms_error_rel_whole")
-#: Every session's module limits over the whole bench, counted on the
-#: controller's request before any clamp (teleop/display_setup.add_limits).
+#: Every session's module limits over the whole bench (every controller,
+#: rate and gain, the real clock's too), counted on the controller's request
+#: before any clamp (teleop/display_setup.add_limits); reported as
+#: ``limits_all_sessions``. ``limits`` is the shipped display's alone.
 _LIMITS = new_limit_totals()
+#: A session's module summary keys ``add_limits`` reads (kept in each row).
+_LIMIT_KEYS = ("current_exceeded", "hot_side_exceeded", "reversals", "contact_s",
+               "ripple_rms_a", "requested")
 #: The pad's idle against the room's dew point over every simulated-clock session.
 _DEW = {"sessions": 0, "min_idle_minus_dew_k": float("inf")}
 
@@ -88,6 +93,7 @@ def _session_row(scene, material, identifier, generator, config, seed,
            "module_reversals_per_s": module["reversals_per_s"],
            "module_ripple_rms_a": module["ripple_rms_a"],
            "module_largest_request_a": (module["requested"] or {}).get("largest_request_a"),
+           "module_limits": {k: module[k] for k in _LIMIT_KEYS},
            "cpu_s_per_simulated_s": cpu / (CONTACT_S + 0.4)}
     return row
 
@@ -98,6 +104,27 @@ def junction_sensor_report(scene) -> dict:
     from telethermal.teleop.display_setup import display_model_args
     js = display_model_args(scene)["junction_sensor"]
     return {"name": js.name, "tau_s": js.tau_s, "source": js.source}
+
+
+def limits_of(rows) -> dict:
+    """The module limits pooled over ``rows`` (each with its session's
+    ``module_limits``): one bench row's, or the shipped configuration's."""
+    totals = new_limit_totals()
+    for r in rows:
+        add_limits(totals, r["module_limits"])
+    return limits_report(totals)
+
+
+def shipped_limits(report: dict) -> dict:
+    """Issue 43's ``limits``: the shipped display's alone, the default
+    controller at the default rate (its first touches: the controller
+    section's row of the default model, run at the default rate); the other
+    controllers, rates and gains have theirs in their rows' ``limits``."""
+    shipped = DisplayConfig()
+    row = next(c for c in report["controller"]
+               if c["feedforward_model"] == shipped.feedforward_model)
+    return {"configuration": f"{shipped.feedforward_model} controller at "
+                             f"{shipped.rate_hz:g} Hz (shipped)", **limits_of(row["rows"])}
 
 
 def _mean(rows, key):
@@ -111,6 +138,7 @@ def _aggregate(rows):
     out["max_temp_rms_error_c"] = float(max(r["temp_rms_error_c"] for r in rows))
     out["safety_events"] = int(sum(r["safety_events"] for r in rows))
     out["mean_cpu_s_per_simulated_s"] = _mean(rows, "cpu_s_per_simulated_s")
+    out["limits"] = limits_of(rows)
     return out
 
 
@@ -348,7 +376,9 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
             report[key].append(real_clock_row(
                 scene, identifier, generator, rate, mode, CONTACT_S, _LIMITS,
                 periods=340 if quick else REAL_CLOCK_PERIODS))
-    report["limits"] = limits_report(_LIMITS)
+    report["limits"] = shipped_limits(report)
+    report["limits_repeat"] = limits_of(repeat)
+    report["limits_all_sessions"] = limits_report(_LIMITS)
     report["junction_sensor"] = junction_sensor_report(scene)
     report["dew"] = {"humidity": scene.room_humidity_pct, "room_c": scene.room_temp_c,
                      "dew_point_c": dew_point_c(scene.room_temp_c, scene.room_humidity_pct),

@@ -58,7 +58,9 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
                      f"{max(d['first_touch_ratio_to_floor_k'].values()):.2f}x)")
     if "limits" in report:
         lim = report["limits"]
-        lines.append(f"module limits over {lim['sessions']} sessions (requests, before any "
+        lines.append(f"module limits of the shipped display ({lim.get('configuration', '?')}; "
+                     f"first touches; every row's own in its 'limits', all sessions pooled "
+                     f"in 'limits_all_sessions') over {lim['sessions']} sessions (requests, before any "
                      f"clamp): over Imax {lim['current_requested_over_imax_periods']} periods, "
                      f"largest {lim['largest_request_a']:.2f} A, voltage over the supply "
                      f"{lim['voltage_exceeded']} periods, hot side exceeded "
