@@ -53,3 +53,22 @@ def test_the_limits_key_is_the_shipped_displays_alone():
     assert lim["reversals_per_s"] == 6 / 4.0
     assert shipped in lim["configuration"]
     assert limits_of(report["controller"][0]["rows"])["largest_request_a"] == 10.78
+
+
+def test_dry_air_has_no_dew_point_and_the_bench_says_so():
+    """A scene at 0 % RH (no dew point: the logarithm of 0): the bench's
+    dew section reports none instead of crashing at the end, and its text
+    says dry air; at 50 % it reports the Magnus dew point (24 C: 12.9 C)."""
+    from dataclasses import replace
+
+    from telethermal.bench.render import dew_report
+    from telethermal.bench.render_text import dew_line
+    from telethermal.physics.scene import load_scene
+
+    scene = load_scene("fingertip-7")
+    pooled = {"sessions": 0, "min_idle_minus_dew_k": float("inf")}
+    dry = dew_report(replace(scene, room_humidity_pct=0.0), pooled)
+    assert dry["dew_point_c"] is None
+    assert "dry air, no dew point" in dew_line(dry)
+    humid = dew_report(replace(scene, room_humidity_pct=50.0, room_temp_c=24.0), pooled)
+    assert abs(humid["dew_point_c"] - 12.9) < 0.1

@@ -115,6 +115,16 @@ def limits_of(rows) -> dict:
     return limits_report(totals)
 
 
+def dew_report(scene, pooled: dict) -> dict:
+    """The bench's ``dew``: the scene's humidity, its dew point (None for
+    dry air, 0 %: no dew point, as teleop/run.py reports it) and margin, and
+    ``pooled``'s sessions and least idle above the dew point."""
+    dew_c = dew_point_c(scene.room_temp_c, scene.room_humidity_pct) \
+        if scene.room_humidity_pct > 0 else None
+    return {"humidity": scene.room_humidity_pct, "room_c": scene.room_temp_c,
+            "dew_point_c": dew_c, "margin_k": DEW_MARGIN_K, **pooled}
+
+
 def shipped_limits(report: dict) -> dict:
     """Issue 43's ``limits``: the shipped display's alone, the default
     controller at the default rate (its first touches: the controller
@@ -380,9 +390,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     report["limits_repeat"] = limits_of(repeat)
     report["limits_all_sessions"] = limits_report(_LIMITS)
     report["junction_sensor"] = junction_sensor_report(scene)
-    report["dew"] = {"humidity": scene.room_humidity_pct, "room_c": scene.room_temp_c,
-                     "dew_point_c": dew_point_c(scene.room_temp_c, scene.room_humidity_pct),
-                     "margin_k": DEW_MARGIN_K, **_DEW}
+    report["dew"] = dew_report(scene, _DEW)
     report.update(_safety_counts(report, repeat + at_object))
     report["default_gains"] = {"kp": DEFAULT_GAINS.kp, "ki": DEFAULT_GAINS.ki,
                                "kd": DEFAULT_GAINS.kd}

@@ -15,6 +15,16 @@ def _controller_line(c: dict) -> str:
         for m, v in c["per_material"].items())
 
 
+def dew_line(dew: dict) -> str:
+    """The report's dew sentence (``dew``: bench render's ``dew`` section)."""
+    if dew["dew_point_c"] is None:
+        return f"dew: {dew['humidity']:.0f} % RH at {dew['room_c']:.1f} C: dry air, no dew point"
+    return (f"dew: {dew['humidity']:.0f} % RH at {dew['room_c']:.1f} C, dew point "
+            f"{dew['dew_point_c']:.2f} C; the idle at least "
+            f"{dew['min_idle_minus_dew_k']:.2f} K above it over {dew['sessions']} "
+            f"sessions (margin {dew['margin_k']:.1f} K)")
+
+
 def text_report(report: dict, json_path: str | Path) -> list[str]:
     """What ``telethermal bench render`` prints of ``report``."""
     lines = [f"{r['rate_hz']:6.0f} Hz: flux error after identification "
@@ -75,11 +85,7 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
             lines.append("the gain study's other gains (not shipped): " + "; ".join(
                 f"{k}: {n} safety events" for k, n in study.items()))
     if "dew" in report:
-        dew = report["dew"]
-        lines.append(f"dew: {dew['humidity']:.0f} % RH at {dew['room_c']:.1f} C, dew point "
-                     f"{dew['dew_point_c']:.2f} C; the idle at least "
-                     f"{dew['min_idle_minus_dew_k']:.2f} K above it over {dew['sessions']} "
-                     f"sessions (margin {dew['margin_k']:.1f} K)")
+        lines.append(dew_line(report["dew"]))
     if "junction_sensor" in report:
         js = report["junction_sensor"]
         lines.append(f"junction sensor {js['name']}, {js['tau_s']:.2f} s as mounted")
