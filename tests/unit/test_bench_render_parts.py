@@ -26,6 +26,18 @@ def test_the_product_count_holds_every_default_gains_session_and_no_study_row():
                                                "P 1e-4, pad model x1": 0}
 
 
+def test_the_junction_loops_stops_and_rearms_are_counted_beside_safety_events():
+    """A product session whose junction loop stopped (and re-armed at idle)
+    is counted in ``junction_stops``/``junction_rearms``; a gain-study row's
+    is not (its gains are not shipped)."""
+    stopped = {"safety_events": 0, "junction_stops": 1, "junction_rearms": 1}
+    report = {"rate": [{"rows": [stopped, *_rows(0)]}], "controller": [], "before": [],
+              "gains": [{"gains": "P 1e-4", "pad_resistance_belief": 1.0, "kp": 1e-4,
+                         "ki": 0.0, "kd": 0.0, "rows": [dict(stopped)]}]}
+    out = _safety_counts(report, [])
+    assert out["junction_stops"] == 1 and out["junction_rearms"] == 1
+
+
 def _limit_row(largest_a, over_imax, reversals):
     requested = {"requested_over_imax_periods": over_imax, "largest_request_a": largest_a,
                  "voltage_over_supply_periods": 0, "voltage_over_vmax_periods": 0}

@@ -204,3 +204,33 @@ def test_reversals_and_ripple_are_counted_as_stated():
     assert sign_reversals(0.05 * np.sin(2 * np.pi * 40 * t)) == 0
     sine = 3.0 + 0.5 * np.sin(2 * np.pi * 50 * t)
     assert ripple_rms_a(sine, DT) == pytest.approx(0.5 / math.sqrt(2), rel=0.02)
+
+
+def test_a_stopped_loop_rearms_once_its_sensor_agrees_with_the_idle_module():
+    """After the 10x-lag stop the module only conducts; idle, the junction
+    settles toward its hot side and the slow sensor follows. The loop
+    re-arms only once the sensor has read within REARM_K of the hot side
+    for REARM_S (not at the stop, when they are ~10 K apart), counted; a
+    fresh 10 K step with the same slow sensor stops it again (the re-arm
+    does not hide the fault)."""
+    pad, loop = PadInAir(24.0, SENSOR.tau_s * 10.0), designed_loop()
+    for _ in range(int(2.0 / DT)):
+        out = loop.update(14.0, pad.sensed_c, pad.stack.state.sink_c, DT)
+        pad.step(out.current_a)
+    assert loop.stopped
+    assert not loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT)
+    rearmed_after_s = None
+    for k in range(int(60.0 / DT)):
+        pad.step(0.0)
+        agrees = abs(pad.sensed_c - pad.stack.state.sink_c) <= loop.REARM_K
+        if loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT):
+            rearmed_after_s = (k + 1) * DT
+            break
+        assert loop.stopped
+    assert rearmed_after_s is not None and agrees and not loop.stopped and loop.rearms == 1
+    assert loop.agree_s == 0.0
+    start = pad.stack.state.cold_c
+    for _ in range(int(3.0 / DT)):
+        out = loop.update(start - 10.0, pad.sensed_c, pad.stack.state.sink_c, DT)
+        pad.step(out.current_a)
+    assert loop.stopped

@@ -27,14 +27,15 @@ import numpy as np
 
 from telethermal.bench.render_text import text_report  # noqa: F401  (the CLI's)
 from telethermal.bench.real_clock import REAL_CLOCK_PERIODS, REAL_CLOCK_RATES_HZ, real_clock_row
-from telethermal.control.dew import DEW_MARGIN_K, dew_point_c
+from telethermal.bench.render_limits import dew_report, limits_of, shipped_limits
 from telethermal.control.loop import DEFAULT_RATE_HZ, FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
-from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
+from telethermal.teleop.master import (DEFAULT_GAINS, JUNCTION_REARMED, JUNCTION_STOPPED,
+                                        DisplayConfig)
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.display_setup import add_limits, limits_report, new_limit_totals
 from telethermal.teleop.run import run_session, with_finger
@@ -94,6 +95,8 @@ def _session_row(scene, material, identifier, generator, config, seed,
            "module_ripple_rms_a": module["ripple_rms_a"],
            "module_largest_request_a": (module["requested"] or {}).get("largest_request_a"),
            "module_limits": {k: module[k] for k in _LIMIT_KEYS},
+           "junction_stops": s["display_event_counts"].get(JUNCTION_STOPPED, 0),
+           "junction_rearms": s["display_event_counts"].get(JUNCTION_REARMED, 0),
            "cpu_s_per_simulated_s": cpu / (CONTACT_S + 0.4)}
     return row
 
@@ -106,37 +109,6 @@ def junction_sensor_report(scene) -> dict:
     return {"name": js.name, "tau_s": js.tau_s, "source": js.source}
 
 
-def limits_of(rows) -> dict:
-    """The module limits pooled over ``rows`` (each with its session's
-    ``module_limits``): one bench row's, or the shipped configuration's."""
-    totals = new_limit_totals()
-    for r in rows:
-        add_limits(totals, r["module_limits"])
-    return limits_report(totals)
-
-
-def dew_report(scene, pooled: dict) -> dict:
-    """The bench's ``dew``: the scene's humidity, its dew point (None for
-    dry air, 0 %: no dew point, as teleop/run.py reports it) and margin, and
-    ``pooled``'s sessions and least idle above the dew point."""
-    dew_c = dew_point_c(scene.room_temp_c, scene.room_humidity_pct) \
-        if scene.room_humidity_pct > 0 else None
-    return {"humidity": scene.room_humidity_pct, "room_c": scene.room_temp_c,
-            "dew_point_c": dew_c, "margin_k": DEW_MARGIN_K, **pooled}
-
-
-def shipped_limits(report: dict) -> dict:
-    """Issue 43's ``limits``: the shipped display's alone, the default
-    controller at the default rate (its first touches: the controller
-    section's row of the default model, run at the default rate); the other
-    controllers, rates and gains have theirs in their rows' ``limits``."""
-    shipped = DisplayConfig()
-    row = next(c for c in report["controller"]
-               if c["feedforward_model"] == shipped.feedforward_model)
-    return {"configuration": f"{shipped.feedforward_model} controller at "
-                             f"{shipped.rate_hz:g} Hz (shipped)", **limits_of(row["rows"])}
-
-
 def _mean(rows, key):
     vals = [r[key] for r in rows if r[key] is not None and np.isfinite(r[key])]
     return float(np.mean(vals)) if vals else None
@@ -147,6 +119,7 @@ def _aggregate(rows):
     out["max_flux_rms_error_rel"] = float(max(r["flux_rms_error_rel"] for r in rows))
     out["max_temp_rms_error_c"] = float(max(r["temp_rms_error_c"] for r in rows))
     out["safety_events"] = int(sum(r["safety_events"] for r in rows))
+    out["junction_stops"] = int(sum(r.get("junction_stops", 0) for r in rows))
     out["mean_cpu_s_per_simulated_s"] = _mean(rows, "cpu_s_per_simulated_s")
     out["limits"] = limits_of(rows)
     return out
@@ -224,6 +197,10 @@ def _safety_counts(report: dict, more_rows: list[dict]) -> dict:
             study[f"{row['gains']}, pad model x{row['pad_resistance_belief']:g}"] = n
     return {"safety_events": int(sum(r["safety_events"] for r in product)),
             "safety_events_sessions": len(product),
+            # The junction loop's stops on an implausible sensor (the module
+            # at 0 A) and its re-arms at idle, in the same sessions.
+            "junction_stops": int(sum(r.get("junction_stops", 0) for r in product)),
+            "junction_rearms": int(sum(r.get("junction_rearms", 0) for r in product)),
             "safety_events_gain_study": study}
 
 

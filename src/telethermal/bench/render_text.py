@@ -79,7 +79,9 @@ def text_report(report: dict, json_path: str | Path) -> list[str]:
                      f"{lim['ripple_rms_a']:.3f} A RMS while rendering; "
                      f"safety events {report['safety_events']} in "
                      f"{report.get('safety_events_sessions', '?')} sessions with the "
-                     f"product's gains")
+                     f"product's gains, the junction loop stopped "
+                     f"{report.get('junction_stops', '?')} times (re-armed "
+                     f"{report.get('junction_rearms', '?')}) in them")
         study = {k: n for k, n in report.get("safety_events_gain_study", {}).items() if n}
         if study:
             lines.append("the gain study's other gains (not shipped): " + "; ".join(

@@ -134,6 +134,14 @@ class DisplayJunctionLoop:
     #: :meth:`reset`); a debonded sensor lags many times its stated value.
     IMPLAUSIBLE_K = 3.0
     IMPLAUSIBLE_S = 0.5
+    #: A stopped loop re-arms (:meth:`rearm_if_settled`, called by its owner
+    #: only while nothing touches the pad) once the sensor agrees with the
+    #: stopped module's model, the junction only conducting to its hot side
+    #: (0 A, no load: it settles at the hot side), within ``REARM_K`` for
+    #: ``REARM_S`` on end. A sensor that lags still fails the next move and
+    #: stops the loop again, at most once per idle.
+    REARM_K = 1.0
+    REARM_S = 1.0
 
     def __init__(self, params: ModuleParams, driver: HBridge, model, gains: JunctionGains,
                  reference_tau_s: float = 0.02, slew_a_s: float = 100.0):
@@ -143,6 +151,7 @@ class DisplayJunctionLoop:
         self.params, self.driver, self.model, self.gains = params, driver, model, gains
         self.reference_tau_s, self.slew_a_s = reference_tau_s, slew_a_s
         self.limits = LimitCounts()
+        self.rearms = 0                            # re-armed by rearm_if_settled
         #: Latched by an implausible sensor (not by reset(): rearm() clears it).
         self.stopped = False
         self.reset()
@@ -152,6 +161,21 @@ class DisplayJunctionLoop:
         self.stopped = False
         self.reset()
 
+    def rearm_if_settled(self, sensed_c: float, hot_c: float, dt_s: float) -> bool:
+        """While stopped, with nothing on the pad: re-arm once the junction
+        sensor has read within ``REARM_K`` of the hot side (what the stopped
+        module settles at) for ``REARM_S``; True when it re-armed now."""
+        if not self.stopped:
+            return False
+        agrees = math.isfinite(sensed_c) and math.isfinite(hot_c) and \
+            abs(sensed_c - hot_c) <= self.REARM_K
+        self.agree_s = self.agree_s + dt_s if agrees else 0.0
+        if self.agree_s < self.REARM_S:
+            return False
+        self.rearm()
+        self.rearms += 1
+        return True
+
     @property
     def saturated_periods(self) -> int:
         return self.limits.saturated_periods
@@ -160,6 +184,7 @@ class DisplayJunctionLoop:
         """Forget the loop's state (not its counts): the next update starts afresh."""
         self.integral_a = 0.0
         self.implausible_s = 0.0                   # how long the sensor has disagreed
+        self.agree_s = 0.0                         # stopped: how long it has agreed
         self.reference_c: float | None = None      # the smoothed target
         self.sensor_model_c = math.nan             # what the sensor would read on it
         self.current_a = 0.0                       # the last current asked for

@@ -14,6 +14,7 @@ from telethermal.errors import ControlError
 BEFORE_MODES = ("hold", "prior")
 #: The display's event when the junction loop stops on an implausible sensor.
 JUNCTION_STOPPED = "junction sensor implausible: module stopped"
+JUNCTION_REARMED = "junction sensor agrees again: module re-armed"
 #: "trajectory": render the slave's curves from the master's own onset (the
 #: compensated path); "setpoints": track the latest flux setpoint streamed
 #: by the slave sample by sample (the naive baseline of the fault benchmark).

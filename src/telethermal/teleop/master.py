@@ -58,7 +58,8 @@ from telethermal.physics.thermoelectric import (DEFAULT_JUNCTION_SENSOR, Junctio
 from telethermal.render.generator import posterior_weights
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.display_config import (  # noqa: F401  (re-exported)
-    BEFORE_MODES, DEFAULT_GAINS, FEEDFORWARD_MODELS, IDLES, JUNCTION_STOPPED, SOURCES,
+    BEFORE_MODES, DEFAULT_GAINS, FEEDFORWARD_MODELS, IDLES, JUNCTION_REARMED, JUNCTION_STOPPED,
+    SOURCES,
     DisplayConfig)
 from telethermal.teleop.rendering import (Estimated, Handover, blended, estimated_target,
                                           generator_flux, has_estimate, inverse_effusivity)
@@ -135,9 +136,10 @@ class MasterDisplay:
         self.junction_sensor = junction_sensor or get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
         #: junction target -> module current (control/junction.py); None: no module model.
         self.junction_loop = self._junction_loop(module, pad_layers or ()) if module else None
-        #: When (session clock, s) the junction loop last stopped on an
+        #: When (session clock, s) the junction loop first stopped on an
         #: implausible sensor; None: it has not.
         self.junction_stopped_at_s: float | None = None
+        self._junction_stop_counted = False     # this stop counted and logged
         #: ``precondition(material or None, object_temp_c) -> idle offset, K``:
         #: where the pad idles relative to the object before (and, holding,
         #: during) a touch (control/preconditioning.py); None: at the object.
@@ -404,6 +406,7 @@ class MasterDisplay:
         if self.junction_loop is not None and self.junction_loop.stopped \
                 and self.junction_stopped_at_s is None:
             self.junction_stopped_at_s = t_s
+        self._rearm_junction_loop(sensors, dt_s)
         if self.impedance is not None:
             # The model advances with the junction as the loop measures it.
             self.impedance.advance(junction_c if math.isfinite(junction_c) else applied.temp_c,
@@ -429,12 +432,28 @@ class MasterDisplay:
                                         min(dt_s, 2 * self.nominal_dt_s), load)
         if out.saturated:
             self._count("module current limited")
-        if self.junction_loop.stopped and not self.events.get(JUNCTION_STOPPED):
+        if self.junction_loop.stopped and not self._junction_stop_counted:
+            self._junction_stop_counted = True
             self._count(JUNCTION_STOPPED)
             log.error("the junction sensor disagrees with its model by over %.1f K for %.1f s: "
                       "module current stopped (0 A) until the sensor is checked",
                       self.junction_loop.IMPLAUSIBLE_K, self.junction_loop.IMPLAUSIBLE_S)
         return out.current_a, out.estimate_c
+
+    def _rearm_junction_loop(self, sensors: PadSensors, dt_s: float) -> None:
+        """A stopped junction loop re-arms at the next idle with nothing on
+        the pad, once its sensor agrees with the stopped module again
+        (:meth:`~telethermal.control.junction.DisplayJunctionLoop.rearm_if_settled`);
+        counted and logged."""
+        loop = self.junction_loop
+        if loop is None or not loop.stopped or self.detector.touching:
+            return
+        if loop.rearm_if_settled(sensors.junction_c, sensors.heatsink_c, dt_s):
+            self._count(JUNCTION_REARMED)
+            log.warning("the junction sensor agrees with the idle module again (within %.1f K "
+                        "of the hot side for %.1f s): module current re-armed",
+                        loop.REARM_K, loop.REARM_S)
+            self._junction_stop_counted = False
 
     # ------------------------------------------------------------ the period
     def step(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews) -> MasterStep:
