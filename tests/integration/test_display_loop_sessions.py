@@ -81,6 +81,11 @@ def test_a_humid_room_lifts_a_remembered_metals_idle_above_the_dew_point(models)
     humid = replace(SCENE, room_humidity_pct=80.0)
     s = run_session(humid, "aluminium", identifier, generator, contact_s=2.0, seed=1,
                     expected_material="aluminium").summary
-    assert s["display_idle_c"] >= s["dew_point_c"] + DEW_MARGIN_K - 1e-9
+    assert s["display_idle_c"] >= s["dew_point_c"] + DEW_MARGIN_K - 1e-9   # the command
+    # The pad's true surface with nothing on it (before the contact and
+    # after the release), not the command: above the dew point, no fog.
+    # The 1.5 K margin is NOT held on it: measured 0.26 K (aluminium, seed
+    # 1, 80 % RH), the command's floor does not bound the true surface.
+    assert s["idle_surface_minus_dew_k"] > 0.0
     assert s["display_event_counts"].get("idle lifted above the dew point", 0) >= 1
     assert s["safety_events"] == 0

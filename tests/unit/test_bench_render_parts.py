@@ -84,3 +84,22 @@ def test_dry_air_has_no_dew_point_and_the_bench_says_so():
     assert "dry air, no dew point" in dew_line(dry)
     humid = dew_report(replace(scene, room_humidity_pct=50.0, room_temp_c=24.0), pooled)
     assert abs(humid["dew_point_c"] - 12.9) < 0.1
+
+
+def test_the_dew_margin_is_the_true_surfaces_with_nothing_on_the_pad():
+    """The margin is measured on the pad's true surface over the periods
+    with no contact (before it and after the release), not on the command:
+    a surface that sags 2 K under the dew point after the release is
+    reported 2 K under it; the contact's colder surface (under the finger,
+    no air) is not counted; dry air has none."""
+    import numpy as np
+
+    from telethermal.teleop.run import idle_surface_minus_dew_k
+
+    t = np.arange(-0.2, 3.0, 0.01)
+    surface = np.full(t.shape, 22.0)
+    surface[(t >= 0) & (t < 2.0)] = 10.0        # under the finger
+    surface[t >= 2.5] = 18.0                     # after the release
+    trace = {"t_s": t, "pad_surface_c": surface}
+    assert idle_surface_minus_dew_k(trace, 2.0, 20.0) == -2.0
+    assert idle_surface_minus_dew_k(trace, 2.0, None) is None

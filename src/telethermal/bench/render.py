@@ -80,10 +80,11 @@ def _session_row(scene, material, identifier, generator, config, seed,
     cpu = time.process_time() - start
     module = s["module"]
     add_limits(_LIMITS, module)
-    if s["dew_point_c"] is not None:
+    if s["idle_surface_minus_dew_k"] is not None:
+        # The pad's true surface with nothing on it, not the clamped command.
         _DEW["sessions"] += 1
         _DEW["min_idle_minus_dew_k"] = min(_DEW["min_idle_minus_dew_k"],
-                                           s["display_idle_c"] - s["dew_point_c"])
+                                           s["idle_surface_minus_dew_k"])
     row = {"material": material, "seed": seed, "identified": s["identified"],
            **{k: s[k] for k in KEYS}, "decision_from_s": s["decision_from_s"],
            "display_idle_c": s["display_idle_c"], "object_ir_c": s["object_ir_c"],

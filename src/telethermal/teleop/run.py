@@ -289,6 +289,18 @@ class DisplayTouch:
         self.k += 1
 
 
+def idle_surface_minus_dew_k(trace: dict, contact_s: float, dew_c: float | None):
+    """The least of the pad's true surface temperature over the periods
+    with nothing on it (before the contact and after the release) less the
+    room's dew point, K: where dew would form, whatever the controller
+    commanded. None in dry air (no dew point) or with no such period."""
+    t, surface = trace["t_s"], trace["pad_surface_c"]
+    free = ((t < 0) | (t >= contact_s)) & np.isfinite(surface)
+    if dew_c is None or not free.any():
+        return None
+    return float(surface[free].min() - dew_c)
+
+
 @dataclass
 class SessionResult:
     summary: dict
@@ -432,6 +444,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     metrics = compare_with_direct(scene, material, slave.object_true_c, operator, touch.trace,
                                   contact_s, render_from)
     metrics["heat_extraction_ratio_first_s"] = heat_extraction_ratio(touch.trace)
+    dew_c = dew_point_c(scene.room_temp_c, scene.room_humidity_pct) \
+        if scene.room_humidity_pct > 0 else None
     metrics["skin_above_threshold_s"] = skin_above_threshold_s(touch.trace)
     summary = {
         "scene": scene.name, "material": material, "seed": seed,
@@ -450,8 +464,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "operator": asdict(operator), "object_true_c": slave.object_true_c,
         "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
         "display_idle_c": idle,
-        "dew_point_c": dew_point_c(scene.room_temp_c, scene.room_humidity_pct)
-        if scene.room_humidity_pct > 0 else None,
+        "dew_point_c": dew_c,
+        "idle_surface_minus_dew_k": idle_surface_minus_dew_k(touch.trace, touch.contact_s, dew_c),
         "room_humidity_pct": scene.room_humidity_pct,
         "expected_material": None if expected_material is None else
         str(getattr(expected_material, "label", expected_material)),
