@@ -70,6 +70,20 @@ def test_a_scene_with_them_says_so_in_the_log(caplog):
     assert "pads built off their datasheet" in caplog.text and "sd 0.15, seed 0" in caplog.text
 
 
+def test_display_factors_say_in_the_log_that_they_are_not_yet_applied(caplog):
+    """``[as_built.display]`` is read, but the display's simulator runs its
+    nominal pad: a scene with display factors off 1 says so in the log
+    (and its record), one with only pad factors does not."""
+    with caplog.at_level(logging.WARNING):
+        scene = _scene({"display": {"flux_lag_s": 1.5}})
+    assert "NOT YET APPLIED" in caplog.text and "display" in caplog.text
+    assert scene.as_built.to_dict()["display_applied"] is False
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        _scene({"pad": {"flux_lag_s": 1.5}})
+    assert "NOT YET APPLIED" not in caplog.text and "display as designed" in caplog.text
+
+
 def test_removing_the_tables_changes_no_model_the_product_builds():
     """Every model the product builds from a scene (the pad's contact
     model, the effusivity estimator's curves, its priors and noise) is the
