@@ -234,3 +234,45 @@ def test_a_stopped_loop_rearms_once_its_sensor_agrees_with_the_idle_module():
         out = loop.update(start - 10.0, pad.sensed_c, pad.stack.state.sink_c, DT)
         pad.step(out.current_a)
     assert loop.stopped
+
+
+def test_the_master_rearms_a_stopped_loop_only_at_idle_and_says_so(caplog):
+    """The display's master re-arms its stopped junction loop at idle (no
+    force on the pad) once the sensor reads the hot side for REARM_S,
+    counting the event and logging it; while the pad is touched it stays
+    stopped (0 A) however well the sensor agrees. A sensor frozen at the
+    hot side (it does not follow the module) stops the loop again: it then
+    stays stopped for the rest of that idle (one re-arm per idle, no
+    stop/re-arm cycle), and the next touch's idle may re-arm it once more."""
+    import logging
+
+    from telethermal.devices.readings import PadSensors
+    from telethermal.teleop.master import (JUNCTION_REARMED, JUNCTION_STOPPED, DisplayConfig,
+                                           MasterDisplay, SlaveNews)
+    from telethermal.teleop.run import pad_resistance
+
+    config = DisplayConfig(feedforward_model="static")
+    dt = 1.0 / config.rate_hz
+    master = MasterDisplay(config, None, pad_resistance(tuple(SCENE.pad.layers)),
+                           SCENE.sensors.flux_lag_s, 33.0, idle_c=24.0,
+                           pad_layers=tuple(SCENE.pad.layers), module=PARAMS)
+    news = SlaveNews(24.0, None, ())
+    master.junction_loop.stopped = True            # as after an implausible sensor
+    touched = PadSensors(-500.0, 24.0, 5.0, 24.0, 24.0)
+    t = 0.0
+    for _ in range(int(3 * DisplayJunctionLoop.REARM_S / dt)):
+        step = master.step(t, dt, touched, news)
+        t += dt
+        assert master.junction_loop.stopped and step.current_a == 0.0
+    idle = PadSensors(0.0, 24.0, 0.0, 24.0, 24.0)
+    with caplog.at_level(logging.WARNING):
+        for _ in range(int(3 * DisplayJunctionLoop.REARM_S / dt)):
+            master.step(t, dt, idle, news)
+            t += dt
+    assert master.events.get(JUNCTION_REARMED) == 1 and "re-armed" in caplog.text
+    assert master.junction_loop.stopped          # the frozen sensor stopped it again
+    assert master.events.get(JUNCTION_STOPPED) == 2
+    for sensors in (touched,) * 100 + (idle,) * int(3 * DisplayJunctionLoop.REARM_S / dt):
+        master.step(t, dt, sensors, news)
+        t += dt
+    assert master.events.get(JUNCTION_REARMED) == 2

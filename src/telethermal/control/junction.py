@@ -139,7 +139,7 @@ class DisplayJunctionLoop:
     #: stopped module's model, the junction only conducting to its hot side
     #: (0 A, no load: it settles at the hot side), within ``REARM_K`` for
     #: ``REARM_S`` on end. A sensor that lags still fails the next move and
-    #: stops the loop again, at most once per idle.
+    #: stops the loop again (its owner re-arms at most once per idle).
     REARM_K = 1.0
     REARM_S = 1.0
 

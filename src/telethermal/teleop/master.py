@@ -140,6 +140,8 @@ class MasterDisplay:
         #: implausible sensor; None: it has not.
         self.junction_stopped_at_s: float | None = None
         self._junction_stop_counted = False     # this stop counted and logged
+        #: One re-arm per idle: set again by the next touch.
+        self._junction_rearm_allowed = True
         #: ``precondition(material or None, object_temp_c) -> idle offset, K``:
         #: where the pad idles relative to the object before (and, holding,
         #: during) a touch (control/preconditioning.py); None: at the object.
@@ -263,6 +265,7 @@ class MasterDisplay:
             return None
         self.handover.pid_running = False
         if event.touching:
+            self._junction_rearm_allowed = True      # a new touch: its idle may re-arm
             self.handover.held = False
             self.onset_s, self.phase, self.rendering = event.t_s, Phase.CONTACT, None
             self.rendered_estimate, self._period_weights = None, None
@@ -444,11 +447,14 @@ class MasterDisplay:
         """A stopped junction loop re-arms at the next idle with nothing on
         the pad, once its sensor agrees with the stopped module again
         (:meth:`~telethermal.control.junction.DisplayJunctionLoop.rearm_if_settled`);
-        counted and logged."""
+        counted and logged. At most once per idle: a loop that stops again
+        before the next touch stays stopped (no stop/re-arm cycle)."""
         loop = self.junction_loop
-        if loop is None or not loop.stopped or self.detector.touching:
+        if loop is None or not loop.stopped or self.detector.touching or \
+                not self._junction_rearm_allowed:
             return
         if loop.rearm_if_settled(sensors.junction_c, sensors.heatsink_c, dt_s):
+            self._junction_rearm_allowed = False
             self._count(JUNCTION_REARMED)
             log.warning("the junction sensor agrees with the idle module again (within %.1f K "
                         "of the hot side for %.1f s): module current re-armed",
