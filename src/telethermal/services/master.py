@@ -1,12 +1,11 @@
 """``telethermal master --config F``: the display side as a process.
 
-Owns: the transport's master end (control DEALER and stream SUB,
-connecting), the simulated display pad, operator and force sensor, and
-the display loop at ``rate_hz`` on the real clock. Each period it reads the
-network and the admin socket and, during a touch, runs one period of
-:class:`~telethermal.teleop.master.MasterDisplay` with what the slave has
-said so far. Rendering is timed from the master's own contact onset, so
-the network's delay shifts nothing once the trajectory is here.
+Owns: the transport's master end (control DEALER and stream SUB, connecting),
+the simulated display pad, operator and force sensor, and the display loop at
+``rate_hz`` on the real clock. Each period it reads the network and the admin
+socket and, in a touch, runs one period of the display (teleop/master.py) with
+what the slave has said. Rendering is timed from the master's own contact onset,
+so the network's delay shifts nothing once the trajectory is here.
 """
 
 from __future__ import annotations
@@ -139,8 +138,7 @@ class MasterService:
         self.stop_requested = False
         self.state = ServiceState.IDLE
         self.last_touch: dict = {}
-        #: The display's clock at its last control period (s; None before one).
-        self.last_period_t_s: float | None = None
+        self.last_period_t_s: float | None = None   # the display's last period (s)
         #: Unexpected errors in one message, one touch or one figure (status).
         self.counters = self.endpoint.extra_counters
         self._internal_error = ErrorCount(self.counters, log)

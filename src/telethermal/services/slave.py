@@ -2,10 +2,9 @@
 
 Owns: the transport's slave end (control ROUTER and stream PUB, bound), the
 simulated sensing pad and the object under it, the identifier and the flux
-generator, and a loop at the scene's sample rate on the real clock. Each
-period it reads the network, the admin socket and, during a contact, the
-pad's new samples; it streams estimates and, once decided, the flux
-trajectory (``proto/PROTOCOL.md`` section 6).
+generator, and a loop at the scene's sample rate on the real clock. Each period
+it reads the network, the admin socket and, in a contact, the pad's new samples;
+it streams estimates and then the flux trajectory (``proto/PROTOCOL.md`` 6).
 """
 
 from __future__ import annotations
@@ -415,10 +414,9 @@ class SlaveService:
     def _last_sample_t_s(self) -> float | None:
         """The touch's last sample read (its ``t_s``), while the pad is down."""
         pad = self.pad
-        if self.touch_t0 is None or pad is None or not pad.samples_read or \
-                "t_s" not in pad.channels:
-            return None
-        return float(pad.channels["t_s"][pad.samples_read - 1])
+        down = self.touch_t0 is not None and pad is not None and pad.samples_read > 0
+        return float(pad.channels["t_s"][pad.samples_read - 1]) \
+            if down and "t_s" in pad.channels else None
 
     def status(self) -> dict:
         e = self.endpoint
