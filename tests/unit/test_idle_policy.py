@@ -38,6 +38,30 @@ def test_shipped_policies_are_current():
         assert data["key"] == pc.policy_key(with_finger(load_scene(name))), name
 
 
+def test_the_key_follows_the_physics_not_the_descriptions(scene, monkeypatch):
+    """A part's ``source`` text (a datasheet name, a pointer into the docs)
+    leaves the key alone; one figure of the heat sink changes it."""
+    import copy
+
+    from telethermal.physics import thermoelectric as te
+
+    base = pc.policy_key(scene)
+    table = copy.deepcopy(te._table())
+
+    def patched(edit):
+        t = copy.deepcopy(table)
+        edit(t)
+        monkeypatch.setattr(te, "_table", lambda: t)
+        return pc.policy_key(scene)
+
+    sink = te.DEFAULT_HEAT_SINK
+    module = te.DEFAULT_MODULE
+    assert patched(lambda t: t["heat_sinks"][sink].update(source="moved to another page")) == base
+    assert patched(lambda t: t["modules"][module].update(source="another datasheet")) == base
+    assert patched(lambda t: t["heat_sinks"][sink].update(
+        to_air_k_w=t["heat_sinks"][sink]["to_air_k_w"] * 1.1)) != base
+
+
 def test_the_shipped_policy_is_used_without_computing(scene, monkeypatch):
     def refuse(_scene):
         raise AssertionError("computed although the package ships the policy")
