@@ -126,13 +126,18 @@ def test_view_lines():
 def test_render_lines_skip_what_the_report_does_not_hold():
     per = {"wood": {"skin_rms_k": 0.6, "skin_rms_idle_at_object_k": 0.14,
                     "skin_rms_repeat_k": 0.06, "flux_rms_from_decision_rel": 0.0157,
-                    "flux_rms_first_second_rel": 0.0645},
+                    "flux_rms_first_second_rel": 0.0645,
+                    # Perceptual units (issue 43, deliverable 6), in every row
+                    # bench render writes since the display's junction loop.
+                    "heat_extraction_ratio_first_s": 0.874, "skin_above_threshold_s": 0.25},
            "steel": {}}                                     # a material not run: no line
     report = {"rate": [], "controller": [], "gains": [], "before": [], "materials": per,
               "generator": None, "real_clock": [], "png": "p.png"}
     assert render.text_report(report, "r.json") == [
         "wood      : first touch skin 0.60 K (idling at the object 0.14 K), repeated "
-        "(pre-conditioned) 0.06 K; flux from the decision 1.57 %, first second 6.45 % of peak",
+        "(pre-conditioned) 0.06 K; flux from the decision 1.57 %, first second 6.45 % of peak; "
+        "heat extracted over the first second 0.87x direct contact's (told apart beyond "
+        "1 +- 0.43), skin off by more than a fingertip detects for 0.25 s",
         "wrote r.json and p.png"]
 
 
