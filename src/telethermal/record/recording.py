@@ -55,6 +55,7 @@ import msgpack
 from mcap.writer import CompressionType, Writer
 
 from telethermal.errors import TelethermalError
+from telethermal.filelimits import check_size
 from telethermal.record.mcapread import MAX_RECORDING_BYTES, Damage, iter_records
 
 log = logging.getLogger(__name__)
@@ -351,11 +352,8 @@ def read_recording(path: str | Path) -> Recording:
     path = Path(path)
     rec = Recording(path)
     channels: dict[int, str] = {}
+    check_size(path, MAX_RECORDING_BYTES, "recording", RecordingError)
     try:
-        size = path.stat().st_size
-        if size > MAX_RECORDING_BYTES:
-            raise RecordingError(f"{path}: {size} bytes, over the {MAX_RECORDING_BYTES}-byte "
-                                 "limit of a recording (docs/limits.md)")
         data = path.read_bytes()
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc}") from exc
