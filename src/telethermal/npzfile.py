@@ -21,6 +21,7 @@ import numpy as np
 
 from telethermal import __version__
 from telethermal.errors import ModelFileError
+from telethermal.filelimits import check_size
 
 #: The largest model file read (the project's models: 10-50 KB; the
 #: effusivity curves' cache: 2-3 MB).
@@ -70,10 +71,7 @@ def read_npz(path: str | Path, fmt: str, version: int, what: str) -> tuple[dict,
         # allow_pickle=True: advice this program must never take.)
         raise ModelFileError(f"{path}: not a telethermal {what} file (not an .npz archive: "
                              f"truncated, overwritten, or another kind of file)")
-    size = path.stat().st_size
-    if size > MAX_FILE_BYTES:
-        raise ModelFileError(f"{path}: {size} bytes, over the {MAX_FILE_BYTES}-byte limit of a "
-                             f"{what} file (docs/limits.md)")
+    check_size(path, MAX_FILE_BYTES, f"{what} file", ModelFileError)
     check_members(path, what)
     try:
         with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:

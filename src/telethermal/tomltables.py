@@ -8,6 +8,7 @@ from dataclasses import fields
 from pathlib import Path
 
 from telethermal.errors import TelethermalError
+from telethermal.filelimits import read_text
 
 #: A TOML file's size, read before parsing (the project's: a few KB).
 MAX_TOML_BYTES = 1024 * 1024
@@ -24,16 +25,7 @@ def read_toml(path: str | Path, what: str, error=TelethermalError) -> dict:
     path = Path(path)
     if not path.is_file():
         raise error(f"{path}: no such {what}")
-    size = path.stat().st_size
-    if size > MAX_TOML_BYTES:
-        raise error(f"{path}: {size} bytes, over the {MAX_TOML_BYTES}-byte limit of a {what}")
-    data = path.read_bytes()
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise error(f"{path}: not UTF-8 text (byte {exc.start}: "
-                    f"{data[exc.start:exc.start + 1]!r})") from None
-    return loads_checked(text, str(path), error)
+    return loads_checked(read_text(path, MAX_TOML_BYTES, what, error), str(path), error)
 
 
 def loads_checked(text: str, source: str, error=TelethermalError) -> dict:

@@ -26,8 +26,8 @@ from telethermal.bench import firmware
 from telethermal.devices import qemu
 from telethermal.devices.board import SensorBoard
 from telethermal.devices.peltier import PeltierDriver
-from test_firmware import (WATCHDOG_MS, expected_keys, float_arg, frame_key, message_of,
-                           random_samples, serial_line, vectors)
+from test_firmware import (WATCHDOG_MS, can_golden_round_trip, expected_keys, float_arg,
+                           frame_key, random_samples, serial_line, vectors)
 
 pytestmark = pytest.mark.qemu
 REQUIRE = os.environ.get("TELETHERMAL_REQUIRE_QEMU") == "1"
@@ -75,6 +75,19 @@ def test_the_arm_build_is_warning_free_and_small(images):
         assert 0 < size["ram"] <= 128 * 1024 // 10, (name, size)
 
 
+def test_check_devices_qemu_builds_and_reports_the_same_sizes(images):
+    """``telethermal check --devices qemu`` on a machine that has it all:
+    no problem, and each image's flash and RAM as the build's own."""
+    from telethermal.services.preflight import qemu_findings
+
+    findings = qemu_findings()
+    assert all(f.ok for f in findings), [f.text() for f in findings]
+    for name, elf in images.items():
+        size = qemu.image_size(elf)
+        assert f"firmware image {name}: flash {size['flash']:,} B, RAM {size['ram']:,} B" in \
+            [f.what for f in findings]
+
+
 def test_selftest_on_the_core(codec):
     assert run_codec(codec, "selftest", "").strip() == "selftest: 27 checks, 0 failed"
 
@@ -90,19 +103,7 @@ def test_every_serial_golden_vector_on_the_core(codec):
 
 
 def test_every_can_golden_vector_both_ways_on_the_core(codec):
-    golden = vectors("can")
-    decoded = run_codec(codec, "can-codec", "".join(
-        f"decode {f['frame_id']:x} {data.hex()}\n" for data, f in golden.values())).splitlines()
-    encoded = run_codec(codec, "can-codec", "".join(
-        f"encode {f['frame_id']:x} " + " ".join(str(f["raw"][s.name])
-                                               for s in message_of(f).signals) + "\n"
-        for _, f in golden.values())).split()
-    assert len(decoded) == len(encoded) == len(golden) >= 27
-    for (name, (data, fields)), line, mine in zip(golden.items(), decoded, encoded):
-        message, *pairs = line.split()
-        assert message == fields["message"], name
-        assert {k: int(v) for k, v in (p.split("=") for p in pairs)} == fields["raw"], name
-        assert bytes.fromhex(mine) == data, name
+    assert can_golden_round_trip(lambda script: run_codec(codec, "can-codec", script)) >= 27
 
 
 def test_a_corrupted_vector_is_caught_on_the_core(codec):

@@ -23,6 +23,7 @@ ROOT = Path(telethermal.__file__).parent
 LAYERS = [
     {"__init__"},
     {"errors"},
+    {"filelimits"},
     {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder", "cachedir",
      "ports"},
     {"physics"},
@@ -184,7 +185,7 @@ def test_the_checks_see_a_circle_and_an_upward_import():
              "telethermal.render.b": [(1, "telethermal.physics.a")]}
     assert circles(graph) == [["telethermal.physics.a", "telethermal.render.b"]]
     assert upward_imports(graph) == [
-        "telethermal.physics.a:1 imports telethermal.render.b (layer 7 from layer 3)"]
+        "telethermal.physics.a:1 imports telethermal.render.b (layer 8 from layer 4)"]
     # A relative import is resolved like an absolute one.
     assert _unit("telethermal") == "__init__"
 

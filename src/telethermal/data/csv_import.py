@@ -40,6 +40,7 @@ import numpy as np
 
 from telethermal.data.dataset import MANIFEST_COLUMNS, TIME, Trial, trial_digest
 from telethermal.errors import DatasetError
+from telethermal.filelimits import check_size
 
 #: Dataset channels a lab file may map to, and the units each may be given in
 #: (factor and offset to the dataset's unit: value * factor + offset).
@@ -273,13 +274,7 @@ def read_lab_manifest(path: str | Path) -> dict[str, dict]:
 
 
 def _check_size(path: Path) -> None:
-    try:
-        size = path.stat().st_size
-    except OSError as exc:
-        raise DatasetError(f"{path}: cannot read: {exc}") from exc
-    if size > MAX_CSV_BYTES:
-        raise DatasetError(f"{path}: {size} bytes, over the {MAX_CSV_BYTES}-byte limit of a "
-                           "lab file (docs/limits.md)")
+    check_size(path, MAX_CSV_BYTES, "lab file", DatasetError)
 
 
 def _manifest_rows(path: Path) -> dict[str, dict]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from telethermal.errors import SceneError
+from telethermal.filelimits import read_text
 from telethermal.tomltables import loads_checked
 
 #: Objects in a scene (the shipped ones: 4-7; 5,000 took over 40 s to load).
@@ -18,18 +19,7 @@ MAX_SCENE_BYTES = 1024 * 1024
 def read_scene_text(path: Path) -> str:
     """The file's text: at most ``MAX_SCENE_BYTES``, UTF-8 (a SceneError
     naming the file and the byte otherwise)."""
-    try:
-        size = path.stat().st_size
-        if size > MAX_SCENE_BYTES:
-            raise SceneError(f"{path}: {size} bytes, over the {MAX_SCENE_BYTES}-byte limit "
-                             "of a scene file (docs/limits.md)")
-        data = path.read_bytes()
-        return data[:MAX_SCENE_BYTES + 1].decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise SceneError(f"{path}: not UTF-8 text (byte {exc.start}: "
-                         f"{data[exc.start:exc.start + 1]!r})") from exc
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot read: {exc}") from exc
+    return read_text(path, MAX_SCENE_BYTES, "scene file", SceneError)
 
 
 #: Upper bounds of ``[sensors]`` and ``[variability]`` (docs/limits.md):

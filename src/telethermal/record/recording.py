@@ -33,7 +33,9 @@ Layout of a recording (one file per host and run):
 
 :class:`Recorder` never blocks the caller: :meth:`Recorder.log` puts the
 message on a bounded queue and a writer thread encodes and writes it; a full
-queue drops the message and counts it. A write error (the disk is full)
+queue drops the message and counts it, and so does a message msgpack cannot
+encode (that message alone; the file says how many when it closes). A
+write error (the disk is full)
 stops the recording with a clear error (:attr:`Recorder.error`) and every
 later message is dropped and counted; the session goes on.
 """
@@ -53,6 +55,7 @@ import msgpack
 from mcap.writer import CompressionType, Writer
 
 from telethermal.errors import TelethermalError
+from telethermal.filelimits import check_size
 from telethermal.record.mcapread import MAX_RECORDING_BYTES, Damage, iter_records
 
 log = logging.getLogger(__name__)
@@ -117,7 +120,7 @@ class Recorder:
         self.path = Path(path)
         self.role = role
         self.counters = {"queued": 0, "written": 0, "dropped_queue_full": 0,
-                         "dropped_after_error": 0}
+                         "dropped_after_error": 0, "dropped_unpackable": 0}
         self.error: str | None = None
         self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self._channels: dict[str, int] = {}
@@ -183,6 +186,9 @@ class Recorder:
             self._thread.join()
             if self.error is None:
                 try:
+                    if self.counters["dropped_unpackable"]:
+                        self._writer.add_metadata("dropped", {
+                            "unpackable": str(self.counters["dropped_unpackable"])})
                     self._writer.finish()
                 except OSError as exc:
                     self._fail(exc)
@@ -257,13 +263,28 @@ class Recorder:
             return False
         try:
             for topic, t_s, message in entries:
-                t_ns = max(0, int(t_s * 1e9))
-                self._writer.add_message(self._channel(topic), t_ns,
-                                         msgpack.packb(message, use_bin_type=True), t_ns)
+                try:
+                    data = msgpack.packb(message, use_bin_type=True)
+                    t_ns = max(0, int(t_s * 1e9))
+                except (ValueError, TypeError, OverflowError) as exc:
+                    self._unpackable(topic, exc)  # this message only: the rest goes on
+                    continue
+                self._writer.add_message(self._channel(topic), t_ns, data, t_ns)
                 self.counters["written"] += 1
         except (OSError, ValueError, TypeError, OverflowError) as exc:
             self._fail(exc)
         return bool(entries)
+
+    def _unpackable(self, topic: str, exc: Exception) -> None:
+        """One message msgpack cannot encode (an object it does not know, an
+        integer past 64 bits) or whose time is not a number: dropped and
+        counted, logged at the first and every 1000th; the file records the
+        count when it closes (metadata ``dropped``), so a reader says it."""
+        self.counters["dropped_unpackable"] += 1
+        n = self.counters["dropped_unpackable"]
+        if n == 1 or n % 1000 == 0:
+            log.warning("recording to %s: message %d on %s not recorded (%s: %s); the "
+                        "recording goes on", self.path, n, topic, type(exc).__name__, exc)
 
     def _flush(self) -> None:
         if self.error is None:
@@ -296,6 +317,9 @@ class Recording:
             parts.append(f"{d.skipped_bytes} unreadable bytes skipped")
         if self.bad_messages:
             parts.append(f"{self.bad_messages} message(s) did not unpack")
+        unpackable = self.metadata.get("dropped", {}).get("unpackable")
+        if unpackable:
+            parts.append(f"{unpackable} message(s) the writer could not encode are missing")
         return "; ".join(parts) or None
 
     @property
@@ -328,11 +352,8 @@ def read_recording(path: str | Path) -> Recording:
     path = Path(path)
     rec = Recording(path)
     channels: dict[int, str] = {}
+    check_size(path, MAX_RECORDING_BYTES, "recording", RecordingError)
     try:
-        size = path.stat().st_size
-        if size > MAX_RECORDING_BYTES:
-            raise RecordingError(f"{path}: {size} bytes, over the {MAX_RECORDING_BYTES}-byte "
-                                 "limit of a recording (docs/limits.md)")
         data = path.read_bytes()
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc}") from exc
