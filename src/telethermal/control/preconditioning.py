@@ -279,6 +279,23 @@ def policy_known(scene: Scene) -> bool:
         _read_policy(cache_dir() / f"idle-policy-{key}.json", key) is not None
 
 
+def prepare_policy(scene: Scene, echo=log.warning) -> None:
+    """The scene's idle policy made ready before a service's first touch (a
+    scene with none shipped or cached computes it now: minutes, once, then
+    cached), so that no touch waits on it: the master, its admin socket
+    unanswered, would look dead. ``echo`` says so when it computes."""
+    import time
+
+    known = policy_known(scene)
+    if not known:
+        echo(f"display idle policy for scene {scene.name}: computing (minutes, once)...")
+    start = time.monotonic()
+    scene_policy(scene)
+    if not known:
+        echo(f"display idle policy ready in {time.monotonic() - start:.0f} s (cached in "
+             f"{cache_dir()})")
+
+
 def scene_policy(scene: Scene) -> dict:
     """The idle policy of ``scene``: the package's for a shipped scene it
     was computed for, else the user's cache (:func:`cache_dir`), else

@@ -62,6 +62,8 @@ class MasterConfig:
     #: Where the display's pad idles before a touch: "policy" (the scene's
     #: idle policy: pre-conditioned for the material the slave expects, the
     #: minimax idle for an unknown object) or "object" (its temperature).
+    #: With "policy" the master makes the scene's policy ready at start
+    #: (a scene with none shipped or cached: minutes, once, then cached).
     idle: str = "policy"
     seed: int = 0
     admin_port: int = 5571

@@ -327,22 +327,6 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
          "network_over_in_process": s["flux_rms_error_rel"] / local["flux_rms_error_rel"]}
 
 
-def _idle_policy_ready(scene, echo) -> None:
-    """The display's idle policy for the scene, before the services start: a
-    scene with none shipped or cached computes it now (minutes, once; then
-    cached), not in the master's first touch, whose request would time out."""
-    from telethermal.control import preconditioning as pc
-
-    known = pc.policy_known(scene)
-    if not known:
-        echo(f"display idle policy for scene {scene.name}: computing (minutes, once)...")
-    start = time.monotonic()
-    pc.scene_policy(scene)
-    if not known:
-        echo(f"display idle policy ready in {time.monotonic() - start:.0f} s (cached in "
-             f"{pc.cache_dir()})")
-
-
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
              realtime_priority: int = 20, record_dir: Path | None = None,
@@ -358,7 +342,9 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
 
     scene = with_finger(load_scene(scene_name))
     identifier, generator = load_model(identifier_path), load_generator(generator_path)
-    _idle_policy_ready(scene, echo)
+    from telethermal.control.preconditioning import prepare_policy
+
+    prepare_policy(scene, echo)
     ports = free_ports(5)
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
                                           ports[:4], seed, realtime_priority=realtime_priority,

@@ -16,8 +16,8 @@ import os
 import time
 from dataclasses import dataclass, replace
 
-
 from telethermal.control.loop import FixedRateLoop
+from telethermal.control.preconditioning import prepare_policy
 from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
@@ -39,7 +39,6 @@ from telethermal.wire.messages import SessionConfig, parse
 from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger("telethermal.master")
-
 
 
 def decided_at_s(estimates, est) -> float | None:
@@ -103,9 +102,10 @@ class MasterService:
         self.scene = with_finger(load_scene(config.scene))
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before,
                                             idle=config.idle)
+        if config.idle == "policy":       # before the sockets: no touch waits for it
+            prepare_policy(self.scene, log.warning)
         self.endpoint, self.admin = open_service_sockets("master", config)
-        # The slave's estimates come on the lossy stream, newest wins; the
-        # link reads them as it reads the lossless kinds (PROTOCOL.md 6a).
+        # Estimates and setpoints: the lossy stream, newest wins (PROTOCOL.md 6a).
         self.endpoint.deliver_stream = frozenset({MessageKind.POSTERIOR_ESTIMATE,
                                                   MessageKind.FLUX_SETPOINT})
         #: The session's rules (what the master reads, what it tells the
