@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from telethermal.data.generate import pad_database
-from telethermal.ident.anytime import StreamingIdentifier, decide, decide_all
+from telethermal.ident.anytime import MisfitRun, StreamingIdentifier, decide, decide_all
 from telethermal.ident.label import Reason
 from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import make
@@ -131,3 +131,18 @@ def test_samples_the_driver_filled_in_are_not_counted_as_measured(model):
         if stream.finished:
             break
     assert (stream.estimate.label, stream.estimate.reason) == (d.label, d.reason)
+
+
+@pytest.mark.parametrize("flags, last, ends", [
+    ((True,), 5, None),                      # one window past the limit: not the verdict
+    ((True, False, True), 5, None),          # two, not in a row
+    ((False, True, True), 5, 2),             # two in a row: ends at the second
+    ((False, False, True), 2, 2),            # at the touch's last window, one is enough
+])
+def test_the_misfit_ends_a_touch_at_confirm_windows_in_a_row_or_at_its_last(flags, last, ends):
+    """MisfitRun with confirm_windows 2: the window index the touch ends on
+    the pad model's misfit, or None (then every flagged window commits
+    nothing: anytime.decide and the stream pass may_commit False there)."""
+    run = MisfitRun(2)
+    got = next((i for i, f in enumerate(flags) if run.step(f, i == last)), None)
+    assert got == ends

@@ -104,20 +104,23 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     group = None
     best = 0.0
     early = EarlyNew(model.confirm_windows)
+    misfit = MisfitRun(model.confirm_windows)
     for i, p in enumerate(path):
         best = float(np.max(p))
         outside = False
         if forces is not None:
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
-        if not outside and pad_model_misfit(model, x[None, :n], i, measured):
+        flagged = not outside and pad_model_misfit(model, x[None, :n], i, measured)
+        if misfit.step(flagged, i == len(path) - 1):
             return Decision(UNKNOWN, best, model.windows_s_[i], Reason.PAD_MODEL_MISFIT,
                             group.time_s if group else None,
                             revised_from=str(group.label) if group else None)
         step = rule.step(i, rule_posterior(model, p, x[None, :n], i),
-                         may_commit=model.may_commit(i), force_outside=outside,
+                         may_commit=model.may_commit(i) and not flagged, force_outside=outside,
                          unlike=lambda i=i: bool(model.outside_classes(x[None, :n], i)[0]))
-        new = early.step(model, x[None, :n], i, step is None and group is None and not outside)
+        new = early.step(model, x[None, :n], i,
+                         step is None and group is None and not outside and not flagged)
         if new is not None:
             t = model.windows_s_[i]
             return Decision(NEW_MATERIAL, new_material_confidence(new), t, Reason.NEW_MATERIAL,
@@ -146,6 +149,26 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+class MisfitRun:
+    """The pad-model check (:func:`pad_model_misfit`) over one touch's
+    windows: a touch ends on it once its window's fit has been past the
+    limit at ``confirm`` windows in a row (``confirm_windows``, as a
+    commitment), or at its last window; a window past it and not yet
+    confirmed commits nothing (neither a class nor a new material). As the
+    rule's :class:`~telethermal.ident.rule.Runs`: each window is a separate
+    fit, and the first windows have few samples (0.04 s: 5, one degree of
+    freedom), where one window past the limit is not the evidence a pad off
+    its model gives (its residual grows with the window: docs/calibration.md)."""
+
+    def __init__(self, confirm: int):
+        self.need, self.run = max(1, int(confirm)), 0
+
+    def step(self, flagged: bool, last: bool) -> bool:
+        """Window past the limit (``flagged``): end the touch on it now?"""
+        self.run = self.run + 1 if flagged else 0
+        return flagged and (self.run >= self.need or last)
 
 
 class EarlyNew:
@@ -303,6 +326,7 @@ class StreamingIdentifier:
         self._watch = False
         self._rule = AnytimeRule(model.threshold, model.confirm_windows)
         self._early = EarlyNew(model.confirm_windows)
+        self._misfit_run = MisfitRun(model.confirm_windows)
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
                                  False)
@@ -365,15 +389,17 @@ class StreamingIdentifier:
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
-        if not outside and pad_model_misfit(model, x, index, self._measured):
+        flagged = not outside and pad_model_misfit(model, x, index, self._measured)
+        if self._misfit_run.step(flagged, last):
             return self._misfit(p, index)
         step = self._rule.step(index, rule_posterior(model, p, x, index),
-                               may_commit=model.may_commit(index),
+                               may_commit=model.may_commit(index) and not flagged,
                                force_outside=outside,
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
         kind, what = step if step is not None else (None, None)
         reading = None
-        early = self._early.step(model, x, index, step is None and held is None and not outside)
+        early = self._early.step(model, x, index,
+                                 step is None and held is None and not outside and not flagged)
         if early is not None:
             est = Estimate(t_s, tuple(p), NEW_MATERIAL, new_material_confidence(early), True,
                            Reason.NEW_MATERIAL)
