@@ -394,9 +394,9 @@ class EffusivityFit(Identifier):
             return None
         est, gap_k = self.estimator()
         theta = np.asarray(self._theta(row, len(row)), float)
-        kept = row if keep is None else row[keep]
-        chi2, _ = est._goodness(theta, row, est._noise_var(kept, gap_k), keep)
-        chi2_noise, _ = est._goodness(theta, row, est._noise_var(kept, gap_k, allowance=0.0),
+        keep = slice(None) if keep is None else keep
+        chi2, _ = est._goodness(theta, row, est._noise_var(row[keep], gap_k), keep)
+        chi2_noise, _ = est._goodness(theta, row, est._noise_var(row[keep], gap_k, allowance=0.0),
                                       keep)
         return chi2, chi2_noise
 
