@@ -112,6 +112,28 @@ def test_foam_far_below_every_class_is_a_new_material_with_its_estimate(model):
     assert err <= TARGET_REL_ERROR
 
 
+def test_foam_on_a_pad_off_its_model_is_caught_never_named(model):
+    """Foam touched with a pad whose flux sensor lags 20 % over its model:
+    the fit's residual is past the pad-model check's limit at every window
+    (measured chi2/dof 21-45 at 0.04 s, 26-39 at 0.06 s, rising to 149-190
+    at 0.2 s; the limit 2), so every touch ends "unknown" on the misfit at
+    the second window, neither a trained material nor a new material's
+    estimate read off a model that does not hold."""
+    import dataclasses
+
+    from fitcases import SCENE, contacts
+    from telethermal.bench.unseen import package_objects, touch_scene
+    from telethermal.physics.as_built import AsBuilt, BuiltFactors, with_as_built
+    objects = package_objects(["foam"], SCENE.materials, SCENE.objects[0].temp_c,
+                              SCENE.objects[0].thickness_m)
+    scene = with_as_built(touch_scene(dataclasses.replace(SCENE, objects=()), objects),
+                          AsBuilt(BuiltFactors((1, 1, 1), flux_lag_s=1.2),
+                                  BuiltFactors((1, 1, 1))))
+    decisions = decide_all(model, contacts(scene, 3))
+    assert all(d.label.is_unknown and d.reason == Reason.PAD_MODEL_MISFIT for d in decisions), \
+        [(str(d.label), d.reason) for d in decisions]
+
+
 def test_copper_above_aluminium_is_new_or_within_aluminiums_spread(model):
     """Copper (e 37,100; aluminium 20,100): a touch is named aluminium only
     at a window where its estimate lies inside aluminium's predictive (at
