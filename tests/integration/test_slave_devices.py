@@ -91,6 +91,11 @@ def test_lost_frames_are_held_and_counted_and_the_decision_stands(identifier, se
     assert devices.board_emulator.counters["dropped"] > 0
     assert c["held_samples"] > 0
     assert c["board"]["lost_frames"] == devices.board_emulator.counters["dropped"]
+    # Each held sample is marked not measured: the pad-model check leaves it
+    # out of its residual (counted, the 7 in this touch's first second read
+    # chi2/dof 3.5 against the limit 2; left out, 0.47).
+    assert c["stale_readings"] == 0
+    assert int(np.sum(~emu._contact.measured[:emu._contact.available])) == c["held_samples"]
     assert emu.estimate.decided and emu.estimate.label == "wood"
 
 

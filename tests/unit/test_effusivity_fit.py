@@ -69,10 +69,11 @@ def test_an_unseen_material_is_outside_every_class_not_named(model, material):
     held = _contacts(scene, 3)
     assert set(held.labels) == {material}
     decisions = decide_all(model, held)
-    # A new material, or (issue 44) not named because the pad model's fit
-    # leaves a residual past the noise's limit: never a trained material.
-    assert all(d.label.is_new or d.reason == "pad model does not fit: recalibrate"
-               for d in decisions), [(str(d.label), d.reason) for d in decisions]
+    # Its fit's residual is under the pad-model check's limit from 0.06 s
+    # (past it at 0.04 s alone on 2 of 10 touches: one window, not the
+    # verdict, tests/unit/test_open_set.py): every touch a new material.
+    assert all(d.label.is_new for d in decisions), [(str(d.label), d.reason)
+                                                    for d in decisions]
     assert model.outside_classes(held.x, len(model.windows_s_) - 1).all()
 
 

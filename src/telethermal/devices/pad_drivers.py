@@ -14,7 +14,9 @@ line and the active pad's driver on CAN (``PAD_*`` frames).
 * :meth:`~SlavePadDrivers.contact`: during a contact, every sample the board
   sends, in order, on the sample grid: a frame lost on the line is filled
   with the previous sample (``held_samples``), a channel the board flagged
-  likewise (``stale_readings``); the board going silent for ``lost_after_s``
+  likewise (``stale_readings``), each marked not measured
+  (``ContactSamples.measured``: the identifier's pad-model check leaves it
+  out of its residual); the board going silent for ``lost_after_s``
   (unplugged, crashed) ends the contact (``boards_lost``);
 * :meth:`~SlavePadDrivers.safe`: the pad's safe state (disabled, 0 A).
 
@@ -67,11 +69,15 @@ class ContactSamples:
     temp_c: np.ndarray = field(init=False)
     force_n: np.ndarray = field(init=False)
     received_s: np.ndarray = field(init=False)     # perf_counter when the driver decoded it
+    #: True where the board sent the sample's values; False where the driver
+    #: filled them in (a frame lost on the line, a flagged reading: held).
+    measured: np.ndarray = field(init=False)
     available: int = 0                              # samples 0..available-1 are in
 
     def __post_init__(self):
         for name in ("flux_w_m2", "temp_c", "force_n", "received_s"):
             setattr(self, name, np.full(self.n, np.nan))
+        self.measured = np.zeros(self.n, dtype=bool)
 
 
 class SlavePadDrivers:
@@ -244,6 +250,7 @@ class SlavePadDrivers:
         s.available = 0
         for a in (s.flux_w_m2, s.temp_c, s.force_n, s.received_s):
             a[:] = np.nan
+        s.measured[:] = False
         self._begun = True
 
     def feed(self, upto_t_s: float) -> bool:
@@ -295,7 +302,8 @@ class SlavePadDrivers:
         if i >= s.n or i < s.available:
             return                                  # beyond the contact, or a repeat
         values = (r.flux_w_m2, r.pad_temp_c, r.force_n)
-        if not all(math.isfinite(v) for v in values):
+        measured = all(math.isfinite(v) for v in values)
+        if not measured:
             self.counters["stale_readings"] += 1
             if s.available == 0:
                 return                              # nothing to hold yet
@@ -311,6 +319,7 @@ class SlavePadDrivers:
             s.received_s[j] = math.nan            # never received
         s.flux_w_m2[i], s.temp_c[i], s.force_n[i] = values
         s.received_s[i] = time.perf_counter()
+        s.measured[i] = measured
         s.available = i + 1
 
     def _lost(self, why: str) -> bool:

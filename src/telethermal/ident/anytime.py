@@ -80,13 +80,16 @@ class Decision:
 
 
 def decide(model: Identifier, x: np.ndarray, gap_k: float,
-           force_n: np.ndarray | None = None) -> Decision:
+           force_n: np.ndarray | None = None, measured: np.ndarray | None = None) -> Decision:
     """Walk one contact's normalised samples ``x`` (n, C) window by window.
 
     ``force_n`` (n,): the pressing force; a window whose force lies outside
     the range the model was trained on commits nothing (a lighter or heavier
     touch changes the contact conductance, and so the flux), and a contact
-    that ends so is "unknown" ("force outside trained range").
+    that ends so is "unknown" ("force outside trained range"). ``measured``
+    (n,) bool: False where a sample was filled in by the driver (a frame
+    lost on the line): the pad-model check leaves it out
+    (:func:`pad_model_misfit`).
 
     Posteriors change only where a longer window (or, for a recurrent
     network, a new input step) becomes available, so this gives the same
@@ -101,20 +104,23 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     group = None
     best = 0.0
     early = EarlyNew(model.confirm_windows)
+    misfit = MisfitRun(model.confirm_windows)
     for i, p in enumerate(path):
         best = float(np.max(p))
         outside = False
         if forces is not None:
             n_w = int(round(model.windows_s_[i] * model.sample_rate_hz_)) + 1
             outside = not force_in_range(model, i, float(force_at(forces, n_w)[0]))
-        if not outside and pad_model_misfit(model, x[None, :n], i):
+        flagged = not outside and pad_model_misfit(model, x[None, :n], i, measured)
+        if misfit.step(flagged, i == len(path) - 1):
             return Decision(UNKNOWN, best, model.windows_s_[i], Reason.PAD_MODEL_MISFIT,
                             group.time_s if group else None,
                             revised_from=str(group.label) if group else None)
         step = rule.step(i, rule_posterior(model, p, x[None, :n], i),
-                         may_commit=model.may_commit(i), force_outside=outside,
+                         may_commit=model.may_commit(i) and not flagged, force_outside=outside,
                          unlike=lambda i=i: bool(model.outside_classes(x[None, :n], i)[0]))
-        new = early.step(model, x[None, :n], i, step is None and group is None and not outside)
+        new = early.step(model, x[None, :n], i,
+                         step is None and group is None and not outside and not flagged)
         if new is not None:
             t = model.windows_s_[i]
             return Decision(NEW_MATERIAL, new_material_confidence(new), t, Reason.NEW_MATERIAL,
@@ -127,11 +133,12 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
             first = group.time_s if group and group.label.holds(model.classes_[what]) \
                 else model.windows_s_[i]
             return _watched(model, x[:n], len(path), Decision(
-                model.classes_[what], best, model.windows_s_[i], Reason.CONFIDENT, first))
+                model.classes_[what], best, model.windows_s_[i], Reason.CONFIDENT, first),
+                measured)
         group = Decision(Label.of(model.classes_[j] for j in what), float(p[list(what)].sum()),
                          model.windows_s_[i], Reason.CONFIDENT_GROUP, model.windows_s_[i])
     if group is not None:
-        return _watched(model, x[:n], len(path), group)
+        return _watched(model, x[:n], len(path), group, measured)
     new = _new_material(model, x[None, :n], len(path) - 1) \
         if len(path) and not rule.force_outside else None
     if new is not None:
@@ -142,6 +149,26 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+class MisfitRun:
+    """The pad-model check (:func:`pad_model_misfit`) over one touch's
+    windows: a touch ends on it once its window's fit has been past the
+    limit at ``confirm`` windows in a row (``confirm_windows``, as a
+    commitment), or at its last window; a window past it and not yet
+    confirmed commits nothing (neither a class nor a new material). As the
+    rule's :class:`~telethermal.ident.rule.Runs`: each window is a separate
+    fit, and the first windows have few samples (0.04 s: 5, one degree of
+    freedom), where one window past the limit is not the evidence a pad off
+    its model gives (its residual grows with the window: docs/calibration.md)."""
+
+    def __init__(self, confirm: int):
+        self.need, self.run = max(1, int(confirm)), 0
+
+    def step(self, flagged: bool, last: bool) -> bool:
+        """Window past the limit (``flagged``): end the touch on it now?"""
+        self.run = self.run + 1 if flagged else 0
+        return flagged and (self.run >= self.need or last)
 
 
 class EarlyNew:
@@ -171,15 +198,23 @@ def rule_posterior(model, p: np.ndarray, x: np.ndarray, window_index: int) -> np
     return p if get is None else get(p, x, window_index)
 
 
-def pad_model_misfit(model, x: np.ndarray, window_index: int) -> bool:
+def pad_model_misfit(model, x: np.ndarray, window_index: int,
+                     measured: np.ndarray | None = None) -> bool:
     """True where ``model`` fits a pad model to the touch ``x`` (1, n, C)
     and its fit at the window leaves a residual past what the noise allows
-    (``EffusivityFit.misfit``): the touch is not named by that model."""
+    (``EffusivityFit.misfit``): the touch is not named by that model.
+    ``measured`` (n,) bool, None for all: the samples the sensor delivered;
+    the ones filled in (False) are not counted in the residual."""
     check = getattr(model, "misfit", None)
-    return bool(check is not None and check(x, window_index))
+    if check is None:
+        return False
+    if measured is None or bool(np.all(measured)):
+        return bool(check(x, window_index))
+    return bool(check(x, window_index, measured=np.asarray(measured, bool)))
 
 
-def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decision:
+def _watched(model, x: np.ndarray, n_windows: int, decision: Decision,
+             measured: np.ndarray | None = None) -> Decision:
     """A decision naming a class (or a pair), checked at the model's last
     window when the touch reaches it: an identifier that estimates the
     effusivity revises it to a new material where the estimate there lies
@@ -187,7 +222,7 @@ def _watched(model, x: np.ndarray, n_windows: int, decision: Decision) -> Decisi
     last = len(model.windows_s_) - 1
     if n_windows != last + 1:
         return decision
-    if pad_model_misfit(model, x[None], last):
+    if pad_model_misfit(model, x[None], last, measured):
         return Decision(UNKNOWN, decision.confidence, model.windows_s_[last],
                         Reason.PAD_MODEL_MISFIT, decision.time_first_s or decision.time_s,
                         revised_from=str(decision.label))
@@ -283,12 +318,15 @@ class StreamingIdentifier:
         self._normalise = normalise
         self._rows: list[np.ndarray] = []
         self._forces: list[float] = []
+        #: Per sample pushed: delivered by the sensor (False: filled in).
+        self._measured: list[bool] = []
         self._window = -1
         #: A class committed before the last window, by an identifier that
         #: estimates the effusivity: the touch is watched to the last window.
         self._watch = False
         self._rule = AnytimeRule(model.threshold, model.confirm_windows)
         self._early = EarlyNew(model.confirm_windows)
+        self._misfit_run = MisfitRun(model.confirm_windows)
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
                                  False)
@@ -312,9 +350,13 @@ class StreamingIdentifier:
         return (self.decided and not self._watch) or \
             self._window == len(self.model.windows_s_) - 1
 
-    def push(self, sample, force_n: float | None = None) -> Estimate | None:
+    def push(self, sample, force_n: float | None = None,
+             measured: bool = True) -> Estimate | None:
         """One sample (the model's channels); ``force_n``, the pressing force
-        with it, lets the decision refuse a touch unlike the trained ones."""
+        with it, lets the decision refuse a touch unlike the trained ones;
+        ``measured`` False: the sample was filled in by the driver (a frame
+        lost on the line, the previous sample held), not counted in the
+        pad-model check's residual (:func:`pad_model_misfit`)."""
         if self.decided and not self._watch:
             return None
         if force_n is not None:
@@ -326,6 +368,7 @@ class StreamingIdentifier:
                                       f"for channels {model.channels}, got {sample!r}")
         self._rows.append(np.array([self._normalise(row[i], c, self.gap_k, self.t_object_c)
                                     for i, c in enumerate(model.channels)]))
+        self._measured.append(bool(measured))
         n = len(self._rows)
         index = model.window_index(n)
         if index is None or index == self._window:
@@ -346,15 +389,17 @@ class StreamingIdentifier:
         held = self.estimate if self.estimate.reason == Reason.CONFIDENT_GROUP else None
         outside = bool(self._forces) and not force_in_range(
             model, index, float(np.mean(self._forces[-FORCE_SAMPLES:])))
-        if not outside and pad_model_misfit(model, x, index):
+        flagged = not outside and pad_model_misfit(model, x, index, self._measured)
+        if self._misfit_run.step(flagged, last):
             return self._misfit(p, index)
         step = self._rule.step(index, rule_posterior(model, p, x, index),
-                               may_commit=model.may_commit(index),
+                               may_commit=model.may_commit(index) and not flagged,
                                force_outside=outside,
                                unlike=lambda: bool(model.outside_classes(x, index)[0]))
         kind, what = step if step is not None else (None, None)
         reading = None
-        early = self._early.step(model, x, index, step is None and held is None and not outside)
+        early = self._early.step(model, x, index,
+                                 step is None and held is None and not outside and not flagged)
         if early is not None:
             est = Estimate(t_s, tuple(p), NEW_MATERIAL, new_material_confidence(early), True,
                            Reason.NEW_MATERIAL)
@@ -405,7 +450,7 @@ class StreamingIdentifier:
         decision stands (None: nothing new). ``reading``: the window's, when
         the caller has it already."""
         self._watch = False
-        if pad_model_misfit(self.model, x, index):
+        if pad_model_misfit(self.model, x, index, self._measured):
             return self._misfit(p, index)
         if reading is None:
             reading = reading_of(self.model, x, index)

@@ -474,11 +474,11 @@ class EffusivityEstimator:
             self, theta, len(x)) if floor_var is None else floor_var)
         return float(math.exp(theta[0])), lo, hi, sd
 
-    def _goodness(self, theta, x, s):
-        """(chi-square per degree of freedom, fits): the residual after the
-        amplitude's posterior mean, against the noise (4 parameters fitted)."""
+    def _goodness(self, theta, x, s, keep=slice(None)):
+        """(chi-square per degree of freedom, fits): the residual after the amplitude's
+        posterior mean, against the noise (4 fitted), of the samples ``keep`` (the measured)."""
         a0, sa = self.amplitude
-        g = self.family.curve(theta, np.arange(len(x)) / self.sample_rate_hz)
+        g, x = self.family.curve(theta, np.arange(len(x)) / self.sample_rate_hz)[keep], x[keep]
         amp = (a0 / sa ** 2 + g @ x / s) / (1 / sa ** 2 + g @ g / s) if sa > 0 else a0
         stat = float(np.sum((x - amp * g) ** 2) / s)
         dof = max(len(x) - 4, 1)

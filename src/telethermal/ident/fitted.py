@@ -359,33 +359,45 @@ class EffusivityFit(Identifier):
                                         floor_var)
         return theta, e, lo, hi, sd, floor_var
 
-    def misfit(self, x, window_index: int) -> bool:
+    def misfit(self, x, window_index: int, measured=None) -> bool:
         """The window's fit of the touch ``x`` (1, n, 1) leaves a residual
         chi-square per degree of freedom past
         :data:`~telethermal.ident.calibration.CHI2_MAX` (:meth:`misfit_chi2`'s
-        first): the pad is not the model the estimate fits."""
+        first): the pad is not the model the estimate fits. ``measured``:
+        as :meth:`misfit_chi2`."""
         from telethermal.ident.calibration import CHI2_MAX
-        chi2 = self.misfit_chi2(x, window_index)
+        chi2 = self.misfit_chi2(x, window_index, measured)
         return chi2 is not None and chi2[0] > CHI2_MAX
 
-    def misfit_chi2(self, x, window_index: int) -> tuple[float, float] | None:
+    def misfit_chi2(self, x, window_index: int, measured=None) -> tuple[float, float] | None:
         """The residual of the window's fit of the touch ``x`` (1, n, 1), as
-        chi-square per degree of freedom (n - 4), against two denominators,
-        one variance for every sample of the window: ``(chi2, chi2_noise)``.
+        chi-square per degree of freedom (measured samples - 4), against two
+        denominators, one variance for every sample of the window:
+        ``(chi2, chi2_noise)``.
         ``chi2``, what :meth:`misfit` tests: the flux noise over the touch's
         gap plus the curves' allowance (the scene's ``tolerance_rel`` times
         the window's rms flux over gap, squared), the estimator's own
         variance; the allowance dominates, so a pad as modelled reads far
         under 1. ``chi2_noise``: the sensor's noise alone (the same fit and
-        residual), for comparison with the noise. None under the window's
-        minimum of samples (docs/calibration.md)."""
+        residual), for comparison with the noise. ``measured`` (n,) bool,
+        from the onset: False where the sample was filled in (a frame lost
+        on the line, held by the driver): left out of the residual and its
+        degrees of freedom, as out of the amplitude and the rms (the fit
+        itself is the slave's, every sample). None under the window's
+        minimum of measured samples (docs/calibration.md)."""
         row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
-        if len(row) < MIN_SAMPLES:
+        keep = None if measured is None else np.asarray(measured, bool)[:len(row)]
+        if keep is not None and len(keep) < len(row):
+            raise IdentificationError(f"measured flags {len(keep)} samples of a window of "
+                                      f"{len(row)}: one flag per sample from the onset")
+        if len(row) < MIN_SAMPLES or (keep is not None and keep.sum() < MIN_SAMPLES):
             return None
         est, gap_k = self.estimator()
         theta = np.asarray(self._theta(row, len(row)), float)
-        chi2, _ = est._goodness(theta, row, est._noise_var(row, gap_k))
-        chi2_noise, _ = est._goodness(theta, row, est._noise_var(row, gap_k, allowance=0.0))
+        keep = slice(None) if keep is None else keep
+        chi2, _ = est._goodness(theta, row, est._noise_var(row[keep], gap_k), keep)
+        chi2_noise, _ = est._goodness(theta, row, est._noise_var(row[keep], gap_k, allowance=0.0),
+                                      keep)
         return chi2, chi2_noise
 
     def outside_classes(self, x, window_index):

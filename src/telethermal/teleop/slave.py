@@ -245,7 +245,10 @@ class Slave:
         return np.array([c[i] for c in self._sample_channels])
 
     def _push(self, j: int):
-        est = self.stream.push(self._sample(j), float(self.force_n[j]))
+        # On devices, a sample the driver filled in (a lost frame held) is
+        # pushed as such: the pad-model check does not count it as measured.
+        measured = self._contact is None or bool(self._contact.measured[j])
+        est = self.stream.push(self._sample(j), float(self.force_n[j]), measured)
         self.pushed_s[j] = time.perf_counter()
         return est
 
