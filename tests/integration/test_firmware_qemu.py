@@ -75,6 +75,19 @@ def test_the_arm_build_is_warning_free_and_small(images):
         assert 0 < size["ram"] <= 128 * 1024 // 10, (name, size)
 
 
+def test_check_devices_qemu_builds_and_reports_the_same_sizes(images):
+    """``telethermal check --devices qemu`` on a machine that has it all:
+    no problem, and each image's flash and RAM as the build's own."""
+    from telethermal.services.preflight import qemu_findings
+
+    findings = qemu_findings()
+    assert all(f.ok for f in findings), [f.text() for f in findings]
+    for name, elf in images.items():
+        size = qemu.image_size(elf)
+        assert f"firmware image {name}: flash {size['flash']:,} B, RAM {size['ram']:,} B" in \
+            [f.what for f in findings]
+
+
 def test_selftest_on_the_core(codec):
     assert run_codec(codec, "selftest", "").strip() == "selftest: 27 checks, 0 failed"
 

@@ -164,6 +164,31 @@ def test_a_disk_that_fills_up_stops_the_recording_not_the_session(models, tmp_pa
     assert len(periods(read_recording(path))) > 0                    # up to the full disk
 
 
+def test_a_message_that_cannot_be_encoded_is_dropped_alone(tmp_path, caplog):
+    """One message msgpack cannot encode (an object it does not know, an
+    integer past 64 bits, a time that is not a number) mid-recording: that
+    message is dropped and counted, every other one written, the recording
+    not stopped, and its reader says what is missing (never identical)."""
+    import mcap.reader
+
+    path = tmp_path / "r.mcap"
+    r = Recorder(path, "test")
+    bad = [{"k": object()}, {"k": 2 ** 70}, {"k": 1}]
+    for i in range(10):
+        r.log("/master/period", i * 0.01, {"k": i})
+        if i in (3, 5, 7):
+            r.log("/master/period", None if i == 7 else i * 0.01, bad[(i - 3) // 2])
+    closed = r.close()
+    assert closed["error"] is None
+    assert closed["dropped_unpackable"] == 3 and closed["written"] == 10
+    assert "not recorded" in caplog.text and "the recording goes on" in caplog.text
+    rec = read_recording(path)
+    assert rec.messages("/master/period") == [{"k": i} for i in range(10)]
+    assert rec.damaged == "3 message(s) the writer could not encode are missing"
+    with open(path, "rb") as f:                        # the mcap library reads it whole
+        assert sum(1 for _ in mcap.reader.make_reader(f).iter_messages()) == 10
+
+
 def test_a_disk_full_at_the_start_refuses_the_recording_and_leaves_nothing(tmp_path,
                                                                          monkeypatch):
     # The models attached at the start do not fit: a clear error, the file

@@ -15,8 +15,12 @@ def add_parsers(sub) -> None:
     """admin, check, models."""
     _admin_parser(sub)
     p = sub.add_parser("check", help="preflight: a service's config, keys, allowed folder, "
-                                     "model files and the peer's reachability")
-    p.add_argument("--config", required=True, help="a slave or master config file (TOML)")
+                                     "model files and the peer's reachability; or what the "
+                                     "processor in the loop needs (--devices qemu)")
+    p.add_argument("--config", help="a slave or master config file (TOML)")
+    p.add_argument("--devices", choices=("qemu",),
+                   help="qemu: QEMU, the Arm toolchain and picolibc (each missing one with "
+                        "its apt package), and the firmware's STM32F405 images built")
     p.add_argument("--timeout-s", type=float, default=3.0,
                    help="how long the master waits for the slave's handshake")
     p.set_defaults(func=cmd_check)
@@ -174,8 +178,16 @@ _ADMIN = {"status": _status, "place": _place, "touch": _touch, "lift": _lift,
 def cmd_check(args) -> int:
     from telethermal.services.preflight import run_checks
 
+    from telethermal.services.preflight import qemu_findings
+
+    if args.config is None and args.devices is None:
+        raise TelethermalError("check: give --config FILE (a service's set-up) and/or "
+                               "--devices qemu (the processor in the loop)")
+    findings = run_checks(args.config, timeout_s=args.timeout_s) if args.config else []
+    if args.devices == "qemu":
+        findings += qemu_findings()
     problems = 0
-    for line in run_checks(args.config, timeout_s=args.timeout_s):
+    for line in findings:
         print(line.text())
         problems += not line.ok
     print(f"{problems} problem{'s' if problems != 1 else ''}" if problems else

@@ -33,7 +33,9 @@ Layout of a recording (one file per host and run):
 
 :class:`Recorder` never blocks the caller: :meth:`Recorder.log` puts the
 message on a bounded queue and a writer thread encodes and writes it; a full
-queue drops the message and counts it. A write error (the disk is full)
+queue drops the message and counts it, and so does a message msgpack cannot
+encode (that message alone; the file says how many when it closes). A
+write error (the disk is full)
 stops the recording with a clear error (:attr:`Recorder.error`) and every
 later message is dropped and counted; the session goes on.
 """
@@ -117,7 +119,7 @@ class Recorder:
         self.path = Path(path)
         self.role = role
         self.counters = {"queued": 0, "written": 0, "dropped_queue_full": 0,
-                         "dropped_after_error": 0}
+                         "dropped_after_error": 0, "dropped_unpackable": 0}
         self.error: str | None = None
         self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self._channels: dict[str, int] = {}
@@ -183,6 +185,9 @@ class Recorder:
             self._thread.join()
             if self.error is None:
                 try:
+                    if self.counters["dropped_unpackable"]:
+                        self._writer.add_metadata("dropped", {
+                            "unpackable": str(self.counters["dropped_unpackable"])})
                     self._writer.finish()
                 except OSError as exc:
                     self._fail(exc)
@@ -257,13 +262,28 @@ class Recorder:
             return False
         try:
             for topic, t_s, message in entries:
-                t_ns = max(0, int(t_s * 1e9))
-                self._writer.add_message(self._channel(topic), t_ns,
-                                         msgpack.packb(message, use_bin_type=True), t_ns)
+                try:
+                    data = msgpack.packb(message, use_bin_type=True)
+                    t_ns = max(0, int(t_s * 1e9))
+                except (ValueError, TypeError, OverflowError) as exc:
+                    self._unpackable(topic, exc)  # this message only: the rest goes on
+                    continue
+                self._writer.add_message(self._channel(topic), t_ns, data, t_ns)
                 self.counters["written"] += 1
         except (OSError, ValueError, TypeError, OverflowError) as exc:
             self._fail(exc)
         return bool(entries)
+
+    def _unpackable(self, topic: str, exc: Exception) -> None:
+        """One message msgpack cannot encode (an object it does not know, an
+        integer past 64 bits) or whose time is not a number: dropped and
+        counted, logged at the first and every 1000th; the file records the
+        count when it closes (metadata ``dropped``), so a reader says it."""
+        self.counters["dropped_unpackable"] += 1
+        n = self.counters["dropped_unpackable"]
+        if n == 1 or n % 1000 == 0:
+            log.warning("recording to %s: message %d on %s not recorded (%s: %s); the "
+                        "recording goes on", self.path, n, topic, type(exc).__name__, exc)
 
     def _flush(self) -> None:
         if self.error is None:
@@ -296,6 +316,9 @@ class Recording:
             parts.append(f"{d.skipped_bytes} unreadable bytes skipped")
         if self.bad_messages:
             parts.append(f"{self.bad_messages} message(s) did not unpack")
+        unpackable = self.metadata.get("dropped", {}).get("unpackable")
+        if unpackable:
+            parts.append(f"{unpackable} message(s) the writer could not encode are missing")
         return "; ".join(parts) or None
 
     @property

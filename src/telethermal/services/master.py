@@ -453,7 +453,7 @@ class MasterService:
                 closed = self.recorder.close()
                 log.info("recording %s closed: %d messages, %d dropped%s", closed["path"],
                          closed["written"], closed["dropped_queue_full"] +
-                         closed["dropped_after_error"],
+                         closed["dropped_after_error"] + closed["dropped_unpackable"],
                          f"; {closed['error']}" if closed["error"] else "")
 
 

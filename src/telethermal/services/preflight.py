@@ -264,3 +264,34 @@ def _handshake(t, timeout_s: float) -> Finding:
     d = diagnose(watch, time.monotonic() - start,
                  key_file_fingerprint(Path(t.keys_dir) / f"{t.client_key}.key"), t.keys_dir)
     return Finding(False, d["problem"], d["fix"])
+
+
+def qemu_findings() -> list[Finding]:
+    """``telethermal check --devices qemu``: what the processor in the loop
+    (``session --devices qemu``) needs, each missing part with the Debian
+    package that provides it, then the firmware's STM32F405 images built
+    (into a temporary folder) and their flash and RAM sizes."""
+    import tempfile
+
+    from telethermal.devices import qemu
+    from telethermal.devices.board import DeviceError
+
+    gone = qemu.missing()
+    out = [Finding(False, f"{what}: not installed", f"apt-get install {package}")
+           for what, package in gone]
+    if gone:
+        return out
+    out.append(Finding(True, f"{qemu.QEMU}, arm-none-eabi-gcc and picolibc installed"))
+    if not (qemu.FIRMWARE / "Makefile").is_file():
+        return out + [Finding(False, f"{qemu.FIRMWARE}: no firmware sources (the package is "
+                                     "installed without them)",
+                              "run from a source checkout of telethermal (pip install -e .)")]
+    with tempfile.TemporaryDirectory(prefix="telethermal-check-") as build:
+        try:
+            images = qemu.build_images(build)
+            sizes = {name: qemu.image_size(elf) for name, elf in images.items()}
+        except (DeviceError, OSError, ValueError) as exc:
+            return out + [Finding(False, f"make -C firmware TARGET=stm32f405: {exc}",
+                                  "see firmware/README.md ('Build')")]
+    return out + [Finding(True, f"firmware image {name}: flash {s['flash']:,} B, RAM "
+                                f"{s['ram']:,} B") for name, s in sizes.items()]

@@ -1,0 +1,49 @@
+"""``telethermal check --devices qemu``: what the processor in the loop
+needs, each missing part named with its Debian package, and the firmware
+built (the build itself is tested in tests/integration/test_firmware_qemu.py)."""
+
+import pytest
+
+from telethermal.cli import main
+from telethermal.devices import qemu
+from telethermal.services.preflight import qemu_findings
+
+
+def test_each_missing_part_is_named_with_its_apt_package(monkeypatch, capsys):
+    monkeypatch.setattr(qemu, "missing", lambda: [
+        ("qemu-system-arm", "qemu-system-arm"), ("arm-none-eabi-gcc", "gcc-arm-none-eabi")])
+    findings = qemu_findings()
+    assert [f.ok for f in findings] == [False, False]
+    assert findings[0].fix == "apt-get install qemu-system-arm"
+    assert findings[1].fix == "apt-get install gcc-arm-none-eabi"
+    assert main(["check", "--devices", "qemu"]) == 1
+    out = capsys.readouterr().out
+    assert "PROBLEM  arm-none-eabi-gcc: not installed" in out and "2 problems" in out
+
+
+def test_firmware_sources_missing_are_named(monkeypatch, tmp_path):
+    monkeypatch.setattr(qemu, "missing", lambda: [])
+    monkeypatch.setattr(qemu, "FIRMWARE", tmp_path / "firmware")
+    findings = qemu_findings()
+    assert findings[0].ok and not findings[-1].ok
+    assert "no firmware sources" in findings[-1].what and "source checkout" in findings[-1].fix
+
+
+def test_a_failing_build_is_a_problem_with_the_compilers_words(monkeypatch, tmp_path):
+    from telethermal.devices.board import DeviceError
+
+    (tmp_path / "Makefile").write_text("all:\n\tfalse\n")
+    monkeypatch.setattr(qemu, "missing", lambda: [])
+    monkeypatch.setattr(qemu, "FIRMWARE", tmp_path)
+
+    def fail(build):
+        raise DeviceError("the STM32F405 build failed:\nhal.c:1: error: nope")
+    monkeypatch.setattr(qemu, "build_images", fail)
+    findings = qemu_findings()
+    assert not findings[-1].ok and "hal.c:1: error: nope" in findings[-1].what
+
+
+def test_check_without_a_config_or_devices_says_what_to_give(capsys):
+    assert main(["check"]) == 2
+    err = capsys.readouterr().err
+    assert "--config FILE" in err and "--devices qemu" in err
