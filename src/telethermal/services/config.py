@@ -45,6 +45,9 @@ class SlaveConfig:
     board_url: str = ""             # pyserial URL of the slave's sensor board (hardware)
     can_bus: str = ""               # interface:channel of its active pad's driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
+    #: devices = "qemu": the firmware's build folder (make's, incremental);
+    #: empty: built in a temporary folder at start.
+    firmware_build: str = ""
     #: The sensing pad's model calibration (``telethermal calibrate pad``,
     #: docs/calibration.md); empty: the scene's design values.
     pad_calibration: str = ""
@@ -81,6 +84,7 @@ class MasterConfig:
     board_url: str = ""             # pyserial URL of the sensor board (hardware)
     can_bus: str = ""               # interface:channel of the Peltier driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
+    firmware_build: str = ""        # devices = "qemu": as the slave's
     #: The finger's temperature before contact (hardware: no IR channel yet).
     finger_temp_c: float = 33.0
     #: Folder to record every touch to (one MCAP file per run); empty: no recording.
@@ -118,7 +122,8 @@ def load_config(path: str | Path, role: str):
         value = getattr(transport, key)
         if value and not Path(value).is_absolute():
             transport = replace(transport, **{key: str(base / value)})
-    for key in ("identifier", "generator", "record_dir", "calibration", "pad_calibration"):
+    for key in ("identifier", "generator", "record_dir", "calibration", "pad_calibration",
+                "firmware_build"):
         value = getattr(config, key, "")
         if value and not Path(value).is_absolute():
             setattr(config, key, str(base / value))
