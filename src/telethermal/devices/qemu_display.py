@@ -18,7 +18,7 @@ simulated clock:
 The cores keep their own clocks (the watchdog, the heartbeat, the
 frames' ``t_us``); the loop waits for each of their answers, so a period
 takes as long as the cores need to hear and answer it (the emulated UART
-takes a byte in about 0.4 ms of the host's time).
+takes a byte in about 0.1 ms of the host's time).
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ class QemuDisplay:
         values.append(COLD_JUNCTION_C)
         values.append(s.force_n if status & 4 else 0.0)
         # Nine significant digits: every float32 exactly, in a short line
-        # (the emulated UART takes about 0.4 ms a byte).
+        # (the emulated UART takes about 0.1 ms a byte).
         return ("s " + " ".join(f"{v:.9g}" for v in values) + f" {status}\n").encode()
 
     def _measure_line(self) -> bytes:
