@@ -26,7 +26,8 @@ def test_demo_on_qemu_without_the_tools_fails_before_anything_is_computed(
     out = " ".join(capsys.readouterr().err.split())      # the console's lines joined
     assert code == 2 and not built
     assert "telethermal demo --devices qemu needs" in out
-    assert "apt-get install qemu-system-arm" in out and "apt-get install picolibc-arm-none-eabi" in out
+    assert "apt-get install qemu-system-arm" in out
+    assert "apt-get install picolibc-arm-none-eabi" in out
     assert not (tmp_path / "demo" / "databases").exists()
 
 

@@ -57,8 +57,15 @@ class _BoardFeed:
         self.core, self.plant, self.calibration = core, plant, calibration
         self.path = core.link_path
         self.noise_uv = 0.0             # the core adds none: the instruments' noise only
-        self.counters = {"samples": 0}
+        self.counters = {"samples": 0, "frames_missed": 0}
         self.cj_c = room_c              # the cold junction at room temperature, as emulated
+        self.pipelined = False
+        self._ends = 0                  # frame delimiters the core has sent
+        core.tap = self._tap
+
+    def _tap(self, uart: int, data: bytes) -> None:
+        if uart == 0:
+            self._ends += data.count(0)
 
     def line(self, flux_w_m2, pad_temp_c, force_n, ir_object_c, ir_ambient_c, pad_drive,
              ir_ok) -> bytes:
@@ -78,13 +85,20 @@ class _BoardFeed:
              ir_object_c: float = math.nan, ir_ambient_c: float = math.nan,
              pad_drive: float = 0.0, ir_ok: bool = True) -> bool:
         """One sample on the plant link (the core stamps it with its own
-        clock: ``t_s`` is not sent). Its frame is not awaited here: the
-        drivers wait for it (``wait_s``), so a contact's samples go to the
-        core one after another while it frames the earlier ones."""
+        clock: ``t_s`` is not sent), its frame awaited unless ``pipelined``
+        (a contact's samples go to the core one after another while it
+        frames the earlier ones; the drivers wait for them, ``wait_s``)."""
         del t_s
+        before = self._ends
         self.plant.write(self.line(flux_w_m2, pad_temp_c, force_n, ir_object_c,
                                    ir_ambient_c, pad_drive, ir_ok))
         self.counters["samples"] += 1
+        deadline = time.monotonic() + ANSWER_WAIT_S
+        while not self.pipelined and self._ends == before and time.monotonic() < deadline:
+            time.sleep(0.0005)
+        if not self.pipelined and self._ends == before:
+            self.counters["frames_missed"] += 1
+            return False
         return True
 
     def disappear(self) -> None:
@@ -128,7 +142,7 @@ class _PadFeed:
         self.plant.write(f"m {cc[0]} {cc[1]} {ma} {drive} {int(ok)}\n".encode())
 
     def close(self) -> None:
-        pass
+        self.core.tap = None
 
 
 class QemuSlavePad(EmulatedSlavePad):
@@ -174,6 +188,16 @@ class QemuSlavePad(EmulatedSlavePad):
         # The core writes the H-bridge's line before it answers, but on the
         # other UART: a moment's listening (host time) for its bytes.
         self.pad_emulator.read_sets(SET_LINE_WAIT_S)
+
+    def feed(self, upto_t_s: float) -> bool:
+        """A contact's samples pipelined through the board's core; every
+        other period (the pad's loop, the object's reading) waits for its
+        frame, so that each period reads its own sample."""
+        self.board_emulator.pipelined = True
+        try:
+            return super().feed(upto_t_s)
+        finally:
+            self.board_emulator.pipelined = False
 
     def all_counters(self) -> dict:
         return {**super().all_counters(), **self.counters_,
