@@ -40,7 +40,9 @@ class SlaveConfig:
     #: pty and the active pad's driver on a virtual CAN bus, read and
     #: commanded through the real drivers; a Peltier pad only) or "hardware"
     #: (the board at ``board_url`` and the pad's driver on ``can_bus``; no
-    #: simulator: ``place`` only names the object for the reports).
+    #: simulator: ``place`` only names the object for the reports); "qemu":
+    #: as "emulated" with the firmware images on emulated STM32F405s as the
+    #: boards (firmware/README.md, "Processor in the loop").
     devices: str = "sim"
     board_url: str = ""             # pyserial URL of the slave's sensor board (hardware)
     can_bus: str = ""               # interface:channel of its active pad's driver (hardware)
@@ -79,7 +81,8 @@ class MasterConfig:
     #: Peltier driver on a CAN bus, read through the real drivers), or
     #: "hardware" (the sensor board at ``board_url`` and the Peltier driver on
     #: ``can_bus``: the display loop runs all the time and the operator's
-    #: force starts each touch).
+    #: force starts each touch); "qemu": as "emulated" with the firmware
+    #: images on emulated STM32F405s as the boards, restarted each touch.
     devices: str = "sim"
     board_url: str = ""             # pyserial URL of the sensor board (hardware)
     can_bus: str = ""               # interface:channel of the Peltier driver (hardware)
