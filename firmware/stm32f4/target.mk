@@ -12,7 +12,7 @@ OUT := $(BUILD)/stm32f405
 PORT := stm32f4/startup.c stm32f4/board.c
 PORT_H := $(wildcard stm32f4/*.h)
 CAN_SRC := $(if $(filter bxcan,$(CAN)),stm32f4/can_bxcan.c,stm32f4/can_slcan.c)
-IMAGES := tt_board tt_peltier tt_pad tt_codec
+IMAGES := tt_board tt_board2 tt_peltier tt_pad tt_codec
 
 all: $(foreach i,$(IMAGES),$(OUT)/$(i).elf $(OUT)/$(i).bin)
 	$(CROSS)size $(foreach i,$(IMAGES),$(OUT)/$(i).elf)
@@ -21,6 +21,12 @@ $(OUT)/tt_board.elf: $(SRC) $(PORT) stm32f4/main_board.c stm32f4/plant.c $(HEADE
 	mkdir -p $(OUT)
 	$(CROSS)gcc $(ARM_CFLAGS) $(ARM_LDFLAGS) -o $@ $(SRC) $(PORT) stm32f4/main_board.c \
 		stm32f4/plant.c
+
+# The slave's board: frame version 2 (the IR thermometer, the pad's drive).
+$(OUT)/tt_board2.elf: $(SRC) $(PORT) stm32f4/main_board.c stm32f4/plant.c $(HEADERS) $(PORT_H)
+	mkdir -p $(OUT)
+	$(CROSS)gcc $(ARM_CFLAGS) -DTT_BOARD_FRAME_VERSION=2 $(ARM_LDFLAGS) -o $@ $(SRC) $(PORT) \
+		stm32f4/main_board.c stm32f4/plant.c
 
 $(OUT)/tt_peltier.elf: $(SRC) $(PORT) stm32f4/main_peltier.c stm32f4/plant.c $(CAN_SRC) \
 		$(HEADERS) $(PORT_H)

@@ -201,7 +201,7 @@ def test_the_slave_config_names_the_devices_it_takes():
                        can_bus="socketcan:can0").can_bus == "socketcan:can0"
     with pytest.raises(ConfigError, match="needs board_url"):
         SlaveConfig(devices="hardware")
-    with pytest.raises(ConfigError, match="'sim', 'emulated' or 'hardware'"):
+    with pytest.raises(ConfigError, match="'sim', 'emulated', 'hardware' or 'qemu'"):
         SlaveConfig(devices="simulator")
 
 

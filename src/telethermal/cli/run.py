@@ -201,9 +201,11 @@ def add_demo(sub) -> None:
                    help="each touch's contact time, seconds (default 5)")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the databases and the touches (default 0)")
-    p.add_argument("--devices", choices=("sim", "emulated"), default="sim",
+    p.add_argument("--devices", choices=("sim", "emulated", "qemu"), default="sim",
                    help="emulated: master and slave each on emulated boards (ptys) and CAN "
-                        "drivers (virtual buses), read through the drivers")
+                        "drivers (virtual buses), read through the drivers; qemu: the boards "
+                        "are the reference firmware on emulated STM32F405s (qemu-system-arm, "
+                        "processor in the loop)")
     p.add_argument("--record", metavar="DIR", help="both services record every touch here "
                                                    "(one MCAP file per host; see replay)")
     p.add_argument("--method", choices=("effusivity-lda", "effusivity-fit"),

@@ -210,8 +210,9 @@ def _by_name(module: str, name: str) -> Callable[..., Display]:
     """A display class reached by name, as python-can's ``BACKENDS`` reach
     an interface: imported when chosen (``qemu_display`` builds on
     :class:`HardwareDisplay` here, so this module does not import it)."""
-    def factory(touch, clock, realtime, seed) -> Display:
-        return getattr(importlib.import_module(module), name)(touch, clock, realtime, seed)
+    def factory(touch, clock, realtime, seed, **options) -> Display:
+        return getattr(importlib.import_module(module), name)(touch, clock, realtime, seed,
+                                                              **options)
     return factory
 
 
@@ -226,10 +227,11 @@ DISPLAYS: dict[DeviceKind, Callable[..., Display]] = {
 
 
 def open_display(kind: str, touch, clock=time.monotonic, realtime: bool = False,
-                 seed: int = 0) -> Display:
-    """The display devices of ``kind`` around a simulated ``touch``."""
+                 seed: int = 0, **options) -> Display:
+    """The display devices of ``kind`` around a simulated ``touch``;
+    ``options`` go to its class (``boards``: a service's QEMU cores)."""
     factory = DISPLAYS.get(parse_device_kind(kind))
     if factory is None:
         raise ValueError(f"devices = {kind!r} has no simulated touch (kinds with one: "
                          f"{', '.join(DISPLAYS)}); the master service opens the hardware")
-    return factory(touch, clock, realtime, seed)
+    return factory(touch, clock, realtime, seed, **options)

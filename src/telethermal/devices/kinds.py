@@ -18,8 +18,8 @@ class DeviceKind(StrEnum):
     QEMU = "qemu"
 
 
-#: The kinds the services run (``device_kind``); QEMU runs in-process only.
-SERVICE_KINDS = (DeviceKind.SIM, DeviceKind.EMULATED, DeviceKind.HARDWARE)
+#: The kinds the services run (``device_kind``).
+SERVICE_KINDS = (DeviceKind.SIM, DeviceKind.EMULATED, DeviceKind.HARDWARE, DeviceKind.QEMU)
 
 
 def parse_device_kind(value: str, kinds: tuple = tuple(DeviceKind)) -> DeviceKind:
@@ -35,10 +35,6 @@ def device_kind(value: str, board_url: str, can_bus: str,
                 example_tty: str = "/dev/ttyUSB0") -> DeviceKind:
     """A service config's kind: one of :data:`SERVICE_KINDS`, and hardware
     with both its ports."""
-    if value == DeviceKind.QEMU.value:
-        raise ValueError("devices = 'qemu' runs the master's display in the in-process "
-                         "session (telethermal session --devices qemu); the services do not "
-                         "run it yet (the slave's pad has no QEMU bridge): use 'emulated'")
     kind = parse_device_kind(value, SERVICE_KINDS)
     if kind == DeviceKind.HARDWARE and not (board_url and can_bus):
         raise ValueError(f"devices = 'hardware' needs board_url (e.g. {example_tty}) and "

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from dataclasses import dataclass
 from importlib import resources
@@ -89,8 +90,15 @@ def parse_bus(spec: str) -> tuple[str, str]:
 
 def open_bus(spec: str) -> can.BusABC:
     interface, channel = parse_bus(spec)
+    options = {}
+    if interface == "slcan" and os.path.realpath(channel.split("@")[0]).startswith("/dev/pts/"):
+        # python-can waits 2 s after opening for an adapter that resets when
+        # its port opens (an Arduino's DTR); a pseudo-terminal (an emulated
+        # core's UART) is none.
+        options["sleep_after_open"] = 0.0
     try:
-        return can.Bus(interface=interface, channel=channel, receive_own_messages=False)
+        return can.Bus(interface=interface, channel=channel, receive_own_messages=False,
+                       **options)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise DeviceError(f"CAN bus {spec!r}: {exc}") from exc
 

@@ -22,12 +22,16 @@ package that provides it.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import re
 import selectors
 import shutil
+import signal
 import socket
 import subprocess
+import tempfile
+import termios
 import threading
 import time
 import tty
@@ -44,7 +48,9 @@ MACHINE = "netduinoplus2"
 #: pipeline, one instruction is one step of its clock).
 ICOUNT_SHIFT = 3
 FIRMWARE = Path(__file__).resolve().parents[3] / "firmware"
-IMAGES = ("tt_board", "tt_peltier", "tt_pad", "tt_codec")
+#: The images: the display's sensor board (frame version 1), the slave's
+#: (version 2), the Peltier driver, the active pad's driver, the codecs.
+IMAGES = ("tt_board", "tt_board2", "tt_peltier", "tt_pad", "tt_codec")
 
 
 def missing() -> list[tuple[str, str]]:
@@ -64,6 +70,22 @@ def missing() -> list[tuple[str, str]]:
     if shutil.which("make") is None:
         out.append(("make", "make"))
     return out
+
+
+def require(purpose: str) -> None:
+    """DeviceError naming what ``purpose`` lacks and its apt package, if
+    anything is missing."""
+    gone = missing()
+    if gone:
+        raise DeviceError(f"{purpose} needs " + ", ".join(
+            f"{what} (apt-get install {package})" for what, package in gone))
+
+
+def _die_with_parent() -> None:
+    """In QEMU's process before it starts: killed when the thread that
+    started it ends (Linux ``PR_SET_PDEATHSIG``), so no core outlives a
+    service killed before its clean-up could run."""
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)     # PR_SET_PDEATHSIG
 
 
 def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, Path]:
@@ -126,13 +148,14 @@ class QemuCore:
         serials = []
         for name, port in zip(("link", "plant", "mon"), ports):
             serials += ["-chardev", f"socket,id={name},host=127.0.0.1,port={port},"
-                        f"server=on,wait={'on' if name != 'mon' else 'off'}"]
+                        f"server=on,nodelay=on,wait={'on' if name != 'mon' else 'off'}"]
         self.proc = subprocess.Popen(
             [qemu, "-M", MACHINE, "-nodefaults", "-display", "none",
              "-icount", f"shift={icount_shift},align=off,sleep=on", "-kernel", str(self.image),
              *serials, "-serial", "chardev:link", "-serial", "chardev:plant",
              "-mon", "chardev=mon,mode=readline"],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            preexec_fn=_die_with_parent)
         self._bridges: list[_PtyBridge] = []
         self._monitor: socket.socket | None = None
         self._stop = threading.Event()
@@ -167,7 +190,9 @@ class QemuCore:
                 raise DeviceError(f"{QEMU} exited with {self.proc.returncode}: "
                                   f"{self.proc.stderr.read().decode(errors='replace')}")
             try:
-                return socket.create_connection(("127.0.0.1", port), timeout=1.0)
+                sock = socket.create_connection(("127.0.0.1", port), timeout=1.0)
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                return sock
             except OSError:
                 if time.monotonic() > deadline:
                     raise DeviceError(f"{QEMU} did not open its UART socket on "
@@ -233,6 +258,18 @@ class QemuCore:
         """The firmware restarts from its reset vector (RAM is not cleared
         by QEMU's reset; the startup code sets up .data and .bss)."""
         self._monitor.sendall(b"system_reset\n")
+
+    def restart(self, drain_s: float = 0.02) -> None:
+        """The firmware from its reset vector with nothing of its last run
+        left on the ptys: the core paused, what it had sent drained (a guard
+        of ``drain_s`` of the host's time) and discarded, then reset and
+        resumed; wait for its first output as after start."""
+        self._monitor.sendall(b"stop\n")
+        self.read_u32(0x08000000)           # the monitor has paused the core
+        time.sleep(drain_s)
+        for bridge in self._bridges:
+            termios.tcflush(bridge.slave, termios.TCIFLUSH)
+        self._monitor.sendall(b"system_reset\ncont\n")
 
     def close(self) -> None:
         self._stop.set()
@@ -326,3 +363,50 @@ class PtyLine:
         if self.fd is not None:
             os.close(self.fd)
             self.fd = None
+
+
+class QemuBoards:
+    """Some of the images on their cores, for as long as a service runs:
+    built once (in ``build_dir``, make's own incremental build, or a
+    temporary folder), each core started and its plant link open.
+    ``cores[name]``, ``plants[name]``; :meth:`restart` gives a new touch
+    boards fresh from reset; :meth:`close` stops every core."""
+
+    def __init__(self, names: tuple[str, ...], build_dir: str | Path = "",
+                 purpose: str = "devices = 'qemu'"):
+        require(purpose)
+        self._tmp = None if build_dir else tempfile.TemporaryDirectory(prefix="telethermal-qemu-")
+        self.cores: dict[str, QemuCore] = {}
+        self.plants: dict[str, PtyLine] = {}
+        try:
+            images = build_images(build_dir or self._tmp.name)
+            for name in names:
+                self.cores[name] = QemuCore(images[name])
+                self.plants[name] = PtyLine(self.cores[name].plant_path)
+            self.wait_ready()
+        except BaseException:
+            self.close()
+            raise
+
+    def wait_ready(self) -> None:
+        """Until every core's plant link says ``ready`` (its UARTs are up)."""
+        for plant in self.plants.values():
+            plant.until(rb"ready\n")
+
+    def restart(self) -> None:
+        """Every core from its reset vector, nothing of its last run left on
+        its lines (:meth:`QemuCore.restart`), then ready."""
+        for name, core in self.cores.items():
+            self.plants[name].buf = b""         # what it read of the last run
+            core.restart()
+        self.wait_ready()
+
+    def close(self) -> None:
+        try:
+            for plant in self.plants.values():
+                plant.close()
+            for core in self.cores.values():
+                core.close()
+        finally:
+            if self._tmp is not None:
+                self._tmp.cleanup()

@@ -18,14 +18,13 @@ simulated clock:
 The cores keep their own clocks (the watchdog, the heartbeat, the
 frames' ``t_us``); the loop waits for each of their answers, so a period
 takes as long as the cores need to hear and answer it (the emulated UART
-takes a byte in about 0.4 ms of the host's time).
+takes a byte in about 0.1 ms of the host's time).
 """
 
 from __future__ import annotations
 
 import math
 import re
-import tempfile
 import time
 from dataclasses import replace
 
@@ -42,38 +41,48 @@ from telethermal.devices.readings import PadSensors
 #: a core that did not answer at all, not a slow host.
 ANSWER_WAIT_S = 5.0
 COLD_JUNCTION_C = 25.0          # the board's boot frame says so (main_board.c)
+NAMES = ("tt_board", "tt_peltier")      # the display's images
 
 
 class QemuDisplay:
     kind = DeviceKind.QEMU
 
     def __init__(self, touch, clock=time.monotonic, realtime: bool = False, seed: int = 0,
-                 calibration: Calibration = Calibration()):
+                 calibration: Calibration = Calibration(), boards: qemu.QemuBoards | None = None):
+        """``boards``: a service's cores (``tt_board``, ``tt_peltier``),
+        restarted for this touch and left running at :meth:`close`; without,
+        the display builds and starts its own and stops them at close."""
         del realtime, seed              # the cores keep their own time; no noise added here
-        gone = qemu.missing()
-        if gone:
-            raise DeviceError("devices = 'qemu' needs " + ", ".join(
-                f"{what} (apt-get install {package})" for what, package in gone))
         self.touch, self.calibration = touch, calibration
-        self._build = tempfile.TemporaryDirectory(prefix="telethermal-qemu-")
-        self.cores: list[qemu.QemuCore] = []
-        self.plants: list[qemu.PtyLine] = []
+        self._own = boards is None
+        self.boards = qemu.QemuBoards(NAMES) if boards is None else boards
+        self.cores = [self.boards.cores[n] for n in NAMES]
+        self.plants = [self.boards.plants[n] for n in NAMES]
         self.hardware = None
         self.counters_ = {"board_waits_missed": 0, "answers_missed": 0}
         self._applied_ma = 0
         try:
-            images = qemu.build_images(self._build.name)
-            for name in ("tt_board", "tt_peltier"):
-                core = qemu.QemuCore(images[name])
-                self.cores.append(core)
-                self.plants.append(qemu.PtyLine(core.plant_path))
-                self.plants[-1].until(rb"ready\n")          # its UARTs are up
+            if not self._own:
+                self.boards.restart()
             self.hardware = HardwareDisplay(self.cores[0].link_path,
                                             f"slcan:{self.cores[1].link_path}",
                                             calibration, clock=clock, wait_s=ANSWER_WAIT_S)
+            self._heard()
         except BaseException:
             self.close()
             raise
+
+    def _heard(self) -> None:
+        """Until the driver has heard the core's heartbeat (every 100 ms; a
+        driver that has not cannot trust the core, and the touch would start
+        with its readings untrusted); a hang guard of ANSWER_WAIT_S."""
+        driver = self.hardware.peltier
+        deadline = time.monotonic() + ANSWER_WAIT_S
+        while not driver.alive and time.monotonic() < deadline:
+            driver.poll(wait_s=0.01)
+        if not driver.alive:
+            raise DeviceError(f"the Peltier driver's core sent no heartbeat within "
+                              f"{ANSWER_WAIT_S} s ({self.cores[1].link_path})")
 
     # ------------------------------------------------------------ the bridge
     def _sample_line(self, s: PadSensors) -> bytes:
@@ -87,7 +96,7 @@ class QemuDisplay:
         values.append(COLD_JUNCTION_C)
         values.append(s.force_n if status & 4 else 0.0)
         # Nine significant digits: every float32 exactly, in a short line
-        # (the emulated UART takes about 0.4 ms a byte).
+        # (the emulated UART takes about 0.1 ms a byte).
         return ("s " + " ".join(f"{v:.9g}" for v in values) + f" {status}\n").encode()
 
     def _measure_line(self) -> bytes:
@@ -146,8 +155,5 @@ class QemuDisplay:
             if self.hardware is not None:
                 self.hardware.close()
         finally:
-            for line in self.plants:
-                line.close()
-            for core in self.cores:
-                core.close()
-            self._build.cleanup()
+            if self._own:
+                self.boards.close()

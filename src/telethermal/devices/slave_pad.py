@@ -74,6 +74,21 @@ class EmulatedSlavePad(SlavePadDrivers):
         #: Faults of the IR sensor: None, "flagged" (the board clears its
         #: bit), or a value (degC) it reports whatever it sees.
         self.ir_fault: str | float | None = None
+        board_url, bus = self._open_boards(seed, board_noise_uv)
+        try:
+            super().__init__(board_url, bus, scene.sample_rate_hz, wait_s=wait_s)
+        except Exception:
+            self._close_boards()
+            raise
+        self.board.reopen_s = 0.05
+        self.write_s: np.ndarray | None = None       # when each contact sample left the board
+        self._trial = None
+        self._sent = 0
+
+    def _open_boards(self, seed: int, board_noise_uv: float) -> tuple[str, str]:
+        """The boards the simulator feeds: ``board_emulator`` (``send``) and
+        ``pad_emulator`` (``poll``, ``current_a``, ``enabled``); returns the
+        board's URL and the pad driver's bus."""
         self._dir = tempfile.TemporaryDirectory(prefix="telethermal-slave-dev-")
         self.board_emulator = SensorBoardEmulator(Path(self._dir.name) / "slave-board",
                                                   cold_junction_c=self.room_c, seed=seed,
@@ -86,18 +101,14 @@ class EmulatedSlavePad(SlavePadDrivers):
                                               clock=lambda: self.t_s,
                                               state=lambda: (self.junction_c, self.room_c,
                                                              self.pad_emulator.current_a))
+        return self.board_emulator.path, bus
+
+    def _close_boards(self) -> None:
         try:
-            super().__init__(self.board_emulator.path, bus, scene.sample_rate_hz,
-                             wait_s=wait_s)
-        except Exception:
             self.pad_emulator.close()
             self.board_emulator.close()
+        finally:
             self._dir.cleanup()
-            raise
-        self.board.reopen_s = 0.05
-        self.write_s: np.ndarray | None = None       # when each contact sample left the board
-        self._trial = None
-        self._sent = 0
 
     # ------------------------------------------------------------ the simulator side
     def _on_current(self, current_a: float) -> None:
@@ -221,9 +232,7 @@ class EmulatedSlavePad(SlavePadDrivers):
         try:
             super().close()
         finally:
-            self.pad_emulator.close()
-            self.board_emulator.close()
-            self._dir.cleanup()
+            self._close_boards()
 
 
 class DriverPadTarget:

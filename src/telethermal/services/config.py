@@ -40,11 +40,16 @@ class SlaveConfig:
     #: pty and the active pad's driver on a virtual CAN bus, read and
     #: commanded through the real drivers; a Peltier pad only) or "hardware"
     #: (the board at ``board_url`` and the pad's driver on ``can_bus``; no
-    #: simulator: ``place`` only names the object for the reports).
+    #: simulator: ``place`` only names the object for the reports); "qemu":
+    #: as "emulated" with the firmware images on emulated STM32F405s as the
+    #: boards (firmware/README.md, "Processor in the loop").
     devices: str = "sim"
     board_url: str = ""             # pyserial URL of the slave's sensor board (hardware)
     can_bus: str = ""               # interface:channel of its active pad's driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
+    #: devices = "qemu": the firmware's build folder (make's, incremental);
+    #: empty: built in a temporary folder at start.
+    firmware_build: str = ""
     #: The sensing pad's model calibration (``telethermal calibrate pad``,
     #: docs/calibration.md); empty: the scene's design values.
     pad_calibration: str = ""
@@ -78,11 +83,13 @@ class MasterConfig:
     #: Peltier driver on a CAN bus, read through the real drivers), or
     #: "hardware" (the sensor board at ``board_url`` and the Peltier driver on
     #: ``can_bus``: the display loop runs all the time and the operator's
-    #: force starts each touch).
+    #: force starts each touch); "qemu": as "emulated" with the firmware
+    #: images on emulated STM32F405s as the boards, restarted each touch.
     devices: str = "sim"
     board_url: str = ""             # pyserial URL of the sensor board (hardware)
     can_bus: str = ""               # interface:channel of the Peltier driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
+    firmware_build: str = ""        # devices = "qemu": as the slave's
     #: The finger's temperature before contact (hardware: no IR channel yet).
     finger_temp_c: float = 33.0
     #: Folder to record every touch to (one MCAP file per run); empty: no recording.
@@ -120,7 +127,8 @@ def load_config(path: str | Path, role: str):
         value = getattr(transport, key)
         if value and not Path(value).is_absolute():
             transport = replace(transport, **{key: str(base / value)})
-    for key in ("identifier", "generator", "record_dir", "calibration", "pad_calibration"):
+    for key in ("identifier", "generator", "record_dir", "calibration", "pad_calibration",
+                "firmware_build"):
         value = getattr(config, key, "")
         if value and not Path(value).is_absolute():
             setattr(config, key, str(base / value))

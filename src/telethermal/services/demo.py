@@ -21,6 +21,7 @@ from telethermal.ident.anytime import Label, Reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
+from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
@@ -47,7 +48,7 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
                   slave_host: str = "127.0.0.1", security: str = "curve",
                   master_ports: tuple[int, int] | None = None,
                   devices: str = "sim", record_dir: str | Path | None = None,
-                  view_port: int = 0) -> tuple[Path, Path]:
+                  view_port: int = 0, firmware_build: str = "") -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
@@ -68,6 +69,7 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     slave = out / "slave.toml"
     ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
     record = f'record_dir = "{Path(record_dir).resolve()}"\n' if record_dir else ""
+    record += f'firmware_build = "{firmware_build}"\n' if firmware_build else ""
     slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n{record}'
                      f'generator = "{gen}"\nseed = {seed}\ndevices = "{devices}"\n'
                      f'{admin(slave_admin)}\n\n[transport]\nbind_host = "{slave_host}"\n'
@@ -202,9 +204,11 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     if during is not None:
         thread = threading.Thread(target=during, daemon=True)
         thread.start()
+    # A hang guard: on QEMU's cores a display period takes many times its length.
+    slow = 60.0 if call(master_admin, "status").get("devices") == "qemu" else 1.0
     try:
-        result = call(master_admin, "touch", timeout_s=contact_s + 30, contact_s=contact_s,
-                      seed=seed, source=source)
+        result = call(master_admin, "touch", timeout_s=slow * contact_s + 30,
+                      contact_s=contact_s, seed=seed, source=source)
     finally:
         if thread is not None:
             thread.join()
@@ -330,7 +334,8 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
              realtime_priority: int = 20, record_dir: Path | None = None,
-             view_port: int | None = None, devices: str = "sim") -> dict:
+             view_port: int | None = None, devices: str = "sim",
+             firmware_build: str = "") -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
     in-process session's (``in_process_flux_rms_error_rel``). ``view_port``:
     the live view (``telethermal view``) on that HTTP port, started once the
@@ -349,7 +354,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
                                           ports[:4], seed, realtime_priority=realtime_priority,
                                           record_dir=record_dir, devices=devices,
-                                          view_port=ports[4] if view_port is not None else 0)
+                                          view_port=ports[4] if view_port is not None else 0,
+                                          firmware_build=firmware_build)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     cal = {}
@@ -358,7 +364,9 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         wait_connected(services, ports[3])
         echo("slave and master up as two processes on loopback (CURVE)" +
              ("; each on its emulated devices (boards on ptys, CAN drivers on virtual "
-              "buses), read through the drivers" if devices == "emulated" else ""))
+              "buses), read through the drivers" if devices == "emulated" else "") +
+             ("; their boards the firmware on emulated STM32F405s (QEMU)"
+              if devices == "qemu" else ""))
         cal = call(ports[2], "status").get("thermometer_calibration") or {}
         if cal.get("calibrated"):
             echo(f"slave's object thermometer calibrated against its pad at "
@@ -455,6 +463,7 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     from telethermal.physics.scene import describe_models, load_scene
 
     out = Path(out)
+    firmware = prepare_firmware(out, devices, echo)         # qemu: what is missing, at once
     scene = with_finger(load_scene(scene_name))
     echo(f"scene {scene.name}: {scene.description.splitlines()[0]}")
     for side, material, choice in describe_models(scene):
@@ -463,7 +472,7 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     report = run_demo(out, scene_name, out / "identifier.npz", out / "generator.npz",
                       demo_materials(scene, materials), seed=seed, contact_s=contact_s,
                       echo=echo, record_dir=Path(record_dir) if record_dir else None,
-                      view_port=view_port, devices=devices)
+                      view_port=view_port, devices=devices, firmware_build=firmware)
     view = report.pop("view", None)
     path = write_json(json_path or out / "demo.json", report)
     echo(f"touch plots: {out}/touch-*.png; summary: {path}")

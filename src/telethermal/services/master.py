@@ -28,6 +28,7 @@ from telethermal.physics.scene import load_scene
 from telethermal.services.admin import ErrorCount, open_service_sockets
 from telethermal.services.requests import MASTER as MASTER_REQUESTS
 from telethermal.services.config import MasterConfig
+from telethermal.services.qemu_boards import close_boards, display_boards
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
@@ -61,17 +62,18 @@ class Touch:
         self.idle_c, shift = display_idle(scene, cfg, self.operator.finger_ir_c,
                                           service.link.object_temp_c,
                                           service.link.expected_material)
-        self.display = MasterDisplay(cfg, service.link.generator,
-                                     pad_resistance(scene.pad.layers),
+        self.display = MasterDisplay(cfg, service.link.generator, pad_resistance(scene.pad.layers),
                                      scene.sensors.flux_lag_s, self.operator.finger_ir_c,
                                      idle_c=self.idle_c, precondition=shift,
                                      **display_model_args(scene))
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
-        self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed)
-        #: Session time 0 (the finger's contact) on the service's clock: the
-        #: display's time is ``now - origin_s`` and its onset goes back to the
-        #: session at ``origin_s`` plus its time (one origin, as ``t0`` on hardware).
-        self.origin_s = now + PRE_CONTACT_S
+        opening = time.monotonic()
+        self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
+                                    **service.display_options)
+        #: Session time 0 (the finger's contact) on the service's clock, counted from when
+        #: the devices are open (QEMU's cores restart first): the display's time is ``now -
+        #: origin_s``; its onset goes back at ``origin_s`` plus its time (as ``t0`` on hardware).
+        self.origin_s = now + (time.monotonic() - opening) + PRE_CONTACT_S
         self.contact_s = contact_s
         # The id the session gives the contact at the display's onset.
         self.contact_id = service.session.next_contact_id
@@ -111,15 +113,15 @@ class MasterService:
         #: The session's rules (what the master reads, what it tells the
         #: slave): the simulated network of ``bench faults`` runs the same.
         self.session = MasterSession()
-        #: The display loop on the real clock (``run``); its statistics are
-        #: each touch's report.
+        #: The display loop on the real clock (``run``); its statistics: each touch's report.
         self.loop = FixedRateLoop(1.0 / config.rate_hz)     # the real clock, for its period
         self.hardware = None
         #: The hardware display's controller and its clock origin (hardware only).
         self.display: MasterDisplay | None = None
         self.t0 = 0.0
-        self.view = None
+        self.view, self.display_options = None, {}
         try:
+            self.display_options = display_boards(config)       # "qemu": the cores
             if config.view_port:
                 self.view = ViewPublisher(config.view_port,
                                           self.scene.finger.contact_conductance_w_m2k)
@@ -129,6 +131,7 @@ class MasterService:
             # Last: a master that did not start writes no recording.
             self.recorder = open_recorder(config, "master")
         except TelethermalError:
+            close_boards(self.display_options)
             self.endpoint.close()
             self.admin.close()
             if self.view is not None:
@@ -323,16 +326,14 @@ class MasterService:
             # last window's estimate otherwise (None: the identifier gives none)
             **dict.fromkeys(EFFUSIVITY_KEYS), **(effusivity_of(est) if est is not None else {}),
             "decision_text": touch_text(est),
-            # when the slave first decided this label (a group that stood
-            # until the last window was decided at its first commitment, as
-            # the slave reports it)
+            # when the slave first decided this label (a group that stood until the
+            # last window was decided at its first commitment, as the slave reports it)
             "decision_time_s": decided_at_s(link.estimates, est),
             "object_memory": None if link.recalled is None else link.recalled.label,
             "estimates": len(link.estimates), "trajectory_at_s": trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,
             "link_counters": dict(link.counters), "devices": self.config.devices,
-            "device_counters": devices,
-            **safety_summary(touch.display), "loop": loop,
+            "device_counters": devices, **safety_summary(touch.display), "loop": loop,
             "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
         }
         try:
@@ -445,6 +446,7 @@ class MasterService:
                                    message="master stopping; pad at neutral")
                 self.endpoint.poll(0.05)
         finally:
+            close_boards(self.display_options)
             self.endpoint.close()
             self.admin.close()
             if self.view is not None:

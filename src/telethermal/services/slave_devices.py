@@ -31,9 +31,15 @@ def _hardware(config, scene, instruments, seed, rate_hz):
                            wait_s=2.0 / rate_hz)
 
 
+def _qemu(config, scene, instruments, seed, rate_hz):
+    from telethermal.devices.qemu_slave_pad import QemuSlavePad
+    return QemuSlavePad(scene, instruments, seed=seed, build_dir=config.firmware_build)
+
+
 #: The sensing pad's devices by kind (the simulator alone has none):
 #: ``factory(config, scene, instruments, seed, rate_hz)``.
-SLAVE_PADS = {DeviceKind.EMULATED: _emulated, DeviceKind.HARDWARE: _hardware}
+SLAVE_PADS = {DeviceKind.EMULATED: _emulated, DeviceKind.HARDWARE: _hardware,
+              DeviceKind.QEMU: _qemu}
 
 
 def open_devices(config, scene, instruments, seed: int, rate_hz: float):
@@ -62,7 +68,7 @@ def calibrate(devices, sensors, scene, rng, drift_k_per_reading: float = 0.0):
     if drift_k_per_reading:
         raise CalibrationError("a drifting pad is a simulator-only hard case "
                                "(devices = 'sim')")
-    emulated = devices.kind == DeviceKind.EMULATED
+    emulated = devices.kind in (DeviceKind.EMULATED, DeviceKind.QEMU)
     if emulated:
         devices.aim_at_pad(rng)
     # On hardware the lab aims the thermometer at the pad for this.
