@@ -71,10 +71,12 @@ class Touch:
         opening = time.monotonic()
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
                                     **service.display_options)
-        #: Session time 0 (the finger's contact) on the service's clock, counted from when
-        #: the devices are open (QEMU's cores restart first): the display's time is ``now -
-        #: origin_s``; its onset goes back at ``origin_s`` plus its time (as ``t0`` on hardware).
-        self.origin_s = now + (time.monotonic() - opening) + PRE_CONTACT_S
+        #: Session time 0 (the finger's contact) on the service's clock: the display's
+        #: time is ``now - origin_s``; its onset goes back at ``origin_s`` plus its time
+        #: (as ``t0`` on hardware). QEMU's cores restart first, in real time: counted
+        #: from when they are open (other devices open at once; ``now`` may be a test's).
+        restart_s = time.monotonic() - opening if service.display_options else 0.0
+        self.origin_s = now + restart_s + PRE_CONTACT_S
         self.contact_s = contact_s
         # The id the session gives the contact at the display's onset.
         self.contact_id = service.session.next_contact_id
