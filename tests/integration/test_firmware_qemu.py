@@ -35,15 +35,22 @@ REQUIRE = os.environ.get("TELETHERMAL_REQUIRE_QEMU") == "1"
 PERIOD_S = firmware.COMMAND_PERIOD_S
 
 
-@pytest.fixture(scope="module")
-def images(tmp_path_factory):
+def qemu_or_skip(who: str) -> None:
+    """Skip (``who`` need ...: each missing part with its apt package), or
+    fail under ``TELETHERMAL_REQUIRE_QEMU=1``, when QEMU or the toolchain
+    is missing."""
     gone = qemu.missing()
     if gone:
-        reason = "the processor-in-the-loop tests need " + ", ".join(
+        reason = f"{who} need " + ", ".join(
             f"{what} (apt-get install {package})" for what, package in gone)
         if REQUIRE:
             pytest.fail(f"TELETHERMAL_REQUIRE_QEMU=1 but {reason}")
         pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def images(tmp_path_factory):
+    qemu_or_skip("the processor-in-the-loop tests")
     return qemu.build_images(tmp_path_factory.mktemp("stm32f405"))
 
 

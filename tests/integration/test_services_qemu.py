@@ -18,7 +18,6 @@ display period in real time it is not met (firmware/README.md says why),
 and a test asserting it would test the host.
 """
 
-import os
 import signal
 import time
 from pathlib import Path
@@ -32,21 +31,15 @@ from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
 from telethermal.teleop.run import with_finger
+from test_firmware_qemu import qemu_or_skip
 
 pytestmark = [pytest.mark.qemu, pytest.mark.slow]
-REQUIRE = os.environ.get("TELETHERMAL_REQUIRE_QEMU") == "1"
 SCENE = with_finger(load_scene("fingertip-7"))
 
 
 @pytest.fixture(scope="module")
 def firmware(tmp_path_factory):
-    gone = qemu.missing()
-    if gone:
-        reason = "the services on QEMU need " + ", ".join(
-            f"{what} (apt-get install {package})" for what, package in gone)
-        if REQUIRE:
-            pytest.fail(f"TELETHERMAL_REQUIRE_QEMU=1 but {reason}")
-        pytest.skip(reason)
+    qemu_or_skip("the services on QEMU")
     build = tmp_path_factory.mktemp("firmware")
     qemu.build_images(build)
     return build
