@@ -234,3 +234,33 @@ def test_a_calibration_file_past_the_readers_limits_is_refused_by_the_cli(tmp_pa
                       ("dotted.toml", "dotted parts")):
         with pytest.raises(CalibrationError, match=f"{name}: .*{why}"):
             read_calibration(tmp_path / name)
+
+
+def test_the_pad_digest_follows_the_figures_not_the_descriptions(monkeypatch):
+    """A layer material's source text or role, or the database's size, leave
+    a calibration valid; a layer's thickness or the module's resistance
+    make it another pad's."""
+    import dataclasses
+
+    from telethermal.ident.pad_calibration import pad_digest
+    from telethermal.physics import thermoelectric as te
+    from telethermal.physics.scene import load_scene
+
+    scene = load_scene("fingertip-7")
+    base = pad_digest(scene)
+    pad = scene.pad
+    layer = pad.layers[0]
+    renamed = dataclasses.replace(layer, material=dataclasses.replace(
+        layer.material, source="another handbook", role="film"))
+    same = [dataclasses.replace(pad, layers=(renamed, *pad.layers[1:])),
+            dataclasses.replace(pad, trials_per_material=pad.trials_per_material + 7,
+                                contact_duration_s=pad.contact_duration_s * 2)]
+    for p in same:
+        assert pad_digest(dataclasses.replace(scene, pad=p)) == base
+    thicker = dataclasses.replace(layer, thickness_m=layer.thickness_m * 1.1)
+    assert pad_digest(dataclasses.replace(scene, pad=dataclasses.replace(
+        pad, layers=(thicker, *pad.layers[1:])))) != base
+    spec = te.get_module(pad.module)
+    monkeypatch.setattr(te, "get_module", lambda name: dataclasses.replace(
+        spec, resistance_ohm=spec.resistance_ohm * 1.05))
+    assert pad_digest(scene) != base

@@ -88,8 +88,8 @@ class Hardware:
     pad_layers: tuple[Layer, ...]
     room_c: float
     #: The pad's face (the scene's ``size_mm``); None: the module's face.
-    #: (Left out of the repr, which keys the idle policies: a scene without
-    #: it keeps its shipped policy; preconditioning.policy_key adds it.)
+    #: (Left out of the repr; the idle policy's key takes it with every
+    #: other field, and the scene's ``size_mm`` besides.)
     face_m2: float | None = field(default=None, repr=False)
 
     @property

@@ -20,7 +20,6 @@ and a test says which are stale)::
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import logging
@@ -38,6 +37,7 @@ from telethermal.control.display_floor import (  # noqa: F401  (re-exported)
 from telethermal.control.safety import SafetyLimits
 from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.jsonfile import write_json
+from telethermal.physics.figures import physical
 from telethermal.physics.scene import Scene, load_scene
 
 log = logging.getLogger("telethermal.preconditioning")
@@ -178,28 +178,6 @@ PAIR_SEPARATOR = "|"
 POLICY_VERSION = 2          # 2: minimax idles for every pair (a remembered group)
 
 
-#: Fields that describe a part and do not change its physics (a datasheet's
-#: name or a comment's pointer to the docs): left out of the policy's key.
-DESCRIPTIVE_FIELDS = frozenset({"source"})
-
-
-def _physical(value):
-    """``value`` as nested tuples of its figures, for hashing: a dataclass by
-    its fields less :data:`DESCRIPTIVE_FIELDS`, containers item by item,
-    anything else by ``repr``."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return (type(value).__name__,
-                tuple((f.name, _physical(getattr(value, f.name)))
-                      for f in dataclasses.fields(value) if f.name not in DESCRIPTIVE_FIELDS))
-    if isinstance(value, (list, tuple)):
-        return tuple(_physical(v) for v in value)
-    if isinstance(value, dict):
-        return tuple(sorted((repr(k), _physical(v)) for k, v in value.items()))
-    if isinstance(value, np.ndarray):
-        return repr(value.tolist())
-    return repr(value)
-
-
 def policy_key(scene: Scene) -> str:
     """What the policy depends on, hashed: the display's hardware (module,
     heat sink, pad layers, room), the nominal touch, the finger, the objects
@@ -209,11 +187,11 @@ def policy_key(scene: Scene) -> str:
     nor a part's descriptive text (its ``source``): a scene differing only
     there shares the policy. A policy stored under another key is stale."""
     inputs = (POLICY_VERSION, SEARCH_GRID_S, SEARCH_ROUNDS, CONTACT_S,
-              _physical(hardware(scene)), _physical(nominal_touch(scene)),
-              _physical(scene.finger), _physical(scene.objects), _physical(scene.variability),
+              physical(hardware(scene)), physical(nominal_touch(scene)),
+              physical(scene.finger), physical(scene.objects), physical(scene.variability),
               scene.room_temp_c, scene.sample_rate_hz, scene.tolerance_rel,
-              [_physical(la.material) for o in scene.objects for la in o.layers()],
-              _physical(SafetyLimits()))
+              [physical(la.material) for o in scene.objects for la in o.layers()],
+              physical(SafetyLimits()))
     if scene.pad.size_mm is not None:           # a face other than the module's
         inputs += (scene.pad.size_mm,)
     return hashlib.sha256(repr(inputs).encode()).hexdigest()[:32]

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from telethermal.errors import CalibrationError
+from telethermal.physics.figures import DESCRIPTIVE_FIELDS, physical
 from telethermal.ident.calibration import (CHI2_MAX, WINDOW_S, PadModelFit, ReferenceTouches,
                                            candidates, describe, marginal_sds,
                                            projected_columns, scaled_scene, select)
@@ -32,9 +33,20 @@ Z_MAX = 4.0
 FORMAT, FORMAT_VERSION = "telethermal-pad-calibration", 1
 
 
+#: What a pad digest leaves out besides the parts' descriptions: a material's
+#: role, and the size of the scene's generated database.
+NOT_THE_PAD = DESCRIPTIVE_FIELDS | {"role", "contact_duration_s", "trials_per_material"}
+
+
 def pad_digest(scene) -> str:
-    """What a calibration was made for: the scene's nominal pad and sensors."""
-    text = repr((scene.pad, scene.sensors, scene.sample_rate_hz, scene.room_temp_c))
+    """What a calibration was made for: the figures of the scene's nominal
+    pad (its layers' materials, module and heat sink) and sensors, its rate
+    and room; not their descriptions nor the database's size."""
+    from telethermal.physics import thermoelectric as te
+
+    pad = scene.pad
+    text = repr(physical((pad, te.get_module(pad.module), te.get_heat_sink(pad.heat_sink),
+                          scene.sensors, scene.sample_rate_hz, scene.room_temp_c), NOT_THE_PAD))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
