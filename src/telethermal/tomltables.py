@@ -3,6 +3,7 @@ the table and the key (service configs, fault profiles, calibrations)."""
 
 from __future__ import annotations
 
+import json
 import tomllib
 from dataclasses import fields
 from pathlib import Path
@@ -16,6 +17,13 @@ MAX_TOML_BYTES = 1024 * 1024
 #: of a dotted key, so its memory grows with the square of their number
 #: (a 40 KB key took 1.58 GB).
 MAX_KEY_PARTS = 32
+
+
+def toml_str(text: str) -> str:
+    """``text`` as a TOML basic string, quotes included: every character
+    TOML needs escaped is (a quote, a backslash, control characters, DEL);
+    reads back as ``text``."""
+    return json.dumps(str(text), ensure_ascii=False).replace("\x7f", "\\u007f")
 
 
 def read_toml(path: str | Path, what: str, error=TelethermalError) -> dict:

@@ -264,3 +264,19 @@ def test_the_pad_digest_follows_the_figures_not_the_descriptions(monkeypatch):
     monkeypatch.setattr(te, "get_module", lambda name: dataclasses.replace(
         spec, resistance_ohm=spec.resistance_ohm * 1.05))
     assert pad_digest(scene) != base
+
+
+def test_names_with_quotes_and_backslashes_round_trip(tmp_path):
+    """A scene, material or label holding a quote, a backslash or a newline
+    is written as TOML escapes it and reads back as it was (it was written
+    between bare quotes: an unreadable file, or another name)."""
+    from telethermal.ident.pad_calibration import read_calibration, write_calibration
+
+    cal = _hand_made(_scene())
+    odd = dataclasses.replace(cal, scene='lab "A"\\pad\n2', materials=('st"eel', "wo\\od"),
+                              parameters=(dataclasses.replace(cal.parameters[0],
+                                                              label='gain "x"\\'),
+                                          *cal.parameters[1:]))
+    back = read_calibration(write_calibration(odd, tmp_path / "cal.toml"))
+    assert back.scene == odd.scene and back.materials == odd.materials
+    assert back.parameters[0].label == 'gain "x"\\'

@@ -5,7 +5,11 @@ naming the file, never a traceback."""
 
 from __future__ import annotations
 
+import tomllib
+
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from telethermal.devices.board import Calibration, DeviceError
 from telethermal.tomltables import MAX_TOML_BYTES, read_toml
@@ -32,3 +36,12 @@ def test_a_good_file_reads(tmp_path):
     path.write_text("[force]\nscale = 1.5\n")
     assert read_toml(path, "calibration file") == {"force": {"scale": 1.5}}
     assert Calibration.load(path).force_scale == 1.5
+
+
+@given(st.text())
+def test_toml_str_reads_back_as_the_text(text):
+    """Any text, quotes, backslashes, control characters, DEL and astral
+    characters included, written as a TOML string reads back unchanged."""
+    from telethermal.tomltables import toml_str
+
+    assert tomllib.loads(f"k = {toml_str(text)}\n")["k"] == text

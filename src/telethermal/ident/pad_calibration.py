@@ -19,6 +19,7 @@ import numpy as np
 
 from telethermal.errors import CalibrationError
 from telethermal.physics.figures import DESCRIPTIVE_FIELDS, physical
+from telethermal.tomltables import toml_str
 from telethermal.ident.calibration import (CHI2_MAX, WINDOW_S, PadModelFit, ReferenceTouches,
                                            candidates, describe, marginal_sds,
                                            projected_columns, scaled_scene, select)
@@ -123,16 +124,16 @@ class PadCalibration:
     # ------------------------------------------------------------ the file
     def to_toml(self) -> str:
         out = [f'format = "{FORMAT}"', f"format_version = {FORMAT_VERSION}",
-               f'scene = "{self.scene}"', f'pad_digest = "{self.pad_digest}"',
+               f"scene = {toml_str(self.scene)}", f"pad_digest = {toml_str(self.pad_digest)}",
                f"contact_conductance_w_m2k = {self.contact_conductance_w_m2k!r}",
                f"flux_gain = {self.flux_gain!r}", f"flux_gain_sd = {self.flux_gain_sd!r}",
                f"chi2_per_dof = {self.chi2_per_dof!r}", f"touches = {self.touches}",
-               "materials = [" + ", ".join(f'"{m}"' for m in self.materials) + "]",
-               "not_identifiable = [" + ", ".join(f'"{m}"' for m in self.not_identifiable)
+               "materials = [" + ", ".join(map(toml_str, self.materials)) + "]",
+               "not_identifiable = [" + ", ".join(map(toml_str, self.not_identifiable))
                + "]"]
         for p in self.parameters:
-            out += ["", "[[parameters]]", "names = [" + ", ".join(f'"{n}"' for n in p.names)
-                    + "]", f'label = "{p.label}"', f"factor = {p.factor!r}",
+            out += ["", "[[parameters]]", "names = [" + ", ".join(map(toml_str, p.names))
+                    + "]", f"label = {toml_str(p.label)}", f"factor = {p.factor!r}",
                     f"lo = {p.lo!r}", f"hi = {p.hi!r}"]
         return "\n".join(out) + "\n"
 

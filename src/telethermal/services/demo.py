@@ -25,6 +25,7 @@ from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
+from telethermal.tomltables import toml_str
 from telethermal.teleop.models import DEFAULT_METHOD, demo_identify
 from telethermal.view.server import ViewServer
 from telethermal.wire.transport import generate_link_keys
@@ -57,7 +58,8 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     control, stream, slave_admin, master_admin = ports
 
     def admin(where):
-        return f'admin_ipc = "{where}"' if isinstance(where, str) else f"admin_port = {where}"
+        return f"admin_ipc = {toml_str(where)}" if isinstance(where, str) else \
+            f"admin_port = {where}"
 
     common = (f'control_port = {control}\nstream_port = {stream}\nsecurity = "{security}"\n')
     m_control, m_stream = master_ports or (control, stream)
@@ -68,14 +70,14 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     master_keys = 'keys_dir = "keys/master"\n' if security == "curve" else ""
     slave = out / "slave.toml"
     ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
-    record = f'record_dir = "{Path(record_dir).resolve()}"\n' if record_dir else ""
-    record += f'firmware_build = "{firmware_build}"\n' if firmware_build else ""
-    slave.write_text(f'[slave]\nscene = "{scene}"\nidentifier = "{ident}"\n{record}'
-                     f'generator = "{gen}"\nseed = {seed}\ndevices = "{devices}"\n'
+    record = f"record_dir = {toml_str(Path(record_dir).resolve())}\n" if record_dir else ""
+    record += f"firmware_build = {toml_str(firmware_build)}\n" if firmware_build else ""
+    slave.write_text(f"[slave]\nscene = {toml_str(scene)}\nidentifier = {toml_str(ident)}\n"
+                     f'{record}generator = {toml_str(gen)}\nseed = {seed}\ndevices = "{devices}"\n'
                      f'{admin(slave_admin)}\n\n[transport]\nbind_host = "{slave_host}"\n'
                      f'{common}{slave_keys}')
     master = out / "master.toml"
-    master.write_text(f'[master]\nscene = "{scene}"\nrate_hz = {rate_hz}\nseed = {seed}\n'
+    master.write_text(f'[master]\nscene = {toml_str(scene)}\nrate_hz = {rate_hz}\nseed = {seed}\n'
                       f'realtime_priority = {realtime_priority}\ndevices = "{devices}"\n{record}'
                       f'view_port = {view_port}\n'
                       f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
