@@ -55,7 +55,7 @@ import msgpack
 from mcap.writer import CompressionType, Writer
 
 from telethermal.errors import TelethermalError
-from telethermal.filelimits import check_size
+from telethermal.filelimits import read_bytes
 from telethermal.record.mcapread import MAX_RECORDING_BYTES, Damage, iter_records
 
 log = logging.getLogger(__name__)
@@ -352,11 +352,7 @@ def read_recording(path: str | Path) -> Recording:
     path = Path(path)
     rec = Recording(path)
     channels: dict[int, str] = {}
-    check_size(path, MAX_RECORDING_BYTES, "recording", RecordingError)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise RecordingError(f"cannot read {path}: {exc}") from exc
+    data = read_bytes(path, MAX_RECORDING_BYTES, "recording", RecordingError)
     try:
         for record in iter_records(data, rec.damage):
             if isinstance(record, Metadata):
