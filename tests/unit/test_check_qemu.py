@@ -47,3 +47,24 @@ def test_check_without_a_config_or_devices_says_what_to_give(capsys):
     assert main(["check"]) == 2
     err = capsys.readouterr().err
     assert "--config FILE" in err and "--devices qemu" in err
+
+
+def test_a_build_that_hangs_or_a_size_that_cannot_be_read_is_a_problem(monkeypatch, tmp_path):
+    """The build's timeout, or arm-none-eabi-size failing or printing
+    nothing, are DeviceErrors naming what failed: a PROBLEM line, never a
+    traceback out of telethermal check."""
+    import subprocess
+
+    (tmp_path / "Makefile").write_text("all:\n")
+    monkeypatch.setattr(qemu, "missing", lambda: [])
+    monkeypatch.setattr(qemu, "FIRMWARE", tmp_path)
+
+    def hangs(*a, **kw):
+        raise subprocess.TimeoutExpired(a[0], 300)
+    monkeypatch.setattr(qemu.subprocess, "run", hangs)
+    findings = qemu_findings()
+    assert not findings[-1].ok and "did not run to its end" in findings[-1].what
+    monkeypatch.setattr(qemu.subprocess, "run", lambda *a, **kw: subprocess.CompletedProcess(
+        a[0], 0, stdout="", stderr=""))
+    findings = qemu_findings()
+    assert not findings[-1].ok and "no size read" in findings[-1].what

@@ -91,9 +91,12 @@ def _die_with_parent() -> None:
 def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, Path]:
     """``make -C firmware TARGET=stm32f405 BUILD=build_dir``: image name ->
     its ELF file. ``DeviceError`` with the compiler's output if it fails."""
-    done = subprocess.run(["make", "-C", str(firmware), "TARGET=stm32f405",
-                           f"BUILD={Path(build_dir).resolve()}"],
-                          capture_output=True, text=True, timeout=300)
+    try:
+        done = subprocess.run(["make", "-C", str(firmware), "TARGET=stm32f405",
+                               f"BUILD={Path(build_dir).resolve()}"],
+                              capture_output=True, text=True, timeout=300)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise DeviceError(f"the STM32F405 build did not run to its end: {exc}") from exc
     if done.returncode != 0:
         raise DeviceError(f"the STM32F405 build failed:\n{done.stdout}\n{done.stderr}")
     out = Path(build_dir).resolve() / "stm32f405"
@@ -299,9 +302,12 @@ def image_size(elf: str | Path) -> dict[str, int]:
     """``arm-none-eabi-size`` of an image: text, data, bss in bytes; flash
     = text + data (the initial values live in flash), ram = data + bss (the
     4 KB stack reserved by the linker script is not counted)."""
-    done = subprocess.run(["arm-none-eabi-size", str(elf)], capture_output=True, text=True,
-                          check=True)
-    text, data, bss = (int(v) for v in done.stdout.splitlines()[1].split()[:3])
+    try:
+        done = subprocess.run(["arm-none-eabi-size", str(elf)], capture_output=True, text=True,
+                              check=True, timeout=60)
+        text, data, bss = (int(v) for v in done.stdout.splitlines()[1].split()[:3])
+    except (OSError, subprocess.SubprocessError, IndexError, ValueError) as exc:
+        raise DeviceError(f"arm-none-eabi-size {elf}: no size read ({exc})") from exc
     return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}
 
 

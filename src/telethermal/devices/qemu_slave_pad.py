@@ -141,9 +141,6 @@ class _PadFeed:
         drive = round(1000 * max(-1.0, min(1.0, current_a / CURRENT_LIMIT_A))) if ok else 0
         self.plant.write(f"m {cc[0]} {cc[1]} {ma} {drive} {int(ok)}\n".encode())
 
-    def close(self) -> None:
-        self.core.tap = None
-
 
 class QemuSlavePad(EmulatedSlavePad):
     """:class:`EmulatedSlavePad` with the firmware images as its boards
