@@ -40,26 +40,26 @@ def _session(models, material, model, seed, idle, expected):
                        contact_s=1.5, seed=seed, expected_material=expected).summary
 
 
-#: What the impedance controller may lose to the static one, and the skin
-#: target may be missed by, on an insulator's first touch idling at the
-#: object: a sixth of the fingertip's cooling-detection threshold (0.3 K,
-#: Stevens and Choo 1998; teleop/perception.py), a difference no operator
-#: would tell. Why any is allowed: on the display's junction loop for its
-#: bonded 0.1 s sensor (issue 43: current slewed at 100 A/s, the impedance
-#: horizon 0.2 s) wood's first touch at the object lost to the static
-#: controller (seeds 1-4: impedance 0.255 / 0.316 / 0.316 / 0.261 K against
-#: static 0.220 / 0.278 / 0.360 / 0.224 K) and missed 0.3 K (seeds 2, 3).
-#: Where it is lost: before the decision the impedance controller renders
-#: the posteriors' mean 1/e; the first, metal-weighted posteriors (1/e
-#: 1.0e-3 against wood's 2.1e-3) send the junction cold for ~25 ms, and the
-#: slower loop starts the junction up about 50 ms after the static
-#: controller's (anchored on the pad's measured surface) (docs/display-loop.md).
-#: Idling by the policy (the product's first touch) impedance is ahead on
-#: wood (seeds 1-4: 0.81-0.98 K against 0.85-1.08 K), pre-conditioned for
-#: wood far ahead (0.047 / 0.060 K against 0.144 / 0.143 K), and ahead on
-#: the metals idling at the object (aluminium, seeds 1-4, 1.51-1.89 K
-#: against 1.56-2.00 K): it stays the default.
-INSULATOR_TOLERANCE_K = 0.05
+#: Why the two wood first-touch assertions below are expected to fail (issue
+#: 43, open): on the display's junction loop for its bonded 0.1 s sensor
+#: (current slewed at 100 A/s, the impedance horizon 0.2 s) wood's first touch
+#: at the object lost to the static controller (seeds 1-4: impedance 0.255 /
+#: 0.316 / 0.316 / 0.261 K against static 0.220 / 0.278 / 0.360 / 0.224 K) and
+#: missed 0.3 K (seeds 2, 3). Where it is lost: before the decision the
+#: impedance controller renders the posteriors' mean 1/e; the first,
+#: metal-weighted posteriors (1/e 1.0e-3 against wood's 2.1e-3) send the
+#: junction cold for ~25 ms, and the slower loop starts the junction up about
+#: 50 ms after the static controller's (anchored on the pad's measured
+#: surface) (docs/display-loop.md). Idling by the policy (the product's first
+#: touch) impedance is ahead on wood (seeds 1-4: 0.81-0.98 K against
+#: 0.85-1.08 K), pre-conditioned for wood far ahead (0.047 / 0.060 K against
+#: 0.144 / 0.143 K), and ahead on the metals idling at the object (aluminium,
+#: seeds 1-4, 1.51-1.89 K against 1.56-2.00 K): it stays the default. Strict:
+#: a loop that meets them again makes these fail, to be turned back into
+#: plain assertions.
+WOOD_FIRST_TOUCH = pytest.mark.xfail(strict=True, reason=(
+    "issue 43: on the bonded-sensor junction loop, wood's first touch at the object "
+    "renders worse with impedance than static, and misses 0.3 K on seed 2"))
 
 
 # Aluminium: with the slave's pad going down at the master's onset (the
@@ -76,25 +76,31 @@ def test_impedance_rendering_brings_the_skin_closer_than_tracking_the_flux_on_a_
             skin_rms(models, "aluminium", "static", seed)
 
 
-def test_impedance_rendering_on_an_insulator_within_a_tolerance_of_tracking_the_flux(models):
-    # Not closer on wood's first touch (INSULATOR_TOLERANCE_K: why), but no
-    # worse than an operator could tell; pre-conditioned (a repeated touch),
-    # closer on every seed.
+def test_impedance_rendering_on_an_insulator_pre_conditioned_beats_tracking_the_flux(models):
+    # A repeated touch (object memory): closer on every seed.
     for seed in SEEDS:
-        assert skin_rms(models, "wood", "impedance", seed) <= \
-            skin_rms(models, "wood", "static", seed) + INSULATOR_TOLERANCE_K
         assert skin_rms(models, "wood", "impedance", seed, "policy", "wood") < \
             skin_rms(models, "wood", "static", seed, "policy", "wood")
 
 
+@WOOD_FIRST_TOUCH
+def test_impedance_rendering_on_an_insulators_first_touch_beats_tracking_the_flux(models):
+    for seed in SEEDS:
+        assert skin_rms(models, "wood", "impedance", seed) < \
+            skin_rms(models, "wood", "static", seed)
+
+
 def test_an_insulator_meets_the_skin_target_when_pre_conditioned(models):
     # The issue's target, 0.3 K RMS over the contact, on wood pre-conditioned
-    # for it (a repeated touch, object memory). Idling at the object (a first
-    # touch) it is missed on some seeds (INSULATOR_TOLERANCE_K): asserted
-    # within that of the target, the target itself open (issue 43).
+    # for it (a repeated touch, object memory).
     for seed in SEEDS:
         assert skin_rms(models, "wood", "impedance", seed, "policy", "wood") <= 0.3
-        assert skin_rms(models, "wood", "impedance", seed) <= 0.3 + INSULATOR_TOLERANCE_K
+
+
+@WOOD_FIRST_TOUCH
+def test_an_insulator_meets_the_skin_target_on_its_first_touch(models):
+    for seed in SEEDS:
+        assert skin_rms(models, "wood", "impedance", seed) <= 0.3
 
 
 def test_the_idle_policy_buys_the_worst_material_its_first_touch(models):
