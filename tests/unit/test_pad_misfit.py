@@ -119,6 +119,15 @@ def test_samples_the_driver_filled_in_are_not_counted_as_measured(model):
     assert model.misfit_chi2(x, w, np.ones(n, bool)) == model.misfit_chi2(x, w)
     with pytest.raises(IdentificationError, match="measured flags"):
         model.misfit_chi2(x, last, measured[:10])
+    # A window of 5 samples has 1 degree of freedom over the fit's 4; one of
+    # them filled in leaves none: no statistic (nor for a window of 4).
+    sizes = [len(model._window(x, ws)[0, :, 0]) for ws in model.windows_s_]
+    five = sizes.index(5)
+    assert model.misfit_chi2(x, five) is not None
+    early = np.ones(n, bool)
+    early[2] = False
+    assert model.misfit_chi2(x, five, early) is None
+    assert all(model.misfit_chi2(x, i) is None for i, m in enumerate(sizes) if m <= 4)
     # decide() and the slave's stream, told which samples were filled in,
     # do not end the touch on the pad model's misfit (counting them, it
     # does: 3.2 at the last window); the stream agrees.

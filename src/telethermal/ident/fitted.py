@@ -383,14 +383,16 @@ class EffusivityFit(Identifier):
         from the onset: False where the sample was filled in (a frame lost
         on the line, held by the driver): left out of the residual and its
         degrees of freedom, as out of the amplitude and the rms (the fit
-        itself is the slave's, every sample). None under the window's
-        minimum of measured samples (docs/calibration.md)."""
+        itself is the slave's, every sample). None with no more measured
+        samples than the fit's 4 parameters (docs/calibration.md)."""
         row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
         keep = None if measured is None else np.asarray(measured, bool)[:len(row)]
         if keep is not None and len(keep) < len(row):
             raise IdentificationError(f"measured flags {len(keep)} samples of a window of "
                                       f"{len(row)}: one flag per sample from the onset")
-        if len(row) < MIN_SAMPLES or (keep is not None and keep.sum() < MIN_SAMPLES):
+        # At least one degree of freedom left over the fit's 4 (the
+        # statistic of fewer is no test).
+        if len(row) <= MIN_SAMPLES or (keep is not None and keep.sum() <= MIN_SAMPLES):
             return None
         est, gap_k = self.estimator()
         theta = np.asarray(self._theta(row, len(row)), float)
