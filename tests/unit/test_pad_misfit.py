@@ -4,7 +4,6 @@ recalibrate"), never a confident wrong name."""
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -16,15 +15,13 @@ from telethermal.ident.prepare import from_trials
 from telethermal.ident.registry import make
 from telethermal.physics.as_built import AsBuilt, BuiltFactors, with_as_built
 from telethermal.physics.scene import load_scene
+from test_pad_calibration import _scene as reference_scene
 
 MATERIALS = ("steel", "plexiglass", "wood")
 
 
 def _scene(trials):
-    s = load_scene("fingertip-7")
-    return dataclasses.replace(
-        s, finger=None, pad=dataclasses.replace(s.pad, trials_per_material=trials),
-        objects=tuple(o for o in s.objects if o.material in MATERIALS))
+    return reference_scene(MATERIALS, trials)
 
 
 @pytest.fixture(scope="module")
