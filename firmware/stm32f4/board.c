@@ -119,7 +119,12 @@ void systick_handler(void)
     millis++;
 }
 
-volatile uint32_t board_loop_worst_cycles, board_loop_count;
+volatile uint32_t board_loop_worst_cycles, board_loop_count, board_loop_worst_unit_cycles,
+    board_loop_bursts, board_isr_worst_cycles;
+/* SysTick counts spent in the UART interrupts since the start, and their
+ * sum when the running iteration began. */
+static volatile uint32_t isr_cycles;
+static uint32_t loop_isr_start;
 
 uint32_t board_stamp(void)
 {
@@ -131,11 +136,29 @@ uint32_t board_stamp(void)
     return ms * (BOARD_SYSCLK_HZ / 1000u) + cycles;
 }
 
-void board_loop_done(uint32_t start)
+uint32_t board_loop_begin(void)
 {
+    /* Stamp first, then the interrupts' sum: an interrupt in between is
+     * counted in the iteration (the measurement errs long, never short). */
+    uint32_t start = board_stamp();
+    loop_isr_start = isr_cycles;
+    return start;
+}
+
+void board_loop_done(uint32_t start, uint32_t units)
+{
+    uint32_t in_isr = isr_cycles - loop_isr_start;
     uint32_t cycles = board_stamp() - start;
-    if (cycles > board_loop_worst_cycles) {
-        board_loop_worst_cycles = cycles;
+    cycles = cycles > in_isr ? cycles - in_isr : 0u;
+    if (units <= 1u) {
+        if (cycles > board_loop_worst_cycles) {
+            board_loop_worst_cycles = cycles;
+        }
+    } else {
+        board_loop_bursts++;
+        if (cycles / units > board_loop_worst_unit_cycles) {
+            board_loop_worst_unit_cycles = cycles / units;
+        }
     }
     board_loop_count++;
 }
@@ -200,6 +223,7 @@ static void uart_tx(int port)
 
 static void uart_irq(int port)
 {
+    uint32_t entry = SYST_CVR; /* SysTick counts down, reloading every millisecond */
     uint32_t base = bases[port];
     uint32_t sr = USART_SR(base);
     if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
@@ -207,6 +231,12 @@ static void uart_irq(int port)
     }
     if ((sr & USART_SR_TXE) && (USART_CR1(base) & USART_CR1_TXEIE)) {
         uart_tx(port);
+    }
+    uint32_t exit = SYST_CVR;
+    uint32_t spent = entry >= exit ? entry - exit : entry + SYST_RVR + 1u - exit;
+    isr_cycles += spent;
+    if (spent > board_isr_worst_cycles) {
+        board_isr_worst_cycles = spent;
     }
 }
 

@@ -1,8 +1,8 @@
 /* The Peltier driver on the STM32F405 (TT_ACTIVE_PAD: the slave's active
  * pad, node 2): the portable driver (src/tt_peltier.c) polled at every
  * interrupt (SysTick each millisecond, a received byte), the core asleep
- * in between. Each iteration's length in core cycles is measured
- * (board_loop_done). */
+ * in between. Each iteration's length in core cycles is measured, with
+ * the command frames it handled (board_loop_done). */
 #include "../src/hal.h"
 #include "../src/tt_peltier.h"
 #include "board.h"
@@ -29,9 +29,10 @@ int main(void)
     tt_peltier_init(&drv, &cfg);
     for (;;) {
         plant_poll(); /* the analog side: outside the measurement (plant.h) */
-        uint32_t start = board_stamp();
+        uint32_t start = board_loop_begin();
+        uint32_t frames = drv.commands + drv.bad_commands;
         tt_peltier_poll(&drv);
-        board_loop_done(start);
+        board_loop_done(start, drv.commands + drv.bad_commands - frames);
         board_wait();
     }
 }

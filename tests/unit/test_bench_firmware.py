@@ -43,3 +43,40 @@ def test_missing_tools_are_named_with_their_apt_packages(monkeypatch):
     monkeypatch.setattr(qemu.shutil, "which", lambda name: None)
     assert qemu.missing() == [("qemu-system-arm", "qemu-system-arm"),
                               ("arm-none-eabi-gcc", "gcc-arm-none-eabi"), ("make", "make")]
+
+
+class FakeCore:
+    """The figures a core's symbols hold, in SysTick counts."""
+
+    def __init__(self, **counts):
+        self.counts = counts
+
+    def read_u32(self, name):
+        return self.counts[name]
+
+
+def loop_of(own_instructions, isr_instructions=125, monkeypatch=None):
+    from telethermal.devices import qemu
+
+    monkeypatch.setattr(qemu, "symbols", lambda elf: {n: n for n in (
+        "board_loop_worst_cycles", "board_isr_worst_cycles", "board_loop_count",
+        "board_loop_bursts", "board_loop_worst_unit_cycles")})
+    per = firmware.SYSTICK_PER_INSTRUCTION
+    return firmware.loop_figures(FakeCore(
+        board_loop_worst_cycles=round(own_instructions * per),
+        board_isr_worst_cycles=round(isr_instructions * per), board_loop_count=5000,
+        board_loop_bursts=2, board_loop_worst_unit_cycles=round(3000 * per)), "elf")
+
+
+def test_the_loop_bound_adds_the_interrupts_the_line_can_bring_in_an_iteration(monkeypatch):
+    # 4000 instructions at 3 cycles: 12000 cycles, 71.4 us at 168 MHz; a byte
+    # every 10/921600 s = 10.85 us: 7 bytes arrive, plus one pending, each
+    # interrupt 125 instructions = 375 cycles: 12000 + 8 * 375 = 15000.
+    r = loop_of(4000, monkeypatch=monkeypatch)
+    assert r["interrupts_in_an_iteration_on_silicon"] == 8
+    assert r["worst_cycles_bound"] == 15000 and r["under_a_tenth"]
+    assert r["bursts"] == 2 and r["worst_instructions_per_unit_in_a_burst"] == 3000
+    # 4500: 13500 cycles, 80.4 us, 8 bytes + 1: 13500 + 9 * 375 = 16875, over
+    # the tenth (16800).
+    r = loop_of(4500, monkeypatch=monkeypatch)
+    assert r["worst_cycles_bound"] == 16875 and not r["under_a_tenth"]
