@@ -68,3 +68,38 @@ def test_a_build_that_hangs_or_a_size_that_cannot_be_read_is_a_problem(monkeypat
         a[0], 0, stdout="", stderr=""))
     findings = qemu_findings()
     assert not findings[-1].ok and "no size read" in findings[-1].what
+
+
+def test_a_build_holds_its_folders_lock_while_make_runs(monkeypatch, tmp_path):
+    """Two services sharing a build folder never run make in it at once:
+    while make runs, the folder's lock cannot be taken."""
+    import fcntl
+    import subprocess
+
+    seen = []
+
+    def fake_make(argv, **kw):
+        with open(tmp_path / ".build.lock", "w") as other:
+            try:
+                fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                seen.append("free")
+            except BlockingIOError:
+                seen.append("held")
+        return subprocess.CompletedProcess(argv, 0, "", "")
+
+    monkeypatch.setattr(qemu.subprocess, "run", fake_make)
+    images = qemu.build_images(tmp_path)
+    assert seen == ["held"]
+    assert images["tt_peltier"] == tmp_path.resolve() / "stm32f405" / "tt_peltier.elf"
+    with open(tmp_path / ".build.lock", "w") as after:            # released after
+        fcntl.flock(after, fcntl.LOCK_EX | fcntl.LOCK_NB)
+
+
+def test_qemu_dies_with_its_parent_through_setpriv_or_says_it_cannot(monkeypatch, caplog):
+    monkeypatch.setattr(qemu.shutil, "which", lambda name: f"/usr/bin/{name}")
+    assert qemu._dying_with_parent(["qemu", "-M", "x"]) == [
+        "/usr/bin/setpriv", "--pdeathsig", "KILL", "--", "qemu", "-M", "x"]
+    monkeypatch.setattr(qemu.shutil, "which", lambda name: None)
+    with caplog.at_level("WARNING"):
+        assert qemu._dying_with_parent(["qemu"]) == ["qemu"]
+    assert "setpriv not found (apt-get install util-linux)" in caplog.text

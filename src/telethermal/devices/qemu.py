@@ -22,12 +22,12 @@ package that provides it.
 
 from __future__ import annotations
 
-import ctypes
+import fcntl
+import logging
 import os
 import re
 import selectors
 import shutil
-import signal
 import socket
 import subprocess
 import tempfile
@@ -38,6 +38,8 @@ import tty
 from pathlib import Path
 
 from telethermal.devices.board import DeviceError
+
+log = logging.getLogger(__name__)
 
 QEMU = "qemu-system-arm"
 #: QEMU 7.2's STM32F405 machine (the Olimex STM32-H405, the board the port
@@ -81,26 +83,40 @@ def require(purpose: str) -> None:
             f"{what} (apt-get install {package})" for what, package in gone))
 
 
-def _die_with_parent() -> None:
-    """In QEMU's process before it starts: killed when the thread that
-    started it ends (Linux ``PR_SET_PDEATHSIG``), so no core outlives a
-    service killed before its clean-up could run."""
-    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)     # PR_SET_PDEATHSIG
+def _dying_with_parent(argv: list[str]) -> list[str]:
+    """``argv`` run so that it is killed when the thread that started it
+    ends (Linux ``PR_SET_PDEATHSIG``, set by util-linux's ``setpriv`` before
+    it execs QEMU), so no core outlives a service killed before its clean-up
+    could run. Not by ``preexec_fn``: Python's documentation warns it may
+    deadlock in a process with threads, as the services are. Without
+    ``setpriv`` the core is stopped by :meth:`QemuCore.close` only, said in
+    the log."""
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:
+        log.warning("setpriv not found (apt-get install util-linux): a QEMU core may "
+                    "outlive a service that is killed")
+        return argv
+    return [setpriv, "--pdeathsig", "KILL", "--", *argv]
 
 
 def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, Path]:
     """``make -C firmware TARGET=stm32f405 BUILD=build_dir``: image name ->
-    its ELF file. ``DeviceError`` with the compiler's output if it fails."""
+    its ELF file. ``DeviceError`` with the compiler's output if it fails.
+    Builds in one folder wait for each other (a lock file in it), so two
+    services sharing a build folder never link a half-written object."""
+    out = Path(build_dir).resolve()
     try:
-        done = subprocess.run(["make", "-C", str(firmware), "TARGET=stm32f405",
-                               f"BUILD={Path(build_dir).resolve()}"],
-                              capture_output=True, text=True, timeout=300)
+        out.mkdir(parents=True, exist_ok=True)
+        with open(out / ".build.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            done = subprocess.run(["make", "-C", str(firmware), "TARGET=stm32f405",
+                                   f"BUILD={out}"],
+                                  capture_output=True, text=True, timeout=300)
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise DeviceError(f"the STM32F405 build did not run to its end: {exc}") from exc
     if done.returncode != 0:
         raise DeviceError(f"the STM32F405 build failed:\n{done.stdout}\n{done.stderr}")
-    out = Path(build_dir).resolve() / "stm32f405"
-    return {name: out / f"{name}.elf" for name in IMAGES}
+    return {name: out / "stm32f405" / f"{name}.elf" for name in IMAGES}
 
 
 def _free_port() -> int:
@@ -152,13 +168,12 @@ class QemuCore:
         for name, port in zip(("link", "plant", "mon"), ports):
             serials += ["-chardev", f"socket,id={name},host=127.0.0.1,port={port},"
                         f"server=on,nodelay=on,wait={'on' if name != 'mon' else 'off'}"]
-        self.proc = subprocess.Popen(
+        self.proc = subprocess.Popen(_dying_with_parent(
             [qemu, "-M", MACHINE, "-nodefaults", "-display", "none",
              "-icount", f"shift={icount_shift},align=off,sleep=on", "-kernel", str(self.image),
              *serials, "-serial", "chardev:link", "-serial", "chardev:plant",
-             "-mon", "chardev=mon,mode=readline"],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-            preexec_fn=_die_with_parent)
+             "-mon", "chardev=mon,mode=readline"]),
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         self._bridges: list[_PtyBridge] = []
         self._monitor: socket.socket | None = None
         self._stop = threading.Event()
