@@ -186,7 +186,29 @@ def test_a_message_that_cannot_be_encoded_is_dropped_alone(tmp_path, caplog):
     assert rec.messages("/master/period") == [{"k": i} for i in range(10)]
     assert rec.damaged == "3 message(s) the writer could not encode are missing"
     with open(path, "rb") as f:                        # the mcap library reads it whole
-        assert sum(1 for _ in mcap.reader.make_reader(f).iter_messages()) == 10
+        assert sum(1 for _ in mcap.reader.make_reader(f).iter_messages(
+            topics=["/master/period"])) == 10
+
+
+def test_the_count_of_unencodable_messages_survives_a_kill(tmp_path):
+    """The writer notes each message it could not encode in the stream as it
+    goes: a file never closed (a kill -9 after its last flush) still says
+    how many are missing, and which topic they were on."""
+    path = tmp_path / "r.mcap"
+    r = Recorder(path, "test")
+    r.log("/master/period", 0.0, {"k": 0})
+    r.log("/master/period", 0.01, {"k": object()})
+    r.log("/master/period", 0.02, {"k": 2 ** 70})
+    r.log("/master/period", 0.03, {"k": 3})
+    assert r.sync()
+    cut = tmp_path / "killed.mcap"                      # the file as a kill leaves it
+    cut.write_bytes(path.read_bytes())
+    r.close()
+    rec = read_recording(cut)
+    assert "dropped" not in rec.metadata             # never closed: no summary
+    assert rec.messages("/master/period") == [{"k": 0}, {"k": 3}]
+    assert rec.damaged == "2 message(s) the writer could not encode are missing"
+    assert [m["topic"] for m in rec.messages("/recording/unpackable")] == ["/master/period"] * 2
 
 
 def test_a_disk_full_at_the_start_refuses_the_recording_and_leaves_nothing(tmp_path,

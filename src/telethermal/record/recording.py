@@ -108,7 +108,11 @@ TOPIC_FIELDS = {
                                 "residual_k": "number", "offset_sd_k": "number",
                                 "points": "array"},
     "sim": {"trace": "object"},
+    "unpackable": {"topic": "string", "count": "integer", "error": "string"},
 }
+#: Where the writer notes, in the stream itself, each message it could not
+#: encode (so a file cut by a kill -9 still says what is missing).
+UNPACKABLE_TOPIC = "/recording/unpackable"
 
 
 class Recorder:
@@ -126,6 +130,7 @@ class Recorder:
         self._channels: dict[str, int] = {}
         self._closed = False
         self._file = None
+        self._last_t_ns = 0                  # the last written message's time
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = _open(self.path, "wb")
@@ -271,6 +276,7 @@ class Recorder:
                     continue
                 self._writer.add_message(self._channel(topic), t_ns, data, t_ns)
                 self.counters["written"] += 1
+                self._last_t_ns = t_ns
         except (OSError, ValueError, TypeError, OverflowError) as exc:
             self._fail(exc)
         return bool(entries)
@@ -279,9 +285,14 @@ class Recorder:
         """One message msgpack cannot encode (an object it does not know, an
         integer past 64 bits) or whose time is not a number: dropped and
         counted, logged at the first and every 1000th; the file records the
-        count when it closes (metadata ``dropped``), so a reader says it."""
+        count in its stream at once (:data:`UNPACKABLE_TOPIC`, flushed with the
+        chunk, so a file cut by a kill -9 keeps it) and when it closes
+        (metadata ``dropped``), so a reader says it."""
         self.counters["dropped_unpackable"] += 1
         n = self.counters["dropped_unpackable"]
+        note = {"topic": topic, "count": n, "error": f"{type(exc).__name__}: {exc}"[:200]}
+        self._writer.add_message(self._channel(UNPACKABLE_TOPIC), self._last_t_ns,
+                                 msgpack.packb(note, use_bin_type=True), self._last_t_ns)
         if n == 1 or n % 1000 == 0:
             log.warning("recording to %s: message %d on %s not recorded (%s: %s); the "
                         "recording goes on", self.path, n, topic, type(exc).__name__, exc)
@@ -317,7 +328,10 @@ class Recording:
             parts.append(f"{d.skipped_bytes} unreadable bytes skipped")
         if self.bad_messages:
             parts.append(f"{self.bad_messages} message(s) did not unpack")
-        unpackable = self.metadata.get("dropped", {}).get("unpackable")
+        closed = str(self.metadata.get("dropped", {}).get("unpackable", "0"))
+        noted = [m.get("count") for m in self.messages(UNPACKABLE_TOPIC)]
+        unpackable = max([int(closed) if closed.isdigit() else 0]
+                         + [n for n in noted if isinstance(n, int) and n > 0])
         if unpackable:
             parts.append(f"{unpackable} message(s) the writer could not encode are missing")
         return "; ".join(parts) or None
