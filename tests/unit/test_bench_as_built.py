@@ -64,3 +64,42 @@ def test_summary_means_over_the_pads_and_prints_them():
     out["summary"] = s
     text = "\n".join(text_lines(out))
     assert "uncalibrated" in text and "named 80.0 %" in text and "66.7 % of 3" in text
+
+
+def _unseen_row(errors: dict, covered: int, n: int) -> dict:
+    return {"unseen_rel_error_0.5": errors, "unseen_coverage_0.5": {"covered": covered, "n": n}}
+
+
+def test_unseen_as_built_summary_takes_each_materials_median_over_pads_and_pools_coverage():
+    from telethermal.bench import unseen_as_built as ua
+
+    out = {"sd": 0.15, "pads": 3, "seeds": [0], "method": "effusivity-fit", "window_s": 0.5,
+           "targets": {"median_rel_error_max": 0.10, "coverage": [0.9, 0.98]},
+           "as_modelled": _unseen_row({"copper": 0.05, "glass": 0.02}, 19, 20),
+           "uncalibrated": [_unseen_row({"copper": 0.5, "glass": 0.1}, 10, 20),
+                            _unseen_row({"copper": 0.3, "glass": 0.2}, 12, 20),
+                            _unseen_row({"copper": 0.4, "glass": 0.05}, 14, 20)],
+           "calibrated": [_unseen_row({"copper": 0.06, "glass": 0.12}, 18, 20),
+                          _unseen_row({"copper": 0.08, "glass": 0.01}, 19, 20),
+                          _unseen_row({"copper": 0.04, "glass": 0.03}, 20, 20)]}
+    s = ua.summary(out)
+    # Medians over the pads: copper (0.5, 0.3, 0.4) -> 0.4, glass -> 0.1.
+    assert s["uncalibrated"]["unseen_rel_error_0.5"] == {"copper": 0.4, "glass": 0.1}
+    assert s["uncalibrated"]["worst_material"] == "copper"
+    assert not s["uncalibrated"]["within_10pct"]
+    # Calibrated: copper 0.06, glass 0.03 (one pad's 12 % is not the median).
+    assert s["calibrated"]["worst_rel_error_0.5"] == pytest.approx(0.06)
+    assert s["calibrated"]["within_10pct"]
+    assert s["calibrated"]["unseen_coverage_0.5"] == pytest.approx(57 / 60)
+    assert s["as_modelled"]["unseen_coverage_0.5"] == pytest.approx(0.95)
+    out["summary"] = s
+    text = "\n".join(ua.text_lines(out))
+    assert "uncalibrated  worst median error 40.0 % (copper), coverage 60.0 % of 60" in text
+
+
+def test_unseen_as_built_refuses_a_custom_unseen_set(capsys):
+    from telethermal.cli import main
+
+    assert main(["bench", "unseen", "--as-built", "0.15", "--unseen", "copper",
+                 "--json", "x.json"]) != 0
+    assert "--unseen and --unseen-scene are for the pad as modelled" in capsys.readouterr().err

@@ -137,12 +137,31 @@ def cmd_bench_skin_floor(args) -> int:
 def cmd_bench_unseen(args) -> int:
     from telethermal.bench import unseen
 
+    if args.as_built is not None:
+        return _bench_unseen_as_built(args)
     seeds = args.seeds or (1 if args.quick else 3)
     with _progress(seeds + 2, "bench unseen") as advance:
         report = unseen.run_and_save(args.json, command=_command(), seeds=seeds,
                                      unseen=args.unseen, unseen_scene=args.unseen_scene,
                                      quick=args.quick, scene=args.scene, progress=advance)
     _print_lines(unseen.text_report(report, args.json))
+    return 0
+
+
+def _bench_unseen_as_built(args) -> int:
+    from telethermal.bench import unseen_as_built as ab
+    from telethermal.jsonfile import write_json
+
+    if args.unseen or args.unseen_scene:
+        from telethermal.errors import BenchError
+        raise BenchError("bench unseen --as-built touches the default unseen set; "
+                         "--unseen and --unseen-scene are for the pad as modelled")
+    with _progress(1 + 2 * args.pads, "bench unseen --as-built") as advance:
+        section = ab.run(args.as_built, args.pads, args.seeds or 1, args.scene or "fingertip-7",
+                         quick=args.quick, progress=advance, partial=lambda part: write_json(
+                             args.json, {"as_built": part, "command": _command()}))
+    write_json(args.json, {"as_built": section, "command": _command()})
+    _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
     return 0
 
 
@@ -274,6 +293,13 @@ def _add_error(bsub) -> None:
     p.add_argument("--unseen-scene", help="a scene file whose objects (with its own materials "
                                           "table; layered ones too) are touched as unseen "
                                           "materials")
+    p.add_argument("--as-built", type=float, metavar="SD",
+                   help="instead: the unseen materials' effusivity on pads built off their "
+                        "datasheet (every factor drawn log-normal with this sd), as "
+                        "modelled, uncalibrated and calibrated (telethermal calibrate pad); "
+                        "--seeds sessions per pad (default 1)")
+    p.add_argument("--pads", type=_positive(int), default=5,
+                   help="with --as-built: how many pads are drawn (default 5)")
     _scene_arg(p)
     p.set_defaults(func=cmd_bench_unseen)
 
