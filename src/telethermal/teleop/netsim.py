@@ -21,28 +21,28 @@ What is modelled, and how:
   (for the naive baseline) a ``flux_setpoint`` per sample.
 * Lossy stream: each message through a :class:`~telethermal.faults.channel.Channel`
   (loss, delay, jitter, reordering); a lost one is gone.
-* Lossless stream (PROTOCOL.md section 4): per direction, in ``seq`` order.
-  A lost message is recovered by the receiver's ``resend`` (sent when a
-  later message, or a heartbeat's ``last_seq``, reveals the gap; repeated
-  once per heartbeat period while it is open; itself through the faulty
-  reverse direction) or by the sender's retransmission timer (``max(3
-  heartbeats, 2 round trips + 1 heartbeat)`` without the peer's ack);
-  messages behind a gap wait for it. Heartbeats (every ``heartbeat_s``,
-  through the channel, lossy) are modelled while the sender holds
-  unacknowledged messages.
-  ``estimates="lossless"`` sends every estimate this way (the protocol
-  before issue 15), so the cost of ordered estimates can be measured.
-* Clocks are the same on both sides (the clock-offset estimate of the real
-  transport is not modelled); heartbeats and liveness are not modelled
-  (a partition or a crash is measured on the real processes).
+* Lossless stream (PROTOCOL.md section 4): each side runs the services' own
+  :class:`~telethermal.wire.lossless.LosslessStream` (numbering, kept
+  messages, ``resend`` on a gap or a lost tail, the retransmission timer,
+  gaps given up), its messages, heartbeats and resends through the faulty
+  channels; both sides' heartbeats and repairs run every ``heartbeat_s`` on
+  the simulated clock (from the first period boundary after the link's
+  first use), so the round trip the timers use is measured as the services
+  measure it. ``estimates="lossless"`` sends every estimate this way (the
+  protocol before issue 15), so the cost of ordered estimates can be
+  measured.
+* Clocks are the same on both sides (the clock-offset estimate is made, on
+  equal clocks); the hello exchange and liveness are not modelled (a
+  partition or a crash is measured on the real processes).
 """
 
 from __future__ import annotations
 
 import heapq
 import itertools
+import logging
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -58,7 +58,13 @@ from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_di
                                      display_idle, display_model_args, draw_operator, master_rng,
                                      pad_resistance, safety_summary, slave_rng, with_finger)
 from telethermal.teleop.slave import Slave
-from telethermal.wire.messages import ContactEvent, Message
+from telethermal.wire.lossless import LosslessStream
+from telethermal.wire.loglimit import LogLimiter
+from telethermal.wire.messages import ContactEvent, Message, parse
+from telethermal.wire.schema import PROTOCOL_VERSION
+from telethermal.wire.transport import COUNTERS, ClockOffset, TransportConfig
+
+log = logging.getLogger(__name__)
 
 #: Bytes of a message on the wire, roughly (only a serialising link cares).
 MESSAGE_BYTES = {"flux_trajectory": 4200, "material_estimate": 160,
@@ -97,41 +103,79 @@ class NetworkSpec:
         return self.slave_to_master.delay_s + self.master_to_slave.delay_s
 
 
-@dataclass
-class _Lossless:
-    """One direction's lossless stream: the sender's kept messages and the
-    receiver's next expected ``seq`` and buffer."""
+class _Quiet:
+    """A logger whose warnings are this module's debug lines."""
 
-    sent: dict = field(default_factory=dict)             # seq -> (message, first send time)
-    next_seq: int = 1
-    expected: int = 1
-    buffered: dict = field(default_factory=dict)
-    resend_asked_at_s: float = -math.inf
-    heartbeat_due: bool = False
-    tail_gap_seq: int = 0                  # the expected seq a heartbeat showed missing
-    counters: dict = field(default_factory=lambda: dict.fromkeys(
-        ("sent", "resent", "gaps", "recovered"), 0))
+    @staticmethod
+    def warning(fmt, *args, exc_info=None):
+        log.debug(fmt, *args, exc_info=exc_info)
+
+
+class _SimEndpoint:
+    """One side's lossless stream: the very
+    :class:`~telethermal.wire.lossless.LosslessStream` an
+    :class:`~telethermal.wire.transport.Endpoint` runs (numbering, the kept
+    messages, acknowledgement by heartbeat, resends, the retransmission
+    timer, gaps given up), its messages handed to ``transmit`` instead of a
+    socket, its clock the simulated one."""
+
+    def __init__(self, role: str, config: TransportConfig, clock, transmit):
+        self.role, self.counters = role, dict.fromkeys(COUNTERS, 0)
+        self._kind_seq: dict[str, int] = {}
+        # What the services log as warnings (a resend throttled, a gap given
+        # up) is counted here and logged at debug: a bench runs thousands.
+        self._limited = LogLimiter(_Quiet())
+        self.stream = LosslessStream(
+            role=role, config=config, clock=clock, counters=self.counters,
+            offset=ClockOffset(), limited=self._limited, send=transmit,
+            unordered=self._unordered, drop=self._drop)
+
+    def _unordered(self, kind: str, now: float, **fields) -> dict:
+        seq = self._kind_seq[kind] = self._kind_seq.get(kind, 0) + 1
+        return {"kind": kind, "v": PROTOCOL_VERSION, "seq": seq, "sent_s": now, **fields}
+
+    def _drop(self, key: str, now: float, fmt: str, *args) -> None:
+        self.counters[key] += 1
+        self._limited.warn(key, now, "%s: " + fmt, self.role, *args)
+
+
+#: Each direction's sending and receiving side.
+ENDS = {"s2m": ("slave", "master"), "m2s": ("master", "slave")}
 
 
 class SimNetwork:
     """The two directions, on a clock the caller advances with :meth:`due`.
     ``send(now, "s2m" | "m2s", message, lossless)``; ``due(now, direction)``
     returns the messages the receiver's application gets up to ``now``, in
-    the order it gets them."""
+    the order it gets them. Lossless messages go through each side's own
+    :class:`~telethermal.wire.lossless.LosslessStream` (the services' code);
+    both sides' heartbeats, every ``heartbeat_s`` on the simulated clock,
+    carry the acknowledgements and run the streams' repair."""
 
     def __init__(self, spec: NetworkSpec, rng: np.random.Generator):
         self.spec = spec
         self.channels = {"s2m": Channel(spec.slave_to_master, rng),
                          "m2s": Channel(spec.master_to_slave, rng)}
-        self.streams = {"s2m": _Lossless(), "m2s": _Lossless()}
         self._events: list = []          # (time, order, action, direction, payload)
         self._order = itertools.count()
         self._ready = {"s2m": [], "m2s": []}
-        self._retransmit_s = max(3 * spec.heartbeat_s, 2 * spec.round_trip_s + spec.heartbeat_s)
+        self._now = -math.inf
+        self._ticking = False
+        config = TransportConfig(heartbeat_s=spec.heartbeat_s, dead_after_s=max(
+            TransportConfig.dead_after_s, 10 * spec.heartbeat_s))
+        self.endpoints = {
+            role: _SimEndpoint(role, config, lambda: self._now,
+                               lambda m, data=None, d=d: self._transmit(
+                                   self._now, d, m["kind"], m, m["kind"]))
+            for d, (role, _) in ENDS.items()}
 
-    @staticmethod
-    def reverse(direction: str) -> str:
-        return "m2s" if direction == "s2m" else "s2m"
+    def counters(self, direction: str) -> dict:
+        """``direction``'s lossless figures: sent and resent by its sender;
+        gaps, recovered, duplicates and skipped at its receiver."""
+        tx, rx = (self.endpoints[r].counters for r in ENDS[direction])
+        return {"sent": tx["lossless_sent"], "resent": tx["resent"], "gaps": rx["gaps"],
+                "recovered": rx["recovered"], "duplicates": rx["duplicates"],
+                "skipped": rx["skipped"]}
 
     def _push(self, t: float, action: str, direction: str, payload) -> None:
         heapq.heappush(self._events, (t, next(self._order), action, direction, payload))
@@ -141,95 +185,62 @@ class SimNetwork:
         if spec.change_at_s is not None and now >= spec.change_at_s and \
                 self.channels[direction].profile is not spec.then:
             self.channels[direction].profile = spec.then
-            self._retransmit_s = max(3 * spec.heartbeat_s,
-                                     4 * spec.then.delay_s + spec.heartbeat_s)
         for t in self.channels[direction].send(now, MESSAGE_BYTES.get(kind, 100)):
             self._push(t, action, direction, payload)
 
+    def _start(self, now: float) -> None:
+        """The heartbeats, from the first period boundary after ``now``."""
+        if not self._ticking:
+            self._ticking = True
+            k = math.floor(now / self.spec.heartbeat_s) + 1
+            self._push(k * self.spec.heartbeat_s, "tick", "", k)
+
     def send(self, now: float, direction: str, message: Message, lossless: bool) -> None:
+        self._advance(now)
         if not lossless:
             self._transmit(now, direction, "lossy", message, message.KIND)
             return
-        s = self.streams[direction]
-        seq = s.next_seq
-        s.next_seq += 1
-        s.sent[seq] = (message, now)
-        s.counters["sent"] += 1
-        self._transmit(now, direction, "lossless", (seq, message), message.KIND)
-        self._push(now + self._retransmit_s, "timer", direction, seq)
-        if not s.heartbeat_due:
-            hb = self.spec.heartbeat_s
-            s.heartbeat_due = True
-            self._push((math.floor(now / hb) + 1) * hb, "heartbeat tick", direction, None)
-
-    def _resend_from(self, now: float, direction: str, from_seq: int) -> None:
-        s = self.streams[direction]
-        for seq in sorted(q for q in s.sent if q >= from_seq):
-            s.counters["resent"] += 1
-            message = s.sent[seq][0]
-            self._transmit(now, direction, "lossless", (seq, message), message.KIND)
+        self.endpoints[ENDS[direction][0]].stream.send(str(message.KIND), now,
+                                                       message.fields(), True)
 
     def _arrive(self, t: float, action: str, direction: str, payload) -> None:
-        s = self.streams[direction]
         if action == "lossy":
             self._ready[direction].append(payload)
-        elif action == "lossless":
-            seq, message = payload
-            if seq < s.expected or seq in s.buffered:
-                return                                      # a duplicate
-            if seq > s.expected:
-                if not s.buffered:
-                    s.counters["gaps"] += 1
-                s.buffered[seq] = message
-                self._ask_resend(t, direction)
-                return
-            self._ready[direction].append(message)
-            s.expected += 1
-            while s.expected in s.buffered:
-                self._ready[direction].append(s.buffered.pop(s.expected))
-                s.counters["recovered"] += 1
-                s.expected += 1
-            # The ack travels back in the next heartbeat; acknowledged
-            # messages are no longer kept (the ack's own loss is not modelled).
-            for q in [q for q in s.sent if q < s.expected]:
-                del s.sent[q]
-        elif action == "resend":                            # at the sender of `direction`
-            self._resend_from(t, direction, payload)
-        elif action == "timer":
-            if payload in s.sent:                           # still unacknowledged
-                self._resend_from(t, direction, payload)
-                self._push(t + self._retransmit_s, "timer", direction, payload)
-        elif action == "gap check":
-            if s.buffered:
-                self._ask_resend(t, direction)
-        elif action == "heartbeat tick":                    # at the sender
-            s.heartbeat_due = bool(s.sent)
-            if s.sent:
-                self._transmit(t, direction, "heartbeat", s.next_seq - 1, "heartbeat")
-                self._push(t + self.spec.heartbeat_s, "heartbeat tick", direction, None)
-        elif action == "heartbeat":                         # at the receiver
-            if s.expected <= payload:                       # last_seq: a lost tail
-                if not s.buffered and s.tail_gap_seq != s.expected:
-                    s.counters["gaps"] += 1                 # once per gap
-                    s.tail_gap_seq = s.expected
-                self._ask_resend(t, direction)
-
-    def _ask_resend(self, t: float, direction: str) -> None:
-        """The receiver of ``direction`` asks for the first missing seq, at
-        most once per heartbeat period; it looks again a period later."""
-        s = self.streams[direction]
-        if t - s.resend_asked_at_s < self.spec.heartbeat_s:
             return
-        s.resend_asked_at_s = t
-        for arrival in self.channels[self.reverse(direction)].send(t, MESSAGE_BYTES["resend"]):
-            self._push(arrival, "resend", direction, s.expected)
-        if s.buffered:
-            self._push(t + self.spec.heartbeat_s, "gap check", direction, None)
+        if action == "tick":                # both sides' housekeeping, as Endpoint.poll
+            for incoming, (_, role) in ENDS.items():
+                stream = self.endpoints[role].stream
+                stream.heartbeat(t)
+                self._deliver(incoming, stream.repair(t))   # a gap given up: what follows
+            self._push((payload + 1) * self.spec.heartbeat_s, "tick", "", payload + 1)
+            return
+        # A message of the stream arriving at the receiver of ``direction``
+        # (a heartbeat or a resend travels the direction of its sender).
+        receiver = self.endpoints[ENDS[direction][1]].stream
+        if action == "heartbeat":
+            receiver.on_heartbeat(payload, t)
+        elif action == "resend":
+            receiver.serve_resend(payload, t)
+        else:
+            self._deliver(direction, receiver.receive(payload, t))
 
-    def due(self, now: float, direction: str) -> list[Message]:
+    def _deliver(self, direction: str, messages: list[dict]) -> None:
+        self._ready[direction] += [parse(m) for m in messages if m is not None]
+
+    @staticmethod
+    def reverse(direction: str) -> str:
+        return "m2s" if direction == "s2m" else "s2m"
+
+    def _advance(self, now: float) -> None:
+        self._start(now)
         while self._events and self._events[0][0] <= now:
             t, _, action, d, payload = heapq.heappop(self._events)
+            self._now = t
             self._arrive(t, action, d, payload)
+        self._now = now
+
+    def due(self, now: float, direction: str) -> list[Message]:
+        self._advance(now)
         out, self._ready[direction] = self._ready[direction], []
         return out
 
@@ -398,7 +409,7 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
         **windowed_errors(touch.trace, contact_s, news_s),
         "temp_rms_error_c": metrics["temp_rms_error_c"],
         **safety_summary(display), "link_counters": dict(session.link.counters),
-        "lossless": {d: dict(s.counters) for d, s in net.streams.items()},
+        "lossless": {d: net.counters(d) for d in ENDS},
         "channel": {d: dict(c.counters) for d, c in net.channels.items()},
     }
     return NetworkTouch(summary, touch.trace)
