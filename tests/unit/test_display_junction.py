@@ -186,12 +186,69 @@ def test_the_current_slew_is_bounded():
     assert loop.limits.slew_limited_periods > 0
 
 
-def test_a_missing_reading_gives_0_a_and_a_fresh_start():
+def test_a_missing_reading_gives_0_a_and_no_fresh_start():
+    """A junction reading that is not finite, after plausible ones: 0 A,
+    the PI emptied, the smoothed target kept (a fresh start would take the
+    next reading, however implausible, as its own reference) and no
+    disagreement timed (nothing disagreed yet)."""
     loop = designed_loop()
     loop.update(14.0, 24.0, 24.0, DT)
-    out = loop.update(14.0, math.nan, 24.0, DT)
-    assert out.current_a == 0.0 and math.isnan(out.estimate_c)
-    assert loop.integral_a == 0.0 and loop.reference_c is None
+    for bad in (math.nan, math.inf, -math.inf):
+        out = loop.update(14.0, bad, 24.0, DT)
+        assert out.current_a == 0.0 and math.isnan(out.estimate_c)
+        assert loop.integral_a == 0.0 and loop.reference_c is not None
+    assert loop.implausible_s == 0.0 and not loop.stopped
+
+
+@pytest.mark.parametrize("missing", ["junction", "hot side"])
+def test_a_sensor_alternating_nan_and_an_implausible_value_stops_in_its_stated_time(missing):
+    """Holding 24 C on a sensor that agrees, the sensor then reads nan and
+    40 C (16 K off its model, over IMPLAUSIBLE_K) in turn, or reads 40 C
+    while the hot side goes missing every other period: on the simulated
+    clock the loop stops IMPLAUSIBLE_S after the first implausible reading
+    (to a period: the missing periods go on timing it), and stays at 0 A."""
+    loop = designed_loop()
+    for _ in range(50):
+        loop.update(24.0, 24.0, 24.0, DT)
+    assert not loop.stopped
+    stopped_after_s = None
+    for k in range(int(2.0 * loop.IMPLAUSIBLE_S / DT)):
+        if k % 2 == 0:
+            sensed, hot = (math.nan, 24.0) if missing == "junction" else (40.0, math.nan)
+        else:
+            sensed, hot = 40.0, 24.0
+        loop.update(24.0, sensed, hot, DT)
+        if loop.stopped:
+            stopped_after_s = (k + 1) * DT
+            break
+    first_implausible_s = DT if missing == "junction" else 0.0
+    assert stopped_after_s is not None
+    # Not before its time (half a period for the sum of periods' rounding).
+    late_s = stopped_after_s - first_implausible_s - loop.IMPLAUSIBLE_S
+    assert -0.5 * DT < late_s <= 1.5 * DT
+    assert all(loop.update(24.0, s, 24.0, DT).current_a == 0.0 for s in (24.0, math.nan) * 5)
+
+
+def test_a_bonded_sensor_that_goes_missing_for_2_s_is_not_stopped_when_it_returns():
+    """The junction held 10 K under the room; the readings then go missing
+    for 2 s (a driver outage: 0 A, the junction warms toward its sink, 10 K
+    x (1 - exp(-2 s / 4.3 s)) = 3.7 K by the model's a = G/C, over
+    IMPLAUSIBLE_K). The loop's model coasts with the module at 0 A, so the
+    returning sensor agrees with it: no disagreement timed at all (a model
+    held still would see the 3.7 K), no stop, and the junction is back
+    within 0.1 K of the target 3 s later."""
+    pad, loop = PadInAir(24.0, SENSOR.tau_s), designed_loop()
+    for k in range(int(8.0 / DT)):
+        outage = 3.0 <= k * DT < 5.0
+        out = loop.update(14.0, math.nan if outage else pad.sensed_c,
+                          pad.stack.state.sink_c, DT)
+        assert out.current_a == 0.0 or not outage
+        pad.step(out.current_a)
+        assert loop.implausible_s == 0.0
+        if k * DT == pytest.approx(5.0 - DT):
+            assert pad.stack.state.cold_c - 14.0 > loop.IMPLAUSIBLE_K
+    assert not loop.stopped
+    assert abs(pad.stack.state.cold_c - 14.0) < 0.1
 
 
 def test_reversals_and_ripple_are_counted_as_stated():

@@ -176,6 +176,36 @@ class DisplayJunctionLoop:
         self.rearms += 1
         return True
 
+    def _judge(self, dt_s: float, implausible: bool) -> bool:
+        """Time the sensor's disagreement; True once the loop is stopped."""
+        self.implausible_s = self.implausible_s + dt_s if implausible else 0.0
+        self.stopped = self.stopped or self.implausible_s > self.IMPLAUSIBLE_S
+        return self.stopped
+
+    def _coast(self, dt_s: float, hot_c: float, load_w: float) -> None:
+        """A period the loop cannot run: its model follows the junction as
+        the model says it moves at 0 A (conducting to the hot side, last
+        read if not now, under the load if known), and the sensor's model
+        follows that; a bonded sensor agrees with it when readings return."""
+        hot_c = hot_c if math.isfinite(hot_c) else self.hot_c
+        if self.reference_c is None or not math.isfinite(hot_c):
+            return
+        qc_w = float(self.params.heat_w(0.0, self.reference_c, hot_c)[0])
+        load_w = load_w if math.isfinite(load_w) else 0.0
+        self.reference_c += dt_s * (load_w - qc_w) / self.model.heat_j_k
+        tau = self.model.sensor_tau_s
+        self.sensor_model_c += (1.0 if tau <= 0 else -math.expm1(-dt_s / tau)) * \
+            (self.reference_c - self.sensor_model_c)
+
+    def _unrun(self, dt_s: float, implausible: bool | None) -> DisplayJunctionStep:
+        """A period the loop does not run (a value missing, or stopped): 0 A,
+        the PI emptied; ``implausible`` (None: already judged) goes to the
+        sensor's check, which only a plausible reading clears."""
+        if implausible is not None:
+            self._judge(dt_s, implausible)
+        self.current_a, self.integral_a = 0.0, 0.0
+        return DisplayJunctionStep(0.0, self.stopped, 0.0, math.nan)
+
     @property
     def saturated_periods(self) -> int:
         return self.limits.saturated_periods
@@ -188,6 +218,7 @@ class DisplayJunctionLoop:
         self.reference_c: float | None = None      # the smoothed target
         self.sensor_model_c = math.nan             # what the sensor would read on it
         self.current_a = 0.0                       # the last current asked for
+        self.hot_c = math.nan                      # the hot side's last reading
 
     def _count(self, requested_a: float, sensed_c: float, hot_c: float) -> None:
         lim, spec = self.limits, self.params.spec
@@ -219,12 +250,22 @@ class DisplayJunctionLoop:
         """This period's current. ``sensed_c``: the junction sensor's reading;
         ``hot_c``: the hot side's (the heat sink's thermistor); ``load_w``:
         heat into the junction from the pad as far as the caller knows it.
-        A reading that is not finite gives 0 A and a fresh start."""
+        A value that is not finite gives 0 A for the period and no fresh
+        start (which would take the next reading, however implausible, as
+        its reference): the loop's model coasts (:meth:`_coast`), a missing
+        junction reading goes on timing a disagreement already begun, and
+        with another value missing the reading is still held against the
+        model; so a sensor alternating nan with an implausible value stops
+        the loop ``IMPLAUSIBLE_S`` after its first implausible reading."""
         if not (dt_s > 0 and math.isfinite(dt_s)):
             raise ControlError(f"junction loop needs a positive period, got {dt_s}")
         if not all(math.isfinite(v) for v in (target_c, sensed_c, hot_c, load_w)):
-            self.reset()
-            return DisplayJunctionStep(0.0, False, 0.0, math.nan)
+            self._coast(dt_s, hot_c, load_w)
+            begun = self.implausible_s > 0
+            return self._unrun(dt_s, begun if not math.isfinite(sensed_c) else
+                               self.reference_c is not None and
+                               abs(sensed_c - self.sensor_model_c) > self.IMPLAUSIBLE_K)
+        self.hot_c = hot_c
         if self.reference_c is None:
             self.reference_c, self.sensor_model_c = sensed_c, sensed_c
         previous = self.reference_c
@@ -236,10 +277,8 @@ class DisplayJunctionLoop:
         self.sensor_model_c += (1.0 if tau <= 0 else -math.expm1(-dt_s / tau)) * \
             (self.reference_c - self.sensor_model_c)
         error = sensed_c - self.sensor_model_c          # positive: warmer than meant, cool
-        self.implausible_s = self.implausible_s + dt_s if abs(error) > self.IMPLAUSIBLE_K else 0.0
-        if self.stopped or self.implausible_s > self.IMPLAUSIBLE_S:
-            self.stopped, self.current_a, self.integral_a = True, 0.0, 0.0
-            return DisplayJunctionStep(0.0, True, 0.0, math.nan)
+        if self._judge(dt_s, abs(error) > self.IMPLAUSIBLE_K):
+            return self._unrun(dt_s, None)
         ff = hold_current_a(self.params, self.reference_c, hot_c,
                             load_w - self.model.heat_j_k * rate_k_s)
         requested = ff + self.gains.kp_a_k * error + self.integral_a
