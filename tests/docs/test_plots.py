@@ -108,3 +108,31 @@ def test_replay_plot_draws_flux_out_of_the_finger_positive_as_the_touch_plot_doe
             assert np.all(q[x >= 0] > 0) and np.all(q[x < 0] == 0), line.get_label()
     finally:
         plt.close(fig)
+
+
+def test_fault_bench_plot_draws_flux_out_of_the_finger_positive(tmp_path, monkeypatch):
+    """`bench faults`' traces, the display's flux into the finger, drawn
+    out of it under the touch plot's axis label (they were pad -> finger)."""
+    from telethermal.bench.faults_plot import plot_traces
+    from telethermal.teleop.plots import OUT_OF_FINGER_KW
+
+    t = np.linspace(-0.2, 1.0, 61)
+    into_finger = np.where(t >= 0, -5e3 / np.sqrt(np.clip(t, 1e-2, None)), 0.0)
+    trace = {"t_s": t, "flux_w_m2": into_finger, "direct_flux_w_m2": into_finger}
+    row = {"fault": "none", "profile": {}, "fault_window_s": None, "safety_events": 0,
+           "compensated_flux_rms_error_rel": 0.01, "naive_flux_rms_error_rel": 0.02}
+    report = {"rows": [row], "contact_s": 1.0, "materials": ["aluminium"], "machine": "m",
+              "date": "d"}
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)
+    plot_traces(report, {"none": {"trajectory": trace}}, tmp_path / "faults.png")
+    ax = figures[0].axes[0]
+    try:
+        assert ax.get_ylabel() == OUT_OF_FINGER_KW
+        for line in ax.get_lines():
+            x, q = (np.asarray(v, dtype=float) for v in line.get_data())
+            if len(x) == len(t):
+                assert np.all(q[x >= 0] > 0), line.get_label()
+    finally:
+        monkeypatch.undo()
+        plt.close(figures[0])
