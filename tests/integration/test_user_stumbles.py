@@ -2,6 +2,7 @@
 each case as a user meets it, through the command line, in process."""
 
 import csv
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -11,33 +12,26 @@ from telethermal.data.dataset import load_dataset
 from telethermal.physics.scene import load_scene
 from telethermal.record.recording import Recorder
 
-TINY = """
-name = "tiny"
-room_temp_c = 21.5
-sample_rate_hz = 200.0
-pre_contact_s = 0.1
-[pad]
-kind = "peltier"
-layers = [["flux_sensor_film", 3.0e-4], ["alumina", 2.5e-4]]
-gap_k = 10.0
-contact_duration_s = 0.5
-trials_per_material = 2
-[finger]
-persons = 1
-trials_per_person = 2
-contact_duration_s = 1.0
-[[objects]]
-material = "glass"
-[[objects]]
-material = "wood"
-"""
+
+def _tiny_text() -> str:
+    """A lab's copy of the shipped scene (docs/scenes.md: its own name), in
+    a room of 21.5 C, with few touches."""
+    text = resources.files("telethermal").joinpath("scenes", "fingertip-7.toml").read_text()
+    for old, new in (('name = "fingertip-7"', 'name = "tiny"'),
+                     ("room_temp_c = 24.0", "room_temp_c = 21.5"),
+                     ("trials_per_material = 10", "trials_per_material = 1"),
+                     ("persons = 5", "persons = 1"), ("trials_per_person = 10",
+                                                      "trials_per_person = 1")):
+        assert old in text, old
+        text = text.replace(old, new)
+    return text
 
 
 @pytest.fixture
 def tiny(tmp_path):
     """A lab's own scene file (docs/scenes.md: its own name, a room of 21.5 C)."""
     path = tmp_path / "tiny.toml"
-    path.write_text(TINY)
+    path.write_text(_tiny_text())
     return path
 
 
@@ -46,13 +40,13 @@ def test_scenes_shows_a_scene_file_given_by_path(tiny, capsys):
     `telethermal scenes` took none (unrecognized arguments)."""
     assert main(["scenes", "--scene", str(tiny), "--scene", "fingertip-7", "-v"]) == 0
     out = capsys.readouterr().out
-    assert "tiny" in out and "glass" in out and "fingertip-7" in out
+    assert "tiny" in out and "plexiglass" in out and "fingertip-7" in out
     assert "gripper-case-V" not in out                  # only the scenes asked for
     assert main(["scenes", "--scene", str(tiny.with_name("tiny2.toml"))]) == 2
     assert "tiny2.toml does not exist" in capsys.readouterr().err
 
 
-def write_recording(path, scene_name, material="glass"):
+def write_recording(path, scene_name, material="plexiglass"):
     """A session's recording as `session --scene FILE --record` writes it: the
     scene by its name (not its file), one slave contact."""
     t = np.round(np.arange(-0.1, 0.5, 0.01), 6)
@@ -79,7 +73,7 @@ def test_a_recording_made_on_a_scene_file_is_imported(tiny, tmp_path, capsys):
     error says what to give; with --scene FILE the scene's room (21.5 C);
     with --room-c that; a shipped scene's recording needs neither."""
     rec = write_recording(tmp_path / "touch.mcap", "tiny")
-    args = ["dataset", "import", str(rec), "--material", "glass", "--group", "day-1"]
+    args = ["dataset", "import", str(rec), "--material", "plexiglass", "--group", "day-1"]
     assert main(args + ["--into", str(tmp_path / "a")]) == 2
     err = capsys.readouterr().err
     assert "'tiny' is not a shipped one" in err and "--scene FILE" in err and "--room-c" in err
