@@ -19,7 +19,7 @@ def _tiny_text() -> str:
     text = resources.files("telethermal").joinpath("scenes", "fingertip-7.toml").read_text()
     for old, new in (('name = "fingertip-7"', 'name = "tiny"'),
                      ("room_temp_c = 24.0", "room_temp_c = 21.5"),
-                     ("trials_per_material = 10", "trials_per_material = 1"),
+                     ("trials_per_material = 10", "trials_per_material = 3"),
                      ("persons = 5", "persons = 1"), ("trials_per_person = 10",
                                                       "trials_per_person = 1")):
         assert old in text, old
@@ -119,3 +119,28 @@ def test_a_generated_datasets_manifest_is_imported_and_mixed_with_lab_contacts(
     assert main(["dataset", "import", "--manifest", manifest, "--into", str(tmp_path / "x"),
                  "--group", "g"]) == 2
     assert "not --group" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def test_a_recording_made_on_a_scene_file_replays_with_its_scene(tiny, tmp_path, capsys,
+                                                                 trained_models, monkeypatch):
+    """`telethermal replay` of a recording made on a scene file failed: the
+    default identifier needs its pad's scene, found by the recorded name,
+    and the error said "give the scene file: --scene FILE", an option replay
+    did not have. Now replay takes --scene FILE (a file of another name is
+    refused) and replays the touch sample for sample."""
+    import telethermal.physics.scene as scene_module
+    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.run import run_session, with_finger
+
+    scene = with_finger(load_scene(tiny))
+    rec = tmp_path / "touch.mcap"
+    run_session(scene, "plexiglass", *trained_models.pair(scene, 0),
+                DisplayConfig(feedforward_model="static", idle="object"), contact_s=0.4,
+                seed=1, record=rec)
+    monkeypatch.setattr(scene_module, "_FILES_BY_NAME", {})   # a new process: none loaded
+    assert main(["replay", str(rec), "--out", str(tmp_path / "a")]) == 2
+    assert "--scene FILE" in capsys.readouterr().err
+    assert main(["replay", str(rec), "--out", str(tmp_path / "b"), "--scene", "fingertip-7"]) == 2
+    assert "recorded on scene 'tiny', but --scene is 'fingertip-7'" in capsys.readouterr().err
+    assert main(["replay", str(rec), "--out", str(tmp_path / "c"), "--scene", str(tiny)]) == 0
+    assert "identical to the recording, sample for sample" in capsys.readouterr().out
