@@ -73,3 +73,66 @@ def test_database_plot_states_the_convention_on_each_flux_axis(tmp_path):
         assert np.nanmax(flux) > 0 and np.nanmin(flux) >= -1.0   # warmer finger: positive
     finally:
         plt.close(fig)
+
+
+def test_replay_plot_draws_flux_out_of_the_finger_positive_as_the_touch_plot_does():
+    """`telethermal replay`'s plot (issue 46's review: it drew the display's
+    flux into the finger, pad -> finger, negative for a cold object, beside
+    the touch plots' positive): every master-side flux, recorded, replayed
+    and the simulator's truth, drawn out of the finger, under the touch
+    plot's own axis label."""
+    from telethermal.teleop.plots import OUT_OF_FINGER_KW
+    from telethermal.teleop.replay import replay_figure
+
+    t = np.linspace(-0.2, 1.0, 121)
+    into_finger = np.where(t >= 0, -5e3 / np.sqrt(np.clip(t, 1e-2, None)), 0.0)  # a cold object
+    recorded = {"t_s": t, "flux_w_m2": into_finger, "desired_flux_w_m2": into_finger,
+                "pad_temp_c": 30 + 0 * t, "junction_applied_c": 28 + 0 * t,
+                "phase": np.array(["track"] * len(t), dtype=object)}
+    result = {"recorded": recorded,
+              "replayed": {"t_s": t, "desired_flux_w_m2": into_finger,
+                           "junction_applied_c": 28 + 0 * t},
+              "trace": {"t_s": t, "direct_flux_w_m2": into_finger, "flux_w_m2": into_finger,
+                        "direct_skin_c": 33 - t, "skin_surface_c": 33 - t},
+              "summary": {"identical": True, "periods": len(t), "file": "touch.mcap",
+                          "slave": {"onset_s": 0.0, "decision_time_s": 0.06,
+                                    "identified": "aluminium"}}}
+    fig = replay_figure(result)
+    try:
+        ax_q = fig.axes[0]
+        assert ax_q.get_ylabel() == OUT_OF_FINGER_KW
+        lines = [line for line in ax_q.get_lines() if len(line.get_xdata()) == len(t)]
+        assert len(lines) == 5                  # truth x2, sensor, setpoint recorded/replayed
+        for line in lines:
+            x, q = (np.asarray(v, dtype=float) for v in line.get_data())
+            assert np.all(q[x >= 0] > 0) and np.all(q[x < 0] == 0), line.get_label()
+    finally:
+        plt.close(fig)
+
+
+def test_fault_bench_plot_draws_flux_out_of_the_finger_positive(tmp_path, monkeypatch):
+    """`bench faults`' traces, the display's flux into the finger, drawn
+    out of it under the touch plot's axis label (they were pad -> finger)."""
+    from telethermal.bench.faults_plot import plot_traces
+    from telethermal.teleop.plots import OUT_OF_FINGER_KW
+
+    t = np.linspace(-0.2, 1.0, 61)
+    into_finger = np.where(t >= 0, -5e3 / np.sqrt(np.clip(t, 1e-2, None)), 0.0)
+    trace = {"t_s": t, "flux_w_m2": into_finger, "direct_flux_w_m2": into_finger}
+    row = {"fault": "none", "profile": {}, "fault_window_s": None, "safety_events": 0,
+           "compensated_flux_rms_error_rel": 0.01, "naive_flux_rms_error_rel": 0.02}
+    report = {"rows": [row], "contact_s": 1.0, "materials": ["aluminium"], "machine": "m",
+              "date": "d"}
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)
+    plot_traces(report, {"none": {"trajectory": trace}}, tmp_path / "faults.png")
+    ax = figures[0].axes[0]
+    try:
+        assert ax.get_ylabel() == OUT_OF_FINGER_KW
+        for line in ax.get_lines():
+            x, q = (np.asarray(v, dtype=float) for v in line.get_data())
+            if len(x) == len(t):
+                assert np.all(q[x >= 0] > 0), line.get_label()
+    finally:
+        monkeypatch.undo()
+        plt.close(figures[0])

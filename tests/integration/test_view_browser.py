@@ -180,3 +180,32 @@ def test_live_session_then_its_recording_in_chromium(tmp_path, models, browser):
         assert not watch.errors, watch.errors
     finally:
         view.close()
+
+
+def test_the_flux_plots_draw_flux_out_of_the_finger_positive(tmp_path, browser):
+    """The view's flux plots in the project's one convention (issue 46's
+    review): the master's flux and setpoint and the slave's setpoint are the
+    display's flux into the finger, drawn negated (a cold object: positive,
+    as the touch and replay plots draw it); the slave pad's own flux (pad
+    -> object) as it is; each caption says so."""
+    view = open_view(None, tmp_path, 0)
+    try:
+        page = browser.new_page()
+        watch = PageWatch(page)
+        page.goto(view.url)
+        page.wait_for_selector('#mode[data-mode="idle"]')
+        drawn = page.evaluate("""() => {
+            plots.masterFlux.push('master_flux', [[0, -5000]]);
+            plots.masterFlux.push('master_setpoint', [[0, -4000]]);
+            plots.slaveFlux.push('slave_setpoint', [[0, -3000]]);
+            plots.slaveFlux.push('slave_flux', [[0, 2000]]);
+            return [plots.masterFlux, plots.slaveFlux].flatMap(
+                (p) => p.series.map((s) => [s.name, s.pts[0][1]])); }""")
+        assert dict(drawn) == {"master_flux": 5000, "master_setpoint": 4000,
+                               "slave_setpoint": 3000, "slave_flux": 2000}
+        captions = page.locator("figcaption").all_inner_texts()
+        assert any("positive out of the finger" in c and "Master" in c for c in captions)
+        assert any("positive into the object" in c and "Slave" in c for c in captions)
+        assert not watch.errors, watch.errors
+    finally:
+        view.close()

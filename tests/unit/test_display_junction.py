@@ -60,12 +60,12 @@ class PadInAir:
     as DisplayTouch idles them), read through the bonded sensor's lag, on
     the simulated clock (physics steps of DT)."""
 
-    def __init__(self, start_c, lag_s):
+    def __init__(self, start_c, lag_s, layers_heat_scale=1.0):
         self.stack = ThermoelectricStack(PARAMS, SINK, SCENE.room_temp_c,
                                          ModuleState(start_c, SCENE.room_temp_c,
                                                      SCENE.room_temp_c))
-        self.heat = SCENE.pad.area_m2 * sum(layer.material.volumetric_heat_j_m3k *
-                                            layer.thickness_m for layer in SCENE.pad.layers)
+        self.heat = layers_heat_scale * SCENE.pad.area_m2 * sum(
+            layer.material.volumetric_heat_j_m3k * layer.thickness_m for layer in SCENE.pad.layers)
         self.sensed_c, self.lag_s = start_c, lag_s
 
     def step(self, current_a):
@@ -186,12 +186,69 @@ def test_the_current_slew_is_bounded():
     assert loop.limits.slew_limited_periods > 0
 
 
-def test_a_missing_reading_gives_0_a_and_a_fresh_start():
+def test_a_missing_reading_gives_0_a_and_no_fresh_start():
+    """A junction reading that is not finite, after plausible ones: 0 A,
+    the PI emptied, the smoothed target kept (a fresh start would take the
+    next reading, however implausible, as its own reference) and no
+    disagreement timed (nothing disagreed yet)."""
     loop = designed_loop()
     loop.update(14.0, 24.0, 24.0, DT)
-    out = loop.update(14.0, math.nan, 24.0, DT)
-    assert out.current_a == 0.0 and math.isnan(out.estimate_c)
-    assert loop.integral_a == 0.0 and loop.reference_c is None
+    for bad in (math.nan, math.inf, -math.inf):
+        out = loop.update(14.0, bad, 24.0, DT)
+        assert out.current_a == 0.0 and math.isnan(out.estimate_c)
+        assert loop.integral_a == 0.0 and loop.reference_c is not None
+    assert loop.implausible_s == 0.0 and not loop.stopped
+
+
+@pytest.mark.parametrize("missing", ["junction", "hot side"])
+def test_a_sensor_alternating_nan_and_an_implausible_value_stops_in_its_stated_time(missing):
+    """Holding 24 C on a sensor that agrees, the sensor then reads nan and
+    40 C (16 K off its model, over IMPLAUSIBLE_K) in turn, or reads 40 C
+    while the hot side goes missing every other period: on the simulated
+    clock the loop stops IMPLAUSIBLE_S after the first implausible reading
+    (to a period: the missing periods go on timing it), and stays at 0 A."""
+    loop = designed_loop()
+    for _ in range(50):
+        loop.update(24.0, 24.0, 24.0, DT)
+    assert not loop.stopped
+    stopped_after_s = None
+    for k in range(int(2.0 * loop.IMPLAUSIBLE_S / DT)):
+        if k % 2 == 0:
+            sensed, hot = (math.nan, 24.0) if missing == "junction" else (40.0, math.nan)
+        else:
+            sensed, hot = 40.0, 24.0
+        loop.update(24.0, sensed, hot, DT)
+        if loop.stopped:
+            stopped_after_s = (k + 1) * DT
+            break
+    first_implausible_s = DT if missing == "junction" else 0.0
+    assert stopped_after_s is not None
+    # Not before its time (half a period for the sum of periods' rounding).
+    late_s = stopped_after_s - first_implausible_s - loop.IMPLAUSIBLE_S
+    assert -0.5 * DT < late_s <= 1.5 * DT
+    assert all(loop.update(24.0, s, 24.0, DT).current_a == 0.0 for s in (24.0, math.nan) * 5)
+
+
+def test_a_bonded_sensor_that_goes_missing_for_2_s_is_not_stopped_when_it_returns():
+    """The junction held 10 K under the room; the readings then go missing
+    for 2 s (a driver outage: 0 A, the junction warms toward its sink, 10 K
+    x (1 - exp(-2 s / 4.3 s)) = 3.7 K by the model's a = G/C, over
+    IMPLAUSIBLE_K). The loop's model coasts with the module at 0 A, so the
+    returning sensor agrees with it: no disagreement timed at all (a model
+    held still would see the 3.7 K), no stop, and the junction is back
+    within 0.1 K of the target 3 s later."""
+    pad, loop = PadInAir(24.0, SENSOR.tau_s), designed_loop()
+    for k in range(int(8.0 / DT)):
+        outage = 3.0 <= k * DT < 5.0
+        out = loop.update(14.0, math.nan if outage else pad.sensed_c,
+                          pad.stack.state.sink_c, DT)
+        assert out.current_a == 0.0 or not outage
+        pad.step(out.current_a)
+        assert loop.implausible_s == 0.0
+        if k * DT == pytest.approx(5.0 - DT):
+            assert pad.stack.state.cold_c - 14.0 > loop.IMPLAUSIBLE_K
+    assert not loop.stopped
+    assert abs(pad.stack.state.cold_c - 14.0) < 0.1
 
 
 def test_reversals_and_ripple_are_counted_as_stated():
@@ -206,44 +263,38 @@ def test_reversals_and_ripple_are_counted_as_stated():
     assert ripple_rms_a(sine, DT) == pytest.approx(0.5 / math.sqrt(2), rel=0.02)
 
 
-def test_a_stopped_loop_rearms_once_its_sensor_agrees_with_the_idle_module():
+def test_a_sensor_ten_times_slower_is_stopped_then_refused_at_idle():
     """After the 10x-lag stop the module only conducts; idle, the junction
-    settles toward its hot side and the slow sensor follows. The loop
-    re-arms only once the sensor has read within REARM_K of the hot side
-    for REARM_S (not at the stop, when they are ~10 K apart), counted; a
-    fresh 10 K step with the same slow sensor stops it again (the re-arm
-    does not hide the fault)."""
+    settles toward its hot side and the slow sensor follows it there, so
+    "it reads the hot side" alone would re-arm it (and its next move would
+    stop it again). The re-arm probe's warming current shows the lag (the
+    sensor sees 0.15-0.35 of the modelled warming): refused, still
+    stopped, never re-armed; the module at 0 A but for the probe's 0.4 A."""
     pad, loop = PadInAir(24.0, SENSOR.tau_s * 10.0), designed_loop()
     for _ in range(int(2.0 / DT)):
         out = loop.update(14.0, pad.sensed_c, pad.stack.state.sink_c, DT)
         pad.step(out.current_a)
     assert loop.stopped
-    assert not loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT)
-    rearmed_after_s = None
-    for k in range(int(60.0 / DT)):
-        pad.step(0.0)
-        agrees = abs(pad.sensed_c - pad.stack.state.sink_c) <= loop.REARM_K
-        if loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT):
-            rearmed_after_s = (k + 1) * DT
-            break
-        assert loop.stopped
-    assert rearmed_after_s is not None and agrees and not loop.stopped and loop.rearms == 1
-    assert loop.agree_s == 0.0
-    start = pad.stack.state.cold_c
-    for _ in range(int(3.0 / DT)):
-        out = loop.update(start - 10.0, pad.sensed_c, pad.stack.state.sink_c, DT)
+    currents = []
+    for _ in range(int(60.0 / DT)):
+        out = loop.update(14.0, pad.sensed_c, pad.stack.state.sink_c, DT)
+        assert not loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT)
         pad.step(out.current_a)
-    assert loop.stopped
+        currents.append(out.current_a)
+    assert loop.stopped and loop.rearms == 0 and loop.rearm_refusals >= 1
+    assert "does not follow the module" in loop.rearm_refused
+    assert max(abs(c) for c in currents) < 0.45
 
 
 def test_the_master_rearms_a_stopped_loop_only_at_idle_and_says_so(caplog):
     """The display's master re-arms its stopped junction loop at idle (no
-    force on the pad) once the sensor reads the hot side for REARM_S,
-    counting the event and logging it; while the pad is touched it stays
-    stopped (0 A) however well the sensor agrees. A sensor frozen at the
-    hot side (it does not follow the module) stops the loop again: it then
-    stays stopped for the rest of that idle (one re-arm per idle, no
-    stop/re-arm cycle), and the next touch's idle may re-arm it once more."""
+    force on the pad) once the bonded sensor has settled at the hot side
+    and followed the probe, counting the event and logging it; while the
+    pad is touched it stays stopped (0 A, no probe) however well the sensor
+    agrees. A sensor that then comes off into the air (it reads the room)
+    stops the loop again: it stays stopped for the rest of that idle (one
+    re-arm per idle, no stop/re-arm cycle), and the next touch's idle may
+    re-arm it once more."""
     import logging
 
     from telethermal.devices.readings import PadSensors
@@ -253,26 +304,36 @@ def test_the_master_rearms_a_stopped_loop_only_at_idle_and_says_so(caplog):
 
     config = DisplayConfig(feedforward_model="static")
     dt = 1.0 / config.rate_hz
+    assert dt == DT                                # the pad in air steps in DT
     master = MasterDisplay(config, None, pad_resistance(tuple(SCENE.pad.layers)),
                            SCENE.sensors.flux_lag_s, 33.0, idle_c=24.0,
                            pad_layers=tuple(SCENE.pad.layers), module=PARAMS)
-    news = SlaveNews(24.0, None, ())
+    news, pad = SlaveNews(24.0, None, ()), PadInAir(24.0, SENSOR.tau_s)
     master.junction_loop.stopped = True            # as after an implausible sensor
-    touched = PadSensors(-500.0, 24.0, 5.0, 24.0, 24.0)
-    t = 0.0
-    for _ in range(int(3 * DisplayJunctionLoop.REARM_S / dt)):
-        step = master.step(t, dt, touched, news)
-        t += dt
-        assert master.junction_loop.stopped and step.current_a == 0.0
-    idle = PadSensors(0.0, 24.0, 0.0, 24.0, 24.0)
-    with caplog.at_level(logging.WARNING):
-        for _ in range(int(3 * DisplayJunctionLoop.REARM_S / dt)):
-            master.step(t, dt, idle, news)
+    t, idle_s = 0.0, 3 * DisplayJunctionLoop.REARM_S + 2.0
+
+    def run(seconds, touched, bonded=True):
+        nonlocal t
+        for _ in range(int(seconds / dt)):
+            junction = pad.sensed_c if bonded else SCENE.room_temp_c
+            sensors = PadSensors(-500.0 if touched else 0.0, 24.0, 5.0 if touched else 0.0,
+                                 junction, pad.stack.state.sink_c)
+            step = master.step(t, dt, sensors, news)
+            pad.step(step.current_a)
             t += dt
+            yield step
+
+    for step in run(idle_s, touched=True):
+        assert master.junction_loop.stopped and step.current_a == 0.0
+    with caplog.at_level(logging.WARNING):
+        list(run(idle_s, touched=False))
     assert master.events.get(JUNCTION_REARMED) == 1 and "re-armed" in caplog.text
-    assert master.junction_loop.stopped          # the frozen sensor stopped it again
+    assert not master.junction_loop.stopped
+    list(run(idle_s, touched=False, bonded=False))
+    assert master.junction_loop.stopped          # the sensor in the air stopped it again
     assert master.events.get(JUNCTION_STOPPED) == 2
-    for sensors in (touched,) * 100 + (idle,) * int(3 * DisplayJunctionLoop.REARM_S / dt):
-        master.step(t, dt, sensors, news)
-        t += dt
+    list(run(idle_s, touched=False))
+    assert master.junction_loop.stopped and master.events.get(JUNCTION_REARMED) == 1
+    list(run(0.2, touched=True))
+    list(run(4 * idle_s, touched=False))           # the junction warmed by the last run
     assert master.events.get(JUNCTION_REARMED) == 2

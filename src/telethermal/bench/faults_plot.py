@@ -76,6 +76,8 @@ def plot_traces(report: dict, traces: dict, path: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from telethermal.teleop.plots import OUT_OF_FINGER_KW
+
     rows = [r for r in report["rows"] if r["fault"] in traces]
     n = len(rows)
     cols = 3
@@ -87,10 +89,11 @@ def plot_traces(report: dict, traces: dict, path: str | Path) -> Path:
                                      ("setpoints", "C0-", "naive")):
             if source in tr:
                 t = tr[source]["t_s"]
-                ax.plot(t, tr[source]["flux_w_m2"] / 1e3, style, lw=1, label=label)
+                # Into the finger, drawn out of it (the project's one convention).
+                ax.plot(t, -tr[source]["flux_w_m2"] / 1e3, style, lw=1, label=label)
         ref = tr.get("trajectory") or tr.get("setpoints")
         if ref is not None:
-            ax.plot(ref["t_s"], ref["direct_flux_w_m2"] / 1e3, "k-", lw=1.6, label="direct")
+            ax.plot(ref["t_s"], -ref["direct_flux_w_m2"] / 1e3, "k-", lw=1.6, label="direct")
         delay = row["profile"].get("delay_s", 0.0)
         if delay:
             ax.axvspan(0, 2 * delay, color="0.85", lw=0)
@@ -109,7 +112,7 @@ def plot_traces(report: dict, traces: dict, path: str | Path) -> Path:
     for ax in axes[-1]:
         ax.set_xlabel("time since the master's contact onset (s)")
     for ax in axes[:, 0]:
-        ax.set_ylabel("flux pad -> finger (kW/m$^2$)")
+        ax.set_ylabel(OUT_OF_FINGER_KW)
     fig.suptitle(f"telethermal bench faults: {report['materials'][0]}, first touch of each "
                  f"setting; {report['machine']}, {report['date']}", fontsize=9)
     fig.tight_layout()

@@ -17,12 +17,13 @@ def cmd_scenes(args) -> int:
 
     from telethermal.physics.scene import describe_models, list_scenes, load_scene
 
-    table = Table(title="shipped scenes")
+    # Every scene read (and checked) before the table is shown.
+    scenes = [load_scene(name) for name in (args.scene or list_scenes())]
+    table = Table(title="scenes" if args.scene else "shipped scenes")
     for col in ("name", "pad", "rate (Hz)", "objects", "finger"):
         table.add_column(col)
-    for name in list_scenes():
-        scene = load_scene(name)
-        table.add_row(name, scene.pad.kind, f"{scene.sample_rate_hz:g}",
+    for scene in scenes:
+        table.add_row(scene.name, scene.pad.kind, f"{scene.sample_rate_hz:g}",
                       ", ".join(scene.materials), "yes" if scene.finger else "no")
         if args.verbose:
             for side, material, choice in describe_models(scene):
@@ -79,9 +80,13 @@ def cmd_dataset_import(args) -> int:
     values = {k: v for k, v in (("T_object_C", args.object_c), ("T_pad_C", args.pad_c),
                                 ("T_room_C", args.room_c), ("onset_s", args.onset_s))
               if v is not None}
+    scene = None
+    if args.scene:
+        from telethermal.physics.scene import load_scene
+        scene = load_scene(args.scene)
     before, after = import_recordings(args.files, args.into, args.material, args.group,
                                       CsvSpec.from_options(args.columns, args.units), values,
-                                      args.manifest)
+                                      args.manifest, scene)
     print(f"{args.into}: {before} trials before, {after} now")
     return 0
 
@@ -116,7 +121,10 @@ def _write_idle_policies(names) -> int:
 
 
 def add_scenes(sub) -> None:
-    p = sub.add_parser("scenes", help="list the shipped scenes")
+    p = sub.add_parser("scenes", help="list the shipped scenes, or show the scenes given")
+    p.add_argument("--scene", action="append", metavar="FILE|NAME",
+                   help="show this scene instead (a shipped name or a TOML path, read and "
+                        "checked; repeat for more)")
     p.add_argument("--verbose", "-v", action="store_true", help="show each contact's model")
     p.add_argument("--write-idle-policy", nargs="+", metavar="SCENE", default=None,
                    help="developers: compute the display's idle policy of these shipped "
@@ -151,7 +159,11 @@ def add_dataset(sub) -> None:
     p.add_argument("--group", help="what is held out together in cross-validation: a person, "
                                    "a session, an object (default for recordings: recorded)")
     p.add_argument("--manifest", help="CSV: file,material,group and, where known, T_object_C, "
-                                      "T_pad_C, T_room_C, onset_s per lab file (relative to it)")
+                                      "T_pad_C, T_room_C, onset_s per lab file (relative to it); "
+                                      "or another dataset's manifest.csv (its trials as they are)")
+    p.add_argument("--scene", metavar="FILE|NAME",
+                   help="the scene the recordings were made on, if a scene file (its room's "
+                        "temperature; a shipped scene is found by the recorded name)")
     p.add_argument("--columns", help="dataset column=the file's column, comma-separated "
                                      "(t_s=time,heat_flux_W_m2=flux,temperature_C=T,force_N=F)")
     p.add_argument("--units", help="dataset column=unit: t_s s|ms, heat_flux_W_m2 "

@@ -95,6 +95,8 @@ def cmd_replay(args) -> int:
     the one asked), and plot each."""
     from telethermal.teleop.replay import touch_count
 
+    if args.scene:
+        _load_recorded_scene(args.file, args.scene)
     n = touch_count(args.file)
     if n == 0:
         from telethermal.record.recording import RecordingError
@@ -107,6 +109,18 @@ def cmd_replay(args) -> int:
             print(f"touch {i} of {n} (0..{n - 1}):")
         _replay_one(args, i, out)
     return 0
+
+
+def _load_recorded_scene(path, scene_arg) -> None:
+    """Load the scene file a recording was made on (its models find their
+    pad's scene by the recorded name), refusing one of another name."""
+    from telethermal.physics.scene import load_scene
+    from telethermal.record.recording import RecordingError, read_recording
+
+    scene, recorded = load_scene(scene_arg), read_recording(path).config.get("scene")
+    if recorded is not None and recorded != scene.name:
+        raise RecordingError(f"{path}: recorded on scene {recorded!r}, but --scene is "
+                             f"{scene.name!r}")
 
 
 def _replay_one(args, touch: int, out: Path) -> None:
@@ -154,6 +168,9 @@ def add_replay(sub) -> None:
     p.add_argument("--touch", type=int, default=None,
                    help="which touch of a service's recording (0: the first); default: "
                         "every touch, each in its own folder OUT/touch-N")
+    p.add_argument("--scene", metavar="FILE",
+                   help="the scene file the recording was made on (a recording names its "
+                        "scene; a shipped one is found by that name)")
     p.set_defaults(func=cmd_replay)
 
 

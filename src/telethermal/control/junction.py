@@ -22,11 +22,15 @@ of the feed-forward's imperfect load within about 0.1 s.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 
+from telethermal.control.junction_probe import JunctionProbe, ProbeVerdict
 from telethermal.errors import ControlError
 from telethermal.physics.thermoelectric import HBridge, ModuleParams, hold_current_a
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -138,8 +142,12 @@ class DisplayJunctionLoop:
     #: only while nothing touches the pad) once the sensor agrees with the
     #: stopped module's model, the junction only conducting to its hot side
     #: (0 A, no load: it settles at the hot side), within ``REARM_K`` for
-    #: ``REARM_S`` on end. A sensor that lags still fails the next move and
-    #: stops the loop again (its owner re-arms at most once per idle).
+    #: ``REARM_S`` on end, and then follows the module: a small warming
+    #: current for a second moves its reading as the module's model says
+    #: (:mod:`telethermal.control.junction_probe`; a debonded sensor reads
+    #: the air, which agrees with the settled module as well). A sensor that
+    #: does not follow is refused, with the reason (:attr:`rearm_refused`),
+    #: and probed again after the module settles once more.
     REARM_K = 1.0
     REARM_S = 1.0
 
@@ -152,6 +160,8 @@ class DisplayJunctionLoop:
         self.reference_tau_s, self.slew_a_s = reference_tau_s, slew_a_s
         self.limits = LimitCounts()
         self.rearms = 0                            # re-armed by rearm_if_settled
+        self.rearm_refusals = 0                    # probes whose sensor did not follow
+        self.rearm_refused = ""                    # the last refusal's reason
         #: Latched by an implausible sensor (not by reset(): rearm() clears it).
         self.stopped = False
         self.reset()
@@ -162,19 +172,99 @@ class DisplayJunctionLoop:
         self.reset()
 
     def rearm_if_settled(self, sensed_c: float, hot_c: float, dt_s: float) -> bool:
-        """While stopped, with nothing on the pad: re-arm once the junction
-        sensor has read within ``REARM_K`` of the hot side (what the stopped
-        module settles at) for ``REARM_S``; True when it re-armed now."""
+        """While stopped, with nothing on the pad, after this period's
+        :meth:`update`: once the junction sensor has read within ``REARM_K``
+        of the hot side (what the stopped module settles at) for
+        ``REARM_S``, probe whether it follows the module (the next periods'
+        :meth:`update` drive the probe's current); re-arm if it does. True
+        when it re-armed now. A period without this call ends a probe."""
         if not self.stopped:
             return False
+        if self.probe is not None:
+            return self._probe_step(sensed_c, hot_c, dt_s)
         agrees = math.isfinite(sensed_c) and math.isfinite(hot_c) and \
             abs(sensed_c - hot_c) <= self.REARM_K
-        self.agree_s = self.agree_s + dt_s if agrees else 0.0
-        if self.agree_s < self.REARM_S:
+        if not agrees:
+            self.agree_s, self._settle = 0.0, [math.nan, 0.0, 0]
             return False
-        self.rearm()
-        self.rearms += 1
-        return True
+        last, d2, n = self._settle
+        self._settle = [sensed_c, d2 + (0.0 if math.isnan(last) else (sensed_c - last) ** 2),
+                        n + (0 if math.isnan(last) else 1)]
+        self.agree_s += dt_s
+        if self.agree_s >= self.REARM_S:
+            scatter_k = math.sqrt(self._settle[1] / max(self._settle[2], 1) / 2.0)
+            self.probe = JunctionProbe(self.params, self.driver, self.model.heat_j_k,
+                                       self.model.sensor_tau_s, sensed_c, hot_c, scatter_k)
+            self._probe_pending, self._probe_prev_a = True, 0.0
+        return False
+
+    def _probe_step(self, sensed_c: float, hot_c: float, dt_s: float) -> bool:
+        """One period of the probe: its verdict at the end; re-armed or refused."""
+        if self._probe_pending or not (math.isfinite(sensed_c) and math.isfinite(hot_c)):
+            self.probe, self._probe_pending = None, False      # not driven, or no reading
+            self.agree_s, self._settle = 0.0, [math.nan, 0.0, 0]
+            return False
+        verdict = self.probe.observe(sensed_c, hot_c, self._probe_prev_a, dt_s)
+        self._probe_prev_a = self.current_a
+        if verdict is None:
+            self._probe_pending = True
+            return False
+        self.probe = None
+        if verdict.follows:
+            self.rearm()
+            self.rearms += 1
+            return True
+        self._refuse(verdict)
+        return False
+
+    def _refuse(self, verdict: ProbeVerdict) -> None:
+        """The sensor did not follow: stay stopped, say why (once per stop)."""
+        self.rearm_refusals += 1
+        self.rearm_refused = verdict.reason
+        self.agree_s, self._settle = 0.0, [math.nan, 0.0, 0]
+        log.log(logging.DEBUG if self._refusal_logged else logging.WARNING,
+                "module kept stopped, not re-armed: %s", verdict.reason)
+        self._refusal_logged = True
+
+    def _judge(self, dt_s: float, implausible: bool) -> bool:
+        """Time the sensor's disagreement; True once the loop is stopped."""
+        self.implausible_s = self.implausible_s + dt_s if implausible else 0.0
+        self.stopped = self.stopped or self.implausible_s > self.IMPLAUSIBLE_S
+        return self.stopped
+
+    def _coast(self, dt_s: float, hot_c: float, load_w: float) -> None:
+        """A period the loop cannot run: its model follows the junction as
+        the model says it moves at 0 A (conducting to the hot side, last
+        read if not now, under the load if known), and the sensor's model
+        follows that; a bonded sensor agrees with it when readings return."""
+        hot_c = hot_c if math.isfinite(hot_c) else self.hot_c
+        if self.reference_c is None or not math.isfinite(hot_c):
+            return
+        qc_w = float(self.params.heat_w(0.0, self.reference_c, hot_c)[0])
+        load_w = load_w if math.isfinite(load_w) else 0.0
+        self.reference_c += dt_s * (load_w - qc_w) / self.model.heat_j_k
+        tau = self.model.sensor_tau_s
+        self.sensor_model_c += (1.0 if tau <= 0 else -math.expm1(-dt_s / tau)) * \
+            (self.reference_c - self.sensor_model_c)
+
+    def _unrun(self, dt_s: float, implausible: bool | None,
+               probe: bool = False) -> DisplayJunctionStep:
+        """A period the loop does not run (a value missing, or stopped): 0 A,
+        the PI emptied; ``implausible`` (None: already judged) goes to the
+        sensor's check, which only a plausible reading clears. ``probe``
+        (stopped, readings whole): the re-arm probe's current if one is
+        asked for this period (inside the slew limit); else a probe ends."""
+        if implausible is not None:
+            self._judge(dt_s, implausible)
+        current = 0.0
+        if self.probe is not None and probe and self._probe_pending and self.stopped:
+            step = self.slew_a_s * dt_s
+            current = min(max(self.probe.current_a, self.current_a - step), self.current_a + step)
+        elif self.probe is not None:
+            self.probe = None                      # its owner stopped asking (a touch)
+        self._probe_pending = False
+        self.current_a, self.integral_a = current, 0.0
+        return DisplayJunctionStep(current, self.stopped, current, math.nan)
 
     @property
     def saturated_periods(self) -> int:
@@ -188,6 +278,14 @@ class DisplayJunctionLoop:
         self.reference_c: float | None = None      # the smoothed target
         self.sensor_model_c = math.nan             # what the sensor would read on it
         self.current_a = 0.0                       # the last current asked for
+        #: Stopped: the re-arm probe, whether the next update drives it, the
+        #: current that acted before this period's reading, and the settled
+        #: readings' [last, sum of squared steps, steps] for their scatter.
+        self.probe: JunctionProbe | None = None
+        self._probe_pending, self._probe_prev_a = False, 0.0
+        self._settle = [math.nan, 0.0, 0]
+        self._refusal_logged = False
+        self.hot_c = math.nan                      # the hot side's last reading
 
     def _count(self, requested_a: float, sensed_c: float, hot_c: float) -> None:
         lim, spec = self.limits, self.params.spec
@@ -219,12 +317,22 @@ class DisplayJunctionLoop:
         """This period's current. ``sensed_c``: the junction sensor's reading;
         ``hot_c``: the hot side's (the heat sink's thermistor); ``load_w``:
         heat into the junction from the pad as far as the caller knows it.
-        A reading that is not finite gives 0 A and a fresh start."""
+        A value that is not finite gives 0 A for the period and no fresh
+        start (which would take the next reading, however implausible, as
+        its reference): the loop's model coasts (:meth:`_coast`), a missing
+        junction reading goes on timing a disagreement already begun, and
+        with another value missing the reading is still held against the
+        model; so a sensor alternating nan with an implausible value stops
+        the loop ``IMPLAUSIBLE_S`` after its first implausible reading."""
         if not (dt_s > 0 and math.isfinite(dt_s)):
             raise ControlError(f"junction loop needs a positive period, got {dt_s}")
         if not all(math.isfinite(v) for v in (target_c, sensed_c, hot_c, load_w)):
-            self.reset()
-            return DisplayJunctionStep(0.0, False, 0.0, math.nan)
+            self._coast(dt_s, hot_c, load_w)
+            begun = self.implausible_s > 0
+            return self._unrun(dt_s, begun if not math.isfinite(sensed_c) else
+                               self.reference_c is not None and
+                               abs(sensed_c - self.sensor_model_c) > self.IMPLAUSIBLE_K)
+        self.hot_c = hot_c
         if self.reference_c is None:
             self.reference_c, self.sensor_model_c = sensed_c, sensed_c
         previous = self.reference_c
@@ -236,10 +344,8 @@ class DisplayJunctionLoop:
         self.sensor_model_c += (1.0 if tau <= 0 else -math.expm1(-dt_s / tau)) * \
             (self.reference_c - self.sensor_model_c)
         error = sensed_c - self.sensor_model_c          # positive: warmer than meant, cool
-        self.implausible_s = self.implausible_s + dt_s if abs(error) > self.IMPLAUSIBLE_K else 0.0
-        if self.stopped or self.implausible_s > self.IMPLAUSIBLE_S:
-            self.stopped, self.current_a, self.integral_a = True, 0.0, 0.0
-            return DisplayJunctionStep(0.0, True, 0.0, math.nan)
+        if self._judge(dt_s, abs(error) > self.IMPLAUSIBLE_K):
+            return self._unrun(dt_s, None, probe=True)
         ff = hold_current_a(self.params, self.reference_c, hot_c,
                             load_w - self.model.heat_j_k * rate_k_s)
         requested = ff + self.gains.kp_a_k * error + self.integral_a

@@ -290,9 +290,11 @@ def write_trials(root: Path, trials: Iterable[Trial]) -> None:
         rows.append(trial.manifest_row())
     if not rows:
         raise DatasetError("no trials to write")
-    columns = list(MANIFEST_COLUMNS) + [c for c in rows[0] if c not in MANIFEST_COLUMNS]
+    # Every trial's extra columns (trials from different sources carry
+    # different ones: blank where a trial has none).
+    columns = list(dict.fromkeys(list(MANIFEST_COLUMNS) + [c for r in rows for c in r]))
     with (root / MANIFEST).open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=columns)
+        writer = csv.DictWriter(fh, fieldnames=columns, restval="")
         writer.writeheader()
         writer.writerows(rows)
 

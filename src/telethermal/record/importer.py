@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.data.dataset import Trial, load_dataset, write_dataset
+from telethermal.data.dataset import MANIFEST, Trial, load_dataset, write_dataset
 from telethermal.errors import DatasetError
 from telethermal.record.recording import read_recording
 
@@ -17,10 +17,13 @@ CHANNELS = ("t_s", "heat_flux_W_m2", "temperature_C", "force_N")
 
 
 def trials_from_recording(path, material: str | None = None, group: str = "recorded",
-                          room_c: float | None = None) -> list[Trial]:
+                          room_c: float | None = None, scene=None) -> list[Trial]:
     """One trial per recorded slave contact. The material is the recording's
     (a simulated session knows it) unless ``material`` is given; a lab
-    recording must be labelled by whoever placed the object."""
+    recording must be labelled by whoever placed the object. The room's
+    temperature: ``room_c``, else the recorded scene's (``scene``, the
+    :class:`~telethermal.physics.scene.Scene` it was made on, for a scene
+    file's recording; a shipped one is found by its name)."""
     rec = read_recording(path)
     params = rec.config
     label = material or params.get("material")
@@ -32,9 +35,7 @@ def trials_from_recording(path, material: str | None = None, group: str = "recor
     samples = rec.messages("/slave/samples")
     if not samples:
         raise DatasetError(f"{path}: no slave samples recorded (role {rec.role!r})")
-    if room_c is None:
-        from telethermal.physics.scene import load_scene
-        room_c = load_scene(params["scene"]).room_temp_c if "scene" in params else math.nan
+    room_c = _room_c(path, params.get("scene"), scene) if room_c is None else room_c
     trials = []
     for i, s in enumerate(samples):
         missing = [c for c in CHANNELS if c not in s]
@@ -51,35 +52,100 @@ def trials_from_recording(path, material: str | None = None, group: str = "recor
     return trials
 
 
+def _room_c(path, recorded: str | None, scene) -> float:
+    """The room's temperature of the scene a recording names: ``scene`` if
+    given (its name must be the recorded one), else a shipped scene or a
+    scene file the recording names; else an error saying what to give."""
+    from telethermal.errors import SceneError
+    from telethermal.physics.scene import load_scene
+
+    if scene is not None:
+        if recorded is not None and scene.name != recorded:
+            raise DatasetError(f"{path}: recorded on scene {recorded!r}, but --scene is "
+                               f"{scene.name!r}")
+        return scene.room_temp_c
+    if recorded is not None:
+        try:
+            return load_scene(recorded).room_temp_c
+        except SceneError:
+            pass
+    raise DatasetError(
+        f"{path}: the room's temperature is not recorded and the recording's scene "
+        f"{recorded!r} is not a shipped one: give the scene file it was made on "
+        "(--scene FILE) or the room's temperature (--room-c)")
+
+
+def _number(values: dict, key: str, where) -> float | None:
+    value = values.get(key)
+    if value in (None, ""):
+        return None
+    try:
+        out = float(value)
+    except ValueError:
+        out = math.nan
+    if not math.isfinite(out):
+        raise DatasetError(f"{where}: {key} {value!r} is not a finite number")
+    return out
+
+
+def is_dataset_manifest(path) -> bool:
+    """A dataset's own manifest (as ``dataset generate`` or ``import``
+    write it): its header has ``trial_id`` and ``sample_rate_hz``."""
+    with Path(path).open(newline="", encoding="utf-8-sig") as fh:
+        header = {h.strip() for h in fh.readline().split(",")}
+    return {"trial_id", "sample_rate_hz"} <= header
+
+
+def _dataset_trials(manifest, material, group, spec, values) -> list[Trial]:
+    """The trials of the dataset whose manifest this is, as they are (its
+    rows give each trial's material, group and temperatures)."""
+    manifest = Path(manifest)
+    if manifest.name != MANIFEST:
+        raise DatasetError(f"{manifest}: a dataset's manifest (trial_id, sample_rate_hz, ...) "
+                           f"is read with its folder, as {MANIFEST}")
+    given = [o for o, v in (("--material", material), ("--group", group),
+                            ("--columns", spec.columns), ("--units", spec.units),
+                            ("--object-c/--pad-c/--room-c/--onset-s", values)) if v]
+    if given:
+        raise DatasetError(f"{manifest}: a dataset's manifest gives each trial's material, group "
+                           f"and temperatures, in the dataset's format: not {', '.join(given)}")
+    return load_dataset(manifest.parent)
+
+
 def import_recordings(paths, into: str | Path, material: str | None = None,
                       group: str | None = None, spec=None, values: dict | None = None,
-                      manifest: str | Path | None = None) -> tuple[int, int]:
+                      manifest: str | Path | None = None, scene=None) -> tuple[int, int]:
     """Add the files' contacts to the dataset at ``into`` (created if
     absent), all or nothing. Each file is told by its content: an MCAP
-    recording (its slave contacts), or a lab's CSV of one contact
+    recording (its slave contacts; ``scene``: the scene it was made on, if a
+    scene file), or a lab's CSV of one contact
     (:mod:`telethermal.data.csv_import`, read with ``spec``; its per-trial
     ``values`` from the call, or its row of the lab's ``manifest``, which may
-    also list the files). Returns (trials before, trials after)."""
+    also list the files). A ``manifest`` that is another dataset's adds that
+    dataset's trials as they are. Returns (trials before, trials after)."""
     from telethermal.data.csv_import import CsvSpec, is_recording, lab_trial, read_lab_manifest
 
     into = Path(into)
     spec = spec or CsvSpec({}, {})
+    new = []
+    if manifest is not None and Path(manifest).is_file() and is_dataset_manifest(manifest):
+        new, manifest = _dataset_trials(manifest, material, group, spec, values), None
     rows = read_lab_manifest(manifest) if manifest is not None else {}
     for p in paths:
         if not Path(p).is_file():
             raise DatasetError(f"{p}: no such file")
     # One file, however it is spelt, once (the command line's and the manifest's).
     files = list(dict.fromkeys([str(Path(p).resolve()) for p in paths] + list(rows)))
-    if not files:
+    if not files and not new:
         raise DatasetError("no files to import: give them, or a --manifest listing them")
-    existing = load_dataset(into) if (into / "manifest.csv").is_file() else []
-    new = []
+    existing = load_dataset(into) if (into / MANIFEST).is_file() else []
     for i, path in enumerate(files):
         per_trial = {"material": material, "group": group, **(values or {}),
                      **rows.get(path, {})}
         if is_recording(path):
             new += trials_from_recording(path, per_trial["material"],
-                                         per_trial["group"] or "recorded")
+                                         per_trial["group"] or "recorded",
+                                         _number(per_trial, "T_room_C", path), scene)
             continue
         new.append(lab_trial(path, spec, per_trial, i))
     seen: dict[str, str] = {}

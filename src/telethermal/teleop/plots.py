@@ -55,8 +55,7 @@ def session_figure(result, title: str | None = None):
         ax.set_xlabel("time since contact (s)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    ax_q.set_ylabel("heat flux finger -> object or display (kW/m$^2$),\n"
-                    "positive out of the finger")
+    ax_q.set_ylabel(OUT_OF_FINGER_KW)
     ax_t.set_ylabel("temperature (°C)")
     # Every flux plotted inside the axes (the true direct curve peaks
     # beyond the sensed ones: aluminium's left the axis below -12.8 kW/m2).
@@ -67,6 +66,8 @@ def session_figure(result, title: str | None = None):
     return fig
 
 
+#: The axis of a flux drawn out of the finger (the display's flux into it, negated).
+OUT_OF_FINGER_KW = "heat flux finger -> object or display (kW/m$^2$),\npositive out of the finger"
 #: The trace's flux series, each the display's (or the object's) flux into the finger.
 FLUX_KEYS = ("direct_flux_w_m2", "flux_w_m2", "direct_flux_sensed_w_m2", "flux_sensed_w_m2",
              "desired_flux_w_m2")

@@ -321,18 +321,31 @@ def _posteriors_diff(replayed, recorded) -> float | None:
 
 
 def plot_replay(result: dict, path: str | Path) -> Path:
-    """The session from its recording: flux and temperature at the master's
-    pad (recorded, and the simulator's truth and direct contact when the
-    recording has them), the replayed setpoint beside the recorded one, the
-    decision instant, and the periods the display was in its safe state or
-    had lost the link shaded."""
+    """The session from its recording (:func:`replay_figure`; a slave's
+    recording: its pad's flux and temperature) into ``path``."""
+    if result["recorded"] is None:
+        return _plot_slave(result, path)
+    return _save(replay_figure(result), path)
+
+
+def replay_figure(result: dict):
+    """Flux and temperature at the master's pad (recorded, and the
+    simulator's truth and direct contact when the recording has them), the
+    replayed setpoint beside the recorded one, the decision instant, and the
+    periods the display had lost the link shaded. Flux in the project's one
+    convention, as the session's plot draws it (:mod:`telethermal.teleop.plots`):
+    positive out of the finger (the display's flux into it, negated)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from telethermal.teleop.plots import OUT_OF_FINGER_KW
+
     rec, rep, s = result["recorded"], result["replayed"], result["summary"]
-    if rec is None:
-        return _plot_slave(result, path)
+
+    def out_of_finger_kw(values):
+        return -np.asarray(values, dtype=float) / 1e3
+
     t = np.asarray(rec["t_s"], dtype=float)
     fig, (ax_q, ax_t) = plt.subplots(1, 2, figsize=(13, 4.6))
     tr = result.get("trace")
@@ -347,13 +360,13 @@ def plot_replay(result: dict, path: str | Path) -> Path:
                 (ax_t, "skin_surface_c", "C3-", "skin, rendered")):
             if key in tr:
                 values = np.asarray(tr[key], dtype=float)
-                ax.plot(tt, values / 1e3 if ax is ax_q else values, style,
+                ax.plot(tt, out_of_finger_kw(values) if ax is ax_q else values, style,
                         lw=2 if style == "k-" else 1, label=label)
-    ax_q.plot(t, np.asarray(rec["flux_w_m2"], dtype=float) / 1e3, "C0-", lw=0.8,
+    ax_q.plot(t, out_of_finger_kw(rec["flux_w_m2"]), "C0-", lw=0.8,
               label="pad sensor (recorded)")
-    ax_q.plot(t, np.asarray(rec["desired_flux_w_m2"], dtype=float) / 1e3, "C2-", lw=1.5,
+    ax_q.plot(t, out_of_finger_kw(rec["desired_flux_w_m2"]), "C2-", lw=1.5,
               label="setpoint (recorded)")
-    ax_q.plot(rep["t_s"], np.asarray(rep["desired_flux_w_m2"], dtype=float) / 1e3, "m--",
+    ax_q.plot(rep["t_s"], out_of_finger_kw(rep["desired_flux_w_m2"]), "m--",
               lw=1, label="setpoint (replayed)")
     ax_t.plot(t, np.asarray(rec["pad_temp_c"], dtype=float), "C0-", lw=0.8,
               label="display pad (recorded)")
@@ -376,13 +389,13 @@ def plot_replay(result: dict, path: str | Path) -> Path:
         ax.grid(alpha=0.3)
         ax.set_xlabel("time since contact (s)")
         ax.legend(fontsize=7)
-    ax_q.set_ylabel("heat flux pad -> finger (kW/m$^2$)")
+    ax_q.set_ylabel(OUT_OF_FINGER_KW)
     ax_t.set_ylabel("temperature (°C)")
     verdict = "identical to the recording" if s["identical"] else \
         f"junction differs by up to {s['junction_max_abs_diff_c']:.3g} K"
     fig.suptitle(f"replay of {Path(s['file']).name}: {s['periods']} periods, {verdict}",
                  fontsize=10)
-    return _save(fig, path)
+    return fig
 
 
 def _save(fig, path) -> Path:
@@ -411,7 +424,7 @@ def _plot_slave(result: dict, path) -> Path:
     t = np.asarray(pad["t_s"], dtype=float)
     ax.plot(t, np.asarray(pad["heat_flux_W_m2"], dtype=float) / 1e3, "C0-", lw=1,
             label="sensing pad heat flux")
-    ax.set_ylabel("heat flux pad -> object (kW/m$^2$)")
+    ax.set_ylabel("heat flux pad -> object (kW/m$^2$),\npositive into the object")
     ax2 = ax.twinx()
     ax2.plot(t, np.asarray(pad["temperature_C"], dtype=float), "C1-", lw=1,
              label="sensing pad temperature")

@@ -8,17 +8,20 @@ const COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"
 const $ = (id) => document.getElementById(id);
 
 class Plot {
+  // series: [name, label, color, dash, sign]; a series of sign -1 is drawn
+  // negated (a flux into the finger, drawn out of it: the one convention).
   constructor(id, series) {
     this.canvas = $(id);
     this.ctx = this.canvas.getContext("2d");
-    this.series = series.map(([name, label, color, dash]) => ({name, label, color, dash, pts: []}));
+    this.series = series.map(([name, label, color, dash, sign = 1]) =>
+      ({name, label, color, dash, sign, pts: []}));
     this.marker = null;          // [x, text]
   }
   get(name) { return this.series.find((s) => s.name === name); }
   clear() { for (const s of this.series) s.pts = []; this.marker = null; }
   push(name, pts) {
     const s = this.get(name);
-    for (const p of pts) s.pts.push(p);
+    for (const p of pts) s.pts.push(s.sign === 1 ? p : [p[0], s.sign * p[1]]);
   }
   trim(tMin) {
     for (const s of this.series) {
@@ -90,9 +93,12 @@ const plots = {
   temp: new Plot("plot-temp", [["master_temp", "master pad", COLORS[0]],
                                ["slave_temp", "slave pad", COLORS[1]],
                                ["skin", "skin (estimate)", COLORS[2], true]]),
-  masterFlux: new Plot("plot-master-flux", [["master_setpoint", "setpoint", "#000", true],
-                                            ["master_flux", "measured", COLORS[0]]]),
-  slaveFlux: new Plot("plot-slave-flux", [["slave_setpoint", "setpoint (naive)", "#000", true],
+  // The master's flux and the slave's setpoint are the display's flux into
+  // the finger: drawn out of it (positive into the display, as the slave
+  // pad's is into its object), as every plot of the project draws flux.
+  masterFlux: new Plot("plot-master-flux", [["master_setpoint", "setpoint", "#000", true, -1],
+                                            ["master_flux", "measured", COLORS[0], false, -1]]),
+  slaveFlux: new Plot("plot-slave-flux", [["slave_setpoint", "setpoint (naive)", "#000", true, -1],
                                           ["slave_flux", "measured", COLORS[1]]]),
 };
 const SERIES_PLOT = {master_temp: "temp", slave_temp: "temp", skin: "temp",
