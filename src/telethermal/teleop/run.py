@@ -38,6 +38,7 @@ from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
 from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import touch_text
+from telethermal.physics.as_built import simulated_display
 from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.layered import pad_resistance  # noqa: F401  (its importers')
 from telethermal.physics.materials import get_material
@@ -151,10 +152,12 @@ class DisplayTouch:
                  junction_lag_scale: float = 1.0):
         self.scene, self.operator, self.contact_s = scene, operator, contact_s
         self.dt_s = 1.0 / rate_hz
-        self.layers = tuple(scene.pad.layers)
+        #: The pad as built (``[as_built.display]``; the scene's nominal pad without it).
+        self.built = built = simulated_display(scene)
+        self.layers = built.layers
         self.model = display_model(self.layers, round(contact_s + 1.0, 3), min(self.dt_s, 1e-3))
         sens = scene.sensors
-        self.flux_sensor = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
+        self.flux_sensor = HeatFluxSensor(lag_s=built.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
         self.force_sensor = ForceSensor()
         self.n_total = int(round((PRE_CONTACT_S + contact_s + AFTER_RELEASE_S) * rate_hz))
         self.noise = rng.normal(size=(self.n_total + 1, 3))
@@ -168,8 +171,9 @@ class DisplayTouch:
         self._reading = None
         self._module_reading = (idle_c, scene.room_temp_c)
         self._current_a = 0.0
-        # The module, idling at ``idle_c`` on a sink at the room's temperature.
-        self.module, sink = scene.pad.module_params()
+        # The module (as built), idling at ``idle_c`` on a sink at the room's temperature.
+        sink = scene.pad.module_params()[1]
+        self.module = built.module
         self.area_m2 = scene.pad.area_m2            # the pad's face: the module's by default
         self.stack = ThermoelectricStack(self.module, sink, scene.room_temp_c,
                                          ModuleState(idle_c, scene.room_temp_c,
@@ -183,7 +187,8 @@ class DisplayTouch:
         #: The junction sensor's true lag in this session (its stated one
         #: times ``junction_lag_scale``: a part off its datasheet, a bond
         #: thicker than designed).
-        self.junction_lag_s = self.junction_sensor.tau_s * junction_lag_scale
+        self.junction_lag_s = self.junction_sensor.tau_s * junction_lag_scale \
+            * built.junction_lag_factor
         self._junction_sensed_c = idle_c       # the bonded chip's own temperature
         js = self.junction_sensor
         self.thermistor_bias_k = rng.uniform(-1, 1, 2) * (js.bias_limit_k,
@@ -213,12 +218,13 @@ class DisplayTouch:
             self.n_total = min(self.n_total, self.k + int(round(AFTER_RELEASE_S / self.dt_s)))
 
     def sense(self, t: float) -> PadSensors:
-        op, sens = self.operator, self.scene.sensors
+        op = self.operator
         touching = self.touching(t)
         if touching and self.plant is None:
             # Contact: the pad, held at the junction temperature, meets the finger.
             self.plant = DisplayPlant(self.model, self.junction_c, op.finger_c,
-                                      op.conductance_w_m2k, self.dt_s, sens.flux_lag_s,
+                                      op.conductance_w_m2k * self.built.contact_factor,
+                                      self.dt_s, self.built.flux_lag_s,
                                       op.skin_k_scale, op.skin_heat_scale)
         if touching:
             r = self.plant.read()
@@ -227,8 +233,9 @@ class DisplayTouch:
             reading = (0.0, 0.0, self.junction_c, math.nan)
         self._reading = reading
         fs, noise = self.flux_sensor, self.noise[min(self.k, self.n_total)]
-        flux = quantise(reading[1] * fs.sensitivity_uv_per_w_m2 + fs.noise_uv_rms * noise[0],
-                        fs.adc_lsb_uv) / fs.sensitivity_uv_per_w_m2
+        # The sensor's true sensitivity is its nominal one times its gain as built.
+        flux = quantise(reading[1] * fs.sensitivity_uv_per_w_m2 * self.built.flux_gain
+                        + fs.noise_uv_rms * noise[0], fs.adc_lsb_uv) / fs.sensitivity_uv_per_w_m2
         # The thermocouple at the surface: its session's bias, 1 uV ~ 0.025 K of noise.
         pad = reading[2] + op.pad_tc_bias_k + 0.025 * noise[1]
         force = (op.force_n * -math.expm1(-t / self.force_sensor.rise_s) if touching else 0.0) \
