@@ -17,19 +17,20 @@ from telethermal.control.current_quality import ripple_rms_a, sign_reversals
 from telethermal.control.dew import DEW_MARGIN_K, idle_floor_c
 from telethermal.control.safety import safety_event_count
 from telethermal.physics.scene import Scene
-from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
 
 log = logging.getLogger(__name__)
 
 
 def display_model_args(scene: Scene) -> dict:
-    """What the display's skin controller knows of the display: the pad's
-    layers and the nominal pad-fingertip contact conductance."""
+    """What the display's skin controller knows of the display, all from the
+    configuration: the pad's layers, the nominal pad-fingertip contact
+    conductance, the module, and the junction sensor the scene names with
+    its stated lag (``[sensors] junction_sensor``, ``junction_lag_s``)."""
     return {"pad_layers": tuple(scene.pad.layers),
             "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
             "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2,
-            "junction_sensor": get_junction_sensor(DEFAULT_JUNCTION_SENSOR),
+            "junction_sensor": scene.sensors.junction_sensor_spec(),
             "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct)}
 
 
@@ -69,7 +70,7 @@ def module_summary(touch, master: MasterDisplay) -> dict:
     (``touch``: a :class:`~telethermal.teleop.run.DisplayTouch`)."""
     spec = touch.module.spec
     loop = master.junction_loop
-    js = touch.junction_sensor
+    js = master.junction_sensor          # as the controller was designed for it
     return {"name": spec.name, **touch.limit_counts,
             "max_current_a": round(touch.max_current_a, 4), "imax_a": spec.imax_a,
             "max_hot_c": round(touch.max_hot_c, 3), "hot_side_max_c": spec.hot_side_max_c,

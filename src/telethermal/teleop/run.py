@@ -44,9 +44,8 @@ from telethermal.physics.layered import pad_resistance  # noqa: F401  (its impor
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
-from telethermal.physics.thermoelectric import (DEFAULT_JUNCTION_SENSOR, JunctionSensorSpec,
-                                                ModuleState, ThermoelectricStack,
-                                                get_junction_sensor)
+from telethermal.physics.thermoelectric import (JunctionSensorSpec, ModuleState,
+                                                ThermoelectricStack)
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
 from telethermal.teleop.display_setup import (display_idle, display_model_args,  # noqa: F401
@@ -180,7 +179,9 @@ class DisplayTouch:
                                                      scene.room_temp_c))
         self._pad_heat_j_k = self.area_m2 * sum(
             layer.material.volumetric_heat_j_m3k * layer.thickness_m for layer in self.layers)
-        self.junction_sensor = junction_sensor or get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
+        # The part the scene names, at its stated lag (the controller's
+        # design figure) times the as-built factor below.
+        self.junction_sensor = junction_sensor or scene.sensors.junction_sensor_spec()
         if not (junction_lag_scale >= 0 and math.isfinite(junction_lag_scale)):
             raise SceneError(f"junction_lag_scale must be finite and >= 0, got "
                              f"{junction_lag_scale!r}")
@@ -389,7 +390,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
                                  idle_scene and with_finger(idle_scene))
     idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng,
-                         master.junction_sensor, junction_lag_scale)
+                         junction_lag_scale=junction_lag_scale)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=bool(realtime),
                            seed=seed)
