@@ -79,9 +79,10 @@ class BuiltFactors:
         return all(v == 1.0 for v in self.layer_thickness) and all(
             getattr(self, k) == 1.0 for k in SCALAR_KEYS + ("junction_lag_s",))
 
-    def to_dict(self) -> dict:
+    def to_dict(self, keys: tuple[str, ...] = PART_KEYS) -> dict:
+        """The factors of ``keys`` (the display's: :data:`DISPLAY_KEYS`)."""
         return {"layer_thickness": [round(v, 5) for v in self.layer_thickness],
-                **{k: round(getattr(self, k), 5) for k in SCALAR_KEYS + ("junction_lag_s",)}}
+                **{k: round(getattr(self, k), 5) for k in keys[1:]}}
 
 
 @dataclass(frozen=True)
@@ -98,18 +99,18 @@ class AsBuilt:
         """One line for logs and reports."""
         how = (f"drawn log-normal, sd {self.sd:g}, seed {self.seed}" if self.sd is not None
                else "given factors")
-        display = (f"display {_short(self.display)}" if not self.display.nominal
+        display = (f"display {_short(self.display, DISPLAY_KEYS)}" if not self.display.nominal
                    else "display as designed")
         return (f"pads built off their datasheet ([as_built], {how}): pad "
                 f"{_short(self.pad)}; {display}")
 
     def to_dict(self) -> dict:
         return {"sd": self.sd, "seed": self.seed, "pad": self.pad.to_dict(),
-                "display": self.display.to_dict()}
+                "display": self.display.to_dict(DISPLAY_KEYS)}
 
 
-def _short(f: BuiltFactors) -> str:
-    return ", ".join(f"{k} {v}" for k, v in f.to_dict().items())
+def _short(f: BuiltFactors, keys: tuple[str, ...] = PART_KEYS) -> str:
+    return ", ".join(f"{k} {v}" for k, v in f.to_dict(keys).items())
 
 
 def parse_as_built(raw, n_layers: int, source: str) -> AsBuilt | None:
