@@ -125,7 +125,7 @@ def test_removing_the_tables_changes_no_model_the_product_builds():
     plain, built = _scene(), _scene({"sd": 0.3, "seed": 7})
     assert not built.as_built.display.nominal
     assert display_model_args(plain) == display_model_args(built)
-    da, db = (MasterDisplay(DisplayConfig(), None, 1e-3, s.sensors.flux_lag_s, 33.0,
+    da, db = (MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
                             **display_model_args(s)) for s in (plain, built))
     assert da.junction_design == db.junction_design
     assert vars(da.junction_loop.gains) == vars(db.junction_loop.gains)

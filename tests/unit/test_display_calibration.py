@@ -16,9 +16,9 @@ from telethermal.control import display_calibration as routine
 from telethermal.errors import CalibrationError
 from telethermal.physics.scene import parse_scene
 from telethermal.teleop.display_calibration import (DisplayCalibration, calibrate_display,
-                                                    calibrate_simulated, keep_other_tables,
-                                                    read_display_calibration,
+                                                    keep_other_tables, read_display_calibration,
                                                     write_display_calibration)
+from telethermal.teleop.display_rig import calibrate_simulated
 
 #: A display off its design on every factor the routine reads, and more.
 BUILT = {"layer_thickness": [1.2, 0.8, 1.1], "flux_lag_s": 1.3, "flux_gain": 1.05,
@@ -104,10 +104,13 @@ def test_a_bad_table_is_refused_by_name(tmp_path, built_cal, edit, words):
 
 
 def test_a_file_with_no_display_table_says_how_to_make_one(tmp_path):
-    path = tmp_path / "pad-only.toml"
-    path.write_text('format = "telethermal-pad-calibration"\n')
-    with pytest.raises(CalibrationError, match="no \\[display\\] table.*calibrate display"):
-        read_display_calibration(path)
+    (tmp_path / "pad-only.toml").write_text('format = "telethermal-pad-calibration"\n')
+    try:
+        read_display_calibration(tmp_path / "pad-only.toml")
+    except CalibrationError as exc:
+        assert "no [display] table" in str(exc) and "calibrate display" in str(exc)
+    else:
+        pytest.fail("a file with no [display] table was read")
 
 
 def test_a_block_not_of_its_named_material_is_refused():
@@ -152,3 +155,41 @@ def test_the_half_space_weights_hold_the_closed_form():
     w = routine.halfspace_weights(500, 0.01, 570.0)
     assert w.sum() * 1000.0 == pytest.approx(2 * 1000.0 * math.sqrt(5.0 / math.pi) / 570.0,
                                              rel=1e-12)
+
+
+def test_the_master_built_with_the_calibration_carries_its_lags(tmp_path, built_cal):
+    """The impedance controller inverts the calibrated flux lag and the
+    junction loop is designed for the calibrated junction lag; without the
+    calibration, the scene's; the plant (as built) is never read."""
+    from telethermal.teleop.display_setup import display_model_args
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+    scene, cal = built_cal
+    master = MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
+                           **display_model_args(scene, cal))
+    assert master.impedance.tau_s == master.sensor_lag_s == cal.flux_lag_s
+    assert master.junction_design["sensor_tau_s"] == cal.junction_lag_s
+    assert master.junction_sensor.tau_s == cal.junction_lag_s
+    plain = MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
+                          **display_model_args(scene))
+    assert plain.impedance.tau_s == scene.sensors.flux_lag_s
+    assert plain.junction_design["sensor_tau_s"] == scene.sensors.junction_sensor_spec().tau_s
+    with pytest.raises(CalibrationError, match="calibrates scene 'lab-display'"):
+        display_model_args(_scene(name="other-lab"), cal)
+
+
+def test_the_master_config_key_reads_the_display_table(tmp_path, built_cal):
+    """The master's ``pad_calibration`` (relative to its config file) is read
+    as the service reads it: the ``[display]`` table, checked against the scene."""
+    from telethermal.services.config import load_config
+    from telethermal.teleop.display_calibration import display_calibration
+    scene, cal = built_cal
+    write_display_calibration(cal, tmp_path / "cal.toml")
+    (tmp_path / "master.toml").write_text('[master]\nscene = "fingertip-7"\n'
+                                          'pad_calibration = "cal.toml"\n\n'
+                                          '[transport]\nsecurity = "plain"\n')
+    config = load_config(tmp_path / "master.toml", "master")
+    assert config.pad_calibration == str(tmp_path / "cal.toml")
+    assert display_calibration(config.pad_calibration, scene).junction_lag_s == cal.junction_lag_s
+    assert display_calibration("", scene) is None
+    with pytest.raises(CalibrationError, match="calibrates scene 'lab-display'"):
+        display_calibration(config.pad_calibration, _scene(name="other-lab"))

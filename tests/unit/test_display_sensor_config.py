@@ -30,7 +30,7 @@ def _scene(sensors=None, as_built=None):
 
 
 def _master(scene):
-    return MasterDisplay(DisplayConfig(), None, 1e-3, scene.sensors.flux_lag_s, 33.0,
+    return MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
                          **display_model_args(scene))
 
 

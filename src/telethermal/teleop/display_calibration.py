@@ -59,15 +59,14 @@ class DisplayCalibration:
     def check(self, scene) -> None:
         """Refuse a calibration made for another scene (or pad, or sensors)."""
         from telethermal.ident.pad_calibration import pad_digest
-        where = self.source or "the display calibration"
-        if scene.name != self.scene:
-            raise CalibrationError(f"{where} calibrates scene {self.scene!r}'s display; this "
-                                   f"runs scene {scene.name!r}: calibrate its own display "
+        problem = (f"calibrates scene {self.scene!r}'s display; this runs scene "
+                   f"{scene.name!r}: calibrate its own display" if scene.name != self.scene
+                   else f"was made for another pad or sensors of scene {scene.name!r} (the "
+                   "scene file changed since): calibrate again"
+                   if pad_digest(scene) != self.pad_digest else "")
+        if problem:
+            raise CalibrationError(f"{self.source or 'the display calibration'} {problem} "
                                    f"(telethermal calibrate display --scene {scene.name})")
-        if pad_digest(scene) != self.pad_digest:
-            raise CalibrationError(f"{where} was made for another pad or sensors of scene "
-                                   f"{scene.name!r} (the scene file changed since): calibrate "
-                                   "again")
 
     def describe(self) -> list[str]:
         return [
@@ -195,37 +194,6 @@ def calibrate_display(scene, display, block: str = DEFAULT_BLOCK,
                               **{k: float(v) for k, v in values.items()})
 
 
-def calibrate_simulated(scene, block: str = DEFAULT_BLOCK, seed: int = 0,
-                        devices: str = "sim") -> DisplayCalibration:
-    """The routine on the simulated bench (teleop/display_rig.py): the
-    display as built (``[as_built.display]``) through ``devices`` ("sim"
-    or "emulated": the master's drivers)."""
-    from telethermal.devices.display import open_display
-    from telethermal.teleop.display_rig import simulated_bench
-
-    touch = simulated_bench(scene, block, seed, routine.RATE_HZ)
-    now = [0.0]
-    display = open_display(devices, touch, clock=lambda: now[0], seed=seed)
-    try:
-        return calibrate_display(scene, _Clocked(display, now), block)
-    finally:
-        display.close()
-
-
-class _Clocked:
-    """A display whose devices' clock follows the routine's session time."""
-
-    def __init__(self, display, now: list):
-        self.display, self.now = display, now
-
-    def read(self, t_s: float):
-        self.now[0] = t_s
-        return self.display.read(t_s)
-
-    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
-        self.display.apply(t_s, step, dt_s, force_n)
-
-
 def calibrated_lags(scene, cal: DisplayCalibration | None) -> tuple[float, float]:
     """(flux sensor lag, junction sensor lag) the master's controllers use,
     s: the calibration's when given (checked against ``scene``), else the
@@ -234,3 +202,13 @@ def calibrated_lags(scene, cal: DisplayCalibration | None) -> tuple[float, float
         return scene.sensors.flux_lag_s, scene.sensors.junction_sensor_spec().tau_s
     cal.check(scene)
     return cal.flux_lag_s, cal.junction_lag_s
+
+
+def display_calibration(path: str, scene) -> DisplayCalibration | None:
+    """A service's ``pad_calibration`` (a calibration file's path; "": none):
+    its ``[display]`` table, checked against ``scene``."""
+    if not path:
+        return None
+    cal = read_display_calibration(path)
+    cal.check(scene)
+    return cal

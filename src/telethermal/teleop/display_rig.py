@@ -18,9 +18,11 @@ import math
 
 import numpy as np
 
-from telethermal.control.display_calibration import BLOCK_FORCE_N, steps_duration_s
+from telethermal.control.display_calibration import BLOCK_FORCE_N, RATE_HZ, steps_duration_s
 from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.materials import get_material
+from telethermal.teleop.display_calibration import (DEFAULT_BLOCK, DisplayCalibration,
+                                                    calibrate_display)
 from telethermal.teleop.run import DisplayTouch, Operator
 
 #: A block pressed on the pad with thermal grease: a 50 um line of a
@@ -63,3 +65,33 @@ def simulated_bench(scene, block: str, seed: int, rate_hz: float) -> BenchTouch:
 def air_start_s() -> float:
     """Session time the part in air starts at: the block is lifted then."""
     return steps_duration_s()
+
+
+def calibrate_simulated(scene, block: str = DEFAULT_BLOCK, seed: int = 0,
+                        devices: str = "sim") -> DisplayCalibration:
+    """The routine on the simulated bench (teleop/display_rig.py): the
+    display as built (``[as_built.display]``) through ``devices`` ("sim"
+    or "emulated": the master's drivers)."""
+    from telethermal.devices.display import open_display
+
+    touch = simulated_bench(scene, block, seed, RATE_HZ)
+    now = [0.0]
+    display = open_display(devices, touch, clock=lambda: now[0], seed=seed)
+    try:
+        return calibrate_display(scene, _Clocked(display, now), block)
+    finally:
+        display.close()
+
+
+class _Clocked:
+    """A display whose devices' clock follows the routine's session time."""
+
+    def __init__(self, display, now: list):
+        self.display, self.now = display, now
+
+    def read(self, t_s: float):
+        self.now[0] = t_s
+        return self.display.read(t_s)
+
+    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        self.display.apply(t_s, step, dt_s, force_n)

@@ -9,28 +9,37 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
 from telethermal.control.current_quality import ripple_rms_a, sign_reversals
 from telethermal.control.dew import DEW_MARGIN_K, idle_floor_c
 from telethermal.control.safety import safety_event_count
+from telethermal.physics.layered import pad_resistance
 from telethermal.physics.scene import Scene
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
 
 log = logging.getLogger(__name__)
 
 
-def display_model_args(scene: Scene) -> dict:
+def display_model_args(scene: Scene, calibration=None) -> dict:
     """What the display's skin controller knows of the display, all from the
-    configuration: the pad's layers, the nominal pad-fingertip contact
-    conductance, the module, and the junction sensor the scene names with
-    its stated lag (``[sensors] junction_sensor``, ``junction_lag_s``)."""
-    return {"pad_layers": tuple(scene.pad.layers),
+    configuration: the pad's layers and resistance, the nominal pad-fingertip
+    contact conductance, the module, the flux sensor's lag (``[sensors]
+    flux_lag_s``) and the junction sensor the scene names with its stated lag
+    (``junction_sensor``, ``junction_lag_s``); with ``calibration`` (a
+    :class:`~telethermal.teleop.display_calibration.DisplayCalibration`,
+    checked against ``scene``) the two lags it measured instead.
+    ``MasterDisplay(config, generator, finger_temp_c=..., **these)``."""
+    from telethermal.teleop.display_calibration import calibrated_lags
+    flux_lag_s, junction_lag_s = calibrated_lags(scene, calibration)
+    return {"pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
+            "sensor_lag_s": flux_lag_s, "pad_layers": tuple(scene.pad.layers),
             "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
             "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2,
-            "junction_sensor": scene.sensors.junction_sensor_spec(),
+            "junction_sensor": replace(scene.sensors.junction_sensor_spec(),
+                                       tau_s=junction_lag_s),
             "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct)}
 
 

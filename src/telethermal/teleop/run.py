@@ -325,7 +325,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 realtime: bool | str = False, devices: str = "sim",
                 record: str | Path | None = None, expected_material=None,
                 news_filter=None, idle_scene: Scene | None = None,
-                fresh_fits: bool = False, junction_lag_scale: float = 1.0) -> SessionResult:
+                fresh_fits: bool = False, junction_lag_scale: float = 1.0,
+                display_calibration=None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -348,7 +349,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     kept ones (a run whose CPU is measured; always on the real clock).
     ``junction_lag_scale``: the display's junction sensor lags this many
     times its stated time constant (the controller is designed for the
-    stated one: a robustness study)."""
+    stated one: a robustness study). ``display_calibration``: the master's
+    display calibration (``DisplayCalibration``): its lags in the controllers."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
     if realtime or fresh_fits:
@@ -387,7 +389,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # memory) or, for an unknown object, by the idle policy (``config.idle``;
     # control/preconditioning.py).
     master = wire.set_up_display(scene, config, operator.finger_ir_c,
-                                 idle_scene and with_finger(idle_scene))
+                                 idle_scene and with_finger(idle_scene), display_calibration)
     idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng,
                          junction_lag_scale=junction_lag_scale)
