@@ -127,7 +127,9 @@ class DisplayTouch:
     physics through a stall of the loop), and every period is recorded in
     ``trace``.
 
-    The pad's Peltier module (the scene's, on its heat sink) is a
+    The pad is built as ``[as_built.display]`` says (``built``: its layers,
+    flux sensor, module, contact and junction sensor's lag off the scene's
+    design; the scene's own pad without it). Its Peltier module is a
     :class:`~telethermal.physics.thermoelectric.ThermoelectricStack`. Before
     contact the pad's layers sit in air (their front face taken as
     adiabatic) and move with the junction as one lumped mass; at contact they
