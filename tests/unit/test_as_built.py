@@ -70,18 +70,32 @@ def test_a_scene_with_them_says_so_in_the_log(caplog):
     assert "pads built off their datasheet" in caplog.text and "sd 0.15, seed 0" in caplog.text
 
 
-def test_display_factors_say_in_the_log_that_they_are_not_yet_applied(caplog):
-    """``[as_built.display]`` is read, but the display's simulator runs its
-    nominal pad: a scene with display factors off 1 says so in the log
-    (and its record), one with only pad factors does not."""
+def test_display_factors_are_in_the_log_and_the_record(caplog):
+    """A scene with ``[as_built.display]`` factors says them in the log and
+    its record; ``junction_lag_s`` is the display's alone (the sensing
+    pad's thermistor has no lag in the simulator)."""
     with caplog.at_level(logging.WARNING):
-        scene = _scene({"display": {"flux_lag_s": 1.5}})
-    assert "NOT YET APPLIED" in caplog.text and "display" in caplog.text
-    assert scene.as_built.to_dict()["display_applied"] is False
+        scene = _scene({"display": {"flux_lag_s": 1.5, "junction_lag_s": 0.5}})
+    assert "display flux_lag_s 1.5" in caplog.text or "flux_lag_s 1.5" in caplog.text
+    assert scene.as_built.to_dict()["display"]["junction_lag_s"] == 0.5
     caplog.clear()
     with caplog.at_level(logging.WARNING):
         _scene({"pad": {"flux_lag_s": 1.5}})
-    assert "NOT YET APPLIED" not in caplog.text and "display as designed" in caplog.text
+    assert "display as designed" in caplog.text
+    with pytest.raises(SceneError, match="unknown key.*junction_lag_s"):
+        _scene({"pad": {"junction_lag_s": 1.2}})
+
+
+def test_the_display_draw_leaves_the_pads_draws_as_they_were():
+    """``junction_lag_s`` is drawn after every other factor: the sensing
+    pad's and the display's other factors of a seed are what they were
+    before it existed (the same generator, the same order)."""
+    ab = draw_as_built(0.15, 3, 3)
+    rng = np.random.default_rng(3)
+    pad = np.exp(rng.normal(0.0, 0.15, 3 + len(SCALAR_KEYS) + 3 + len(SCALAR_KEYS) + 1))
+    assert ab.pad.layer_thickness == tuple(pad[:3])
+    assert ab.display.flux_gain == pad[3 + len(SCALAR_KEYS) + 3 + SCALAR_KEYS.index("flux_gain")]
+    assert ab.display.junction_lag_s == pad[-1]
 
 
 def test_removing_the_tables_changes_no_model_the_product_builds():
@@ -105,6 +119,17 @@ def test_removing_the_tables_changes_no_model_the_product_builds():
     assert np.array_equal(na["u"], nb["u"]) and np.array_equal(na["tau_s"], nb["tau_s"])
     assert all(np.array_equal(na["amp"][k], nb["amp"][k]) for k in na["amp"])
     assert flux_noise_w_m2(plain) == flux_noise_w_m2(built)
+    # The display's: what its controllers are built from, and the controllers.
+    from telethermal.teleop.display_setup import display_model_args
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+    plain, built = _scene(), _scene({"sd": 0.3, "seed": 7})
+    assert not built.as_built.display.nominal
+    assert display_model_args(plain) == display_model_args(built)
+    da, db = (MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
+                            **display_model_args(s)) for s in (plain, built))
+    assert da.junction_design == db.junction_design
+    assert vars(da.junction_loop.gains) == vars(db.junction_loop.gains)
+    assert da.impedance.tau_s == db.impedance.tau_s == plain.sensors.flux_lag_s
 
 
 def test_the_simulated_pad_is_the_scene_written_with_the_built_values():
@@ -159,3 +184,45 @@ def test_generation_json_records_the_pads_as_built(tmp_path):
     summary = generate_databases(parse_scene(copy.deepcopy(data), "v.toml"), tmp_path / "db")
     assert summary["as_built"]["sd"] == 0.1
     assert "as_built" in (tmp_path / "db" / "generation.json").read_text()
+
+
+def _display_touch(scene, contact_s=0.3):
+    from telethermal.teleop.run import DisplayTouch, Operator
+    op = Operator(33.0, 33.0, 1.0, 1.0, 10.0, 5000.0)
+    return DisplayTouch(scene, op, 500.0, contact_s, 25.0, np.random.default_rng(0))
+
+
+def test_display_factors_reach_the_display_simulator_only():
+    """``[as_built.display]`` builds the display's simulated pad (its
+    layers, flux lag and gain, module, junction sensor's lag), the sensing
+    pad's simulator stays nominal; the display's flux gain reads every
+    sample that many times the nominal sensor's (the same draws: the sum's
+    ratio to 1e-3, the 0.01 uV quantisation on ~100 uV)."""
+    from telethermal.physics.as_built import simulated_display
+    factors = {"layer_thickness": [1.3, 1.0, 0.8], "flux_lag_s": 1.3, "flux_gain": 1.05,
+               "module_resistance": 1.2, "junction_lag_s": 2.0}
+    plain, built = _scene(), _scene({"display": factors})
+    assert simulated_pad_scene(built).pad == plain.pad
+    d, p = simulated_display(built), simulated_display(plain)
+    assert p.layers == tuple(plain.pad.layers) and p.flux_lag_s == plain.sensors.flux_lag_s
+    assert [lay.thickness_m for lay in d.layers] == pytest.approx(
+        [lay.thickness_m * k for lay, k in zip(plain.pad.layers, factors["layer_thickness"])])
+    assert d.flux_lag_s == pytest.approx(1.3 * plain.sensors.flux_lag_s)
+    assert d.module.resistance_ohm == pytest.approx(1.2 * p.module.resistance_ohm)
+    ta, tb = _display_touch(plain), _display_touch(built)
+    assert tb.junction_lag_s == pytest.approx(2.0 * ta.junction_lag_s)
+    assert tb.module.resistance_ohm == pytest.approx(1.2 * ta.module.resistance_ohm)
+    fa, fb = [], []
+    for touch, out in ((ta, fa), (tb, fb)):
+        for k in range(150):                    # 0.3 s of contact at 500 Hz
+            out.append(touch.sense(k / 500.0).flux_w_m2)
+            touch._drive(0.0)
+    # The same pad but for its gain: the layers and lag of the plain one.
+    gain_only = _display_touch(_scene({"display": {"flux_gain": 1.05}}))
+    fg = []
+    for k in range(150):
+        fg.append(gain_only.sense(k / 500.0).flux_w_m2)
+        gain_only._drive(0.0)
+    assert sum(fg[50:]) / sum(fa[50:]) == pytest.approx(1.05, abs=1e-3)
+    # The thicker, slower-sensed pad reads another flux altogether.
+    assert abs(sum(fb[50:]) / sum(fa[50:]) - 1.05) > 0.02

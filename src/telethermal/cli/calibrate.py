@@ -1,5 +1,7 @@
 """``telethermal calibrate pad``: the sensing pad's model from a lab's
-reference touches (docs/calibration.md)."""
+reference touches; ``telethermal calibrate display``: the display pad's
+sensor lags from its bench routine (docs/calibration.md). One calibration
+file holds both: each command keeps the other's table."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ from telethermal.cli._common import _print_lines, console
 
 def cmd_calibrate_pad(args) -> int:
     from telethermal.data.dataset import load_dataset
-    from telethermal.ident.pad_calibration import calibrate_pad, write_calibration
+    from telethermal.ident.pad_calibration import calibrate_pad
     from telethermal.ident.registry import pad_dataset, touches_scene
     from telethermal.physics.scene import load_scene
 
@@ -19,8 +21,24 @@ def cmd_calibrate_pad(args) -> int:
         trials = load_dataset(data)
     with console.status(f"fitting {scene.name}'s pad model to the reference touches"):
         cal = calibrate_pad(scene, trials, args.window_s)
-    write_calibration(cal, args.out)
+    from telethermal.jsonfile import write_text
+    from telethermal.teleop.display_calibration import keep_other_tables
+    write_text(args.out, cal.to_toml() + keep_other_tables(args.out, "pad"))
     _print_lines(cal.describe() + [f"wrote {args.out}"])
+    return 0
+
+
+def cmd_calibrate_display(args) -> int:
+    from telethermal.physics.scene import load_scene
+    from telethermal.teleop.display_calibration import write_display_calibration
+    from telethermal.teleop.display_rig import calibrate_simulated
+
+    scene = load_scene(args.scene)
+    with console.status(f"running {scene.name}'s display routine (simulated bench, "
+                        f"devices {args.devices}) and fitting its sensors"):
+        cal = calibrate_simulated(scene, args.block, args.seed, args.devices)
+    write_display_calibration(cal, args.out)
+    _print_lines(cal.describe() + [f"wrote {args.out} ([display])"])
     return 0
 
 
@@ -37,3 +55,18 @@ def add_parser(sub) -> None:
     q.add_argument("--window-s", type=float, default=1.0,
                    help="seconds of each touch fitted from the onset (default 1)")
     q.set_defaults(func=cmd_calibrate_pad)
+    d = csub.add_parser("display", help="fit the display pad's flux sensor lag (and gain) and "
+                                        "junction sensor lag from current steps with a "
+                                        "reference block on its face, then in air")
+    d.add_argument("--scene", required=True, help="the display's scene: a shipped name or a file")
+    d.add_argument("--out", required=True,
+                   help="the calibration file to write its [display] table to (TOML; a "
+                        "sensing pad's calibration already in it is kept)")
+    d.add_argument("--block", default="plexiglass",
+                   help="the reference block's material, of the materials table (default "
+                        "plexiglass: a low effusivity, see docs/calibration.md)")
+    d.add_argument("--seed", type=int, default=0, help="the simulated bench's draws")
+    d.add_argument("--devices", default="sim", choices=("sim", "emulated"),
+                   help="the display's devices: the simulator, or it behind the emulated "
+                        "board and driver read through the master's drivers")
+    d.set_defaults(func=cmd_calibrate_display)

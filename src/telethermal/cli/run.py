@@ -24,7 +24,8 @@ def cmd_demo(args) -> int:
                   [m for m in args.materials.split(",") if m] if args.materials else None,
                   seed=args.seed, contact_s=args.contact_s, record_dir=args.record,
                   view_port=args.view, devices=args.devices, json_path=args.json,
-                  progress=_progress, status=console.status, method=args.method)
+                  progress=_progress, status=console.status, method=args.method,
+                  display_calibration=args.calibration or "")
     if result.view is not None:
         print(f"the view stays up at {result.view.url} (recordings play there); Ctrl-C to "
               "stop", flush=True)
@@ -69,9 +70,13 @@ def cmd_session(args) -> int:
                                            status=console.status)
     config = DisplayConfig(rate_hz=args.rate_hz, before=args.before,
                            feedforward_model=args.controller)
+    cal = None
+    if args.calibration:
+        from telethermal.teleop.display_calibration import display_calibration
+        cal = display_calibration(args.calibration, scene)
     result = run_session(scene, args.material, identifier, generator, config,
                          contact_s=args.contact_s, seed=args.seed, realtime=args.realtime,
-                         devices=args.devices, record=args.record)
+                         devices=args.devices, record=args.record, display_calibration=cal)
     write_json(args.json, result.summary)
     if args.plot:
         plot_session(result, args.plot)
@@ -197,12 +202,18 @@ def add_session(sub) -> None:
     p.add_argument("--realtime", action="store_true",
                    help="run the master loop on the real clock and report its timing")
     p.add_argument("--record", help="record the session to this MCAP file")
+    p.add_argument("--calibration", metavar="CAL.toml", help=DISPLAY_CAL_HELP)
     p.add_argument("--devices", choices=("sim", "emulated", "qemu"), default="sim",
                    help="sim: the simulator directly; emulated: the display's sensor board on "
                         "a pty and its Peltier driver on a virtual CAN bus, through the drivers; "
                         "qemu: the reference firmware as those boards on emulated STM32F405 "
                         "cores (qemu-system-arm, gcc-arm-none-eabi, picolibc-arm-none-eabi)")
     p.set_defaults(func=cmd_session)
+
+
+DISPLAY_CAL_HELP = ("the display's calibration (telethermal calibrate display: the file's "
+                    "[display] table): the master's controllers use its flux and junction "
+                    "sensor lags instead of the scene's")
 
 
 def add_demo(sub) -> None:
@@ -229,6 +240,8 @@ def add_demo(sub) -> None:
                    help="the slave's identifier (default effusivity-fit, which fits the pad's "
                         "model to each window, on a scene it can model; else effusivity-lda: "
                         "telethermal bench identify compares them)")
+    p.add_argument("--calibration", metavar="CAL.toml", help=DISPLAY_CAL_HELP + " (the "
+                   "master's config key pad_calibration)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
                    help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
                         "(default 8050); it stays up after the touches until Ctrl-C")

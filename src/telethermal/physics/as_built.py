@@ -15,9 +15,8 @@ each). A scene may say how its pads are really built::
     module_resistance = 1.0
     module_conductance = 1.0
 
-    [as_built.display]              # the master's display pad (same keys;
-                                    # read and checked, not yet applied by
-                                    # the display's simulator: logged)
+    [as_built.display]              # the master's display pad: the same
+    junction_lag_s = 1.3            # keys, and its junction sensor's lag
 
 each a factor on the scene's nominal value (1: as designed; a key left out
 is 1), or::
@@ -29,7 +28,10 @@ is 1), or::
 The product never reads these: its models are built from the scene's
 nominal values (``Scene.as_built`` is read only by the simulator:
 :func:`simulated_pad_scene`, :func:`simulated_module`; a test proves that
-removing the tables changes no model the product builds).
+removing the tables changes no model the product builds). The display's
+simulated pad (teleop/run.py's ``DisplayTouch``) is built by
+:func:`simulated_display`: its layers, flux sensor's lag and gain, module,
+contact and junction sensor's lag times ``[as_built.display]``'s factors.
 """
 
 from __future__ import annotations
@@ -49,12 +51,10 @@ log = logging.getLogger(__name__)
 SCALAR_KEYS = ("flux_lag_s", "contact_conductance_w_m2k", "flux_gain", "module_seebeck",
                "module_resistance", "module_conductance")
 PART_KEYS = ("layer_thickness",) + SCALAR_KEYS
+#: The display's own: its junction sensor's lag as mounted (the sensing
+#: pad's held-pad thermistor is lag-free in the simulator: no such factor).
+DISPLAY_KEYS = PART_KEYS + ("junction_lag_s",)
 PARTS = ("pad", "display")
-#: ``[as_built.display]`` is read and checked, but the display's simulated
-#: plant (teleop/run.py's DisplayTouch) does not apply it yet: said in the
-#: log wherever a scene with display factors is loaded.
-DISPLAY_NOT_APPLIED = ("NOT YET APPLIED: the display's simulator still runs its nominal "
-                       "pad; only [as_built.pad] reaches a simulated touch")
 #: A factor outside this range is a typo, not a tolerance.
 FACTOR_RANGE = (0.2, 5.0)
 #: ``[as_built] sd``'s range (log-normal sd of every factor).
@@ -72,15 +72,17 @@ class BuiltFactors:
     module_seebeck: float = 1.0
     module_resistance: float = 1.0
     module_conductance: float = 1.0
+    junction_lag_s: float = 1.0         # the display's alone (DISPLAY_KEYS)
 
     @property
     def nominal(self) -> bool:
         return all(v == 1.0 for v in self.layer_thickness) and all(
-            getattr(self, k) == 1.0 for k in SCALAR_KEYS)
+            getattr(self, k) == 1.0 for k in SCALAR_KEYS + ("junction_lag_s",))
 
-    def to_dict(self) -> dict:
+    def to_dict(self, keys: tuple[str, ...] = PART_KEYS) -> dict:
+        """The factors of ``keys`` (the display's: :data:`DISPLAY_KEYS`)."""
         return {"layer_thickness": [round(v, 5) for v in self.layer_thickness],
-                **{k: round(getattr(self, k), 5) for k in SCALAR_KEYS}}
+                **{k: round(getattr(self, k), 5) for k in keys[1:]}}
 
 
 @dataclass(frozen=True)
@@ -97,18 +99,18 @@ class AsBuilt:
         """One line for logs and reports."""
         how = (f"drawn log-normal, sd {self.sd:g}, seed {self.seed}" if self.sd is not None
                else "given factors")
-        display = (f"display {_short(self.display)} ({DISPLAY_NOT_APPLIED})"
-                   if not self.display.nominal else "display as designed")
+        display = (f"display {_short(self.display, DISPLAY_KEYS)}" if not self.display.nominal
+                   else "display as designed")
         return (f"pads built off their datasheet ([as_built], {how}): pad "
                 f"{_short(self.pad)}; {display}")
 
     def to_dict(self) -> dict:
         return {"sd": self.sd, "seed": self.seed, "pad": self.pad.to_dict(),
-                "display": self.display.to_dict(), "display_applied": False}
+                "display": self.display.to_dict(DISPLAY_KEYS)}
 
 
-def _short(f: BuiltFactors) -> str:
-    return ", ".join(f"{k} {v}" for k, v in f.to_dict().items())
+def _short(f: BuiltFactors, keys: tuple[str, ...] = PART_KEYS) -> str:
+    return ", ".join(f"{k} {v}" for k, v in f.to_dict(keys).items())
 
 
 def parse_as_built(raw, n_layers: int, source: str) -> AsBuilt | None:
@@ -142,22 +144,23 @@ def parse_as_built(raw, n_layers: int, source: str) -> AsBuilt | None:
     if not given:
         raise SceneError(f"{where}: empty; give 'sd' and 'seed', or [as_built.pad] / "
                          f"[as_built.display] factors")
-    return AsBuilt(*(_parse_part(raw.get(part, {}), n_layers, f"{where}.{part}")
+    return AsBuilt(*(_parse_part(raw.get(part, {}), n_layers, f"{where}.{part}",
+                                 DISPLAY_KEYS if part == "display" else PART_KEYS)
                      for part in PARTS))
 
 
-def _parse_part(table, n_layers: int, where: str) -> BuiltFactors:
+def _parse_part(table, n_layers: int, where: str, keys: tuple[str, ...]) -> BuiltFactors:
     if not isinstance(table, dict):
         raise SceneError(f"{where} must be a table of factors, got {table!r}")
-    extra = sorted(set(table) - set(PART_KEYS))
+    extra = sorted(set(table) - set(keys))
     if extra:
         raise SceneError(f"{where}: unknown key(s) {', '.join(extra)}; known: "
-                         f"{', '.join(PART_KEYS)}")
+                         f"{', '.join(keys)}")
     thick = table.get("layer_thickness", [1.0] * n_layers)
     if not isinstance(thick, list) or len(thick) != n_layers:
         raise SceneError(f"{where}: 'layer_thickness' must be a list of {n_layers} factor(s), "
                          f"one per layer of [pad] layers, got {thick!r}")
-    values = {k: _factor(table.get(k, 1.0), f"{where}: '{k}'") for k in SCALAR_KEYS}
+    values = {k: _factor(table.get(k, 1.0), f"{where}: '{k}'") for k in keys[1:]}
     return BuiltFactors(tuple(_factor(v, f"{where}: 'layer_thickness'[{i}]")
                               for i, v in enumerate(thick)), **values)
 
@@ -181,14 +184,17 @@ def read_as_built(scene, raw, source: str):
 
 def draw_as_built(sd: float, seed: int, n_layers: int) -> AsBuilt:
     """Every factor of both pads drawn ``exp(N(0, sd))`` from ``seed``
-    (the pad's first, then the display's, in :data:`PART_KEYS` order)."""
+    (the pad's first, then the display's, in :data:`PART_KEYS` order, then
+    the display's ``junction_lag_s``: a pad's draws as before it existed)."""
     rng = np.random.default_rng(seed)
 
     def part():
         thick = tuple(float(v) for v in np.exp(rng.normal(0.0, sd, n_layers)))
         return BuiltFactors(thick, *(float(v) for v in np.exp(rng.normal(0.0, sd,
                                                                             len(SCALAR_KEYS)))))
-    return AsBuilt(part(), part(), float(sd), int(seed))
+    pad, display = part(), part()
+    display = dataclasses.replace(display, junction_lag_s=float(np.exp(rng.normal(0.0, sd))))
+    return AsBuilt(pad, display, float(sd), int(seed))
 
 
 def with_as_built(scene, as_built: AsBuilt | None):
@@ -196,9 +202,10 @@ def with_as_built(scene, as_built: AsBuilt | None):
     return dataclasses.replace(scene, as_built=as_built)
 
 
-def pad_factors(scene) -> BuiltFactors | None:
-    """The sensing pad's factors, None when the scene has none."""
-    return None if scene.as_built is None else scene.as_built.pad
+def pad_factors(scene, part: str = "pad") -> BuiltFactors | None:
+    """The sensing pad's factors (``part`` "display": the display pad's),
+    None when the scene has none."""
+    return None if scene.as_built is None else getattr(scene.as_built, part)
 
 
 def simulated_pad_scene(scene):
@@ -220,10 +227,11 @@ def simulated_pad_scene(scene):
     return dataclasses.replace(scene, pad=pad, sensors=sensors)
 
 
-def simulated_module(scene, params):
+def simulated_module(scene, params, part: str = "pad"):
     """The module ``params`` (:class:`~telethermal.physics.thermoelectric.ModuleParams`)
-    of the sensing pad as built: Seebeck, resistance, conductance times their factors."""
-    f = pad_factors(scene)
+    of the sensing pad (``part`` "display": the display pad) as built: Seebeck,
+    resistance, conductance times their factors."""
+    f = pad_factors(scene, part)
     if f is None:
         return params
     return dataclasses.replace(params, seebeck_v_k=params.seebeck_v_k * f.module_seebeck,
@@ -235,3 +243,31 @@ def flux_gain_factor(scene) -> float:
     """The sensing pad's flux sensor's gain factor as built (1: as designed)."""
     f = pad_factors(scene)
     return 1.0 if f is None else f.flux_gain
+
+
+@dataclass(frozen=True)
+class DisplayBuild:
+    """The display pad as the simulator builds it: the scene's nominal
+    figures times ``[as_built.display]``'s factors (all 1 without one)."""
+
+    layers: tuple
+    flux_lag_s: float
+    flux_gain: float
+    contact_factor: float
+    module: object              # ModuleParams
+    junction_lag_factor: float
+
+
+def simulated_display(scene) -> DisplayBuild:
+    """The display pad of ``scene`` as built (teleop/run.py's ``DisplayTouch``
+    alone reads it): its layers' thicknesses, flux sensor's lag and gain,
+    the contact conductance on the finger, the module's S, R, K and the
+    junction sensor's lag, each times its factor."""
+    from telethermal.physics.layered import Layer
+    f = pad_factors(scene, "display") or BuiltFactors((1.0,) * len(scene.pad.layers))
+    layers = tuple(lay if k == 1.0 else Layer(lay.material, lay.thickness_m * k)
+                   for lay, k in zip(scene.pad.layers, f.layer_thickness))
+    return DisplayBuild(layers, scene.sensors.flux_lag_s * f.flux_lag_s, f.flux_gain,
+                        f.contact_conductance_w_m2k,
+                        simulated_module(scene, scene.pad.module_params()[0], "display"),
+                        f.junction_lag_s)

@@ -21,13 +21,15 @@ from pathlib import Path
 
 from telethermal.errors import SceneError
 from telethermal.physics.as_built import AsBuilt, read_as_built
+from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR
 from telethermal.physics.layered import Boundary, Layer
 from telethermal.physics.materials import (get_material, load_materials, read_table,
                                            register_materials, shadowed_by,
                                            unregister_materials)
 from telethermal.physics.model import ModelChoice, choose_model
-from telethermal.physics.scenefile import MAX_OBJECTS, UPPER_BOUNDS, parse_toml, read_scene_text
+from telethermal.physics.scenefile import MAX_OBJECTS, parse_toml, read_scene_text
 from telethermal.physics.scenereader import TableReader as _Reader
+from telethermal.physics.scenereader import parse_dataclass as _parse_dataclass
 from telethermal.physics.scenereader import check_own_name, read_layers, read_material
 
 PAD_KINDS = ("peltier", "water")
@@ -124,7 +126,6 @@ class ObjectSpec:
                 f"thickness_m={self.thickness_m!r}{extra})")
 
 
-THERMOMETER_KINDS = ("ir", "contact")
 
 
 @dataclass(frozen=True)
@@ -152,6 +153,20 @@ class SensorSpec:
     object_resolution_k: float = 0.02
     object_readings: float = 4
     instrument_seed: float = 1
+    #: The display's junction sensor (a part of physics/modules.toml's
+    #: ``[junction_sensors]``) and its lag as mounted, s (None: the part's
+    #: stated one): what the junction loop is designed for, and what the
+    #: simulated pad's sensor lags (times ``[as_built.display] junction_lag_s``).
+    junction_sensor: str = DEFAULT_JUNCTION_SENSOR
+    junction_lag_s: float | None = None
+
+    def junction_sensor_spec(self):
+        """The display's junction sensor as configured
+        (:class:`~telethermal.physics.thermoelectric.JunctionSensorSpec`)."""
+        from telethermal.physics.thermoelectric import get_junction_sensor
+        spec = get_junction_sensor(self.junction_sensor)
+        return spec if self.junction_lag_s is None else dataclasses.replace(
+            spec, tau_s=self.junction_lag_s)
 
 
 @dataclass(frozen=True)
@@ -316,30 +331,6 @@ def _parse_object(table, r: _Reader, room_c) -> ObjectSpec:
         r.fail(f"'name' = {label!r} is a material's name; the object (of {material!r}) "
                "would be read as that material wherever its name is looked up")
     return ObjectSpec(material, float(temp), thickness, base, label)
-
-
-#: Keys that were replaced, with what replaced them.
-_RENAMED = {"ir_error_k": "'ir_error_k' was one error drawn afresh for every reading; it is "
-                          "now 'object_bias_limit_k' (the instrument's bias in a session, a "
-                          "datasheet accuracy) and 'object_noise_k' (per reading)"}
-
-
-def _parse_dataclass(cls, table, where, source):
-    r = _Reader(table or {}, where, source)
-    for old, why in _RENAMED.items():
-        if old in (table or {}):
-            r.fail(why)
-    defaults = cls()
-    values = {}
-    for f in cls.__dataclass_fields__:
-        default = getattr(defaults, f)
-        if f == "object_thermometer":
-            values[f] = r.text(f, default, choices=THERMOMETER_KINDS)
-        else:
-            values[f] = r.num(f, default, lo=0, hi=UPPER_BOUNDS.get(f, 1e6))
-    r.done()
-    return cls(**values)
-
 
 
 def parse_scene(data: dict, source: str = "<scene>") -> Scene:

@@ -136,3 +136,35 @@ def check_own_name(scene, shipped_names, load_shipped) -> None:
         f"from it ({', '.join(differs)}): models and datasets find a scene's pad model by its "
         f"name, so this file's touches would be fitted with the shipped pad's: give your "
         f"scene its own name (name = \"...\" at the top of {scene.source})")
+
+
+THERMOMETER_KINDS = ("ir", "contact")
+
+#: Keys that were replaced, with what replaced them.
+_RENAMED = {"ir_error_k": "'ir_error_k' was one error drawn afresh for every reading; it is "
+                          "now 'object_bias_limit_k' (the instrument's bias in a session, a "
+                          "datasheet accuracy) and 'object_noise_k' (per reading)"}
+
+
+def parse_dataclass(cls, table, where, source):
+    """``cls`` (SensorSpec, VariabilitySpec) from its table, every key checked."""
+    from telethermal.physics.scenefile import UPPER_BOUNDS
+    from telethermal.physics.thermoelectric import junction_sensor_names
+    r = TableReader(table or {}, where, source)
+    for old, why in _RENAMED.items():
+        if old in (table or {}):
+            r.fail(why)
+    defaults = cls()
+    values = {}
+    for f in cls.__dataclass_fields__:
+        default = getattr(defaults, f)
+        if f == "object_thermometer":
+            values[f] = r.text(f, default, choices=THERMOMETER_KINDS)
+        elif f == "junction_sensor":
+            values[f] = r.text(f, default, choices=junction_sensor_names())
+        elif f == "junction_lag_s":
+            values[f] = None if f not in (table or {}) else r.num(f, lo=0, hi=10.0)
+        else:
+            values[f] = r.num(f, default, lo=0, hi=UPPER_BOUNDS.get(f, 1e6))
+    r.done()
+    return cls(**values)

@@ -95,7 +95,6 @@ def display_params(scene, config, operator, idle_c) -> dict:
     its models, from the scene as the product builds them)."""
     from telethermal.control.dew import idle_floor_c
     from telethermal.control.preconditioning import policy_fractions
-    from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
 
     return {"display": {"rate_hz": config.rate_hz, "before": config.before,
                         "idle": config.idle,
@@ -115,7 +114,7 @@ def display_params(scene, config, operator, idle_c) -> dict:
             "idle_policy": policy_fractions(scene) if config.idle == "policy" else None,
             "operator": asdict(operator),
             "module": asdict(scene.pad.module_params()[0]), "pad_area_m2": scene.pad.area_m2,
-            "junction_sensor": asdict(get_junction_sensor(DEFAULT_JUNCTION_SENSOR)),
+            "junction_sensor": asdict(scene.sensors.junction_sensor_spec()),
             "dew_floor_c": _finite_or_none(idle_floor_c(scene.room_temp_c,
                                                         scene.room_humidity_pct))}
 

@@ -90,6 +90,11 @@ class MasterConfig:
     can_bus: str = ""               # interface:channel of the Peltier driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
     firmware_build: str = ""        # devices = "qemu": as the slave's
+    #: The display pad's calibration: the ``[display]`` table of a
+    #: calibration file (``telethermal calibrate display``, docs/calibration.md):
+    #: its flux and junction sensor lags replace the scene's in the
+    #: controllers; empty: the scene's.
+    pad_calibration: str = ""
     #: The finger's temperature before contact (hardware: no IR channel yet).
     finger_temp_c: float = 33.0
     #: Folder to record every touch to (one MCAP file per run); empty: no recording.

@@ -49,11 +49,13 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
                   slave_host: str = "127.0.0.1", security: str = "curve",
                   master_ports: tuple[int, int] | None = None,
                   devices: str = "sim", record_dir: str | Path | None = None,
-                  view_port: int = 0, firmware_build: str = "") -> tuple[Path, Path]:
+                  view_port: int = 0, firmware_build: str = "",
+                  pad_calibration: str = "") -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
-    (a fault proxy in between; plain loopback sockets then)."""
+    (a fault proxy in between; plain loopback sockets then). ``pad_calibration``:
+    the master's (its display's: docs/calibration.md)."""
     generate_link_keys(out / "keys")
     control, stream, slave_admin, master_admin = ports
 
@@ -80,6 +82,8 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     master.write_text(f'[master]\nscene = {toml_str(scene)}\nrate_hz = {rate_hz}\nseed = {seed}\n'
                       f'realtime_priority = {realtime_priority}\ndevices = "{devices}"\n{record}'
                       f'view_port = {view_port}\n'
+                      + (f"pad_calibration = {toml_str(str(Path(pad_calibration).resolve()))}\n"
+                         if pad_calibration else "") +
                       f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
                       f'{master_common}{master_keys}')
     return slave, master
@@ -291,7 +295,7 @@ def touch_said(s: dict) -> str:
 
 
 def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, generator,
-                again: bool, echo) -> dict:
+                again: bool, echo, display_cal=None) -> dict:
     """One touch of the demo over the network, beside the same touch in one
     process; prints its line and returns its summary."""
     from telethermal.teleop.run import run_session
@@ -303,7 +307,7 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
                  f"{scene.name}: {material}{' again' if again else ''} over the network (two "
                  "processes)")
     local = run_session(scene, material, identifier, generator, contact_s=contact_s,
-                        seed=seed).summary
+                        seed=seed, display_calibration=display_cal).summary
     when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
     if s.get("identified_at_s") is not None and s["identified_at_s"] != s["decision_time_s"]:
         when = f"at {s['identified_at_s']:.2f} s (first committed {when})"   # after a group
@@ -337,7 +341,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
              realtime_priority: int = 20, record_dir: Path | None = None,
              view_port: int | None = None, devices: str = "sim",
-             firmware_build: str = "") -> dict:
+             firmware_build: str = "", display_calibration: str = "") -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
     in-process session's (``in_process_flux_rms_error_rel``). ``view_port``:
     the live view (``telethermal view``) on that HTTP port, started once the
@@ -347,7 +351,10 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     from telethermal.ident.registry import load_model
     from telethermal.render.generator import load_generator
 
+    from telethermal.teleop.display_calibration import display_calibration as read_cal
+
     scene = with_finger(load_scene(scene_name))
+    display_cal = read_cal(display_calibration, scene)          # refused before anything runs
     identifier, generator = load_model(identifier_path), load_generator(generator_path)
     from telethermal.control.preconditioning import prepare_policy
 
@@ -357,7 +364,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                                           ports[:4], seed, realtime_priority=realtime_priority,
                                           record_dir=record_dir, devices=devices,
                                           view_port=ports[4] if view_port is not None else 0,
-                                          firmware_build=firmware_build)
+                                          firmware_build=firmware_build,
+                                          pad_calibration=display_calibration)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     cal = {}
@@ -385,7 +393,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         plan = [(m, False) for m in materials] + [(materials[0], True)] if materials else []
         for i, (material, again) in enumerate(plan):
             touches.append(_demo_touch(scene, material, ports, seed + 1 + i, contact_s, out,
-                                       identifier, generator, again, echo))
+                                       identifier, generator, again, echo, display_cal))
     except BaseException:
         if view is not None:
             view.close()
@@ -453,7 +461,8 @@ def _demo_models(scene, out: Path, seed: int, echo, progress, status,
 def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed: int = 0,
          contact_s: float = 5.0, record_dir: str | Path | None = None,
          view_port: int | None = None, devices: str = "sim", json_path=None, echo=print,
-         progress=_no_progress, status=nullcontext, method: str | None = None) -> DemoResult:
+         progress=_no_progress, status=nullcontext, method: str | None = None,
+         display_calibration: str = "") -> DemoResult:
     """``telethermal demo``: the scene's databases, an identifier and a flux
     generator trained on them, then slave and master as two processes on
     loopback and a touch on each material (:func:`run_demo`); the summary
@@ -474,7 +483,8 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     report = run_demo(out, scene_name, out / "identifier.npz", out / "generator.npz",
                       demo_materials(scene, materials), seed=seed, contact_s=contact_s,
                       echo=echo, record_dir=Path(record_dir) if record_dir else None,
-                      view_port=view_port, devices=devices, firmware_build=firmware)
+                      view_port=view_port, devices=devices, firmware_build=firmware,
+                      display_calibration=display_calibration)
     view = report.pop("view", None)
     path = write_json(json_path or out / "demo.json", report)
     echo(f"touch plots: {out}/touch-*.png; summary: {path}")

@@ -35,8 +35,9 @@ from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
 from telethermal.teleop.session import MasterSession, ServiceState, send_through
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_idle,
-                                     display_model_args, draw_operator, master_rng, pad_resistance,
+                                     display_model_args, draw_operator, master_rng,
                                      safety_summary, with_finger)
+from telethermal.teleop.display_calibration import display_calibration
 from telethermal.wire.messages import SessionConfig, parse
 from telethermal.wire.schema import MessageKind
 
@@ -63,10 +64,10 @@ class Touch:
         self.idle_c, shift = display_idle(scene, cfg, self.operator.finger_ir_c,
                                           service.link.object_temp_c,
                                           service.link.expected_material)
-        self.display = MasterDisplay(cfg, service.link.generator, pad_resistance(scene.pad.layers),
-                                     scene.sensors.flux_lag_s, self.operator.finger_ir_c,
+        self.display = MasterDisplay(cfg, service.link.generator,
+                                     finger_temp_c=self.operator.finger_ir_c,
                                      idle_c=self.idle_c, precondition=shift,
-                                     **display_model_args(scene))
+                                     **display_model_args(scene, service.display_calibration))
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
         opening = time.monotonic()
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
@@ -105,6 +106,8 @@ class MasterService:
     def __init__(self, config: MasterConfig):
         self.config = config
         self.scene = with_finger(load_scene(config.scene))
+        #: The display's calibration (the ``[display]`` table of ``pad_calibration``).
+        self.display_calibration = display_calibration(config.pad_calibration, self.scene)
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before,
                                             idle=config.idle)
         if config.idle == "policy":       # before the sockets: no touch waits for it
@@ -171,10 +174,9 @@ class MasterService:
         # The pad model (the scene's layers, the finger's contact
         # conductance) and the module behind the pad, as in simulation.
         _, shift = display_idle(self.scene, self.display_config, cfg.finger_temp_c, None)
-        self.display = MasterDisplay(self.display_config, None,
-                                     pad_resistance(self.scene.pad.layers),
-                                     self.scene.sensors.flux_lag_s, cfg.finger_temp_c,
-                                     precondition=shift, **display_model_args(self.scene))
+        self.display = MasterDisplay(self.display_config, None, finger_temp_c=cfg.finger_temp_c,
+                                     precondition=shift,
+                                     **display_model_args(self.scene, self.display_calibration))
         self.t0 = time.monotonic()
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
                  cfg.can_bus)

@@ -9,27 +9,37 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
 from telethermal.control.current_quality import ripple_rms_a, sign_reversals
 from telethermal.control.dew import DEW_MARGIN_K, idle_floor_c
 from telethermal.control.safety import safety_event_count
+from telethermal.physics.layered import pad_resistance
 from telethermal.physics.scene import Scene
-from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
 
 log = logging.getLogger(__name__)
 
 
-def display_model_args(scene: Scene) -> dict:
-    """What the display's skin controller knows of the display: the pad's
-    layers and the nominal pad-fingertip contact conductance."""
-    return {"pad_layers": tuple(scene.pad.layers),
+def display_model_args(scene: Scene, calibration=None) -> dict:
+    """What the display's skin controller knows of the display, all from the
+    configuration: the pad's layers and resistance, the nominal pad-fingertip
+    contact conductance, the module, the flux sensor's lag (``[sensors]
+    flux_lag_s``) and the junction sensor the scene names with its stated lag
+    (``junction_sensor``, ``junction_lag_s``); with ``calibration`` (a
+    :class:`~telethermal.teleop.display_calibration.DisplayCalibration`,
+    checked against ``scene``) the two lags it measured instead.
+    ``MasterDisplay(config, generator, finger_temp_c=..., **these)``."""
+    from telethermal.teleop.display_calibration import calibrated_lags
+    flux_lag_s, junction_lag_s = calibrated_lags(scene, calibration)
+    return {"pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
+            "sensor_lag_s": flux_lag_s, "pad_layers": tuple(scene.pad.layers),
             "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
             "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2,
-            "junction_sensor": get_junction_sensor(DEFAULT_JUNCTION_SENSOR),
+            "junction_sensor": replace(scene.sensors.junction_sensor_spec(),
+                                       tau_s=junction_lag_s),
             "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct)}
 
 
@@ -69,7 +79,7 @@ def module_summary(touch, master: MasterDisplay) -> dict:
     (``touch``: a :class:`~telethermal.teleop.run.DisplayTouch`)."""
     spec = touch.module.spec
     loop = master.junction_loop
-    js = touch.junction_sensor
+    js = master.junction_sensor          # as the controller was designed for it
     return {"name": spec.name, **touch.limit_counts,
             "max_current_a": round(touch.max_current_a, 4), "imax_a": spec.imax_a,
             "max_hot_c": round(touch.max_hot_c, 3), "hot_side_max_c": spec.hot_side_max_c,

@@ -12,7 +12,6 @@ import math
 from typing import Callable
 
 from telethermal.devices.readings import PadSensors
-from telethermal.physics.layered import pad_resistance
 from telethermal.physics.scene import Scene
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.teleop.display_setup import display_idle, display_model_args
@@ -56,7 +55,7 @@ class InProcessWire:
         self.news_filter = news_filter
 
     def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float,
-                       idle_scene: Scene | None = None) -> MasterDisplay:
+                       idle_scene: Scene | None = None, calibration=None) -> MasterDisplay:
         """The master's display, idled before this touch at its standby: the
         object's temperature, pre-conditioned for what the slave announced
         it expects (object memory) or, for an unknown object, by the idle
@@ -66,10 +65,9 @@ class InProcessWire:
         idle, shift = display_idle(idle_scene or scene, config, finger_c,
                                    self.slave.pad.object_ir_c,
                                    self.master.link.expected_material)
-        self.display = MasterDisplay(config, self.master.link.generator,
-                                     pad_resistance(scene.pad.layers), scene.sensors.flux_lag_s,
-                                     finger_c, idle_c=idle, precondition=shift,
-                                     **display_model_args(scene))
+        self.display = MasterDisplay(config, self.master.link.generator, finger_temp_c=finger_c,
+                                     idle_c=idle, precondition=shift,
+                                     **display_model_args(scene, calibration))
         self.idle_c, self.finger_c = idle, finger_c
         return self.display
 

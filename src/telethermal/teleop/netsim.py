@@ -56,7 +56,7 @@ from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterS
                                         SlaveSession)
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
                                      display_idle, display_model_args, draw_operator, master_rng,
-                                     pad_resistance, safety_summary, slave_rng, with_finger)
+                                     safety_summary, slave_rng, with_finger)
 from telethermal.teleop.slave import Slave
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.loglimit import LogLimiter
@@ -305,9 +305,9 @@ class SimMasterService:
         expected = oracle if oracle is not None else self.session.link.expected_material
         self.idle_c, shift = display_idle(scene, config, finger_c,
                                           self.session.link.object_temp_c, expected)
-        self.display = MasterDisplay(config, generator, pad_resistance(scene.pad.layers),
-                                     scene.sensors.flux_lag_s, finger_c, idle_c=self.idle_c,
-                                     precondition=shift, **display_model_args(scene))
+        self.display = MasterDisplay(config, generator, finger_temp_c=finger_c,
+                                     idle_c=self.idle_c, precondition=shift,
+                                     **display_model_args(scene))
         self.onset_s: float | None = None       # the display's last onset
 
     def on_message(self, m: Message, now: float) -> None:

@@ -38,14 +38,14 @@ from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
 from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import touch_text
+from telethermal.physics.as_built import simulated_display
 from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.layered import pad_resistance  # noqa: F401  (its importers')
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
 from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
-from telethermal.physics.thermoelectric import (DEFAULT_JUNCTION_SENSOR, JunctionSensorSpec,
-                                                ModuleState, ThermoelectricStack,
-                                                get_junction_sensor)
+from telethermal.physics.thermoelectric import (JunctionSensorSpec, ModuleState,
+                                                ThermoelectricStack)
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
 from telethermal.teleop.display_setup import (display_idle, display_model_args,  # noqa: F401
@@ -127,7 +127,9 @@ class DisplayTouch:
     physics through a stall of the loop), and every period is recorded in
     ``trace``.
 
-    The pad's Peltier module (the scene's, on its heat sink) is a
+    The pad is built as ``[as_built.display]`` says (``built``: its layers,
+    flux sensor, module, contact and junction sensor's lag off the scene's
+    design; the scene's own pad without it). Its Peltier module is a
     :class:`~telethermal.physics.thermoelectric.ThermoelectricStack`. Before
     contact the pad's layers sit in air (their front face taken as
     adiabatic) and move with the junction as one lumped mass; at contact they
@@ -151,10 +153,12 @@ class DisplayTouch:
                  junction_lag_scale: float = 1.0):
         self.scene, self.operator, self.contact_s = scene, operator, contact_s
         self.dt_s = 1.0 / rate_hz
-        self.layers = tuple(scene.pad.layers)
+        #: The pad as built (``[as_built.display]``; the scene's nominal pad without it).
+        self.built = built = simulated_display(scene)
+        self.layers = built.layers
         self.model = display_model(self.layers, round(contact_s + 1.0, 3), min(self.dt_s, 1e-3))
         sens = scene.sensors
-        self.flux_sensor = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
+        self.flux_sensor = HeatFluxSensor(lag_s=built.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
         self.force_sensor = ForceSensor()
         self.n_total = int(round((PRE_CONTACT_S + contact_s + AFTER_RELEASE_S) * rate_hz))
         self.noise = rng.normal(size=(self.n_total + 1, 3))
@@ -168,22 +172,26 @@ class DisplayTouch:
         self._reading = None
         self._module_reading = (idle_c, scene.room_temp_c)
         self._current_a = 0.0
-        # The module, idling at ``idle_c`` on a sink at the room's temperature.
-        self.module, sink = scene.pad.module_params()
+        # The module (as built), idling at ``idle_c`` on a sink at the room's temperature.
+        sink = scene.pad.module_params()[1]
+        self.module = built.module
         self.area_m2 = scene.pad.area_m2            # the pad's face: the module's by default
         self.stack = ThermoelectricStack(self.module, sink, scene.room_temp_c,
                                          ModuleState(idle_c, scene.room_temp_c,
                                                      scene.room_temp_c))
         self._pad_heat_j_k = self.area_m2 * sum(
             layer.material.volumetric_heat_j_m3k * layer.thickness_m for layer in self.layers)
-        self.junction_sensor = junction_sensor or get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
+        # The part the scene names, at its stated lag (the controller's
+        # design figure) times the as-built factor below.
+        self.junction_sensor = junction_sensor or scene.sensors.junction_sensor_spec()
         if not (junction_lag_scale >= 0 and math.isfinite(junction_lag_scale)):
             raise SceneError(f"junction_lag_scale must be finite and >= 0, got "
                              f"{junction_lag_scale!r}")
         #: The junction sensor's true lag in this session (its stated one
         #: times ``junction_lag_scale``: a part off its datasheet, a bond
         #: thicker than designed).
-        self.junction_lag_s = self.junction_sensor.tau_s * junction_lag_scale
+        self.junction_lag_s = self.junction_sensor.tau_s * junction_lag_scale \
+            * built.junction_lag_factor
         self._junction_sensed_c = idle_c       # the bonded chip's own temperature
         js = self.junction_sensor
         self.thermistor_bias_k = rng.uniform(-1, 1, 2) * (js.bias_limit_k,
@@ -213,12 +221,13 @@ class DisplayTouch:
             self.n_total = min(self.n_total, self.k + int(round(AFTER_RELEASE_S / self.dt_s)))
 
     def sense(self, t: float) -> PadSensors:
-        op, sens = self.operator, self.scene.sensors
+        op = self.operator
         touching = self.touching(t)
         if touching and self.plant is None:
             # Contact: the pad, held at the junction temperature, meets the finger.
             self.plant = DisplayPlant(self.model, self.junction_c, op.finger_c,
-                                      op.conductance_w_m2k, self.dt_s, sens.flux_lag_s,
+                                      op.conductance_w_m2k * self.built.contact_factor,
+                                      self.dt_s, self.built.flux_lag_s,
                                       op.skin_k_scale, op.skin_heat_scale)
         if touching:
             r = self.plant.read()
@@ -227,8 +236,9 @@ class DisplayTouch:
             reading = (0.0, 0.0, self.junction_c, math.nan)
         self._reading = reading
         fs, noise = self.flux_sensor, self.noise[min(self.k, self.n_total)]
-        flux = quantise(reading[1] * fs.sensitivity_uv_per_w_m2 + fs.noise_uv_rms * noise[0],
-                        fs.adc_lsb_uv) / fs.sensitivity_uv_per_w_m2
+        # The sensor's true sensitivity is its nominal one times its gain as built.
+        flux = quantise(reading[1] * fs.sensitivity_uv_per_w_m2 * self.built.flux_gain
+                        + fs.noise_uv_rms * noise[0], fs.adc_lsb_uv) / fs.sensitivity_uv_per_w_m2
         # The thermocouple at the surface: its session's bias, 1 uV ~ 0.025 K of noise.
         pad = reading[2] + op.pad_tc_bias_k + 0.025 * noise[1]
         force = (op.force_n * -math.expm1(-t / self.force_sensor.rise_s) if touching else 0.0) \
@@ -317,7 +327,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 realtime: bool | str = False, devices: str = "sim",
                 record: str | Path | None = None, expected_material=None,
                 news_filter=None, idle_scene: Scene | None = None,
-                fresh_fits: bool = False, junction_lag_scale: float = 1.0) -> SessionResult:
+                fresh_fits: bool = False, junction_lag_scale: float = 1.0,
+                display_calibration=None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -340,7 +351,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     kept ones (a run whose CPU is measured; always on the real clock).
     ``junction_lag_scale``: the display's junction sensor lags this many
     times its stated time constant (the controller is designed for the
-    stated one: a robustness study)."""
+    stated one: a robustness study). ``display_calibration``: the master's
+    display calibration (``DisplayCalibration``): its lags in the controllers."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
     if realtime or fresh_fits:
@@ -379,10 +391,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # memory) or, for an unknown object, by the idle policy (``config.idle``;
     # control/preconditioning.py).
     master = wire.set_up_display(scene, config, operator.finger_ir_c,
-                                 idle_scene and with_finger(idle_scene))
+                                 idle_scene and with_finger(idle_scene), display_calibration)
     idle = wire.idle_c
     touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng,
-                         master.junction_sensor, junction_lag_scale)
+                         junction_lag_scale=junction_lag_scale)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=bool(realtime),
                            seed=seed)
