@@ -445,7 +445,8 @@ class MasterDisplay:
 
     def _rearm_junction_loop(self, sensors: PadSensors, dt_s: float) -> None:
         """A stopped junction loop re-arms at the next idle with nothing on
-        the pad, once its sensor agrees with the stopped module again
+        the pad, once its sensor agrees with the stopped module again and
+        follows a probe current as the loop's model predicts
         (:meth:`~telethermal.control.junction.DisplayJunctionLoop.rearm_if_settled`);
         counted and logged. At most once per idle: a loop that stops again
         before the next touch stays stopped (no stop/re-arm cycle)."""
@@ -457,8 +458,8 @@ class MasterDisplay:
             self._junction_rearm_allowed = False
             self._count(JUNCTION_REARMED)
             log.warning("the junction sensor agrees with the idle module again (within %.1f K "
-                        "of the hot side for %.1f s): module current re-armed",
-                        loop.REARM_K, loop.REARM_S)
+                        "of the hot side for %.1f s) and follows a small probe current as "
+                        "its model says: module current re-armed", loop.REARM_K, loop.REARM_S)
             self._junction_stop_counted = False
 
     # ------------------------------------------------------------ the period
