@@ -269,3 +269,24 @@ def test_a_recording_written_before_the_session_core_replays_sample_for_sample()
     # equal to 1e-9 (they too differ in the last bits here).
     assert s["slave"]["posteriors_max_abs_diff"] is not None
     assert s["slave"]["posteriors_max_abs_diff"] <= 1e-9
+
+
+def test_a_calibrated_displays_touch_records_its_lags_and_replays_sample_for_sample(models,
+                                                                                   tmp_path):
+    """A master built with a display calibration records the lags its
+    controllers used (not the scene's stated ones): the replay rebuilds the
+    same controllers and comes out identical."""
+    from telethermal.ident.pad_calibration import pad_digest
+    from telethermal.teleop.display_calibration import DisplayCalibration
+
+    lag, tau = 1.2 * SCENE.sensors.flux_lag_s, 1.5 * SCENE.sensors.junction_sensor_spec().tau_s
+    cal = DisplayCalibration("telethermal-calibration", 1, SCENE.name, pad_digest(SCENE),
+                             "plexiglass", lag, lag, lag, tau, tau, tau, 1.0, 1.0, 1.0,
+                             1.0, 1.0, 0.01, 0.01, 0.01, 0.01)
+    path = tmp_path / "calibrated.mcap"
+    run_session(SCENE, "aluminium", *models, DisplayConfig(feedforward_model="impedance"),
+                contact_s=0.5, seed=1, record=path, display_calibration=cal)
+    params = read_recording(path).config
+    assert params["sensor_lag_s"] == lag and params["junction_sensor"]["tau_s"] == tau
+    same = replay(path)["summary"]
+    assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0

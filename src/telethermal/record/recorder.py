@@ -89,10 +89,12 @@ def open_recorder(config, role: str, identifier=None, generator=None):
                                     model_bytes(identifier, generator)))
 
 
-def display_params(scene, config, operator, idle_c) -> dict:
+def display_params(scene, config, operator, idle_c, display=None) -> dict:
     """What a replay needs to rebuild the display of one touch (the module,
     the junction sensor and the dew floor the display's loop was given:
-    its models, from the scene as the product builds them)."""
+    its models, from the scene as the product builds them; the two lags
+    the ``display`` (a MasterDisplay) was built with, calibrated or not,
+    when given)."""
     from telethermal.control.dew import idle_floor_c
     from telethermal.control.preconditioning import policy_fractions
 
@@ -108,13 +110,15 @@ def display_params(scene, config, operator, idle_c) -> dict:
             "pad_layers": [[layer.material.name, layer.thickness_m] for layer in scene.pad.layers],
             "contact_conductance_w_m2k": (scene.finger.contact_conductance_w_m2k
                                           if scene.finger is not None else None),
-            "sensor_lag_s": scene.sensors.flux_lag_s,
+            "sensor_lag_s": (scene.sensors.flux_lag_s if display is None
+                             else display.sensor_lag_s),
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
             # The idle policy the display applied (fractions of finger - object).
             "idle_policy": policy_fractions(scene) if config.idle == "policy" else None,
             "operator": asdict(operator),
             "module": asdict(scene.pad.module_params()[0]), "pad_area_m2": scene.pad.area_m2,
-            "junction_sensor": asdict(scene.sensors.junction_sensor_spec()),
+            "junction_sensor": asdict(scene.sensors.junction_sensor_spec() if display is None
+                                      else display.junction_sensor),
             "dew_floor_c": _finite_or_none(idle_floor_c(scene.room_temp_c,
                                                         scene.room_humidity_pct))}
 
@@ -139,13 +143,14 @@ class SessionRecorder:
 
     @classmethod
     def open(cls, path, scene, material, identifier, generator, config, operator, idle_c,
-             seed, contact_s, devices, sampled: list | None = None) -> "SessionRecorder":
+             seed, contact_s, devices, sampled: list | None = None,
+             display=None) -> "SessionRecorder":
         """``sampled``: the materials whose sampled curves the display
         rendered (the in-process run renders what the slave's session
         sends, as the services do), sampled from the attached generator."""
         params = {"scene": scene.name, "material": material, "seed": seed,
                   "contact_s": contact_s, "devices": devices,
-                  **display_params(scene, config, operator, idle_c),
+                  **display_params(scene, config, operator, idle_c, display),
                   **({"sampled_curves": sampled} if sampled is not None else {})}
         return cls(Recorder(path, "session", params, model_bytes(identifier, generator)))
 

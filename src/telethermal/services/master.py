@@ -83,7 +83,8 @@ class Touch:
         self.contact_id = service.session.next_contact_id
         if service.recorder is not None:
             service.recorder.touch_start(now, self.contact_id,
-                                         display_params(scene, cfg, self.operator, self.idle_c))
+                                         display_params(scene, cfg, self.operator, self.idle_c,
+                                                        self.display))
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
         self.gc0 = list(service.loop.stats.gc_collections)
@@ -201,7 +202,7 @@ class MasterService:
                 # run since the service started, so it may differ slightly.)
                 self.recorder.touch_start(now, session.contact_id, display_params(
                     self.scene, self.display_config, _Finger(self.config.finger_temp_c),
-                    display.safety.applied_temp_c))
+                    display.safety.applied_temp_c, display))
         if (session.contact_id is not None or contact_id is not None) and \
                 self.recorder is not None:
             self.recorder.period(t, dt_s, sensors, news, step)

@@ -400,7 +400,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
                            seed=seed)
     recorder = SessionRecorder.open(record, scene, material, identifier, generator, config,
                                     operator, idle, seed, contact_s, devices,
-                                    sampled=list(wire.curves)) if record else None
+                                    sampled=list(wire.curves), display=master) \
+        if record else None
 
     # On the real clock, the master's own share of each period (its news,
     # display step and messages; not the simulated plants and slave that
