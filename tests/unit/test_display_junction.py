@@ -337,3 +337,36 @@ def test_the_master_rearms_a_stopped_loop_only_at_idle_and_says_so(caplog):
     list(run(0.2, touched=True))
     list(run(4 * idle_s, touched=False))           # the junction warmed by the last run
     assert master.events.get(JUNCTION_REARMED) == 2
+
+
+def test_no_probe_current_flows_in_the_period_a_finger_is_detected():
+    """A stopped loop probing its sensor at idle: from the first period the
+    master's detector sees the finger, the module gets 0 A (the probe asked
+    for in the period before is cancelled, not run under the finger)."""
+    from telethermal.devices.readings import PadSensors
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from telethermal.teleop.run import pad_resistance
+
+    config = DisplayConfig(feedforward_model="static")
+    dt = 1.0 / config.rate_hz
+    master = MasterDisplay(config, None, pad_resistance(tuple(SCENE.pad.layers)),
+                           SCENE.sensors.flux_lag_s, 33.0, idle_c=24.0,
+                           pad_layers=tuple(SCENE.pad.layers), module=PARAMS)
+    news, pad = SlaveNews(24.0, None, ()), PadInAir(24.0, SENSOR.tau_s)
+    master.junction_loop.stopped = True
+    t, probing = 0.0, 0
+    while probing < 5:                              # a few periods into the probe
+        sensors = PadSensors(0.0, 24.0, 0.0, pad.sensed_c, pad.stack.state.sink_c)
+        step = master.step(t, dt, sensors, news)
+        pad.step(step.current_a)
+        probing += step.current_a != 0.0
+        t += dt
+        assert t < 3 * DisplayJunctionLoop.REARM_S, "no probe started"
+    touching = []
+    for _ in range(20):
+        sensors = PadSensors(-500.0, 24.0, 5.0, pad.sensed_c, pad.stack.state.sink_c)
+        step = master.step(t, dt, sensors, news)
+        touching.append((step.touching, step.current_a))
+        t += dt
+    first = next(i for i, (touched, _) in enumerate(touching) if touched)
+    assert all(current == 0.0 for _, current in touching[first:]), touching

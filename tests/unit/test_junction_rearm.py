@@ -116,3 +116,20 @@ def test_a_probe_not_asked_for_again_ends_at_0_a():
         out = loop.update(24.0, pad.sensed_c, pad.stack.state.sink_c, DT)
         assert out.current_a == 0.0 and loop.probe is None and loop.stopped
     assert math.isfinite(pad.sensed_c)
+
+
+def test_a_probe_cancelled_by_a_touch_gives_0_a_in_that_very_period():
+    """The master cancels a probe in the period its detector sees a finger
+    (before the loop's update): no probe current under the finger, not even
+    for the period the probe had been asked for."""
+    pad = PadInAir(SCENE.room_temp_c, SENSOR.tau_s)
+    loop = designed_loop()
+    loop.stopped = True
+    for _ in range(int((loop.REARM_S + 0.2) / DT)):
+        out = loop.update(24.0, pad.sensed_c, pad.stack.state.sink_c, DT)
+        loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT)
+        pad.step(out.current_a)
+    assert loop.probe is not None and out.current_a < 0      # a probe asked for
+    loop.cancel_probe()
+    out = loop.update(24.0, pad.sensed_c, pad.stack.state.sink_c, DT)
+    assert out.current_a == 0.0 and loop.probe is None and loop.stopped

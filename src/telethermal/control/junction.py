@@ -198,6 +198,11 @@ class DisplayJunctionLoop:
             self._probe_pending, self._probe_prev_a = True, 0.0
         return False
 
+    def cancel_probe(self) -> None:
+        """No probe current from the next :meth:`update` on (a finger came
+        down: nothing but the loop's own command under it)."""
+        self.probe, self._probe_pending = None, False
+
     def _probe_step(self, sensed_c: float, hot_c: float, dt_s: float) -> bool:
         """One period of the probe: its verdict at the end; re-armed or refused."""
         if self._probe_pending or not (math.isfinite(sensed_c) and math.isfinite(hot_c)):

@@ -405,6 +405,8 @@ class MasterDisplay:
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
         applied, self.safety = supervise(self.safety, reading, request, self.config.limits, dt_s)
+        if self.detector.touching and self.junction_loop is not None:
+            self.junction_loop.cancel_probe()       # no re-arm probe current under a finger
         current_a, junction_c = self._current(applied.temp_c, sensors, dt_s)
         if self.junction_loop is not None and self.junction_loop.stopped \
                 and self.junction_stopped_at_s is None:
