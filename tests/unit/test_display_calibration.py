@@ -158,17 +158,20 @@ def test_the_half_space_weights_hold_the_closed_form():
 
 
 def test_the_master_built_with_the_calibration_carries_its_lags(tmp_path, built_cal):
-    """The impedance controller inverts the calibrated flux lag and the
-    junction loop is designed for the calibrated junction lag; without the
-    calibration, the scene's; the plant (as built) is never read."""
+    """The impedance controller inverts the calibrated flux lag; the
+    junction loop stays designed for the configured junction lag (the
+    routine's in-air lag is reported, not used: JUNCTION_NOT_USED); without
+    the calibration, the scene's; the plant (as built) is never read."""
     from telethermal.teleop.display_setup import display_model_args
     from telethermal.teleop.master import DisplayConfig, MasterDisplay
     scene, cal = built_cal
     master = MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
                            **display_model_args(scene, cal))
     assert master.impedance.tau_s == master.sensor_lag_s == cal.flux_lag_s
-    assert master.junction_design["sensor_tau_s"] == cal.junction_lag_s
-    assert master.junction_sensor.tau_s == cal.junction_lag_s
+    configured = scene.sensors.junction_sensor_spec().tau_s
+    assert cal.junction_lag_s != pytest.approx(configured, rel=0.1)   # built 1.5x
+    assert master.junction_design["sensor_tau_s"] == configured
+    assert master.junction_sensor.tau_s == configured
     plain = MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
                           **display_model_args(scene))
     assert plain.impedance.tau_s == scene.sensors.flux_lag_s
@@ -193,3 +196,16 @@ def test_the_master_config_key_reads_the_display_table(tmp_path, built_cal):
     assert display_calibration("", scene) is None
     with pytest.raises(CalibrationError, match="calibrates scene 'lab-display'"):
         display_calibration(config.pad_calibration, _scene(name="other-lab"))
+
+
+def test_a_hardware_master_refuses_a_calibration_from_a_simulated_bench(built_cal):
+    """The routine runs only on the simulator's display (directly or behind
+    the emulated devices) and says so in the file; a master on a lab's
+    hardware refuses such a file rather than take the simulator's figures
+    for its pad's."""
+    from telethermal.teleop.display_calibration import refuse_on_hardware
+    _, cal = built_cal
+    assert cal.bench == "simulated"
+    with pytest.raises(CalibrationError, match="simulated bench.*no hardware routine"):
+        refuse_on_hardware(cal)
+    refuse_on_hardware(None)

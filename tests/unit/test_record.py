@@ -274,8 +274,9 @@ def test_a_recording_written_before_the_session_core_replays_sample_for_sample()
 def test_a_calibrated_displays_touch_records_its_lags_and_replays_sample_for_sample(models,
                                                                                    tmp_path):
     """A master built with a display calibration records the lags its
-    controllers used (not the scene's stated ones): the replay rebuilds the
-    same controllers and comes out identical."""
+    controllers used (the calibrated flux lag, not the scene's stated one;
+    the junction's stays the configured one, the calibration's is not used):
+    the replay rebuilds the same controllers and comes out identical."""
     from telethermal.ident.pad_calibration import pad_digest
     from telethermal.teleop.display_calibration import DisplayCalibration
 
@@ -287,6 +288,7 @@ def test_a_calibrated_displays_touch_records_its_lags_and_replays_sample_for_sam
     run_session(SCENE, "aluminium", *models, DisplayConfig(feedforward_model="impedance"),
                 contact_s=0.5, seed=1, record=path, display_calibration=cal)
     params = read_recording(path).config
-    assert params["sensor_lag_s"] == lag and params["junction_sensor"]["tau_s"] == tau
+    assert params["sensor_lag_s"] == lag != SCENE.sensors.flux_lag_s
+    assert params["junction_sensor"]["tau_s"] == SCENE.sensors.junction_sensor_spec().tau_s
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0

@@ -6,10 +6,15 @@ The routine a lab runs on its master, through the display's devices (the
 drives: :mod:`telethermal.devices.display`), in two parts:
 
 1. **The face free in air**, open-loop current steps (+-1 A, 1 s each).
-   Nothing leaves the face, so the pad's layers move with the module's cold
-   junction (to within their diffusion time, about 10 ms for the shipped
-   stack): the pad's **surface thermocouple** (lag-free at this scale) reads
-   the junction, and the junction sensor reads it through its lag. The fit
+   Nothing leaves the face, and the fit takes the pad's **surface
+   thermocouple** for the junction, read by the junction sensor through its
+   lag. That holds only where the layers follow the junction at once: on a
+   real pad the face lags the junction by the layers' diffusion (the
+   shipped stack's slowest mode about 0.2 s, a review's finite-difference
+   model, as long as the sensor's own lag), and the simulated display lumps
+   its layers with the junction in air, which hides it. So this part's
+   lag is reported and NOT used by the master (its configured lag is:
+   ``teleop/display_calibration.calibrated_lags``). The fit
    ``J_n = z_n + b``, ``z_n = z_{n-1} + g (T_n - z_{n-1})``,
    ``g = 1 - exp(-dt / tau_j)`` gives the **junction sensor's lag**
    ``tau_j`` and its offset from the thermocouple ``b``. The air's own
@@ -25,7 +30,7 @@ drives: :mod:`telethermal.devices.display`), in two parts:
    to the block's table effusivity: a block 5 % off the table reads a gain
    5 % off), ``h`` and ``T_0`` (the block's temperature with the
    thermocouple's bias). A low-effusivity block keeps the contact's own
-   time ``(e / h)^2`` far below the lag (PMMA on grease: about 10 ms
+   time ``(e / h)^2`` far below the lag (PMMA on grease: about 1 ms
    against 150 ms): on a metal block the contact and the lag could not be
    told apart.
 

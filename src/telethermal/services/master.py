@@ -37,7 +37,7 @@ from telethermal.teleop.session import MasterSession, ServiceState, send_through
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_idle,
                                      display_model_args, draw_operator, master_rng,
                                      safety_summary, with_finger)
-from telethermal.teleop.display_calibration import display_calibration
+from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
 from telethermal.wire.messages import SessionConfig, parse
 from telethermal.wire.schema import MessageKind
 
@@ -169,6 +169,7 @@ class MasterService:
         from telethermal.devices.display import HardwareDisplay
 
         cfg = self.config
+        refuse_on_hardware(self.display_calibration)     # before any device is opened
         calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
         self.hardware = HardwareDisplay(cfg.board_url, cfg.can_bus, calibration)
         # The module behind the pad: the master commands its current.

@@ -78,7 +78,8 @@ def calibrate_simulated(scene, block: str = DEFAULT_BLOCK, seed: int = 0,
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], seed=seed)
     try:
-        return calibrate_display(scene, _Clocked(display, now), block)
+        return calibrate_display(scene, _Clocked(display, now), block,
+                                 bench="simulated" if devices == "sim" else "emulated")
     finally:
         display.close()
 
