@@ -55,7 +55,10 @@ class FakeCore:
         return self.counts[name]
 
 
-def loop_of(own_instructions, isr_instructions=125, monkeypatch=None):
+def loop_of(own_instructions, isr_counts=42, per_unit_instructions=3000, monkeypatch=None):
+    """The figures of a core whose worst one-unit iteration, worst per-unit
+    cost in a burst and worst interrupt are these (SysTick counts are
+    1.344 per instruction: 42 counts = 31.25 instructions)."""
     from telethermal.devices import qemu
 
     monkeypatch.setattr(qemu, "symbols", lambda elf: {n: n for n in (
@@ -64,19 +67,31 @@ def loop_of(own_instructions, isr_instructions=125, monkeypatch=None):
     per = firmware.SYSTICK_PER_INSTRUCTION
     return firmware.loop_figures(FakeCore(
         board_loop_worst_cycles=round(own_instructions * per),
-        board_isr_worst_cycles=round(isr_instructions * per), board_loop_count=5000,
-        board_loop_bursts=2, board_loop_worst_unit_cycles=round(3000 * per)), "elf")
+        board_isr_worst_cycles=isr_counts, board_loop_count=5000,
+        board_loop_bursts=2, board_loop_worst_unit_cycles=round(per_unit_instructions * per)),
+        "elf")
 
 
 def test_the_loop_bound_adds_the_interrupts_the_line_can_bring_in_an_iteration(monkeypatch):
-    # 4000 instructions at 3 cycles: 12000 cycles, 71.4 us at 168 MHz; a byte
-    # every 10/921600 s = 10.85 us: 7 bytes arrive, plus one pending, each
-    # interrupt 125 instructions = 375 cycles: 12000 + 8 * 375 = 15000.
+    # 4000 instructions at 3 cycles: 12000 cycles; an interrupt 31.25
+    # instructions, 93.75 cycles; a byte every 10/921600 s = 10.85 us, each
+    # with a receive and a transmit interrupt. From 12000 + 2 x 93.75: 72.5
+    # us, 7 bytes + 1 -> 16 interrupts, 13500 cycles, 80.4 us, 8 + 1 -> 18,
+    # 13687.5 cycles (81.5 us: 8 + 1 again): the fixed point, 18 interrupts.
     r = loop_of(4000, monkeypatch=monkeypatch)
-    assert r["interrupts_in_an_iteration_on_silicon"] == 8
-    assert r["worst_cycles_bound"] == 15000 and r["under_a_tenth"]
+    assert r["interrupts_in_an_iteration_on_silicon"] == 18
+    assert abs(r["worst_cycles_bound"] - 13687.5) <= 1 and r["under_a_tenth"]
     assert r["bursts"] == 2 and r["worst_instructions_per_unit_in_a_burst"] == 3000
-    # 4500: 13500 cycles, 80.4 us, 8 bytes + 1: 13500 + 9 * 375 = 16875, over
-    # the tenth (16800).
-    r = loop_of(4500, monkeypatch=monkeypatch)
-    assert r["worst_cycles_bound"] == 16875 and not r["under_a_tenth"]
+    # 5000: 15187.5 -> 20 interrupts, 16875 -> 22, 17062.5 (fixed): over the
+    # tenth of the period (16800).
+    r = loop_of(5000, monkeypatch=monkeypatch)
+    assert r["interrupts_in_an_iteration_on_silicon"] == 22
+    assert abs(r["worst_cycles_bound"] - 17062.5) <= 1 and not r["under_a_tenth"]
+
+
+def test_a_bursts_cost_per_unit_counts_when_it_is_the_worse(monkeypatch):
+    # One-unit iterations at 4000 instructions, but a burst's per-unit cost
+    # at 5000: the bound is 5000's (above), over the tenth.
+    r = loop_of(4000, per_unit_instructions=5000, monkeypatch=monkeypatch)
+    assert r["worst_instructions"] == 4000
+    assert abs(r["worst_cycles_bound"] - 17062.5) <= 1 and not r["under_a_tenth"]
