@@ -290,9 +290,15 @@ class Recorder:
         (metadata ``dropped``), so a reader says it."""
         self.counters["dropped_unpackable"] += 1
         n = self.counters["dropped_unpackable"]
-        note = {"topic": topic, "count": n, "error": f"{type(exc).__name__}: {exc}"[:200]}
-        self._writer.add_message(self._channel(UNPACKABLE_TOPIC), self._last_t_ns,
-                                 msgpack.packb(note, use_bin_type=True), self._last_t_ns)
+        note = {"topic": str(topic)[:200], "count": n,
+                "error": f"{type(exc).__name__}: {exc}"[:200]}
+        try:
+            self._writer.add_message(self._channel(UNPACKABLE_TOPIC), self._last_t_ns,
+                                     msgpack.packb(note, use_bin_type=True), self._last_t_ns)
+        except (ValueError, TypeError, OverflowError) as note_exc:
+            # The note itself did not encode: the count at close still says it.
+            log.warning("recording to %s: the note of message %d not written (%s)",
+                        self.path, n, note_exc)
         if n == 1 or n % 1000 == 0:
             log.warning("recording to %s: message %d on %s not recorded (%s: %s); the "
                         "recording goes on", self.path, n, topic, type(exc).__name__, exc)
