@@ -99,9 +99,8 @@ def test_a_sensor_too_noisy_to_see_the_probe_is_refused_for_that():
     assert "scatter" in loop.rearm_refused
 
 
-def test_a_probe_not_asked_for_again_ends_at_0_a():
-    """The owner stops calling rearm_if_settled mid-probe (a finger came
-    down): the next update gives 0 A and the probe is gone."""
+def probing():
+    """A stopped loop at idle, 0.2 s into its probe: (pad, loop, last step)."""
     pad = PadInAir(SCENE.room_temp_c, SENSOR.tau_s)
     loop = designed_loop()
     loop.stopped = True
@@ -109,6 +108,13 @@ def test_a_probe_not_asked_for_again_ends_at_0_a():
         out = loop.update(24.0, pad.sensed_c, pad.stack.state.sink_c, DT)
         loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT)
         pad.step(out.current_a)
+    return pad, loop, out
+
+
+def test_a_probe_not_asked_for_again_ends_at_0_a():
+    """The owner stops calling rearm_if_settled mid-probe (a finger came
+    down): the next update gives 0 A and the probe is gone."""
+    pad, loop, out = probing()
     assert loop.probe is not None and out.current_a < 0
     out = loop.update(24.0, pad.sensed_c, pad.stack.state.sink_c, DT)
     assert out.current_a < 0                       # this period was asked for
@@ -122,13 +128,7 @@ def test_a_probe_cancelled_by_a_touch_gives_0_a_in_that_very_period():
     """The master cancels a probe in the period its detector sees a finger
     (before the loop's update): no probe current under the finger, not even
     for the period the probe had been asked for."""
-    pad = PadInAir(SCENE.room_temp_c, SENSOR.tau_s)
-    loop = designed_loop()
-    loop.stopped = True
-    for _ in range(int((loop.REARM_S + 0.2) / DT)):
-        out = loop.update(24.0, pad.sensed_c, pad.stack.state.sink_c, DT)
-        loop.rearm_if_settled(pad.sensed_c, pad.stack.state.sink_c, DT)
-        pad.step(out.current_a)
+    pad, loop, out = probing()
     assert loop.probe is not None and out.current_a < 0      # a probe asked for
     loop.cancel_probe()
     out = loop.update(24.0, pad.sensed_c, pad.stack.state.sink_c, DT)
