@@ -89,7 +89,8 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     that ends so is "unknown" ("force outside trained range"). ``measured``
     (n,) bool: False where a sample was filled in by the driver (a frame
     lost on the line): the pad-model check leaves it out
-    (:func:`pad_model_misfit`).
+    (:func:`pad_model_misfit`), and so does a model that reads it as
+    missing (:func:`with_missing`).
 
     Posteriors change only where a longer window (or, for a recurrent
     network, a new input step) becomes available, so this gives the same
@@ -98,7 +99,8 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     if not np.isfinite(gap_k) or abs(gap_k) < MIN_GAP_K:
         return Decision(UNKNOWN, 0.0, None, Reason.GAP_TOO_SMALL)
     n = int(np.sum(np.all(np.isfinite(x), axis=1)))
-    path = model.posterior_path(x[:n])
+    x = with_missing(model, x[:n], None if measured is None else measured[:n])
+    path = model.posterior_path(x)
     forces = None if force_n is None else np.asarray(force_n, dtype=np.float64)[None]
     rule = AnytimeRule(model.threshold, model.confirm_windows)
     group = None
@@ -149,6 +151,22 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
         return Decision(UNKNOWN, best, model.windows_s_[len(path) - 1], Reason.OUTSIDE_CLASSES)
     return Decision(UNKNOWN, best, None,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
+
+
+def with_missing(model, x: np.ndarray, measured) -> np.ndarray:
+    """One contact's samples ``x`` (n, C) as ``model`` reads them: for a
+    model that takes missing samples (``Identifier.missing_samples``), the
+    ones not ``measured`` ((n,) bool; None: all were) as NaN, so a frame
+    lost on the line is missing data, not the sample the driver held
+    (``effusivity-fit`` fits the measured ones alone); else ``x`` itself."""
+    if measured is None or not getattr(model, "missing_samples", False):
+        return x
+    lost = ~np.asarray(measured, bool)[:len(x)]
+    if not lost.any():
+        return x
+    x = np.array(x, dtype=np.float64)
+    x[:len(lost)][lost] = np.nan
+    return x
 
 
 class MisfitRun:
@@ -356,7 +374,8 @@ class StreamingIdentifier:
         with it, lets the decision refuse a touch unlike the trained ones;
         ``measured`` False: the sample was filled in by the driver (a frame
         lost on the line, the previous sample held), not counted in the
-        pad-model check's residual (:func:`pad_model_misfit`)."""
+        pad-model check's residual (:func:`pad_model_misfit`), and missing
+        data to a model that reads it so (:func:`with_missing`)."""
         if self.decided and not self._watch:
             return None
         if force_n is not None:
@@ -378,9 +397,9 @@ class StreamingIdentifier:
         if self._watch and not last:
             follow = getattr(model, "follow", None)
             if follow is not None:      # the watched fit, one window at a time
-                follow(np.stack(self._rows)[None], index)
+                follow(with_missing(model, np.stack(self._rows), self._measured)[None], index)
             return None
-        x = np.stack(self._rows)[None]
+        x = with_missing(model, np.stack(self._rows), self._measured)[None]
         p = model.proba_normalised(x, index)[0]
         if self._watch:
             return self._revised(x, p, index)

@@ -177,6 +177,10 @@ class Identifier:
     #: softened: the mean held-out log loss that would sharpen it is the
     #: easy touches' say, while commitments are made in the tail.
     calibration_may_sharpen = True
+    #: True: a sample the driver filled in (a frame lost on the line) reaches
+    #: the model as NaN, missing data (``anytime.with_missing``); False: as
+    #: the value the driver held.
+    missing_samples = False
 
     def __init__(self, channels=(FLUX,), max_window_s: float = 1.0, window_step_s: float = 0.05,
                  threshold: float = 0.99, calibrate: bool = True, seed: int = 0,

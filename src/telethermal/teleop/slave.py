@@ -252,6 +252,23 @@ class Slave:
         self.pushed_s[j] = time.perf_counter()
         return est
 
+    def _onset_across_lost(self, k: int) -> int:
+        """The onset, ``k`` the first sample past the threshold, moved back
+        onto a frame lost just before it (held by the driver at the previous,
+        lower force) whose force, interpolated linearly between its measured
+        neighbours, was past it too: a lost frame delays the onset no more
+        than the force says (the identifier reads the lost one as missing)."""
+        if self._contact is None:
+            return k
+        measured, j = self._contact.measured, k - 1
+        while j >= 0 and not measured[j]:
+            j -= 1
+        if j < 0 or j == k - 1:
+            return k
+        f0, f1 = float(self.force_n[j]), float(self.force_n[k])
+        return next((i for i in range(j + 1, k)
+                     if f0 + (f1 - f0) * (i - j) / (k - j) > self.detector.on_n), k)
+
     def advance_to(self, t_s: float) -> list[SlaveEvent]:
         if self.fault is not None:
             if not self._fault_sent:
@@ -269,8 +286,9 @@ class Slave:
             self._next += 1
             event = self.detector.update(float(self.t_s[i]), float(self.force_n[i]))
             if event is not None and event.touching and self.stream is None:
-                self.onset_s = event.t_s
-                self._onset_index = int(np.searchsorted(self.t_s, event.t_s))
+                self._onset_index = self._onset_across_lost(
+                    int(np.searchsorted(self.t_s, event.t_s)))
+                self.onset_s = float(self.t_s[self._onset_index])
                 self.detected_index = i          # the debounce's backlog is pushed now
                 self.stream = StreamingIdentifier(self.identifier, self.gap_k, self.object_ir_c)
                 if self.stream.decided:                       # gap too small: unknown at once
