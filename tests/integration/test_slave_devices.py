@@ -130,6 +130,14 @@ def test_a_touch_with_lost_frames_is_named_as_without(identifier, session, mater
                                                      slave.onset_index + 101])))
             onsets.append(slave.onset_index)
             got.append((str(slave.estimate.label), str(slave.estimate.reason)))
+            # A replay of what a recording holds (the channels, 'measured'
+            # among them) reads the lost frames as the slave did live.
+            n = slave.samples_read
+            replay = Slave.from_samples({k: np.asarray(v)[:n] for k, v in slave.channels.items()},
+                                        identifier, slave.object_ir_c, slave.gap_k)
+            replay.advance_to(math.inf)
+            assert (replay.onset_index, str(replay.estimate.label),
+                    str(replay.estimate.reason)) == (slave.onset_index, *got[-1])
         finally:
             devices.close()
     assert held[0] == 0 and held[1] > 0          # frames were lost in the touch's first second
