@@ -99,6 +99,55 @@ def test_lost_frames_are_held_and_counted_and_the_decision_stands(identifier, se
     assert emu.estimate.decided and emu.estimate.label == "wood"
 
 
+@pytest.mark.parametrize("material, seed, board_seed", [
+    ("wood", 15, 15), ("plexiglass", 15, 15), ("steel", 15, 15), ("aluminium", 15, 15),
+    ("wood", 13, 3), ("plexiglass", 13, 3)])
+def test_a_touch_with_lost_frames_is_named_as_without(identifier, session, material, seed,
+                                                      board_seed):
+    """5 % of the board's frames lost (held by the driver, marked not
+    measured): the touch ends with the label and reason of the same touch
+    with none lost (the criterion: the decision as without the fault, not a
+    figure). A lost frame is missing data to the fit (it fits the measured
+    samples at their own instants), not a wrong sample. These six ended
+    otherwise when the fit counted the held samples (seed 15: the misfit at
+    0.08 s, a sample held in the rise; seed 13 on board seed 3: a new
+    material: the frame at the onset lost and the onset detected one
+    sample late, which with the fit mended still read 1.0-6.1 at 0.04 s
+    on board seed 3's seeds 13 and 14, and at most 0.29 now). Over wood,
+    plexiglass, steel and aluminium, seeds 12-15 (two board seeds): 22 of 32
+    named right before, 32 now; the largest chi2/dof of the pad-model check
+    at any window 0.47, as without lost frames (docs/calibration.md)."""
+    got, held, onsets = [], [], []
+    for dropout in (0.0, 0.05):
+        devices = EmulatedSlavePad(SCENE, session.instruments, seed=board_seed)
+        try:
+            devices.board_emulator.dropout = dropout
+            slave = Slave(SCENE, material, identifier, slave_rng(seed), session=session,
+                          devices=devices)
+            run_touch(slave)
+            contact = slave._contact
+            held.append(int(np.sum(~contact.measured[slave.onset_index:
+                                                     slave.onset_index + 101])))
+            onsets.append(slave.onset_index)
+            got.append((str(slave.estimate.label), str(slave.estimate.reason)))
+            # A replay of what a recording holds (the channels, 'measured'
+            # among them) reads the lost frames as the slave did live.
+            n = slave.samples_read
+            replay = Slave.from_samples({k: np.asarray(v)[:n] for k, v in slave.channels.items()},
+                                        identifier, slave.object_ir_c, slave.gap_k)
+            replay.advance_to(math.inf)
+            assert (replay.onset_index, str(replay.estimate.label),
+                    str(replay.estimate.reason)) == (slave.onset_index, *got[-1])
+        finally:
+            devices.close()
+    assert held[0] == 0 and held[1] > 0          # frames were lost in the touch's first second
+    # The onset: where the frame at it was lost, the force interpolated
+    # over it finds it (Slave._onset_across_lost), not the next frame.
+    assert onsets[1] == onsets[0]
+    assert got[1] == got[0]
+    assert material in got[0][0].split("|")
+
+
 def test_the_board_unplugged_mid_contact_makes_the_pad_safe_and_the_next_touch_works(
         identifier, session, devices):
     def unplug_after_onset(slave, t):

@@ -100,6 +100,7 @@ def test_reason_values_are_the_recorded_strings():
         "", "confident", "confident group", "outside classes", "new material", "gap too small",
         "not confident", "force outside trained range", "object memory",
         "sensor board lost", "no object temperature", "pad model does not fit: recalibrate",
+        "pad model does not fit: named by the fallback",
         "no estimate", "no decision", "slave restarted"}
     assert Reason("confident group") is Reason.CONFIDENT_GROUP
     assert not Reason.UNDECIDED and str(Reason.OBJECT_MEMORY) == "object memory"

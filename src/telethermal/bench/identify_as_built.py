@@ -4,12 +4,15 @@ pads built off their datasheet (issue 44, deliverable 6).
 ``pads`` pads are drawn (``[as_built] sd = SD``, seeds 0, 1, ...: every
 factor of the sensing pad log-normal). For each, the same touches (the
 scene's pad database, one seed for every pad: only the pad differs) are
-cross-validated (grouped, 5 folds) three ways:
+cross-validated (grouped, 5 folds) four ways:
 
 - ``as_modelled``: the touches of the pad as designed (the product's model
   is the simulator's pad: every headline figure so far);
 - ``uncalibrated``: the drawn pad's touches, the product's model the
   design's;
+- ``uncalibrated_fallback``: the same, each fold's model with its
+  model-free fallback (``effusivity-lda``, trained on the same touches: the
+  slave's) naming the touches the pad-model check refuses;
 - ``calibrated``: the drawn pad's touches, the product's model calibrated
   (``telethermal calibrate pad``) from reference touches of that pad on
   :data:`REFERENCE_MATERIALS`, :data:`REFERENCE_TOUCHES` each (another
@@ -52,6 +55,7 @@ def _row(report: dict) -> dict:
             "misfit_rate": (d["unknown_reasons"] or {}).get(MISFIT, 0) / d["touches"]
             if d["touches"] else None,
             "wrong_rate": (committed - right) / d["touches"] if d["touches"] else None,
+            "fallback_rate": d.get("fallback_named", 0) / d["touches"] if d["touches"] else None,
             "touches": d["touches"]}
 
 
@@ -127,12 +131,16 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7", folds:
            "reference": {"materials": list(REFERENCE_MATERIALS),
                          "touches_each": REFERENCE_TOUCHES},
            "as_modelled": _row(cross_validate(touches, METHOD, folds, scene=scene)),
-           "uncalibrated": [], "calibrated": [], "calibrations": []}
+           "uncalibrated": [], "uncalibrated_fallback": [], "calibrated": [],
+           "calibrations": []}
     for k in range(pads):
         built = with_as_built(scene, draw_as_built(sd, k, len(scene.pad.layers)))
         drawn = list(pad_database(built, np.random.default_rng(TOUCH_SEED)))
         step(f"pad {k}: uncalibrated")
         out["uncalibrated"].append(_row(cross_validate(drawn, METHOD, folds, scene=scene)))
+        step(f"pad {k}: uncalibrated, with the model-free fallback")
+        out["uncalibrated_fallback"].append(_row(cross_validate(drawn, METHOD, folds,
+                                                                scene=scene, fallback=True)))
         step(f"pad {k}: calibrating")
         cal, cpu_s, truth = calibrate_drawn(scene, built)
         out["calibrations"].append({"seed": k, "as_built": built.as_built.pad.to_dict(),
@@ -152,14 +160,16 @@ def summary(out: dict) -> dict:
     """Means over the drawn pads of each row's figures; the calibrations'
     coverage (parameters held / fitted) and CPU time."""
     def mean(rows, key):
-        vals = [r[key] for r in rows if r[key] is not None]
+        vals = [r[key] for r in rows if r.get(key) is not None]
         return float(np.mean(vals)) if vals else None
     keys = ("accuracy_0.5", "accuracy_1.0", "named_rate", "pair_rate", "unknown_rate",
-            "misfit_rate", "wrong_rate")
+            "misfit_rate", "wrong_rate", "fallback_rate")
     held = [p["held"] for c in out["calibrations"] for p in c["parameters"]]
     return {"uncalibrated": {k: mean(out["uncalibrated"], k) for k in keys},
+            "uncalibrated_fallback": {k: mean(out.get("uncalibrated_fallback", []), k)
+                                      for k in keys},
             "calibrated": {k: mean(out["calibrated"], k) for k in keys},
-            "as_modelled": {k: out["as_modelled"][k] for k in keys},
+            "as_modelled": {k: out["as_modelled"].get(k) for k in keys},
             "coverage": float(np.mean(held)) if held else None,
             "parameters_fitted": len(held),
             "calibrate_cpu_s_max": max((c["cpu_s"] for c in out["calibrations"]), default=None)}
@@ -172,12 +182,12 @@ def text_lines(out: dict) -> list[str]:
     s = out["summary"]
     lines = [f"pads built off their datasheet: {out['pads']} drawn at sd {out['sd']:g} "
              f"({out['method']}, {out['folds']} folds, mean over the pads)"]
-    for key in ("as_modelled", "uncalibrated", "calibrated"):
+    for key in ("as_modelled", "uncalibrated", "uncalibrated_fallback", "calibrated"):
         r = s[key]
         lines.append(f"  {key:13s} 0.5 s {pct(r['accuracy_0.5'])}, 1 s {pct(r['accuracy_1.0'])};"
                      f" named {pct(r['named_rate'])}, pair {pct(r['pair_rate'])}, unknown "
                      f"{pct(r['unknown_rate'])} (misfit {pct(r['misfit_rate'])}), wrong "
-                     f"{pct(r['wrong_rate'])}")
+                     f"{pct(r['wrong_rate'])}, by the fallback {pct(r['fallback_rate'])}")
     lines.append(f"  calibration: {pct(s['coverage'])} of {s['parameters_fitted']} fitted "
                  f"parameters within their 95 % interval; CPU up to "
                  f"{s['calibrate_cpu_s_max']:.0f} s per pad")

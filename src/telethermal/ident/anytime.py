@@ -35,12 +35,14 @@ from telethermal.errors import IdentificationError
 from telethermal.ident.base import FORCE_SAMPLES, Identifier, force_at, force_in_range
 from telethermal.ident.rule import AnytimeRule
 from telethermal.ident.label import GROUP_SEPARATOR, NEW_MATERIAL, UNKNOWN, Label, Reason
+from telethermal.ident.misfit import MisfitRun, pad_model_misfit, with_missing
 from telethermal.ident.openset import new_material_confidence, reading_fields, reading_of
 from telethermal.ident.prepare import MIN_GAP_K
 
 __all__ = ["GROUP_SEPARATOR", "UNKNOWN", "NEW_MATERIAL", "FORCE_OUTSIDE", "Label", "Reason",
            "Decision",
-           "Estimate", "StreamingIdentifier", "decide", "decide_all", "group_label", "members"]
+           "Estimate", "StreamingIdentifier", "decide", "decide_all", "group_label", "members",
+           "MisfitRun", "pad_model_misfit", "with_missing"]
 
 FORCE_OUTSIDE = Reason.FORCE_OUTSIDE
 
@@ -89,16 +91,44 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
     that ends so is "unknown" ("force outside trained range"). ``measured``
     (n,) bool: False where a sample was filled in by the driver (a frame
     lost on the line): the pad-model check leaves it out
-    (:func:`pad_model_misfit`).
+    (:func:`pad_model_misfit`), and so does a model that reads it as
+    missing (:func:`with_missing`).
 
     Posteriors change only where a longer window (or, for a recurrent
     network, a new input step) becomes available, so this gives the same
     decision as updating at every sample, at a fraction of the cost.
+
+    A touch the pad-model check ends is named by the model's fallback where
+    it has one (:func:`fallen_back`).
     """
+    return fallen_back(model, _decide(model, x, gap_k, force_n, measured), x, gap_k, force_n,
+                       measured)
+
+
+def fallen_back(model, decision: Decision, x, gap_k, force_n=None, measured=None) -> Decision:
+    """A touch the pad-model check ended (``decision``: unknown, reason
+    ``PAD_MODEL_MISFIT``) named by the model's fallback, which needs no pad
+    model (``Identifier.fallback_``, trained on the same touches) on the
+    whole touch, by its own anytime rule: its class or pair with the reason
+    ``PAD_MODEL_FALLBACK``, no earlier than the check's verdict; where it
+    names nothing (or there is none) the misfit's unknown stands."""
+    fallback = getattr(model, "fallback_", None)
+    if fallback is None or decision.reason != Reason.PAD_MODEL_MISFIT:
+        return decision
+    named = decide(fallback, x, gap_k, force_n, measured)
+    if named.label.is_unknown or named.label.is_new or named.time_s is None:
+        return decision
+    t = max(named.time_s, decision.time_s or 0.0)
+    return replace(named, reason=Reason.PAD_MODEL_FALLBACK, time_s=t, time_first_s=t)
+
+
+def _decide(model, x, gap_k, force_n, measured) -> Decision:
+    """:func:`decide` by the model alone."""
     if not np.isfinite(gap_k) or abs(gap_k) < MIN_GAP_K:
         return Decision(UNKNOWN, 0.0, None, Reason.GAP_TOO_SMALL)
     n = int(np.sum(np.all(np.isfinite(x), axis=1)))
-    path = model.posterior_path(x[:n])
+    x = with_missing(model, x[:n], None if measured is None else measured[:n])
+    path = model.posterior_path(x)
     forces = None if force_n is None else np.asarray(force_n, dtype=np.float64)[None]
     rule = AnytimeRule(model.threshold, model.confirm_windows)
     group = None
@@ -151,26 +181,6 @@ def decide(model: Identifier, x: np.ndarray, gap_k: float,
                     FORCE_OUTSIDE if rule.force_outside else Reason.NOT_CONFIDENT)
 
 
-class MisfitRun:
-    """The pad-model check (:func:`pad_model_misfit`) over one touch's
-    windows: a touch ends on it once its window's fit has been past the
-    limit at ``confirm`` windows in a row (``confirm_windows``, as a
-    commitment), or at its last window; a window past it and not yet
-    confirmed commits nothing (neither a class nor a new material). As the
-    rule's :class:`~telethermal.ident.rule.Runs`: each window is a separate
-    fit, and the first windows have few samples (0.04 s: 5, one degree of
-    freedom), where one window past the limit is not the evidence a pad off
-    its model gives (its residual grows with the window: docs/calibration.md)."""
-
-    def __init__(self, confirm: int):
-        self.need, self.run = max(1, int(confirm)), 0
-
-    def step(self, flagged: bool, last: bool) -> bool:
-        """Window past the limit (``flagged``): end the touch on it now?"""
-        self.run = self.run + 1 if flagged else 0
-        return flagged and (self.run >= self.need or last)
-
-
 class EarlyNew:
     """A new material before the last window: where nothing commits at a
     window the calibration lets commit and the touch's estimate lies
@@ -196,21 +206,6 @@ def rule_posterior(model, p: np.ndarray, x: np.ndarray, window_index: int) -> np
     ``p`` itself for a model without it)."""
     get = getattr(model, "rule_posterior", None)
     return p if get is None else get(p, x, window_index)
-
-
-def pad_model_misfit(model, x: np.ndarray, window_index: int,
-                     measured: np.ndarray | None = None) -> bool:
-    """True where ``model`` fits a pad model to the touch ``x`` (1, n, C)
-    and its fit at the window leaves a residual past what the noise allows
-    (``EffusivityFit.misfit``): the touch is not named by that model.
-    ``measured`` (n,) bool, None for all: the samples the sensor delivered;
-    the ones filled in (False) are not counted in the residual."""
-    check = getattr(model, "misfit", None)
-    if check is None:
-        return False
-    if measured is None or bool(np.all(measured)):
-        return bool(check(x, window_index))
-    return bool(check(x, window_index, measured=np.asarray(measured, bool)))
 
 
 def _watched(model, x: np.ndarray, n_windows: int, decision: Decision,
@@ -327,6 +322,11 @@ class StreamingIdentifier:
         self._rule = AnytimeRule(model.threshold, model.confirm_windows)
         self._early = EarlyNew(model.confirm_windows)
         self._misfit_run = MisfitRun(model.confirm_windows)
+        #: The samples as pushed (sample, force, measured), replayed into the
+        #: model's fallback once the pad-model check ends the touch; then
+        #: the fallback's stream (:meth:`_misfit`).
+        self._pushed: list = []
+        self._fallback: StreamingIdentifier | None = None
         n_classes = len(model.classes_)
         self.estimate = Estimate(0.0, (1.0 / n_classes,) * n_classes, UNKNOWN, 1.0 / n_classes,
                                  False)
@@ -347,6 +347,8 @@ class StreamingIdentifier:
         identifier that estimates the effusivity only once the last window
         has checked it), or the model's last window is past (a group then
         stands as the contact's answer)."""
+        if self._fallback is not None:
+            return self._fallback.finished
         return (self.decided and not self._watch) or \
             self._window == len(self.model.windows_s_) - 1
 
@@ -356,7 +358,12 @@ class StreamingIdentifier:
         with it, lets the decision refuse a touch unlike the trained ones;
         ``measured`` False: the sample was filled in by the driver (a frame
         lost on the line, the previous sample held), not counted in the
-        pad-model check's residual (:func:`pad_model_misfit`)."""
+        pad-model check's residual (:func:`pad_model_misfit`), and missing
+        data to a model that reads it so (:func:`with_missing`). Once the
+        pad-model check has ended the touch, the model's fallback reads
+        them (:meth:`_misfit`)."""
+        if self._fallback is not None:
+            return self._from_fallback(self._fallback.push(sample, force_n, measured))
         if self.decided and not self._watch:
             return None
         if force_n is not None:
@@ -369,6 +376,7 @@ class StreamingIdentifier:
         self._rows.append(np.array([self._normalise(row[i], c, self.gap_k, self.t_object_c)
                                     for i, c in enumerate(model.channels)]))
         self._measured.append(bool(measured))
+        self._pushed.append((row, force_n, measured))
         n = len(self._rows)
         index = model.window_index(n)
         if index is None or index == self._window:
@@ -378,9 +386,9 @@ class StreamingIdentifier:
         if self._watch and not last:
             follow = getattr(model, "follow", None)
             if follow is not None:      # the watched fit, one window at a time
-                follow(np.stack(self._rows)[None], index)
+                follow(with_missing(model, np.stack(self._rows), self._measured)[None], index)
             return None
-        x = np.stack(self._rows)[None]
+        x = with_missing(model, np.stack(self._rows), self._measured)[None]
         p = model.proba_normalised(x, index)[0]
         if self._watch:
             return self._revised(x, p, index)
@@ -438,11 +446,34 @@ class StreamingIdentifier:
         return est
 
     def _misfit(self, p, index: int) -> Estimate:
-        """The touch not named by the pad model, for good (see :func:`pad_model_misfit`)."""
+        """The touch not named by the pad model, for good (see :func:`pad_model_misfit`):
+        unknown; with a fallback (``model.fallback_``), the fallback's stream
+        from now on, fed the touch's samples so far (:func:`fallen_back`)."""
         self._watch = False
-        self.estimate = Estimate(self.model.windows_s_[index], tuple(p), UNKNOWN,
-                                 float(np.max(p)), True, Reason.PAD_MODEL_MISFIT)
-        return self.estimate
+        t_s = self.model.windows_s_[index]
+        self.estimate = Estimate(t_s, tuple(p), UNKNOWN, float(np.max(p)), True,
+                                 Reason.PAD_MODEL_MISFIT)
+        fallback = getattr(self.model, "fallback_", None)
+        if fallback is None:
+            return self.estimate
+        self._fallback = StreamingIdentifier(fallback, self.gap_k, self.t_object_c)
+        for row, force_n, measured in self._pushed:
+            self._fallback.push(row, force_n, measured)
+        return self._from_fallback(replace(self._fallback.estimate,
+                                           t_s=max(t_s, self._fallback.estimate.t_s)))
+
+    def _from_fallback(self, est: Estimate | None) -> Estimate | None:
+        """The fallback's estimate as this stream's: a class or pair it names
+        with the reason ``PAD_MODEL_FALLBACK``; anything else it decides
+        (unknown) is the pad model's misfit."""
+        if est is None:
+            return None
+        if est.decided and (est.label.is_unknown or est.label.is_new):
+            est = replace(est, label=UNKNOWN, reason=Reason.PAD_MODEL_MISFIT)
+        elif est.decided:
+            est = replace(est, reason=Reason.PAD_MODEL_FALLBACK)
+        self.estimate = est
+        return est
 
     def _revised(self, x, p, index: int, reading=None) -> Estimate | None:
         """The last window of a touch named before: a new material where

@@ -177,6 +177,14 @@ class Identifier:
     #: softened: the mean held-out log loss that would sharpen it is the
     #: easy touches' say, while commitments are made in the tail.
     calibration_may_sharpen = True
+    #: True: a sample the driver filled in (a frame lost on the line) reaches
+    #: the model as NaN, missing data (``anytime.with_missing``); False: as
+    #: the value the driver held.
+    missing_samples = False
+    #: A fitted model that needs no pad model, trained on the same touches,
+    #: that names a touch this one's pad-model check refuses
+    #: (``anytime``; saved in the same file); None: such a touch is not named.
+    fallback_ = None
 
     def __init__(self, channels=(FLUX,), max_window_s: float = 1.0, window_step_s: float = 0.05,
                  threshold: float = 0.99, calibrate: bool = True, seed: int = 0,
@@ -401,6 +409,12 @@ class Identifier:
     def save(self, path: str | Path) -> Path:
         """Write one ``.npz`` (header JSON + arrays), through a temporary file."""
         self._require_fitted()
+        header, arrays = self._file_parts()
+        return write_npz(path, "telethermal-identifier", FORMAT_VERSION, header, arrays)
+
+    def _file_parts(self) -> tuple[dict, dict]:
+        """(header, arrays) of the model file; a fallback's under ``fallback``
+        and its arrays' names prefixed with :data:`FALLBACK_PREFIX`."""
         header = {"method": self.method,
                   "classes": self.classes_, "channels": list(self.channels),
                   "sample_rate_hz": self.sample_rate_hz_, "windows_s": self.windows_s_,
@@ -409,7 +423,11 @@ class Identifier:
                   "learned": self.learned()}
         arrays = {f"w{i}.{name}": value for i, params in enumerate(self.params_)
                   for name, value in params.items()}
-        return write_npz(path, "telethermal-identifier", FORMAT_VERSION, header, arrays)
+        if self.fallback_ is not None:
+            fb_header, fb_arrays = self.fallback_._file_parts()
+            header["fallback"] = fb_header
+            arrays.update({FALLBACK_PREFIX + k: v for k, v in fb_arrays.items()})
+        return header, arrays
 
     @classmethod
     def restore(cls, header: dict, arrays: dict) -> "Identifier":
@@ -424,11 +442,16 @@ class Identifier:
             model.scene_ = header["scene"]
         for key, value in (header.get("learned") or {}).items():
             setattr(model, key, value)
+        arrays = {k: v for k, v in arrays.items() if not k.startswith(FALLBACK_PREFIX)}
         # One parameter set per window for a bank, one in all for a network.
         n_sets = len({k.split(".", 1)[0] for k in arrays})
         model.params_ = [{k.split(".", 1)[1]: v for k, v in arrays.items()
                           if k.startswith(f"w{i}.")} for i in range(n_sets)]
         return model
+
+
+#: The names of a fallback's arrays in its model's file start so.
+FALLBACK_PREFIX = "fallback:"
 
 
 def read_model_file(path: str | Path) -> tuple[dict, dict]:

@@ -191,7 +191,7 @@ class PadModelFit:
     # ------------------------------------------------------------ the model
     def curves(self, factors: dict, log_h: np.ndarray) -> np.ndarray:
         """Each touch's sensed unit-gap flux on the fine grid (N, n_fine)."""
-        from telethermal.ident.effusivity import reference_object, sensed_unit_flux
+        from telethermal.ident.effusivity_curves import reference_object, sensed_unit_flux
         key = (tuple(sorted(factors.items())), np.asarray(log_h).tobytes())
         if key not in self._curves:
             if len(self._curves) > 64:

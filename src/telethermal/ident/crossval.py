@@ -29,16 +29,18 @@ from telethermal.ident.evaluate import (ECE_MAX_S, decision_summary,
                                         expected_calibration_error, wilson_interval)
 from telethermal.ident.label import Reason
 from telethermal.ident.prepare import MIN_GAP_K, from_trials
-from telethermal.ident.registry import make
+from telethermal.ident.registry import make, with_fallback
 
 
 def cross_validate(trials, method: str, folds: int = 5, channels=("heat_flux_W_m2",),
                    max_window_s: float = 1.0, progress=None, scene: str | None = None,
-                   calibration=None) -> dict:
+                   calibration=None, fallback: bool = False) -> dict:
     """Grouped ``folds``-fold cross-validation of ``method`` on ``trials``;
     the report described in the module docstring. ``progress(text)``:
     called before each fold; ``scene``: the trials' scene, for the methods
-    that fit its pad's model, and ``calibration`` that pad's (a PadCalibration)."""
+    that fit its pad's model, and ``calibration`` that pad's (a PadCalibration);
+    ``fallback``: each fold's model with its model-free fallback trained on
+    the same touches (``registry.with_fallback``), as the slave has it."""
     if folds < 2:
         raise IdentificationError(f"--folds {folds}: cross-validation needs at least 2 folds")
     probe = make(method, scene=scene, calibration=calibration, channels=channels,
@@ -62,6 +64,8 @@ def cross_validate(trials, method: str, folds: int = 5, channels=("heat_flux_W_m
         model = make(method, scene=scene, calibration=calibration, channels=channels,
                      max_window_s=max_window_s)
         model.fit(contacts.subset(train))
+        if fallback:
+            with_fallback(model, contacts.subset(train))
         fit_s.append(time.perf_counter() - start)
         unseen = sorted(set(held.labels) - set(model.classes_))
         if unseen:
@@ -86,7 +90,8 @@ def cross_validate(trials, method: str, folds: int = 5, channels=("heat_flux_W_m
     # What each touch ended as, over the whole contact (they sum to 1).
     n = len(decisions)
     unknown = sum(d.label.is_unknown for d in decisions)
-    pairs = sum(not d.label.is_unknown and d.reason == Reason.CONFIDENT_GROUP for d in decisions)
+    pairs = sum(not d.label.is_unknown and (d.reason == Reason.CONFIDENT_GROUP or
+                                            len(d.label.members) == 2) for d in decisions)
     return {
         "method": method, "channels": list(probe.channels), "folds": k,
         "folds_asked": folds, "grouped_by": "group", "groups": len(groups),
@@ -110,6 +115,7 @@ def cross_validate(trials, method: str, folds: int = 5, channels=("heat_flux_W_m
             "named_accuracy": summary["single_accuracy"],
             "time_s_p50": summary["time_s_p50"], "committed": summary["committed"],
             "touches": summary["touches"], "unknown_reasons": summary["unknown_reasons"],
+            "fallback_named": summary["fallback_named"],
             "confusion": decision_confusion(decisions, labels),
         },
         "train_s_per_fold_mean": float(np.mean(fit_s)),

@@ -1,6 +1,6 @@
 """The effusivity estimator's curve family on disk: a per-user cache.
 
-The curves (:func:`~telethermal.ident.effusivity.effusivity_family`) take
+The curves (:func:`~telethermal.ident.effusivity_curves.effusivity_family`) take
 seconds to build (the pad's loop simulated at 1 kHz for every grid point)
 and depend only on what this module's key names: the scene's pad (layers,
 module, heat sink, contact conductance), its room, rate, flux sensor lag and
@@ -30,8 +30,8 @@ from telethermal import __version__
 from telethermal.cachedir import cache_dir
 from telethermal.errors import ModelFileError
 from telethermal.ident.effusivity import (EFFUSIVITY_RANGE_W_S05_M2K, MODEL_DT_S, N_E,
-                                          REFERENCE_MATERIAL, EffusivityFamily,
-                                          effusivity_family)
+                                          REFERENCE_MATERIAL, EffusivityFamily)
+from telethermal.ident.effusivity_curves import effusivity_family
 from telethermal.npzfile import read_npz, write_npz
 
 log = logging.getLogger(__name__)
@@ -40,7 +40,8 @@ FORMAT = "telethermal-effusivity-curves"
 FORMAT_VERSION = 1
 #: The package folders whose source computes the curves: an edit to any of
 #: them (a release or not) is another key.
-SOURCE_FOLDERS = ("physics", "ident/effusivity.py", "ident/oracle.py", "data/generate.py")
+SOURCE_FOLDERS = ("physics", "ident/effusivity.py", "ident/effusivity_curves.py",
+                  "ident/oracle.py", "data/generate.py")
 
 
 def _source_digest() -> str:
@@ -105,7 +106,7 @@ def _read(path: Path, digest: str):
 def cached_family(scene, object_temp_c: float, u_grid, t_max_s: float, n_e: int = N_E,
                   e_range=EFFUSIVITY_RANGE_W_S05_M2K,
                   dt_s: float = MODEL_DT_S) -> EffusivityFamily:
-    """:func:`~telethermal.ident.effusivity.effusivity_family` of these
+    """:func:`~telethermal.ident.effusivity_curves.effusivity_family` of these
     arguments (its signature), read from the cache when it holds it, else
     built and written there."""
     digest = key_digest(family_key(scene, object_temp_c, u_grid, t_max_s, n_e, e_range, dt_s))

@@ -77,30 +77,23 @@ curves: once per scene and object temperature (:mod:`.curvecache`).
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import NdBSpline, make_interp_spline
 from scipy.special import chdtrc
 
 from telethermal.errors import IdentificationError
-from telethermal.ident.bspline import SplineAxis
+# The curves' grid and forward model, named here too (their former home).
+from telethermal.ident.effusivity_curves import (  # noqa: F401
+    EFFUSIVITY_RANGE_W_S05_M2K, MODEL_DT_S, N_E, N_H, REFERENCE_MATERIAL, EffusivityFamily,
+    effusivity_family, reference_object, sensed_unit_flux)
 from telethermal.ident.intervals import resolution_var
 from telethermal.ident.openset import Z95  # the interval's normal quantile (95 %)
 from telethermal.ident.oracle import KernelPrior, draw_nuisances, flux_noise_w_m2, \
     marginal_log_likelihood
 from telethermal.ident.prepare import FLUX, MIN_GAP_K, Contacts
 
-#: The grid's objects: this material with k and rho c scaled together.
-REFERENCE_MATERIAL = "glass"
-#: The effusivity grid's range, W s^0.5/(m^2 K): below the table's foam
-#: (42) and above its copper (37 100) by a factor of ~3.
-EFFUSIVITY_RANGE_W_S05_M2K = (15.0, 1.2e5)
-#: Points of the grid in log e and in log h; the time grid's spacing, s (the
-#: Peltier pad's loop period: its junction's current changes once per period).
-N_E, N_H, MODEL_DT_S = 29, 9, 1e-3
 #: Below this chi-square p-value a fit says the model does not fit.
 FIT_P_MIN = 1e-3
 #: Samples the coarse start reads at most (a 1 kHz window is strided).
@@ -163,131 +156,6 @@ class EffusivityEstimate:
         out["interval_w_s05_m2k"] = list(self.interval_w_s05_m2k)
         out.pop("theta")
         return out
-
-
-@dataclass(frozen=True)
-class EffusivityFamily:
-    """``g(t; e, h)`` on a grid: ``log_e`` (n_e,), ``u = ln(h / h_ref)``
-    (n_u,), ``t_s`` (n_t,, uniform from 0) and ``g`` (n_e, n_u, n_t), with
-    its tricubic spline (not-a-knot, interpolating the grid)."""
-
-    log_e: np.ndarray
-    u: np.ndarray
-    t_s: np.ndarray
-    g: np.ndarray
-    spline: NdBSpline
-
-    @classmethod
-    def from_grid(cls, log_e, u, t_s, g) -> "EffusivityFamily":
-        axes = [np.asarray(a, float) for a in (log_e, u, t_s)]
-        if min(len(a) for a in axes) < 4:
-            raise IdentificationError(f"a tricubic spline needs >= 4 points on each axis, got "
-                                      f"{[len(a) for a in axes]} (log e, log h, t)")
-        c, knots = np.asarray(g, float), []
-        for ax, x in enumerate(axes):                  # tensor product: one axis at a time
-            spl = make_interp_spline(x, c, k=3, axis=ax)
-            c, knots = np.moveaxis(spl.c, 0, ax), knots + [spl.t]
-        return cls(*axes, np.asarray(g, float), NdBSpline(tuple(knots), c, 3))
-
-    def curve(self, theta, times_s: np.ndarray, deriv: bool = False):
-        """g at ``times_s - tau`` for ``theta = (ln e, u, tau)``; with
-        ``deriv`` also the Jacobian (n, 3) in ``theta``. The tensor spline is
-        first contracted in ``ln e`` and ``u`` (a scalar each) to a spline in
-        t, on the coefficients the samples reach, then evaluated once at
-        every sample: the same values as ``spline`` (to rounding), several
-        times cheaper than evaluating it four times. No scipy object is
-        built and checked per call (:mod:`telethermal.ident.bspline`: the
-        same arithmetic as the scipy objects, to the bit)."""
-        (i, wi, di), (j, wj, dj) = [self._weights(axis, theta[axis]) for axis in (0, 1)]
-        axis_t = self._axes[2]
-        t = times_s - theta[2]
-        rows = axis_t.rows(t)
-        block = self.spline.c[i[0]:i[-1] + 1, j[0]:j[-1] + 1, rows]      # (4, 4, coef in t)
-        c_g = np.einsum("a,b,abk->k", wi, wj, block)
-        if not deriv:
-            return axis_t.evaluate(c_g, rows, t)
-        cols = np.stack([c_g, np.einsum("a,b,abk->k", di, wj, block),
-                         np.einsum("a,b,abk->k", wi, dj, block)], axis=1)
-        values = axis_t.evaluate(cols, rows, t)
-        d_t = axis_t.evaluate_derivative(c_g, rows, t)
-        return values[:, 0], np.column_stack([values[:, 1], values[:, 2], -d_t])
-
-    @functools.cached_property
-    def _axes(self):
-        """The spline's three axes (ln e, u, t): knots and derivative factors."""
-        return [SplineAxis(knots) for knots in self.spline.t]
-
-    def _weights(self, axis: int, x: float):
-        """The 4 cubic B-spline weights at ``x`` on ``axis`` (0: ln e, 1: u)
-        that can be nonzero: (their coefficient indices, weights, derivative
-        weights)."""
-        return self._axes[axis].weights(float(x))
-
-    def nodes(self, times_s: np.ndarray, taus_s: np.ndarray):
-        """Every grid node's curve at ``times_s - tau`` for each of ``taus_s``
-        (linear in t between the grid's samples): (thetas (m, 3), g (m, n))."""
-        pos = (times_s[None, :] - taus_s[:, None]) / (self.t_s[1] - self.t_s[0])
-        i = np.clip(np.floor(pos).astype(int), 0, len(self.t_s) - 2)
-        w = np.clip(pos - i, 0.0, 1.0)
-        g = self.g[:, :, i] * (1 - w) + self.g[:, :, i + 1] * w     # (n_e, n_u, n_tau, n)
-        le, uu, tt = np.meshgrid(self.log_e, self.u, taus_s, indexing="ij")
-        return np.column_stack([le.ravel(), uu.ravel(), tt.ravel()]), g.reshape(-1, len(times_s))
-
-
-# ---------------------------------------------------------------- the forward model
-def reference_object(scene, object_temp_c: float):
-    """(the scene's pad model against a semi-infinite :data:`REFERENCE_MATERIAL`
-    object at ``object_temp_c``, that material)."""
-    from telethermal.physics.materials import get_material
-    from telethermal.physics.scene import ObjectSpec, pad_contact_model
-    model, _ = pad_contact_model(scene, ObjectSpec(REFERENCE_MATERIAL, float(object_temp_c),
-                                                   math.inf))
-    return model, get_material(REFERENCE_MATERIAL)
-
-
-def sensed_unit_flux(scene, model, t_s, object_temp_c: float, scale, h_w_m2k) -> np.ndarray:
-    """The pad's noise-free sensed flux per kelvin of true gap against
-    ``model``'s object with k and rho c scaled by ``scale`` (B,), contact
-    conductance ``h_w_m2k`` (B,), at ``t_s`` (n,) after contact: (B, n).
-    The pad at the scene's set point for ``object_temp_c``: a Peltier pad
-    held by its loop on its module, a water pad pre-conditioned as the
-    generator does (the pump off at contact)."""
-    from telethermal.data.generate import PRECONDITION_S, _pad_module
-    from telethermal.physics.held_pad import HeldPad
-    from telethermal.physics.thermoelectric import default_driver
-    from telethermal.physics.waterpad import precondition
-    scale, h = np.asarray(scale, float), np.asarray(h_w_m2k, float)
-    b = len(scale)
-    command = scene.pad_temp_c(object_temp_c)
-    obj_c = np.full(b, float(object_temp_c))
-    lag = scene.sensors.flux_lag_s
-    if scene.pad.kind == "peltier":
-        params, sink = _pad_module(scene)
-        plant = HeldPad(model, params, sink, default_driver(params), scene.room_temp_c,
-                        sensor_lag_s=lag, area_m2=scene.pad.area_m2)
-        pad_c = np.full(b, command)
-        flux = plant.run(t_s, pad_c, obj_c, h, k_scale_b=scale, heat_scale_b=scale)
-    else:
-        run = precondition(np.array([command]), scene.room_temp_c, PRECONDITION_S)
-        pad_c = np.full(b, float(run.final_pad_c[0]))
-        flux = model.solve(t_s, pad_c, obj_c, h, k_scale_b=scale, heat_scale_b=scale,
-                           back_temp_a_c=float(run.final_water_c[0]), sensor_lag_s=lag)
-    return flux.flux_sensed_w_m2 / (pad_c - obj_c)[:, None]
-
-
-def effusivity_family(scene, object_temp_c: float, u_grid, t_max_s: float,
-                      n_e: int = N_E, e_range=EFFUSIVITY_RANGE_W_S05_M2K,
-                      dt_s: float = MODEL_DT_S) -> EffusivityFamily:
-    """:func:`sensed_unit_flux` on ``n_e`` log-spaced effusivities x
-    ``u_grid`` x [0, t_max_s], as an :class:`EffusivityFamily`."""
-    model, ref = reference_object(scene, object_temp_c)
-    log_e = np.linspace(math.log(e_range[0]), math.log(e_range[1]), n_e)
-    u = np.asarray(u_grid, float)
-    t = np.arange(int(np.ceil(t_max_s / dt_s)) + 1) * dt_s
-    le, uu = np.meshgrid(log_e, u, indexing="ij")
-    g = sensed_unit_flux(scene, model, t, object_temp_c, np.exp(le.ravel()) / ref.effusivity,
-                         scene.pad.contact_conductance_w_m2k * np.exp(uu.ravel()))
-    return EffusivityFamily.from_grid(log_e, u, t, g.reshape(len(log_e), len(u), len(t)))
 
 
 # ---------------------------------------------------------------- the estimator
@@ -358,10 +226,18 @@ class EffusivityEstimator:
                    scene.pad.contact_conductance_w_m2k, object_temp_c, scene.tolerance_rel)
 
     # ----------------------------------------------------------- the fit
-    def _objective(self, theta, x, s):
-        """(log posterior density, gradient, Gauss-Newton Hessian) in theta."""
+    def _times(self, n: int, measured=None) -> np.ndarray:
+        """The instants (s, from the onset) of a window's ``n`` samples, or
+        of its measured ones (``measured`` (n,) bool)."""
+        index = np.arange(n) if measured is None else np.flatnonzero(measured)
+        return index / self.sample_rate_hz
+
+    def _objective(self, theta, x, s, t_s=None):
+        """(log posterior density, gradient, Gauss-Newton Hessian) in theta,
+        of the samples ``x`` taken at ``t_s`` (default: every sample from the onset)."""
         a0, sa = self.amplitude
-        g, jac = self.family.curve(theta, np.arange(len(x)) / self.sample_rate_hz, deriv=True)
+        t_s = self._times(len(x)) if t_s is None else t_s
+        g, jac = self.family.curve(theta, t_s, deriv=True)
         logl, dg = marginal_log_likelihood(x, g, s, a0, sa)
         lp, lp_grad, lp_hess = self.prior.terms(theta[1:])
         grad = jac.T @ dg
@@ -374,17 +250,17 @@ class EffusivityEstimator:
         hess[1:, 1:] += lp_hess
         return logl + lp, grad, hess
 
-    def _start(self, x, s):
+    def _start(self, x, s, t_s):
         """The best node of the grid (linear in t), tau on a coarse grid; on
         at most :data:`START_SAMPLES` of the samples (evenly strided: a start
         needs only to be near the optimum)."""
         stride = -(-len(x) // START_SAMPLES)
         taus = np.linspace(*self.tau_range_s, 9)
-        thetas, g = self.family.nodes(np.arange(0, len(x), stride) / self.sample_rate_hz, taus)
+        thetas, g = self.family.nodes(t_s[::stride], taus)
         logl, _ = marginal_log_likelihood(x[::stride], g, s, *self.amplitude)
         return thetas[int(np.argmax(logl))].copy()
 
-    def _fit(self, x, s, start=None):
+    def _fit(self, x, s, start=None, t_s=None):
         """Damped Newton steps from ``start`` (else the grid's best node).
 
         Done when a step gains under ``1e-9 |value|`` (the objective's
@@ -396,9 +272,10 @@ class EffusivityEstimator:
         steps, ever more damped, only wander within the resolution). The
         fit's result is that of evaluating those steps to within a fraction
         of the wander (issue 29; ``tests/unit/test_fit_speed.py``)."""
-        theta = self._start(x, s) if start is None else np.clip(np.asarray(start, float),
-                                                                 self.lo, self.hi)
-        value, grad, hess = self._objective(theta, x, s)
+        t_s = self._times(len(x)) if t_s is None else t_s
+        theta = self._start(x, s, t_s) if start is None else np.clip(np.asarray(start, float),
+                                                                      self.lo, self.hi)
+        value, grad, hess = self._objective(theta, x, s, t_s)
         lam = 1e-3
         for _ in range(50):
             scale = np.sqrt(np.maximum(np.abs(np.diag(hess)), 1e-300))
@@ -407,7 +284,7 @@ class EffusivityEstimator:
             size = float(np.max(np.abs(new - theta) * scale))      # in conditional sds
             if lam <= 1e-3 and size < STEP_SD_MIN:
                 break
-            v_new, g_new, h_new = self._objective(new, x, s)
+            v_new, g_new, h_new = self._objective(new, x, s, t_s)
             resolution = 1e-9 * max(1.0, abs(value))
             if v_new >= value:
                 done = v_new - value < resolution
@@ -423,27 +300,41 @@ class EffusivityEstimator:
                     break
         return theta, hess
 
-    def estimate(self, x: np.ndarray, gap_k: float, start=None) -> EffusivityEstimate:
+    def estimate(self, x: np.ndarray, gap_k: float, start=None,
+                 measured=None) -> EffusivityEstimate:
         """The estimate from one touch's first samples ``x`` (n,), flux over
         the measured gap ``gap_k`` (W/m^2 K), from the detected onset at
-        the scene's rate; ``start``: a previous window's ``theta``."""
+        the scene's rate; ``start``: a previous window's ``theta``.
+        ``measured`` (n,) bool, None for all: the samples the sensor
+        delivered; the others (a frame lost on the line, filled in by the
+        driver) are missing data: the fit, its residual and its degrees of
+        freedom read the measured samples alone, at their own instants
+        (``n_samples`` counts them)."""
         x = np.asarray(x, float)
-        if x.ndim != 1 or len(x) < 4 or not np.all(np.isfinite(x)):
-            raise IdentificationError(f"an estimate needs >= 4 finite samples, got shape "
-                                      f"{x.shape}" + ("" if np.all(np.isfinite(x)) else
-                                                      " with NaN or inf"))
+        keep = None if measured is None else np.asarray(measured, bool)
+        if keep is not None and keep.shape != x.shape:
+            raise IdentificationError(f"measured flags shape {keep.shape} for samples of shape "
+                                      f"{x.shape}: one flag per sample")
+        if x.ndim != 1 or (len(x) if keep is None else int(keep.sum())) < 4 or \
+                not np.all(np.isfinite(x)):
+            raise IdentificationError(f"an estimate needs >= 4 finite measured samples, got "
+                                      f"shape {x.shape}" + ("" if keep is None else
+                                                            f", {int(keep.sum())} measured")
+                                      + ("" if np.all(np.isfinite(x)) else " with NaN or inf"))
         n = len(x)
         if (n - 1) / self.sample_rate_hz > self.family.t_s[-1] + self.tau_range_s[0]:
             raise IdentificationError(f"a {(n - 1) / self.sample_rate_hz:g} s window is longer "
                                       "than the estimator's curves: build it with a larger max_s")
-        s = self._noise_var(x, gap_k)
-        theta, hess = self._fit(x, s, start)
+        t_s, xs = self._times(n, keep), (x if keep is None else x[keep])
+        s = self._noise_var(xs, gap_k)
+        theta, hess = self._fit(xs, s, start, t_s)
         sd, (lo, hi), bound = self._interval(theta, hess, resolution_var(self, theta, n))
         return EffusivityEstimate(
             float(math.exp(theta[0])), (lo, hi),
-            sd, (n - 1) / self.sample_rate_hz, n, self.h_ref_w_m2k * float(math.exp(theta[1])),
-            float(theta[2]), *self._goodness(theta, x, s), bool(bound),
-            tuple(float(v) for v in theta))
+            sd, (n - 1) / self.sample_rate_hz, len(xs),
+            self.h_ref_w_m2k * float(math.exp(theta[1])),
+            float(theta[2]), *self._goodness(theta, x, s, slice(None) if keep is None else keep),
+            bool(bound), tuple(float(v) for v in theta))
 
     def _noise_var(self, x: np.ndarray, gap_k: float, allowance: float = 1.0) -> float:
         """The samples' variance: the flux noise over the gap and the curves'
@@ -461,15 +352,19 @@ class EffusivityEstimator:
             bool(lo <= self.lo[0] or hi >= self.hi[0])
 
     def interval_at(self, x: np.ndarray, gap_k: float, theta, allowance: float = 1.0,
-                    floor_var: float | None = None) -> tuple[float, float, float, float]:
+                    floor_var: float | None = None,
+                    measured=None) -> tuple[float, float, float, float]:
         """``(e, lo, hi, sd)`` of ``x`` at a fit ``theta`` made of them: the
         interval (W s^0.5/(m^2 K), clipped to the grid) and the sd of ``ln e``
         (unclipped) from the Hessian there, one evaluation, no refit;
         ``allowance``: the factor on the curves' allowance's variance and,
         unless ``floor_var`` (the floor's variance itself) is given, on the
-        resolution floor's (:mod:`telethermal.ident.intervals`)."""
+        resolution floor's (:mod:`telethermal.ident.intervals`); ``measured``:
+        as :meth:`estimate`'s."""
         x, theta = np.asarray(x, float), np.asarray(theta, float)
-        _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k, allowance))
+        t_s = self._times(len(x), measured)
+        x = x if measured is None else x[np.asarray(measured, bool)]
+        _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k, allowance), t_s)
         sd, (lo, hi), _ = self._interval(theta, hess, allowance * resolution_var(
             self, theta, len(x)) if floor_var is None else floor_var)
         return float(math.exp(theta[0])), lo, hi, sd

@@ -103,7 +103,9 @@ def decision_summary(decisions, labels, within_s: float = 1.0) -> dict:
                                 if any(d.reason != Reason.CONFIDENT_GROUP for d, _ in committed)
                                 else None),
             "committed": len(committed), "touches": len(decisions),
-            "unknown_reasons": _unknown_reasons(decisions)}
+            "unknown_reasons": _unknown_reasons(decisions),
+            # named by the model's fallback after its pad-model check refused them
+            "fallback_named": sum(d.reason == Reason.PAD_MODEL_FALLBACK for d in decisions)}
 
 
 def _unknown_reasons(decisions) -> dict[str, int]:

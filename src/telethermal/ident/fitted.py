@@ -154,6 +154,7 @@ class EffusivityFit(Identifier):
 
     method = "effusivity-fit"
     needs_scene = True
+    missing_samples = True      # a lost frame is left out of the fit (NaN in a window)
     calibration_may_sharpen = False
     #: The intervals' calibration on the training touches (:meth:`fit`;
     #: :func:`telethermal.ident.intervals.calibrate_allowance`):
@@ -234,15 +235,15 @@ class EffusivityFit(Identifier):
 
     def log_effusivity(self, x: np.ndarray) -> np.ndarray:
         """``ln e`` of each touch's window ``x`` (N, n, 1), NaN where the
-        window has under :data:`MIN_SAMPLES` samples."""
+        window has under :data:`MIN_SAMPLES` measured samples (a NaN
+        sample is missing: a frame lost on the line)."""
         n = x.shape[1]
         out = np.full(len(x), np.nan)
-        if n < MIN_SAMPLES:
-            return out
         if len(_CACHE) > CACHE_MAX:
             _CACHE.clear()
         for i, row in enumerate(x[:, :, 0]):
-            out[i] = self._theta(np.ascontiguousarray(row), n)[0]
+            if _enough(row, n):
+                out[i] = self._theta(np.ascontiguousarray(row), n)[0]
         return out
 
     def _key(self, row: np.ndarray, n: int):
@@ -271,7 +272,7 @@ class EffusivityFit(Identifier):
         fits, so the same decisions, made as the windows come; measured
         by helper-18 at ~125 ms on one sample at the last window)."""
         row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
-        if len(row) >= MIN_SAMPLES:
+        if _enough(row, len(row)):
             self._theta(row, len(row))
 
     def _step_samples(self, est) -> int:
@@ -282,16 +283,18 @@ class EffusivityFit(Identifier):
         """The fit ``(ln e, u, tau)`` of ``row[:n]``, started from the fit
         of the previous window's samples, as a live slave walks them: the
         fit follows its optimum from window to window (from cold, a short
-        window's optimum can be another of a few near-equal ones)."""
+        window's optimum can be another of a few near-equal ones). A NaN
+        sample is missing: the fit reads the measured ones alone."""
         key = self._key(row, n)
         theta = _CACHE.get(key)
         if theta is None:
             est, gap_k = self.estimator()
             step = self._step_samples(est)
-            start = self._theta(row, n - step) if n - step >= MIN_SAMPLES else None
+            start = self._theta(row, n - step) if _enough(row, n - step) else None
             # The noise at the scene's gap: x is already over the touch's
             # measured gap, which a window does not carry.
-            theta = _CACHE[key] = est.estimate(row[:n], gap_k, start=start).theta
+            xs, keep = _measured(row[:n])
+            theta = _CACHE[key] = est.estimate(xs, gap_k, start=start, measured=keep).theta
         return theta
 
     def _fit_window(self, x, y):
@@ -321,7 +324,9 @@ class EffusivityFit(Identifier):
         if "means" not in params:
             return np.zeros((len(x), len(params["n"])))
         z, dof, scale = self._t_terms(params, x)
-        return student_t.logpdf(z, dof[None]) - np.log(scale)[None]
+        # A window without enough measured samples has no estimate: no say.
+        return np.where(np.isfinite(z), student_t.logpdf(z, dof[None]) - np.log(scale)[None],
+                        0.0)
 
     def rule_posterior(self, p, x, window_index):
         """``p`` times ``1 - P(another material | estimate)`` at the window:
@@ -350,13 +355,14 @@ class EffusivityFit(Identifier):
         :data:`MIN_SAMPLES` samples. ``bench unseen`` scores this."""
         n = int(round(window_s * self.sample_rate_hz_)) + 1
         row = np.ascontiguousarray(np.asarray(row, float)[:n])
-        if len(row) < MIN_SAMPLES:
+        if not _enough(row, len(row)):
             return None
         est, gap_k = self.estimator()
         theta = self._theta(row, len(row))
         floor_var = self.floor_at_s(window_s) * resolution_var(est, theta, len(row))
-        e, lo, hi, sd = est.interval_at(row, gap_k, theta, self.allowance_at_s(window_s),
-                                        floor_var)
+        xs, keep = _measured(row)
+        e, lo, hi, sd = est.interval_at(xs, gap_k, theta, self.allowance_at_s(window_s),
+                                        floor_var, measured=keep)
         return theta, e, lo, hi, sd, floor_var
 
     def misfit(self, x, window_index: int, measured=None) -> bool:
@@ -381,24 +387,28 @@ class EffusivityFit(Identifier):
         under 1. ``chi2_noise``: the sensor's noise alone (the same fit and
         residual), for comparison with the noise. ``measured`` (n,) bool,
         from the onset: False where the sample was filled in (a frame lost
-        on the line, held by the driver): left out of the residual and its
-        degrees of freedom, as out of the amplitude and the rms (the fit
-        itself is the slave's, every sample). None with no more measured
-        samples than the fit's 4 parameters (docs/calibration.md)."""
+        on the line, held by the driver), as a NaN in ``x``: left out of the
+        residual and its degrees of freedom, the amplitude, the rms, and
+        the fit itself (:meth:`_theta`, when ``x`` carries it as NaN). None
+        with no more measured samples than the fit's 4 parameters
+        (docs/calibration.md)."""
         row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
-        keep = None if measured is None else np.asarray(measured, bool)[:len(row)]
-        if keep is not None and len(keep) < len(row):
-            raise IdentificationError(f"measured flags {len(keep)} samples of a window of "
-                                      f"{len(row)}: one flag per sample from the onset")
+        keep = np.isfinite(row)
+        if measured is not None:
+            flags = np.asarray(measured, bool)[:len(row)]
+            if len(flags) < len(row):
+                raise IdentificationError(f"measured flags {len(flags)} samples of a window of "
+                                          f"{len(row)}: one flag per sample from the onset")
+            keep &= flags
         # At least one degree of freedom left over the fit's 4 (the
         # statistic of fewer is no test).
-        if len(row) <= MIN_SAMPLES or (keep is not None and keep.sum() <= MIN_SAMPLES):
+        if keep.sum() <= MIN_SAMPLES:
             return None
         est, gap_k = self.estimator()
         theta = np.asarray(self._theta(row, len(row)), float)
-        keep = slice(None) if keep is None else keep
-        chi2, _ = est._goodness(theta, row, est._noise_var(row[keep], gap_k), keep)
-        chi2_noise, _ = est._goodness(theta, row, est._noise_var(row[keep], gap_k, allowance=0.0),
+        xs = np.where(keep, row, 0.0)
+        chi2, _ = est._goodness(theta, xs, est._noise_var(xs[keep], gap_k), keep)
+        chi2_noise, _ = est._goodness(theta, xs, est._noise_var(xs[keep], gap_k, allowance=0.0),
                                       keep)
         return chi2, chi2_noise
 
@@ -440,6 +450,18 @@ class EffusivityFit(Identifier):
             inside = classes_holding(float(theta[0]), math.sqrt(max(own, 0.0)), params,
                                      self.classes_, self.outlier_p)
         return EffusivityReading(e, lo, hi, nearest, tail, inside)
+
+
+def _enough(row: np.ndarray, n: int) -> bool:
+    """The first ``n`` samples of ``row`` hold :data:`MIN_SAMPLES` measured (finite) ones."""
+    return n >= MIN_SAMPLES and int(np.sum(np.isfinite(row[:n]))) >= MIN_SAMPLES
+
+
+def _measured(row: np.ndarray):
+    """(``row`` with its missing (NaN) samples as 0, their flags: None when
+    every sample was measured)."""
+    keep = np.isfinite(row)
+    return (row, None) if keep.all() else (np.where(keep, row, 0.0), keep)
 
 
 def _calibration(value):

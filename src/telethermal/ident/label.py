@@ -119,6 +119,8 @@ class Reason(StrEnum):
     NO_OBJECT_TEMPERATURE = "no object temperature"     # unknown: its thermometer refused
     # unknown: the pad model's fit leaves a residual past what the noise allows
     PAD_MODEL_MISFIT = "pad model does not fit: recalibrate"
+    # named by the model's model-free fallback (``Identifier.fallback_``) after the misfit
+    PAD_MODEL_FALLBACK = "pad model does not fit: named by the fallback"
     # A touch's report only (no estimate carries these):
     NO_ESTIMATE = "no estimate"
     NO_DECISION = "no decision"

@@ -10,7 +10,8 @@ from pathlib import Path
 
 from telethermal.data.dataset import load_dataset, trial_digest
 from telethermal.errors import IdentificationError, ModelFileError
-from telethermal.ident.base import Identifier, read_model_file
+from telethermal.ident.base import (FALLBACK_PREFIX, Identifier, check_identifier_header,
+                                   read_model_file)
 from telethermal.ident.fitted import EffusivityFit
 from telethermal.ident.methods import EffusivityLda, PcaFnn
 from telethermal.ident.prepare import MIN_GAP_K, from_trials
@@ -41,6 +42,34 @@ def make(method: str, scene: str | None = None, calibration=None, **kw) -> Ident
 
 def load_model(path: str | Path) -> Identifier:
     header, arrays = read_model_file(path)
+    model = _restored(path, header, arrays)
+    fallback = header.get("fallback")
+    if fallback is not None:
+        if not isinstance(fallback, dict):
+            raise ModelFileError(f"{path}: fallback must be a model's header")
+        check_identifier_header(Path(path), fallback)
+        model.fallback_ = _restored(path, fallback, {
+            k[len(FALLBACK_PREFIX):]: v for k, v in arrays.items()
+            if k.startswith(FALLBACK_PREFIX)})
+        if list(model.fallback_.classes_) != list(model.classes_):
+            raise ModelFileError(f"{path}: the fallback's classes {model.fallback_.classes_} "
+                                 f"are not the model's {model.classes_}")
+    return model
+
+
+def with_fallback(model: Identifier, contacts) -> Identifier:
+    """``model`` with an ``effusivity-lda`` identifier trained on the same
+    ``contacts`` and channels as its ``fallback_``, where ``model`` fits a
+    pad model (its pad-model check can refuse a touch: the fallback, which
+    needs none, then names it; ``anytime.fallen_back``); other models as
+    they are."""
+    if getattr(model, "misfit", None) is not None:
+        model.fallback_ = EffusivityLda(channels=tuple(model.channels)).fit(contacts)
+        model.fallback_.scene_ = model.scene_
+    return model
+
+
+def _restored(path, header: dict, arrays: dict) -> Identifier:
     cls = METHODS.get(header.get("method"))
     if cls is None:
         raise ModelFileError(f"{path}: method {header.get('method')!r} is not one this "

@@ -26,8 +26,8 @@ Layout of a recording (one file per host and run):
   schema (``jsonschema``) of its fields. Topics: ``/<role>/period`` (one per
   control period), ``/<role>/news`` (what the master knew of the slave,
   when it changed), ``/slave/sample_batch`` (the slave pad's samples as
-  they come, 20 ms a batch; read back as one ``/slave/samples`` message per
-  contact), ``/slave/contact_end`` (a contact's end),
+  they come, 20 ms a batch, with ``measured`` (1/0) on devices; read back
+  as one ``/slave/samples`` message per contact), ``/slave/contact_end`` (a contact's end),
   ``/<role>/wire/<kind>`` (protocol messages sent and received), ``/<role>/touch``
   (a touch's summary).
 
@@ -98,9 +98,10 @@ TOPIC_FIELDS = {
     "news": {"t_s": "number", "object_temp_c": "number", "estimate": "array",
              "classes": "array", "setpoint_w_m2": "number", "link_ok": "boolean"},
     "samples": {"t_s": "array", "heat_flux_W_m2": "array", "temperature_C": "array",
-                "force_N": "array"},
+                "force_N": "array", "measured": "array"},
     "sample_batch": {"contact_id": "integer", "k0": "integer", "t_s": "array",
-                     "heat_flux_W_m2": "array", "temperature_C": "array", "force_N": "array"},
+                     "heat_flux_W_m2": "array", "temperature_C": "array", "force_N": "array",
+                     "measured": "array"},
     "contact_end": {"contact_id": "integer", "samples": "integer", "object_ir_c": "number",
                     "pad_before_c": "number", "gap_k": "number"},
     "touch": {"summary": "object"},

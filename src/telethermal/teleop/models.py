@@ -11,7 +11,7 @@ import numpy as np
 from telethermal.data.generate import finger_database, pad_database
 from telethermal.ident.fitted import serves
 from telethermal.ident.prepare import from_trials
-from telethermal.ident.registry import load_model, make
+from telethermal.ident.registry import load_model, make, with_fallback
 from telethermal.physics.scene import Scene
 from telethermal.render.generator import NetworkGenerator, load_generator
 
@@ -44,15 +44,18 @@ def method_and_reason(scene: Scene) -> tuple[str, str]:
 
 
 def train_identifier(scene: Scene, seed: int = 0, method: str | None = None,
-                     calibration=None):
+                     calibration=None, fallback: bool = True):
     """Database 1 of ``scene`` (seed ``seed``) -> a fitted ``method``
     identifier (default: :func:`default_method`); ``calibration``: the
-    pad's (a PadCalibration), for the methods that fit its model."""
+    pad's (a PadCalibration), for the methods that fit its model;
+    ``fallback``: with its model-free fallback (:func:`with_fallback`)."""
     method = method or default_method(scene)
     trials = pad_database(scene, np.random.default_rng(seed))
-    model = make(method, scene=scene, calibration=calibration).fit(from_trials(trials)[0])
+    contacts = from_trials(trials)[0]
+    model = make(method, scene=scene, calibration=calibration).fit(contacts)
     model.scene_ = scene.name
-    return model
+    return with_fallback(model, contacts) if fallback else model
+
 
 
 def train_generator(scene: Scene, seed: int = 0):
@@ -118,14 +121,18 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
         trials = load_dataset(pad)
         named = dataset_scene(pad)                      # None when it has no record
         method, data_scene, why = _dataset_method(scene, named)
-        identifier = make(method, scene=data_scene, calibration=cal).fit(
-            from_trials(trials)[0])
+        contacts = from_trials(trials)[0]
+        identifier = make(method, scene=data_scene, calibration=cal).fit(contacts)
         identifier.scene_ = named
+        with_fallback(identifier, contacts)
         identifier.training_digests_ = sorted({trial_digest(t) for t in trials})
         finger = Path(data) / "finger"
         generator = NetworkGenerator().fit(load_dataset(finger)) \
             if (finger / MANIFEST).is_file() else train_generator(scene, seed)
     echo(f"identifier: {method} on {', '.join(identifier.classes_)}: {why}")
+    if identifier.fallback_ is not None:
+        echo(f"fallback: {identifier.fallback_.method} on the same touches, in the same file: "
+             f"it names a touch {method}'s pad-model check refuses (pad model does not fit)")
     paths = [Path(identifier.save(out / "identifier.npz")),
              Path(save_generator(generator, out / "generator.npz"))]
     sums = out / "SHA256SUMS"

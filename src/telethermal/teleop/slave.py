@@ -95,7 +95,8 @@ class Slave:
                                             ch["temperature_C"], ch["force_N"])
             # The identifier reads these, filled as the board's frames arrive.
             channels = {"t_s": ch["t_s"], "heat_flux_W_m2": contact.flux_w_m2,
-                        "temperature_C": contact.temp_c, "force_N": contact.force_n}
+                        "temperature_C": contact.temp_c, "force_N": contact.force_n,
+                        "measured": contact.measured}
         self._load(channels, identifier, self.trial.T_object_C,
                    float(self.trial.extra["T_object_true_C"]), self.trial.T_pad_C,
                    self.trial.gap_k, on_n, off_n, debounce_s, contact=contact)
@@ -128,7 +129,7 @@ class Slave:
         contact = devices.contact(n)
         channels = {"t_s": np.arange(n) / devices.rate_hz,
                     "heat_flux_W_m2": contact.flux_w_m2, "temperature_C": contact.temp_c,
-                    "force_N": contact.force_n}
+                    "force_N": contact.force_n, "measured": contact.measured}
         pad_c = float(loop["reading_c"])
         self._load(channels, identifier, object_c, float("nan"), pad_c, pad_c - object_c,
                    on_n, off_n, debounce_s, contact=contact)
@@ -161,7 +162,9 @@ class Slave:
                      object_true_c: float = float("nan"), pad_before_c: float = float("nan"),
                      on_n: float = 2.0, off_n: float = 1.0, debounce_s: float = 0.02) -> "Slave":
         """A slave reading recorded samples (``t_s``, ``force_N`` and the
-        identifier's channels) instead of a simulated trial: a replay."""
+        identifier's channels; ``measured``, 1/0 per sample, where the
+        recording holds it: a frame lost on the line is then read as it was
+        live) instead of a simulated trial: a replay."""
         self = cls.__new__(cls)
         self.trial = None
         self.devices = None
@@ -182,6 +185,10 @@ class Slave:
         self.samples = np.stack(self._sample_channels, axis=1) if self.devices is None \
             else None
         self._contact = contact
+        #: Per sample: delivered by the sensor (False: filled in by the
+        #: driver); the devices' contact's, or a recording's ``measured``
+        #: channel (1/0); None: all were (a simulated trial, an older recording).
+        self._measured = ch.get("measured")
         self.force_n = ch["force_N"]
         self.object_ir_c = object_ir_c
         self.object_true_c = object_true_c
@@ -247,10 +254,27 @@ class Slave:
     def _push(self, j: int):
         # On devices, a sample the driver filled in (a lost frame held) is
         # pushed as such: the pad-model check does not count it as measured.
-        measured = self._contact is None or bool(self._contact.measured[j])
+        measured = self._measured is None or bool(self._measured[j])
         est = self.stream.push(self._sample(j), float(self.force_n[j]), measured)
         self.pushed_s[j] = time.perf_counter()
         return est
+
+    def _onset_across_lost(self, k: int) -> int:
+        """The onset, ``k`` the first sample past the threshold, moved back
+        onto a frame lost just before it (held by the driver at the previous,
+        lower force) whose force, interpolated linearly between its measured
+        neighbours, was past it too: a lost frame delays the onset no more
+        than the force says (the identifier reads the lost one as missing)."""
+        if self._measured is None:
+            return k
+        measured, j = self._measured, k - 1
+        while j >= 0 and not measured[j]:
+            j -= 1
+        if j < 0 or j == k - 1:
+            return k
+        f0, f1 = float(self.force_n[j]), float(self.force_n[k])
+        return next((i for i in range(j + 1, k)
+                     if f0 + (f1 - f0) * (i - j) / (k - j) > self.detector.on_n), k)
 
     def advance_to(self, t_s: float) -> list[SlaveEvent]:
         if self.fault is not None:
@@ -269,8 +293,9 @@ class Slave:
             self._next += 1
             event = self.detector.update(float(self.t_s[i]), float(self.force_n[i]))
             if event is not None and event.touching and self.stream is None:
-                self.onset_s = event.t_s
-                self._onset_index = int(np.searchsorted(self.t_s, event.t_s))
+                self._onset_index = self._onset_across_lost(
+                    int(np.searchsorted(self.t_s, event.t_s)))
+                self.onset_s = float(self.t_s[self._onset_index])
                 self.detected_index = i          # the debounce's backlog is pushed now
                 self.stream = StreamingIdentifier(self.identifier, self.gap_k, self.object_ir_c)
                 if self.stream.decided:                       # gap too small: unknown at once

@@ -89,7 +89,8 @@ ESTIMATE_FIELDS = (
     Field("reason", "str", doc="confident | confident group | outside classes | "
                                "new material | gap too small | not confident | force outside "
                                "trained range | sensor board lost | pad model does not "
-                               "fit: recalibrate | '' while undecided"),
+                               "fit: recalibrate | pad model does not fit: named by the "
+                               "fallback | '' while undecided"),
     Field("object_temp_c", "float", "degC", lo=-50, hi=200),
 ) + _effusivity_fields()
 KINDS: dict[str, Kind] = {k.name: k for k in (
