@@ -60,8 +60,8 @@ class PadInAir:
     as DisplayTouch idles them), read through the bonded sensor's lag, on
     the simulated clock (physics steps of DT)."""
 
-    def __init__(self, start_c, lag_s, layers_heat_scale=1.0):
-        self.stack = ThermoelectricStack(PARAMS, SINK, SCENE.room_temp_c,
+    def __init__(self, start_c, lag_s, layers_heat_scale=1.0, params=PARAMS):
+        self.stack = ThermoelectricStack(params, SINK, SCENE.room_temp_c,
                                          ModuleState(start_c, SCENE.room_temp_c,
                                                      SCENE.room_temp_c))
         self.heat = layers_heat_scale * SCENE.pad.area_m2 * sum(

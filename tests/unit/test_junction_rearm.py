@@ -4,6 +4,7 @@ module settled, a small warming current for a second must move the
 sensor's reading as the module's model says. On the simulated clock, in
 the master's order (read, update, rearm_if_settled, the period runs)."""
 
+import dataclasses
 import logging
 import math
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from telethermal.control import junction_probe
-from test_display_junction import DT, SCENE, SENSOR, PadInAir, designed_loop
+from test_display_junction import DT, PARAMS, SCENE, SENSOR, PadInAir, designed_loop
 
 
 class Debonded:
@@ -27,11 +28,12 @@ class Debonded:
 
 
 def idle(sensor="bonded", lag_scale=1.0, layers_heat_scale=1.0, noise_k=SENSOR.noise_k,
-         seconds=8.0, seed=0):
+         seconds=8.0, seed=0, seebeck_scale=1.0):
     """A stopped loop at idle on the pad in air, settled at its sink: the
     sensor read with the part's noise and resolution. Returns (loop, the
     period it re-armed or None, the currents)."""
-    pad = PadInAir(SCENE.room_temp_c, SENSOR.tau_s * lag_scale, layers_heat_scale)
+    params = dataclasses.replace(PARAMS, seebeck_v_k=seebeck_scale * PARAMS.seebeck_v_k)
+    pad = PadInAir(SCENE.room_temp_c, SENSOR.tau_s * lag_scale, layers_heat_scale, params)
     loop, rng = designed_loop(), np.random.default_rng(seed)
     loop.stopped = True                            # as after an implausible sensor
     rearmed, currents = None, []
@@ -64,13 +66,15 @@ def test_a_bonded_sensor_is_rearmed_after_settling_and_one_probe():
 
 
 @pytest.mark.parametrize("off", [{"layers_heat_scale": 0.6}, {"layers_heat_scale": 1.6},
-                                 {"lag_scale": 0.5}, {"lag_scale": 2.0}])
+                                 {"lag_scale": 0.5}, {"lag_scale": 2.0},
+                                 {"seebeck_scale": 0.8}, {"seebeck_scale": 1.2}])
 def test_a_bonded_sensor_on_a_pad_off_its_configuration_is_rearmed(off):
     """The pad's layers 0.6x or 1.6x their configured heat capacity (the
     junction's total C then 0.71x / 1.44x the model's), or the sensor
     lagging half or twice its stated value (the range the loop is designed
     for): the gain stays inside 0.5-2 (measured 1.39 / 0.69, 1.16 / 0.74),
-    re-armed."""
+    re-armed. So does a module whose Seebeck coefficient is 0.8x or 1.2x
+    the configured one the probe's current is sized from (review)."""
     loop, rearmed, _ = idle(**off)
     assert rearmed is not None and loop.rearm_refusals == 0
 
