@@ -156,9 +156,9 @@ def test_feed_turns_both_streams_into_frames(publisher_and_sub):
         slave_pub.close(linger=0)
 
 
-def _recording(path, cut_at: float | None = None):
-    rec = SessionRecorder(Recorder(path, "master", {"scene": "fingertip-7"}))
-    rec.touch_start(100.0, 1, {})
+def _recording(path, cut_at: float | None = None, scene="fingertip-7", start_params=None):
+    rec = SessionRecorder(Recorder(path, "master", {"scene": scene}))
+    rec.touch_start(100.0, 1, start_params or {})
     news = SlaveNews(24.0)
     for k in range(400):
         if k == 200:
@@ -180,6 +180,18 @@ def test_playback_series_of_a_recording(tmp_path):
     assert len(p["series"]["master_temp"]) == 400 * MAX_RATE_HZ // 1000
     assert p["estimates"][-1]["label"] == "b" and p["estimates"][-1]["decided"]
     json.dumps(p, allow_nan=False)                         # what the server sends
+
+
+def test_playback_of_a_scene_file_not_on_this_machine_uses_what_the_recording_holds(tmp_path):
+    """A service's recording made on a lab's scene file holds, at each
+    touch's start, the contact conductance its display was given: the view
+    plays it without the scene file (it refused: 'cannot be loaded here');
+    a recording that holds none, of a scene it cannot load, is still refused."""
+    p = load_playback(_recording(tmp_path / "lab.mcap", scene="lab-pad-elsewhere",
+                                 start_params={"contact_conductance_w_m2k": 2500.0}))
+    assert p["counts"]["master"] == 400
+    with pytest.raises(RecordingError, match="cannot be loaded here"):
+        load_playback(_recording(tmp_path / "bare.mcap", scene="lab-pad-elsewhere"))
 
 
 def test_playback_of_a_cut_recording_says_so(tmp_path):

@@ -36,9 +36,20 @@ def _touch_starts(rec) -> dict[int, float]:
 
 
 def _conductance(rec) -> float:
-    from telethermal.physics.scene import load_scene
+    """The pad-fingertip contact conductance the display was given: as the
+    recording holds it (a session's config, a service's touch start), else
+    its scene's, loaded by name (a scene file this process loaded, or a
+    shipped one)."""
+    from telethermal.physics.scene import load_scene, loaded_scene_file
     from telethermal.teleop.run import with_finger
+    starts = rec.messages("/master/touch_start")
+    for held in [rec.config] + starts[:1]:
+        h = held.get("contact_conductance_w_m2k")
+        if isinstance(h, (int, float)) and math.isfinite(h) and h > 0:
+            return float(h)
     scene = rec.config.get("scene", "fingertip-7")
+    if isinstance(scene, str) and loaded_scene_file(scene) is not None:
+        return with_finger(loaded_scene_file(scene)).finger.contact_conductance_w_m2k
     try:
         return with_finger(load_scene(scene)).finger.contact_conductance_w_m2k
     except Exception as exc:        # noqa: BLE001 - a scene file not on this machine
