@@ -292,3 +292,15 @@ def test_a_calibrated_displays_touch_records_its_lags_and_replays_sample_for_sam
     assert params["junction_sensor"]["tau_s"] == SCENE.sensors.junction_sensor_spec().tau_s
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
+
+
+def test_replay_reports_the_decision_when_the_session_does(recorded):
+    """The replayed slave's decision time, and the recorded one, are the
+    session's own (its first commitment to a material), not the time of
+    the last estimate (the replay plot drew it at 0.3 s where the session
+    decided at 0.06 s)."""
+    path, result = recorded
+    slave = replay(path)["summary"]["slave"]
+    assert result.summary["decision_time_s"] is not None
+    assert slave["decision_time_s"] == pytest.approx(result.summary["decision_time_s"])
+    assert slave["recorded_decision_time_s"] == pytest.approx(result.summary["decision_time_s"])

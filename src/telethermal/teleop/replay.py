@@ -290,12 +290,17 @@ def _replay_slave(rec, cid, identifier, attached):
     recorded_est = [_estimate_from(m["estimate"]) for m in rec.messages("/slave/estimates")
                     if m.get("contact_id", 0) == cid]
     last = recorded_est[-1] if recorded_est else None
+    # When it was decided, as the session reports it (teleop/run.py): the
+    # first commitment to a material (or group); an unknown, when it ended so.
+    first = next((e for e in recorded_est if e.decided and not e.label.is_unknown), None)
     return {"onset_s": slave.onset_s,
             "identified": est.label if est is not None and est.decided else UNKNOWN,
-            "decision_time_s": est.t_s if est is not None and est.decided else None,
+            "decision_time_s": None if est is None or not est.decided else (
+                est.t_s if est.label.is_unknown else slave.committed_at_s),
             "recorded_identified": last.label if last is not None and last.decided
             else UNKNOWN,
-            "recorded_decision_time_s": last.t_s if last is not None and last.decided else None,
+            "recorded_decision_time_s": None if last is None or not last.decided else (
+                last.t_s if last.label.is_unknown or first is None else first.t_s),
             "estimates": len(slave.events), "recorded_estimates": len(recorded_est),
             # posteriors, label, reason, and effusivity estimate and nearest class
             "same_estimates": [_same(e.estimate) for e in slave.events] ==
