@@ -21,6 +21,7 @@ from telethermal.ident.anytime import Label, Reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
+from telethermal.services.demo_calibration import calibrate_as_built, path_line
 from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
 from telethermal.teleop.plots import plot_session
@@ -49,13 +50,13 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
                   slave_host: str = "127.0.0.1", security: str = "curve",
                   master_ports: tuple[int, int] | None = None,
                   devices: str = "sim", record_dir: str | Path | None = None,
-                  view_port: int = 0, firmware_build: str = "",
-                  pad_calibration: str = "") -> tuple[Path, Path]:
+                  view_port: int = 0, firmware_build: str = "", pad_calibration: str = "",
+                  slave_pad_calibration: str = "") -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
     (a fault proxy in between; plain loopback sockets then). ``pad_calibration``:
-    the master's (its display's: docs/calibration.md)."""
+    the master's (its display's), ``slave_pad_calibration`` the slave's (its pad's)."""
     generate_link_keys(out / "keys")
     control, stream, slave_admin, master_admin = ports
 
@@ -75,15 +76,15 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     record = f"record_dir = {toml_str(Path(record_dir).resolve())}\n" if record_dir else ""
     record += f"firmware_build = {toml_str(firmware_build)}\n" if firmware_build else ""
     slave.write_text(f"[slave]\nscene = {toml_str(scene)}\nidentifier = {toml_str(ident)}\n"
-                     f'{record}generator = {toml_str(gen)}\nseed = {seed}\ndevices = "{devices}"\n'
+                     f'{record}{path_line("pad_calibration", slave_pad_calibration)}'
+                     f'generator = {toml_str(gen)}\nseed = {seed}\ndevices = "{devices}"\n'
                      f'{admin(slave_admin)}\n\n[transport]\nbind_host = "{slave_host}"\n'
                      f'{common}{slave_keys}')
     master = out / "master.toml"
     master.write_text(f'[master]\nscene = {toml_str(scene)}\nrate_hz = {rate_hz}\nseed = {seed}\n'
                       f'realtime_priority = {realtime_priority}\ndevices = "{devices}"\n{record}'
                       f'view_port = {view_port}\n'
-                      + (f"pad_calibration = {toml_str(str(Path(pad_calibration).resolve()))}\n"
-                         if pad_calibration else "") +
+                      + path_line("pad_calibration", pad_calibration) +
                       f'{admin(master_admin)}\n\n[transport]\nhost = "{slave_host}"\n'
                       f'{master_common}{master_keys}')
     return slave, master
@@ -340,8 +341,8 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
              realtime_priority: int = 20, record_dir: Path | None = None,
-             view_port: int | None = None, devices: str = "sim",
-             firmware_build: str = "", display_calibration: str = "") -> dict:
+             view_port: int | None = None, devices: str = "sim", firmware_build: str = "",
+             display_calibration: str = "", pad_calibration: str = "") -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
     in-process session's (``in_process_flux_rms_error_rel``). ``view_port``:
     the live view (``telethermal view``) on that HTTP port, started once the
@@ -365,7 +366,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                                           record_dir=record_dir, devices=devices,
                                           view_port=ports[4] if view_port is not None else 0,
                                           firmware_build=firmware_build,
-                                          pad_calibration=display_calibration)
+                                          pad_calibration=display_calibration,
+                                          slave_pad_calibration=pad_calibration)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     cal = {}
@@ -438,8 +440,8 @@ def _no_progress(_total: int, _what: str):
 
 
 def _demo_models(scene, out: Path, seed: int, echo, progress, status,
-                 method: str | None = None) -> None:
-    """The demo's databases (and their plot), identifier and generator in ``out``."""
+                 method: str | None = None, calibration=None) -> None:
+    """The demo's databases (and plot), identifier (``calibration``: its pad's), generator."""
     from telethermal.data.dataset import load_dataset
     from telethermal.data.generate import generate_databases
     from telethermal.data.plots import plot_datasets
@@ -452,7 +454,7 @@ def _demo_models(scene, out: Path, seed: int, echo, progress, status,
     echo(f"databases in {time.perf_counter() - start:.1f} s: "
          + ", ".join(f"{k} {v['trials']} trials" for k, v in summary["datasets"].items()))
     echo(f"plot: {plot_datasets(out / 'databases', out / 'databases.png')}")
-    demo_identify(scene, out, seed, echo, method)
+    demo_identify(scene, out, seed, echo, method, calibration)
     with status("training the flux generator on database 2"):
         save_generator(NetworkGenerator().fit(load_dataset(out / "databases" / "finger")),
                        out / "generator.npz")
@@ -479,12 +481,15 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     echo(f"scene {scene.name}: {scene.description.splitlines()[0]}")
     for side, material, choice in describe_models(scene):
         echo(f"  {side:6s} on {material:10s} {choice.describe()}")
-    _demo_models(scene, out, seed, echo, progress, status, method)
+    cal = None if display_calibration else calibrate_as_built(scene, out, seed, echo, status)
+    _demo_models(scene, out, seed, echo, progress, status, method, cal and cal.pad)
     report = run_demo(out, scene_name, out / "identifier.npz", out / "generator.npz",
                       demo_materials(scene, materials), seed=seed, contact_s=contact_s,
                       echo=echo, record_dir=Path(record_dir) if record_dir else None,
                       view_port=view_port, devices=devices, firmware_build=firmware,
-                      display_calibration=display_calibration)
+                      display_calibration=str(cal.path) if cal else display_calibration,
+                      pad_calibration=str(cal.path) if cal else "")
+    report |= {"calibration": cal.summary()} if cal else {}
     view = report.pop("view", None)
     path = write_json(json_path or out / "demo.json", report)
     echo(f"touch plots: {out}/touch-*.png; summary: {path}")

@@ -162,11 +162,14 @@ def _dataset_method(scene: Scene, named: str | None):
     return method, data_scene, why
 
 
-def demo_identify(scene, out, seed: int, echo=print, method: str | None = None):
+def demo_identify(scene, out, seed: int, echo=print, method: str | None = None,
+                  calibration=None):
     """Train telethermal's identifier (``method``, default: :func:`default_method`)
     on ``out/databases/pad`` and score it on fresh trials of the same scene
     (seed ``seed + 1``): writes ``identifier.npz``, ``identify.json`` and
-    ``identify.png`` in ``out``, echoes one line; returns the model."""
+    ``identify.png`` in ``out``, echoes one line; returns the model.
+    ``calibration``: the pad's (a PadCalibration), for the methods that fit
+    its model (recorded in the model file)."""
     from pathlib import Path
 
     from telethermal.jsonfile import write_json
@@ -176,7 +179,7 @@ def demo_identify(scene, out, seed: int, echo=print, method: str | None = None):
 
     out = Path(out)
     method = method or default_method(scene)
-    model = make(method, scene=scene).fit(
+    model = make(method, scene=scene, calibration=calibration).fit(
         from_trials(load_dataset(out / "databases" / "pad"))[0])
     model.scene_ = scene.name
     model.save(out / "identifier.npz")
