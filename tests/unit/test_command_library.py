@@ -270,6 +270,10 @@ def test_demo_identify_writes_its_files_and_one_line(small_scene_db):
     # The default identifier on a scene it can model: effusivity-fit.
     from telethermal.ident.fitted import serves
     assert serves(scene) is None and model.method == "effusivity-fit"
+    # With its model-free fallback, as the slave service trains it, saved in the file.
+    from telethermal.ident.registry import load_model
+    assert model.fallback_.method == "effusivity-lda"
+    assert load_model(out / "identifier.npz").fallback_.method == "effusivity-lda"
     assert len(lines) == 1 and lines[0].startswith("identification (effusivity-fit, fresh "
                                                    "trials): 0.2 s ")
     assert lines[0].endswith(f"; decisions {report['decision_time_s']['n']}/"

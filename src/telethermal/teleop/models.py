@@ -164,8 +164,9 @@ def _dataset_method(scene: Scene, named: str | None):
 
 def demo_identify(scene, out, seed: int, echo=print, method: str | None = None,
                   calibration=None):
-    """Train telethermal's identifier (``method``, default: :func:`default_method`)
-    on ``out/databases/pad`` and score it on fresh trials of the same scene
+    """Train telethermal's identifier (``method``, default: :func:`default_method`;
+    with its model-free fallback where it fits a pad model, as the slave
+    service's :func:`train_identifier`) on ``out/databases/pad`` and score it on fresh trials of the same scene
     (seed ``seed + 1``): writes ``identifier.npz``, ``identify.json`` and
     ``identify.png`` in ``out``, echoes one line; returns the model.
     ``calibration``: the pad's (a PadCalibration), for the methods that fit
@@ -179,9 +180,10 @@ def demo_identify(scene, out, seed: int, echo=print, method: str | None = None,
 
     out = Path(out)
     method = method or default_method(scene)
-    model = make(method, scene=scene, calibration=calibration).fit(
-        from_trials(load_dataset(out / "databases" / "pad"))[0])
+    contacts = from_trials(load_dataset(out / "databases" / "pad"))[0]
+    model = make(method, scene=scene, calibration=calibration).fit(contacts)
     model.scene_ = scene.name
+    model = with_fallback(model, contacts)     # as the slave service trains it
     model.save(out / "identifier.npz")
     report = evaluate(model, pad_database(scene, np.random.default_rng(seed + 1)))
     write_json(out / "identify.json", report)
