@@ -86,9 +86,13 @@ class _OldEstimator(EffusivityEstimator):
         hess[1:, 1:] += lp_hess
         return logl + lp, grad, hess
 
-    def _fit(self, x, s, start=None):
-        theta = self._start(x, s) if start is None else np.clip(np.asarray(start, float),
-                                                                 self.lo, self.hi)
+    def _fit(self, x, s, start=None, t_s=None):
+        # Every window here is whole (no lost frame): the old fit's times,
+        # every sample from the onset, are t_s.
+        assert t_s is None or np.allclose(t_s, np.arange(len(x)) / self.sample_rate_hz)
+        t_s = np.arange(len(x)) / self.sample_rate_hz
+        theta = self._start(x, s, t_s) if start is None else np.clip(
+            np.asarray(start, float), self.lo, self.hi)
         value, grad, hess = self._objective(theta, x, s)
         lam = 1e-3
         for _ in range(50):
@@ -112,9 +116,9 @@ class _OldEstimator(EffusivityEstimator):
 class _CountedEstimator(EffusivityEstimator):
     evaluations = 0
 
-    def _objective(self, theta, x, s):
+    def _objective(self, theta, x, s, t_s=None):
         type(self).evaluations += 1
-        return super()._objective(theta, x, s)
+        return super()._objective(theta, x, s, t_s)
 
 
 # ---------------------------------------------------------------- fixtures
