@@ -129,14 +129,12 @@ def loop_figures(core: qemu.QemuCore, elf: Path) -> dict:
     own_cycles = max(one, per_unit) * CYCLES_PER_INSTRUCTION_BOUND
     isr_cycles = isr * CYCLES_PER_INSTRUCTION_BOUND
     budget = SYSCLK_HZ * LOOP_PERIOD_S / 10
-    interrupts, bound = 2, own_cycles + 2 * isr_cycles
+    bound = own_cycles + 2 * isr_cycles
     for _ in range(100):                            # to the fixed point (or past the budget)
         interrupts = 2 * (math.ceil(bound / SYSCLK_HZ / LINK_BYTE_S) + 1)
-        new = own_cycles + interrupts * isr_cycles
-        if new == bound or new > 10 * budget:
+        bound, previous = own_cycles + interrupts * isr_cycles, bound
+        if bound == previous or bound > 10 * budget:
             break
-        bound = new
-    bound = own_cycles + interrupts * isr_cycles
     return {"iterations": core.read_u32(sym["board_loop_count"]),
             "worst_instructions": round(one), "worst_isr_instructions": round(isr),
             "bursts": core.read_u32(sym["board_loop_bursts"]),

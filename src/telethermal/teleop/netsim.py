@@ -227,10 +227,6 @@ class SimNetwork:
     def _deliver(self, direction: str, messages: list[dict]) -> None:
         self._ready[direction] += [parse(m) for m in messages if m is not None]
 
-    @staticmethod
-    def reverse(direction: str) -> str:
-        return "m2s" if direction == "s2m" else "s2m"
-
     def _advance(self, now: float) -> None:
         self._start(now)
         while self._events and self._events[0][0] <= now:
