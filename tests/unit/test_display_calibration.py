@@ -209,3 +209,39 @@ def test_a_hardware_master_refuses_a_calibration_from_a_simulated_bench(built_ca
     with pytest.raises(CalibrationError, match="simulated bench.*no hardware routine"):
         refuse_on_hardware(cal)
     refuse_on_hardware(None)
+
+
+def test_the_flux_noise_the_fit_expects_is_the_configured_sensor_s():
+    """The block's chi2 weighs the flux residual by the noise the scene's
+    ``[sensors]`` state (thermopile noise, ADC step, sensitivity), not by
+    the simulated plant's own sensor: a plant whose thermopile is 32x
+    noisier than the configuration says is refused on the block; told the
+    truth, the same recording fits (8x is not refused: the windows average
+    the flux noise down to about the thermocouple's)."""
+    from telethermal.devices.display import open_display
+    from telethermal.teleop.display_rig import simulated_bench
+    noisy = _scene(sensors={"flux_noise_uv": 16.0})
+    stated, told = _scene(), _scene(sensors={"flux_noise_uv": 16.0})
+    # The closed form of the configured noise, W/m^2 rms.
+    assert math.isclose(stated.sensors.flux_noise_w_m2(),
+                        math.hypot(0.5, 0.3 / math.sqrt(12.0)) / 1.26, rel_tol=1e-12)
+    with pytest.raises(CalibrationError, match="on the plexiglass block"):
+        calibrate_display(stated, open_display(
+            "sim", simulated_bench(noisy, "plexiglass", 0, routine.RATE_HZ)), "plexiglass")
+    cal = calibrate_display(told, open_display(
+        "sim", simulated_bench(noisy, "plexiglass", 0, routine.RATE_HZ)), "plexiglass")
+    assert cal.chi2_per_dof_block <= routine.CHI2_MAX
+
+
+def test_the_simulated_flux_sensor_is_the_configured_part():
+    """The simulator reads its pads' flux through the sensor the scene's
+    ``[sensors]`` configure (sensitivity, ADC step, noise), so a scene that
+    says a coarser ADC gets one: readings on its steps."""
+    scene = _scene(sensors={"flux_adc_lsb_uv": 2.52, "flux_sensitivity_uv_per_w_m2": 2.52,
+                            "flux_noise_uv": 0.0})
+    sensor = scene.sensors.flux_sensor(lag_s=0.2, gain=1.0)
+    assert (sensor.sensitivity_uv_per_w_m2, sensor.adc_lsb_uv, sensor.lag_s) == (2.52, 2.52, 0.2)
+    read = sensor.read_w_m2(np.array([0.2, 0.6, 1.4, -3.3]), np.random.default_rng(0))
+    np.testing.assert_allclose(read, [0.0, 1.0, 1.0, -3.0])    # 1 W/m^2 steps
+    with pytest.raises(Exception, match="flux_sensitivity_uv_per_w_m2"):
+        _scene(sensors={"flux_sensitivity_uv_per_w_m2": 0.0})

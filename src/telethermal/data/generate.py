@@ -61,7 +61,7 @@ from telethermal.physics.as_built import (flux_gain_factor, simulated_module,
                                           simulated_pad_scene)
 from telethermal.physics.held_pad import HeldPad, HeldPadResult
 from telethermal.physics.thermoelectric import default_driver
-from telethermal.physics.sensors import (ForceSensor, HeatFluxSensor, Instruments,
+from telethermal.physics.sensors import (ForceSensor, Instruments,
                                          Thermocouple, draw_instruments)
 from telethermal.physics.waterpad import precondition
 
@@ -175,8 +175,7 @@ def _record(scene, result, times, draws, first_contact_temp, rng, group_of, pref
             extra_of, session: SensorSession, duration_s: float):
     """Turn a ContactResult into trials with sensor readings."""
     sens = scene.sensors
-    flux = HeatFluxSensor(lag_s=sens.flux_lag_s, noise_uv_rms=sens.flux_noise_uv,
-                          gain=session.instruments.flux_gain).read_w_m2(
+    flux = sens.flux_sensor(gain=session.instruments.flux_gain).read_w_m2(
         result.flux_sensed_w_m2, rng)
     thermo = Thermocouple(noise_uv_rms=sens.thermocouple_noise_uv,
                           cold_junction_c=scene.room_temp_c,
@@ -395,8 +394,7 @@ def single_contact(pad: str, obj: str, pad_temp_c: float, object_temp_c: float, 
         times = np.arange(0, n + 1) / rate_hz
         result = model.solve(times, pad_temp_c, object_temp_c, contact_conductance_w_m2k,
                              sensor_lag_s=sensors.flux_lag_s)
-        flux = HeatFluxSensor(lag_s=sensors.flux_lag_s, noise_uv_rms=sensors.flux_noise_uv
-                              ).read_w_m2(result.flux_sensed_w_m2, rng)[0]
+        flux = sensors.flux_sensor().read_w_m2(result.flux_sensed_w_m2, rng)[0]
         temp = Thermocouple(noise_uv_rms=sensors.thermocouple_noise_uv,
                             cold_junction_c=room_temp_c).read_c(result.surface_temp_a_c, rng)[0]
     trial_id = f"{pad}-on-{obj}"

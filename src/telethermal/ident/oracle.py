@@ -329,11 +329,9 @@ class Oracle:
 # ---------------------------------------------------------------- the scene's model
 def flux_noise_w_m2(scene) -> float:
     """The recorded flux's noise, W/m^2 rms: the amplifier's noise and the
-    ADC's quantisation (``lsb^2 / 12``) over the sensor's sensitivity."""
-    from telethermal.physics.sensors import HeatFluxSensor
-    sensor = HeatFluxSensor(lag_s=scene.sensors.flux_lag_s, noise_uv_rms=scene.sensors.flux_noise_uv)
-    return float(np.hypot(sensor.noise_uv_rms, sensor.adc_lsb_uv / np.sqrt(12.0))
-                 / sensor.sensitivity_uv_per_w_m2)
+    ADC's quantisation (``lsb^2 / 12``) over the sensor's sensitivity, as
+    the scene's ``[sensors]`` configure them."""
+    return scene.sensors.flux_noise_w_m2()
 
 
 def forward_curves(scene, u_grid, t_max_s: float, dt_s: float = MODEL_DT_S) -> dict:

@@ -136,6 +136,12 @@ class SensorSpec:
 
     flux_lag_s: float = 0.15
     flux_noise_uv: float = 0.5
+    #: The flux thermopile's nominal sensitivity (its calibration
+    #: certificate's; the first paper's Captec sensor, sec. 2) and the ADC
+    #: step its microvolts are read at: with ``flux_noise_uv``, the flux
+    #: noise the product's fits expect (:meth:`flux_noise_w_m2`).
+    flux_sensitivity_uv_per_w_m2: float = 1.26
+    flux_adc_lsb_uv: float = 0.3
     flux_sensitivity_limit_rel: float = 0.03
     onset_jitter_s: float = 0.005
     thermocouple_noise_uv: float = 1.0
@@ -159,6 +165,24 @@ class SensorSpec:
     #: simulated pad's sensor lags (times ``[as_built.display] junction_lag_s``).
     junction_sensor: str = DEFAULT_JUNCTION_SENSOR
     junction_lag_s: float | None = None
+
+    def flux_noise_w_m2(self) -> float:
+        """The flux reading's noise as configured, W/m^2 rms: the
+        thermopile's noise and the ADC's quantisation (``lsb / sqrt 12``)
+        over the nominal sensitivity."""
+        return math.hypot(self.flux_noise_uv, self.flux_adc_lsb_uv / math.sqrt(12.0)) \
+            / self.flux_sensitivity_uv_per_w_m2
+
+    def flux_sensor(self, lag_s: float | None = None, gain: float = 1.0):
+        """The flux sensor these figures describe
+        (:class:`~telethermal.physics.sensors.HeatFluxSensor`): what the
+        simulator reads its pads' flux through (its lag ``lag_s``, None: the
+        configured one; ``gain``: this instrument's true over nominal)."""
+        from telethermal.physics.sensors import HeatFluxSensor
+        return HeatFluxSensor(sensitivity_uv_per_w_m2=self.flux_sensitivity_uv_per_w_m2,
+                              lag_s=self.flux_lag_s if lag_s is None else lag_s,
+                              noise_uv_rms=self.flux_noise_uv, adc_lsb_uv=self.flux_adc_lsb_uv,
+                              gain=gain)
 
     def junction_sensor_spec(self):
         """The display's junction sensor as configured

@@ -171,7 +171,6 @@ def calibrate_display(scene, display, block: str = DEFAULT_BLOCK,
     the display's figures; refused when the model does not fit."""
     from telethermal.ident.pad_calibration import pad_digest
     from telethermal.physics.materials import get_material
-    from telethermal.physics.sensors import HeatFluxSensor
 
     on_block = routine.run_part(display, 0.0, rate_hz)
     in_air = routine.run_part(display, routine.steps_duration_s()
@@ -181,10 +180,9 @@ def calibrate_display(scene, display, block: str = DEFAULT_BLOCK,
     air = routine.fit_junction_lag(in_air, js.tau_s, math.hypot(js.noise_k, js.lsb_k / 12 ** 0.5),
                                    tc_noise_k)
     routine.refuse_misfit("in air (junction sensor)", air)
-    m, fs = get_material(block), HeatFluxSensor()
+    m = get_material(block)
     effusivity = math.sqrt(m.conductivity_w_mk * m.density_kg_m3 * m.specific_heat_j_kgk)
-    flux_noise = math.hypot(sens.flux_noise_uv, fs.adc_lsb_uv / 12 ** 0.5) \
-        / fs.sensitivity_uv_per_w_m2
+    flux_noise = sens.flux_noise_w_m2()       # the configured sensor's, not the plant's
     blk = routine.fit_flux(on_block, effusivity, sens.flux_lag_s, CONTACT_GUESS_W_M2K,
                            tc_noise_k, flux_noise)
     routine.refuse_misfit(f"on the {block} block (flux sensor)", blk)

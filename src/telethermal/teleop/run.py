@@ -43,7 +43,7 @@ from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.layered import pad_resistance  # noqa: F401  (its importers')
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import FingerSpec, Scene
-from telethermal.physics.sensors import ForceSensor, HeatFluxSensor, quantise
+from telethermal.physics.sensors import ForceSensor, quantise
 from telethermal.physics.thermoelectric import (JunctionSensorSpec, ModuleState,
                                                 ThermoelectricStack)
 from telethermal.devices.readings import PadSensors
@@ -158,7 +158,7 @@ class DisplayTouch:
         self.layers = built.layers
         self.model = display_model(self.layers, round(contact_s + 1.0, 3), min(self.dt_s, 1e-3))
         sens = scene.sensors
-        self.flux_sensor = HeatFluxSensor(lag_s=built.flux_lag_s, noise_uv_rms=sens.flux_noise_uv)
+        self.flux_sensor = sens.flux_sensor(lag_s=built.flux_lag_s)
         self.force_sensor = ForceSensor()
         self.n_total = int(round((PRE_CONTACT_S + contact_s + AFTER_RELEASE_S) * rate_hz))
         self.noise = rng.normal(size=(self.n_total + 1, 3))
