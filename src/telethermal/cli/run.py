@@ -25,7 +25,7 @@ def cmd_demo(args) -> int:
                   seed=args.seed, contact_s=args.contact_s, record_dir=args.record,
                   view_port=args.view, devices=args.devices, json_path=args.json,
                   progress=_progress, status=console.status, method=args.method,
-                  display_calibration=args.calibration or "")
+                  calibration=args.calibration or "")
     if result.view is not None:
         print(f"the view stays up at {result.view.url} (recordings play there); Ctrl-C to "
               "stop", flush=True)
@@ -240,8 +240,12 @@ def add_demo(sub) -> None:
                    help="the slave's identifier (default effusivity-fit, which fits the pad's "
                         "model to each window, on a scene it can model; else effusivity-lda: "
                         "telethermal bench identify compares them)")
-    p.add_argument("--calibration", metavar="CAL.toml", help=DISPLAY_CAL_HELP + " (the "
-                   "master's config key pad_calibration)")
+    p.add_argument("--calibration", metavar="CAL.toml",
+                   help="a calibration file (telethermal calibrate pad and/or calibrate "
+                        "display): the slave's identifier is trained with the sensing pad's "
+                        "calibration it holds and the master given its [display] table "
+                        "(each service's config key pad_calibration); either may be absent. "
+                        "Without it, a scene with [as_built] is calibrated first")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
                    help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
                         "(default 8050); it stays up after the touches until Ctrl-C")

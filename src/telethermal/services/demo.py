@@ -21,7 +21,7 @@ from telethermal.ident.anytime import Label, Reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.jsonfile import write_json
 from telethermal.services.admin import call
-from telethermal.services.demo_calibration import calibrate_as_built, path_line
+from telethermal.services.demo_calibration import demo_calibration, path_line
 from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
 from telethermal.teleop.plots import plot_session
@@ -456,23 +456,23 @@ def _demo_models(scene, out: Path, seed: int, echo, progress, status,
     echo(f"plot: {plot_datasets(out / 'databases', out / 'databases.png')}")
     demo_identify(scene, out, seed, echo, method, calibration)
     with status("training the flux generator on database 2"):
-        save_generator(NetworkGenerator().fit(load_dataset(out / "databases" / "finger")),
-                       out / "generator.npz")
+        generator = NetworkGenerator().fit(load_dataset(out / "databases" / "finger"))
+    save_generator(generator, out / "generator.npz")
 
 
 def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed: int = 0,
          contact_s: float = 5.0, record_dir: str | Path | None = None,
          view_port: int | None = None, devices: str = "sim", json_path=None, echo=print,
          progress=_no_progress, status=nullcontext, method: str | None = None,
-         display_calibration: str = "") -> DemoResult:
+         calibration: str = "") -> DemoResult:
     """``telethermal demo``: the scene's databases, an identifier and a flux
     generator trained on them, then slave and master as two processes on
     loopback and a touch on each material (:func:`run_demo`); the summary
     goes to ``json_path`` (default ``out/demo.json``). ``echo`` takes each
     line to show; ``progress(total, what)`` and ``status(text)`` are context
     managers held around the long steps (the first yields a callable taking
-    a step's label); ``method``: the identifier's (default:
-    ``teleop.models.default_method``)."""
+    a step's label); ``method``: the identifier's (default: ``teleop.models.
+    default_method``); ``calibration``: a file (``demo_calibration``'s)."""
     from telethermal.physics.scene import describe_models, load_scene
 
     out = Path(out)
@@ -481,14 +481,14 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     echo(f"scene {scene.name}: {scene.description.splitlines()[0]}")
     for side, material, choice in describe_models(scene):
         echo(f"  {side:6s} on {material:10s} {choice.describe()}")
-    cal = None if display_calibration else calibrate_as_built(scene, out, seed, echo, status)
+    cal = demo_calibration(scene, out, seed, echo, status, calibration)
     _demo_models(scene, out, seed, echo, progress, status, method, cal and cal.pad)
     report = run_demo(out, scene_name, out / "identifier.npz", out / "generator.npz",
                       demo_materials(scene, materials), seed=seed, contact_s=contact_s,
                       echo=echo, record_dir=Path(record_dir) if record_dir else None,
                       view_port=view_port, devices=devices, firmware_build=firmware,
-                      display_calibration=str(cal.path) if cal else display_calibration,
-                      pad_calibration=str(cal.path) if cal else "")
+                      display_calibration=cal.display_path if cal else "",
+                      pad_calibration=cal.pad_path if cal else "")
     report |= {"calibration": cal.summary()} if cal else {}
     view = report.pop("view", None)
     path = write_json(json_path or out / "demo.json", report)

@@ -46,14 +46,49 @@ class DemoCalibration:
     """The calibration file and both pads' calibrations as read back from it."""
 
     path: Path
-    pad: object            # ident.pad_calibration.PadCalibration
-    display: object        # teleop.display_calibration.DisplayCalibration
+    pad: object            # ident.pad_calibration.PadCalibration (None: the file has none)
+    display: object        # teleop.display_calibration.DisplayCalibration (None: idem)
 
     def summary(self) -> dict:
-        """For ``demo.json``: the file and both calibrations' figures."""
-        display = {f.name: getattr(self.display, f.name)
-                   for f in dataclasses.fields(self.display) if f.name != "source"}
-        return {"file": str(self.path), "pad": self.pad.to_dict(), "display": display}
+        """For ``demo.json``: the file and both calibrations' figures (None
+        for a pad the file does not calibrate)."""
+        display = None if self.display is None else {
+            f.name: getattr(self.display, f.name)
+            for f in dataclasses.fields(self.display) if f.name != "source"}
+        return {"file": str(self.path), "pad": self.pad and self.pad.to_dict(),
+                "display": display}
+
+    @property
+    def pad_path(self) -> str:
+        """The file, for the slave's key ``pad_calibration`` ("": no pad's)."""
+        return str(self.path) if self.pad is not None else ""
+
+    @property
+    def display_path(self) -> str:
+        """The file, for the master's key ``pad_calibration`` ("": no display's)."""
+        return str(self.path) if self.display is not None else ""
+
+
+def given_calibration(path: str | Path, scene) -> DemoCalibration:
+    """``demo --calibration FILE``: the sensing pad's calibration (the
+    file's top level, ``telethermal calibrate pad``) for the slave and its
+    ``[display]`` table (``calibrate display``) for the master, whichever the
+    file holds, each checked against ``scene``; refused, naming the file,
+    when it holds neither."""
+    from telethermal.errors import CalibrationError
+    from telethermal.ident.pad_calibration import pad_calibration
+    from telethermal.teleop.display_calibration import display_calibration
+    from telethermal.tomltables import read_toml
+
+    data = read_toml(path, "calibration file", CalibrationError)
+    if "format" not in data and "display" not in data:
+        raise CalibrationError(
+            f"{path}: neither a sensing pad's calibration (telethermal calibrate pad) nor a "
+            f"[display] table (telethermal calibrate display); its keys: "
+            f"{', '.join(sorted(data))[:200] or 'none'}")
+    return DemoCalibration(Path(path), pad_calibration(str(path), scene) if "format" in data
+                           else None,
+                           display_calibration(str(path), scene) if "display" in data else None)
 
 
 def path_line(key: str, path: str | Path) -> str:
@@ -115,3 +150,18 @@ def calibrate_as_built(scene, out: Path, seed: int = 0, echo=print,
     echo(f"calibration: {path} (the slave's identifier is trained with its pad's, the master "
          "given its display's)")
     return cal
+
+
+def demo_calibration(scene, out: Path, seed: int = 0, echo=print, status=None,
+                     given: str | Path = "") -> DemoCalibration | None:
+    """The demo's calibrations: the file ``given`` (:func:`given_calibration`,
+    nothing calibrated), else, on a scene with ``[as_built]``, both pads
+    calibrated first (:func:`calibrate_as_built`); None without either."""
+    if given:
+        cal = given_calibration(given, scene)
+        echo(f"calibration: {given} (the slave's identifier "
+             + ("trained with its pad's" if cal.pad is not None else "without a pad's") +
+             ", the master " + ("given its display's" if cal.display is not None else
+                                "without a display's") + ")")
+        return cal
+    return calibrate_as_built(scene, out, seed, echo, status)
