@@ -27,6 +27,9 @@ from telethermal.services.demo import free_ports  # noqa: E402,F401 (re-exported
 
 HEARTBEAT_S = 0.05
 DEAD_AFTER_S = 0.5
+#: How long a test waits for what it pumps for: a hang guard (a pump ends as
+#: soon as its condition holds; how soon is the machine's load's, never asserted).
+GUARD_S = 60.0
 SCENE = "fingertip-7"
 
 

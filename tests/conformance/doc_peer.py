@@ -109,7 +109,7 @@ class DocMaster:
         self._ours.add(sent["sent_s"])
         self._last_hb = now
 
-    def sync(self, timeout_s: float = 5.0) -> None:
+    def sync(self, timeout_s: float = 60.0) -> None:              # a hang guard
         """Return once the slave has read everything sent so far: the control
         connection is ordered, so the slave's echo of a heartbeat sent now
         means it has handled every message before it."""
@@ -194,7 +194,7 @@ class DocMaster:
         return [m for m in source if m.get("kind") == kind and
                 all(m.get(k) == v for k, v in match.items())]
 
-    def connect(self, timeout_s: float = 10.0) -> None:
+    def connect(self, timeout_s: float = 60.0) -> None:           # a hang guard
         """hello until the slave's hello, session_config and object arrive."""
         ok = self.pump(timeout_s, until=lambda: self.of("session_config") and
                        self.of("contact_event", contact_id=0))

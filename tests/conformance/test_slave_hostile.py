@@ -14,7 +14,7 @@ import time
 import msgpack
 import pytest
 
-from conftest import HEARTBEAT_S
+from conftest import GUARD_S, HEARTBEAT_S
 from doc_peer import pack
 from touch import assert_pad_safe, final_estimate, touch
 
@@ -147,7 +147,7 @@ def test_hostile_message_mid_contact_is_counted_and_harmless(case, slave, sessio
     m, contact_id = session, next(_ids)
     assert slave.admin("place", material=MATERIAL, seed=SEED)["ok"]
     m.touch(contact_id)
-    assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id,
+    assert m.pump(GUARD_S, until=lambda: m.of("contact_event", contact_id=contact_id,
                                           touching=True))
     m.answer_resend = False          # a replayed or void seq is not "repaired" by resending
     before = slave.counters()
@@ -160,9 +160,9 @@ def test_hostile_message_mid_contact_is_counted_and_harmless(case, slave, sessio
     assert errors_moved(before, slave.counters()) == {counter: n}
     status = slave.admin("status")
     assert status["pad_down"] and status["contact_id"] == contact_id
-    assert _decision(final_estimate(m, contact_id, 5.0)) == baseline
+    assert _decision(final_estimate(m, contact_id)) == baseline
     m.touch(contact_id, touching=False)
-    assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id,
+    assert m.pump(GUARD_S, until=lambda: m.of("contact_event", contact_id=contact_id,
                                           touching=False))
     assert_pad_safe(slave)
 
@@ -197,9 +197,10 @@ def test_ten_thousand_hostile_messages_in_a_row(slave, session, baseline):
     assert slave.alive
     assert errors_moved(before, after) == {k: v for k, v in expected.items() if v}
     grown = slave.log_bytes() - log_before
-    # <= 100 KiB per minute of garbage; this flood lasts less than a minute,
-    # so the whole of it must fit in 100 KiB.
-    assert garbage_s < 60 and grown <= 100 * 1024, (grown, garbage_s)
+    # <= 100 KiB per minute of garbage, and at least a minute's worth allowed:
+    # the flood alone lasts less than a minute, a loaded machine's can last
+    # longer (its length is a real-clock figure, printed, not asserted).
+    assert grown <= 100 * 1024 * max(1.0, garbage_s / 60), (grown, garbage_s)
     print(f"10000 hostile messages in {garbage_s:.1f} s: log grew {grown} bytes")
     m.answer_resend = True
     assert legit_touch(slave, m, next(_ids)) == baseline

@@ -11,7 +11,7 @@ import time
 import pytest
 import zmq
 
-from conftest import DEAD_AFTER_S, HEARTBEAT_S
+from conftest import DEAD_AFTER_S, GUARD_S, HEARTBEAT_S
 from doc_peer import DocMaster, pack
 from touch import assert_pad_safe, touch
 
@@ -45,7 +45,7 @@ def test_a_message_over_the_receive_limit_costs_only_that_connection(slave, mast
     before, configs = slave.counters(), len(m.of("session_config"))
     m.send_raw(b"\x00" * (2 * 1024 * 1024))
     m.peer_hello = None                          # say hello again on the new connection
-    assert m.pump(10.0, until=lambda: len(m.of("session_config")) > configs)
+    assert m.pump(GUARD_S, until=lambda: len(m.of("session_config")) > configs)
     assert slave.alive
     after = slave.counters()
     # Not read, so not counted as a message; seen as the session's reconnection.
@@ -61,7 +61,7 @@ def _pad_down(slave) -> bool:
 def _touch_down(m, slave, contact_id: int) -> None:
     assert slave.admin("place", material=MATERIAL, seed=SEED)["ok"]
     m.touch(contact_id)
-    assert m.pump(3.0, until=lambda: m.of("contact_event", contact_id=contact_id,
+    assert m.pump(GUARD_S, until=lambda: m.of("contact_event", contact_id=contact_id,
                                           touching=True))
     assert _pad_down(slave)
 
@@ -85,7 +85,7 @@ def test_a_master_killed_mid_contact_and_restarted(slave, masters, baseline):
             lifted_at = time.monotonic()
         return new.peer_hello is not None
 
-    assert new.pump(10.0, until=lifted)
+    assert new.pump(GUARD_S, until=lifted)
     assert lifted_at is not None                      # lifted before the new session began
     after = slave.counters()
     # Declared dead by the slave's loop, or superseded by the new session's
@@ -106,7 +106,7 @@ def test_a_new_session_on_the_same_connection_supersedes_the_contact_at_once(
     _touch_down(m, slave, 8)
     before = slave.counters()
     m.restart()
-    assert m.pump(5.0, until=lambda: m.peer_hello is not None)
+    assert m.pump(GUARD_S, until=lambda: m.peer_hello is not None)
     assert not _pad_down(slave)
     after = slave.counters()
     assert after["contacts_superseded"] - before["contacts_superseded"] == 1
@@ -122,7 +122,7 @@ def test_a_second_master_cannot_lift_the_first_masters_contact(slave, masters, b
     _touch_down(first, slave, 10)
     second = masters("b", connect=False)
     second.hello()
-    assert second.pump(2.0, until=lambda: any(x["kind"] == "fault" and x["code"] == "busy"
+    assert second.pump(GUARD_S, until=lambda: any(x["kind"] == "fault" and x["code"] == "busy"
                                               for _, x in second.received), heartbeats=False)
     before = slave.counters()
     second.send_raw(pack({**second.envelope("contact_event", True), "contact_id": 10,
@@ -132,7 +132,7 @@ def test_a_second_master_cannot_lift_the_first_masters_contact(slave, masters, b
     assert _pad_down(slave)
     assert slave.counters()["not_peer"] - before["not_peer"] == 1
     first.touch(10, touching=False)
-    assert first.pump(3.0, until=lambda: first.of("contact_event", contact_id=10,
+    assert first.pump(GUARD_S, until=lambda: first.of("contact_event", contact_id=10,
                                                   touching=False))
     assert_pad_safe(slave)
 
@@ -161,7 +161,7 @@ def test_sigterm_mid_contact_lifts_the_pad_and_says_stopping(slave, curve_keys):
         m.connect()
         _touch_down(m, slave, 20)
         slave.proc.send_signal(signal.SIGTERM)
-        assert m.pump(10.0, until=lambda: m.of("status", state="stopping"))
+        assert m.pump(GUARD_S, until=lambda: m.of("status", state="stopping"))
         lift = m.of("contact_event", contact_id=20, touching=False)
         stopping = m.of("status", state="stopping")[0]
         assert lift and lift[0]["seq"] < stopping["seq"]

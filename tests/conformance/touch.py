@@ -3,10 +3,11 @@ case ends with."""
 
 from __future__ import annotations
 
+from conftest import GUARD_S
 from doc_peer import DocMaster
 
 
-def final_estimate(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
+def final_estimate(master: DocMaster, contact_id: int, timeout_s: float = GUARD_S) -> dict:
     """The contact's final material_estimate (section 6a: decisions only,
     then the final one): decided with any reason but "confident group", or
     a group that repeats the previous decision's label (a pair that stood
@@ -23,17 +24,17 @@ def final_estimate(master: DocMaster, contact_id: int, timeout_s: float = 10.0) 
     return final()[-1]
 
 
-def touch(master: DocMaster, contact_id: int, timeout_s: float = 10.0) -> dict:
+def touch(master: DocMaster, contact_id: int, timeout_s: float = GUARD_S) -> dict:
     """Touch, wait for the slave's decision (and trajectory), lift, wait for
     the slave's lift. Returns the decided estimate."""
     master.touch(contact_id, True)
     estimate = final_estimate(master, contact_id, timeout_s)
     if estimate["label"] != "unknown" and estimate["reason"] != "confident group":
-        assert master.pump(2.0, until=lambda: master.of("flux_trajectory",
+        assert master.pump(GUARD_S, until=lambda: master.of("flux_trajectory",
                                                         contact_id=contact_id)), \
             f"contact {contact_id}: decided {estimate['label']} but no flux_trajectory"
     master.touch(contact_id, False)
-    assert master.pump(3.0, until=lambda: master.of("contact_event", contact_id=contact_id,
+    assert master.pump(GUARD_S, until=lambda: master.of("contact_event", contact_id=contact_id,
                                                     touching=False)), \
         f"contact {contact_id}: the slave never lifted"
     return estimate

@@ -1,7 +1,9 @@
 """A real master and slave with the fault proxy between them: the
 compensated rendering under 200 ms of delay, and what a 2 s partition in the
-middle of a contact leaves behind. Rendering figures only; no wall-clock
-figure is asserted."""
+middle of a contact leaves behind. No wall-clock figure is asserted, nor
+what a loaded machine changes in a real-clock touch (its safety events and
+its flux error: tests/realclock.py says where they are counted); each test
+makes the state it needs (the module's services are shared, in order)."""
 
 import contextlib
 import subprocess
@@ -10,13 +12,14 @@ import threading
 import time
 
 import pytest
+from realclock import assert_rendered, assert_safe_under_load
 
 from telethermal.errors import TransportError
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.run import PRE_CONTACT_S, with_finger
+from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -52,9 +55,10 @@ def proxy_between(out, link: str, both: str, master_admin: int):
     finally:
         proxy.terminate()
         proxy.wait(10)
-        gone = _wait_for(lambda: not call(master_admin, "status")["peer_alive"], 10)
+        # A hang guard: the master declares the peer dead after 1 s of silence.
+        gone = _wait_for(lambda: not call(master_admin, "status")["peer_alive"], 60)
     # (Reached only when the block did not raise: its own error comes first.)
-    assert gone, "the master did not see the link go within 10 s of the proxy's end"
+    assert gone, "the master did not see the link go within 60 s of the proxy's end"
 
 
 def touch_again(services, ports, seed):
@@ -73,22 +77,15 @@ def touch_through(out, services, ports, link, both: str, seed=5):
 
 
 def test_200_ms_of_delay_renders_safely_and_loses_nothing(link):
-    # What holds at 200 ms one way: nothing trips, nothing of the lossless
-    # stream is lost, and after identification the flux is still within 5 %
-    # of peak. The issue's target (the whole contact within 1.2x of zero
-    # delay) is NOT met yet: `bench faults` measures about 2x, because the
-    # posteriors the master renders before identification arrive 2 x 200 ms
-    # late. It is reported there, not asserted here.
-    # The flux bound is the zero-delay target (5 % of peak) plus what the
-    # idle policy trades on an insulator under delay: the pad idles 4.3 K
-    # under an unknown object (best for the worst material, aluminium) and
-    # holds there while the decision is 0.4 s late, so wood's flux after the
-    # decision rises (simulated network, 200 ms, 5 seeds: 3.9 % mean, 1.5 %
-    # with the pad idling at the object; these processes, seed 5: 5.2 %).
+    # What holds at 200 ms one way: nothing of the lossless stream is lost,
+    # the touch renders the decision, no fault but a stall's. The flux error
+    # under delay (the issue's target: the whole contact within 1.2x of zero
+    # delay) is `bench faults`' figure (simulated network, and these
+    # processes against its spread), a real-clock outcome here.
     out, services, ports, text = link
     slow, counters = touch_through(out, services, ports, text, "delay_s = 0.2\n")
-    assert slow["flux_rms_error_rel"] < 0.08
-    assert slow["safety_events"] == 0
+    assert_rendered(slow)
+    assert_safe_under_load(slow)
     assert counters["refused_by_window"] == 0 and counters["invalid"] == 0
 
 
@@ -98,11 +95,12 @@ def test_a_partition_mid_contact_is_survived_and_counted(link):
     # blackhole covers 2 s from 2.5 s after the proxy started: mid-contact.
     result, counters = touch_through(out, services, ports, text,
                                      "delay_s = 0.005\npartitions = [[2.5, 2.0]]\n")
-    assert result["safety_events"] == 0
+    assert_safe_under_load(result)
     assert counters["refused_by_window"] == 0 and counters["invalid"] == 0
     # After the partition the link is back: a second touch renders normally.
     again, _ = touch_through(out, services, ports, text, "delay_s = 0.005\n", seed=6)
-    assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
+    assert_rendered(again)
+    assert_safe_under_load(again)
 
 
 def _wait_for(predicate, timeout_s):
@@ -118,33 +116,41 @@ def _wait_for(predicate, timeout_s):
 
 
 def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
-    # SIGKILL the slave 0.5 s into the contact and start it again: the touch
-    # under way ends without a safety event (a trajectory that arrived before
-    # the crash, or the object's remembered material, is held through it;
-    # with neither, the display goes to neutral once the link is dead), and
-    # the restarted slave (its object memory gone) is found again and
-    # renders the next touch.
+    # SIGKILL the slave once its pad is on the object and start it again:
+    # the touch under way is held through it on the object's remembered
+    # material (this test's first touch decides wood on the object "wood";
+    # the slave announces it, the master renders it from t = 0, and a
+    # recollection is valid like a final estimate), so the display never
+    # goes to neutral for a dead link; and the restarted slave (its object
+    # memory gone) is found again and renders the next touch.
     out, services, ports, text = link
 
+    touching = []
+
     def crash():
-        time.sleep(PRE_CONTACT_S + 0.5)
+        # Mid-contact: once the slave's pad is down (a hang guard of 60 s).
+        touching.append(_wait_for(lambda: call(ports[2], "status")["state"] == "touching", 60))
         services.kill("slave")
         time.sleep(0.5)
         services.start("slave")
 
     with proxy_between(out, text, "delay_s = 0.005\n", ports[3]):
         wait_connected(services, ports[3], timeout_s=60)
+        first = networked_touch(SCENE, "wood", ports, 6, 2.0).summary
+        assert first["identified"] == "wood"             # the memory this test relies on
+        # Placed as networked_touch will place it, until the master has heard
+        # the announcement with the memory (networked_touch waits 2 s alone).
+        placed = call(ports[2], "place", material="wood", seed=7)
+        assert placed["object_material"] == "wood"
+        assert _wait_for(lambda: call(ports[3], "status")["object_material"] == "wood", 60)
         under = networked_touch(SCENE, "wood", ports, 7, 2.0, during=crash).summary
-        assert under["safety_events"] == 0
-        # Held through the crash: a trajectory that arrived before it, or the
-        # object's remembered material (earlier tests decided wood on this
-        # object: the slave announced it, the master rendered it from t = 0,
-        # and a recollection is valid like a final estimate).
-        held = under["trajectory_at_s"] is not None and under["trajectory_at_s"] < 0.5 or \
-            under["link_counters"]["memory_used"] > 0
-        assert under["display_event_counts"].get("link lost", 0) == (0 if held else 1)
+        assert touching == [True]                        # killed with its pad down
+        assert_safe_under_load(under)
+        assert under["object_memory"] == "wood"          # this contact began with it
+        assert under["display_event_counts"].get("link lost", 0) == 0
         again = touch_again(services, ports, 8)
-    assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
+    assert_rendered(again)
+    assert_safe_under_load(again)
 
 
 def test_a_master_crash_mid_contact_lifts_the_slave_and_a_new_master_renders(link):
@@ -164,13 +170,15 @@ def test_a_master_crash_mid_contact_lifts_the_slave_and_a_new_master_renders(lin
 
         toucher = threading.Thread(target=touch)
         toucher.start()
-        assert _wait_for(lambda: call(ports[2], "status")["state"] == "touching", 5)
+        assert _wait_for(lambda: call(ports[2], "status")["state"] == "touching", 60)
         services.kill("master")
         toucher.join()
         assert isinstance(outcome[0], TransportError)          # no reply: the master died
-        # The slave notices within its dead_after_s and lifts its pad.
-        assert _wait_for(lambda: call(ports[2], "status")["state"] == "idle", 5)
+        # The slave notices after its dead_after_s and lifts its pad (a hang
+        # guard: how soon is a real-clock figure).
+        assert _wait_for(lambda: call(ports[2], "status")["state"] == "idle", 60)
         assert call(ports[2], "status")["masters_lost"] == lost_before + 1
         services.start("master")
         again = touch_again(services, ports, 10)
-    assert again["flux_rms_error_rel"] < 0.05 and again["safety_events"] == 0
+    assert_rendered(again)
+    assert_safe_under_load(again)

@@ -5,9 +5,10 @@ from pathlib import Path
 
 import pytest
 
+from realclock import assert_rendered, assert_safe_under_load
+
 from telethermal.cli import main
 from telethermal.control.loop import DEFAULT_RATE_HZ
-from telethermal.control.safety import Fault
 from telethermal.physics.scene import load_scene
 from telethermal.services.config import ConfigError, load_config
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
@@ -41,23 +42,16 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     # The same touch in one process (same seeds, so the same physics).
     local = run_session(SCENE, "wood", identifier, generator, contact_s=1.5, seed=4).summary
     assert codes == {"slave": 0, "master": 0}
-    if devices == "emulated" and s["safety_events"]:
-        # A stall of the master's process longer than the Peltier board's
-        # watchdog (0.1 s; this machine stalls now and then under load) has
-        # the board disable itself: the right safe state, and the only one
-        # allowed here, with the stall that explains it on record.
-        faults = {k for k in s["safety_event_counts"] if k in {f.value for f in Fault}}
-        assert faults == {Fault.FLUX_NOT_FINITE.value}, s["safety_event_counts"]
-        assert s["device_counters"]["driver_board"]["watchdog_trips"] >= 1, s
-        assert s["loop"]["period_max_us"] > 0.1e6, s["loop"]
-    else:
-        assert s["safety_events"] == 0, s["safety_event_counts"]
+    # The touch ran on the real clock: its safety events and its flux error
+    # are the machine's load's as much as the code's (tests/realclock.py
+    # says where they are counted and asserted instead). What load cannot
+    # change: no fault but a stall's, no event without a stall on record;
+    # the touch identified as in one process and rendered from it.
+    assert_safe_under_load(s, devices)
     assert s["identified"] == local["identified"]
     assert s["unknown_reason"] is None            # named: nothing to explain
-    # Over the network the slave touches when the master's contact event
-    # reaches it and the loop runs on the real clock; the rendering stays
-    # within a few percent of peak, like the in-process session.
-    assert s["flux_rms_error_rel"] < 0.05 and math.isfinite(local["flux_rms_error_rel"])
+    assert_rendered(s)
+    assert math.isfinite(local["flux_rms_error_rel"])
     assert s["transport"]["invalid"] == 0 and s["transport"]["refused_by_window"] == 0
     assert s["devices"] == devices
     if devices == "emulated":
@@ -133,8 +127,8 @@ def test_master_and_slave_in_two_network_namespaces(tmp_path, models):
         finally:
             codes = services.stop()
     assert codes == {"slave": 0, "master": 0}
-    assert result.summary["safety_events"] == 0
-    assert result.summary["flux_rms_error_rel"] < 0.05
+    assert_safe_under_load(result.summary)        # real clock: tests/realclock.py
+    assert_rendered(result.summary)
     assert result.summary["transport"]["invalid"] == 0
     # Nothing of the namespaces is left behind.
     import subprocess
@@ -157,8 +151,8 @@ def _place(ports, material: str, object_id: str, seed: int) -> dict:
 def _touch(ports, seed: int) -> dict:
     from telethermal.services.admin import call
     result = call(ports[3], "touch", timeout_s=40, contact_s=1.0, seed=seed)
-    assert result["ok"] and result["safety_events"] == 0, \
-        (result.get("safety_event_counts"), result.get("display_event_counts"))
+    assert result["ok"], result
+    assert_safe_under_load(result)                # real clock: tests/realclock.py
     return result
 
 

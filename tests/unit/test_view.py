@@ -30,6 +30,32 @@ STATE = {"contact_id": 2, "touching": True, "phase": "render", "safe": False,
          "estimate_t_s": 0.5}
 
 
+def _until(done, what: str, guard_s: float = 30.0) -> None:
+    """Wait for ``done()`` (a hang guard: how soon is the machine's load's)."""
+    end = time.monotonic() + guard_s
+    while not done():
+        assert time.monotonic() < end, what
+        time.sleep(0.01)
+
+
+def _subscribed(pub: ViewPublisher, sub) -> None:
+    """Until the SUB's subscription has reached the PUB (a PUB drops what it
+    sends before: ZeroMQ's slow joiner): probes on the PUB's own socket,
+    outside the view stream's numbering, until one arrives, then read up to
+    the last one sent (one connection: in order), so none is left before
+    the test's messages. A hang guard of 30 s."""
+    sent, got = [], None
+    end = time.monotonic() + 30.0
+    while got is None:
+        assert time.monotonic() < end, "the subscription never reached the publisher"
+        sent.append(f"probe {len(sent)}".encode())
+        pub.sock.send(sent[-1])
+        got = sub.recv() if sub.poll(10) else None
+    while got != sent[-1]:
+        assert sub.poll(30_000), "a probe sent after the subscription was lost"
+        got = sub.recv()
+
+
 @pytest.fixture
 def publisher_and_sub():
     pub = ViewPublisher(0, 2000.0)
@@ -37,7 +63,7 @@ def publisher_and_sub():
     sub.linger = 0
     sub.setsockopt(zmq.SUBSCRIBE, b"")
     sub.connect(f"tcp://127.0.0.1:{pub.port}")
-    time.sleep(0.2)                                  # the subscription reaches the PUB
+    _subscribed(pub, sub)
     yield pub, sub
     pub.close()
     sub.close(linger=0)
@@ -131,7 +157,17 @@ def test_feed_turns_both_streams_into_frames(publisher_and_sub):
     q = feed.frames.subscribe()
     from telethermal.wire.codec import encode
     try:
-        time.sleep(0.3)
+        # Both subscriptions made before the test's messages (slow joiner):
+        # on the master's stream a probe the feed counts as invalid, on the
+        # slave's a flux setpoint (neither adds to the batches' counts).
+        def probe(sock, data, counter):
+            sock.send(data)
+            return feed.counters[counter] > 0
+
+        _until(lambda: probe(pub.sock, b"probe", "invalid"), "the feed never heard the master")
+        setpoint = encode({"kind": "flux_setpoint", "v": 1, "seq": 1, "sent_s": time.monotonic(),
+                           "contact_id": 2, "t_since_contact_s": 0.0, "flux_w_m2": 1.0})
+        _until(lambda: probe(slave_pub, setpoint, "setpoints"), "the feed never heard the slave")
         now = time.monotonic()
         for k in range(BATCH):
             pub.period(now + k / 1000, 1000.0, -10.0, 30.0, 4.0, lambda: dict(STATE))
@@ -141,7 +177,7 @@ def test_feed_turns_both_streams_into_frames(publisher_and_sub):
                                "force_n": [1.0] * 10}))
         got = {"master": 0, "slave": 0}
         state = None
-        end = time.monotonic() + 3
+        end = time.monotonic() + 30                       # a hang guard
         while time.monotonic() < end and not (got["master"] and got["slave"] and state):
             try:
                 f = q.get(timeout=0.5)
