@@ -28,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -40,9 +41,13 @@ from pathlib import Path
 import pytest
 import yaml
 
+from realclock import stalled
+
 from telethermal.record.recording import read_recording
 
 pytestmark = pytest.mark.compose
+#: The warnings a stalled display loop causes (tests/realclock.py).
+STALL_WARNING = re.compile(r"safe state entered: surface out of band|link lost mid-contact")
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = "telethermal-test-base:bookworm"
@@ -425,7 +430,15 @@ def test_up_waits_for_training_then_a_touch_through_exec(stack, timings):
     assert "identified wood" in r.stdout and "against direct contact with wood" in r.stdout, \
         r.stdout
     logs = stack("logs", "--no-color", "slave", "master").stdout
-    assert " WARNING " not in logs and " ERROR " not in logs, logs[-3000:]
+    assert " ERROR " not in logs, logs[-3000:]
+    warnings = [line for line in logs.splitlines() if " WARNING " in line]
+    if warnings:
+        # Only what a stalled display loop causes, with the stall on record
+        # (tests/realclock.py: a loaded machine's outcome, not the stack's).
+        assert all(STALL_WARNING.search(line) for line in warnings), warnings
+        report = json.loads(stack("exec", "-T", "master", "telethermal", "admin", "--json",
+                                  "report", timeout_s=60).stdout)
+        assert stalled(report["loop"]), (warnings, report["loop"])
     assert "touch over contact_id=1" in logs
 
 
