@@ -83,15 +83,6 @@ def calibrate_drawn(scene, built) -> tuple:
     return cal, time.process_time() - start, truth_of(built.as_built, gain)
 
 
-def design_value(scene, name: str) -> float:
-    """A layer candidate's design value: its resistance per area ``L / k``
-    (m^2 K/W) or heat capacity per area ``L rho c`` (J/(m^2 K))."""
-    lay = scene.pad.layers[int(name[7:name.index("]")])]
-    if name.endswith(".resistance"):
-        return lay.thickness_m / lay.material.conductivity_w_mk
-    return lay.thickness_m * lay.material.volumetric_heat_j_m3k
-
-
 def lumped_truth(scene, names, truth: dict) -> float:
     """The true factor of the quantity a parameter scales. One member: its
     truth. Lumped (layers' resistances together, or heat capacities
@@ -99,11 +90,11 @@ def lumped_truth(scene, names, truth: dict) -> float:
     every member by one factor, so it scales the group's total ``sum x_i``
     (the layers in series: their resistance, their heat capacity) by it;
     the true factor of that total is ``sum x_i f_i / sum x_i``, the
-    members' factors weighted by their design values ``x_i``."""
-    if len(names) == 1:
-        return truth[names[0]]
-    x = [design_value(scene, n) for n in names]
-    return sum(xi * truth[n] for xi, n in zip(x, names)) / sum(x)
+    members' factors weighted by their design values ``x_i``
+    (:func:`~telethermal.ident.calibration.lump_weights`: the calibration's
+    intervals are for that total)."""
+    from telethermal.ident.calibration import lump_weights
+    return sum(w * truth[n] for w, n in zip(lump_weights(scene, names), names))
 
 
 def coverage(cal, truth: dict, scene) -> list[dict]:

@@ -20,7 +20,8 @@ def cmd_calibrate_pad(args) -> int:
     with console.status(f"reading {data}"):
         trials = load_dataset(data)
     with console.status(f"fitting {scene.name}'s pad model to the reference touches"):
-        cal = calibrate_pad(scene, trials, args.window_s)
+        cal = calibrate_pad(scene, trials, args.window_s, *(
+            () if args.design_sd is None else (args.design_sd,)))
     from telethermal.jsonfile import write_text
     from telethermal.teleop.display_calibration import keep_other_tables
     write_text(args.out, cal.to_toml() + keep_other_tables(args.out, "pad"))
@@ -54,6 +55,10 @@ def add_parser(sub) -> None:
     q.add_argument("--out", required=True, help="the calibration file to write (TOML)")
     q.add_argument("--window-s", type=float, default=1.0,
                    help="seconds of each touch fitted from the onset (default 1)")
+    q.add_argument("--design-sd", type=float, default=None,
+                   help="how far (log sd) the parts the touches cannot identify may be off "
+                        "their design, carried into the intervals (default 0.2: a part "
+                        "known to about 20 %%; 0: statistical intervals alone)")
     q.set_defaults(func=cmd_calibrate_pad)
     d = csub.add_parser("display", help="fit the display pad's flux sensor lag (and gain) and "
                                         "junction sensor lag from current steps with a "

@@ -65,6 +65,12 @@ CURVE_TOLERANCE_FACTOR = 1.0
 #: under this: its 95 % interval within about +-20 % (the datasheets' 10-30 %
 #: would not be narrowed otherwise).
 SD_MAX = 0.1
+#: How far (log sd) a candidate the touches cannot identify may be off its
+#: design value: a lab knows its layers from their datasheets to 10-30 %
+#: (the middle taken). The fit holds such a candidate at the design and
+#: widens the others' intervals by what it would move them
+#: (:func:`consider_sds`).
+DESIGN_SD = 0.2
 #: Columns (nuisances projected out) this parallel are one parameter.
 LUMP_COS = 0.95
 #: The residual's chi-square per degree of freedom past which the model
@@ -280,6 +286,64 @@ def marginal_sds(jac: np.ndarray, k: int) -> np.ndarray:
     ``(J^T J)^-1`` (every other parameter marginalised)."""
     cov = np.linalg.pinv(jac.T @ jac)
     return np.sqrt(np.maximum(np.diag(cov)[:k], 0.0))
+
+
+def design_value(scene, name: str) -> float:
+    """A layer candidate's design value: its resistance per area ``L / k``
+    (m^2 K/W) or its heat capacity per area ``L rho c`` (J/(m^2 K))."""
+    lay = scene.pad.layers[int(name[7:name.index("]")])]
+    if name.endswith(".resistance"):
+        return lay.thickness_m / lay.material.conductivity_w_mk
+    return lay.thickness_m * lay.material.volumetric_heat_j_m3k
+
+
+def lump_weights(scene, group) -> list[float]:
+    """What a lumped parameter (one factor on every member) stands for: the
+    members' total (layers in series: their resistance, or their heat
+    capacity), whose factor is the members' own weighted by their design
+    values; these weights (1 for one member)."""
+    if len(group) == 1:
+        return [1.0]
+    x = [design_value(scene, n) for n in group]
+    return [v / sum(x) for v in x]
+
+
+def consider_sds(fit: "PadModelFit", z: np.ndarray, free, fixed, design_sd: float,
+                 jac: np.ndarray) -> np.ndarray:
+    """The sds of the first ``len(free)`` parameters (``ln factor``) that
+    what the touches cannot tell carries into them (a "consider"
+    covariance), each such part off its design by a log sd ``design_sd``:
+
+    - a candidate held at its design value (``fixed``): where it truly is,
+      its effect on the flux is absorbed by the free parameters (and the
+      nuisances) that can mimic it;
+    - each member of a lumped parameter apart from the others: the lumped
+      factor stands for the members' total (:func:`lump_weights`), and a
+      member off alone moves the fit and that total differently.
+
+    ``jac``: the fit's Jacobian at ``z`` (free parameters, then nuisances),
+    in the residuals' noise units."""
+    k = len(free)
+    members = [(m,) for g in free if len(g) > 1 for m in g]
+    parts = [(m,) for m in fixed] + members
+    if not parts or design_sd <= 0:
+        return np.zeros(k)
+    # The parts' columns alone (one solve each), at the fit: the free
+    # factors given as fixed, a member at its group's factor, the gain kept.
+    factors = fit.split(z, free)[0]
+    gain = [z[i] for i, g in enumerate(free) if g == ("flux_gain",)]
+    at = [0.0] * len(fixed) + [math.log(factors[m]) for (m,) in members] + gain
+    groups = parts + [("flux_gain",)] * len(gain)
+    cols = fit.jacobian(np.concatenate([at, z[k:]]), groups, fixed=factors)[:, :len(parts)]
+    shift, *_ = np.linalg.lstsq(jac, cols, rcond=None)     # d z / d ln(part's factor)
+    shift = shift[:k]
+    # A member moves its own lumped quantity by its weight: the fit's error
+    # on that quantity is the fit's shift less that.
+    for j, (m,) in enumerate(members, start=len(fixed)):
+        for i, g in enumerate(free):
+            if m in g:
+                shift[i, j] -= lump_weights(fit.scene, g)[g.index(m)]
+    return design_sd * np.sqrt(np.sum(shift ** 2, axis=1))
 
 
 def projected_columns(jac: np.ndarray, k: int) -> np.ndarray:

@@ -20,8 +20,9 @@ import numpy as np
 from telethermal.errors import CalibrationError
 from telethermal.physics.figures import DESCRIPTIVE_FIELDS, physical
 from telethermal.tomltables import toml_str
-from telethermal.ident.calibration import (CHI2_MAX, WINDOW_S, PadModelFit, ReferenceTouches,
-                                           candidates, describe, marginal_sds,
+from telethermal.ident.calibration import (CHI2_MAX, DESIGN_SD, WINDOW_S, PadModelFit,
+                                           ReferenceTouches, candidates, consider_sds,
+                                           describe, marginal_sds,
                                            projected_columns, scaled_scene, select)
 from telethermal.ident.openset import Z95
 
@@ -78,6 +79,9 @@ class PadCalibration:
     touches: int
     materials: tuple[str, ...]
     source: str = ""
+    #: The log sd of the parts it could not identify that its intervals
+    #: carry (``ident.calibration.consider_sds``; 0: statistical alone).
+    design_sd: float = DESIGN_SD
 
     def factors(self) -> dict:
         """Candidate name -> factor on its design value (the gain apart)."""
@@ -119,6 +123,9 @@ class PadCalibration:
         if self.not_identifiable:
             lines.append("  not identifiable from these touches (design value kept): "
                          + ", ".join(self.not_identifiable))
+        if self.design_sd > 0:
+            lines.append(f"  the intervals carry what the touches cannot tell (each such part "
+                         f"of the pad off its design by a log sd of {self.design_sd:g})")
         return lines
 
     # ------------------------------------------------------------ the file
@@ -130,7 +137,7 @@ class PadCalibration:
                f"chi2_per_dof = {self.chi2_per_dof!r}", f"touches = {self.touches}",
                "materials = [" + ", ".join(map(toml_str, self.materials)) + "]",
                "not_identifiable = [" + ", ".join(map(toml_str, self.not_identifiable))
-               + "]"]
+               + "]", f"design_sd = {self.design_sd!r}"]
         for p in self.parameters:
             out += ["", "[[parameters]]", "names = [" + ", ".join(map(toml_str, p.names))
                     + "]", f"label = {toml_str(p.label)}", f"factor = {p.factor!r}",
@@ -169,8 +176,9 @@ class PadCalibration:
                    _number(data, "flux_gain", source),
                    _number(data, "flux_gain_sd", source, positive=False),
                    _number(data, "chi2_per_dof", source, positive=False),
-                   touches, _strings(data, "materials", source),
-                   source)
+                   touches, _strings(data, "materials", source), source,
+                   # A file written before the key: statistical intervals alone.
+                   _number(data, "design_sd", source, positive=False, default=0.0))
 
     def to_dict(self) -> dict:
         return tomllib.loads(self.to_toml())
@@ -203,10 +211,10 @@ def _field(table: dict, key: str, kind, source: str, default=_MISSING, where: st
 
 
 def _number(table: dict, key: str, source: str, where: str = "",
-            positive: bool = True) -> float:
+            positive: bool = True, default=_MISSING) -> float:
     """A finite number > 0 (``positive``), else >= 0."""
     name = f"{where}.{key}" if where else key
-    value = _field(table, key, (int, float), source, where=where)
+    value = _field(table, key, (int, float), source, default, where=where)
     if isinstance(value, bool) or not math.isfinite(value) or value < 0 or \
             (positive and value == 0):
         raise CalibrationError(f"{source}: {name}: {value!r}; must be a finite number "
@@ -267,14 +275,20 @@ def amplitude_sd(scene) -> float:
     return float(np.mean([np.std(a) / np.mean(a) for a in draws["amp"].values()]))
 
 
-def calibrate_pad(scene, trials, window_s: float = WINDOW_S) -> PadCalibration:
+def calibrate_pad(scene, trials, window_s: float = WINDOW_S,
+                  design_sd: float = DESIGN_SD) -> PadCalibration:
     """Fit ``scene``'s pad model to reference ``trials`` (see
-    :mod:`telethermal.ident.calibration`); refused with the reason when
-    the touches cannot calibrate it."""
-    return calibrate_touches(scene, ReferenceTouches.from_trials(trials, window_s))
+    :mod:`telethermal.ident.calibration`; ``design_sd``: how far, log sd,
+    the parts the touches cannot identify may be off their design);
+    refused with the reason when the touches cannot calibrate it."""
+    if not (0.0 <= design_sd <= 1.0):
+        raise CalibrationError(f"design_sd = {design_sd!r}: a log sd in [0, 1] (0.2: a part "
+                               "known to about 20 %)")
+    return calibrate_touches(scene, ReferenceTouches.from_trials(trials, window_s), design_sd)
 
 
-def calibrate_touches(scene, touches: ReferenceTouches) -> PadCalibration:
+def calibrate_touches(scene, touches: ReferenceTouches,
+                      design_sd: float = DESIGN_SD) -> PadCalibration:
     """:func:`calibrate_pad` of touches already read."""
     from telethermal.ident.oracle import flux_noise_w_m2
 
@@ -294,7 +308,8 @@ def calibrate_touches(scene, touches: ReferenceTouches) -> PadCalibration:
     log.info("pad calibration: %d touches, %d evaluations, %.1f s of CPU, chi2/dof %.3f",
              n, result.nfev, time.process_time() - start, chi2)
     _refuse_misfit(fit, result, touches, chi2, fit.split(result.x, free)[4])
-    sds = marginal_sds(result.jac, len(free)) * math.sqrt(max(1.0, chi2))
+    sds = np.hypot(marginal_sds(result.jac, len(free)) * math.sqrt(max(1.0, chi2)),
+                   consider_sds(fit, result.x, free, fixed, design_sd, result.jac))
     params = tuple(CalibratedParameter(g, " + ".join(describe(scene, m) for m in g),
                                        math.exp(v), math.exp(v - Z95 * sd), math.exp(v + Z95 * sd))
                    for g, v, sd in zip(free, result.x, sds))
@@ -305,7 +320,7 @@ def calibrate_touches(scene, touches: ReferenceTouches) -> PadCalibration:
         float(scene.pad.contact_conductance_w_m2k * math.exp(float(np.mean(log_h)))),
         gain.factor if gain else 1.0,
         float((math.log(gain.hi) - math.log(gain.lo)) / (2 * Z95)) if gain else 0.0,
-        float(chi2), n, tuple(sorted(set(touches.labels))))
+        float(chi2), n, tuple(sorted(set(touches.labels))), design_sd=float(design_sd))
 
 
 def amplitude_z(touches: ReferenceTouches, log_a: np.ndarray, sd: float) -> dict:

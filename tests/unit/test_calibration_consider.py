@@ -1,0 +1,87 @@
+"""The pad calibration's intervals carry what the touches cannot tell
+(``ident.calibration.consider_sds``): a candidate held at its design value,
+and a lumped parameter's members apart. On a linear model the fit's error
+is exactly the consider shift times how far the part is off, so the
+consider sd is checked against the least-squares error itself (closed
+form, to 1e-9)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from telethermal.ident.calibration import consider_sds, lump_weights
+from telethermal.physics.scene import load_scene
+
+
+class Linear:
+    """Residuals linear in the log factors: each candidate's column, then
+    the nuisances' (as the pad fit's, without its curves)."""
+
+    def __init__(self, columns: dict, nuisances: np.ndarray, scene=None):
+        self.columns, self.nuisances, self.scene = columns, nuisances, scene
+
+    def split(self, z, free):
+        factors = {}
+        for group, value in zip(free, z[:len(free)]):
+            for name in group:
+                factors[name] = math.exp(value)
+        return factors, 0.0, None, None, None
+
+    def jacobian(self, z, free, fixed=None):
+        cols = [sum(self.columns[m] for m in g) for g in free]
+        return np.column_stack(cols + [self.nuisances])
+
+
+def _fit_error(model: Linear, free, truth: dict) -> np.ndarray:
+    """The least-squares estimate of the free groups' log factors less the
+    true ones, the data made by ``truth`` (log factors of every candidate)."""
+    data = sum(model.columns[m] * v for m, v in truth.items())
+    jac = model.jacobian(None, free)
+    est = np.linalg.lstsq(jac, data, rcond=None)[0][:len(free)]
+    return est, jac
+
+
+def test_a_held_candidate_off_its_design_moves_the_fit_by_its_consider_shift():
+    rng = np.random.default_rng(0)
+    cols = {n: rng.normal(size=200) for n in ("a", "b", "c")}
+    cols["c"] = 0.6 * cols["a"] + 0.3 * rng.normal(size=200)    # c mimics a, partly
+    model = Linear(cols, rng.normal(size=(200, 3)))
+    free, sd = [("a",), ("b",)], 0.2
+    truth = {"a": 0.05, "b": -0.02, "c": sd}                     # c one sd off
+    est, jac = _fit_error(model, free, truth)
+    err = est - np.array([truth["a"], truth["b"]])
+    got = consider_sds(model, np.zeros(2 + 3), free, ["c"], sd, jac)
+    assert abs(err[0]) > 0.05                                   # a real bias
+    np.testing.assert_allclose(got, np.abs(err), rtol=1e-9, atol=1e-12)
+    # Nothing held, or a design taken as exact: no widening.
+    assert not consider_sds(model, np.zeros(5), free, [], sd, jac).any()
+    assert not consider_sds(model, np.zeros(5), free, ["c"], 0.0, jac).any()
+
+
+def test_a_lumped_parameter_s_members_apart_are_carried_against_their_total():
+    """Two layers' resistances lumped: the factor stands for their total
+    (weights: their design resistances); each member off alone by one sd
+    errs the fit by (its shift less its weight) sd; the consider sd is the
+    quadrature of the two."""
+    scene = load_scene("fingertip-7")
+    names = ("layers[0].resistance", "layers[1].resistance")
+    w = lump_weights(scene, names)
+    assert math.isclose(sum(w), 1.0) and all(0 < x < 1 for x in w)
+    rng = np.random.default_rng(1)
+    base = rng.normal(size=300)
+    cols = {names[0]: base + 0.2 * rng.normal(size=300),
+            names[1]: 0.7 * base + 0.2 * rng.normal(size=300), "flux_lag_s": rng.normal(size=300)}
+    model = Linear(cols, rng.normal(size=(300, 2)), scene)
+    free, sd = [names, ("flux_lag_s",)], 0.2
+    errors = []
+    for i in range(2):
+        truth = {names[0]: 0.0, names[1]: 0.0, "flux_lag_s": 0.0}
+        truth[names[i]] = sd
+        est, jac = _fit_error(model, free, truth)
+        errors.append(est[0] - w[i] * sd)                          # against the total's factor
+    got = consider_sds(model, np.zeros(2 + 2), free, [], sd, jac)
+    assert got[0] == pytest.approx(math.hypot(*errors), rel=1e-9)
+    assert got[0] > 0.01
