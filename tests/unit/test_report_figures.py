@@ -57,6 +57,12 @@ def test_reduced_options_are_those_that_change_what_is_measured():
     assert reduced_options("telethermal bench identify --json OUT --png PNG (copied by "
                            "hand)") == []
     assert reduced_options("unbalanced 'quote --quick") == ["--quick"]
+    # The as-built benches at the issue's sd and pad count are the benches
+    # themselves; fewer pads or another sd are a reduction.
+    assert reduced_options("telethermal bench identify --as-built 0.15 --json x") == []
+    assert reduced_options("telethermal bench unseen --as-built=0.15 --pads 5 --json x") == []
+    assert reduced_options("telethermal bench identify --as-built 0.3 --pads 2 --json x") == [
+        "--as-built 0.3", "--pads 2"]
 
 
 def test_a_reduced_run_is_named_in_the_report(tmp_path):

@@ -28,6 +28,9 @@ def _load(results: Path, name: str) -> dict | None:
 #: Options that say where a bench writes or how many workers it uses, not
 #: what it measures.
 OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs"})
+#: Options at the value the issue's targets name: which bench, not a
+#: reduction of it (``bench identify --as-built 0.15``, its 5 pads).
+TARGET_OPTIONS = frozenset({"--as-built 0.15", "--pads 5"})
 
 
 def reduced_options(command: str) -> list[str]:
@@ -46,8 +49,10 @@ def reduced_options(command: str) -> list[str]:
         if name in OUTPUT_OPTIONS:
             continue
         value = words[i + 1] if "=" not in word and i + 1 < len(words) else ""
-        out.append(word if "=" in word or not value or value.startswith("--")
-                   else f"{word} {value}")
+        option = word if "=" in word or not value or value.startswith("--") \
+            else f"{word} {value}"
+        if option.replace("=", " ") not in TARGET_OPTIONS:
+            out.append(option)
     return out
 
 
@@ -447,13 +452,29 @@ def unseen(out: Path, d: dict) -> list[str]:
     return unseen_section(out, d) + [_provenance(d), ""]
 
 
+def _as_built(title: str, module: str):
+    """A section of an as-built bench's JSON: its own text, its provenance."""
+    def section(out: Path, d: dict) -> list[str]:
+        import importlib
+        lines = importlib.import_module(f"telethermal.bench.{module}").text_lines(d["as_built"])
+        stopped = [f"*{d['stopped']}*", ""] if d.get("stopped") else []
+        return [f"## {title}", "", "```", *lines, "```", "", *stopped, _provenance(d), ""]
+    return section
+
+
 SECTIONS = (("physics", physics), ("identify", identify), ("render", render),
             ("transport", transport), ("faults", faults), ("devices", devices),
             ("record", record), ("view", view), ("unseen", unseen))
 #: Reported when its JSON is there, not run by the Makefile's bench targets:
 #: ``telethermal bench skin-floor`` takes 20 minutes at its defaults (10
-#: with --quick), past bench-quick's 3 and most of bench's 15.
-BY_HAND = (("skin-floor", skin_floor),)
+#: with --quick), past bench-quick's 3 and most of bench's 15; the as-built
+#: benches (``bench identify|unseen --as-built 0.15``) calibrate five pads,
+#: 10-40 minutes each run.
+BY_HAND = (("skin-floor", skin_floor),
+           ("identify-as-built", _as_built("Identification on pads built off their datasheet",
+                                           "identify_as_built")),
+           ("unseen-as-built", _as_built("Unseen materials on pads built off their datasheet",
+                                         "unseen_as_built")))
 
 
 def write_report(results: str | Path, out_md: str | Path, command: str = "") -> Path:

@@ -99,6 +99,16 @@ def cmd_bench_identify(args) -> int:
     return 0
 
 
+def _stamp() -> dict:
+    """An as-built bench's provenance: its command, the machine, the date."""
+    import datetime
+    import os
+    import platform
+    return {"command": _command(), "machine": f"{platform.node()} ({platform.machine()}, "
+            f"{os.cpu_count()} CPUs, Python {platform.python_version()})",
+            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+
 def _bench_identify_as_built(args) -> int:
     from telethermal.bench import identify_as_built as ab
     from telethermal.jsonfile import write_json
@@ -106,8 +116,8 @@ def _bench_identify_as_built(args) -> int:
     with _progress(1 + 3 * args.pads, "bench identify --as-built") as advance:
         section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
                          progress=advance, partial=lambda part: write_json(
-                             args.json, {"as_built": part, "command": _command()}))
-    write_json(args.json, {"as_built": section, "command": _command()})
+                             args.json, {"as_built": part, **_stamp()}))
+    write_json(args.json, {"as_built": section, **_stamp()})
     _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
     return 0
 
@@ -159,8 +169,8 @@ def _bench_unseen_as_built(args) -> int:
     with _progress(1 + 2 * args.pads, "bench unseen --as-built") as advance:
         section = ab.run(args.as_built, args.pads, args.seeds or 1, args.scene or "fingertip-7",
                          quick=args.quick, progress=advance, partial=lambda part: write_json(
-                             args.json, {"as_built": part, "command": _command()}))
-    write_json(args.json, {"as_built": section, "command": _command()})
+                             args.json, {"as_built": part, **_stamp()}))
+    write_json(args.json, {"as_built": section, **_stamp()})
     _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
     return 0
 
