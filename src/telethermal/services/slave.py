@@ -28,7 +28,7 @@ from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
-from telethermal.teleop.memory import ObjectMemory, Verdict
+from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.run import slave_rng, with_finger
 from telethermal.teleop.session import (ContactRequest, Send, ServiceState, SlaveSession,
                                         send_through)
@@ -90,16 +90,17 @@ class SlaveService:
         # Opened once the sockets are: a slave refused (a busy port) writes nothing.
         self.recorder = None
         self.stop_requested = False
-        #: The session's rules (what goes out, when): the simulated network
-        #: of ``bench faults`` runs the same object.
-        self.session = SlaveSession(self.curves, self.rate_hz)
-        self.state = ServiceState.IDLE
-        self.masters_lost = 0          # contacts ended because the master went silent
         #: The service's own error counters, reported with the transport's
-        #: (status messages and the admin socket).
+        #: (status messages and the admin socket); the session counts the
+        #: memory's (``memory_overruled``, ``memory_kept``) in them.
         self.counters = self.endpoint.extra_counters
         self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
-                             memory_overruled=0, lifted_by_place=0)
+                             lifted_by_place=0)
+        #: The session's rules (what goes out, when): the simulated network
+        #: of ``bench faults`` runs the same object.
+        self.session = SlaveSession(self.curves, self.rate_hz, counters=self.counters)
+        self.state = ServiceState.IDLE
+        self.masters_lost = 0          # contacts ended because the master went silent
         self._count_error = ErrorCount(self.counters, log)
         self.object_id: str | None = None
         self.material = ""                          # under the pad (``place``)
@@ -266,7 +267,7 @@ class SlaveService:
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
         contact_id = self.contact_id
-        sends, learned = self.session.lift(now)
+        sends, _ = self.session.lift(now)
         self._send(sends)       # the final estimate if unsent (6a), the lift event
         if self.devices is not None:
             self.devices.hold()                 # the pad leaves the object, held
@@ -277,10 +278,9 @@ class SlaveService:
                  if r["decision_time_s"] is None else decision_text(self.pad, r["identified"]))
         self.state = ServiceState.IDLE
         # The touch's decision (a material or a pair; not "unknown"), once per
-        # touch: its evidence added to this object's, what that supports
-        # announced just below; a disagreeing decision is logged and counted.
-        if learned in (Verdict.KEPT, Verdict.DOUBTED, Verdict.OVERRULED, Verdict.REPLACED):
-            self.counters["memory_overruled"] += 1        # disagreed with the memory
+        # touch: its evidence added to this object's (a disagreeing decision
+        # counted by the session and logged by the memory), what that
+        # supports announced just below.
         try:
             self.place(self.material, self._seed + 1, self.object_id)   # a fresh trial
         except TelethermalError as exc:
