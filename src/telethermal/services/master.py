@@ -34,8 +34,8 @@ from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
 from telethermal.teleop.session import MasterSession, ServiceState, send_through
-from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_idle,
-                                     display_model_args, draw_operator, master_rng,
+from telethermal.teleop.display_setup import build_display
+from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
                                      safety_summary, with_finger)
 from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
 from telethermal.wire.messages import SessionConfig, parse
@@ -61,13 +61,9 @@ class Touch:
         rng = master_rng(seed)
         self.operator = draw_operator(scene, rng)
         # Idling before the touch: pre-conditioned for what the slave expects.
-        self.idle_c, shift = display_idle(scene, cfg, self.operator.finger_ir_c,
-                                          service.link.object_temp_c,
-                                          service.link.expected_material)
-        self.display = MasterDisplay(cfg, service.link.generator,
-                                     finger_temp_c=self.operator.finger_ir_c,
-                                     idle_c=self.idle_c, precondition=shift,
-                                     **display_model_args(scene, service.display_calibration))
+        self.display, self.idle_c = build_display(scene, cfg, self.operator.finger_ir_c,
+                                                  service.link,
+                                                  calibration=service.display_calibration)
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
         opening = time.monotonic()
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
@@ -175,10 +171,9 @@ class MasterService:
         # The module behind the pad: the master commands its current.
         # The pad model (the scene's layers, the finger's contact
         # conductance) and the module behind the pad, as in simulation.
-        _, shift = display_idle(self.scene, self.display_config, cfg.finger_temp_c, None)
-        self.display = MasterDisplay(self.display_config, None, finger_temp_c=cfg.finger_temp_c,
-                                     precondition=shift,
-                                     **display_model_args(self.scene, self.display_calibration))
+        self.display, _ = build_display(self.scene, self.display_config, cfg.finger_temp_c,
+                                        self.link, calibration=self.display_calibration,
+                                        idling=False)
         self.t0 = time.monotonic()
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
                  cfg.can_bus)

@@ -50,13 +50,14 @@ from telethermal.faults.channel import Channel, Direction
 from telethermal.ident.anytime import UNKNOWN, Estimate, Reason
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import MasterDisplay, MasterStep, SlaveNews
+from telethermal.teleop.master import MasterStep, SlaveNews
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession, Send,
                                         SlaveSession)
+from telethermal.teleop.display_setup import build_display
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
-                                     display_idle, display_model_args, draw_operator, master_rng,
-                                     safety_summary, slave_rng, with_finger)
+                                     draw_operator, master_rng, safety_summary, slave_rng,
+                                     with_finger)
 from telethermal.teleop.slave import Slave
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.loglimit import LogLimiter
@@ -298,12 +299,8 @@ class SimMasterService:
         # The display has idled for what the announcement said (as the
         # services do); the oracle, knowing the material, for that material:
         # the floor of a repeated touch pre-conditions as the repeated touch does.
-        expected = oracle if oracle is not None else self.session.link.expected_material
-        self.idle_c, shift = display_idle(scene, config, finger_c,
-                                          self.session.link.object_temp_c, expected)
-        self.display = MasterDisplay(config, generator, finger_temp_c=finger_c,
-                                     idle_c=self.idle_c, precondition=shift,
-                                     **display_model_args(scene))
+        self.display, self.idle_c = build_display(scene, config, finger_c, self.session.link,
+                                                  expected_material=oracle)
         self.onset_s: float | None = None       # the display's last onset
 
     def on_message(self, m: Message, now: float) -> None:

@@ -223,6 +223,9 @@ def _replay_master(rec, params, cid, generator, gains, attached):
                            feedforward_model=d.get("feedforward_model", "static"),
                            impedance_horizon_s=d.get("impedance_horizon_s", 0.1),
                            idle=d.get("idle", "object"))
+    # Not build_display (teleop/display_setup.py), on purpose: a replay's
+    # inputs are the display's parameters as recorded (a recording of an
+    # older version included), not a scene and a link to build them from.
     # The idle policy the display applied (recordings before it: at the object).
     fractions = params.get("idle_policy") if d.get("idle") == "policy" else None
     master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
