@@ -97,3 +97,31 @@ def test_the_three_drivers_build_equal_displays_from_what_the_master_heard(train
                                wire.master.link.expected_material)
     assert wire.master.link.object_temp_c == heard.object_temp_c
     assert wire.idle_c == link_idle != pad_idle
+
+
+def test_the_in_process_run_and_the_services_report_one_decision(trained_models,
+                                                                 monkeypatch):
+    """One touch (test_master_drivers' recorded slave session, simulated
+    clock): what the slave decided, by the in-process run's and the slave
+    service's definition (its pad's estimates), and what the master service
+    reports from the estimates it heard are the same fields
+    (teleop/decision.py)."""
+    from test_master_drivers import (_models, operator_and_forces, run_service,
+                                     slave_recording)
+    from telethermal.services import master as master_service
+    from telethermal.teleop.decision import pad_decision
+
+    models = _models(trained_models.pair(SCENE, 0))
+    pads, results = [], []
+    lift = SlaveSession.lift
+    monkeypatch.setattr(SlaveSession, "lift",
+                        lambda self, now: (pads.append(self.pad), lift(self, now))[1])
+    monkeypatch.setattr(master_service, "log_touch_figures", results.append)
+    operator, forces = operator_and_forces(1.0)
+    before, arrivals, _, _ = slave_recording(models, MATERIAL, forces, operator.finger_ir_c,
+                                             reorder=True)
+    run_service(before, arrivals, len(forces), "trajectory", 1.0)
+    (pad,), (result,) = pads, results
+    slave = pad_decision(pad).fields()
+    assert slave["identified"] == MATERIAL and slave["decision_time_s"] is not None
+    assert {k: result[k] for k in slave} == slave

@@ -22,7 +22,7 @@ from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
-from telethermal.ident.anytime import UNKNOWN, unknown_reason
+from telethermal.ident.anytime import unknown_reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import ErrorCount, open_service_sockets
@@ -34,6 +34,7 @@ from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
 from telethermal.teleop.session import MasterSession, ServiceState, send_through
+from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.display_setup import build_display
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
                                      safety_summary, with_finger)
@@ -43,13 +44,6 @@ from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger("telethermal.master")
 
-
-def decided_at_s(estimates, est) -> float | None:
-    """Time after contact of the first decided estimate with ``est``'s label
-    (``est`` itself if none is among ``estimates``); None if undecided."""
-    if est is None or not est.decided:
-        return None
-    return next((e.t_s for e in estimates if e.decided and e.label == est.label), est.t_s)
 
 class Touch:
     """One operator touch in progress."""
@@ -311,8 +305,10 @@ class MasterService:
             session.trajectory_at_s - touch.origin_s
         self._send(session.close_contact(time.monotonic(), touch.operator.finger_ir_c))
         # What the slave itself decided on this touch (not the recollection
-        # the display may have rendered from; that is reported apart).
-        est = link.decision or link.latest
+        # the display may have rendered from; that is reported apart), by
+        # the definition every summary uses (teleop/decision.py).
+        decision = touch_decision(link.estimates)
+        est = decision.estimate
         loop = stats.summary(last=stats.count - touch.loop_count0)
         loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
         loop["gc_collections"] = [a - b for a, b in zip(stats.gc_collections, touch.gc0)]
@@ -322,15 +318,12 @@ class MasterService:
             "operator": vars(touch.operator), "trace": touch.sim.trace,
             "render_start_s": touch.display.rendered_from_s,
             "master_onset_s": touch.display.last_onset_s,
-            "identified": est.label if est is not None and est.decided else UNKNOWN,
+            **decision.fields(),            # identified, decision_time_s, identified_at_s
             "unknown_reason": unknown_reason(est),
             # a new material's estimate (W s^0.5/(m^2 K)) and nearest class; the
             # last window's estimate otherwise (None: the identifier gives none)
             **dict.fromkeys(EFFUSIVITY_KEYS), **(effusivity_of(est) if est is not None else {}),
             "decision_text": touch_text(est),
-            # when the slave first decided this label (a group that stood until the
-            # last window was decided at its first commitment, as the slave reports it)
-            "decision_time_s": decided_at_s(link.estimates, est),
             "object_memory": None if link.recalled is None else link.recalled.label,
             "estimates": len(link.estimates), "trajectory_at_s": trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,

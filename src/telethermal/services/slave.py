@@ -17,7 +17,7 @@ import zmq
 
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
-from telethermal.ident.anytime import UNKNOWN, Reason, unknown_reason
+from telethermal.ident.anytime import Reason, unknown_reason
 from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
@@ -28,6 +28,7 @@ from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
+from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.run import slave_rng, with_finger
 from telethermal.teleop.session import (ContactRequest, Send, ServiceState, SlaveSession,
@@ -37,18 +38,6 @@ from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, Sess
                                        given, parse)
 
 log = logging.getLogger("telethermal.slave")
-
-
-def decision_text(pad: Slave, label: str) -> str:
-    """When ``label`` was decided, and the group the pad committed to first
-    if there was one: the same words in the slave's "decided" and "touch
-    over" lines, so the two give the same time for the same touch."""
-    at_s = pad.decided_at_s(label)
-    first = pad.first_commitment
-    text = "decided at -" if at_s is None else f"decided at {at_s:.2f} s"
-    if first is not None and first.label != label:
-        text += f", after committing to {first.label} at {first.t_s:.2f} s"
-    return text
 
 
 class SlaveService:
@@ -145,7 +134,7 @@ class SlaveService:
             if isinstance(s.message, FluxTrajectory):
                 material = s.message.material
                 log.info("decided contact_id=%d material=%s (%s)", self.contact_id, material,
-                         decision_text(self.pad, material))
+                         pad_decision(self.pad).text())
 
     # ------------------------------------------------------------ instruments
     def _start_sensor_session(self, seed: int) -> None:
@@ -275,7 +264,7 @@ class SlaveService:
         r = self.last_touch
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
-                 if r["decision_time_s"] is None else decision_text(self.pad, r["identified"]))
+                 if r["identified_at_s"] is None else pad_decision(self.pad).text())
         self.state = ServiceState.IDLE
         # The touch's decision (a material or a pair; not "unknown"), once per
         # touch: its evidence added to this object's (a disagreeing decision
@@ -343,16 +332,12 @@ class SlaveService:
 
     def _report(self) -> dict:
         pad = self.pad
-        est = pad.estimate
+        decision = pad_decision(pad)
+        est = decision.estimate
         return {"material": self.material, "object_true_c": pad.object_true_c,
                 "object_ir_c": pad.object_ir_c, "onset_s": pad.onset_s,
-                "identified": est.label if est is not None and est.decided else UNKNOWN,
-                # the first commitment (a group's, when refined later)
-                "decision_time_s": (pad.committed_at_s if est is not None and est.decided
-                                    and not est.label.is_unknown else None),
-                # when the identified label itself was decided (later, after a group)
-                "identified_at_s": (pad.decided_at_s(est.label) if est is not None and
-                                    est.decided and not est.label.is_unknown else None),
+                # identified, decision_time_s, identified_at_s: teleop/decision.py
+                **decision.fields(),
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else Reason.NO_ESTIMATE,

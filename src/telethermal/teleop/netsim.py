@@ -47,13 +47,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from telethermal.faults.channel import Channel, Direction
-from telethermal.ident.anytime import UNKNOWN, Estimate, Reason
+from telethermal.ident.anytime import Estimate, Reason
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import MasterStep, SlaveNews
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession, Send,
                                         SlaveSession)
+from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.display_setup import build_display
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
                                      draw_operator, master_rng, safety_summary, slave_rng,
@@ -388,14 +389,17 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     metrics = compare_with_direct(scene, material, pad.object_true_c, operator, touch.trace,
                                   contact_s, display.rendered_from_s)
     news_s = 0.0 if mode == "oracle" else session.first_news_s
-    est = session.link.estimate
+    # What the slave decided on this touch, as the master heard it (never
+    # the memory's recollection the display may have rendered): teleop/decision.py.
+    decision = touch_decision(session.link.estimates)
+    est = decision.estimate
     summary = {
         "material": material, "seed": seed, "mode": mode, "object_id": object_id,
         "before_identification": config.before, "estimates": network.estimates,
         "first_news_s": news_s, "master_onset_s": master.onset_s, "slave_onset_s": (
             None if pad.onset_s is None or slave.touch_t0 is None
             else slave.touch_t0 + pad.onset_s),
-        "identified": est.label if est is not None and est.decided else UNKNOWN,
+        **decision.fields(),            # identified, decision_time_s, identified_at_s
         "decision_reason": est.reason if est is not None else Reason.NO_ESTIMATE,
         "render_start_s": display.rendered_from_s,
         "rendered": display.rendering,
