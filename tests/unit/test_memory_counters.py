@@ -96,3 +96,38 @@ def test_an_undecided_or_unknown_decision_says_nothing_of_the_memory():
     # A vaguer decision (a pair holding the remembered material) leaves it in force.
     pair = Estimate(0.5, (0.5, 0.5), "plexiglass|steel", 0.995, True, Reason.CONFIDENT_GROUP)
     assert judge("plexiglass", None, pair) == Judgement.VAGUER
+
+
+@pytest.fixture(scope="module")
+def models(trained_models):
+    from test_netsim import SCENE
+    return trained_models.pair(SCENE, 0)
+
+
+def test_a_touch_against_the_memory_counts_alike_in_process_and_on_the_simulated_network(
+        models):
+    """The same wood touch of an object remembered as steel, in process and
+    over the simulated network (the services: tests/integration/
+    test_services.py, the link's and the slave's status counters): one
+    disagreement on each side, nothing kept; and the same decision fields
+    (teleop/decision.py)."""
+    from test_netsim import SCENE, touch
+
+    from telethermal.render.sampled import sample_curves
+    from telethermal.teleop.run import run_session
+
+    identifier, generator = models
+    steel = Estimate(0.5, (), "steel", 0.99, True, Reason.CONFIDENT)
+    local = run_session(SCENE, "wood", identifier, generator, contact_s=1.0, seed=6,
+                        expected_material=steel).summary
+    memory = ObjectMemory()
+    memory.learn("wood", steel, 0.0)
+    curves = sample_curves(generator, [m for m in generator.materials
+                                       if m in identifier.classes_])
+    network = touch((identifier, curves), "wood", seed=6, object_id="wood", memory=memory)
+    want = {"master": {"memory_overruled": 1, "memory_kept": 0},
+            "slave": {"memory_overruled": 1, "memory_kept": 0}}
+    assert local["memory_counts"] == network["memory_counts"] == want
+    fields = ("identified", "decision_time_s", "identified_at_s")
+    assert local["identified"] == "wood"
+    assert {k: local[k] for k in fields} == {k: network[k] for k in fields}

@@ -171,6 +171,14 @@ def judge(held: str, held_effusivity: "Effusivity | None", fresh: Estimate
     return Judgement.VAGUER if verdict == Agreement.VAGUER else Judgement.AGREES
 
 
+def memory_counts(master_counters: dict, slave_counters: dict) -> dict:
+    """A touch summary's ``memory_counts``: the counters :func:`judge` feeds,
+    as the master's link and the slave's session counted them."""
+    names = (str(Judgement.OVERRULED), str(Judgement.KEPT))
+    return {side: {k: int(c.get(k, 0)) for k in names}
+            for side, c in (("master", master_counters), ("slave", slave_counters))}
+
+
 @dataclass(frozen=True)
 class Remembered:
     """What the memory announces for an object: a material or a pair, the

@@ -51,7 +51,7 @@ from telethermal.ident.anytime import Estimate, Reason
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import MasterStep, SlaveNews
-from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession, Send,
                                         SlaveSession)
 from telethermal.teleop.decision import touch_decision
@@ -406,6 +406,7 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
         **windowed_errors(touch.trace, contact_s, news_s),
         "temp_rms_error_c": metrics["temp_rms_error_c"],
         **safety_summary(display), "link_counters": dict(session.link.counters),
+        "memory_counts": memory_counts(session.link.counters, slave.session.counters),
         "lossless": {d: net.counters(d) for d in ENDS},
         "channel": {d: dict(c.counters) for d, c in net.channels.items()},
     }

@@ -53,7 +53,7 @@ from telethermal.teleop.display_setup import (display_idle, display_model_args, 
                                               module_summary, safety_summary)
 from telethermal.teleop.inprocess import PRE_CONTACT_S, InProcessWire
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
 from telethermal.teleop.slave import Slave
 
@@ -481,6 +481,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "room_humidity_pct": scene.room_humidity_pct,
         "expected_material": None if expected_material is None else
         str(getattr(expected_material, "label", expected_material)),
+        "memory_counts": memory_counts(wire.master.link.counters, wire.slave.counters),
         **metrics, **safety_summary(master),
         "clock": {False: "simulated", True: "real", "master": WORLD_PAUSED}[realtime],
         "loop": stats.summary(),
