@@ -45,3 +45,19 @@ def test_the_order_of_arrival_does_not_matter_and_a_later_posterior_does_not_und
     assert touch_decision(estimates).fields() == want
     assert touch_decision(reversed(estimates)).fields() == want
     assert touch_decision([None, *estimates]).fields() == want
+
+
+def test_every_summary_says_when_alike():
+    """The demo's line, admin touch and the master's log word the fields
+    one way (teleop/decision.when_decided)."""
+    from telethermal.services.admin_client import describe_touch
+    from telethermal.teleop.decision import when_decided
+
+    refined = touch_decision([_est(0.06, "plexiglass|rubber", reason=Reason.CONFIDENT_GROUP),
+                              _est(0.38, "plexiglass")]).fields()
+    assert when_decided(refined) == "at 0.38 s (first committed at 0.06 s)"
+    assert when_decided(touch_decision([_est(0.06, "wood")]).fields()) == "at 0.06 s"
+    assert when_decided(touch_decision([]).fields()) is None
+    line = describe_touch({"contact_id": 1, **refined, "render_start_s": 0.4,
+                           "safety_events": 0, "rtt_s": None, "direct": None})[0]
+    assert "(decided at 0.38 s (first committed at 0.06 s))" in line

@@ -26,9 +26,12 @@ what the slave decided on this touch.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
-from telethermal.ident.anytime import UNKNOWN, Estimate
+from telethermal.ident.label import UNKNOWN
+
+if TYPE_CHECKING:               # the admin client imports this module: kept light
+    from telethermal.ident.anytime import Estimate
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,19 @@ def touch_decision(estimates: Iterable[Estimate | None]) -> TouchDecision:
                              (committed or final).t_s, None)
     at_s = next(e.t_s for e in decided if e.label == final.label)
     return TouchDecision(final, committed, final.label, committed.t_s, at_s)
+
+
+def when_decided(summary: dict) -> str | None:
+    """When a summary's touch was decided, in words: "at 0.38 s (first
+    committed at 0.06 s)" after a refinement, "at 0.06 s", None without a
+    decision. The demo's line, ``admin touch`` and the master's log say it
+    so."""
+    t_s, at_s = summary.get("decision_time_s"), summary.get("identified_at_s")
+    if t_s is None:
+        return None
+    if at_s is not None and at_s != t_s:
+        return f"at {at_s:.2f} s (first committed at {t_s:.2f} s)"
+    return f"at {t_s:.2f} s"
 
 
 def pad_decision(pad) -> TouchDecision:
