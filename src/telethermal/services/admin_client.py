@@ -19,6 +19,7 @@ from pathlib import Path
 from telethermal.errors import TelethermalError, TransportError
 from telethermal.ident.label import Label
 from telethermal.services.admin import call
+from telethermal.teleop.decision import when_decided
 
 DEFAULT = {"slave": 5570, "master": 5571}
 
@@ -194,8 +195,8 @@ def describe_status(status: dict) -> list[str]:
 
 
 def describe_touch(result: dict) -> list[str]:
-    when = "no decision" if result.get("decision_time_s") is None else \
-        f"decided at {result['decision_time_s']:.2f} s"
+    when = when_decided(result)
+    when = "no decision" if when is None else f"decided {when}"
     if result.get("unknown_reason"):
         when = f"{result['unknown_reason']}; {when}"
     # A newer master says what a new material was estimated at (its decision's text).

@@ -24,6 +24,7 @@ from telethermal.services.admin import call
 from telethermal.services.demo_calibration import demo_calibration, path_line
 from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
+from telethermal.teleop.decision import when_decided
 from telethermal.teleop.plots import plot_session
 from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
 from telethermal.tomltables import toml_str
@@ -309,9 +310,7 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
                  "processes)")
     local = run_session(scene, material, identifier, generator, contact_s=contact_s,
                         seed=seed, display_calibration=display_cal).summary
-    when = "never" if s["decision_time_s"] is None else f"at {s['decision_time_s']:.2f} s"
-    if s.get("identified_at_s") is not None and s["identified_at_s"] != s["decision_time_s"]:
-        when = f"at {s['identified_at_s']:.2f} s (first committed {when})"   # after a group
+    when = when_decided(s) or "never"
     start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
     memory = "" if s["object_memory"] is None else \
         f"announced from memory as {s['object_memory']}, rendered from {start}; "

@@ -22,7 +22,7 @@ from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
 from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
-from telethermal.ident.anytime import UNKNOWN, unknown_reason
+from telethermal.ident.anytime import unknown_reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
 from telethermal.services.admin import ErrorCount, open_service_sockets
@@ -34,8 +34,9 @@ from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
 from telethermal.teleop.session import MasterSession, ServiceState, send_through
-from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, display_idle,
-                                     display_model_args, draw_operator, master_rng,
+from telethermal.teleop.decision import touch_decision
+from telethermal.teleop.display_setup import build_display
+from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
                                      safety_summary, with_finger)
 from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
 from telethermal.wire.messages import SessionConfig, parse
@@ -43,13 +44,6 @@ from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger("telethermal.master")
 
-
-def decided_at_s(estimates, est) -> float | None:
-    """Time after contact of the first decided estimate with ``est``'s label
-    (``est`` itself if none is among ``estimates``); None if undecided."""
-    if est is None or not est.decided:
-        return None
-    return next((e.t_s for e in estimates if e.decided and e.label == est.label), est.t_s)
 
 class Touch:
     """One operator touch in progress."""
@@ -61,13 +55,9 @@ class Touch:
         rng = master_rng(seed)
         self.operator = draw_operator(scene, rng)
         # Idling before the touch: pre-conditioned for what the slave expects.
-        self.idle_c, shift = display_idle(scene, cfg, self.operator.finger_ir_c,
-                                          service.link.object_temp_c,
-                                          service.link.expected_material)
-        self.display = MasterDisplay(cfg, service.link.generator,
-                                     finger_temp_c=self.operator.finger_ir_c,
-                                     idle_c=self.idle_c, precondition=shift,
-                                     **display_model_args(scene, service.display_calibration))
+        self.display, self.idle_c = build_display(scene, cfg, self.operator.finger_ir_c,
+                                                  service.link,
+                                                  calibration=service.display_calibration)
         self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
         opening = time.monotonic()
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
@@ -175,10 +165,9 @@ class MasterService:
         # The module behind the pad: the master commands its current.
         # The pad model (the scene's layers, the finger's contact
         # conductance) and the module behind the pad, as in simulation.
-        _, shift = display_idle(self.scene, self.display_config, cfg.finger_temp_c, None)
-        self.display = MasterDisplay(self.display_config, None, finger_temp_c=cfg.finger_temp_c,
-                                     precondition=shift,
-                                     **display_model_args(self.scene, self.display_calibration))
+        self.display, _ = build_display(self.scene, self.display_config, cfg.finger_temp_c,
+                                        self.link, calibration=self.display_calibration,
+                                        idling=False)
         self.t0 = time.monotonic()
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
                  cfg.can_bus)
@@ -316,8 +305,10 @@ class MasterService:
             session.trajectory_at_s - touch.origin_s
         self._send(session.close_contact(time.monotonic(), touch.operator.finger_ir_c))
         # What the slave itself decided on this touch (not the recollection
-        # the display may have rendered from; that is reported apart).
-        est = link.decision or link.latest
+        # the display may have rendered from; that is reported apart), by
+        # the definition every summary uses (teleop/decision.py).
+        decision = touch_decision(link.estimates)
+        est = decision.estimate
         loop = stats.summary(last=stats.count - touch.loop_count0)
         loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
         loop["gc_collections"] = [a - b for a, b in zip(stats.gc_collections, touch.gc0)]
@@ -327,15 +318,12 @@ class MasterService:
             "operator": vars(touch.operator), "trace": touch.sim.trace,
             "render_start_s": touch.display.rendered_from_s,
             "master_onset_s": touch.display.last_onset_s,
-            "identified": est.label if est is not None and est.decided else UNKNOWN,
+            **decision.fields(),            # identified, decision_time_s, identified_at_s
             "unknown_reason": unknown_reason(est),
             # a new material's estimate (W s^0.5/(m^2 K)) and nearest class; the
             # last window's estimate otherwise (None: the identifier gives none)
             **dict.fromkeys(EFFUSIVITY_KEYS), **(effusivity_of(est) if est is not None else {}),
             "decision_text": touch_text(est),
-            # when the slave first decided this label (a group that stood until the
-            # last window was decided at its first commitment, as the slave reports it)
-            "decision_time_s": decided_at_s(link.estimates, est),
             "object_memory": None if link.recalled is None else link.recalled.label,
             "estimates": len(link.estimates), "trajectory_at_s": trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,

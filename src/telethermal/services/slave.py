@@ -17,7 +17,7 @@ import zmq
 
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
-from telethermal.ident.anytime import UNKNOWN, Reason, unknown_reason
+from telethermal.ident.anytime import Reason, unknown_reason
 from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
@@ -28,7 +28,8 @@ from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
-from telethermal.teleop.memory import ObjectMemory, Verdict
+from telethermal.teleop.decision import pad_decision
+from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.run import slave_rng, with_finger
 from telethermal.teleop.session import (ContactRequest, Send, ServiceState, SlaveSession,
                                         send_through)
@@ -37,18 +38,6 @@ from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, Sess
                                        given, parse)
 
 log = logging.getLogger("telethermal.slave")
-
-
-def decision_text(pad: Slave, label: str) -> str:
-    """When ``label`` was decided, and the group the pad committed to first
-    if there was one: the same words in the slave's "decided" and "touch
-    over" lines, so the two give the same time for the same touch."""
-    at_s = pad.decided_at_s(label)
-    first = pad.first_commitment
-    text = "decided at -" if at_s is None else f"decided at {at_s:.2f} s"
-    if first is not None and first.label != label:
-        text += f", after committing to {first.label} at {first.t_s:.2f} s"
-    return text
 
 
 class SlaveService:
@@ -90,16 +79,17 @@ class SlaveService:
         # Opened once the sockets are: a slave refused (a busy port) writes nothing.
         self.recorder = None
         self.stop_requested = False
-        #: The session's rules (what goes out, when): the simulated network
-        #: of ``bench faults`` runs the same object.
-        self.session = SlaveSession(self.curves, self.rate_hz)
-        self.state = ServiceState.IDLE
-        self.masters_lost = 0          # contacts ended because the master went silent
         #: The service's own error counters, reported with the transport's
-        #: (status messages and the admin socket).
+        #: (status messages and the admin socket); the session counts the
+        #: memory's (``memory_overruled``, ``memory_kept``) in them.
         self.counters = self.endpoint.extra_counters
         self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
-                             memory_overruled=0, lifted_by_place=0)
+                             lifted_by_place=0)
+        #: The session's rules (what goes out, when): the simulated network
+        #: of ``bench faults`` runs the same object.
+        self.session = SlaveSession(self.curves, self.rate_hz, counters=self.counters)
+        self.state = ServiceState.IDLE
+        self.masters_lost = 0          # contacts ended because the master went silent
         self._count_error = ErrorCount(self.counters, log)
         self.object_id: str | None = None
         self.material = ""                          # under the pad (``place``)
@@ -144,7 +134,7 @@ class SlaveService:
             if isinstance(s.message, FluxTrajectory):
                 material = s.message.material
                 log.info("decided contact_id=%d material=%s (%s)", self.contact_id, material,
-                         decision_text(self.pad, material))
+                         pad_decision(self.pad).text())
 
     # ------------------------------------------------------------ instruments
     def _start_sensor_session(self, seed: int) -> None:
@@ -266,7 +256,7 @@ class SlaveService:
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
         contact_id = self.contact_id
-        sends, learned = self.session.lift(now)
+        sends, _ = self.session.lift(now)
         self._send(sends)       # the final estimate if unsent (6a), the lift event
         if self.devices is not None:
             self.devices.hold()                 # the pad leaves the object, held
@@ -274,13 +264,12 @@ class SlaveService:
         r = self.last_touch
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
-                 if r["decision_time_s"] is None else decision_text(self.pad, r["identified"]))
+                 if r["identified_at_s"] is None else pad_decision(self.pad).text())
         self.state = ServiceState.IDLE
         # The touch's decision (a material or a pair; not "unknown"), once per
-        # touch: its evidence added to this object's, what that supports
-        # announced just below; a disagreeing decision is logged and counted.
-        if learned in (Verdict.KEPT, Verdict.DOUBTED, Verdict.OVERRULED, Verdict.REPLACED):
-            self.counters["memory_overruled"] += 1        # disagreed with the memory
+        # touch: its evidence added to this object's (a disagreeing decision
+        # counted by the session and logged by the memory), what that
+        # supports announced just below.
         try:
             self.place(self.material, self._seed + 1, self.object_id)   # a fresh trial
         except TelethermalError as exc:
@@ -343,16 +332,12 @@ class SlaveService:
 
     def _report(self) -> dict:
         pad = self.pad
-        est = pad.estimate
+        decision = pad_decision(pad)
+        est = decision.estimate
         return {"material": self.material, "object_true_c": pad.object_true_c,
                 "object_ir_c": pad.object_ir_c, "onset_s": pad.onset_s,
-                "identified": est.label if est is not None and est.decided else UNKNOWN,
-                # the first commitment (a group's, when refined later)
-                "decision_time_s": (pad.committed_at_s if est is not None and est.decided
-                                    and not est.label.is_unknown else None),
-                # when the identified label itself was decided (later, after a group)
-                "identified_at_s": (pad.decided_at_s(est.label) if est is not None and
-                                    est.decided and not est.label.is_unknown else None),
+                # identified, decision_time_s, identified_at_s: teleop/decision.py
+                **decision.fields(),
                 "thermometer_calibration_residual_k":
                     self.sensors.calibration.to_dict()["residual_k"],
                 "reason": est.reason if est is not None else Reason.NO_ESTIMATE,

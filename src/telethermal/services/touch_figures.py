@@ -8,6 +8,8 @@ import logging
 
 import numpy as np
 
+from telethermal.teleop.decision import when_decided
+
 log = logging.getLogger("telethermal.master")
 
 
@@ -40,8 +42,8 @@ def touch_figures(scene, touch, result: dict) -> dict:
 
 def log_touch_figures(result: dict) -> None:
     d = result.get("direct")
-    when = "no decision" if result["decision_time_s"] is None else \
-        f"decided at {result['decision_time_s']:.2f} s"
+    when = when_decided(result)
+    when = "no decision" if when is None else f"decided {when}"
     rtt = result.get("rtt_s")
     figures = "" if not d else (
         f"; against direct contact with {d['material']}: flux error "

@@ -73,6 +73,35 @@ def display_idle(scene: Scene, config: DisplayConfig, finger_c: float,
     return idle, shift
 
 
+def build_display(scene: Scene, config: DisplayConfig, finger_c: float, heard, *,
+                  calibration=None, idle_scene: Scene | None = None,
+                  expected_material: str | None = None, idling: bool = True
+                  ) -> tuple[MasterDisplay, float | None]:
+    """The master's display, as every driver builds it (the services, the
+    in-process run, the simulated network): its skin controller's model
+    from the configuration (:func:`display_model_args` of ``scene`` and the
+    display's ``calibration``), the generator the session's link holds, and
+    idled before the touch on what the master heard from the slave
+    (``heard``, a :class:`~telethermal.teleop.link.SlaveLink`: its
+    ``object_temp_c`` and ``expected_material``), pre-conditioned by the
+    idle policy of ``idle_scene`` (default ``scene``: the trained
+    materials' scene where the touched object is outside them, as a
+    deployed master's policy knows only those) (:func:`display_idle`).
+
+    ``expected_material``: the material the display idles for instead of
+    what the slave announced (the simulated network's oracle, which knows
+    it). ``idling`` False: the display starts in its safe state rather than
+    idling (a hardware display whose loop runs before anything is heard).
+    Returns the display and its idle temperature (C; None when not idling)."""
+    expected = heard.expected_material if expected_material is None else expected_material
+    idle_c, shift = display_idle(idle_scene or scene, config, finger_c,
+                                 heard.object_temp_c if idling else None, expected)
+    display = MasterDisplay(config, heard.generator, finger_temp_c=finger_c,
+                            idle_c=idle_c if idling else None, precondition=shift,
+                            **display_model_args(scene, calibration))
+    return display, (idle_c if idling else None)
+
+
 def module_summary(touch, master: MasterDisplay) -> dict:
     """The display's module over the touch: its datasheet limits never
     exceeded (counted), how close it came, how often the current saturated

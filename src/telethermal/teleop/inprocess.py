@@ -14,7 +14,7 @@ from typing import Callable
 from telethermal.devices.readings import PadSensors
 from telethermal.physics.scene import Scene
 from telethermal.render.sampled import SampledGenerator, sample_curves
-from telethermal.teleop.display_setup import display_idle, display_model_args
+from telethermal.teleop.display_setup import build_display
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
 from telethermal.teleop.memory import ObjectMemory
@@ -57,18 +57,14 @@ class InProcessWire:
     def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float,
                        idle_scene: Scene | None = None, calibration=None) -> MasterDisplay:
         """The master's display, idled before this touch at its standby: the
-        object's temperature, pre-conditioned for what the slave announced
-        it expects (object memory) or, for an unknown object, by the idle
-        policy of ``idle_scene`` (default ``scene``; the trained materials'
-        scene where the touched object is outside them, as a deployed
-        master's policy knows only those)."""
-        idle, shift = display_idle(idle_scene or scene, config, finger_c,
-                                   self.slave.pad.object_ir_c,
-                                   self.master.link.expected_material)
-        self.display = MasterDisplay(config, self.master.link.generator, finger_temp_c=finger_c,
-                                     idle_c=idle, precondition=shift,
-                                     **display_model_args(scene, calibration))
-        self.idle_c, self.finger_c = idle, finger_c
+        object's temperature the master heard, pre-conditioned for what the
+        slave announced it expects (object memory) or, for an unknown
+        object, by the idle policy of ``idle_scene`` (:func:`build_display`,
+        as the services build it)."""
+        self.display, self.idle_c = build_display(scene, config, finger_c, self.master.link,
+                                                  calibration=calibration,
+                                                  idle_scene=idle_scene)
+        self.finger_c = finger_c
         return self.display
 
     def to_master(self, m: Message, t: float) -> None:

@@ -25,7 +25,9 @@ The rules, each a hard case of issue 6:
   renders the remembered material from t = 0 (an estimate with reason
   "object memory"), until the slave's own decision for this touch: the
   fresh decision wins, a disagreement is counted (``memory_overruled``)
-  and logged. The slave's touching event names its object: another object
+  and logged; a class named early on a remembered new material, its
+  estimate consistent with the remembered one, leaves the memory in force
+  (``memory_kept``). The rule is the slave's (:func:`~telethermal.teleop.memory.judge`). The slave's touching event names its object: another object
   than the announced one drops the memory for this contact
   (``memory_mismatch``).
 * A trajectory is played from the master's own contact onset. Its anchor
@@ -56,7 +58,7 @@ from telethermal.ident.anytime import Estimate, Label
 from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.master import SlaveNews
-from telethermal.teleop.memory import Agreement, Effusivity, agreement, remembered_estimate
+from telethermal.teleop.memory import Effusivity, Judgement, judge, remembered_estimate
 from telethermal.wire.messages import (ESTIMATES, ContactEvent, FluxTrajectory, Message,
                                        SessionConfig, given)
 
@@ -177,23 +179,21 @@ class SlaveLink:
         if newest_decision:
             self.decision = e
             mem = self.memory
-            # "unknown", or a decision vaguer than the memory (a pair that
-            # holds the remembered material), leaves the memory in force.
-            verdict = None if mem is None or e.label.is_unknown else \
-                agreement(mem.label, e.label)
-            if verdict == Agreement.DISAGREES and mem.label.is_new and _consistent(mem, e):
-                # A class named early by a touch whose own estimate holds the
-                # remembered new material's: the closed set's early guess
-                # (an unseen material named as its nearest class, revised
-                # later), not evidence against the memory, which stands.
+            # One rule with the slave's (memory.judge): "unknown", or a
+            # decision vaguer than the memory (a pair that holds the
+            # remembered material), leaves the memory in force; so does a
+            # class named early whose estimate holds the remembered new
+            # material's (a closed set's early guess, revised later: not
+            # evidence against the memory, counted memory_kept).
+            verdict = None if mem is None else judge(mem.label, Effusivity.of(mem), e)
+            if verdict == Judgement.KEPT:
                 self.counters["memory_kept"] += 1
-                verdict = None
-            if verdict == Agreement.DISAGREES:
+            elif verdict == Judgement.OVERRULED:
                 log.warning("contact %s: the slave decided %s, memory said %s: the fresh "
                             "decision wins", self.contact_id, e.label, mem.label)
                 self.counters["memory_overruled"] += 1
                 self.memory = None
-            elif verdict in (Agreement.SAME, Agreement.SHARPER):
+            elif verdict == Judgement.AGREES:
                 self.memory = None             # the decision takes over
 
     @property
@@ -271,11 +271,3 @@ def _remembered_effusivity(m: ContactEvent) -> dict | None:
     if Effusivity.of_fields(*values) is None:
         return None
     return dict(zip(keys, (float(v) for v in values)))
-
-
-def _consistent(memory: Estimate, fresh: Estimate) -> bool:
-    """The fresh estimate's effusivity and the remembered one's could be one
-    object's (the memory's own rule, :meth:`Effusivity.consistent`); False
-    when either has none."""
-    a, b = Effusivity.of(memory), Effusivity.of(fresh)
-    return a is not None and b is not None and a.consistent(b)

@@ -133,6 +133,52 @@ class Verdict(StrEnum):
     REPLACED = "replaced"        # CHANGE_TOUCHES disagreeing in a row: another object
 
 
+class Judgement(StrEnum):
+    """What a touch's decision says of the memory announced for its object,
+    judged the same way by the master (:class:`~telethermal.teleop.link.SlaveLink`,
+    as the decisions arrive) and the slave (:class:`~telethermal.teleop.session.SlaveSession`,
+    on the touch's final decision): :func:`judge`. The two that are counted
+    carry their counters' names (PROTOCOL.md sections 4, 6b and 6c)."""
+    AGREES = "agrees"                    # the same, or sharper: the decision takes over
+    VAGUER = "vaguer"                    # holds what is remembered: the memory stays in force
+    KEPT = "memory_kept"                 # a class named early, consistent with the
+    #                                      remembered new material's estimate: not against it
+    OVERRULED = "memory_overruled"       # disagrees with the memory
+
+
+def judge(held: str, held_effusivity: "Effusivity | None", fresh: Estimate
+          ) -> Judgement | None:
+    """How the decision ``fresh`` stands to the remembered ``held`` (a
+    material, a pair or "new material", with its estimate
+    ``held_effusivity``); None when ``fresh`` is no decision on a material
+    (undecided, or "unknown"). A decision disagrees (``OVERRULED``) when it
+    names none of the remembered materials, or is a new material whose
+    estimate is inconsistent with the remembered new material's; a class
+    whose own estimate is consistent with the remembered new material's is
+    what a closed set names early on an unseen material (``KEPT``), not a
+    disagreement."""
+    if not fresh.decided or fresh.label.is_unknown:
+        return None
+    fresh_e = Effusivity.of(fresh)
+    verdict = agreement(held, fresh.label)
+    if verdict == Agreement.DISAGREES:
+        if Label(held).is_new and held_effusivity is not None and fresh_e is not None and \
+                held_effusivity.consistent(fresh_e):
+            return Judgement.KEPT
+        return Judgement.OVERRULED
+    if _other_new(Label(held), held_effusivity, fresh_e if fresh.label.is_new else None):
+        return Judgement.OVERRULED
+    return Judgement.VAGUER if verdict == Agreement.VAGUER else Judgement.AGREES
+
+
+def memory_counts(master_counters: dict, slave_counters: dict) -> dict:
+    """A touch summary's ``memory_counts``: the counters :func:`judge` feeds,
+    as the master's link and the slave's session counted them."""
+    names = (str(Judgement.OVERRULED), str(Judgement.KEPT))
+    return {side: {k: int(c.get(k, 0)) for k in names}
+            for side, c in (("master", master_counters), ("slave", slave_counters))}
+
+
 @dataclass(frozen=True)
 class Remembered:
     """What the memory announces for an object: a material or a pair, the

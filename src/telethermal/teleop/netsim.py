@@ -47,16 +47,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from telethermal.faults.channel import Channel, Direction
-from telethermal.ident.anytime import UNKNOWN, Estimate, Reason
+from telethermal.ident.anytime import Estimate, Reason
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import MasterDisplay, MasterStep, SlaveNews
-from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.master import MasterStep, SlaveNews
+from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession, Send,
                                         SlaveSession)
+from telethermal.teleop.decision import touch_decision
+from telethermal.teleop.display_setup import build_display
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
-                                     display_idle, display_model_args, draw_operator, master_rng,
-                                     safety_summary, slave_rng, with_finger)
+                                     draw_operator, master_rng, safety_summary, slave_rng,
+                                     with_finger)
 from telethermal.teleop.slave import Slave
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.loglimit import LogLimiter
@@ -298,12 +300,8 @@ class SimMasterService:
         # The display has idled for what the announcement said (as the
         # services do); the oracle, knowing the material, for that material:
         # the floor of a repeated touch pre-conditions as the repeated touch does.
-        expected = oracle if oracle is not None else self.session.link.expected_material
-        self.idle_c, shift = display_idle(scene, config, finger_c,
-                                          self.session.link.object_temp_c, expected)
-        self.display = MasterDisplay(config, generator, finger_temp_c=finger_c,
-                                     idle_c=self.idle_c, precondition=shift,
-                                     **display_model_args(scene))
+        self.display, self.idle_c = build_display(scene, config, finger_c, self.session.link,
+                                                  expected_material=oracle)
         self.onset_s: float | None = None       # the display's last onset
 
     def on_message(self, m: Message, now: float) -> None:
@@ -391,20 +389,24 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     metrics = compare_with_direct(scene, material, pad.object_true_c, operator, touch.trace,
                                   contact_s, display.rendered_from_s)
     news_s = 0.0 if mode == "oracle" else session.first_news_s
-    est = session.link.estimate
+    # What the slave decided on this touch, as the master heard it (never
+    # the memory's recollection the display may have rendered): teleop/decision.py.
+    decision = touch_decision(session.link.estimates)
+    est = decision.estimate
     summary = {
         "material": material, "seed": seed, "mode": mode, "object_id": object_id,
         "before_identification": config.before, "estimates": network.estimates,
         "first_news_s": news_s, "master_onset_s": master.onset_s, "slave_onset_s": (
             None if pad.onset_s is None or slave.touch_t0 is None
             else slave.touch_t0 + pad.onset_s),
-        "identified": est.label if est is not None and est.decided else UNKNOWN,
+        **decision.fields(),            # identified, decision_time_s, identified_at_s
         "decision_reason": est.reason if est is not None else Reason.NO_ESTIMATE,
         "render_start_s": display.rendered_from_s,
         "rendered": display.rendering,
         **windowed_errors(touch.trace, contact_s, news_s),
         "temp_rms_error_c": metrics["temp_rms_error_c"],
         **safety_summary(display), "link_counters": dict(session.link.counters),
+        "memory_counts": memory_counts(session.link.counters, slave.session.counters),
         "lossless": {d: net.counters(d) for d in ENDS},
         "channel": {d: dict(c.counters) for d, c in net.channels.items()},
     }

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.ident.anytime import UNKNOWN
 from telethermal.ident.openset import touch_text
 from telethermal.jsonfile import write_json
 from telethermal.record.recorder import periods
 from telethermal.record.recording import RecordingError, read_recording
+from telethermal.teleop.decision import pad_decision, touch_decision
 from telethermal.teleop.master import Phase
 
 
@@ -223,6 +223,9 @@ def _replay_master(rec, params, cid, generator, gains, attached):
                            feedforward_model=d.get("feedforward_model", "static"),
                            impedance_horizon_s=d.get("impedance_horizon_s", 0.1),
                            idle=d.get("idle", "object"))
+    # Not build_display (teleop/display_setup.py), on purpose: a replay's
+    # inputs are the display's parameters as recorded (a recording of an
+    # older version included), not a scene and a link to build them from.
     # The idle policy the display applied (recordings before it: at the object).
     fractions = params.get("idle_policy") if d.get("idle") == "policy" else None
     master = MasterDisplay(config, generator, params["pad_resistance_m2k_w"],
@@ -290,17 +293,14 @@ def _replay_slave(rec, cid, identifier, attached):
     recorded_est = [_estimate_from(m["estimate"]) for m in rec.messages("/slave/estimates")
                     if m.get("contact_id", 0) == cid]
     last = recorded_est[-1] if recorded_est else None
-    # When it was decided, as the session reports it (teleop/run.py): the
-    # first commitment to a material (or group); an unknown, when it ended so.
-    first = next((e for e in recorded_est if e.decided and not e.label.is_unknown), None)
+    # What was decided, replayed and recorded, as every summary defines it
+    # (teleop/decision.py).
+    replayed = pad_decision(slave)
+    recorded = touch_decision(recorded_est)
     return {"onset_s": slave.onset_s,
-            "identified": est.label if est is not None and est.decided else UNKNOWN,
-            "decision_time_s": None if est is None or not est.decided else (
-                est.t_s if est.label.is_unknown else slave.committed_at_s),
-            "recorded_identified": last.label if last is not None and last.decided
-            else UNKNOWN,
-            "recorded_decision_time_s": None if last is None or not last.decided else (
-                last.t_s if last.label.is_unknown or first is None else first.t_s),
+            "identified": replayed.identified, "decision_time_s": replayed.decision_time_s,
+            "recorded_identified": recorded.identified,
+            "recorded_decision_time_s": recorded.decision_time_s,
             "estimates": len(slave.events), "recorded_estimates": len(recorded_est),
             # posteriors, label, reason, and effusivity estimate and nearest class
             "same_estimates": [_same(e.estimate) for e in slave.events] ==

@@ -35,7 +35,7 @@ from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, LoopStats, Re
 from telethermal.control.dew import dew_point_c
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
-from telethermal.ident.anytime import UNKNOWN, Estimate, Label, Reason
+from telethermal.ident.anytime import Estimate, Label, Reason
 from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import touch_text
 from telethermal.physics.as_built import simulated_display
@@ -47,12 +47,13 @@ from telethermal.physics.sensors import ForceSensor, quantise
 from telethermal.physics.thermoelectric import (JunctionSensorSpec, ModuleState,
                                                 ThermoelectricStack)
 from telethermal.devices.readings import PadSensors
+from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.direct import CORRECT_WITHIN, compare_with_direct  # noqa: F401
 from telethermal.teleop.display_setup import (display_idle, display_model_args,  # noqa: F401
                                               module_summary, safety_summary)
 from telethermal.teleop.inprocess import PRE_CONTACT_S, InProcessWire
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.memory import ObjectMemory
+from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
 from telethermal.teleop.slave import Slave
 
@@ -440,7 +441,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
         wire.end(t_end=now[0])
         if recorder is not None:
             recorder.slave(slave)
-    est = slave.estimate
+    # What the touch decided, as every summary defines it (teleop/decision.py).
+    decision = pad_decision(slave)
+    est = decision.estimate
     # The slave's trial times are from its pad going down (at the master's
     # onset, as in the services); on the session's clock they are later by that.
     slave_t0 = wire.slave_t0_s or 0.0
@@ -450,10 +453,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # render one material (that hides the transient between the two); when
     # the slave said only "unknown", where it said so.
     render_from = None
-    if slave.onset_s is not None and slave.committed_at_s is not None:
-        render_from = slave_t0 + slave.onset_s + slave.committed_at_s
-    elif decided and slave.onset_s is not None:
-        render_from = slave_t0 + slave.onset_s + est.t_s
+    if slave.onset_s is not None and decision.decision_time_s is not None:
+        render_from = slave_t0 + slave.onset_s + decision.decision_time_s
     metrics = compare_with_direct(scene, material, slave.object_true_c, operator, touch.trace,
                                   contact_s, render_from)
     metrics["heat_extraction_ratio_first_s"] = heat_extraction_ratio(touch.trace)
@@ -462,12 +463,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     metrics["skin_above_threshold_s"] = skin_above_threshold_s(touch.trace)
     summary = {
         "scene": scene.name, "material": material, "seed": seed,
-        "identified": est.label if decided else UNKNOWN,
+        **decision.fields(),                   # identified, decision_time_s, identified_at_s
         "identified_correctly": decided and est.label == material,
         "decision_text": touch_text(est),      # a new material: with its estimate
         "decision_reason": est.reason if decided else Reason.NO_DECISION,
-        "decision_time_s": ((est.t_s if est.label.is_unknown else slave.committed_at_s)
-                            if decided else None),
         "slave_onset_s": None if slave.onset_s is None else slave_t0 + slave.onset_s,
         "slave_touch_s": wire.slave_t0_s, "master_onset_s": master.last_onset_s,
         "master_release_s": master.last_release_s, "decision_from_s": render_from,
@@ -482,6 +481,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "room_humidity_pct": scene.room_humidity_pct,
         "expected_material": None if expected_material is None else
         str(getattr(expected_material, "label", expected_material)),
+        "memory_counts": memory_counts(wire.master.link.counters, wire.slave.counters),
         **metrics, **safety_summary(master),
         "clock": {False: "simulated", True: "real", "master": WORLD_PAUSED}[realtime],
         "loop": stats.summary(),

@@ -28,8 +28,10 @@ The rules:
   operator's finger temperature is known.
 * A ``measurement_batch`` per ``batch`` samples.
 * At the lift: the contact's final estimate if it was not sent, then the
-  non-touching ``contact_event``; the object memory learns the touch's
-  decision.
+  non-touching ``contact_event``; the touch's decision is judged against
+  what the memory announced for the object (:func:`~telethermal.teleop.memory.judge`,
+  the master's rule: ``memory_overruled``, ``memory_kept`` counted in
+  ``counters``), then the object memory learns it.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import SlaveNews
-from telethermal.teleop.memory import ObjectMemory, Verdict
+from telethermal.teleop.memory import Judgement, ObjectMemory, Verdict, judge, learnable
 from telethermal.wire.messages import (ContactEvent, FluxSetpoint, FluxTrajectory,
                                        ESTIMATES, MaterialEstimate, MeasurementBatch,
                                        Message, PosteriorEstimate, given)
@@ -122,10 +124,12 @@ class SlaveSession:
     ``curves``: the flux generator's sampled curves (what a trajectory
     carries); ``rate_hz``: the pad's sample rate; ``memory``: the object memory (shared across touches).
     ``measurements``: send ``measurement_batch`` (a driver that models no
-    reader of them may leave them out)."""
+    reader of them may leave them out). ``counters``: where the memory's
+    counters go (the service passes its own; PROTOCOL.md section 4)."""
 
     def __init__(self, curves: dict, rate_hz: float, memory: ObjectMemory | None = None,
-                 estimates: str = "stream", batch: int = BATCH, measurements: bool = True):
+                 estimates: str = "stream", batch: int = BATCH, measurements: bool = True,
+                 counters: dict | None = None):
         if estimates not in ESTIMATE_ROUTES:
             raise ValueError(f"estimates must be one of {ESTIMATE_ROUTES}, got {estimates!r}")
         if batch < 1:
@@ -133,6 +137,11 @@ class SlaveSession:
         self.curves, self.rate_hz = curves, float(rate_hz)
         self.generator = SampledGenerator(curves)
         self.memory = memory if memory is not None else ObjectMemory()
+        #: Touches whose decision disagreed with the memory, and classes named
+        #: early on a remembered new material (:func:`judge`).
+        self.counters = counters if counters is not None else {}
+        for name in (Judgement.OVERRULED, Judgement.KEPT):
+            self.counters.setdefault(str(name), 0)
         self.estimates, self.batch, self.measurements = estimates, batch, measurements
         self.pad = None
         self.object_id: str | None = None
@@ -223,6 +232,11 @@ class SlaveSession:
         out.append(Send(now, ContactEvent(contact_id=self.contact_id, touching=False, t_s=now,
                                           force_n=0.0, object_temp_c=self.object_temp_c())))
         self.touch_t0 = self.owner = None
+        held = self.memory.recall(self.object_id)
+        verdict = None if held is None or not learnable(est) else \
+            judge(held.material, held.effusivity, est)
+        if verdict in (Judgement.OVERRULED, Judgement.KEPT):
+            self.counters[str(verdict)] += 1
         return out, self.memory.learn(self.object_id, est, now, classes=self.pad.classes)
 
     @property
