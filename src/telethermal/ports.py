@@ -14,6 +14,19 @@ log = logging.getLogger(__name__)
 RELEASE_WAIT_S = 2.0
 
 
+def free_ports(n: int) -> list[int]:
+    """``n`` TCP ports on 127.0.0.1 free now (the OS's choice: bound, read
+    and closed; free until someone else takes them)."""
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
 def wait_released(host: str, ports, timeout_s: float = RELEASE_WAIT_S) -> list[int]:
     """Wait until each TCP ``port`` on ``host`` can be bound again; returns
     the ports still taken after ``timeout_s`` (logged, never raised).

@@ -7,7 +7,6 @@ from __future__ import annotations
 import logging
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -20,6 +19,7 @@ from telethermal.errors import TelethermalError, TransportError
 from telethermal.ident.anytime import Label, Reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.jsonfile import write_json
+from telethermal.ports import free_ports  # noqa: F401 - the benches' and tests' name here
 from telethermal.services.admin import call
 from telethermal.services.demo_calibration import demo_calibration, path_line
 from telethermal.services.qemu_boards import prepare_firmware
@@ -33,17 +33,6 @@ from telethermal.view.server import ViewServer
 from telethermal.wire.transport import generate_link_keys
 
 log = logging.getLogger(__name__)
-
-
-def free_ports(n: int) -> list[int]:
-    socks = [socket.socket() for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind(("127.0.0.1", 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
 
 
 def write_configs(out: Path, scene: str, identifier: Path, generator: Path, ports, seed: int,
@@ -205,8 +194,11 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
         return abs((status.get("object_temp_c") or 1e9) - announced["object_temp_c"]) <= 1e-9 \
             and all(status.get(k) == announced[k] for k in ("object_id", "object_material"))
 
-    end = time.monotonic() + 2.0
-    while time.monotonic() < end and not heard(call(master_admin, "status")):
+    end = time.monotonic() + 30.0     # a hang guard: heard at once on a link that works
+    while not heard(call(master_admin, "status")):
+        if time.monotonic() > end:
+            log.warning("the master did not hear the placement of %s in 30 s", material)
+            break
         time.sleep(0.05)
     thread = None
     if during is not None:
