@@ -55,7 +55,9 @@ def test_fresh_identification_wins_over_memory_and_is_counted():
     link.on_message(posterior(1, 0.05, label="plexiglass", p_steel=0.3), 0.0)
     assert link.estimate.label == "steel"              # an undecided posterior: memory holds
     link.on_message(estimate(1, 0.1, label="plexiglass", decided=True, p_steel=0.01), 0.0)
-    assert link.estimate.label == "plexiglass" and link.counters["memory_overruled"] == 1
+    assert link.estimate.label == "plexiglass" and link.counters["memory_overruled"] == 0
+    link.end()                                         # counted once, at the contact's end
+    assert link.counters["memory_overruled"] == 1
 
 
 def test_an_unknown_decision_does_not_erase_the_memory():
@@ -63,6 +65,7 @@ def test_an_unknown_decision_does_not_erase_the_memory():
     link.on_message(announce("plate", "steel", 0.98), 0.0)
     link.begin(1)
     link.on_message(estimate(1, 1.0, label="unknown", decided=True, p_steel=0.5), 0.0)
+    link.end()
     assert link.estimate.label == "steel" and link.counters["memory_overruled"] == 0
 
 

@@ -44,10 +44,11 @@ class DecidedPad:
         self.estimate = estimate
 
 
-def _one_touch(remembered: Estimate, final: Estimate) -> tuple[dict, dict]:
+def _one_touch(remembered: Estimate, final: Estimate, early=()) -> tuple[dict, dict]:
     """One touch of an object the slave's memory learnt from ``remembered``,
-    ending on ``final``: the slave session's counters and the master link's,
-    the link told what the session announced and sent."""
+    ending on ``final`` (after the decisions ``early``, sent as they came):
+    the slave session's counters and the master link's, the link told what
+    the session announced and sent, then the master's contact ending."""
     memory = ObjectMemory(0.99)
     memory.learn("thing", remembered, 1.0, CLASSES)
     slave = SlaveSession(CURVES, 1000.0, memory=memory)
@@ -57,9 +58,14 @@ def _one_touch(remembered: Estimate, final: Estimate) -> tuple[dict, dict]:
     slave.touch(7, 0.0, 31.0)
     link.begin(7)
     assert link.counters["memory_used"] == 1
+    for i, e in enumerate(early):
+        slave.pad.estimate = e
+        link.on_message(slave._decision(0.1 * (i + 1), e).message, 0.1 * (i + 1), 0.0)
+    slave.pad.estimate = final
     sends, _ = slave.lift(1.0)          # the final decision, then the lift
     for s in sends:
         link.on_message(s.message, 1.0, 0.0)
+    link.end()                          # the master's contact ends
     keys = ("memory_overruled", "memory_kept")
     return {k: slave.counters[k] for k in keys}, {k: link.counters[k] for k in keys}
 
@@ -84,6 +90,21 @@ def test_the_slave_and_the_master_count_the_same_touch_alike(remembered, final, 
                                                              kept):
     slave, master = _one_touch(remembered, final)
     assert slave == master == {"memory_overruled": overruled, "memory_kept": kept}
+
+
+def test_a_touch_with_several_decisions_is_counted_once_on_its_last():
+    """The review's case (PROTOCOL.md 6c): an object remembered as a new
+    material, two early classes consistent with its estimate, then the
+    same new material: nothing counted on either side (the master counted
+    memory_kept per early decision before); an early disagreement refined
+    to agree is not a disagreement either."""
+    early = (_decision("steel", 1600.0, 900.0, 2900.0),) * 2
+    final = _decision(NEW_MATERIAL, 1420.0, 1330.0, 1510.0)
+    assert _one_touch(NEW, final, early) == ({"memory_overruled": 0, "memory_kept": 0},) * 2
+    assert _one_touch(_decision("plexiglass"), _decision("plexiglass"),
+                      (_decision("steel"),)) == ({"memory_overruled": 0, "memory_kept": 0},) * 2
+    # Ending on the early class: kept, once.
+    assert _one_touch(NEW, early[0], early) == ({"memory_overruled": 0, "memory_kept": 1},) * 2
 
 
 def test_an_undecided_or_unknown_decision_says_nothing_of_the_memory():

@@ -173,14 +173,23 @@ def test_an_early_class_consistent_with_the_remembered_new_material_does_not_ove
     link.on_message(_announce(), 0.0)
     link.begin(1)
     link.on_message(_named("steel", 1600.0, 900.0, 2900.0), 0.0)
-    assert link.estimate.reason == FROM_MEMORY and link.counters["memory_kept"] == 1
-    assert link.counters["memory_overruled"] == 0
+    assert link.estimate.reason == FROM_MEMORY
     fresh = _named("steel", 1420.0, 1330.0, 1510.0, t=1.0)
     fresh = type(fresh)(**{**fresh.fields(), "label": "new material",
                            "reason": "new material", "nearest": "plexiglass"})
     link.on_message(fresh, 0.0)
     assert link.estimate.reason == "new material"
     assert link.estimate.effusivity_w_s05_m2k == 1420.0
+    # Counted once, at the contact's end, on its last decision (the same
+    # new material): neither kept nor overruled.
+    link.end()
+    assert (link.counters["memory_kept"], link.counters["memory_overruled"]) == (0, 0)
+    # A touch that ends on the early class: kept.
+    link.begin(2)
+    early = _named("steel", 1600.0, 900.0, 2900.0)
+    link.on_message(type(early)(**{**early.fields(), "contact_id": 2}), 0.0)
+    link.end()
+    assert (link.counters["memory_kept"], link.counters["memory_overruled"]) == (1, 0)
 
 
 def test_a_class_inconsistent_with_the_remembered_new_material_overrules_it():
@@ -188,10 +197,12 @@ def test_a_class_inconsistent_with_the_remembered_new_material_overrules_it():
     link.on_message(_announce(), 0.0)
     link.begin(1)
     link.on_message(_named("steel", 14000.0, 12500.0, 15500.0), 0.0)
+    link.end()
     assert link.estimate.label == "steel" and link.counters["memory_overruled"] == 1
     # A class decision without an estimate (an older slave's) overrules it too.
     link.begin(2)
     link.on_message(estimate(2, 0.1, label="steel", decided=True, p_steel=0.995), 0.0)
+    link.end()
     assert link.estimate.label == "steel" and link.counters["memory_overruled"] == 2
 
 

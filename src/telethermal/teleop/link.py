@@ -24,10 +24,10 @@ The rules, each a hard case of issue 6:
   (``object_material``). A contact that begins after such an announcement
   renders the remembered material from t = 0 (an estimate with reason
   "object memory"), until the slave's own decision for this touch: the
-  fresh decision wins, a disagreement is counted (``memory_overruled``)
-  and logged; a class named early on a remembered new material, its
-  estimate consistent with the remembered one, leaves the memory in force
-  (``memory_kept``). The rule is the slave's (:func:`~telethermal.teleop.memory.judge`). The slave's touching event names its object: another object
+  fresh decision wins and a disagreement is logged; a class named early on
+  a remembered new material, its estimate consistent with the remembered
+  one, leaves the memory in force. The contact's last decision is counted
+  once at its end (``memory_overruled``, ``memory_kept``: :meth:`SlaveLink.end`). The rule is the slave's (:func:`~telethermal.teleop.memory.judge`). The slave's touching event names its object: another object
   than the announced one drops the memory for this contact
   (``memory_mismatch``).
 * A trajectory is played from the master's own contact onset. Its anchor
@@ -94,6 +94,9 @@ class SlaveLink:
     remembered_effusivity: dict | None = None
     memory: Estimate | None = None          # the recollection this contact renders
     recalled: Estimate | None = None        # what this contact began with, for reports
+    #: The memory the contact's decision is judged on at its end (None: none,
+    #: or the slave's pad was on another object than announced).
+    _judged: Estimate | None = field(default=None, repr=False)
     counters: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("stale", "older_estimate", "duplicate_trajectory", "replaced_trajectory",
          "anchor_in_future", "memory_used", "memory_overruled", "memory_mismatch",
@@ -104,13 +107,14 @@ class SlaveLink:
         """A new contact is going on (the master's onset is not yet known)."""
         self.contact_id, self.onset_s = contact_id, None
         self.estimates, self.trajectory = [], None
-        self.latest = self.decision = self.memory = self.recalled = None
+        self.latest = self.decision = self.memory = self.recalled = self._judged = None
         if self.remembered is not None and (
                 Label(self.remembered[0]).within(self.classes) or
                 (Label(self.remembered[0]).is_new and self.remembered_effusivity)):
             self.memory = remembered_estimate(*self.remembered, self.classes,
                                               self.remembered_effusivity)
             self.recalled = self.memory          # kept for the report, never cleared
+            self._judged = self.memory           # what the touch's decision is judged on
             self._memory_object = self.object_id
             self.counters["memory_used"] += 1
 
@@ -118,7 +122,15 @@ class SlaveLink:
         self.onset_s = t_s
 
     def end(self) -> None:
-        self.contact_id = None
+        """The contact ends: the decision it held, judged once against the
+        memory it began with (the slave's rule at its lift, so both sides
+        count a touch alike: ``memory_overruled``, ``memory_kept``)."""
+        held = self._judged
+        if held is not None and self.decision is not None:
+            verdict = judge(held.label, Effusivity.of(held), self.decision)
+            if verdict in (Judgement.KEPT, Judgement.OVERRULED):
+                self.counters[str(verdict)] += 1
+        self.contact_id, self._judged = None, None
 
     # ------------------------------------------------------------ messages
     def on_message(self, m: Message, now_s: float, offset_s: float | None = None) -> None:
@@ -158,7 +170,7 @@ class SlaveLink:
                 log.warning("contact %s is on object %s, not the announced %s: its memory "
                             "is not used", self.contact_id, m.object_id, self._memory_object)
                 self.counters["memory_mismatch"] += 1
-                self.memory = None
+                self.memory = self._judged = None
             return
         self.object_id = m.object_id
         material = given(m.object_material)
@@ -184,14 +196,12 @@ class SlaveLink:
             # remembered material), leaves the memory in force; so does a
             # class named early whose estimate holds the remembered new
             # material's (a closed set's early guess, revised later: not
-            # evidence against the memory, counted memory_kept).
+            # evidence against the memory). The counters judge the
+            # contact's last decision, once, at its end (:meth:`end`).
             verdict = None if mem is None else judge(mem.label, Effusivity.of(mem), e)
-            if verdict == Judgement.KEPT:
-                self.counters["memory_kept"] += 1
-            elif verdict == Judgement.OVERRULED:
+            if verdict == Judgement.OVERRULED:
                 log.warning("contact %s: the slave decided %s, memory said %s: the fresh "
                             "decision wins", self.contact_id, e.label, mem.label)
-                self.counters["memory_overruled"] += 1
                 self.memory = None
             elif verdict == Judgement.AGREES:
                 self.memory = None             # the decision takes over
