@@ -139,7 +139,7 @@ def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
         first = networked_touch(SCENE, "wood", ports, 6, 2.0).summary
         assert first["identified"] == "wood"             # the memory this test relies on
         # Placed as networked_touch will place it, until the master has heard
-        # the announcement with the memory (networked_touch waits 2 s alone).
+        # the announcement with the memory (networked_touch waits for it, up to 30 s).
         placed = call(ports[2], "place", material="wood", seed=7)
         assert placed["object_material"] == "wood"
         assert _wait_for(lambda: call(ports[3], "status")["object_material"] == "wood", 60)

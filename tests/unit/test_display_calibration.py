@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from telethermal.control import display_calibration as routine
-from telethermal.errors import CalibrationError
+from telethermal.errors import CalibrationError, SceneError
 from telethermal.physics.scene import parse_scene
 from telethermal.teleop.display_calibration import (DisplayCalibration, calibrate_display,
                                                     keep_other_tables, read_display_calibration,
@@ -214,14 +214,17 @@ def test_a_hardware_master_refuses_a_calibration_from_a_simulated_bench(built_ca
 def test_the_flux_noise_the_fit_expects_is_the_configured_sensor_s():
     """The block's chi2 weighs the flux residual by the noise the scene's
     ``[sensors]`` state (thermopile noise, ADC step, sensitivity), not by
-    the simulated plant's own sensor: a plant whose thermopile is 32x
-    noisier than the configuration says is refused on the block; told the
-    truth, the same recording fits (8x is not refused: the windows average
-    the flux noise down to about the thermocouple's)."""
+    the simulated plant's own sensor (before, the ADC step and the
+    sensitivity were ``HeatFluxSensor()``'s class defaults, which the plant
+    used too): a plant read through an ADC 190x coarser than the defaults'
+    (its quantisation noise 32x the thermopile's) is refused on the block
+    when the configuration states the default step; told the truth, the same
+    recording fits (the windows average a few times the noise down to about
+    the thermocouple's: a misstatement of 8x is not refused)."""
     from telethermal.devices.display import open_display
     from telethermal.teleop.display_rig import simulated_bench
-    noisy = _scene(sensors={"flux_noise_uv": 16.0})
-    stated, told = _scene(), _scene(sensors={"flux_noise_uv": 16.0})
+    noisy = _scene(sensors={"flux_adc_lsb_uv": 56.0})
+    stated, told = _scene(), _scene(sensors={"flux_adc_lsb_uv": 56.0})
     # The closed form of the configured noise, W/m^2 rms.
     assert math.isclose(stated.sensors.flux_noise_w_m2(),
                         math.hypot(0.5, 0.3 / math.sqrt(12.0)) / 1.26, rel_tol=1e-12)
@@ -243,5 +246,6 @@ def test_the_simulated_flux_sensor_is_the_configured_part():
     assert (sensor.sensitivity_uv_per_w_m2, sensor.adc_lsb_uv, sensor.lag_s) == (2.52, 2.52, 0.2)
     read = sensor.read_w_m2(np.array([0.2, 0.6, 1.4, -3.3]), np.random.default_rng(0))
     np.testing.assert_allclose(read, [0.0, 1.0, 1.0, -3.0])    # 1 W/m^2 steps
-    with pytest.raises(Exception, match="flux_sensitivity_uv_per_w_m2"):
-        _scene(sensors={"flux_sensitivity_uv_per_w_m2": 0.0})
+    for key in ("flux_sensitivity_uv_per_w_m2", "flux_adc_lsb_uv"):     # both divide
+        with pytest.raises(SceneError, match=f"'{key}' = 0.0 is outside"):
+            _scene(sensors={key: 0.0})

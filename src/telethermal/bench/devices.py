@@ -45,6 +45,7 @@ from telethermal.devices.display import EmulatedDisplay, SimDisplay
 from telethermal.ident.anytime import members
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
+from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.master import MasterStep, Phase
 from telethermal.teleop.run import DisplayTouch, Operator, with_finger
 
@@ -164,11 +165,12 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
                 to_ident += list(emu.pushed_s[pushed] - devices.write_s[pushed])
                 got = np.isfinite(emu._contact.received_s)
                 serial += list(emu._contact.received_s[got] - devices.write_s[got])
+                # What each pad decided: the touch summary's one definition.
+                d_sim, d_emu = pad_decision(sim), pad_decision(emu)
                 rows.append({"material": material, "seed": trial_seed,
-                             "sim": sim.estimate.label if sim.estimate else "unknown",
-                             "emulated": emu.estimate.label if emu.estimate else "unknown",
-                             "sim_decision_s": sim.committed_at_s,
-                             "emulated_decision_s": emu.committed_at_s,
+                             "sim": d_sim.identified, "emulated": d_emu.identified,
+                             "sim_decision_s": d_sim.decision_time_s,
+                             "emulated_decision_s": d_emu.decision_time_s,
                              "pad_true_c_sim": float(sim.trial.extra["T_pad_true_C"]),
                              "pad_true_c_emulated": float(emu.trial.extra["T_pad_true_C"])})
         can = []

@@ -80,8 +80,9 @@ class PadCalibration:
     materials: tuple[str, ...]
     source: str = ""
     #: The log sd of the parts it could not identify that its intervals
-    #: carry (``ident.calibration.consider_sds``; 0: statistical alone).
-    design_sd: float = DESIGN_SD
+    #: carry (``ident.calibration.consider_sds``; 0: statistical alone, as
+    #: for one made without it). :func:`calibrate_touches` sets it.
+    design_sd: float = 0.0
 
     def factors(self) -> dict:
         """Candidate name -> factor on its design value (the gain apart)."""

@@ -25,7 +25,7 @@ def read_scene_text(path: Path) -> str:
 #: Upper bounds of ``[sensors]`` and ``[variability]`` (docs/limits.md):
 #: far above any instrument's figure, below what the simulator can hold
 #: (``object_readings = 1e9`` allocated 1e9 readings); others at most 1e6.
-UPPER_BOUNDS = {"flux_lag_s": 10.0, "flux_adc_lsb_uv": 100.0, "flux_sensitivity_limit_rel": 1.0, "onset_jitter_s": 1.0,
+UPPER_BOUNDS = {"flux_lag_s": 10.0, "flux_sensitivity_limit_rel": 1.0, "onset_jitter_s": 1.0,
                 "object_gain_limit": 1.0, "object_readings": 10_000,
                 "instrument_seed": 2 ** 32 - 1, "force_n": 1000.0, "force_sd_n": 1000.0,
                 "reference_force_n": 1000.0, "conductance_force_exponent": 10.0}

@@ -164,6 +164,8 @@ def parse_dataclass(cls, table, where, source):
             values[f] = r.text(f, default, choices=junction_sensor_names())
         elif f == "flux_sensitivity_uv_per_w_m2":     # divides: never 0
             values[f] = r.num(f, default, lo=0.01, hi=1000.0)
+        elif f == "flux_adc_lsb_uv":                  # a step: readings divide by it
+            values[f] = r.num(f, default, lo=1e-6, hi=100.0)
         elif f == "junction_lag_s":
             values[f] = None if f not in (table or {}) else r.num(f, lo=0, hi=10.0)
         else:

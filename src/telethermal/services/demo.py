@@ -5,6 +5,7 @@ material directly."""
 from __future__ import annotations
 
 import logging
+import math
 import os
 import signal
 import subprocess
@@ -191,8 +192,11 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                  "object_material": placed.get("object_material")}
 
     def heard(status):
-        return abs((status.get("object_temp_c") or 1e9) - announced["object_temp_c"]) <= 1e-9 \
-            and all(status.get(k) == announced[k] for k in ("object_id", "object_material"))
+        t, want = status.get("object_temp_c"), announced["object_temp_c"]
+        same = t == want or (None not in (t, want) and (abs(t - want) <= 1e-9 or
+                                                        math.isnan(t) and math.isnan(want)))
+        return same and all(status.get(k) == announced[k]
+                            for k in ("object_id", "object_material"))
 
     end = time.monotonic() + 30.0     # a hang guard: heard at once on a link that works
     while not heard(call(master_admin, "status")):
