@@ -479,4 +479,9 @@ def test_a_session_with_the_firmware_as_the_displays_boards_matches_the_emulated
         assert c["untrusted_periods"] == 0
     assert c["board_waits_missed"] == c["answers_missed"] == 0
     assert c["board"]["crc"] == c["board"]["seq_gaps"] == 0 and c["board"]["frames"] > 0
-    assert c["peltier"]["statuses"] == c["peltier"]["sent"] > 0
+    # A status answers each command; a watchdog trip sends one of its own
+    # (firmware/src/tt_peltier.c), so a tripped run has more.
+    if tripped(pil):
+        assert c["peltier"]["statuses"] >= c["peltier"]["sent"] > 0
+    else:
+        assert c["peltier"]["statuses"] == c["peltier"]["sent"] > 0

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import shlex
 from pathlib import Path
 
 import matplotlib
@@ -16,6 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from telethermal.bench.faults_text import recovery_text  # noqa: E402
+from telethermal.bench.options import reduced_options  # noqa: E402
 from telethermal.bench.clock_text import real_clock_sentences  # noqa: E402
 from telethermal.bench.unseen import report_section as unseen_section  # noqa: E402
 
@@ -23,37 +23,6 @@ from telethermal.bench.unseen import report_section as unseen_section  # noqa: E
 def _load(results: Path, name: str) -> dict | None:
     path = results / f"{name}.json"
     return json.loads(path.read_text()) if path.is_file() else None
-
-
-#: Options that say where a bench writes or how many workers it uses, not
-#: what it measures.
-OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs"})
-#: Options at the value the issue's targets name: which bench, not a
-#: reduction of it (``bench identify --as-built 0.15``, its 5 pads).
-TARGET_OPTIONS = frozenset({"--as-built 0.15", "--pads 5"})
-
-
-def reduced_options(command: str) -> list[str]:
-    """The options of a bench's ``command`` (as stored in its JSON) that
-    change what it measures (``--quick``, ``--seeds 2``, ``--methods a,b``):
-    none for a run at the bench's defaults."""
-    try:
-        words = shlex.split(command)
-    except ValueError:                  # an unbalanced quote: read it word by word
-        words = command.split()
-    out = []
-    for i, word in enumerate(words):
-        if not word.startswith("--"):
-            continue
-        name = word.split("=", 1)[0]
-        if name in OUTPUT_OPTIONS:
-            continue
-        value = words[i + 1] if "=" not in word and i + 1 < len(words) else ""
-        option = word if "=" in word or not value or value.startswith("--") \
-            else f"{word} {value}"
-        if option.replace("=", " ") not in TARGET_OPTIONS:
-            out.append(option)
-    return out
 
 
 def _provenance(d: dict) -> str:

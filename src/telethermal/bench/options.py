@@ -1,0 +1,37 @@
+"""Which options of a bench's command change what it measures: the
+benchmark page calls a run with any of them reduced."""
+
+from __future__ import annotations
+
+import shlex
+
+
+#: Options that say where a bench writes or how many workers it uses, not
+#: what it measures.
+OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs"})
+#: Options at the value the issue's targets name: which bench, not a
+#: reduction of it (``bench identify --as-built 0.15``, its 5 pads).
+TARGET_OPTIONS = frozenset({"--as-built 0.15", "--pads 5"})
+
+
+def reduced_options(command: str) -> list[str]:
+    """The options of a bench's ``command`` (as stored in its JSON) that
+    change what it measures (``--quick``, ``--seeds 2``, ``--methods a,b``):
+    none for a run at the bench's defaults."""
+    try:
+        words = shlex.split(command)
+    except ValueError:                  # an unbalanced quote: read it word by word
+        words = command.split()
+    out = []
+    for i, word in enumerate(words):
+        if not word.startswith("--"):
+            continue
+        name = word.split("=", 1)[0]
+        if name in OUTPUT_OPTIONS:
+            continue
+        value = words[i + 1] if "=" not in word and i + 1 < len(words) else ""
+        option = word if "=" in word or not value or value.startswith("--") \
+            else f"{word} {value}"
+        if option.replace("=", " ") not in TARGET_OPTIONS:
+            out.append(option)
+    return out
