@@ -18,23 +18,11 @@ def test_a_scene_without_as_built_is_not_calibrated(tmp_path):
 
 
 def test_the_demo_on_a_scene_without_as_built_calibrates_nothing(tmp_path, monkeypatch):
-    seen = {}
-
-    def models(*args):
-        seen["identifier_calibration"] = args[7] if len(args) > 7 else None
-
-    def run(*args, **kw):
-        seen["run"] = kw
-        return {"touches": [], "exit_codes": {"slave": 0, "master": 0}}
-
-    monkeypatch.setattr(demo_mod, "_demo_models", models)
-    monkeypatch.setattr(demo_mod, "run_demo", run)
-    lines = []
-    result = demo_mod.demo(tmp_path, "fingertip-7", [], echo=lines.append)
+    seen, result, lines = _demo_with(tmp_path, monkeypatch, "")
     assert seen["identifier_calibration"] is None
     assert (seen["run"]["display_calibration"], seen["run"]["pad_calibration"]) == ("", "")
     assert "calibration" not in result.report
-    assert not (tmp_path / CALIBRATION_FILE).exists()
+    assert not (tmp_path / "out" / CALIBRATION_FILE).exists()
     assert not any("calibrat" in line for line in lines), lines
 
 
