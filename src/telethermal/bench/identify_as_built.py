@@ -171,7 +171,10 @@ def text_lines(out: dict) -> list[str]:
     def pct(x):
         return "-" if x is None else f"{100 * x:.1f} %"
     s = out["summary"]
-    lines = [f"pads built off their datasheet: {out['pads']} drawn at sd {out['sd']:g} "
+    done = out.get("pads_done", out["pads"])
+    lines = [f"pads built off their datasheet: "
+             + (f"{out['pads']}" if done == out["pads"] else f"{done} of {out['pads']}")
+             + f" drawn at sd {out['sd']:g} "
              f"({out['method']}, {out['folds']} folds, mean over the pads)"]
     for key in ("as_modelled", "uncalibrated", "uncalibrated_fallback", "calibrated"):
         r = s[key]

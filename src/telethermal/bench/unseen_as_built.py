@@ -141,7 +141,10 @@ def summary(out: dict) -> dict:
 def text_lines(out: dict) -> list[str]:
     """What ``bench unseen --as-built`` prints."""
     s = out["summary"]
-    lines = [f"unseen materials on pads built off their datasheet: {out['pads']} drawn at sd "
+    done = out.get("pads_done", out["pads"])
+    lines = [f"unseen materials on pads built off their datasheet: "
+             + (f"{out['pads']}" if done == out["pads"] else f"{done} of {out['pads']}")
+             + " drawn at sd "
              f"{out['sd']:g}, {len(out['seeds'])} session(s) each ({out['method']}, "
              f"{out['window_s']:g} s; targets: median error <= "
              f"{100 * out['targets']['median_rel_error_max']:.0f} %, coverage "

@@ -264,7 +264,7 @@ class SlaveService:
         r = self.last_touch
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
-                 if r["identified_at_s"] is None else pad_decision(self.pad).text())
+                 if r["decision_time_s"] is None else pad_decision(self.pad).text())
         self.state = ServiceState.IDLE
         # The touch's decision (a material or a pair; not "unknown"), once per
         # touch: its evidence added to this object's (a disagreeing decision
