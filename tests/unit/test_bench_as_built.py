@@ -56,14 +56,17 @@ def test_summary_means_over_the_pads_and_prints_them():
     other = {**row, "named_rate": 0.7, "unknown_rate": 0.3}
     out = {"sd": 0.15, "pads": 2, "method": "effusivity-fit", "folds": 5, "as_modelled": row,
            "uncalibrated": [row, other], "calibrated": [row, row],
-           "calibrations": [{"cpu_s": 20.0, "parameters": [{"held": True}, {"held": False}]},
-                            {"cpu_s": 30.0, "parameters": [{"held": True}]}]}
+           "calibrations": [{"cpu_s": 20.0, "parameters": [
+               {"held": True, "lo": 0.98, "hi": 1.02}, {"held": False, "lo": 0.9, "hi": 1.1}]},
+               {"cpu_s": 30.0, "parameters": [{"held": True, "lo": 0.7, "hi": 1.4}]}]}
     s = summary(out)
     assert s["uncalibrated"]["named_rate"] == pytest.approx(0.8)
     assert s["coverage"] == pytest.approx(2 / 3) and s["calibrate_cpu_s_max"] == 30.0
     out["summary"] = s
     text = "\n".join(text_lines(out))
     assert "uncalibrated" in text and "named 80.0 %" in text and "66.7 % of 3" in text
+    # [0.7, 1.4] is an sd of 0.18 in ln factor: past the identifiability rule's 0.1.
+    assert "(1 of the 2 whose interval sd is within 0.1)" in text
 
 
 def _unseen_row(errors: dict, covered: int, n: int) -> dict:

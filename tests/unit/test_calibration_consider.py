@@ -85,3 +85,25 @@ def test_a_lumped_parameter_s_members_apart_are_carried_against_their_total():
     got = consider_sds(model, np.zeros(2 + 2), free, [], sd, jac)
     assert got[0] == pytest.approx(math.hypot(*errors), rel=1e-9)
     assert got[0] > 0.01
+
+
+def test_a_parameter_the_design_bounds_better_than_the_fit_is_said_so():
+    """A fitted factor whose interval (with the consider term) stands for an
+    sd of ln factor past the identifiability rule's is printed as known no
+    better than its design allows; a sharp one is not."""
+    from telethermal.ident.calibration import SD_MAX
+    from telethermal.ident.pad_calibration import (CalibratedParameter, PadCalibration,
+                                                   interval_sd, pad_digest)
+    scene = load_scene("fingertip-7")
+    from telethermal.ident.openset import Z95
+    assert interval_sd(math.exp(-Z95 * 0.05), math.exp(Z95 * 0.05)) == pytest.approx(0.05)
+    cal = PadCalibration(scene.name, pad_digest(scene), (
+        CalibratedParameter(("flux_lag_s",), "flux sensor lag", 1.0, 0.99, 1.01),
+        CalibratedParameter(("layers[0].heat_capacity", "layers[1].heat_capacity"),
+                            "heat capacity", 1.02, 0.72, 1.45)), (), 3000.0, 1.0, 0.01, 0.1,
+        15, ("steel", "wood"), design_sd=0.2)
+    assert interval_sd(0.72, 1.45) > SD_MAX
+    lines = cal.describe()
+    loose = [line for line in lines if "known no better than its design allows" in line]
+    assert len(loose) == 1 and "heat capacity" in loose[0]
+    assert any("log sd of 0.2" in line for line in lines)

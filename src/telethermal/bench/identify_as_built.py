@@ -31,6 +31,7 @@ import time
 import numpy as np
 
 from telethermal.data.generate import pad_database, sensor_session
+from telethermal.ident.calibration import SD_MAX
 from telethermal.ident.crossval import cross_validate
 from telethermal.physics.as_built import draw_as_built, with_as_built
 from telethermal.physics.scene import load_scene
@@ -182,7 +183,13 @@ def text_lines(out: dict) -> list[str]:
                      f" named {pct(r['named_rate'])}, pair {pct(r['pair_rate'])}, unknown "
                      f"{pct(r['unknown_rate'])} (misfit {pct(r['misfit_rate'])}), wrong "
                      f"{pct(r['wrong_rate'])}, by the fallback {pct(r['fallback_rate'])}")
+    # Those whose interval, what the touches cannot tell included, is still
+    # within the identifiability rule's sd (the others are fitted, not known).
+    from telethermal.ident.pad_calibration import interval_sd
+    sharp = [p["held"] for c in out["calibrations"] for p in c["parameters"]
+             if interval_sd(p["lo"], p["hi"]) <= SD_MAX]
     lines.append(f"  calibration: {pct(s['coverage'])} of {s['parameters_fitted']} fitted "
-                 f"parameters within their 95 % interval; CPU up to "
+                 f"parameters within their 95 % interval ({sum(sharp)} of the {len(sharp)} "
+                 f"whose interval sd is within {SD_MAX:g}); CPU up to "
                  f"{s['calibrate_cpu_s_max']:.0f} s per pad")
     return lines

@@ -20,7 +20,7 @@ import numpy as np
 from telethermal.errors import CalibrationError
 from telethermal.physics.figures import DESCRIPTIVE_FIELDS, physical
 from telethermal.tomltables import toml_str
-from telethermal.ident.calibration import (CHI2_MAX, DESIGN_SD, WINDOW_S, PadModelFit,
+from telethermal.ident.calibration import (CHI2_MAX, DESIGN_SD, SD_MAX, WINDOW_S, PadModelFit,
                                            ReferenceTouches, candidates, consider_sds,
                                            describe, marginal_sds,
                                            projected_columns, scaled_scene, select)
@@ -118,7 +118,10 @@ class PadCalibration:
                  f"(the sensor's noise and the curves' error allow {CHI2_MAX:g})"]
         for p in self.parameters:
             lumped = " (lumped: " + ", ".join(p.names) + ")" if len(p.names) > 1 else ""
-            lines.append(f"  {p.label}: x{p.factor:.3f} [{p.lo:.3f}, {p.hi:.3f}] 95 %{lumped}")
+            loose = "; known no better than its design allows" \
+                if interval_sd(p.lo, p.hi) > SD_MAX else ""
+            lines.append(f"  {p.label}: x{p.factor:.3f} [{p.lo:.3f}, {p.hi:.3f}] 95 %"
+                         f"{lumped}{loose}")
         lines.append(f"  contact conductance: {self.contact_conductance_w_m2k:.0f} W/m^2K "
                      "(the touches' geometric mean)")
         if self.not_identifiable:
@@ -266,6 +269,11 @@ def check_model_calibration(model, cal: PadCalibration | None, where: str) -> No
 
 
 # ---------------------------------------------------------------- the fit
+def interval_sd(lo: float, hi: float) -> float:
+    """The sd of ``ln factor`` a 95 % interval ``[lo, hi]`` stands for."""
+    return (math.log(hi) - math.log(lo)) / (2 * Z95)
+
+
 def amplitude_sd(scene) -> float:
     """The per-touch relative spread of the true over the measured gap: the
     thermometers' per-reading noise over the scene's gap (one session of
