@@ -107,3 +107,38 @@ def test_a_parameter_the_design_bounds_better_than_the_fit_is_said_so():
     loose = [line for line in lines if "known no better than its design allows" in line]
     assert len(loose) == 1 and "heat capacity" in loose[0]
     assert any("log sd of 0.2" in line for line in lines)
+
+
+def test_the_pad_fit_s_consider_columns_are_its_own_jacobian_s_at_the_fit():
+    """The real call path (``PadModelFit.jacobian(..., fixed=...)``, the
+    gain kept, a lumped group's members at its factor): consider_sds equals
+    the shifts computed from one Jacobian over every candidate alone, at the
+    same point, to 1e-9."""
+    import dataclasses
+
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.calibration import PadModelFit, ReferenceTouches
+    from telethermal.ident.pad_calibration import amplitude_sd
+
+    scene = load_scene("fingertip-7")
+    ref = dataclasses.replace(
+        scene, pad=dataclasses.replace(scene.pad, trials_per_material=3),
+        objects=tuple(o for o in scene.objects if o.material in ("steel", "plexiglass")))
+    touches = ReferenceTouches.from_trials(pad_database(ref, np.random.default_rng(3)))
+    fit = PadModelFit(scene, touches, amplitude_sd(scene), scene.sensors.flux_noise_w_m2())
+    n = len(touches.labels)
+    lump = ("layers[0].resistance", "layers[1].resistance")
+    free, fixed = [("flux_gain",), ("flux_lag_s",), lump], ["layers[2].resistance"]
+    z = np.concatenate([[0.03, -0.05, 0.1], np.zeros(3 * n)])
+    jac = fit.jacobian(z, free)
+    got = consider_sds(fit, z, free, fixed, 1.0, jac)
+    # Every candidate alone, at the same factors: the members at the lump's.
+    alone = [("flux_gain",), ("flux_lag_s",), (lump[0],), (lump[1],), (fixed[0],)]
+    full = fit.jacobian(np.concatenate([[0.03, -0.05, 0.1, 0.1, 0.0], np.zeros(3 * n)]), alone)
+    parts = full[:, [4, 2, 3]]                           # the fixed one, then the members
+    shift = np.linalg.lstsq(jac, parts, rcond=None)[0][:3]
+    w = lump_weights(scene, lump)
+    shift[2, 1] -= w[0]
+    shift[2, 2] -= w[1]
+    np.testing.assert_allclose(got, np.sqrt(np.sum(shift ** 2, axis=1)), rtol=1e-9)
+    assert got[2] > 0                                   # the lump carries something
