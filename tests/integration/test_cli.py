@@ -66,7 +66,7 @@ sample_rate_hz = 200.0
 pre_contact_s = 0.1
 [pad]
 kind = "peltier"
-layers = [["flux_sensor_film", 3.0e-4], ["alumina", 2.5e-4]]
+layers = [["flux_sensor_film", 3.0e-4], ["thermal_grease", 2.0e-5]]
 gap_k = 10.0
 contact_duration_s = 0.5
 trials_per_material = 2

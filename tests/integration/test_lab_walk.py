@@ -27,7 +27,7 @@ pre_contact_s = 0.5
 
 [pad]
 kind = "peltier"
-layers = [["flux_sensor_film", 3.0e-4], ["thermal_grease", 2.0e-5], ["alumina", 2.5e-4]]
+layers = [["flux_sensor_film", 3.0e-4], ["thermal_grease", 2.0e-5]]
 gap_k = 10.0
 size_mm = [15.0, 15.0]
 contact_duration_s = 2.0

@@ -135,12 +135,14 @@ def test_removing_the_tables_changes_no_model_the_product_builds():
 def test_the_simulated_pad_is_the_scene_written_with_the_built_values():
     """Touches of a pad built with factors on its layers, contact conductance
     and lag equal those of a scene that names the built values as nominal
-    (same draws: equal to rounding)."""
+    (same draws: equal to rounding). The module's own cold plate, last in
+    the stack, is not a key of the written scene: its factor stays 1."""
     from telethermal.data.generate import pad_database
-    factors = {"layer_thickness": [1.3, 1.5, 0.8], "flux_lag_s": 1.2,
+    factors = {"layer_thickness": [1.3, 1.5, 1.0], "flux_lag_s": 1.2,
                "contact_conductance_w_m2k": 0.85}
     built = _scene({"pad": factors})
     data = _data()
+    assert len(data["pad"]["layers"]) == 2          # the plate is added on parsing
     data["pad"]["layers"] = [[m, t * f] for (m, t), f in
                              zip(data["pad"]["layers"], factors["layer_thickness"])]
     data["pad"]["contact_conductance_w_m2k"] *= 0.85

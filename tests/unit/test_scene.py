@@ -15,7 +15,7 @@ room_temp_c = 24.0
 sample_rate_hz = 100.0
 [pad]
 kind = "peltier"
-layers = [["flux_sensor_film", 3.0e-4], ["alumina", 2.5e-4]]
+layers = [["flux_sensor_film", 3.0e-4], ["thermal_grease", 2.0e-5]]
 gap_k = 10.0
 contact_duration_s = 1.0
 trials_per_material = 2
@@ -62,7 +62,7 @@ def test_unknown_material_names_the_file_and_the_known_ones(tmp_path):
     (("sample_rate_hz = 100.0", "sample_rate_hz = \"fast\""), "sample_rate_hz"),
     (("trials_per_material = 2", "trials_per_material = 2.5"), "trials_per_material"),
     (("room_temp_c = 24.0", "room_temp_c = 24.0\ncolour = 3"), "colour"),
-    (("[\"alumina\", 2.5e-4]", "[\"alumina\", -1]"), "layers[1]"),
+    (("[\"thermal_grease\", 2.0e-5]", "[\"thermal_grease\", -1]"), "layers[1]"),
 ])
 def test_bad_keys_are_named(change, needle):
     with pytest.raises(SceneError) as info:
@@ -313,3 +313,29 @@ def test_a_table_cannot_shadow_a_row_already_used_and_a_failed_scene_registers_n
     with pytest.raises(SceneError, match="gapk"):
         load_scene(tmp_path / "a.toml")
     assert "cork" not in materials._SCENE_MATERIALS
+
+
+def test_a_peltier_pads_stack_ends_with_its_modules_own_plate():
+    """One figure for the module's cold plate: the pad's stack is the listed
+    layers, then the module's plate (modules.toml's plate_mm of alumina), the
+    same plate whose thickness sets the module's pellet length and hot plate."""
+    from telethermal.physics.thermoelectric import get_module
+    scene = parse_scene(tomllib.loads(MINIMAL), "x.toml")
+    module = get_module(scene.pad.module)
+    assert [(lay.material.name, lay.thickness_m) for lay in scene.pad.layers] == [
+        ("flux_sensor_film", 3.0e-4), ("thermal_grease", 2.0e-5),
+        ("alumina", module.plate_mm * 1e-3)]
+    assert module.plate_mm == 0.8
+    water = parse_scene(tomllib.loads(MINIMAL.replace('"peltier"', '"water"')), "x.toml")
+    assert [lay.material.name for lay in water.pad.layers] == ["flux_sensor_film",
+                                                               "thermal_grease"]
+
+
+def test_a_stack_that_lists_the_plate_itself_is_refused_saying_why():
+    text = MINIMAL.replace('["thermal_grease", 2.0e-5]]',
+                           '["thermal_grease", 2.0e-5], ["alumina", 2.5e-4]]')
+    with pytest.raises(SceneError) as info:
+        parse_scene(tomllib.loads(text), "x.toml")
+    message = str(info.value)
+    assert "x.toml" in message and "'alumina'" in message and "0.25 mm" in message
+    assert "0.8 mm" in message and "TM-31-1.4-8.5" in message and "cold plate" in message

@@ -7,7 +7,7 @@ gain, the module's Seebeck coefficient, resistance and conductance (10-30 %
 each). A scene may say how its pads are really built::
 
     [as_built.pad]                  # the slave's sensing pad
-    layer_thickness = [1.2, 1.5]    # one factor per layer of [pad] layers
+    layer_thickness = [1.2, 1.5, 1.0]  # one per layer of the pad's stack
     flux_lag_s = 1.2
     contact_conductance_w_m2k = 0.9
     flux_gain = 1.05
@@ -159,7 +159,8 @@ def _parse_part(table, n_layers: int, where: str, keys: tuple[str, ...]) -> Buil
     thick = table.get("layer_thickness", [1.0] * n_layers)
     if not isinstance(thick, list) or len(thick) != n_layers:
         raise SceneError(f"{where}: 'layer_thickness' must be a list of {n_layers} factor(s), "
-                         f"one per layer of [pad] layers, got {thick!r}")
+                         f"one per layer of the pad's stack ([pad] layers, then a Peltier pad's "
+                         f"cold plate), got {thick!r}")
     values = {k: _factor(table.get(k, 1.0), f"{where}: '{k}'") for k in keys[1:]}
     return BuiltFactors(tuple(_factor(v, f"{where}: 'layer_thickness'[{i}]")
                               for i, v in enumerate(thick)), **values)

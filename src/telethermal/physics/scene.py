@@ -179,12 +179,15 @@ class Scene:
 # ---------------------------------------------------------------- parsing
 def _parse_pad(table, source) -> PadSpec:
     from telethermal.physics.thermoelectric import (DEFAULT_HEAT_SINK, DEFAULT_MODULE,
-                                                    heat_sink_names, module_names)
+                                                    get_module, heat_sink_names, module_names)
 
     r = _Reader(table, "[pad]", source)
     r.only(PAD_KEYS)              # a typo first: 'gapk' is not a missing 'gap_k'
     kind = r.text("kind", choices=PAD_KINDS)
     layers = read_layers(table.get("layers"), r)
+    module = r.text("module", DEFAULT_MODULE, choices=module_names())
+    if kind == "peltier":
+        layers = _with_cold_plate(layers, get_module(module), r)
     gap = table.get("gap_k")
     fixed = table.get("temp_c")
     if (gap is None) == (fixed is None):
@@ -197,12 +200,27 @@ def _parse_pad(table, source) -> PadSpec:
         trials_per_material=r.num("trials_per_material", 10, 1, 10000, integer=True),
         contact_conductance_w_m2k=r.num("contact_conductance_w_m2k", 3000.0, 1.0, 1e7),
         back_h_w_m2k=r.num("back_h_w_m2k", 300.0, 1e-3, 1e7),
-        module=r.text("module", DEFAULT_MODULE, choices=module_names()),
+        module=module,
         heat_sink=r.text("heat_sink", DEFAULT_HEAT_SINK, choices=heat_sink_names()),
         size_mm=_size_mm(table, r),
     )
     r.done()
     return spec
+
+
+def _with_cold_plate(layers, module, reader: _Reader):
+    """A Peltier pad's stack: its listed layers, then its module's own cold
+    plate (physics/modules.toml's ``plate_mm``: one figure for the pad's
+    stack and the module's geometry). A list that already ends in the
+    plate's ceramic would count the plate twice: refused, saying why."""
+    from telethermal.physics.thermoelectric import PLATE_MATERIAL, cold_plate
+    plate = cold_plate(module)
+    if layers[-1].material.name == PLATE_MATERIAL:
+        reader.fail(f"'layers' ends with {PLATE_MATERIAL!r} ({layers[-1].thickness_m * 1e3:g} mm): "
+                    f"the module's own cold plate ({module.plate_mm:g} mm {PLATE_MATERIAL}, "
+                    f"module {module.name!r} in physics/modules.toml) is added behind the listed "
+                    "layers; list only the layers in front of it")
+    return tuple(layers) + (plate,)
 
 
 def _size_mm(table, reader: _Reader) -> tuple[float, float] | None:

@@ -54,6 +54,10 @@ BI2TE3_HEAT_J_M3K = 7700.0 * 154.0
 COPPER_HEAT_J_M3K = 8960.0 * 385.0
 
 
+#: The ceramic of a module's plates (both sides; its geometry's ``plate_mm``).
+PLATE_MATERIAL = "alumina"
+
+
 @dataclass(frozen=True)
 class ModuleSpec:
     """What a module's datasheet says (and its geometry, for its heat capacities)."""
@@ -145,8 +149,16 @@ def derive(spec: ModuleSpec) -> ModuleParams:
     legs = 2 * spec.couples * pellet * pellet * length * BI2TE3_HEAT_J_M3K
     # A tab joins two pellets: two pellet widths by one, per couple and side.
     tabs = spec.couples * 2 * pellet * pellet * spec.tab_mm * 1e-3 * COPPER_HEAT_J_M3K
-    plate = spec.area_m2 * spec.plate_mm * 1e-3 * get_material("alumina").volumetric_heat_j_m3k
+    plate = spec.area_m2 * spec.plate_mm * 1e-3 * get_material(PLATE_MATERIAL).volumetric_heat_j_m3k
     return ModuleParams(spec, s, r, k, 0.5 * legs + tabs, 0.5 * legs + tabs + plate)
+
+
+def cold_plate(spec: ModuleSpec):
+    """The module's cold plate as the innermost layer of the pad built on
+    it: ``plate_mm`` of :data:`PLATE_MATERIAL`, the one figure the pad's stack
+    and the module's geometry (its pellets' length, its hot plate) share."""
+    from telethermal.physics.layered import Layer
+    return Layer(get_material(PLATE_MATERIAL), spec.plate_mm * 1e-3)
 
 
 @dataclass(frozen=True)
