@@ -24,8 +24,8 @@ if the response stands far out of the sensor's scatter: the predicted
 warming must reach ``SCATTER_RATIO`` times the scatter measured while the
 module settled (from successive differences, so a slow drift does not
 count), or the probe refuses for that reason. With the shipped chip (0.01 K
-of noise) the modelled warming (0.77 K: ``PROBE_K`` less the losses) is
-some seventy times its scatter.
+of noise) the modelled warming (0.81 K on fingertip-7's pad: ``PROBE_K``
+less the losses) is some eighty times its scatter.
 """
 
 from __future__ import annotations
@@ -39,8 +39,9 @@ from telethermal.physics.thermoelectric import KELVIN, HBridge, ModuleParams
 #: sensor lagging within the range the loop is designed for (half to twice
 #: its stated value) then gives a gain of 0.74-1.16, one lagging ten times
 #: 0.15-0.35 (its reading has not caught up with the warming); at least
-#: ``PROBE_MIN_S``, and for the shipped chip (0.10 s) 0.5 s: an eighth of
-#: the junction's own time constant in air (C/G = 4.3 s), so the warming
+#: ``PROBE_MIN_S``, and for the shipped chip (0.10 s) 0.5 s: a seventeenth
+#: of the junction's own time constant in air (C/G = 8.6 s on fingertip-7's
+#: pad), so the warming
 #: is mostly the current's and little the losses'.
 PROBE_LAGS = 5.0
 PROBE_MIN_S = 0.1

@@ -67,8 +67,16 @@ class DisplayConfig:
     #: The junction loop: its target smoothed over this long (the feed-forward
     #: differentiates the smoothed target), and the module current's slew
     #: bound (8.5 A in 85 ms: under the junction sensor's lag; module makers
-    #: warn against fast reversals and ripple).
-    junction_reference_s: float = 0.02
+    #: warn against fast reversals and ripple). The feed-forward's current is
+    #: the junction's heat capacity times the target's rate over S T, so the
+    #: target's noise reaches the current in proportion to that capacity:
+    #: with the module's own 0.8 mm plate (1.43 J/K against 0.714 with the
+    #: thinner layer modelled before) this and the impedance controller's
+    #: offset filter below were doubled (0.02 -> 0.04 s, 0.05 -> 0.1 s),
+    #: halving the target's noise; both stay under the junction loop's
+    #: closed-loop time constant (0.93 Hz: 0.17 s), which sets how fast the
+    #: junction follows anyway.
+    junction_reference_s: float = 0.04
     current_slew_a_s: float = 100.0
     #: The impedance controller's inversion of the flux sensor's lag is
     #: regularised: ``(tau s + 1) / (flux_inverse_s s + 1)``, its noise gain
@@ -77,7 +85,7 @@ class DisplayConfig:
     flux_inverse_s: float = 0.02
     #: The impedance controller's measured-minus-model offsets (its
     #: disturbance estimate) are filtered over this long.
-    impedance_bias_filter_s: float = 0.05
+    impedance_bias_filter_s: float = 0.1
     contact_on_n: float = 2.0
     contact_off_n: float = 1.0
     debounce_s: float = 0.02
