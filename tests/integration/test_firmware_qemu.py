@@ -196,7 +196,10 @@ def test_the_watchdog_disables_the_element_within_100_ms_and_a_period_over_20_tr
     trips, delays, changes = w["trips"], w["delays_ms"], w["changes"]
     offs = [ms for ms, enabled, _ in changes[1:] if not enabled]
     assert len(trips) == len(offs) >= 20, (trips, changes)
-    assert [ms for ms, _ in trips] == offs             # each disable is a watchdog trip
+    # Each disable is a watchdog trip: the H-bridge's change is stamped when
+    # it is made, the trip's status when it is sent, in the same or the next
+    # millisecond (CI saw 3484 against 3483 on a loaded host).
+    assert all(0 <= ms - off <= 1 for (ms, _), off in zip(trips, offs)), (trips, offs)
     assert {(e, ma) for _, e, ma in changes[1:]} == {(1, 1250), (0, 0)}
     assert all(s["enabled"] == 0 and s["current_a"] == 0.0 for _, s in trips)
     assert all(WATCHDOG_MS <= d <= WATCHDOG_MS + 1000 * PERIOD_S for d in delays), delays
