@@ -38,14 +38,9 @@ def test_aluminium_with_the_sensor_at_half_and_twice_its_lag(models, lag_scale):
     loop oscillated at +-8.5 A about 6 Hz, 1,205 periods saturated) and its
     2x: no safety event, the loop never stopped, no period at the current
     limit after the first second (the metal's onset may use it), and no
-    oscillation: no sign reversal of the current from 1.5 s of contact on
-    (the old loop's limit cycle reversed about 12 times a second). The
-    reversals of the first 1.5 s are the touch's own transients (onset,
-    decision, hand-over: the junction turns from cooling to holding) and
-    are counted against issue 43's target, <= 2 per second of contact, on
-    the shipped sensor (below) and over every session by bench render; with
-    the module's own 0.8 mm plate the half-lag case has 2.34 per second
-    (seed 1), the twice-lag case 1.67."""
+    sustained oscillation: no sign reversal of the current in the contact's
+    last second (a limit cycle persists; the old loop's reversed about 12
+    times a second)."""
     res = touch(models, lag_scale)
     s, module = res.summary, res.summary["module"]
     assert module["junction_sensor"]["true_tau_s"] == pytest.approx(
@@ -54,17 +49,27 @@ def test_aluminium_with_the_sensor_at_half_and_twice_its_lag(models, lag_scale):
     assert JUNCTION_STOPPED not in s["display_event_counts"]
     assert at_the_limit_after(res, 1.0) == 0
     tr = res.trace
-    late = (tr["t_s"] >= 1.5) & (tr["t_s"] < CONTACT_S)        # to the release
-    assert sign_reversals(tr["current_a"][late]) == 0
+    last = (tr["t_s"] >= CONTACT_S - 1.0) & (tr["t_s"] < CONTACT_S)     # to the release
+    assert sign_reversals(tr["current_a"][last]) == 0
 
 
-def test_aluminium_on_the_shipped_sensor_reverses_within_the_target(models):
-    """Issue 43's target on the shipped sensor's lag (aluminium, seed 1): the
-    current's sign reversals <= 2 per second of contact and its ripple <=
-    0.3 A RMS (measured 1.67 per second, 0.21 A)."""
-    module = touch(models, 1.0).summary["module"]
-    assert module["reversals_per_s"] <= 2.0
+#: Issue 43, open: with the module's own 0.8 mm plate (the junction's heat
+#: capacity doubled) the sensor lagging half its stated value gives 2.34
+#: reversals per second of contact on this touch (the touch's transients in
+#: its first 1.5 s; none after), over the target's 2 (docs/display-loop.md).
+HALF_LAG_REVERSALS = pytest.mark.xfail(strict=True, reason=(
+    "issue 43: 2.34 reversals per s with the sensor at half its lag, over 2"))
+
+
+@pytest.mark.parametrize("lag_scale", [pytest.param(0.5, marks=HALF_LAG_REVERSALS), 1.0, 2.0])
+def test_aluminium_reverses_within_the_target(models, lag_scale):
+    """Issue 43's target over the sensor's lags the loop is designed for (half
+    to twice its stated value; aluminium, seed 1): the current's sign
+    reversals <= 2 per second of contact and its ripple <= 0.3 A RMS
+    (measured 2.34 / 1.67 / 1.67 per second, 0.22 / 0.21 / 0.20 A)."""
+    module = touch(models, lag_scale).summary["module"]
     assert module["ripple_rms_a"] <= 0.3
+    assert module["reversals_per_s"] <= 2.0
 
 
 def test_a_sensor_ten_times_slower_is_made_safe_or_stable(models):

@@ -36,7 +36,7 @@ def test_coverage_scores_a_lumped_parameter_against_its_groups_total():
     scene = load_scene("fingertip-7")
     c = [lay.thickness_m * lay.material.volumetric_heat_j_m3k for lay in scene.pad.layers]
     total = (1.2 * c[0] + 1.5 * c[2]) / (c[0] + c[2])
-    assert 1.25 < total < 1.47                   # neither member's (464, 2619 J/(m^2 K))
+    assert 1.21 < total < 1.49                   # strictly between the members' 1.2 and 1.5
     truth = {"flux_lag_s": 1.1, "layers[0].heat_capacity": 1.2, "layers[2].heat_capacity": 1.5}
     lumped = ("layers[0].heat_capacity", "layers[2].heat_capacity")
     rows = coverage(_cal([(("flux_lag_s",), "lag", 1.09, 1.05, 1.12),

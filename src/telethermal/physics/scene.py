@@ -216,7 +216,8 @@ def _with_cold_plate(layers, module, reader: _Reader):
     from telethermal.physics.thermoelectric import PLATE_MATERIAL, cold_plate
     plate = cold_plate(module)
     if layers[-1].material.name == PLATE_MATERIAL:
-        reader.fail(f"'layers' ends with {PLATE_MATERIAL!r} ({layers[-1].thickness_m * 1e3:g} mm): "
+        reader.fail(f"'layers' ends with {PLATE_MATERIAL!r} (layers[{len(layers) - 1}], "
+                    f"{layers[-1].thickness_m * 1e3:g} mm): "
                     f"the module's own cold plate ({module.plate_mm:g} mm {PLATE_MATERIAL}, "
                     f"module {module.name!r} in physics/modules.toml) is added behind the listed "
                     "layers; list only the layers in front of it")

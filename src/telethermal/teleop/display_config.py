@@ -43,10 +43,11 @@ class DisplayConfig:
     feedforward_model: str = "impedance"
     #: The impedance controller's prediction horizon: no shorter than the
     #: junction loop takes to move the junction (its target moves no faster
-    #: than the module can follow: a 10 K step takes 0.3-0.4 s), else the
-    #: outer loop re-plans faster than the inner one follows and the two
-    #: oscillate (0.1 s did: +-8 A at about 2 Hz on plexiglass with the
-    #: bonded sensor; docs/display-loop.md).
+    #: than the module can follow), else the outer loop re-plans faster
+    #: than the inner one follows and the two oscillate (0.1 s did: +-8 A at
+    #: about 2 Hz on plexiglass with the bonded sensor, on the thinner cold
+    #: layer modelled before the module's own plate; not re-tuned since:
+    #: docs/display-loop.md).
     impedance_horizon_s: float = 0.2
     before: str = "prior"
     source: str = "trajectory"
