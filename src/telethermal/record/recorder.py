@@ -105,7 +105,11 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
                         "handover_k_s": config.handover_k_s, "blend_s": config.blend_s,
                         "r_pad_belief": config.r_pad_belief,
                         "feedforward_model": config.feedforward_model,
-                        "impedance_horizon_s": config.impedance_horizon_s},
+                        "impedance_horizon_s": config.impedance_horizon_s,
+                        "junction_reference_s": config.junction_reference_s,
+                        "current_slew_a_s": config.current_slew_a_s,
+                        "flux_inverse_s": config.flux_inverse_s,
+                        "impedance_bias_filter_s": config.impedance_bias_filter_s},
             "pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
             "pad_layers": [[layer.material.name, layer.thickness_m] for layer in scene.pad.layers],
             "contact_conductance_w_m2k": (scene.finger.contact_conductance_w_m2k

@@ -222,6 +222,12 @@ def _replay_master(rec, params, cid, generator, gains, attached):
                            # Recordings from before the skin-side controllers: "static".
                            feedforward_model=d.get("feedforward_model", "static"),
                            impedance_horizon_s=d.get("impedance_horizon_s", 0.1),
+                           # Recordings from before these were recorded: the
+                           # values the display then shipped with.
+                           junction_reference_s=d.get("junction_reference_s", 0.02),
+                           current_slew_a_s=d.get("current_slew_a_s", 100.0),
+                           flux_inverse_s=d.get("flux_inverse_s", 0.02),
+                           impedance_bias_filter_s=d.get("impedance_bias_filter_s", 0.05),
                            idle=d.get("idle", "object"))
     # Not build_display (teleop/display_setup.py), on purpose: a replay's
     # inputs are the display's parameters as recorded (a recording of an
