@@ -26,6 +26,14 @@ DT = 0.002
 MODEL = plant_model(PARAMS, SCENE.pad.layers, SCENE.pad.area_m2, 0.0, SENSOR.tau_s, DT)
 
 
+def probe_current_a(start_c=24.0):
+    """The re-arm probe's current in closed form from the configuration:
+    PROBE_K C / (S T duration), duration PROBE_LAGS sensor lags (at least
+    PROBE_MIN_S)."""
+    probe_s = max(PROBE_LAGS * SENSOR.tau_s, PROBE_MIN_S)
+    return PROBE_K * MODEL.heat_j_k / (PARAMS.seebeck_v_k * (start_c + 273.15) * probe_s)
+
+
 def designed_loop(driver=None, model=MODEL):
     kp, ki, _ = design_gains(model)
     return DisplayJunctionLoop(PARAMS, driver or default_driver(PARAMS), model,
@@ -314,8 +322,7 @@ def test_a_sensor_ten_times_slower_is_stopped_then_refused_at_idle():
         currents.append(out.current_a)
     assert loop.stopped and loop.rearms == 0 and loop.rearm_refusals >= 1
     assert "does not follow the module" in loop.rearm_refused
-    probe_s = max(PROBE_LAGS * SENSOR.tau_s, PROBE_MIN_S)
-    probe_a = PROBE_K * MODEL.heat_j_k / (PARAMS.seebeck_v_k * (24.0 + 273.15) * probe_s)
+    probe_a = probe_current_a()
     # The reading it starts from is within a few kelvin of 24 C: the pump's
     # S T within 2 % of the one above.
     assert max(abs(c) for c in currents) <= 1.02 * probe_a

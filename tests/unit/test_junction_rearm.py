@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from telethermal.control import junction_probe
-from test_display_junction import DT, MODEL, PARAMS, SCENE, SENSOR, PadInAir, designed_loop
+from test_display_junction import (DT, PARAMS, SCENE, SENSOR, PadInAir, designed_loop,
+                                   probe_current_a)
 
 
 class Debonded:
@@ -63,9 +64,7 @@ def test_a_bonded_sensor_is_rearmed_after_settling_and_one_probe():
     expected_s = loop.REARM_S + junction_probe.PROBE_LAGS * SENSOR.tau_s
     assert rearmed * DT == pytest.approx(expected_s, abs=3 * DT)
     probe = currents[currents != 0.0]
-    sized_a = junction_probe.PROBE_K * MODEL.heat_j_k / (
-        PARAMS.seebeck_v_k * (24.0 + 273.15) * junction_probe.PROBE_LAGS * SENSOR.tau_s)
-    assert probe.max() < 0 and abs(probe.min()) == pytest.approx(sized_a, rel=0.05)
+    assert probe.max() < 0 and abs(probe.min()) == pytest.approx(probe_current_a(), rel=0.05)
 
 
 @pytest.mark.parametrize("off", [{"layers_heat_scale": 0.6}, {"layers_heat_scale": 1.6},
