@@ -106,3 +106,51 @@ def test_unseen_as_built_refuses_a_custom_unseen_set(capsys):
     assert main(["bench", "unseen", "--as-built", "0.15", "--unseen", "copper",
                  "--json", "x.json"]) != 0
     assert "--unseen and --unseen-scene are for the pad as modelled" in capsys.readouterr().err
+
+
+def _render_pad(seed: int, skins: dict, identified: dict | None = None,
+                over_imax: int = 0) -> dict:
+    """One drawn pad's first touches: ``skins[material]`` the seeds' skin
+    errors; ``over_imax`` periods requested over Imax in each session."""
+    from telethermal.bench.render_as_built import _per_material
+    limits = {"current_exceeded": 0, "hot_side_exceeded": 0, "reversals": 3, "contact_s": 3.0,
+              "ripple_rms_a": 0.2, "requested": {"requested_over_imax_periods": over_imax,
+                                                 "largest_request_a": 7.0 + over_imax}}
+    rows = [{"material": m, "seed": s, "temp_rms_error_c": v, "flux_rms_error_rel": 0.02,
+             "identified": (identified or {}).get(m, m), "safety_events": 0,
+             "module_limits": limits}
+            for m, vals in skins.items() for s, v in enumerate(vals)]
+    return {"seed": seed, "rows": rows, "per_material": _per_material(rows)}
+
+
+def test_render_as_built_summary_sets_each_materials_calibrated_mean_against_as_modelled():
+    from telethermal.bench import render_as_built as ra
+
+    modelled = _render_pad(0, {"aluminium": [0.6, 0.8], "wood": [0.7, 0.9]})
+    out = {"sd": 0.15, "pads": 2, "seeds": [1, 2],
+           "as_modelled": {"rows": modelled["rows"], "per_material": modelled["per_material"]},
+           "uncalibrated": [_render_pad(0, {"aluminium": [1.0, 1.2], "wood": [0.8, 1.0]},
+                                        {"wood": "plexiglass"}),
+                            _render_pad(1, {"aluminium": [0.9, 0.9], "wood": [0.8, 0.8]},
+                                        over_imax=5)],
+           "calibrated": [_render_pad(0, {"aluminium": [0.7, 0.8], "wood": [0.9, 1.1]}),
+                          _render_pad(1, {"aluminium": [0.7, 0.7], "wood": [0.9, 0.9]})]}
+    s = ra.summary(out)
+    al, wood = s["per_material"]["aluminium"], s["per_material"]["wood"]
+    # Aluminium: as modelled 0.7 K; calibrated (0.75 + 0.7) / 2 = 0.725 K: 1.036x.
+    assert al["calibrated_ratio"] == pytest.approx(0.725 / 0.7) and al["met"]
+    # Wood: as modelled 0.8 K; calibrated (1.0 + 0.9) / 2 = 0.95 K: 1.1875x, over 1.15.
+    assert wood["calibrated_ratio"] == pytest.approx(0.95 / 0.8) and not wood["met"]
+    assert wood["calibrated_skin_rms_max_k"] == pytest.approx(1.1)
+    assert s["worst_material"] == "wood" and not s["met"]
+    # The first pad named wood as plexiglass on both uncalibrated seeds.
+    assert wood["uncalibrated_identified_right"] == 2 and wood["calibrated_identified_right"] == 4
+    # Limits pooled over the pads: the second uncalibrated pad's 4 sessions
+    # asked past Imax for 5 periods each.
+    lim = s["limits"]["uncalibrated"]
+    assert lim["current_requested_over_imax_periods"] == 20 and lim["largest_request_a"] == 12.0
+    assert s["limits"]["calibrated"]["current_requested_over_imax_periods"] == 0
+    assert lim["reversals_per_s"] == pytest.approx(1.0)     # 3 in each 3 s contact
+    out["summary"] = s
+    text = "\n".join(ra.text_lines(out))
+    assert "worst: wood 1.19x (missed)" in text and "(over the target)" in text

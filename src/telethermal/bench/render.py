@@ -70,13 +70,14 @@ _DEW = {"sessions": 0, "min_idle_minus_dew_k": float("inf")}
 
 
 def _session_row(scene, material, identifier, generator, config, seed,
-                 expected_material=None):
+                 expected_material=None, display_calibration=None):
     start = time.process_time()
     # The pad idles by config.idle (control/preconditioning.py): by default a
     # repeated touch (the material known from memory) is pre-conditioned for
     # it, a first touch idles at the policy's choice for an unknown object.
     s = run_session(scene, material, identifier, generator, config, contact_s=CONTACT_S,
-                    seed=seed, expected_material=expected_material, fresh_fits=True).summary
+                    seed=seed, expected_material=expected_material, fresh_fits=True,
+                    display_calibration=display_calibration).summary
     cpu = time.process_time() - start
     module = s["module"]
     add_limits(_LIMITS, module)

@@ -437,13 +437,15 @@ SECTIONS = (("physics", physics), ("identify", identify), ("render", render),
 #: Reported when its JSON is there, not run by the Makefile's bench targets:
 #: ``telethermal bench skin-floor`` takes 20 minutes at its defaults (10
 #: with --quick), past bench-quick's 3 and most of bench's 15; the as-built
-#: benches (``bench identify|unseen --as-built 0.15``) calibrate five pads,
-#: 10-40 minutes each run.
+#: benches (``bench identify|unseen|render --as-built 0.15``) calibrate five
+#: pads, 10-40 minutes each run.
 BY_HAND = (("skin-floor", skin_floor),
            ("identify-as-built", _as_built("Identification on pads built off their datasheet",
                                            "identify_as_built")),
            ("unseen-as-built", _as_built("Unseen materials on pads built off their datasheet",
-                                         "unseen_as_built")))
+                                         "unseen_as_built")),
+           ("render-as-built", _as_built("First touches on pads built off their datasheet",
+                                         "render_as_built")))
 
 
 def write_report(results: str | Path, out_md: str | Path, command: str = "") -> Path:

@@ -19,6 +19,8 @@ def cmd_bench_physics(args) -> int:
 def cmd_bench_render(args) -> int:
     from telethermal.bench import render
 
+    if args.as_built is not None:
+        return _bench_render_as_built(args)
     with _progress(7, "bench render") as advance:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene)
@@ -116,6 +118,19 @@ def _bench_identify_as_built(args) -> int:
     with _progress(1 + 3 * args.pads, "bench identify --as-built") as advance:
         section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
                          progress=advance, partial=lambda part: write_json(
+                             args.json, {"as_built": part, **_stamp()}))
+    write_json(args.json, {"as_built": section, **_stamp()})
+    _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
+    return 0
+
+
+def _bench_render_as_built(args) -> int:
+    from telethermal.bench import render_as_built as ab
+    from telethermal.jsonfile import write_json
+
+    with _progress(1 + 3 * args.pads, "bench render --as-built") as advance:
+        section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
+                         quick=args.quick, progress=advance, partial=lambda part: write_json(
                              args.json, {"as_built": part, **_stamp()}))
     write_json(args.json, {"as_built": section, **_stamp()})
     _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
@@ -253,6 +268,14 @@ def _add_error(bsub) -> None:
     p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--png", help="plot (default: beside the JSON)")
     p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
+    p.add_argument("--as-built", type=float, metavar="SD",
+                   help="instead: every material's first touch on pads built off their "
+                        "datasheet (both pads' factors drawn log-normal with this sd), as "
+                        "modelled, uncalibrated and after calibrating both pads "
+                        "(telethermal calibrate pad and calibrate display); with --quick, a "
+                        "third of the materials")
+    p.add_argument("--pads", type=_positive(int), default=5,
+                   help="with --as-built: how many pads are drawn (default 5)")
     _scene_arg(p)
     p.set_defaults(func=cmd_bench_render)
 
