@@ -8,7 +8,7 @@ import numpy as np
 
 from telethermal.teleop.display_setup import add_limits
 
-from telethermal.control.loop import combined_summary, master_step_summary
+from telethermal.control.loop import combined_summary, master_step_summary, realtime
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.run import run_session
 
@@ -19,26 +19,30 @@ REAL_CLOCK_PERIODS = 6800
 
 
 def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s: float,
-                   limits: dict, periods: int = REAL_CLOCK_PERIODS) -> dict:
+                   limits: dict, periods: int = REAL_CLOCK_PERIODS, priority: int = 0) -> dict:
     """Steel touches (the scene's first object where it has no steel) on the real clock at ``rate_hz`` (seeds 1, 2, ...) until
     the loop has run ``periods``, its timing pooled over them
     (:func:`combined_summary`): a miss rate of 0.1 % is then a count of
     some, whatever the rate. ``limits``: the bench's module-limit counts,
     added to. ``mode``: ``"master"`` (the world's time not charged to the
-    loop) or True (everything on the loop's thread)."""
+    loop) or True (everything on the loop's thread). ``priority``: the
+    loop's thread at SCHED_FIFO this priority for the row (0: normal
+    scheduling); the row's ``realtime_priority`` is what was granted."""
     if periods < 1:
         raise ValueError(f"a real-clock row needs periods >= 1, got {periods}")
     runs, steps_s, flux = [], [], []
     config = DisplayConfig(rate_hz=rate_hz)
     material = "steel" if "steel" in scene.materials else scene.materials[0]
-    while sum(len(r.starts_s) for r in runs) < periods:
-        res = run_session(scene, material, identifier, generator, config, contact_s=contact_s,
-                          seed=len(runs) + 1, realtime=mode)
-        add_limits(limits, res.summary["module"])
-        runs.append(res.loop_stats)
-        steps_s.extend(res.master_step_s)
-        flux.append(res.summary["flux_rms_error_rel"])
-        clock = res.summary["clock"]
+    with realtime(priority) as granted:
+        while sum(len(r.starts_s) for r in runs) < periods:
+            res = run_session(scene, material, identifier, generator, config,
+                              contact_s=contact_s, seed=len(runs) + 1, realtime=mode)
+            add_limits(limits, res.summary["module"])
+            runs.append(res.loop_stats)
+            steps_s.extend(res.master_step_s)
+            flux.append(res.summary["flux_rms_error_rel"])
+            clock = res.summary["clock"]
     return {"rate_hz": rate_hz, "material": material, "clock": clock, "sessions": len(runs),
+            "realtime_priority": granted,
             **combined_summary(runs), **master_step_summary(steps_s, rate_hz),
             "flux_rms_error_rel": float(np.mean(flux))}

@@ -28,7 +28,7 @@ import numpy as np
 from telethermal.bench.render_text import text_report  # noqa: F401  (the CLI's)
 from telethermal.bench.real_clock import REAL_CLOCK_PERIODS, REAL_CLOCK_RATES_HZ, real_clock_row
 from telethermal.bench.render_limits import dew_report, limits_of, shipped_limits
-from telethermal.control.loop import DEFAULT_RATE_HZ, FixedRateLoop, RealClock
+from telethermal.control.loop import DEFAULT_RATE_HZ, DEPLOYED_PRIORITY, FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
@@ -358,13 +358,17 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     report["real_clock_empty_loop"] = {"rate_hz": DEFAULT_RATE_HZ, **empty}
     report["real_clock"], report["real_clock_world_on_thread"] = [], []
     report["default_rate_hz"] = DEFAULT_RATE_HZ
-    for key, mode, rates in (("real_clock", "master", (DEFAULT_RATE_HZ,) if quick
-                              else REAL_CLOCK_RATES_HZ),
-                             ("real_clock_world_on_thread", True, (DEFAULT_RATE_HZ,))):
+    # And the master's loop at the default rate as the shipped deployments
+    # run it: its thread at SCHED_FIFO (where the bench may set it).
+    report["real_clock_deployed"] = []
+    for key, mode, rates, priority in (
+            ("real_clock", "master", (DEFAULT_RATE_HZ,) if quick else REAL_CLOCK_RATES_HZ, 0),
+            ("real_clock_world_on_thread", True, (DEFAULT_RATE_HZ,), 0),
+            ("real_clock_deployed", "master", (DEFAULT_RATE_HZ,), DEPLOYED_PRIORITY)):
         for rate in rates:
             report[key].append(real_clock_row(
                 scene, identifier, generator, rate, mode, CONTACT_S, _LIMITS,
-                periods=340 if quick else REAL_CLOCK_PERIODS))
+                periods=340 if quick else REAL_CLOCK_PERIODS, priority=priority))
     report["limits"] = shipped_limits(report)
     report["limits_repeat"] = limits_of(repeat)
     report["limits_all_sessions"] = limits_report(_LIMITS)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import gc
 import math
+import os
 import time
 from collections import deque
 from contextlib import contextmanager
@@ -48,6 +49,42 @@ SPIN_FRACTION = 0.2
 #: loop holds 500 Hz where at 1 kHz its sleeps are too short to absorb the
 #: wake-up delays. The first paper's dSPACE ran at 100 Hz.
 DEFAULT_RATE_HZ = 500.0
+
+
+#: The display loop's SCHED_FIFO priority in the shipped deployments
+#: (deploy/two-host/master.toml, the systemd unit, ``telethermal demo``): above
+#: every normal thread, below the kernel's own real-time threads (50).
+DEPLOYED_PRIORITY = 20
+
+
+def set_realtime(priority: int) -> str:
+    """The calling thread at SCHED_FIFO ``priority`` (0: normal scheduling,
+    left as it is). Returns "" when granted, else why not (no root nor
+    CAP_SYS_NICE, or a platform without it): the loop then runs at normal
+    priority, which the caller says."""
+    if not priority:
+        return ""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        return str(exc) or type(exc).__name__
+    return ""
+
+
+@contextmanager
+def realtime(priority: int):
+    """:func:`set_realtime` for a block, the thread's policy restored after;
+    yields the priority granted (0: refused or not asked)."""
+    if not priority:
+        yield 0
+        return
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    refused = set_realtime(priority)
+    try:
+        yield 0 if refused else priority
+    finally:
+        if not refused:
+            os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
 
 
 class RealClock:

@@ -16,7 +16,7 @@ import os
 import time
 from dataclasses import dataclass, replace
 
-from telethermal.control.loop import FixedRateLoop
+from telethermal.control.loop import FixedRateLoop, set_realtime
 from telethermal.control.preconditioning import prepare_policy
 from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
@@ -410,12 +410,12 @@ class MasterService:
             except (OSError, ValueError) as exc:
                 log.warning("cpus=%r not applied: %s", cfg.cpus, exc)
         if cfg.realtime_priority:
-            try:
-                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(cfg.realtime_priority))
-                log.info("display loop at SCHED_FIFO priority %d", cfg.realtime_priority)
-            except (OSError, AttributeError) as exc:
+            refused = set_realtime(cfg.realtime_priority)
+            if refused:
                 log.warning("SCHED_FIFO %d not granted (%s): running at normal priority",
-                            cfg.realtime_priority, exc)
+                            cfg.realtime_priority, refused)
+            else:
+                log.info("display loop at SCHED_FIFO priority %d", cfg.realtime_priority)
 
     def run(self) -> None:
         self._realtime()

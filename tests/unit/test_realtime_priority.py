@@ -1,0 +1,63 @@
+"""The display loop's SCHED_FIFO: granted and restored for a block, a
+refusal said and not fatal; the real-clock text names both rows' targets."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from telethermal.bench.clock_text import real_clock_sentences
+from telethermal.control import loop
+from telethermal.control.loop import WORLD_PAUSED, realtime, set_realtime
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "SCHED_FIFO"), reason="no SCHED_FIFO here")
+
+
+def test_a_block_runs_at_fifo_and_the_threads_policy_is_restored_after():
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    with realtime(loop.DEPLOYED_PRIORITY) as granted:
+        if granted:       # root or CAP_SYS_NICE (CI runs as root)
+            assert granted == loop.DEPLOYED_PRIORITY
+            assert os.sched_getscheduler(0) == os.SCHED_FIFO
+            assert os.sched_getparam(0).sched_priority == loop.DEPLOYED_PRIORITY
+        else:
+            assert os.sched_getscheduler(0) == before[0]
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
+
+
+def test_a_refusal_is_returned_not_raised_and_nothing_is_restored(monkeypatch):
+    calls = []
+
+    def refuse(pid, policy, param):
+        calls.append(policy)
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    assert "not permitted" in set_realtime(20)
+    with realtime(20) as granted:
+        assert granted == 0
+    assert calls == [os.SCHED_FIFO, os.SCHED_FIFO]          # no restore after a refusal
+    assert set_realtime(0) == "" and len(calls) == 2         # 0: not asked, nothing called
+
+
+def _row(misses: int, priority=None) -> dict:
+    r = {"rate_hz": 500.0, "clock": WORLD_PAUSED, "period_p50_us": 2000.0,
+         "period_p99_us": 2100.0, "period_max_us": 5000.0, "deadline_misses": misses,
+         "steps": 6800, "stalls": 0, "busy_p99_us": 700.0, "period_target_us": 2000.0}
+    return r if priority is None else {**r, "realtime_priority": priority}
+
+
+def test_the_text_sets_both_rows_against_the_target_and_skips_a_refused_fifo():
+    report = {"default_rate_hz": 500.0, "real_clock": [_row(12)],
+              "real_clock_deployed": [_row(3, 20)]}
+    text = "\n".join(real_clock_sentences(report))
+    # 12 of 6800 = 0.176 %: missed; 3 of 6800 = 0.044 %: met.
+    assert "at normal priority: 12 of 6800 deadlines missed (0.176 %, target 0.1 %: MISSED)" \
+        in text
+    assert "as deployed (SCHED_FIFO): 3 of 6800 deadlines missed (0.044 %, target 0.1 %: met)" \
+        in text
+    assert "as deployed: SCHED_FIFO priority 20" in text
+    report["real_clock_deployed"] = [_row(0, 0)]            # not granted: no target line
+    text = "\n".join(real_clock_sentences(report))
+    assert "SCHED_FIFO not granted" in text and "as deployed (SCHED_FIFO):" not in text
