@@ -134,7 +134,8 @@ def test_render_as_built_summary_sets_each_materials_calibrated_mean_against_as_
                             _render_pad(1, {"aluminium": [0.9, 0.9], "wood": [0.8, 0.8]},
                                         over_imax=5)],
            "calibrated": [_render_pad(0, {"aluminium": [0.7, 0.8], "wood": [0.9, 1.1]}),
-                          _render_pad(1, {"aluminium": [0.7, 0.7], "wood": [0.9, 0.9]})]}
+                          _render_pad(1, {"aluminium": [0.7, 0.7], "wood": [0.9, 0.9]})],
+           "calibrations": []}
     s = ra.summary(out)
     al, wood = s["per_material"]["aluminium"], s["per_material"]["wood"]
     # Aluminium: as modelled 0.7 K; calibrated (0.75 + 0.7) / 2 = 0.725 K: 1.036x.
@@ -151,6 +152,73 @@ def test_render_as_built_summary_sets_each_materials_calibrated_mean_against_as_
     assert lim["current_requested_over_imax_periods"] == 20 and lim["largest_request_a"] == 12.0
     assert s["limits"]["calibrated"]["current_requested_over_imax_periods"] == 0
     assert lim["reversals_per_s"] == pytest.approx(1.0)     # 3 in each 3 s contact
+    # Each pad's own mean: wood's first pad 1.0 K, 1.25x as modelled.
+    assert wood["calibrated_worst_pad_ratio"] == pytest.approx(1.25)
     out["summary"] = s
     text = "\n".join(ra.text_lines(out))
-    assert "worst: wood 1.19x (missed)" in text and "(over the target)" in text
+    assert "worst: wood 1.19x" in text and "target missed" in text
+    assert "(over the target)" in text and "(worst pad 1.25x)" in text
+
+
+def test_render_as_built_is_missed_on_a_safety_event_and_says_a_refused_calibration():
+    from telethermal.bench import render_as_built as ra
+
+    modelled = _render_pad(0, {"aluminium": [0.7, 0.7]})
+    fine = _render_pad(0, {"aluminium": [0.7, 0.72]})
+    out = {"sd": 0.15, "pads": 2, "seeds": [1, 2],
+           "as_modelled": {"rows": modelled["rows"], "per_material": modelled["per_material"]},
+           "uncalibrated": [fine, fine], "calibrated": [fine],
+           "calibrations": [{"seed": 0}, {"seed": 1, "refused": "chi2/dof 9 past 2"}]}
+    s = ra.summary(out)
+    assert s["met"] and s["calibration_refused_pads"] == [1]
+    assert s["sessions"] == {"as_modelled": 2, "uncalibrated": 4, "calibrated": 2}
+    out["summary"] = s
+    assert "calibration refused on pads 1" in "\n".join(ra.text_lines(out))
+    fine["rows"][0]["safety_events"] = 1          # the ratio holds, a safety event does not
+    assert not ra.summary(out)["met"]
+
+
+def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monkeypatch):
+    """The run's wiring, its sessions and fits stubbed: the as-modelled row
+    on the design (no [as_built]), the uncalibrated on the drawn pads with
+    neither calibration, the calibrated with both."""
+    from telethermal.bench import render_as_built as ra
+
+    calls = []
+
+    def session(scene, material, identifier, generator, config, seed,
+                display_calibration=None):
+        calls.append((scene.as_built is not None, (identifier[0], id(identifier[1])),
+                      display_calibration))
+        return {"material": material, "seed": seed, "temp_rms_error_c": 0.5,
+                "flux_rms_error_rel": 0.02, "identified": material, "safety_events": 0,
+                "module_limits": _render_pad(0, {"x": [0]})["rows"][0]["module_limits"]}
+
+    monkeypatch.setattr(ra, "_session_row", session)
+    monkeypatch.setattr(ra, "train_generator", lambda scene, seed: "generator")
+    monkeypatch.setattr(ra, "train_identifier", lambda scene, seed, calibration=None:
+                        ("identifier", calibration))
+    from types import SimpleNamespace
+    pad_cal = SimpleNamespace(chi2_per_dof=1.0)
+    monkeypatch.setattr(ra.iab, "calibrate_drawn", lambda scene, built: (pad_cal, 1.0, {}))
+    import telethermal.teleop.display_rig as rig
+
+    class DisplayCal:
+        flux_lag_s, flux_lag_s_lo, flux_lag_s_hi, flux_gain = 0.15, 0.14, 0.16, 1.0
+    monkeypatch.setattr(rig, "calibrate_simulated", lambda scene, seed: DisplayCal)
+    out = ra.run(0.15, pads=1, quick=True)
+    n = len(out["as_modelled"]["rows"])
+    assert n == 3 * len(ra.SEEDS) and len(calls) == 3 * n
+    assert {c for c in calls[:n]} == {(False, ("identifier", id(None)), None)}
+    assert {c for c in calls[n:2 * n]} == {(True, ("identifier", id(None)), None)}
+    assert {c for c in calls[2 * n:]} == {(True, ("identifier", id(pad_cal)), DisplayCal)}
+    assert out["summary"]["met"] and out["calibrations"][0]["display"]["flux_lag_s"] == 0.15
+
+
+def test_bench_render_as_built_refuses_an_sd_out_of_range(capsys):
+    from telethermal.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["bench", "render", "--as-built", "-0.1", "--json", "x.json"])
+    assert exit_.value.code == 2
+    assert "--as-built: '-0.1' must be an sd in [0.0, 1.0]" in capsys.readouterr().err

@@ -11,12 +11,14 @@ from telethermal.bench.clock_text import real_clock_sentences
 from telethermal.control import loop
 from telethermal.control.loop import WORLD_PAUSED, realtime, set_realtime
 
-pytestmark = pytest.mark.skipif(not hasattr(os, "SCHED_FIFO"), reason="no SCHED_FIFO here")
+pytestmark = pytest.mark.skipif(not hasattr(os, "sched_setscheduler"),
+                                reason="no scheduling policies here")
 
 
 def test_a_block_runs_at_fifo_and_the_threads_policy_is_restored_after():
     before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
-    with realtime(loop.DEPLOYED_PRIORITY) as granted:
+    with realtime(loop.DEPLOYED_PRIORITY) as (granted, refused):
+        assert bool(granted) != bool(refused)
         if granted:       # root or CAP_SYS_NICE (CI runs as root)
             assert granted == loop.DEPLOYED_PRIORITY
             assert os.sched_getscheduler(0) == os.SCHED_FIFO
@@ -35,8 +37,8 @@ def test_a_refusal_is_returned_not_raised_and_nothing_is_restored(monkeypatch):
 
     monkeypatch.setattr(os, "sched_setscheduler", refuse)
     assert "not permitted" in set_realtime(20)
-    with realtime(20) as granted:
-        assert granted == 0
+    with realtime(20) as (granted, refused):
+        assert granted == 0 and "not permitted" in refused
     assert calls == [os.SCHED_FIFO, os.SCHED_FIFO]          # no restore after a refusal
     assert set_realtime(0) == "" and len(calls) == 2         # 0: not asked, nothing called
 
@@ -58,6 +60,22 @@ def test_the_text_sets_both_rows_against_the_target_and_skips_a_refused_fifo():
     assert "as deployed (SCHED_FIFO): 3 of 6800 deadlines missed (0.044 %, target 0.1 %: met)" \
         in text
     assert "as deployed: SCHED_FIFO priority 20" in text
-    report["real_clock_deployed"] = [_row(0, 0)]            # not granted: no target line
-    text = "\n".join(real_clock_sentences(report))
-    assert "SCHED_FIFO not granted" in text and "as deployed (SCHED_FIFO):" not in text
+    report["real_clock_deployed"] = [{**_row(0, 0), "realtime_refused": "[Errno 1] no"}]
+    text = "\n".join(real_clock_sentences(report))     # not granted: no target line
+    assert "SCHED_FIFO not granted ([Errno 1] no)" in text
+    assert "as deployed (SCHED_FIFO):" not in text
+
+
+def test_a_restore_the_system_refuses_is_warned_not_raised(monkeypatch):
+    calls = []
+
+    def grant_then_refuse(pid, policy, param):
+        calls.append(policy)
+        if len(calls) > 1:
+            raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", grant_then_refuse)
+    with pytest.warns(RuntimeWarning, match="not restored"):
+        with realtime(20) as (granted, refused):
+            assert granted == 20 and refused == ""
+    assert len(calls) == 2

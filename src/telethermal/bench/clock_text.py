@@ -26,7 +26,8 @@ def real_clock_sentences(report: dict) -> list[str]:
             if key == "real_clock_deployed":
                 who += (f", as deployed: SCHED_FIFO priority {r['realtime_priority']}"
                         if r.get("realtime_priority") else
-                        ", as deployed but SCHED_FIFO not granted: normal scheduling")
+                        ", as deployed but SCHED_FIFO not granted ("
+                        f"{r.get('realtime_refused', 'no reason given')}): normal scheduling")
             own = (f", the master's step p99 {r['master_step_p99_us']:.0f} us"
                    if "master_step_p99_us" in r else "")
             if "gc_collections" in r:

@@ -27,13 +27,19 @@ def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s
     added to. ``mode``: ``"master"`` (the world's time not charged to the
     loop) or True (everything on the loop's thread). ``priority``: the
     loop's thread at SCHED_FIFO this priority for the row (0: normal
-    scheduling); the row's ``realtime_priority`` is what was granted."""
+    scheduling); the row's ``realtime_priority`` is what was granted
+    (``realtime_refused``: why not). At SCHED_FIFO the simulated world
+    (slave, plants, sensors) runs on the same thread, its time not charged
+    to the loop ("master" mode): it holds that thread's core where a lab's
+    master would hold it for its step alone; the kernel's real-time
+    throttling (``sched_rt_runtime_us``) leaves the rest of the machine its
+    share."""
     if periods < 1:
         raise ValueError(f"a real-clock row needs periods >= 1, got {periods}")
     runs, steps_s, flux = [], [], []
     config = DisplayConfig(rate_hz=rate_hz)
     material = "steel" if "steel" in scene.materials else scene.materials[0]
-    with realtime(priority) as granted:
+    with realtime(priority) as (granted, refused):
         while sum(len(r.starts_s) for r in runs) < periods:
             res = run_session(scene, material, identifier, generator, config,
                               contact_s=contact_s, seed=len(runs) + 1, realtime=mode)
@@ -43,6 +49,6 @@ def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s
             flux.append(res.summary["flux_rms_error_rel"])
             clock = res.summary["clock"]
     return {"rate_hz": rate_hz, "material": material, "clock": clock, "sessions": len(runs),
-            "realtime_priority": granted,
+            "realtime_priority": granted, **({"realtime_refused": refused} if refused else {}),
             **combined_summary(runs), **master_step_summary(steps_s, rate_hz),
             "flux_rms_error_rel": float(np.mean(flux))}

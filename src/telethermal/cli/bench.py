@@ -190,6 +190,22 @@ def _bench_unseen_as_built(args) -> int:
     return 0
 
 
+def _as_built_sd(text: str) -> float:
+    """``--as-built``'s sd: a number in the scene table's range."""
+    import argparse
+    import math
+
+    from telethermal.physics.as_built import SD_RANGE
+    try:
+        value = float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from exc
+    if not (math.isfinite(value) and SD_RANGE[0] <= value <= SD_RANGE[1]):
+        raise argparse.ArgumentTypeError(f"{text!r} must be an sd in {list(SD_RANGE)} "
+                                         "(a factor's log-normal spread)")
+    return value
+
+
 def _add_speed(bsub) -> None:
     """physics, transport, report, record, devices."""
     p = bsub.add_parser("physics", help="contact models: error against runtime")
@@ -268,7 +284,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--png", help="plot (default: beside the JSON)")
     p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
-    p.add_argument("--as-built", type=float, metavar="SD",
+    p.add_argument("--as-built", type=_as_built_sd, metavar="SD",
                    help="instead: every material's first touch on pads built off their "
                         "datasheet (both pads' factors drawn log-normal with this sd), as "
                         "modelled, uncalibrated and after calibrating both pads "
@@ -305,7 +321,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--no-limit", action="store_true",
                    help="skip the physical limit (the oracle on every session's touches, "
                         "a few minutes)")
-    p.add_argument("--as-built", type=float, metavar="SD",
+    p.add_argument("--as-built", type=_as_built_sd, metavar="SD",
                    help="instead: the default identifier on pads built off their datasheet "
                         "(every factor drawn log-normal with this sd), as modelled, "
                         "uncalibrated and calibrated (telethermal calibrate pad)")
@@ -326,7 +342,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--unseen-scene", help="a scene file whose objects (with its own materials "
                                           "table; layered ones too) are touched as unseen "
                                           "materials")
-    p.add_argument("--as-built", type=float, metavar="SD",
+    p.add_argument("--as-built", type=_as_built_sd, metavar="SD",
                    help="instead: the unseen materials' effusivity on pads built off their "
                         "datasheet (every factor drawn log-normal with this sd), as "
                         "modelled, uncalibrated and calibrated (telethermal calibrate pad); "

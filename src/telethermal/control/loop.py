@@ -24,6 +24,7 @@ import gc
 import math
 import os
 import time
+import warnings
 from collections import deque
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -73,18 +74,28 @@ def set_realtime(priority: int) -> str:
 
 @contextmanager
 def realtime(priority: int):
-    """:func:`set_realtime` for a block, the thread's policy restored after;
-    yields the priority granted (0: refused or not asked)."""
+    """:func:`set_realtime` for a block, the thread's policy restored after
+    (a restore the system refuses is warned about, never raised over the
+    block's own error). Yields ``(granted, why_not)``: the priority granted
+    (0: refused or not asked) and the refusal's reason ("" when granted)."""
     if not priority:
-        yield 0
+        yield 0, ""
         return
-    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    try:
+        before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    except (OSError, AttributeError) as exc:        # a platform without them
+        yield 0, str(exc) or type(exc).__name__
+        return
     refused = set_realtime(priority)
     try:
-        yield 0 if refused else priority
+        yield (0 if refused else priority), refused
     finally:
         if not refused:
-            os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
+            try:
+                os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
+            except OSError as exc:
+                warnings.warn(f"the thread's scheduling policy {before} not restored after "
+                              f"SCHED_FIFO {priority}: {exc}", RuntimeWarning, stacklevel=3)
 
 
 class RealClock:
