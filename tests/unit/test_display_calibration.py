@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from telethermal.control import display_calibration as routine
-from telethermal.errors import CalibrationError, SceneError
+from telethermal.errors import CalibrationError, ControlError, SceneError
 from telethermal.physics.scene import parse_scene
 from telethermal.teleop.display_calibration import (DisplayCalibration, calibrate_display,
                                                     keep_other_tables, read_display_calibration,
@@ -249,3 +249,44 @@ def test_the_simulated_flux_sensor_is_the_configured_part():
     for key in ("flux_sensitivity_uv_per_w_m2", "flux_adc_lsb_uv"):     # both divide
         with pytest.raises(SceneError, match=f"'{key}' = 0.0 is outside"):
             _scene(sensors={key: 0.0})
+
+
+def test_the_master_divides_its_flux_readings_by_the_calibrated_gain(built_cal):
+    """A display whose flux sensor reads ``g`` times the flux, calibrated to
+    ``g``, does bit for bit what an exact sensor's display does on the same
+    flux: every period's applied junction temperature, desired flux and
+    current equal (to 1e-9 relative: one division's rounding), through
+    idle, contact, the decision and rendering. Without the gain it does not."""
+    from telethermal.devices.readings import PadSensors
+    from telethermal.teleop.display_setup import display_model_args
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from test_master import closed_form_generator, decided
+
+    scene, cal = built_cal
+    g = cal.flux_gain
+    assert abs(g - 1.0) > 0.02                          # the built sensor is off
+    args = display_model_args(scene, cal)
+    assert args["flux_gain"] == g and display_model_args(scene)["flux_gain"] == 1.0
+
+    def run(gain, reads):
+        master = MasterDisplay(DisplayConfig(), closed_form_generator(), finger_temp_c=33.0,
+                               idle_c=24.0, **{**args, "flux_gain": gain})
+        news = SlaveNews(24.0, decided("steel"), ("plexiglass", "steel"))
+        out = []
+        for k in range(1500):
+            t = k * 2e-3
+            touching = 0.2 <= t < 2.5
+            flux = (-3000.0 * np.exp(-(t - 0.2)) - 0.5 * (k % 7)) if touching else 0.3 * (k % 3)
+            step = master.step(t, 2e-3, PadSensors(reads * flux, 26.0 + 1e-3 * (k % 5),
+                                                   10.0 if touching else 0.0,
+                                                   junction_c=24.0 - 1e-3 * (k % 4),
+                                                   heatsink_c=24.0), news)
+            out.append((step.junction_applied_c, step.desired_flux_w_m2, step.current_a))
+        return np.array(out, dtype=float)
+
+    exact = run(1.0, 1.0)
+    assert np.isfinite(exact[:, 0]).all() and np.nanmax(np.abs(exact[:, 1])) > 1000.0
+    np.testing.assert_allclose(run(g, g), exact, rtol=1e-9, atol=1e-9, equal_nan=True)
+    assert not np.allclose(run(1.0, g), exact, rtol=1e-3, equal_nan=True)
+    with pytest.raises(ControlError, match="flux_gain"):
+        MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0, **{**args, "flux_gain": 0.0})

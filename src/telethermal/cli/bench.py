@@ -277,8 +277,7 @@ def _scene_arg(p) -> None:
                    help="a shipped scene or a scene file (a lab's own; default fingertip-7)")
 
 
-def _add_error(bsub) -> None:
-    """render, identify, view."""
+def _add_render(bsub) -> None:
     p = bsub.add_parser("render", help="rendering error against loop rate, gains, strategy; "
                                        "the loop on the real clock")
     p.add_argument("--json", required=True, help="JSON report to write")
@@ -294,6 +293,11 @@ def _add_error(bsub) -> None:
                    help="with --as-built: how many pads are drawn (default 5)")
     _scene_arg(p)
     p.set_defaults(func=cmd_bench_render)
+
+
+def _add_error(bsub) -> None:
+    """render (:func:`_add_render`), skin-floor, identify, view."""
+    _add_render(bsub)
 
     p = bsub.add_parser("skin-floor", help="the best any current trajectory within the "
                                            "Peltier module's limits can do on the skin, per "

@@ -93,8 +93,8 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
     """What a replay needs to rebuild the display of one touch (the module,
     the junction sensor and the dew floor the display's loop was given:
     its models, from the scene as the product builds them; the two lags
-    the ``display`` (a MasterDisplay) was built with, calibrated or not,
-    when given)."""
+    and the flux gain the ``display`` (a MasterDisplay) was built with,
+    calibrated or not, when given)."""
     from telethermal.control.dew import idle_floor_c
     from telethermal.control.preconditioning import policy_fractions
 
@@ -116,6 +116,7 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
                                           if scene.finger is not None else None),
             "sensor_lag_s": (scene.sensors.flux_lag_s if display is None
                              else display.sensor_lag_s),
+            "flux_gain": 1.0 if display is None else display.flux_gain,
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
             # The idle policy the display applied (fractions of finger - object).
             "idle_policy": policy_fractions(scene) if config.idle == "policy" else None,

@@ -86,8 +86,8 @@ class DisplayCalibration:
             f"  flux sensor lag: {self.flux_lag_s:.4f} s [{self.flux_lag_s_lo:.4f}, "
             f"{self.flux_lag_s_hi:.4f}] 95 %",
             f"  flux sensor gain: x{self.flux_gain:.4f} [{self.flux_gain_lo:.4f}, "
-            f"{self.flux_gain_hi:.4f}] 95 % (against the block's table effusivity; recorded, "
-            "not applied by the master)",
+            f"{self.flux_gain_hi:.4f}] 95 % (against the block's table effusivity; the "
+            "master divides its flux readings by it)",
             f"  on the block: residual {self.residual_block_k:.4f} K rms against "
             f"{self.noise_block_k:.4f} K of noise (chi2/dof {self.chi2_per_dof_block:.2f})"]
 

@@ -30,7 +30,8 @@ def display_model_args(scene: Scene, calibration=None) -> dict:
     flux_lag_s``) and the junction sensor the scene names with its stated lag
     (``junction_sensor``, ``junction_lag_s``); with ``calibration`` (a
     :class:`~telethermal.teleop.display_calibration.DisplayCalibration`,
-    checked against ``scene``) the two lags it measured instead.
+    checked against ``scene``) the flux sensor's lag and gain it measured
+    (the junction sensor keeps its stated lag: docs/calibration.md).
     ``MasterDisplay(config, generator, finger_temp_c=..., **these)``."""
     from telethermal.teleop.display_calibration import calibrated_lags
     flux_lag_s, junction_lag_s = calibrated_lags(scene, calibration)
@@ -40,7 +41,8 @@ def display_model_args(scene: Scene, calibration=None) -> dict:
             "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2,
             "junction_sensor": replace(scene.sensors.junction_sensor_spec(),
                                        tau_s=junction_lag_s),
-            "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct)}
+            "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct),
+            "flux_gain": 1.0 if calibration is None else calibration.flux_gain}
 
 
 def precondition_for(scene: Scene, finger_c: float):

@@ -122,7 +122,7 @@ class MasterDisplay:
                  pad_layers=None, contact_conductance_w_m2k: float | None = None,
                  module: ModuleParams | None = None, precondition=None, pad_area_m2=None,
                  junction_sensor: JunctionSensorSpec | None = None,
-                 dew_floor_c: float | None = None):
+                 dew_floor_c: float | None = None, flux_gain: float = 1.0):
         self.config = config
         self.generator = generator
         self.nominal_dt_s = 1.0 / config.rate_hz
@@ -148,6 +148,11 @@ class MasterDisplay:
         self.precondition = precondition
         self.r_pad_m2k_w = pad_resistance_m2k_w * config.r_pad_belief   # as believed
         self.sensor_lag_s = sensor_lag_s
+        #: The flux sensor's gain against its stated sensitivity (a display
+        #: calibration's, 1: none): each reading is divided by it.
+        if not (flux_gain > 0 and math.isfinite(flux_gain)):
+            raise ControlError(f"flux_gain must be a finite number > 0, got {flux_gain}")
+        self.flux_gain = flux_gain
         self.finger_temp_c = finger_temp_c           # measured before contact
         self.pid = Pid(config.gains, self.nominal_dt_s)
         self.detector = ContactDetector(config.contact_on_n, config.contact_off_n,
@@ -469,6 +474,8 @@ class MasterDisplay:
         """One control period: the phase from the contact, the slave's
         decision and the link; then track or hold; then the limits."""
         self.generator = news.generator or self.generator
+        if self.flux_gain != 1.0:
+            sensors = replace(sensors, flux_w_m2=sensors.flux_w_m2 / self.flux_gain)
         if self.impedance is not None:
             self.impedance.observe(sensors.flux_w_m2, dt_s)
         contact = self._on_contact(t_s, sensors.force_n)
