@@ -47,8 +47,9 @@ SPIN_FRACTION = 0.2
 #: rate (bench/results/render.json): the skin error is flat from 100 Hz to
 #: 2 kHz, the flux error over the first second falls with the rate and 500 Hz
 #: has all but a fraction of a point of it, and a 2-core machine's master
-#: loop holds 500 Hz where at 1 kHz its sleeps are too short to absorb the
-#: wake-up delays. The first paper's dSPACE ran at 100 Hz.
+#: loop misses fewer deadlines at 500 Hz than at 1 kHz, where its sleeps are
+#: too short to absorb the wake-up delays (docs/concepts/loop.md has the
+#: figures). The first paper's dSPACE ran at 100 Hz.
 DEFAULT_RATE_HZ = 500.0
 
 
