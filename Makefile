@@ -21,8 +21,9 @@ demo: $(STAMP)
 
 # Two workers (pytest-xdist; tests/conftest.py gives each a whole test file
 # at a time); the 25 slowest tests in every log. `test` leaves out the tests
-# behind the `compose` and `slow` markers (an image build and a Docker stack,
-# the guides run command by command: minutes each); `test-all` runs every
+# behind the `compose` and `slow` markers (an image build and a Docker stack;
+# the guides run command by command, and every test over about 10 s on a
+# 2-core machine), so that it stays under 10 minutes; `test-all` runs every
 # test, as .ci/run does.
 test: $(STAMP)
 	$(PY) -m pytest tests -n 2 --durations=25 -m "not compose and not slow"

@@ -115,6 +115,7 @@ def _wait_for(predicate, timeout_s):
     return False
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
     # SIGKILL the slave once its pad is on the object and start it again:
     # the touch under way is held through it on the object's remembered
@@ -153,6 +154,7 @@ def test_a_slave_crash_mid_contact_is_survived_and_the_next_touch_renders(link):
     assert_safe_under_load(again)
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_master_crash_mid_contact_lifts_the_slave_and_a_new_master_renders(link):
     out, services, ports, text = link
     with proxy_between(out, text, "delay_s = 0.005\n", ports[3]):

@@ -13,6 +13,7 @@ from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.run import with_finger
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_simulated_rows_in_two_workers(tmp_path, trained_models):
     scene = with_finger(load_scene("fingertip-7"))
     ident, gen = trained_models.files(scene, 0)

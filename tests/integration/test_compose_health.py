@@ -58,6 +58,7 @@ def processes():
             proc.wait()
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_master_alone_is_unhealthy_and_a_touch_waits_for_the_slave(tmp_path, processes,
                                                                    trained_models):
     # (the files `telethermal models --scene fingertip-7` writes: seed 0)

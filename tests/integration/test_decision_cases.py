@@ -12,6 +12,7 @@ third."""
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from telethermal.data.generate import SensorSession
 from telethermal.physics.scene import load_scene
@@ -28,6 +29,7 @@ DEMO_SEED = 13
 RUBBER_SEEDS = [DEMO_SEED + 1 + i for i in (5, 12, 19)]
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_the_soak_rubber_touches_are_rubber_and_remembered_so():
     identifier = train_identifier(SCENE, DEMO_SEED)
     # The slave service's instruments and calibration, drawn as the service
@@ -47,6 +49,7 @@ def test_the_soak_rubber_touches_are_rubber_and_remembered_so():
     assert announced == [None, "rubber", "rubber"]
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_the_emulated_seed_5_plexiglass_touch_is_never_committed_as_rubber(tmp_path,
                                                                           trained_models):
     # `telethermal demo --devices emulated --materials wood,aluminium,plexiglass

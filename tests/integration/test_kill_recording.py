@@ -74,6 +74,7 @@ def _library_topics(path) -> set[str]:
     return seen
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 @pytest.mark.parametrize("killed", ["slave", "master"])
 def test_kill_9_mid_touch_keeps_the_touch_up_to_the_last_flush(tmp_path, model_files, killed):
     ports = free_ports(4)

@@ -13,6 +13,8 @@ import pytest
 
 from telethermal.cli import main
 
+pytestmark = pytest.mark.slow      # the whole guide or walk, command by command (about a minute)
+
 TABLE = """name,role,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,source
 cork,object,0.045,120,1800,"cork board, a supplier's datasheet"
 granite,object,2.8,2650,790,"Incropera Table A.3 (granite, Barre)"

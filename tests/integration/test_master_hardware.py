@@ -108,6 +108,7 @@ def test_a_hardware_master_needs_its_ports():
         MasterConfig(devices="hardware")
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path, trained_models):
     # A slave process on loopback; the master in this process on the emulated
     # devices. The operator presses for 1.5 s: the slave touches when told,

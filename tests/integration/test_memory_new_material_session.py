@@ -32,6 +32,7 @@ def touches(trained_models):
     return identifier, generator, first
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_the_second_touch_renders_the_remembered_estimate_from_onset(touches):
     identifier, generator, first = touches
     s1 = first.summary

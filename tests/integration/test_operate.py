@@ -59,6 +59,7 @@ def test_models_writes_loadable_files_and_their_checksums(models):
         assert hashlib.sha256((folder / name).read_bytes()).hexdigest() == digest
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_admin_operates_a_session_and_reports_the_touch(tmp_path, models, capsys):
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0)
@@ -123,6 +124,7 @@ def test_admin_operates_a_session_and_reports_the_touch(tmp_path, models, capsys
     assert "flux error" in (tmp_path / "master.log").read_text()
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_missing_master_key_is_shown_by_admin_status_and_fixed_without_restart(
         tmp_path, models, capsys):
     ports = free_ports(4)
@@ -230,6 +232,7 @@ def test_diagnosis_of_a_silent_drop_is_the_firewall():
     assert d["likely"] == "firewall" and "slave.nft" in d["fix"]
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_firewall_that_drops_the_master_is_named_then_fixed_in_namespaces(tmp_path, models):
     # The slave's rule set admits another address than the master's: the
     # master's SYNs are dropped, and it names the firewall. With the right

@@ -23,7 +23,7 @@ def models(trained_models):
     return (*trained_models.files(SCENE, 0), *trained_models.pair(SCENE, 0))
 
 
-@pytest.mark.parametrize("devices", ["sim", "emulated"])
+@pytest.mark.parametrize("devices", ["sim", pytest.param("emulated", marks=pytest.mark.slow)])
 def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices):
     # devices = "emulated": the master's display pad and the slave's sensing
     # pad are read and driven through the serial and CAN drivers and their
@@ -105,6 +105,7 @@ def test_shipped_service_configs_load():
     assert load_config(root / "master" / "config.toml", "master").rate_hz == DEFAULT_RATE_HZ
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_master_and_slave_in_two_network_namespaces(tmp_path, models):
     # Real addresses on a veth pair, separate network stacks: the slave binds
     # 10.231.0.1 in one namespace, the master connects from the other, over
@@ -172,6 +173,7 @@ def _until(done, what: str, timeout_s: float = 20.0) -> None:
         time.sleep(0.05)
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, models):
     # Item 2 of issue 15 on the wire: place object A, touch, identify;
     # place B, touch; place A again: its announcement carries what the slave

@@ -17,6 +17,7 @@ def models(trained_models):
     return trained_models.files(SCENE, 0)
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_calibration_at_start_on_request_and_refused_when_drifting(tmp_path, models):
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, *models, ports, 0)

@@ -345,6 +345,7 @@ class FreeRunningRig:
         self.board.close()
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
         tmp_path, identifier, session, trained_models):
     from telethermal.services.demo import free_ports

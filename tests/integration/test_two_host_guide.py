@@ -17,6 +17,8 @@ import pytest
 
 from telethermal.cli import build_parser
 
+pytestmark = pytest.mark.slow      # the whole guide or walk, command by command (about a minute)
+
 ROOT = Path(__file__).resolve().parents[2]
 GUIDE = ROOT / "deploy" / "README.md"
 SCRIPT = ROOT / "deploy" / "two-host" / "try-in-namespaces.sh"

@@ -59,6 +59,7 @@ def test_the_closed_set_is_the_live_path_where_the_slave_names_a_trained_class(m
         assert closed[key] == live[key]
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_tiny_bench_run_reports_the_rendered_columns_and_their_targets(tmp_path):
     path = tmp_path / "u.json"
     report = unseen.run_and_save(path, seeds=1, quick=True, unseen="glass")

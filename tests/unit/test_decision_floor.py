@@ -149,6 +149,7 @@ def test_a_material_without_a_decision_time_is_named(setup):
                                                   "marble": math.nan})
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_the_worst_ratio_to_each_materials_own_floor(setup, all_at):
     # Relative to each material's floor knowing it at contact: deciding at
     # contact, every material reaches its own floor (ratio 1, 2e-3 K over

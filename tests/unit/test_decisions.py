@@ -44,6 +44,7 @@ def test_objects_five_kelvin_off_room_are_identified(model, offset_k):
     assert np.mean(right) >= 0.95, [(m, e.label) for m, e in touches]
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 @pytest.mark.parametrize("force_n", [4.0, 20.0])
 def test_light_and_heavy_touches_are_unknown_not_wrong(model, force_n):
     # Trained at 10 +- 1.5 N; at 4 N the contact conductance falls to 48 %
@@ -59,6 +60,7 @@ def test_light_and_heavy_touches_are_unknown_not_wrong(model, force_n):
                if e.label == "unknown")
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_touches_like_the_trained_ones_commit_and_are_right(model):
     touches = _touches(SCENE, model, seeds=range(100, 104))
     committed = [(m, e) for m, e in touches if e.label != "unknown"]

@@ -69,6 +69,7 @@ def test_a_pad_30_percent_off_from_two_materials_is_recovered_within_its_interva
     assert not any("thickness" in n or "conductivity" in n for n in names)
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_reference_material_whose_table_value_is_wrong_is_named():
     """Its touches' amplitudes all stand out one way (10 % of effusivity
     against the thermometers' ~1 % per touch), named among three materials.

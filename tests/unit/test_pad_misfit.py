@@ -31,6 +31,7 @@ def model():
         from_trials(pad_database(scene, np.random.default_rng(1)))[0])
 
 
+@pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_a_sensor_lag_20_percent_off_is_flagged_and_never_named_wrong(model):
     """The fit's residual against the noise: a lag of 0.18 s fitted with a
     model of 0.15 s reads chi2/dof 7-45 from 0.25 s (as modelled: under
