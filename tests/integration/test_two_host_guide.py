@@ -17,8 +17,6 @@ import pytest
 
 from telethermal.cli import build_parser
 
-pytestmark = pytest.mark.slow      # the whole guide or walk, command by command (about a minute)
-
 ROOT = Path(__file__).resolve().parents[2]
 GUIDE = ROOT / "deploy" / "README.md"
 SCRIPT = ROOT / "deploy" / "two-host" / "try-in-namespaces.sh"
@@ -91,6 +89,7 @@ def _why_not() -> str | None:
     return None
 
 
+@pytest.mark.slow          # the whole guide, command by command (about a minute)
 def test_the_guide_script_passes_in_two_network_namespaces(tmp_path):
     reason = _why_not()
     if reason:

@@ -290,3 +290,33 @@ def test_the_master_divides_its_flux_readings_by_the_calibrated_gain(built_cal):
     assert not np.allclose(run(1.0, g), exact, rtol=1e-3, equal_nan=True)
     with pytest.raises(ControlError, match="flux_gain"):
         MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0, **{**args, "flux_gain": 0.0})
+
+
+def test_a_recording_carries_the_gain_and_its_playback_reads_the_flux_over_it(built_cal):
+    """The touch's display parameters carry the master's gain (a replay
+    builds its display with it: teleop/replay.py); the view of a recording
+    divides the recorded readings by it, and a recording without one (older,
+    or uncalibrated) reads 1."""
+    from types import SimpleNamespace
+
+    from telethermal.record.recorder import display_params
+    from telethermal.teleop.display_setup import display_model_args
+    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+    from telethermal.teleop.run import draw_operator, with_finger
+    from telethermal.view.playback import _flux_gain
+
+    scene, cal = built_cal
+    scene = with_finger(scene)
+    master = MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
+                           **display_model_args(scene, cal))
+    operator = draw_operator(scene, np.random.default_rng(0))
+    params = display_params(scene, DisplayConfig(), operator, 24.0, display=master)
+    assert params["flux_gain"] == cal.flux_gain != 1.0
+    assert display_params(scene, DisplayConfig(), operator, 24.0)["flux_gain"] == 1.0
+
+    def rec(config, starts=()):
+        return SimpleNamespace(config=config, messages=lambda topic: list(starts))
+    assert _flux_gain(rec(params)) == cal.flux_gain
+    assert _flux_gain(rec({}, [{"flux_gain": 0.9}])) == 0.9          # a service's touch start
+    assert _flux_gain(rec({})) == 1.0                                # an older recording
+    assert _flux_gain(rec({"flux_gain": float("nan")})) == 1.0      # not a gain: none

@@ -18,8 +18,9 @@ rendered on the same session seeds three ways:
   sensing pad from its reference touches (``telethermal calibrate pad``:
   :func:`~telethermal.bench.identify_as_built.calibrate_drawn`), the display
   by ``telethermal calibrate display``'s routine on the simulated bench
-  (its flux sensor's lag in the impedance controller; the junction loop
-  keeps its configured lag: docs/calibration.md).
+  (its flux sensor's lag in the impedance controller, its gain on the
+  flux readings; the junction loop keeps its configured lag:
+  docs/calibration.md).
 
 Per row and material: the skin error over the whole contact (mean over the
 pads and seeds, and the worst), the flux error from the decision, safety

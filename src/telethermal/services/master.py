@@ -180,8 +180,8 @@ class MasterService:
         step = display.step(t, dt_s, sensors, news)
         self.hardware.apply(t, step, dt_s, sensors.force_n)
         if self.view is not None:
-            self.view.period(now, self.config.rate_hz, sensors.flux_w_m2, sensors.pad_temp_c,
-                             sensors.force_n, lambda: self._view_state(
+            self.view.period(now, self.config.rate_hz, sensors.flux_w_m2 / display.flux_gain,
+                             sensors.pad_temp_c, sensors.force_n, lambda: self._view_state(
                                  step, display, session.contact_id or 0))
         contact_id = session.contact_id
         self._send(session.period(step, self.t0, sensors.force_n, self.config.finger_temp_c))
@@ -262,7 +262,8 @@ class MasterService:
         step = touch.display.step(t, dt_s, sensors, news)
         touch.devices.apply(t, step, dt_s, sensors.force_n)
         if self.view is not None:
-            self.view.period(now, self.config.rate_hz, sensors.flux_w_m2, sensors.pad_temp_c,
+            self.view.period(now, self.config.rate_hz,
+                             sensors.flux_w_m2 / touch.display.flux_gain, sensors.pad_temp_c,
                              sensors.force_n, lambda: self._view_state(step, touch.display,
                                                                        touch.contact_id))
         if self.recorder is not None:

@@ -271,7 +271,7 @@ def _replay_master(rec, params, cid, generator, gains, attached):
     same_nan = np.array_equal(np.isnan(qa), np.isnan(qb))
     both = ~np.isnan(qa) & ~np.isnan(qb)
     return out, recorded, {
-        "periods": len(rows), "gains": asdict(config.gains),
+        "periods": len(rows), "gains": asdict(config.gains), "flux_gain": master.flux_gain,
         "recorded_gains": asdict(recorded_gains),
         "junction_max_abs_diff_c": float(np.max(np.abs(a - b))) if len(a) else 0.0,
         "desired_max_abs_diff_w_m2": float(np.max(np.abs(qa[both] - qb[both])))
@@ -375,8 +375,11 @@ def replay_figure(result: dict):
                 values = np.asarray(tr[key], dtype=float)
                 ax.plot(tt, out_of_finger_kw(values) if ax is ax_q else values, style,
                         lw=2 if style == "k-" else 1, label=label)
-    ax_q.plot(t, out_of_finger_kw(rec["flux_w_m2"]), "C0-", lw=0.8,
-              label="pad sensor (recorded)")
+    # The recorded readings are the sensor's; the display read them over its
+    # calibrated gain (1: none).
+    ax_q.plot(t, out_of_finger_kw(np.asarray(rec["flux_w_m2"], dtype=float)
+                                  / s.get("flux_gain", 1.0)), "C0-", lw=0.8,
+              label="pad sensor (recorded, over its gain)")
     ax_q.plot(t, out_of_finger_kw(rec["desired_flux_w_m2"]), "C2-", lw=1.5,
               label="setpoint (recorded)")
     ax_q.plot(rep["t_s"], out_of_finger_kw(rep["desired_flux_w_m2"]), "m--",

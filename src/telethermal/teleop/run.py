@@ -353,7 +353,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     ``junction_lag_scale``: the display's junction sensor lags this many
     times its stated time constant (the controller is designed for the
     stated one: a robustness study). ``display_calibration``: the master's
-    display calibration (``DisplayCalibration``): its lags in the controllers."""
+    display calibration (``DisplayCalibration``): its flux lag in the
+    controllers, its flux gain on the readings."""
     if realtime not in (False, True, "master"):
         raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
     if realtime or fresh_fits:

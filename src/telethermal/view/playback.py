@@ -57,6 +57,16 @@ def _conductance(rec) -> float:
                              f"({exc})") from exc
 
 
+def _flux_gain(rec) -> float:
+    """The display's calibrated flux gain the recording holds (its
+    session's config or its first touch start; 1: none or an older file)."""
+    for held in [rec.config] + rec.messages("/master/touch_start")[:1]:
+        g = held.get("flux_gain")
+        if isinstance(g, (int, float)) and not isinstance(g, bool) and math.isfinite(g) and g > 0:
+            return float(g)
+    return 1.0
+
+
 def _master_series(rec, offset, out, h_w_m2k) -> int:
     batches = rec.messages("/master/periods")
     k = 1
@@ -64,6 +74,7 @@ def _master_series(rec, offset, out, h_w_m2k) -> int:
         dt = batches[0]["t_s"][1] - batches[0]["t_s"][0]
         k = max(1, math.ceil(1.0 / dt / MAX_RATE_HZ)) if dt > 0 else 1
     n = 0
+    gain = _flux_gain(rec)          # the sensor's readings, as the display read them
     for b in batches:
         off = offset(b.get("contact_id", 0))
         for i, t in enumerate(b["t_s"]):
@@ -71,7 +82,7 @@ def _master_series(rec, offset, out, h_w_m2k) -> int:
             if (b["k0"] + i) % k:
                 continue
             t = round(off + t, 4)
-            temp, flux = b["pad_temp_c"][i], b["flux_w_m2"][i]
+            temp, flux = b["pad_temp_c"][i], b["flux_w_m2"][i] / gain
             if math.isfinite(temp) and math.isfinite(flux):
                 out["master_temp"].append([t, temp])
                 out["master_flux"].append([t, flux])
