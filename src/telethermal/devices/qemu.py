@@ -150,12 +150,12 @@ class QemuCore:
     """One emulated STM32F405 running ``image`` (an ELF file).
 
     ``link_path`` and ``plant_path``: the ptys of USART1 and USART2. The
-    core starts when both are connected (in the constructor) and stops in
-    :meth:`close`. :meth:`reset` restarts the firmware (QEMU's
+    core starts when both are connected (in the constructor; with
+    ``paused``, at :meth:`resume`) and stops in :meth:`close`. :meth:`reset` restarts the firmware (QEMU's
     ``system_reset``), as a watchdog or a power cycle would."""
 
     def __init__(self, image: str | Path, icount_shift: int = ICOUNT_SHIFT,
-                 start_timeout_s: float = 20.0):
+                 start_timeout_s: float = 20.0, paused: bool = False):
         qemu = shutil.which(QEMU)
         if qemu is None:
             raise DeviceError(f"{QEMU} not found: apt-get install qemu-system-arm")
@@ -172,7 +172,7 @@ class QemuCore:
             [qemu, "-M", MACHINE, "-nodefaults", "-display", "none",
              "-icount", f"shift={icount_shift},align=off,sleep=on", "-kernel", str(self.image),
              *serials, "-serial", "chardev:link", "-serial", "chardev:plant",
-             "-mon", "chardev=mon,mode=readline"]),
+             "-mon", "chardev=mon,mode=readline", *(["-S"] if paused else [])]),
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         self._bridges: list[_PtyBridge] = []
         self._monitor: socket.socket | None = None
@@ -276,6 +276,12 @@ class QemuCore:
         """The firmware restarts from its reset vector (RAM is not cleared
         by QEMU's reset; the startup code sets up .data and .bss)."""
         self._monitor.sendall(b"system_reset\n")
+
+    def resume(self) -> None:
+        """Start a core made with ``paused=True``: its drivers opened first
+        (pyserial's open flushes a port's input, so a boot frame sent before
+        it would be lost)."""
+        self._monitor.sendall(b"cont\n")
 
     def restart(self, drain_s: float = 0.02) -> None:
         """The firmware from its reset vector with nothing of its last run
