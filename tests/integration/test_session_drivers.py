@@ -187,3 +187,38 @@ def test_a_slave_refused_for_a_busy_port_writes_no_recording(models, tmp_path):
     service = SlaveService(config, identifier, generator)
     service.shutdown()
     assert len(list((tmp_path / "rec").glob("slave-*.mcap"))) == 1
+
+
+def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(models):
+    # The simulated pad's next touch is computed in advance (its physics);
+    # after a lift that runs on a worker thread, so the service's loop keeps
+    # its heartbeats (the master declares a slave silent for dead_after_s
+    # lost), and a touch waits for it. Held here until the lift returned.
+    import threading
+
+    identifier, _ = models
+    service = wood_slave(models)
+    service.endpoint.send = lambda kind, **fields: 0
+    try:
+        service._on_message(master_events(1.0)[0], 100.0)
+        for k in range(300):
+            service._sample(100.0 + k / 1000)
+        used, seed = service.pad, service._seed
+        gate = threading.Event()
+        build = service._simulated_pad
+        service._simulated_pad = lambda m, s: build(m, s) if gate.wait(60) else None
+        service._lift(100.3)
+        assert service._next.pending and service.pad is used          # the lift did not wait
+        service._step(0.0, 1.0 / service.rate_hz)                      # nor does the loop
+        assert service._next.pending and service.pad is used
+        gate.set()
+        touch = dict(master_events(1.0)[0], contact_id=2, t_s=1.0)
+        service._on_message(touch, 101.0)
+        assert service.touch_t0 is not None and service.pad is not used
+        assert service._seed == seed + 1 and service.object_id == "wood"
+        # The very trial the loop would have placed itself.
+        same = Slave(SCENE, "wood", identifier, slave_rng(seed + 1), session=service.sensors)
+        np.testing.assert_array_equal(service.pad.trial.channels["heat_flux_W_m2"],
+                                      same.trial.channels["heat_flux_W_m2"])
+    finally:
+        service.shutdown()

@@ -357,3 +357,47 @@ def test_a_resend_sends_what_was_asked_at_most_a_burst(link):
     master.lossless.resend_from(40)
     assert sent == list(range(40, 40 + RESEND_BURST))
     master._raw_send = real
+
+
+def test_a_stall_of_its_own_is_not_taken_for_the_peers_silence(caplog):
+    # The master's process stalls (its socket unread) for twice dead_after_s
+    # while the slave goes on sending heartbeats: once it polls again, what
+    # arrived meanwhile is read before the peer is judged, so no silence is
+    # reported. (A slave service's touch preparation once stalled it so
+    # under load, and both ends then said "peer silent".) Both ends on one
+    # simulated clock: the judgment is the code's, not the machine's load.
+    t = [0.0]
+    clock = lambda: t[0]                                      # noqa: E731
+    slave = Endpoint("slave", dataclasses.replace(PLAIN), clock=clock)
+    master = Endpoint("master", dataclasses.replace(PLAIN, control_port=slave.ports[0],
+                                                    stream_port=slave.ports[1]), clock=clock)
+
+    def run(*endpoints, seconds):
+        for _ in range(int(round(seconds / PLAIN.heartbeat_s))):
+            t[0] += PLAIN.heartbeat_s
+            for e in endpoints:
+                e.poll(0.01)
+
+    try:
+        for _ in range(int(GUARD_S / 0.01)):
+            run(slave, master, seconds=PLAIN.heartbeat_s)
+            if slave.peer_alive and master.peer_alive and master.peer_version is not None:
+                break
+        run(slave, master, seconds=5 * PLAIN.heartbeat_s)     # both judged the other alive
+        assert master.peer_alive
+        missed = master.counters["heartbeats_missed"]
+        run(slave, seconds=2 * PLAIN.dead_after_s)            # the master stalls
+        with caplog.at_level("WARNING", logger="telethermal.wire.transport"):
+            master.poll(GUARD_S)           # returns once the queued heartbeats are there
+        assert master.peer_alive
+        assert master.counters["heartbeats_missed"] == missed
+        assert "master: peer silent" not in caplog.text
+        # The control: a peer really silent for dead_after_s is reported.
+        t[0] += 2 * PLAIN.dead_after_s
+        with caplog.at_level("WARNING", logger="telethermal.wire.transport"):
+            master.poll(0.0)
+        assert not master.peer_alive and master.counters["heartbeats_missed"] == missed + 1
+        assert "master: peer silent" in caplog.text
+    finally:
+        slave.close()
+        master.close()

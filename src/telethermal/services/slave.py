@@ -24,7 +24,8 @@ from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
 from telethermal.services.admin import ErrorCount, open_service_sockets
-from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
+from telethermal.services.background import Background
+from telethermal.services.slave_admin import handle_admin
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
@@ -101,6 +102,8 @@ class SlaveService:
         self.devices = None
         self._touch_counters: dict = {}
         self.last_touch: dict = {}
+        #: The simulated pad's next touch, prepared off the loop (background.py).
+        self._next = Background("slave-next-touch")
         try:
             self.recorder = open_recorder(config, "slave", identifier, generator)
             self._start_sensor_session(config.seed)
@@ -180,19 +183,43 @@ class SlaveService:
         return cal.to_dict()
 
     # ------------------------------------------------------------ the object
-    def place(self, material: str, seed: int, object_id: str | None = None) -> None:
+    def place(self, material: str, seed: int, object_id: str | None = None,
+              background: bool = False) -> None:
         """Put ``material`` under the pad and measure it (IR) before contact.
         ``object_id``: the object's name (its object memory's key); by default
         the name of the scene object holding ``material`` (the scene names
-        its objects by their material)."""
+        its objects by their material). ``background`` (the simulator alone):
+        prepared on a worker thread, placed by the loop once ready."""
+        self._next.drop()
+        if self.devices is None and background:
+            self._next.start(lambda: self._simulated_pad(material, seed),
+                             (material, seed, object_id))
+            return
         if self.devices is not None:
             self._touch_counters = flat_counters(self.devices.all_counters())
         if self.devices is not None and self.devices.kind == DeviceKind.HARDWARE:
-            self.pad = Slave.on_hardware(self.scene, self.identifier, self.devices,
-                                         self.sensors)
+            pad = Slave.on_hardware(self.scene, self.identifier, self.devices, self.sensors)
         else:
-            self.pad = Slave(self.scene, material, self.identifier, slave_rng(seed),
-                             session=self.sensors, devices=self.devices)
+            pad = self._simulated_pad(material, seed)
+        self._placed(pad, material, seed, object_id)
+
+    def _simulated_pad(self, material: str, seed: int) -> Slave:
+        return Slave(self.scene, material, self.identifier, slave_rng(seed),
+                     session=self.sensors, devices=self.devices)
+
+    def _next_prepared(self, wait: bool = False) -> None:
+        """The touch prepared in the background placed once ready (``wait``: now)."""
+        try:
+            taken = self._next.take(wait)
+        except TelethermalError as exc:
+            log.error("next touch not prepared: %s", exc)
+            return
+        if taken is not None:
+            pad, (material, seed, object_id) = taken
+            self._placed(pad, material, seed, object_id)
+
+    def _placed(self, pad: Slave, material: str, seed: int, object_id: str | None) -> None:
+        self.pad = pad
         self.object_id = object_id or material
         self.session.place(self.pad, self.object_id)
         self.material = material
@@ -228,6 +255,7 @@ class SlaveService:
         contact, changes nothing and is counted (``contact_ignored``)."""
         verdict = self.session.classify(m, self.endpoint.peer_session)
         if verdict == ContactRequest.TOUCH:
+            self._next_prepared(wait=True)
             if self.pad.samples_read or self.pad.fault == BOARD_LOST:
                 # This trial was used (its touch ended without a lift that
                 # prepared the next, e.g. the board was away): a fresh one.
@@ -271,7 +299,8 @@ class SlaveService:
         # counted by the session and logged by the memory), what that
         # supports announced just below.
         try:
-            self.place(self.material, self._seed + 1, self.object_id)   # a fresh trial
+            self.place(self.material, self._seed + 1, self.object_id,   # a fresh trial
+                       background=True)
         except TelethermalError as exc:
             # The devices could not prepare the next touch (the pad did not
             # settle, the board is away): the pad is safe; an admin place or
@@ -350,42 +379,7 @@ class SlaveService:
                    if self.devices is not None else {})}
 
     def _on_admin(self, request: dict) -> None:
-        def place(r):
-            object_id = r.get("object_id")
-            if object_id is not None and (not isinstance(object_id, str) or not object_id or
-                                          len(object_id.encode()) > 256):
-                raise ValueError(f"object_id must be a non-empty string of at most 256 bytes, "
-                                 f"got {object_id!r}")
-            if self.touch_t0 is not None:
-                # The pad is moved to another object: the contact going on
-                # ends first (its lift may still be on the way from the master).
-                cause = self._place_lift_cause()
-                log.warning("place during contact_id=%d: the pad is lifted first (%s)",
-                            self.contact_id, cause)
-                self.counters[cause] += 1
-                if cause == "masters_lost":
-                    self.masters_lost += 1
-                self._lift(time.monotonic())
-            self.place(str(r["material"]), int(r.get("seed", self._seed + 1)), object_id)
-            # object_true_c: the simulator's truth, for comparing with direct contact
-            return {"object_ir_c": self.pad.object_ir_c, "object_true_c": self.pad.object_true_c,
-                    "object_id": self.object_id, **self.session.object_fields()}
-
-        def calibrate(r):
-            if self.touch_t0 is not None:
-                raise ValueError("cannot calibrate during a contact: lift first")
-            return self.calibrate_thermometer(float(r.get("drift_k_per_reading", 0.0)))
-
-        def forget(r):
-            self.memory.forget(r.get("object_id"))
-            log.info("object memory: forgot %s", r.get("object_id") or "every object")
-            if self.endpoint.peer_version is not None and self.touch_t0 is None:
-                self._announce_object()          # the master forgets it too
-            return {"memory": self.memory.to_dict()}
-
-        self.admin.handle(request, self, {
-            "place": place, "report": lambda r: dict(self.last_touch),
-            "calibrate_thermometer": calibrate, "forget": forget}, SLAVE_REQUESTS)
+        handle_admin(self, request)
 
     def _close_devices(self) -> None:
         """The active pad to its safe state, the devices released."""
@@ -445,6 +439,7 @@ class SlaveService:
         if now >= deadline:
             deadline = max(deadline + period, now)
             try:
+                self._next_prepared()
                 if self.touch_t0 is None and self.devices is not None:
                     self.devices.hold()      # the pad held at temperature, frames read
                 if self.touch_t0 is not None and not self.endpoint.peer_alive:
@@ -476,6 +471,7 @@ class SlaveService:
                                    counters=self.endpoint.all_counters(), message="slave stopping")
                 self.endpoint.poll(0.05)
         finally:
+            self._next.close()
             self._close_devices()
             self.endpoint.close()
             self.admin.close()

@@ -323,10 +323,6 @@ class Endpoint:
         every application message that arrived, lossless ones in order."""
         now = self.clock()
         alive = self.peer_alive
-        if self._was_alive and not alive:
-            self.counters["heartbeats_missed"] += 1
-            log.warning("%s: peer silent for %.2f s", self.role, self.config.dead_after_s)
-        self._was_alive = alive
         out, self._held_back = self._held_back, []
         if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
             if self.role == "master":
@@ -359,6 +355,13 @@ class Endpoint:
                 except zmq.Again:
                     break
                 out += self._on_stream(data)
+        # The peer judged silent after what arrived is read: a stall of this
+        # process (its socket unread) is not the peer's silence.
+        alive = self.peer_alive
+        if self._was_alive and not alive:
+            self.counters["heartbeats_missed"] += 1
+            log.warning("%s: peer silent for %.2f s", self.role, self.config.dead_after_s)
+        self._was_alive = alive
         return out
 
     def _forget_stream(self) -> None:
