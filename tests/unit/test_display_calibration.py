@@ -320,3 +320,32 @@ def test_a_recording_carries_the_gain_and_its_playback_reads_the_flux_over_it(bu
     assert _flux_gain(rec({}, [{"flux_gain": 0.9}])) == 0.9          # a service's touch start
     assert _flux_gain(rec({})) == 1.0                                # an older recording
     assert _flux_gain(rec({"flux_gain": float("nan")})) == 1.0      # not a gain: none
+
+
+def test_a_calibrated_touch_replays_identical_and_not_without_its_gain(tmp_path,
+                                                                       trained_models):
+    """A touch recorded by a master with the display's calibration replays
+    bit for bit (the replay builds its display with the recorded gain); the
+    same recording with its gain set to 1 replays different: the gain is
+    what the replay's identity rests on, not a value it ignores."""
+    from telethermal.physics.scene import load_scene
+    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.replay import replay
+    from telethermal.teleop.run import run_session, with_finger
+    from test_replay_wrong import rewrite
+
+    data = tomllib.loads(resources.files("telethermal").joinpath(
+        "scenes/fingertip-7.toml").read_text())
+    data["as_built"] = {"display": BUILT}
+    built = parse_scene(data, "fingertip-7.toml")          # the shipped scene, built off
+    cal = calibrate_simulated(built, seed=0)
+    models = trained_models.pair(with_finger(load_scene("fingertip-7")), 0)
+    path = tmp_path / "calibrated.mcap"
+    run_session(with_finger(built), "plexiglass", *models,
+                DisplayConfig(feedforward_model="static"), contact_s=0.4, seed=2,
+                record=path, display_calibration=cal)
+    summary = replay(path)["summary"]
+    assert summary["identical"] and summary["flux_gain"] == cal.flux_gain != 1.0
+    ungained = rewrite(path, tmp_path / "ungained.mcap",
+                       config=lambda c: c.__setitem__("flux_gain", 1.0))
+    assert not replay(ungained)["summary"]["identical"]
