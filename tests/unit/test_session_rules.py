@@ -9,7 +9,7 @@ from dataclasses import dataclass, replace
 
 import pytest
 
-from telethermal.control.contact import ContactEvent
+from telethermal.control.contact import ContactChange
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.session import MasterSession, SlaveSession
@@ -22,7 +22,7 @@ CURVES = {m: {"t_s": [0.1, 1.0], "g_w_m2k": [1000.0 * (i + 1), 500.0 * (i + 1)]}
 
 @dataclass
 class Step:
-    contact: ContactEvent | None
+    contact: ContactChange | None
 
 
 def session() -> MasterSession:
@@ -49,17 +49,17 @@ def trajectory(contact_id, label="aluminium"):
 
 def test_onset_and_release_become_contact_events_with_fresh_ids():
     s = session()
-    out = s.period(Step(ContactEvent(True, 0.25)), 10.0, 2.0, 31.0)
+    out = s.period(Step(ContactChange(True, 0.25)), 10.0, 2.0, 31.0)
     assert [(o.kind, o.message.contact_id, o.message.touching, o.t_s) for o in out] == \
         [("contact_event", 1, True, 10.25)]
     assert out[0].lossless and out[0].message.finger_temp_c == 31.0
     assert s.link.contact_id == 1 and s.link.onset_s == 10.25
     assert s.period(Step(None), 10.0, 2.0, 31.0) == []
-    out = s.period(Step(ContactEvent(False, 1.5)), 10.0, 0.0, 31.0)
+    out = s.period(Step(ContactChange(False, 1.5)), 10.0, 0.0, 31.0)
     assert [(o.message.contact_id, o.message.touching, o.t_s) for o in out] == \
         [(1, False, 11.5)]
     assert s.contact_id is None and s.link.contact_id is None
-    out = s.period(Step(ContactEvent(True, 3.0)), 10.0, 2.0, 31.0)
+    out = s.period(Step(ContactChange(True, 3.0)), 10.0, 2.0, 31.0)
     assert out[0].message.contact_id == 2
     # The driver's touch ends with the contact open: the slave hears the lift.
     out = s.close_contact(14.0, 31.0)
@@ -70,7 +70,7 @@ def test_onset_and_release_become_contact_events_with_fresh_ids():
 @pytest.mark.parametrize("order", ["decision first", "trajectory first"])
 def test_a_reordered_decision_and_trajectory_leave_the_same_news(order):
     s = session()
-    s.period(Step(ContactEvent(True, 0.0)), 10.0, 2.0, 31.0)
+    s.period(Step(ContactChange(True, 0.0)), 10.0, 2.0, 31.0)
     messages = [estimate(1, 0.08), trajectory(1)]
     if order == "trajectory first":
         messages.reverse()
@@ -85,7 +85,7 @@ def test_a_reordered_decision_and_trajectory_leave_the_same_news(order):
 
 def test_messages_of_another_contact_are_stale_and_setpoints_keep_the_newest():
     s = session()
-    s.period(Step(ContactEvent(True, 0.0)), 10.0, 2.0, 31.0)
+    s.period(Step(ContactChange(True, 0.0)), 10.0, 2.0, 31.0)
     sp = lambda cid, t, f: wire.FluxSetpoint(contact_id=cid,                  # noqa: E731
                                              t_since_contact_s=t, flux_w_m2=f)
     s.on_message(sp(1, 0.20, -900.0), 10.2)
@@ -94,10 +94,10 @@ def test_messages_of_another_contact_are_stale_and_setpoints_keep_the_newest():
     assert s.news(10.3, True).setpoint_w_m2 == -900.0
     s.on_message(estimate(7, 0.05), 10.3)
     assert s.link.counters["stale"] == 1 and s.first_news_s is None
-    s.period(Step(ContactEvent(False, 1.0)), 10.0, 0.0, 31.0)
+    s.period(Step(ContactChange(False, 1.0)), 10.0, 0.0, 31.0)
     s.on_message(estimate(1, 0.9), 11.2)              # after the lift: stale
     assert s.link.counters["stale"] == 2
-    s.period(Step(ContactEvent(True, 2.0)), 10.0, 2.0, 31.0)
+    s.period(Step(ContactChange(True, 2.0)), 10.0, 2.0, 31.0)
     assert s.news(12.1, True).setpoint_w_m2 is None and math.isinf(s.setpoint_t_s)
 
 
@@ -147,7 +147,7 @@ def test_a_slave_restarted_mid_contact_reaches_the_display_as_news():
     from telethermal.teleop.master import DisplayConfig, MasterDisplay
 
     s = session()
-    s.period(Step(ContactEvent(True, 0.0)), 10.0, 2.0, 31.0)
+    s.period(Step(ContactChange(True, 0.0)), 10.0, 2.0, 31.0)
     display = MasterDisplay(DisplayConfig(feedforward_model="static", rate_hz=1000.0), None,
                             1e-3, 0.01, 31.0, idle_c=22.0)
     display.step(0.0, 1e-3, PadSensors(0.0, 22.0, 0.0), s.news(10.0, True))
@@ -169,10 +169,10 @@ def test_the_last_contacts_decision_is_not_news_at_the_next_onset():
     # (aluminium) was still held then, and the display rendered it on the
     # next object (plexiglass: 5.2 K skin error on the services).
     s = session()
-    s.period(Step(ContactEvent(True, 0.0)), 10.0, 2.0, 31.0)
+    s.period(Step(ContactChange(True, 0.0)), 10.0, 2.0, 31.0)
     s.on_message(estimate(1, 0.08), 10.1, 0.0)
     assert s.news(10.2, True).estimate.label == "aluminium"
-    s.period(Step(ContactEvent(False, 1.0)), 10.0, 0.0, 31.0)
+    s.period(Step(ContactChange(False, 1.0)), 10.0, 0.0, 31.0)
     assert s.news(12.0, True).estimate is None          # between contacts
-    s.period(Step(ContactEvent(True, 3.0)), 10.0, 2.0, 31.0)
+    s.period(Step(ContactChange(True, 3.0)), 10.0, 2.0, 31.0)
     assert s.news(13.0, True).estimate is None          # the new contact's own only

@@ -16,7 +16,10 @@ from telethermal.errors import ControlError
 
 
 @dataclass(frozen=True, slots=True)
-class ContactEvent:
+class ContactChange:
+    """The detector's debounced change of state (the wire's ``ContactEvent``,
+    wire/messages.py, is what the master tells the slave of it)."""
+
     touching: bool
     t_s: float          # onset (or release) instant: first sample past the threshold
 
@@ -32,7 +35,7 @@ class ContactDetector:
         self._candidate_since: float | None = None
         self._last_t: float | None = None
 
-    def update(self, t_s: float, force_n: float) -> ContactEvent | None:
+    def update(self, t_s: float, force_n: float) -> ContactChange | None:
         """Feed one sample; returns an event when the debounced state changes.
 
         A non-finite force is refused (the caller's safety supervisor decides
@@ -52,5 +55,5 @@ class ContactDetector:
         if t_s - self._candidate_since >= self.debounce_s:
             self.touching = not self.touching
             onset, self._candidate_since = self._candidate_since, None
-            return ContactEvent(self.touching, onset)
+            return ContactChange(self.touching, onset)
         return None

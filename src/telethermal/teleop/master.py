@@ -45,7 +45,7 @@ import math
 from dataclasses import dataclass, replace
 from enum import StrEnum
 
-from telethermal.control.contact import ContactDetector, ContactEvent
+from telethermal.control.contact import ContactChange, ContactDetector
 from telethermal.control.junction_design import design_display_loop
 from telethermal.control.feedforward import ImpedanceController
 from telethermal.control.pid import Pid
@@ -111,7 +111,7 @@ class MasterStep:
     current_a: float = 0.0
     #: The contact detector's news this period: a touch began or ended
     #: (its ``t_s`` the onset or release instant), else None.
-    contact: ContactEvent | None = None
+    contact: ContactChange | None = None
 
 
 class MasterDisplay:
@@ -261,7 +261,7 @@ class MasterDisplay:
         return inverse_effusivity(weights)
 
     # ------------------------------------------------------------ the phases
-    def _on_contact(self, t_s: float, force_n: float) -> ContactEvent | None:
+    def _on_contact(self, t_s: float, force_n: float) -> ContactChange | None:
         """The contact detector's news: a touch begins or ends (returned)."""
         if not math.isfinite(force_n):
             return None
@@ -392,7 +392,7 @@ class MasterDisplay:
         return desired, command
 
     def _apply(self, t_s: float, dt_s: float, sensors: PadSensors, desired: float,
-               command: float, contact: ContactEvent | None = None) -> MasterStep:
+               command: float, contact: ContactChange | None = None) -> MasterStep:
         """The controller's own slew limit (the supervisor's is looser), then
         the supervisor; what it let through."""
         # A stall buys no bigger jump.
