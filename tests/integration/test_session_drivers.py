@@ -222,3 +222,40 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
                                       same.trial.channels["heat_flux_W_m2"])
     finally:
         service.shutdown()
+
+
+def test_admin_requests_on_the_slave_between_and_during_touches(models):
+    """The slave's admin requests (services/slave_admin.py) straight on the
+    service: a calibration refused during a contact, by name; one right
+    after a lift, while the next touch is being prepared in the background,
+    calibrates and measures the object anew (the pad placed with the new
+    calibration, nothing left pending); a place with an object name
+    answers with it; a forget empties the memory."""
+    service = wood_slave(models)
+    service.endpoint.send = lambda kind, **fields: 0
+    replies = []
+    service.admin.reply = lambda **r: replies.append(r)
+    try:
+        service._on_message(master_events(1.0)[0], 100.0)
+        service._on_admin({"cmd": "calibrate_thermometer"})
+        assert replies[-1]["ok"] is False
+        assert "cannot calibrate during a contact" in replies[-1]["error"]
+        for k in range(300):
+            service._sample(100.0 + k / 1000)
+        service._lift(100.3)
+        assert service._next.pending
+        before = service.sensors
+        service._on_admin({"cmd": "calibrate_thermometer"})
+        assert replies[-1]["ok"] and replies[-1]["calibrated"] is True
+        assert not service._next.pending and service.sensors is not before
+        assert service.pad.samples_read == 0 and service.touch_t0 is None
+        service._on_admin({"cmd": "place", "material": "steel", "seed": 3,
+                           "object_id": "the steel cup"})
+        assert replies[-1]["ok"] and replies[-1]["object_id"] == "the steel cup"
+        assert service.material == "steel" and service._seed == 3
+        service._on_admin({"cmd": "place", "material": "steel", "object_id": ""})
+        assert replies[-1]["ok"] is False and "object_id" in replies[-1]["error"]
+        service._on_admin({"cmd": "forget"})
+        assert replies[-1]["ok"] and replies[-1]["memory"] == service.memory.to_dict()
+    finally:
+        service.shutdown()
