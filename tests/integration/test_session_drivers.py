@@ -206,7 +206,7 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
         used, seed = service.pad, service._seed
         gate = threading.Event()
         build = service._simulated_pad
-        service._simulated_pad = lambda m, s: build(m, s) if gate.wait(60) else None
+        service._simulated_pad = lambda m, s: build(m, s) if gate.wait(10) else None
         service._lift(100.3)
         assert service._next.pending and service.pad is used          # the lift did not wait
         service._step(0.0, 1.0 / service.rate_hz)                      # nor does the loop
@@ -248,6 +248,7 @@ def test_admin_requests_on_the_slave_between_and_during_touches(models):
         service._on_admin({"cmd": "calibrate_thermometer"})
         assert replies[-1]["ok"] and replies[-1]["calibrated"] is True
         assert not service._next.pending and service.sensors is not before
+        assert service._seed == 6 and service.material == "wood"   # the lift's next trial
         assert service.pad.samples_read == 0 and service.touch_t0 is None
         service._on_admin({"cmd": "place", "material": "steel", "seed": 3,
                            "object_id": "the steel cup"})

@@ -309,9 +309,12 @@ def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monk
     from telethermal.errors import WindowFull
 
     slave, master = link
+    # The window empty first (the slave's first status may still be unacked).
+    pump(slave, master, seconds=GUARD_S, until=lambda: slave.unacked == 0)
     monkeypatch.setattr(lossless, "WINDOW", 8)
     monkeypatch.setattr("telethermal.wire.transport.WINDOW", 8)
     accepted, refused = [], 0
+    first_seq = slave.lossless._next_seq
     for i in range(1, 21):                   # the master reads nothing meanwhile
         try:
             slave.send("contact_event", **contact(i))
@@ -321,8 +324,8 @@ def test_a_full_window_refuses_the_send_and_loses_nothing_it_accepted(link, monk
             assert "window is full" in str(exc) and "contact_event" in str(exc)
     assert accepted == list(range(1, 9)) and refused == 12
     assert slave.counters["refused_by_window"] == 12 and slave.unacked == 8
-    # The next seq is still 9: a refused send leaves no gap.
-    assert slave.lossless._next_seq == 9
+    # The next seq is the ninth's: a refused send leaves no gap.
+    assert slave.lossless._next_seq == first_seq + 8
     _, m_got = pump(slave, master, seconds=GUARD_S, until=lambda: slave.unacked == 0)
     assert [m["contact_id"] for m in m_got if m["kind"] == "contact_event"] == accepted
     # With a bound to wait, the send waits for the ack instead of refusing,
@@ -386,13 +389,23 @@ def test_a_stall_of_its_own_is_not_taken_for_the_peers_silence(caplog):
         run(slave, master, seconds=5 * PLAIN.heartbeat_s)     # both judged the other alive
         assert master.peer_alive
         missed = master.counters["heartbeats_missed"]
+        reconnects = slave.counters["reconnects"]
         run(slave, seconds=2 * PLAIN.dead_after_s)            # the master stalls
         with caplog.at_level("WARNING", logger="telethermal.wire.transport"):
             master.poll(GUARD_S)           # returns once the queued heartbeats are there
         assert master.peer_alive
         assert master.counters["heartbeats_missed"] == missed
         assert "master: peer silent" not in caplog.text
-        # The control: a peer really silent for dead_after_s is reported.
+        # And no hello sent for it: after its own stall the master does not
+        # take the peer for gone (a hello the slave would count as a reconnect).
+        for _ in range(3):
+            slave.poll(0.05)
+        assert slave.counters["reconnects"] == reconnects
+        # The control: a peer really silent for dead_after_s is reported
+        # (the slave gone, what it sent read first, on the frozen clock).
+        slave.close()
+        for _ in range(5):
+            master.poll(0.05)
         t[0] += 2 * PLAIN.dead_after_s
         with caplog.at_level("WARNING", logger="telethermal.wire.transport"):
             master.poll(0.0)

@@ -103,3 +103,23 @@ def test_the_dew_margin_is_the_true_surfaces_with_nothing_on_the_pad():
     trace = {"t_s": t, "pad_surface_c": surface}
     assert idle_surface_minus_dew_k(trace, 2.0, 20.0) == -2.0
     assert idle_surface_minus_dew_k(trace, 2.0, None) is None
+
+
+def test_a_session_adds_to_its_runs_totals_and_to_no_other(trained_models, monkeypatch):
+    # The totals were module globals: another bench's sessions in the same
+    # process (bench render --as-built's) were added to bench render's.
+    from telethermal.bench import render
+    from telethermal.physics.scene import load_scene
+    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.run import with_finger
+
+    monkeypatch.setattr(render, "CONTACT_S", 0.5)
+    scene = with_finger(load_scene("fingertip-7"))
+    ident, gen = trained_models.pair(scene, 0)
+    mine = render.Totals()
+    row = render._session_row(scene, "steel", ident, gen, DisplayConfig(), 1, totals=mine)
+    render._session_row(scene, "steel", ident, gen, DisplayConfig(), 1)      # no totals
+    # The session without totals added nothing to this run's.
+    assert mine.limits["sessions"] == 1 and mine.dew["sessions"] == 1
+    assert mine.limits["current_exceeded"] == row["module_limits"]["current_exceeded"]
+    assert mine.limits["contact_s"] == row["module_limits"]["contact_s"] > 0

@@ -57,20 +57,25 @@ GAIN_SETS = {
 }
 KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
         "time_to_correct_flux_s", "safety_events", "flux_rms_error_rel_whole")
-#: Every session's module limits over the whole bench (every controller,
-#: rate and gain, the real clock's too), counted on the controller's request
-#: before any clamp (teleop/display_setup.add_limits); reported as
-#: ``limits_all_sessions``. ``limits`` is the shipped display's alone.
-_LIMITS = new_limit_totals()
 #: A session's module summary keys ``add_limits`` reads (kept in each row).
 _LIMIT_KEYS = ("current_exceeded", "hot_side_exceeded", "reversals", "contact_s",
                "ripple_rms_a", "requested")
-#: The pad's idle against the room's dew point over every simulated-clock session.
-_DEW = {"sessions": 0, "min_idle_minus_dew_k": float("inf")}
+
+
+class Totals:
+    """One run's pools, nothing carried to the next: every session's module
+    limits, counted on the controller's request before any clamp
+    (``limits_all_sessions``; ``limits`` is the shipped display's alone), and
+    the pad's idle against the room's dew point (simulated-clock sessions)."""
+
+    def __init__(self):
+        self.limits = new_limit_totals()
+        self.dew = {"sessions": 0, "min_idle_minus_dew_k": float("inf")}
 
 
 def _session_row(scene, material, identifier, generator, config, seed,
-                 expected_material=None, display_calibration=None):
+                 expected_material=None, display_calibration=None, totals: Totals | None = None):
+    """One session's row; its limits and idle added to ``totals`` if given."""
     start = time.process_time()
     # The pad idles by config.idle (control/preconditioning.py): by default a
     # repeated touch (the material known from memory) is pre-conditioned for
@@ -80,12 +85,14 @@ def _session_row(scene, material, identifier, generator, config, seed,
                     display_calibration=display_calibration).summary
     cpu = time.process_time() - start
     module = s["module"]
-    add_limits(_LIMITS, module)
-    if s["idle_surface_minus_dew_k"] is not None:
+    if totals is not None:
+        add_limits(totals.limits, module)
+    if totals is not None and s["idle_surface_minus_dew_k"] is not None:
         # The pad's true surface with nothing on it, not the clamped command.
-        _DEW["sessions"] += 1
-        _DEW["min_idle_minus_dew_k"] = min(_DEW["min_idle_minus_dew_k"],
-                                           s["idle_surface_minus_dew_k"])
+        dew = totals.dew
+        dew["sessions"] += 1
+        dew["min_idle_minus_dew_k"] = min(dew["min_idle_minus_dew_k"],
+                                          s["idle_surface_minus_dew_k"])
     row = {"material": material, "seed": seed, "identified": s["identified"],
            **{k: s[k] for k in KEYS}, "decision_from_s": s["decision_from_s"],
            "display_idle_c": s["display_idle_c"], "object_ir_c": s["object_ir_c"],
@@ -298,12 +305,12 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     identifier, generator = train_identifier(scene, 0), train_generator(scene, 0)
     training_s = time.perf_counter() - t0
 
-    def sweep(config, mats=materials, sds=seeds):
-        return [_session_row(scene, m, identifier, generator, config, s) for m in mats for s in sds]
+    totals = Totals()
 
-    for key in _LIMITS:
-        _LIMITS[key] = 0
-    _DEW.update(sessions=0, min_idle_minus_dew_k=float("inf"))
+    def sweep(config, mats=materials, sds=seeds):
+        return [_session_row(scene, m, identifier, generator, config, s, totals=totals)
+                for m in mats for s in sds]
+
     report = {"scene": scene.name, "contact_s": CONTACT_S, "seeds": list(seeds),
               "materials": {m: {} for m in materials}, "training_s": training_s}
     seeds5 = SEEDS_5[:1] if quick else SEEDS_5
@@ -322,9 +329,10 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     first = next(c["rows"] for c in report["controller"]
                  if c["feedforward_model"] == DisplayConfig().feedforward_model)
     repeat = [_session_row(scene, m, identifier, generator, DisplayConfig(), s,
-                           expected_material=m) for m in materials for s in seeds5]
+                           expected_material=m, totals=totals) for m in materials for s in seeds5]
     step("first touches with the pad idling at the object (the policy's comparison)")
-    at_object = [_session_row(scene, m, identifier, generator, DisplayConfig(idle="object"), s)
+    at_object = [_session_row(scene, m, identifier, generator, DisplayConfig(idle="object"), s,
+                              totals=totals)
                  for m in materials for s in seeds5]
     report["materials"] = _materials(first, repeat, at_object)
     step("the floor at the slave's decision times")
@@ -367,13 +375,13 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
             ("real_clock_deployed", "master", (DEFAULT_RATE_HZ,), DEPLOYED_PRIORITY)):
         for rate in rates:
             report[key].append(real_clock_row(
-                scene, identifier, generator, rate, mode, CONTACT_S, _LIMITS,
+                scene, identifier, generator, rate, mode, CONTACT_S, totals.limits,
                 periods=340 if quick else REAL_CLOCK_PERIODS, priority=priority))
     report["limits"] = shipped_limits(report)
     report["limits_repeat"] = limits_of(repeat)
-    report["limits_all_sessions"] = limits_report(_LIMITS)
+    report["limits_all_sessions"] = limits_report(totals.limits)
     report["junction_sensor"] = junction_sensor_report(scene)
-    report["dew"] = dew_report(scene, _DEW)
+    report["dew"] = dew_report(scene, totals.dew)
     report.update(_safety_counts(report, repeat + at_object))
     report["default_gains"] = {"kp": DEFAULT_GAINS.kp, "ki": DEFAULT_GAINS.ki,
                                "kd": DEFAULT_GAINS.kd}

@@ -61,7 +61,9 @@ class Background:
             log.debug("%s: a dropped job failed: %s", self.name, exc)
 
     def close(self) -> None:
-        self.drop()
+        """The job not taken is abandoned (not waited for: a service that
+        stops closes its sockets and recording first); no more jobs."""
+        self._job = None
         if self._pool is not None:
-            self._pool.shutdown(wait=True)
+            self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None

@@ -161,6 +161,7 @@ class SlaveService:
         as they are, and status says so); the error is logged and returned."""
         from dataclasses import replace as dc_replace
 
+        self._next_prepared(wait=True)       # the seed and object after the last lift
         try:
             cal = calibrate(self.devices, self.sensors, self.scene, self._session_rng,
                             drift_k_per_reading)
@@ -213,6 +214,9 @@ class SlaveService:
             taken = self._next.take(wait)
         except TelethermalError as exc:
             log.error("next touch not prepared: %s", exc)
+            return
+        except Exception as exc:         # a bug: counted; the next touch places afresh
+            self._count_error("next touch's preparation", exc)
             return
         if taken is not None:
             pad, (material, seed, object_id) = taken
@@ -286,6 +290,8 @@ class SlaveService:
         contact_id = self.contact_id
         sends, _ = self.session.lift(now)
         self._send(sends)       # the final estimate if unsent (6a), the lift event
+        if self.endpoint.peer_version is not None:
+            self._announce_object()     # the memory's update at once (6b), the object again
         if self.devices is not None:
             self.devices.hold()                 # the pad leaves the object, held
         self.last_touch = self._report()
@@ -442,8 +448,6 @@ class SlaveService:
                 self._next_prepared()
                 if self.touch_t0 is None and self.devices is not None:
                     self.devices.hold()      # the pad held at temperature, frames read
-                if self.touch_t0 is not None and not self.endpoint.peer_alive:
-                    self._master_lost(now)
                 if self.touch_t0 is not None:
                     self._sample(now)
             except Exception as exc:
@@ -454,6 +458,13 @@ class SlaveService:
                 self._on_message(message, time.monotonic())
             except Exception as exc:
                 self._internal_error(f"message {str(message.get('kind'))[:32]}", exc)
+        # The master judged lost after what arrived is read (a stall of this
+        # process is not the master's silence).
+        if self.touch_t0 is not None and not self.endpoint.peer_alive:
+            try:
+                self._master_lost(time.monotonic())
+            except Exception as exc:
+                self._internal_error("master lost", exc)
         request = self.admin.receive()
         if request is not None:
             self._on_admin(request)
@@ -471,7 +482,6 @@ class SlaveService:
                                    counters=self.endpoint.all_counters(), message="slave stopping")
                 self.endpoint.poll(0.05)
         finally:
-            self._next.close()
             self._close_devices()
             self.endpoint.close()
             self.admin.close()
@@ -479,3 +489,4 @@ class SlaveService:
                 closed = self.recorder.close()
                 log.info("recording %s closed: %d messages%s", closed["path"], closed["written"],
                          f"; {closed['error']}" if closed["error"] else "")
+            self._next.close()          # a touch being prepared: not waited for

@@ -30,6 +30,7 @@ def handle_admin(service, request: dict) -> None:
             if cause == "masters_lost":
                 service.masters_lost += 1
             service._lift(time.monotonic())
+        service._next_prepared(wait=True)     # the seed after the last lift's
         service.place(str(r["material"]), int(r.get("seed", service._seed + 1)), object_id)
         # object_true_c: the simulator's truth, for comparing with direct contact
         pad = service.pad

@@ -320,10 +320,18 @@ class Endpoint:
     # ------------------------------------------------------------ receiving
     def poll(self, timeout_s: float = 0.0) -> list[dict]:
         """Housekeeping (heartbeats, hellos, resends, liveness, status) and
-        every application message that arrived, lossless ones in order."""
+        every application message that arrived, lossless ones in order.
+        What arrived while this process was away (a stall: its socket
+        unread) is read first, so the peer is judged on it: a stall of
+        this process is not the peer's silence."""
+        out, self._held_back = self._held_back, []
+        out += self._receive(control=True, stream=self.role == "master")   # the slave's: PUB
         now = self.clock()
         alive = self.peer_alive
-        out, self._held_back = self._held_back, []
+        if self._was_alive and not alive:
+            self.counters["heartbeats_missed"] += 1
+            log.warning("%s: peer silent for %.2f s", self.role, self.config.dead_after_s)
+        self._was_alive = alive
         if now - self._last_heartbeat_sent >= self.config.heartbeat_s:
             if self.role == "master":
                 self.sockets.watch_handshakes(now, alive)
@@ -340,28 +348,25 @@ class Endpoint:
         if self.peer_version is not None and alive:
             self._publish_status(now)
         events = dict(self.poller.poll(max(0.0, timeout_s) * 1000))
-        if self.control in events:
-            while True:
-                try:
-                    frames = self.control.recv_multipart(flags=zmq.NOBLOCK)
-                except zmq.Again:
-                    break
-                identity = frames[0] if self.role == "slave" and len(frames) > 1 else None
-                out += self._on_control(frames[-1], identity)
-        if self.stream in events:
-            while True:
-                try:
-                    data = self.stream.recv(flags=zmq.NOBLOCK)
-                except zmq.Again:
-                    break
-                out += self._on_stream(data)
-        # The peer judged silent after what arrived is read: a stall of this
-        # process (its socket unread) is not the peer's silence.
-        alive = self.peer_alive
-        if self._was_alive and not alive:
-            self.counters["heartbeats_missed"] += 1
-            log.warning("%s: peer silent for %.2f s", self.role, self.config.dead_after_s)
-        self._was_alive = alive
+        out += self._receive(control=self.control in events, stream=self.stream in events)
+        return out
+
+    def _receive(self, control: bool, stream: bool) -> list[dict]:
+        """Every message waiting on the control and/or stream socket."""
+        out = []
+        while control:
+            try:
+                frames = self.control.recv_multipart(flags=zmq.NOBLOCK)
+            except zmq.Again:
+                break
+            identity = frames[0] if self.role == "slave" and len(frames) > 1 else None
+            out += self._on_control(frames[-1], identity)
+        while stream:
+            try:
+                data = self.stream.recv(flags=zmq.NOBLOCK)
+            except zmq.Again:
+                break
+            out += self._on_stream(data)
         return out
 
     def _forget_stream(self) -> None:
