@@ -105,8 +105,10 @@ def test_every_serial_golden_vector_on_the_core(codec):
                     "".join(serial_line(f) + "\n" for _, f in golden.values()))
     made = [bytes.fromhex(line) for line in out.split()]
     assert len(made) == len(golden) == 20
-    differ = [name for (name, (wire, _)), mine in zip(golden.items(), made) if wire != mine]
-    assert not differ, f"the core's frames differ from the golden vectors: {differ}"
+    differ = [(name, wire.hex(), mine.hex(), serial_line(f))
+              for (name, (wire, f)), mine in zip(golden.items(), made) if wire != mine]
+    assert not differ, (f"the core's frames differ from the golden vectors (name, golden, "
+                        f"the core's, the line sent): {differ}; the link: {codec.log[-600:]!r}")
 
 
 def test_every_can_golden_vector_both_ways_on_the_core(codec):
