@@ -87,12 +87,12 @@ def _session_row(scene, material, identifier, generator, config, seed,
     module = s["module"]
     if totals is not None:
         add_limits(totals.limits, module)
-    if totals is not None and s["idle_surface_minus_dew_k"] is not None:
         # The pad's true surface with nothing on it, not the clamped command.
-        dew = totals.dew
-        dew["sessions"] += 1
-        dew["min_idle_minus_dew_k"] = min(dew["min_idle_minus_dew_k"],
-                                          s["idle_surface_minus_dew_k"])
+        idle_minus_dew_k = s["idle_surface_minus_dew_k"]
+        if idle_minus_dew_k is not None:
+            totals.dew["sessions"] += 1
+            totals.dew["min_idle_minus_dew_k"] = min(totals.dew["min_idle_minus_dew_k"],
+                                                     idle_minus_dew_k)
     row = {"material": material, "seed": seed, "identified": s["identified"],
            **{k: s[k] for k in KEYS}, "decision_from_s": s["decision_from_s"],
            "display_idle_c": s["display_idle_c"], "object_ir_c": s["object_ir_c"],

@@ -20,8 +20,8 @@ log = logging.getLogger("telethermal.background")
 
 
 class Background:
-    """At most one job: ``start`` it, ``take`` its result (and the
-    arguments it was started with) once done, or ``drop`` it."""
+    """At most one job: ``start`` it, ``take`` its result (and the tag it
+    was started with) once done, or ``drop`` it."""
 
     def __init__(self, name: str):
         self.name = name
@@ -45,9 +45,9 @@ class Background:
         None; the job's exception is raised here, once."""
         if self._job is None or not (wait or self._job[0].done()):
             return None
-        future, args = self._job
+        future, tag = self._job
         self._job = None
-        return future.result(), args
+        return future.result(), tag
 
     def drop(self) -> None:
         """The job not taken is waited for and its result discarded."""
