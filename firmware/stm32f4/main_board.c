@@ -22,9 +22,11 @@ int main(void)
     tt_board_app_start(&app, TT_BOARD_FRAME_VERSION, 25.0f);
     for (;;) {
         plant_poll(); /* the analog side: outside the measurement (plant.h) */
+        plant_hold(true);
         uint32_t start = board_loop_begin();
         int sent = tt_board_app_poll(&app);
         board_loop_done(start, sent > 0 ? (uint32_t)sent : 0u);
+        plant_hold(false);
         if (sent == 0) {
             board_wait();
         }

@@ -29,10 +29,12 @@ int main(void)
     tt_peltier_init(&drv, &cfg);
     for (;;) {
         plant_poll(); /* the analog side: outside the measurement (plant.h) */
+        plant_hold(true);
         uint32_t start = board_loop_begin();
         uint32_t frames = drv.commands + drv.bad_commands;
         tt_peltier_poll(&drv);
         board_loop_done(start, drv.commands + drv.bad_commands - frames);
+        plant_hold(false);
         board_wait();
     }
 }

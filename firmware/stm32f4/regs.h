@@ -91,6 +91,7 @@
 #define SYST_CSR_CLKSOURCE (1u << 2)
 #define NVIC_ISER(n) REG32(0xE000E100u + 4u * (n))
 #define NVIC_ICER(n) REG32(0xE000E180u + 4u * (n))
+#define NVIC_ISPR(n) REG32(0xE000E200u + 4u * (n))
 #define SCB_CPACR REG32(0xE000ED88u)
 #define SCB_VTOR REG32(0xE000ED08u)
 

@@ -55,43 +55,60 @@ class FakeCore:
         return self.counts[name]
 
 
-def loop_of(own_instructions, isr_counts=42, per_unit_instructions=3000, monkeypatch=None):
+def loop_of(own_instructions, isr_counts=42, per_unit_instructions=3000, monkeypatch=None,
+            overhead_counts=21):
     """The figures of a core whose worst one-unit iteration, worst per-unit
-    cost in a burst and worst interrupt are these (SysTick counts are
-    1.344 per instruction: 42 counts = 31.25 instructions)."""
+    cost in a burst, worst interrupt and interrupt overhead are these
+    (SysTick counts are 1.344 per instruction: 42 counts = 31.25
+    instructions, 21 = 15.625)."""
     from telethermal.devices import qemu
 
     monkeypatch.setattr(qemu, "symbols", lambda elf: {n: n for n in (
         "board_loop_worst_cycles", "board_isr_worst_cycles", "board_loop_count",
-        "board_loop_bursts", "board_loop_worst_unit_cycles")})
+        "board_loop_bursts", "board_loop_worst_unit_cycles", "board_isr_overhead_cycles",
+        "board_aside_worst_cycles")})
     per = firmware.SYSTICK_PER_INSTRUCTION
     return firmware.loop_figures(FakeCore(
         board_loop_worst_cycles=round(own_instructions * per),
         board_isr_worst_cycles=isr_counts, board_loop_count=5000,
-        board_loop_bursts=2, board_loop_worst_unit_cycles=round(per_unit_instructions * per)),
+        board_loop_bursts=2, board_loop_worst_unit_cycles=round(per_unit_instructions * per),
+        board_isr_overhead_cycles=overhead_counts, board_aside_worst_cycles=9000),
         "elf")
 
 
 def test_the_loop_bound_adds_the_interrupts_the_line_can_bring_in_an_iteration(monkeypatch):
-    # 4000 instructions at 3 cycles: 12000 cycles; an interrupt 31.25
-    # instructions, 93.75 cycles; a byte every 10/921600 s = 10.85 us, each
-    # with a receive and a transmit interrupt. From 12000 + 2 x 93.75: 72.5
-    # us, 7 bytes + 1 -> 16 interrupts, 13500 cycles, 80.4 us, 8 + 1 -> 18,
-    # 13687.5 cycles (81.5 us: 8 + 1 again): the fixed point, 18 interrupts.
+    # 4000 instructions at 3 cycles: 12000 cycles. An interrupt: its span
+    # (31.25 instructions) and what lies outside it (15.625) at 3 cycles,
+    # 140.625, plus the exception's 29 cycles: 169.625. A byte every
+    # 10/921600 s = 10.85 us, each with a receive and a transmit interrupt.
+    # From 12000 + 2 x 169.625: 73.4 us, 7 bytes + 1 -> 16 interrupts,
+    # 14714 cycles, 87.6 us, 9 + 1 -> 20, 15392.5 cycles (91.6 us: 9 + 1
+    # again): the fixed point, 20 interrupts, under the tenth (16800).
     r = loop_of(4000, monkeypatch=monkeypatch)
-    assert r["interrupts_in_an_iteration_on_silicon"] == 18
-    assert abs(r["worst_cycles_bound"] - 13687.5) <= 1 and r["under_a_tenth"]
+    assert r["interrupts_in_an_iteration_on_silicon"] == 20
+    assert abs(r["worst_cycles_bound"] - 15392.5) <= 1 and r["under_a_tenth"]
+    assert abs(r["isr_cycles_bound"] - 169.625) <= 1
     assert r["bursts"] == 2 and r["worst_instructions_per_unit_in_a_burst"] == 3000
-    # 5000: 15187.5 -> 20 interrupts, 16875 -> 22, 17062.5 (fixed): over the
-    # tenth of the period (16800).
-    r = loop_of(5000, monkeypatch=monkeypatch)
+    # 4500: 16553.25 -> 22 interrupts, 17231.75 (fixed): over the tenth.
+    r = loop_of(4500, monkeypatch=monkeypatch)
     assert r["interrupts_in_an_iteration_on_silicon"] == 22
-    assert abs(r["worst_cycles_bound"] - 17062.5) <= 1 and not r["under_a_tenth"]
+    assert abs(r["worst_cycles_bound"] - 17231.75) <= 1 and not r["under_a_tenth"]
+    # The interrupt's overhead counts: without it, 4500 instructions are
+    # 13500 + 20 x (93.75 + 29) = 15955 (fixed at 20), under.
+    r = loop_of(4500, monkeypatch=monkeypatch, overhead_counts=0)
+    assert abs(r["worst_cycles_bound"] - 15955) <= 1 and r["under_a_tenth"]
+
+
+def test_an_overhead_the_core_did_not_measure_is_refused(monkeypatch):
+    import pytest
+
+    with pytest.raises(RuntimeError, match="board_isr_overhead_cycles"):
+        loop_of(4000, monkeypatch=monkeypatch, overhead_counts=0xFFFFFFFF)
 
 
 def test_a_bursts_cost_per_unit_counts_when_it_is_the_worse(monkeypatch):
     # One-unit iterations at 4000 instructions, but a burst's per-unit cost
-    # at 5000: the bound is 5000's (above), over the tenth.
-    r = loop_of(4000, per_unit_instructions=5000, monkeypatch=monkeypatch)
+    # at 4500: the bound is 4500's (above), over the tenth.
+    r = loop_of(4000, per_unit_instructions=4500, monkeypatch=monkeypatch)
     assert r["worst_instructions"] == 4000
-    assert abs(r["worst_cycles_bound"] - 17062.5) <= 1 and not r["under_a_tenth"]
+    assert abs(r["worst_cycles_bound"] - 17231.75) <= 1 and not r["under_a_tenth"]
