@@ -112,3 +112,19 @@ def test_a_bursts_cost_per_unit_counts_when_it_is_the_worse(monkeypatch):
     r = loop_of(4000, per_unit_instructions=4500, monkeypatch=monkeypatch)
     assert r["worst_instructions"] == 4000
     assert abs(r["worst_cycles_bound"] - 17231.75) <= 1 and not r["under_a_tenth"]
+
+
+def test_the_benchmark_page_shows_the_row_and_a_loop_over_its_budget(monkeypatch):
+    loop = loop_of(4500, monkeypatch=monkeypatch)
+    row = {"machine": "netduinoplus2", "part": "STM32F405RG", "sysclk_hz": 168e6,
+           "icount_shift": 3, "sizes": {"tt_board": {"flash": 6244, "ram": 2396}},
+           "peltier_loop": loop_of(4000, monkeypatch=monkeypatch), "board_loop": loop,
+           "watchdog": {"trips": 20, "trials": 20, "delay_ms_min": 100, "delay_ms_max": 101,
+                        "limit_ms": 100}}
+    text = "\n".join(firmware.report_lines(row))
+    assert "| tt_board | 6,244 B | 2,396 B |" in text
+    assert "| peltier loop | 5000 | 4,000 | 20 x 170 cycles | 15,392 | 16,800 | yes |" in text
+    assert "| board loop | 5000 | 4,500 | 22 x 170 cycles | 17,232 | 16,800 | NO |" in text
+    assert "20 trips in 20 trials, 100-101 ms" in text
+    assert firmware.report_lines({"skipped": "missing make (apt-get install make)"}) == [
+        "The firmware on QEMU: skipped, missing make (apt-get install make)."]

@@ -233,3 +233,29 @@ def lines(row: dict) -> list[str]:
                f"{w['delay_ms_min']}-{w['delay_ms_max']} ms after the last command "
                f"(core clock; limit 100 ms + one 10 ms period)")
     return out
+
+
+def report_lines(q: dict) -> list[str]:
+    """The ``qemu`` row on the benchmark page (markdown)."""
+    if "skipped" in q:
+        return [f"The firmware on QEMU: skipped, {q['skipped']}."]
+    lines = [f"The reference firmware on QEMU's {q['machine']} ({q['part']}, "
+             f"{q['sysclk_hz'] / 1e6:g} MHz; `-icount shift={q['icount_shift']}`):", "",
+             "| image | flash | RAM |", "|---|---|---|"]
+    lines += [f"| {name} | {s['flash']:,} B | {s['ram']:,} B |" for name, s in q["sizes"].items()]
+    lines += ["", "| loop | iterations | worst instructions | interrupts on silicon x bound "
+                  "| worst cycles, bound | a tenth of the period | under |",
+              "|---|---|---|---|---|---|---|"]
+    for name in ("peltier_loop", "board_loop"):
+        r = q[name]
+        lines.append(f"| {name.replace('_', ' ')} | {r['iterations']} | "
+                     f"{r['worst_instructions']:,} | "
+                     f"{r['interrupts_in_an_iteration_on_silicon']} x "
+                     f"{r.get('isr_cycles_bound', '?')} cycles | {r['worst_cycles_bound']:,} | "
+                     f"{r['tenth_of_period_cycles']:,} | {'yes' if r['under_a_tenth'] else 'NO'} |")
+    w = q["watchdog"]
+    lines += ["", f"Watchdog: {w['trips']} trips in {w['trials']} trials, "
+                  f"{w['delay_ms_min']}-{w['delay_ms_max']} ms after the last command "
+                  f"(limit {w['limit_ms']} ms plus one 10 ms command period)."]
+    return lines
+

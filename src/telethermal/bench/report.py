@@ -363,6 +363,9 @@ def devices(out: Path, d: dict) -> list[str]:
                       f"{100 * slave['accuracy_emulated']:.1f} % through the drivers "
                       f"({slave['accuracy_difference_points']:+.1f} points; same label on "
                       f"{100 * slave['agreement']:.1f} %)."]
+    if d.get("qemu"):
+        from telethermal.bench.firmware import report_lines
+        lines += ["", *report_lines(d["qemu"])]
     return lines + ["", _provenance(d), ""]
 
 
