@@ -211,10 +211,12 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
         assert service._next.pending and service.pad is used          # the lift did not wait
         service._step(0.0, 1.0 / service.rate_hz)                      # nor does the loop
         assert service._next.pending and service.pad is used
+        assert service.status()["next_touch_preparing"] is True
         gate.set()
         touch = dict(master_events(1.0)[0], contact_id=2, t_s=1.0)
         service._on_message(touch, 101.0)
         assert service.touch_t0 is not None and service.pad is not used
+        assert service.status()["next_touch_preparing"] is False
         assert service._seed == seed + 1 and service.object_id == "wood"
         # The very trial the loop would have placed itself.
         same = Slave(SCENE, "wood", identifier, slave_rng(seed + 1), session=service.sensors)
@@ -222,6 +224,22 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
                                       same.trial.channels["heat_flux_W_m2"])
     finally:
         service.shutdown()
+
+
+def test_a_slave_stopping_mid_contact_lifts_without_preparing_a_touch(models):
+    # Shutdown lifts the pad (the master hears it) and starts nothing it
+    # would then abandon: no next touch is being built when it returns.
+    service = wood_slave(models)
+    sent = []
+    service.endpoint.send = lambda kind, **fields: sent.append(kind) or 0
+    service._on_message(master_events(1.0)[0], 100.0)
+    for k in range(100):
+        service._sample(100.0 + k / 1000)
+    started = []
+    service._next.start = lambda *a, **k: started.append(a)
+    service.shutdown()
+    assert service.touch_t0 is None and service.last_touch is not None
+    assert not started and not service._next.pending
 
 
 def test_admin_requests_on_the_slave_between_and_during_touches(models):

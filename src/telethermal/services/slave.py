@@ -284,7 +284,10 @@ class SlaveService:
                       m.contact_id, m.touching,
                       self.contact_id if self.touch_t0 is not None else None)
 
-    def _lift(self, now: float) -> None:
+    def _lift(self, now: float, prepare_next: bool = True) -> None:
+        """The touch ends: the final estimate and the lift sent, the memory's
+        update announced, the touch's report kept; then the next touch
+        prepared (not when the service stops: ``prepare_next`` False)."""
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
         contact_id = self.contact_id
@@ -300,10 +303,10 @@ class SlaveService:
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
                  if r["decision_time_s"] is None else pad_decision(self.pad).text())
         self.state = ServiceState.IDLE
-        # The touch's decision (a material or a pair; not "unknown"), once per
-        # touch: its evidence added to this object's (a disagreeing decision
-        # counted by the session and logged by the memory), what that
-        # supports announced just below.
+        if not prepare_next:
+            return
+        # A fresh trial of the same object for the next touch (the
+        # simulator's built on a worker thread: the loop keeps its heartbeats).
         try:
             self.place(self.material, self._seed + 1, self.object_id,   # a fresh trial
                        background=True)
@@ -414,6 +417,7 @@ class SlaveService:
                 "thermometer_calibration": {**self.sensors.calibration.to_dict(),
                                             "error": self.calibration_error},
                 "pad_down": self.touch_t0 is not None,
+                "next_touch_preparing": self._next.pending,
                 "contact_id": self.contact_id if self.touch_t0 is not None else None,
                 "last_sample_t_s": self._last_sample_t_s(),
                 "peer_session": e.peer_session,
@@ -475,8 +479,8 @@ class SlaveService:
         # The sensing pad to its safe state first (simulated: nothing to hold).
         log.info("stopping: pad to safe state, sockets closed")
         try:
-            if self.touch_t0 is not None:
-                self._lift(time.monotonic())        # the master hears the pad left
+            if self.touch_t0 is not None:           # the master hears the pad left
+                self._lift(time.monotonic(), prepare_next=False)
             if self.endpoint.peer_version is not None:
                 self.endpoint.send("status", state=ServiceState.STOPPING,
                                    counters=self.endpoint.all_counters(), message="slave stopping")
