@@ -66,8 +66,9 @@ extern volatile uint32_t board_loop_worst_cycles, board_loop_count, board_loop_w
 extern volatile uint32_t board_isr_overhead_cycles;
 
 /* The processor-in-the-loop stand-in's own work (plant.c: the text lines
- * that stand for the ADC conversions), wherever it runs, is left out of
- * the iteration as the interrupts are: its span, between
+ * that stand for the ADC conversions and for the H-bridge's and the water
+ * loop's outputs), wherever it runs, is left out of the iteration as the
+ * interrupts are: its span, between
  * board_aside_begin and board_aside_end, less the interrupts in it.
  *   board_aside_worst_cycles  the worst such span (for the record) */
 uint32_t board_aside_begin(void);
@@ -86,9 +87,11 @@ void board_uart_write(int port, const uint8_t *data, size_t len);
  * interrupt waits for room, and `board_uart_overruns` counts the bytes the
  * UART lost meanwhile (its overrun flag). */
 int board_uart_getc(int port);
-/* Mask (true) or unmask the port's receive interrupt for a while: bytes
- * wait in the UART meanwhile (on silicon the second one overruns). For the
- * processor-in-the-loop stand-in's port only (plant_hold). */
+/* Mask (true) or unmask the port's interrupt (receive and transmit: one
+ * line in the NVIC) for a while: received bytes wait in the UART meanwhile
+ * (on silicon the second one overruns) and board_uart_write sends by
+ * polling the data register. For the processor-in-the-loop stand-in's port
+ * under QEMU only (plant_hold). */
 void board_uart_hold(int port, bool hold);
 uint32_t board_uart_overruns(int port);
 

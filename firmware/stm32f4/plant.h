@@ -16,11 +16,16 @@
  * and stamped, the measurement copied) stays counted. */
 void plant_poll(void);
 
-/* Hold the plant link's receive interrupt (true) while the main loop's
- * measured iteration runs, and release it (false) after: its bytes are the
- * stand-in's traffic, which silicon does not have, and QEMU hands a line
- * the bridge wrote at once as a burst of interrupts into whatever runs. QEMU
- * keeps the bytes in the UART meanwhile; nothing is lost. */
+/* Under QEMU (board_emulated), hold the plant link's interrupt (true)
+ * while the main loop's measured iteration runs, and release it (false)
+ * after: its bytes are the stand-in's traffic, which a lab's board does not
+ * have, and QEMU hands a line the bridge wrote at once as a burst of
+ * interrupts into whatever runs. QEMU keeps the received bytes in the UART
+ * meanwhile (nothing is lost) and a line told to the plant is sent by
+ * polling. On silicon (a stand-in bridged to a real board) it does
+ * nothing: the line runs at 460800 baud and a held byte would overrun; the
+ * stand-in's interrupts are then in the iteration, counted apart as any
+ * interrupt. */
 void plant_hold(bool hold);
 
 /* Says "ready" on the plant link: the UARTs are set up (main, after
