@@ -35,6 +35,17 @@ def _touch_starts(rec) -> dict[int, float]:
     return starts
 
 
+def _held(rec, key: str) -> float | None:
+    """A positive finite number the recording holds under ``key``: its
+    session's config, else its first touch start; None if neither has one."""
+    for held in [rec.config] + rec.messages("/master/touch_start")[:1]:
+        v = held.get(key)
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) \
+                and v > 0:
+            return float(v)
+    return None
+
+
 def _conductance(rec) -> float:
     """The pad-fingertip contact conductance the display was given: as the
     recording holds it (a session's config, a service's touch start), else
@@ -42,11 +53,9 @@ def _conductance(rec) -> float:
     shipped one)."""
     from telethermal.physics.scene import load_scene, loaded_scene_file
     from telethermal.teleop.run import with_finger
-    starts = rec.messages("/master/touch_start")
-    for held in [rec.config] + starts[:1]:
-        h = held.get("contact_conductance_w_m2k")
-        if isinstance(h, (int, float)) and math.isfinite(h) and h > 0:
-            return float(h)
+    h = _held(rec, "contact_conductance_w_m2k")
+    if h is not None:
+        return h
     scene = rec.config.get("scene", "fingertip-7")
     if isinstance(scene, str) and loaded_scene_file(scene) is not None:
         return with_finger(loaded_scene_file(scene)).finger.contact_conductance_w_m2k
@@ -58,13 +67,10 @@ def _conductance(rec) -> float:
 
 
 def _flux_gain(rec) -> float:
-    """The display's calibrated flux gain the recording holds (its
-    session's config or its first touch start; 1: none or an older file)."""
-    for held in [rec.config] + rec.messages("/master/touch_start")[:1]:
-        g = held.get("flux_gain")
-        if isinstance(g, (int, float)) and not isinstance(g, bool) and math.isfinite(g) and g > 0:
-            return float(g)
-    return 1.0
+    """The display's calibrated flux gain the recording holds (1: none, or
+    an older file)."""
+    g = _held(rec, "flux_gain")
+    return 1.0 if g is None else g
 
 
 def _master_series(rec, offset, out, h_w_m2k) -> int:
