@@ -69,7 +69,7 @@ def test_material_summary_counts_coverage_and_median_error():
     true = get_material("glass").effusivity
     rows = [{"windows": {w: _estimate(true * f, true * f * 0.97, true * f * 1.03)
                          for w in unseen.WINDOWS_S}} for f in (1.0, 1.02, 1.10, 0.90)]
-    out = unseen._material_summary("glass", rows, TRAINED)
+    out = unseen.material_summary("glass", rows, TRAINED)
     assert out["effusivity_rel_error"]["0.5"] == pytest.approx(0.06)      # median of 0, 2, 10, 10 %
     cov = out["interval_coverage"]["0.5"]
     assert (cov["covered"], cov["n"], cov["rate"]) == (2, 4, 0.5)
@@ -124,8 +124,8 @@ def test_targets_pool_coverage_per_window_and_judge_the_unseen_error():
                           for w in unseen.WINDOWS_S}}] * 3          # 20 % off, never covered
     wood = [{"windows": {w: _estimate(e_wood, e_wood * 0.9, e_wood * 1.1)
                          for w in unseen.WINDOWS_S}}] * 5
-    materials = {"glass": unseen._material_summary("glass", glass, TRAINED),
-                 "wood": unseen._material_summary("wood", wood, TRAINED)}
+    materials = {"glass": unseen.material_summary("glass", glass, TRAINED),
+                 "wood": unseen.material_summary("wood", wood, TRAINED)}
     targets = unseen._targets(materials)
     assert targets["unseen_rel_error_within_10pct_by_0.5_s"] == {"glass": False}
     pooled = targets["coverage_by_window"]["0.5"]
@@ -203,7 +203,7 @@ def test_the_bench_scores_what_the_slave_reports(fit_model_0_3s, monkeypatch):
     monkeypatch.setattr(unseen, "WINDOWS_S", (0.1, 0.3))
     touches = contacts(SCENE, 3)
     timed = {0}
-    rows = unseen._estimates(fit_model_0_3s, touches, timed)
+    rows = unseen.estimates(fit_model_0_3s, touches, timed)
     est, gap_k = fit_model_0_3s.estimator()
     assert len(rows) == len(touches.labels)
     for i in (0, 7, len(rows) - 1):

@@ -109,7 +109,7 @@ def _rows(late_factors, early=1620.0):
 def test_the_bench_reports_a_layered_object_by_its_stack_and_drift_not_its_error():
     slide = layered_object()
     rows = _rows([1.5, 1.06, 0.8])          # beyond its intervals up; overlapping; down
-    out = unseen._material_summary(slide.name, rows, BASE.materials, slide)
+    out = unseen.material_summary(slide.name, rows, BASE.materials, slide)
     assert out["layered"] and out["effusivity_w_s05_m2k"] is None
     assert [la["material"] for la in out["stack"]] == ["glass", "aluminium"]
     assert out["surface_effusivity_w_s05_m2k"] == pytest.approx(1620, rel=1e-3)
@@ -121,7 +121,7 @@ def test_the_bench_reports_a_layered_object_by_its_stack_and_drift_not_its_error
     assert out["effusivity_rel_error"].startswith("not_applicable")
     assert out["interval_coverage"].startswith("not_applicable")
     # left out of the targets and the pooled coverage, and said so
-    glass = unseen._material_summary("glass", _rows([1.0] * 2), BASE.materials)
+    glass = unseen.material_summary("glass", _rows([1.0] * 2), BASE.materials)
     targets = unseen._targets({slide.name: out, "glass": glass})
     assert targets["coverage_by_window"]["1"]["n"] == 2
     assert slide.name not in targets["unseen_rel_error_within_10pct_by_0.5_s"]

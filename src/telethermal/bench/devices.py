@@ -90,9 +90,9 @@ def _paths(n: int) -> dict:
                 if kind == "emulated":
                     # A current well inside the module's limits, alternating
                     # sign; timed until the board drives it (CAN_WAIT_S: timed out).
-                    d._applied_a = None
+                    d.clear_applied()
                     d.hardware.peltier.command(0.5 if k % 2 else -0.5)
-                    while d._applied_a is None and time.perf_counter() - t0 < CAN_WAIT_S:
+                    while d.applied_a is None and time.perf_counter() - t0 < CAN_WAIT_S:
                         d.peltier_emulator.poll()
                     can.append(time.perf_counter() - t0)
                     d.hardware.peltier.poll()
@@ -158,13 +158,13 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
                 if emu.detected_index is not None:
                     # The samples between the onset and its debounced detection
                     # wait for the detector, not for the devices: apart.
-                    backlog[emu._onset_index:emu.detected_index] = True
+                    backlog[emu.onset_index:emu.detected_index] = True
                     to_ident_backlog += list((emu.pushed_s - devices.write_s)[
-                        emu._onset_index:emu.detected_index])
-                    pushed[emu._onset_index:emu.detected_index] = False
+                        emu.onset_index:emu.detected_index])
+                    pushed[emu.onset_index:emu.detected_index] = False
                 to_ident += list(emu.pushed_s[pushed] - devices.write_s[pushed])
-                got = np.isfinite(emu._contact.received_s)
-                serial += list(emu._contact.received_s[got] - devices.write_s[got])
+                got = np.isfinite(emu.received_s)
+                serial += list(emu.received_s[got] - devices.write_s[got])
                 # What each pad decided: the touch summary's one definition.
                 d_sim, d_emu = pad_decision(sim), pad_decision(emu)
                 rows.append({"material": material, "seed": trial_seed,

@@ -167,7 +167,7 @@ def unseen_objects(base: Scene, unseen=None, unseen_scene=None) -> tuple[list, s
 
 
 # ---------------------------------------------------------------- measuring
-def _estimates(identifier, contacts, timed: set) -> list[dict]:
+def estimates(identifier, contacts, timed: set) -> list[dict]:
     """Per touch: each window's estimate as the slave reports it
     (:meth:`~telethermal.ident.fitted.EffusivityFit.interval_of`: the
     identifier's estimator, its fit walked from window to window, its
@@ -267,7 +267,7 @@ def within_spread(identifier, material: str, classes) -> dict:
     return out
 
 
-def _material_summary(name: str, rows: list[dict], trained, obj=None) -> dict:
+def material_summary(name: str, rows: list[dict], trained, obj=None) -> dict:
     """One material's figures over its touches (every seed); a layered
     ``obj``'s: :func:`~telethermal.bench.unseen_layered.summary`."""
     rep = reported([r["decision"] for r in rows]) if rows and "decision" in rows[0] \
@@ -320,7 +320,7 @@ def _timing(rows: list[dict]) -> dict:
     return out
 
 
-def _pooled_coverage(materials: dict, key: str) -> dict:
+def pooled_coverage(materials: dict, key: str) -> dict:
     """The share of ``materials``' touches whose interval at window ``key``
     holds the truth, with its Wilson interval and the target's verdict."""
     hit = sum(r["interval_coverage"][key]["covered"] for r in materials.values())
@@ -352,8 +352,8 @@ def _targets(materials: dict) -> dict:
             "unseen_named_as_trained_before_the_last_window": named_first,
             "unseen_rel_error_within_10pct_by_0.5_s": {
                 m: r["effusivity_rel_error"][key] <= TARGET_REL_ERROR for m, r in unseen.items()},
-            "coverage_by_window": {k: _pooled_coverage(every, k) for k in windows},
-            "unseen_coverage_by_window": {k: _pooled_coverage(unseen, k) for k in windows}
+            "coverage_by_window": {k: pooled_coverage(every, k) for k in windows},
+            "unseen_coverage_by_window": {k: pooled_coverage(unseen, k) for k in windows}
             if unseen else None,
             "left_out_layered": {"objects": layered, "why": ul.NOT_ONE_VALUE} if layered
             else None}
@@ -394,7 +394,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         contacts, _ = from_trials(pad_database(touched, np.random.default_rng(seed)),
                                   max_s=max(WINDOWS_S))
         first = {m: contacts.labels.index(m) for m in dict.fromkeys(contacts.labels)}
-        seed_rows = _estimates(identifier, contacts, set(first.values()))
+        seed_rows = estimates(identifier, contacts, set(first.values()))
         for w in trade:
             decided = ut.decisions(identifier, contacts, w)
             trade[w] += decided
@@ -402,7 +402,7 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         for row, decision in zip(seed_rows, trade[identifier.unseen_weight][-len(seed_rows):]):
             row["decision"] = decision
         rows += seed_rows
-    materials = {m: _material_summary(m, [r for r in rows if r["material"] == m], trained,
+    materials = {m: material_summary(m, [r for r in rows if r["material"] == m], trained,
                                       touched.object_named(m))
                  for m in dict.fromkeys(r["material"] for r in rows)}
     for m, r in materials.items():

@@ -21,7 +21,7 @@ and estimates the effusivity of every touch, trained and unseen, of
 Per row: each unseen material's median relative error at 0.5 s (the issue's
 10 % target) and the pooled coverage of the 95 % intervals over the unseen
 (its 90-98 % target), with the estimator's own scoring
-(:func:`~telethermal.bench.unseen._material_summary`). No rendering and no
+(:func:`~telethermal.bench.unseen.material_summary`). No rendering and no
 decisions: those are ``bench unseen``'s and ``bench identify --as-built``'s.
 """
 
@@ -70,18 +70,18 @@ def score(model_scene, built, calibration, objects, seeds: int, quick: bool) -> 
     for seed in range(seeds):
         contacts, _ = from_trials(pad_database(touched, np.random.default_rng(seed)),
                                   max_s=max(un.WINDOWS_S))
-        rows += un._estimates(identifier, contacts, set())
+        rows += un.estimates(identifier, contacts, set())
     trained = model_scene.materials
-    materials = {m: un._material_summary(m, [r for r in rows if r["material"] == m], trained,
+    materials = {m: un.material_summary(m, [r for r in rows if r["material"] == m], trained,
                                          touched.object_named(m))
                  for m in dict.fromkeys(r["material"] for r in rows)}
     single = {m: r for m, r in materials.items() if not r.get("layered")}
     unseen = {m: r for m, r in single.items() if not r["trained"]}
     return {"unseen_rel_error_0.5": {m: r["effusivity_rel_error"][KEY] for m, r in unseen.items()},
-            "unseen_coverage_0.5": un._pooled_coverage(unseen, KEY),
+            "unseen_coverage_0.5": un.pooled_coverage(unseen, KEY),
             "trained_rel_error_0.5": {m: r["effusivity_rel_error"][KEY]
                                       for m, r in single.items() if r["trained"]},
-            "coverage_0.5": un._pooled_coverage(single, KEY),
+            "coverage_0.5": un.pooled_coverage(single, KEY),
             "touches": len(rows)}
 
 

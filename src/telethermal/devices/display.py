@@ -149,6 +149,15 @@ class EmulatedDisplay:
     def _on_current(self, current_a: float) -> None:
         self._applied_a = current_a
 
+    @property
+    def applied_a(self) -> float | None:
+        """The current the emulated board drove on the last command it took
+        since :meth:`clear_applied` (or the last :meth:`apply`); None if none."""
+        return self._applied_a
+
+    def clear_applied(self) -> None:
+        self._applied_a = None
+
     def _module_state(self) -> tuple[float, float, float]:
         """What the emulated board measures: the touch's ``module_state()``
         (junction_c, heatsink_c, current_a) once the physics side gives the

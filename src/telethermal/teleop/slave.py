@@ -223,6 +223,12 @@ class Slave:
         return self._onset_index
 
     @property
+    def received_s(self) -> np.ndarray | None:
+        """Per sample, when the devices' driver decoded it
+        (``time.perf_counter``; NaN: never received); None without devices."""
+        return self._contact.received_s if self._contact is not None else None
+
+    @property
     def committed_at_s(self) -> float | None:
         """Time after contact of the first commitment (to a material or a
         group, later refined), or None."""
