@@ -1,6 +1,8 @@
 """The master's display loop on the simulated plant: tracking against the
 exact direct-contact solution, hand-over, the skin band and the safe state."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -336,3 +338,19 @@ def test_the_impedance_controller_without_the_pad_model_is_a_clear_error():
     master = MasterDisplay(DisplayConfig(), closed_form_generator(), 1e-3, TAU, FINGER_C,
                            pad_layers=tuple(SCENE.pad.layers), contact_conductance_w_m2k=H)
     assert master.impedance is not None
+
+
+def test_the_display_configs_modes_are_enums_taken_from_their_strings():
+    from telethermal.teleop.display_config import Before, FeedforwardModel, Idle, Source
+
+    c = DisplayConfig(before="hold", source="setpoints", feedforward_model="static",
+                      idle="object")
+    assert (c.before, c.source, c.feedforward_model, c.idle) == (
+        Before.HOLD, Source.SETPOINTS, FeedforwardModel.STATIC, Idle.OBJECT)
+    assert type(c.before) is Before and c.before == "hold"      # a string still compares
+    assert DisplayConfig().idle is Idle.POLICY
+    for name, bad in (("source", "setpoint"), ("feedforward_model", "dynamic"),
+                      ("idle", ["policy"]), ("before", None)):
+        with pytest.raises(ControlError, match=re.escape(f"got {bad!r}")) as err:
+            DisplayConfig(**{name: bad})
+        assert str(err.value).startswith(f"{name} must be one of ")

@@ -5,25 +5,58 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.control.pid import PidGains
 from telethermal.control.safety import SafetyLimits
 from telethermal.errors import ControlError
 
-BEFORE_MODES = ("hold", "prior")
+class Before(StrEnum):
+    """What the display renders before the slave's decision: ``prior``,
+    the posterior mixture from the master's own onset; ``hold``, the pad
+    held where it was."""
+
+    HOLD = "hold"
+    PRIOR = "prior"
+
+
+class Source(StrEnum):
+    """``trajectory``: render the slave's curves from the master's own onset
+    (the compensated path); ``setpoints``: track the latest flux setpoint
+    streamed by the slave sample by sample (the naive baseline of the fault
+    benchmark)."""
+
+    TRAJECTORY = "trajectory"
+    SETPOINTS = "setpoints"
+
+
+class FeedforwardModel(StrEnum):
+    """``impedance``: the pad's surface made to behave as the rendered
+    object's (control/feedforward.py; needs the pad's layers); ``static``:
+    ``T_pad + q R_pad`` plus the flux PID on the generator's flux."""
+
+    STATIC = "static"
+    IMPEDANCE = "impedance"
+
+
+class Idle(StrEnum):
+    """Before a touch: ``policy``, the object's temperature shifted by the
+    scene's idle policy (control/preconditioning.py), for the material the
+    slave expects or, unknown, the minimax idle; ``object``: at the object's."""
+
+    POLICY = "policy"
+    OBJECT = "object"
+
+
+#: The choices as strings (command-line choices, messages).
+BEFORE_MODES = tuple(Before)
+SOURCES = tuple(Source)
+FEEDFORWARD_MODELS = tuple(FeedforwardModel)
+IDLES = tuple(Idle)
 #: The display's event when the junction loop stops on an implausible sensor.
 JUNCTION_STOPPED = "junction sensor implausible: module stopped"
 JUNCTION_REARMED = "junction sensor agrees again: module re-armed"
-#: "trajectory": render the slave's curves from the master's own onset (the
-#: compensated path); "setpoints": track the latest flux setpoint streamed
-#: by the slave sample by sample (the naive baseline of the fault benchmark).
-SOURCES = ("trajectory", "setpoints")
-FEEDFORWARD_MODELS = ("static", "impedance")
-#: Before a touch: "policy", the object's temperature shifted by the scene's
-#: idle policy (control/preconditioning.py), for the material the slave
-#: expects or, unknown, the minimax idle; "object": at the object's.
-IDLES = ("policy", "object")
 
 #: PID gains of the flux loop (K of junction per W/m^2 of flux error), from ``bench render``:
 #: the lowest mean flux error with the pad model right and 30 % off; more integral rings
@@ -37,10 +70,8 @@ class DisplayConfig:
     rate_hz: float = DEFAULT_RATE_HZ
     gains: PidGains = DEFAULT_GAINS
     feedforward: bool = True
-    #: "impedance": the pad's surface made to behave as the rendered object's
-    #: (control/feedforward.py; needs the pad's layers, else "static");
-    #: "static": ``T_pad + q R_pad`` plus the flux PID on the generator's flux.
-    feedforward_model: str = "impedance"
+    #: :class:`FeedforwardModel` (impedance needs the pad's layers, else static).
+    feedforward_model: FeedforwardModel = FeedforwardModel.IMPEDANCE
     #: The impedance controller's prediction horizon: no shorter than the
     #: junction loop takes to move the junction (its target moves no faster
     #: than the module can follow), else the outer loop re-plans faster
@@ -49,9 +80,11 @@ class DisplayConfig:
     #: layer modelled before the module's own plate; not re-tuned since:
     #: docs/display-loop.md).
     impedance_horizon_s: float = 0.2
-    before: str = "prior"
-    source: str = "trajectory"
-    idle: str = "policy"
+    #: A string naming a choice is taken (``before="hold"``): each is made
+    #: its enum, and one that names none is refused, saying which.
+    before: Before = Before.PRIOR
+    source: Source = Source.TRAJECTORY
+    idle: Idle = Idle.POLICY
     #: The controller's own slew limit on the junction command; the
     #: supervisor's rate limit above it is the independent backstop.
     slew_k_s: float = 100.0
@@ -96,11 +129,14 @@ class DisplayConfig:
             raise ControlError(f"display rate_hz must be > 0, got {self.rate_hz}")
         if not (self.slew_k_s > 0 and self.handover_k_s > 0 and self.blend_s > 0):
             raise ControlError("slew_k_s, handover_k_s and blend_s must be > 0")
-        if self.source not in SOURCES:
-            raise ControlError(f"source must be one of {SOURCES}, got {self.source!r}")
-        if self.feedforward_model not in FEEDFORWARD_MODELS:
-            raise ControlError(f"feedforward_model must be one of {FEEDFORWARD_MODELS}, "
-                               f"got {self.feedforward_model!r}")
+        for name, kind in (("before", Before), ("source", Source),
+                           ("feedforward_model", FeedforwardModel), ("idle", Idle)):
+            value = getattr(self, name)
+            try:
+                object.__setattr__(self, name, kind(value))
+            except (ValueError, TypeError):
+                raise ControlError(f"{name} must be one of {[str(v) for v in kind]}, "
+                                   f"got {value!r}") from None
         if not (self.junction_reference_s > 0 and self.current_slew_a_s > 0
                 and self.flux_inverse_s > 0):
             raise ControlError("junction_reference_s, current_slew_a_s and flux_inverse_s must "
@@ -109,7 +145,4 @@ class DisplayConfig:
         if not self.impedance_horizon_s > 0:
             raise ControlError("impedance_horizon_s must be > 0, got "
                                f"{self.impedance_horizon_s}")
-        for name, value, allowed in (("before", self.before, BEFORE_MODES),
-                                     ("idle", self.idle, IDLES)):
-            if value not in allowed:
-                raise ControlError(f"{name} must be one of {allowed}, got {value!r}")
+

@@ -18,7 +18,7 @@ from telethermal.control.dew import DEW_MARGIN_K, idle_floor_c
 from telethermal.control.safety import safety_event_count
 from telethermal.physics.layered import pad_resistance
 from telethermal.physics.scene import Scene
-from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.master import DisplayConfig, Idle, MasterDisplay
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,7 @@ def display_idle(scene: Scene, config: DisplayConfig, finger_c: float,
     minimax idle); "object": the object's temperature. Every driver (the
     in-process run, the services, the simulated network) starts its display
     here. Returns (idle C, precondition or None)."""
-    shift = precondition_for(scene, finger_c) if config.idle == "policy" else None
+    shift = precondition_for(scene, finger_c) if config.idle == Idle.POLICY else None
     obj = object_temp_c
     if shift is not None and obj is not None and math.isfinite(obj):
         obj = obj + shift(expected_material, obj)

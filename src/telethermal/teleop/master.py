@@ -59,8 +59,7 @@ from telethermal.render.generator import posterior_weights
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.display_config import (  # noqa: F401  (re-exported)
     BEFORE_MODES, DEFAULT_GAINS, FEEDFORWARD_MODELS, IDLES, JUNCTION_REARMED, JUNCTION_STOPPED,
-    SOURCES,
-    DisplayConfig)
+    SOURCES, Before, DisplayConfig, FeedforwardModel, Idle, Source)
 from telethermal.teleop.rendering import (Estimated, Handover, blended, estimated_target,
                                           generator_flux, has_estimate, inverse_effusivity)
 
@@ -178,7 +177,7 @@ class MasterDisplay:
         # The finger's contact conductance, for a new material's closed form.
         self._conductance_w_m2k = contact_conductance_w_m2k or math.inf
         # The impedance controller needs the pad model (no silent static PID).
-        wants_impedance = config.feedforward and config.feedforward_model == "impedance"
+        wants_impedance = config.feedforward and config.feedforward_model == FeedforwardModel.IMPEDANCE
         if wants_impedance and not (pad_layers and contact_conductance_w_m2k):
             raise ControlError("the impedance controller (feedforward_model 'impedance', the "
                                "default) needs the display's pad model: pad_layers and "
@@ -330,7 +329,7 @@ class MasterDisplay:
         # pad's own contact carries the touch (a uniform prior over the
         # scene measured worse than holding when posteriors come late).
         return self.phase == Phase.RENDER or bool(
-            self.phase == Phase.CONTACT and self.config.before == "prior" and news.classes
+            self.phase == Phase.CONTACT and self.config.before == Before.PRIOR and news.classes
             and self.generator is not None and news.estimate is not None)
 
     # ------------------------------------------------------------ tracking
@@ -479,7 +478,7 @@ class MasterDisplay:
         if self.impedance is not None:
             self.impedance.observe(sensors.flux_w_m2, dt_s)
         contact = self._on_contact(t_s, sensors.force_n)
-        naive = self.config.source == "setpoints"
+        naive = self.config.source == Source.SETPOINTS
         if not naive:
             self._on_decision(t_s, news.estimate)
         self._on_link(t_s, news.link_ok)
