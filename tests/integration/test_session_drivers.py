@@ -226,6 +226,27 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
         service.shutdown()
 
 
+def test_what_arrived_while_the_devices_held_the_loop_is_handled_first_in_order(models):
+    # _keep_alive (called by the devices while they pre-condition the pad)
+    # reads the transport; the loop's next wake handles what it read before
+    # what arrives then, without waiting in the poll.
+    service = wood_slave(models)
+    handled, timeouts = [], []
+    service._on_message = lambda m, now: handled.append(m["n"])
+    try:
+        service.endpoint.poll = lambda timeout_s=0.0: timeouts.append(timeout_s) or [{"n": 1}]
+        service._keep_alive()
+        service._keep_alive()
+        service.endpoint.poll = lambda timeout_s=0.0: timeouts.append(timeout_s) or [{"n": 2}]
+        service._step(float("inf"), 1.0 / service.rate_hz)
+        assert handled == [1, 1, 2] and timeouts == [0.0, 0.0, 0.0]
+        service._step(float("inf"), 1.0 / service.rate_hz)     # nothing waiting: it waits
+        assert handled == [1, 1, 2, 2] and timeouts[-1] > 0
+    finally:
+        del service.endpoint.poll
+        service.shutdown()
+
+
 def test_a_slave_stopping_mid_contact_lifts_without_preparing_a_touch(models):
     # Shutdown lifts the pad (the master hears it) and starts nothing it
     # would then abandon: no next touch is being built when it returns.

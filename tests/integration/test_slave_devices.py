@@ -366,7 +366,15 @@ def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
         assert cal["calibrated"] and cal["error"] is None and cal["residual_k"] < 0.1
         # ... then at the object, 20 C: the pad pre-conditioned to it plus the gap.
         rig.aim = "object"
+        # The pre-conditioning holds the service's thread for a second or
+        # more: the transport is polled every period meanwhile (heartbeats).
+        polls, poll = [], service.endpoint.poll
+        service.endpoint.poll = lambda timeout_s=0.0: polls.append(timeout_s) or poll(timeout_s)
         service.place("wood", 1)
+        service.endpoint.poll = poll
+        settled_s = service.devices.last_precondition["settled_s"]
+        assert settled_s >= 1.0 and len(polls) >= settled_s * service.rate_hz - 1
+        assert set(polls) == {0.0}
         assert service.pad.object_ir_c == pytest.approx(20.0, abs=0.5)
         assert rig.pad.enabled
         assert rig.pad_c == pytest.approx(service.pad.object_ir_c + SCENE.pad.gap_k -

@@ -29,6 +29,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -105,6 +106,10 @@ class SlavePadDrivers:
                                        "boards_lost", "ir_refused", "preconditions",
                                        "precondition_failed", "safe_commands"), 0)
         self.last_precondition: dict = {}
+        #: Called once a period while a loop here holds the caller's thread
+        #: (the pre-conditioning: a second or more): a service keeps its
+        #: transport's heartbeats going there. It must not use these devices.
+        self.on_wait: Callable[[], None] | None = None
         self._loop: dict | None = None          # the pad loop's target, integral, set point
         self._samples: ContactSamples | None = None
         self._seq0: int | None = None
@@ -193,6 +198,8 @@ class SlavePadDrivers:
             setpoint = self._loop["setpoint"]
             self._command_junction(setpoint)
             self._after_command()
+            if self.on_wait is not None:
+                self.on_wait()
             half = n_settle // 2
             if k >= n_min and len(window) == n_settle and \
                     abs(float(np.mean(window)) - target_c) <= g.tol_k and \

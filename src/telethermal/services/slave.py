@@ -25,7 +25,7 @@ from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
 from telethermal.services.admin import ErrorCount, open_service_sockets
 from telethermal.services.background import Background
-from telethermal.services.slave_admin import handle_admin
+from telethermal.services.slave_admin import handle_admin, slave_status
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
@@ -104,6 +104,8 @@ class SlaveService:
         self.last_touch: dict = {}
         #: The simulated pad's next touch, prepared off the loop (background.py).
         self._next = Background("slave-next-touch")
+        #: Messages that arrived while the devices held the loop (_keep_alive).
+        self._inbox: list[dict] = []
         try:
             self.recorder = open_recorder(config, "slave", identifier, generator)
             self._start_sensor_session(config.seed)
@@ -152,6 +154,8 @@ class SlaveService:
         self.sensors = SensorSession(draw_instruments(self.scene.sensors, self._session_rng))
         self.devices = open_devices(self.config, self.scene, self.sensors.instruments, seed,
                                     self.rate_hz)
+        if self.devices is not None:
+            self.devices.on_wait = self._keep_alive
         self.calibrate_thermometer()
 
     def calibrate_thermometer(self, drift_k_per_reading: float = 0.0) -> dict:
@@ -232,6 +236,14 @@ class SlaveService:
                  self.object_id, self.pad.object_ir_c)
         if self.endpoint.peer_version is not None:
             self._announce_object()
+
+    def _keep_alive(self) -> None:
+        """Once a period while the devices hold this thread (the pad
+        pre-conditioned before a touch, a second or more on a real pad): the
+        transport's heartbeats go on and what arrives is read, to be handled
+        in order by the loop once the devices return (a master would
+        otherwise declare this slave lost after every touch)."""
+        self._inbox.extend(self.endpoint.poll(0.0))
 
     def _announce_object(self):
         self._send([self.session.announcement(time.monotonic())])
@@ -407,25 +419,7 @@ class SlaveService:
             if down and "t_s" in pad.channels else None
 
     def status(self) -> dict:
-        e = self.endpoint
-        return {"role": "slave", "state": self.state, "peer_alive": e.peer_alive,
-                "material": self.material, "rtt_s": e.offset.rtt_s,
-                "object_id": self.object_id, "memory": self.memory.to_dict(),
-                "object_true_c": self.pad.object_true_c, "object_ir_c": self.pad.object_ir_c,
-                "last_rejected_key": e.last_rejected_key,
-                "masters_lost": self.masters_lost,
-                "thermometer_calibration": {**self.sensors.calibration.to_dict(),
-                                            "error": self.calibration_error},
-                "pad_down": self.touch_t0 is not None,
-                "next_touch_preparing": self._next.pending,
-                "contact_id": self.contact_id if self.touch_t0 is not None else None,
-                "last_sample_t_s": self._last_sample_t_s(),
-                "peer_session": e.peer_session,
-                "offset_s": e.offset.offset_s, "counters": e.all_counters(),
-                "admin": dict(self.admin.counters),
-                "devices": {"kind": self.config.devices,
-                            **({"counters": self.devices.all_counters()}
-                               if self.devices is not None else {})}}
+        return slave_status(self)
 
     def run(self) -> None:
         """Wake at every sample period, and at once when a message arrives
@@ -456,8 +450,10 @@ class SlaveService:
                     self._sample(now)
             except Exception as exc:
                 self._internal_error("sample period", exc)
-        for message in self.endpoint.poll(max(0.0, min(deadline - time.monotonic(),
-                                                       self.config.transport.heartbeat_s))):
+        inbox, self._inbox = self._inbox, []      # what came while the devices held the loop
+        wait = 0.0 if inbox else max(0.0, min(deadline - time.monotonic(),
+                                              self.config.transport.heartbeat_s))
+        for message in inbox + self.endpoint.poll(wait):
             try:
                 self._on_message(message, time.monotonic())
             except Exception as exc:

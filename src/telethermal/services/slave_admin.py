@@ -52,3 +52,26 @@ def handle_admin(service, request: dict) -> None:
     service.admin.handle(request, service, {
         "place": place, "report": lambda r: dict(service.last_touch),
         "calibrate_thermometer": calibrate, "forget": forget}, SLAVE_REQUESTS)
+
+
+def slave_status(service) -> dict:
+    """The slave's ``status`` (services/slave/README.md lists its fields)."""
+    e = service.endpoint
+    return {"role": "slave", "state": service.state, "peer_alive": e.peer_alive,
+            "material": service.material, "rtt_s": e.offset.rtt_s,
+            "object_id": service.object_id, "memory": service.memory.to_dict(),
+            "object_true_c": service.pad.object_true_c, "object_ir_c": service.pad.object_ir_c,
+            "last_rejected_key": e.last_rejected_key,
+            "masters_lost": service.masters_lost,
+            "thermometer_calibration": {**service.sensors.calibration.to_dict(),
+                                        "error": service.calibration_error},
+            "pad_down": service.touch_t0 is not None,
+            "next_touch_preparing": service._next.pending,
+            "contact_id": service.contact_id if service.touch_t0 is not None else None,
+            "last_sample_t_s": service._last_sample_t_s(),
+            "peer_session": e.peer_session,
+            "offset_s": e.offset.offset_s, "counters": e.all_counters(),
+            "admin": dict(service.admin.counters),
+            "devices": {"kind": service.config.devices,
+                        **({"counters": service.devices.all_counters()}
+                           if service.devices is not None else {})}}
