@@ -127,8 +127,13 @@ def test_placing_another_object_during_a_contact_lifts_the_pad_first(models):
         service._on_message(master_events(1.0)[0], 100.0)
         for k in range(300):
             service._sample(100.0 + k / 1000)
+        built, build = [], service._simulated_pad
+        service._simulated_pad = lambda m, s: built.append((m, s)) or build(m, s)
         service._on_admin({"cmd": "place", "material": "steel", "seed": 9})
-        assert service.touch_t0 is None and service.material == "steel"
+        assert service.touch_t0 is None
+        service._next_prepared(wait=True)              # built off the loop, then placed
+        assert built == [("steel", 9)]                 # no next touch of wood built first
+        assert service.material == "steel"
         assert service.counters["lifted_by_place"] == 1 and replies[-1]["ok"]
         lifts = [f for k, f in sent if k == "contact_event" and f["touching"] is False]
         assert [f["contact_id"] for f in lifts] == [1]
@@ -247,6 +252,54 @@ def test_what_arrived_while_the_devices_held_the_loop_is_handled_first_in_order(
         service.shutdown()
 
 
+def test_an_admin_place_is_built_off_the_loop_and_answered_once_placed(models):
+    # A place between touches builds the trial on the worker thread (the
+    # loop keeps its heartbeats) and is answered when the loop places it;
+    # its default seed follows the touch being prepared; a build that fails
+    # is answered with why; a stop while one is pending answers it too.
+    import threading
+
+    service = wood_slave(models)
+    service.endpoint.send = lambda kind, **fields: 0
+    replies = []
+    service.admin.reply = lambda **r: replies.append(r)
+    gate = threading.Event()
+    build = service._simulated_pad
+    try:
+        service._simulated_pad = lambda m, s: build(m, s) if gate.wait(10) else None
+        service._on_admin({"cmd": "place", "material": "steel"})
+        assert not replies and service.status()["next_touch_preparing"]
+        assert service.next_seed() == 5 + 2          # after the one being built (seed 6)
+        service._step(0.0, 1.0 / service.rate_hz)    # the loop goes on meanwhile
+        assert not replies and service.material == "wood"
+        gate.set()
+        service._next_prepared(wait=True)
+        assert replies[-1]["ok"] and replies[-1]["object_id"] == "steel"
+        assert service.material == "steel" and service._seed == 6
+        service._simulated_pad = lambda m, s: 1 / 0
+        service._on_admin({"cmd": "place", "material": "wood", "seed": 9})
+        service._next_prepared(wait=True)
+        assert replies[-1]["ok"] is False and "division by zero" in replies[-1]["error"]
+        assert service.material == "steel"                     # the last one stays
+        # Placing what was built fails: counted, and the request answered.
+        service._simulated_pad = build
+        placed, errors = service._placed, service.counters["internal_errors"]
+        service._placed = lambda *a: 1 / 0
+        service._on_admin({"cmd": "place", "material": "wood", "seed": 9})
+        service._next_prepared(wait=True)
+        service._placed = placed
+        assert replies[-1]["ok"] is False and "division by zero" in replies[-1]["error"]
+        assert service.counters["internal_errors"] == errors + 1
+        gate.clear()
+        service._simulated_pad = lambda m, s: build(m, s) if gate.wait(10) else None
+        service._on_admin({"cmd": "place", "material": "wood"})
+        service.admin.pending = True
+    finally:
+        gate.set()
+        service.shutdown()
+    assert replies[-1] == {"ok": False, "error": "place: the slave is stopping"}
+
+
 def test_a_slave_stopping_mid_contact_lifts_without_preparing_a_touch(models):
     # Shutdown lifts the pad (the master hears it) and starts nothing it
     # would then abandon: no next touch is being built when it returns.
@@ -289,12 +342,18 @@ def test_admin_requests_on_the_slave_between_and_during_touches(models):
         assert not service._next.pending and service.sensors is not before
         assert service._seed == 6 and service.material == "wood"   # the lift's next trial
         assert service.pad.samples_read == 0 and service.touch_t0 is None
+        n = len(replies)
         service._on_admin({"cmd": "place", "material": "steel", "seed": 3,
                            "object_id": "the steel cup"})
+        assert len(replies) == n and service._next.pending     # answered once placed
+        service._next_prepared(wait=True)
         assert replies[-1]["ok"] and replies[-1]["object_id"] == "the steel cup"
         assert service.material == "steel" and service._seed == 3
         service._on_admin({"cmd": "place", "material": "steel", "object_id": ""})
         assert replies[-1]["ok"] is False and "object_id" in replies[-1]["error"]
+        service._on_admin({"cmd": "place", "material": "unobtainium"})
+        assert replies[-1]["ok"] is False and "no object of 'unobtainium'" in \
+            replies[-1]["error"] and not service._next.pending
         service._on_admin({"cmd": "forget"})
         assert replies[-1]["ok"] and replies[-1]["memory"] == service.memory.to_dict()
     finally:

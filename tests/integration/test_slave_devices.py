@@ -379,6 +379,13 @@ def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
         assert rig.pad.enabled
         assert rig.pad_c == pytest.approx(service.pad.object_ir_c + SCENE.pad.gap_k -
                                           session.instruments.pad_tc_bias_k, abs=0.3)
+        # On hardware the object is whatever the lab puts there: a name the
+        # scene does not have is placed (and identified, or not).
+        replies, reply = [], service.admin.reply
+        service.admin.reply = lambda **r: replies.append(r)
+        service._on_admin({"cmd": "place", "material": "a mug", "seed": 2})
+        service.admin.reply = reply
+        assert replies[-1]["ok"] and replies[-1]["object_id"] == "a mug", replies
         status = service.status()
         assert status["devices"]["kind"] == "hardware"
         assert status["devices"]["counters"]["board"]["frames_v2"] > 100

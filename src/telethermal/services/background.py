@@ -20,8 +20,9 @@ log = logging.getLogger("telethermal.background")
 
 
 class Background:
-    """At most one job: ``start`` it, ``take`` its result (and the tag it
-    was started with) once done, or ``drop`` it."""
+    """At most one job the loop waits on: ``start`` it, ``take`` its outcome
+    (and the tag it was started with) once done, or ``drop`` it. One worker
+    thread: jobs run one after another, never two at once."""
 
     def __init__(self, name: str):
         self.name = name
@@ -32,25 +33,45 @@ class Background:
     def pending(self) -> bool:
         return self._job is not None
 
+    @property
+    def tag(self) -> tuple | None:
+        """The pending job's tag (None: no job)."""
+        return self._job[1] if self._job is not None else None
+
     def start(self, work: Callable[[], Any], tag: tuple = ()) -> None:
-        """``work()`` on the worker thread, replacing a job not taken;
-        ``tag``: what the loop needs with its result."""
-        self.drop()
+        """``work()`` on the worker thread; ``tag``: what the loop needs with
+        its result. A job not taken is replaced without waiting for it: not
+        run if it has not started, else its result discarded when it ends
+        (the one worker runs ``work`` after it)."""
+        if self._job is not None:
+            future, _ = self._job
+            self._job = None
+            if not future.cancel():
+                future.add_done_callback(self._discarded)
         if self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=self.name)
         self._job = (self._pool.submit(work), tag)
 
-    def take(self, wait: bool = False) -> tuple[Any, tuple] | None:
-        """(result, tag) once the job is done (at once if ``wait``), else
-        None; the job's exception is raised here, once."""
+    def _discarded(self, future: Future) -> None:
+        if not future.cancelled() and future.exception() is not None:
+            log.debug("%s: a replaced job failed: %s", self.name, future.exception())
+
+    def take(self, wait: bool = False) -> tuple[Any, BaseException | None, tuple] | None:
+        """(result, None, tag) once the job is done (at once if ``wait``), or
+        (None, its exception, tag) if it failed; None if no job is done."""
         if self._job is None or not (wait or self._job[0].done()):
             return None
         future, tag = self._job
         self._job = None
-        return future.result(), tag
+        try:
+            return future.result(), None, tag
+        except Exception as exc:
+            return None, exc, tag
 
     def drop(self) -> None:
-        """The job not taken is waited for and its result discarded."""
+        """The job not taken is waited for and its result discarded (the
+        caller then does on its own thread what the job did: never both at
+        once)."""
         if self._job is None:
             return
         future, _ = self._job
@@ -59,6 +80,7 @@ class Background:
             future.result()
         except Exception as exc:             # nobody wants it: said, not raised
             log.debug("%s: a dropped job failed: %s", self.name, exc)
+        # A job it replaced ran before it (one worker, in order): done too.
 
     def close(self) -> None:
         """The job not taken is abandoned (not waited for: a service that

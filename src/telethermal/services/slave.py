@@ -25,7 +25,7 @@ from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
 from telethermal.services.admin import ErrorCount, open_service_sockets
 from telethermal.services.background import Background
-from telethermal.services.slave_admin import handle_admin, slave_status
+from telethermal.services.slave_admin import answer_place, handle_admin, slave_status
 from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
                                                 open_devices)
@@ -86,8 +86,7 @@ class SlaveService:
         self.counters = self.endpoint.extra_counters
         self.counters.update(masters_lost=0, contacts_superseded=0, contact_ignored=0,
                              lifted_by_place=0)
-        #: The session's rules (what goes out, when): the simulated network
-        #: of ``bench faults`` runs the same object.
+        #: The session's rules (what goes out, when; bench faults runs it too).
         self.session = SlaveSession(self.curves, self.rate_hz, counters=self.counters)
         self.state = ServiceState.IDLE
         self.masters_lost = 0          # contacts ended because the master went silent
@@ -102,10 +101,8 @@ class SlaveService:
         self.devices = None
         self._touch_counters: dict = {}
         self.last_touch: dict = {}
-        #: The simulated pad's next touch, prepared off the loop (background.py).
-        self._next = Background("slave-next-touch")
-        #: Messages that arrived while the devices held the loop (_keep_alive).
-        self._inbox: list[dict] = []
+        self._next = Background("slave-next-touch")   # the simulated pad's next touch
+        self._inbox: list[dict] = []            # arrived while devices held the loop
         try:
             self.recorder = open_recorder(config, "slave", identifier, generator)
             self._start_sensor_session(config.seed)
@@ -189,17 +186,18 @@ class SlaveService:
 
     # ------------------------------------------------------------ the object
     def place(self, material: str, seed: int, object_id: str | None = None,
-              background: bool = False) -> None:
+              background: bool = False, reply: bool = False) -> None:
         """Put ``material`` under the pad and measure it (IR) before contact.
         ``object_id``: the object's name (its object memory's key); by default
         the name of the scene object holding ``material`` (the scene names
         its objects by their material). ``background`` (the simulator alone):
-        prepared on a worker thread, placed by the loop once ready."""
-        self._next.drop()
+        built on a worker thread (replacing one not placed), placed by the
+        loop once ready; ``reply``: the admin request waiting answered then."""
         if self.devices is None and background:
             self._next.start(lambda: self._simulated_pad(material, seed),
-                             (material, seed, object_id))
+                             (material, seed, object_id, reply))
             return
+        self._next.drop()
         if self.devices is not None:
             self._touch_counters = flat_counters(self.devices.all_counters())
         if self.devices is not None and self.devices.kind == DeviceKind.HARDWARE:
@@ -212,19 +210,30 @@ class SlaveService:
         return Slave(self.scene, material, self.identifier, slave_rng(seed),
                      session=self.sensors, devices=self.devices)
 
+    def next_seed(self) -> int:
+        """A fresh trial's seed: after the one being prepared, else the placed one."""
+        tag = self._next.tag
+        return (tag[1] if tag is not None else self._seed) + 1
+
     def _next_prepared(self, wait: bool = False) -> None:
-        """The touch prepared in the background placed once ready (``wait``: now)."""
+        """The touch prepared in the background placed once ready (``wait``:
+        now); the admin request that asked for it answered."""
+        taken = self._next.take(wait)
+        if taken is None:
+            return
+        pad, error, (material, seed, object_id, reply) = taken
         try:
-            taken = self._next.take(wait)
-        except TelethermalError as exc:
-            log.error("next touch not prepared: %s", exc)
-            return
-        except Exception as exc:         # a bug: counted; the next touch places afresh
-            self._count_error("next touch's preparation", exc)
-            return
-        if taken is not None:
-            pad, (material, seed, object_id) = taken
-            self._placed(pad, material, seed, object_id)
+            if error is None:
+                self._placed(pad, material, seed, object_id)
+            elif isinstance(error, TelethermalError):
+                log.error("next touch not prepared: %s", error)
+            else:                        # a bug: counted; the next touch places afresh
+                self._count_error("next touch's preparation", error)
+        except Exception as exc:         # placing it failed: counted, and answered below
+            error = exc
+            self._count_error("placing the prepared touch", exc)
+        if reply:
+            answer_place(self, error)
 
     def _placed(self, pad: Slave, material: str, seed: int, object_id: str | None) -> None:
         self.pad = pad
@@ -238,11 +247,9 @@ class SlaveService:
             self._announce_object()
 
     def _keep_alive(self) -> None:
-        """Once a period while the devices hold this thread (the pad
-        pre-conditioned before a touch, a second or more on a real pad): the
-        transport's heartbeats go on and what arrives is read, to be handled
-        in order by the loop once the devices return (a master would
-        otherwise declare this slave lost after every touch)."""
+        """Each period the devices hold this thread (the pad pre-conditioned,
+        a second or more): heartbeats go on; what arrives waits for the loop."""
+        self.endpoint.state = self.state
         self._inbox.extend(self.endpoint.poll(0.0))
 
     def _announce_object(self):
@@ -269,7 +276,8 @@ class SlaveService:
         """Only the session that opened a contact may lift it, and only by its
         id; a touch while a contact is going on, or a lift of another
         contact, changes nothing and is counted (``contact_ignored``)."""
-        verdict = self.session.classify(m, self.endpoint.peer_session)
+        owner = self.endpoint.peer_session      # before a place's pre-conditioning polls
+        verdict = self.session.classify(m, owner)
         if verdict == ContactRequest.TOUCH:
             self._next_prepared(wait=True)
             if self.pad.samples_read or self.pad.fault == BOARD_LOST:
@@ -284,8 +292,7 @@ class SlaveService:
             # the same samples, whose fits would then cost nothing).
             clear_fits()
             # The operator touched: the slave's pad goes down on the object now.
-            self.session.touch(m.contact_id, now, given(m.finger_temp_c),
-                               owner=self.endpoint.peer_session)
+            self.session.touch(m.contact_id, now, given(m.finger_temp_c), owner=owner)
             self.state = ServiceState.TOUCHING
             log.info("touch contact_id=%d material=%s", self.contact_id, self.material)
         elif verdict == ContactRequest.LIFT:
@@ -297,9 +304,8 @@ class SlaveService:
                       self.contact_id if self.touch_t0 is not None else None)
 
     def _lift(self, now: float, prepare_next: bool = True) -> None:
-        """The touch ends: the final estimate and the lift sent, the memory's
-        update announced, the touch's report kept; then the next touch
-        prepared (not when the service stops: ``prepare_next`` False)."""
+        """The touch ends (its last estimate, lift, report); the next one
+        prepared unless ``prepare_next`` is False (the service stopping)."""
         if self.recorder is not None:
             self.recorder.slave(self.pad, self.contact_id)
         contact_id = self.contact_id
@@ -317,8 +323,7 @@ class SlaveService:
         self.state = ServiceState.IDLE
         if not prepare_next:
             return
-        # A fresh trial of the same object for the next touch (the
-        # simulator's built on a worker thread: the loop keeps its heartbeats).
+        # A fresh trial of the same object (the simulator's: off the loop).
         try:
             self.place(self.material, self._seed + 1, self.object_id,   # a fresh trial
                        background=True)
@@ -484,6 +489,8 @@ class SlaveService:
         finally:
             self._close_devices()
             self.endpoint.close()
+            if (self._next.tag or (None,) * 4)[3] and self.admin.pending:
+                self.admin.reply(ok=False, error="place: the slave is stopping")
             self.admin.close()
             if self.recorder is not None:
                 closed = self.recorder.close()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import time
 
+from telethermal.devices.kinds import DeviceKind
 from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
 
 log = logging.getLogger("telethermal.slave")
@@ -20,22 +21,30 @@ def handle_admin(service, request: dict) -> None:
                                       len(object_id.encode()) > 256):
             raise ValueError(f"object_id must be a non-empty string of at most 256 bytes, "
                              f"got {object_id!r}")
+        material = str(r["material"])
+        seed = int(r["seed"]) if "seed" in r else None
+        simulated = service.devices is None or service.devices.kind != DeviceKind.HARDWARE
+        if simulated and material not in service.scene.materials:
+            raise ValueError(f"scene {service.scene.name} has no object of {material!r}; it "
+                             f"has {', '.join(service.scene.materials)}")
         if service.touch_t0 is not None:
             # The pad is moved to another object: the contact going on
-            # ends first (its lift may still be on the way from the master).
+            # ends first (its lift may still be on the way from the master),
+            # without preparing a next touch on the object it leaves.
             cause = service._place_lift_cause()
             log.warning("place during contact_id=%d: the pad is lifted first (%s)",
                         service.contact_id, cause)
             service.counters[cause] += 1
             if cause == "masters_lost":
                 service.masters_lost += 1
-            service._lift(time.monotonic())
-        service._next_prepared(wait=True)     # the seed after the last lift's
-        service.place(str(r["material"]), int(r.get("seed", service._seed + 1)), object_id)
-        # object_true_c: the simulator's truth, for comparing with direct contact
-        pad = service.pad
-        return {"object_ir_c": pad.object_ir_c, "object_true_c": pad.object_true_c,
-                "object_id": service.object_id, **service.session.object_fields()}
+            service._lift(time.monotonic(), prepare_next=False)
+        seed = service.next_seed() if seed is None else seed
+        if service.devices is None:
+            # Built off the loop (its heartbeats go on), answered once placed.
+            service.place(material, seed, object_id, background=True, reply=True)
+            return None
+        service.place(material, seed, object_id)
+        return place_reply(service)
 
     def calibrate(r):
         if service.touch_t0 is not None:
@@ -52,6 +61,25 @@ def handle_admin(service, request: dict) -> None:
     service.admin.handle(request, service, {
         "place": place, "report": lambda r: dict(service.last_touch),
         "calibrate_thermometer": calibrate, "forget": forget}, SLAVE_REQUESTS)
+
+
+def place_reply(service) -> dict:
+    """The answer to a ``place``: the object placed (object_true_c: the
+    simulator's truth, for comparing with direct contact)."""
+    pad = service.pad
+    return {"object_ir_c": pad.object_ir_c, "object_true_c": pad.object_true_c,
+            "object_id": service.object_id, **service.session.object_fields()}
+
+
+def answer_place(service, error: BaseException | None) -> None:
+    """The admin ``place`` waiting for its touch, answered exactly once:
+    the object placed, or why it was not."""
+    try:
+        answer = {"ok": True, **place_reply(service)} if error is None else \
+            {"ok": False, "error": f"place: {str(error)[:400]}"}
+    except Exception as exc:            # noqa: BLE001 - answered all the same
+        answer = {"ok": False, "error": f"place: {str(exc)[:400]}"}
+    service.admin.reply(**answer)
 
 
 def slave_status(service) -> dict:
