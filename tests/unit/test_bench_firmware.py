@@ -26,12 +26,6 @@ def test_slcan_cmd_is_the_dbc_frame_in_hex():
                                           "version": 2}).hex().upper().encode() + b"\r"
 
 
-def test_the_row_says_what_is_missing():
-    assert firmware.lines({"skipped": "missing qemu-system-arm (apt-get install "
-                                      "qemu-system-arm)"}) == [
-        "qemu: skipped, missing qemu-system-arm (apt-get install qemu-system-arm)"]
-
-
 def test_the_instruction_clock_is_the_parts_clock_times_the_icount_step():
     # 168 MHz SysTick counts over 2**3 ns per instruction.
     assert abs(firmware.SYSTICK_PER_INSTRUCTION - 168e6 * 8e-9) < 1e-12

@@ -293,5 +293,5 @@ def text_report(report: dict, json_path) -> list[str]:
               f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %"
               for kind, r in report["sessions_real_clock"].items()]
     # An empty line where there is no slave part, as the command always printed.
-    qemu_lines = firmware.lines(report["qemu"]) if "qemu" in report else []
+    qemu_lines = firmware.report_lines(report["qemu"]) if "qemu" in report else []
     return lines + (slave_lines(report) or [""]) + qemu_lines + [f"wrote {json_path}"]

@@ -214,31 +214,9 @@ def measure(build_dir: str | Path, trials: int = 20, board_samples: int = 200) -
     return row
 
 
-def lines(row: dict) -> list[str]:
-    """What ``telethermal bench devices`` prints of the ``qemu`` row."""
-    if "skipped" in row:
-        return [f"qemu: skipped, {row['skipped']}"]
-    out = [f"qemu ({row['machine']}, -icount shift={row['icount_shift']}): "
-           + ", ".join(f"{name} flash {s['flash']} B, RAM {s['ram']} B"
-                       for name, s in row["sizes"].items())]
-    for name in ("peltier_loop", "board_loop"):
-        r = row[name]
-        out.append(f"qemu {name}: worst {r['worst_instructions']} instructions over "
-                   f"{r['iterations']} iterations (one unit of work), with "
-                   f"{r['interrupts_in_an_iteration_on_silicon']} interrupts of at most "
-                   f"{r['isr_cycles_bound']} cycles: <= {r['worst_cycles_bound']} cycles at "
-                   f"{CYCLES_PER_INSTRUCTION_BOUND}/instruction against a tenth of the "
-                   f"{r['period_cycles']}-cycle period ({r['tenth_of_period_cycles']}); "
-                   f"{r['bursts']} bursts the host delivered at once")
-    w = row["watchdog"]
-    out.append(f"qemu watchdog: {w['trips']} trips over {w['trials']} trials, "
-               f"{w['delay_ms_min']}-{w['delay_ms_max']} ms after the last command "
-               f"(core clock; limit 100 ms + one 10 ms period)")
-    return out
-
-
 def report_lines(q: dict) -> list[str]:
-    """The ``qemu`` row on the benchmark page (markdown)."""
+    """The ``qemu`` row as ``bench devices`` prints it and the benchmark
+    page shows it (markdown: one renderer for both)."""
     if "skipped" in q:
         return [f"The firmware on QEMU: skipped, {q['skipped']}."]
     lines = [f"The reference firmware on QEMU's {q['machine']} ({q['part']}, "
