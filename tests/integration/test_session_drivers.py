@@ -300,6 +300,28 @@ def test_an_admin_place_is_built_off_the_loop_and_answered_once_placed(models):
     assert replies[-1] == {"ok": False, "error": "place: the slave is stopping"}
 
 
+def test_a_touch_belongs_to_the_master_that_sent_it_even_if_a_hello_comes_meanwhile(models):
+    # On devices a touch may first pre-condition the pad, polling the
+    # transport (_keep_alive), where a new master's hello can be accepted:
+    # the touch stays the sending master's, so the new one supersedes it.
+    service = wood_slave(models)
+    service.endpoint.send = lambda kind, **fields: 0
+    hello = service.endpoint.hello
+    try:
+        hello.peer_session = "old-master"
+        prepared = service._next_prepared
+
+        def a_hello_while_preparing(wait=False):
+            prepared(wait)
+            hello.peer_session = "new-master"
+        service._next_prepared = a_hello_while_preparing
+        service._on_message(master_events(1.0)[0], 100.0)
+        assert service.touch_t0 is not None and service.session.owner == "old-master"
+    finally:
+        hello.peer_session = None
+        service.shutdown()
+
+
 def test_a_slave_stopping_mid_contact_lifts_without_preparing_a_touch(models):
     # Shutdown lifts the pad (the master hears it) and starts nothing it
     # would then abandon: no next touch is being built when it returns.
