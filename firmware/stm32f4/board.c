@@ -16,7 +16,7 @@ typedef struct {
     volatile uint32_t overruns;
     volatile uint8_t tx[RING];
     volatile uint32_t tx_head, tx_tail; /* written by the loop / by the interrupt */
-    bool held; /* board_uart_hold: the receive interrupt masked by the loop */
+    bool held; /* board_uart_hold: the port's interrupt masked by the loop */
 } uart;
 
 static uart uarts[2];
@@ -215,10 +215,10 @@ static void calibrate_isr_overhead(void)
         uint32_t t0 = board_stamp();
         NVIC_ISPR(USART2_IRQN / 32u) = 1u << (USART2_IRQN % 32u);
         __asm__ volatile("dsb\n\tisb" ::: "memory"); /* taken here */
-        uint32_t t1 = board_stamp();
+        uint32_t spent = board_stamp() - t0;
         uint32_t inside = isr_cycles - counted;
-        if (inside > 0u && t1 - t0 > stamp + inside && t1 - t0 - stamp - inside < least) {
-            least = t1 - t0 - stamp - inside;
+        if (inside > 0u && spent > stamp + inside && spent - stamp - inside < least) {
+            least = spent - stamp - inside;
         }
     }
     board_isr_overhead_cycles = least; /* UINT32_MAX: no try counted (a reader says so) */

@@ -125,10 +125,10 @@ def loop_figures(core: qemu.QemuCore, elf: Path) -> dict:
     most; those that fall inside the iteration (plus one pending each way)
     lengthen it, which lets more in: the count is iterated to its fixed
     point; SysTick's, once a millisecond, adds one more (an iteration
-    under a tenth of the period holds at most one). An interrupt costs its worst span, what the core measured at
-    boot outside that span (``board_isr_overhead_cycles``: the handler's
-    entry and bookkeeping), at :data:`CYCLES_PER_INSTRUCTION_BOUND`, and
-    :data:`EXCEPTION_CYCLES`. The bound is held against a tenth of the
+    under a tenth of the period holds at most one). An interrupt costs its
+    worst span, what the core measured at boot outside that span
+    (``board_isr_overhead_cycles``: the handler's entry and bookkeeping),
+    at :data:`CYCLES_PER_INSTRUCTION_BOUND`, and :data:`EXCEPTION_CYCLES`. The bound is held against a tenth of the
     period. The processor-in-the-loop stand-in's own work (``plant.c``: its
     text lines for the ADCs and the H-bridge) is left out by the core and
     its worst span recorded (``board_aside_worst_cycles``)."""
@@ -238,4 +238,3 @@ def report_lines(q: dict) -> list[str]:
                   f"{w['delay_ms_min']}-{w['delay_ms_max']} ms after the last command "
                   f"(limit {w['limit_ms']} ms plus one 10 ms command period)."]
     return lines
-

@@ -489,7 +489,8 @@ class SlaveService:
         finally:
             self._close_devices()
             self.endpoint.close()
-            if (self._next.tag or (None,) * 4)[3] and self.admin.pending:
+            tag = self._next.tag                    # (material, seed, object_id, reply)
+            if tag is not None and tag[3] and self.admin.pending:
                 self.admin.reply(ok=False, error="place: the slave is stopping")
             self.admin.close()
             if self.recorder is not None:

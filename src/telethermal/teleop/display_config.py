@@ -12,6 +12,7 @@ from telethermal.control.pid import PidGains
 from telethermal.control.safety import SafetyLimits
 from telethermal.errors import ControlError
 
+
 class Before(StrEnum):
     """What the display renders before the slave's decision: ``prior``,
     the posterior mixture from the master's own onset; ``hold``, the pad
@@ -145,4 +146,3 @@ class DisplayConfig:
         if not self.impedance_horizon_s > 0:
             raise ControlError("impedance_horizon_s must be > 0, got "
                                f"{self.impedance_horizon_s}")
-
