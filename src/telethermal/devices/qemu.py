@@ -352,12 +352,21 @@ class PtyLine:
         self.fd: int | None = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         self.buf = self.log = b""
 
-    def write(self, data: bytes) -> None:
+    def write(self, data: bytes, guard_s: float = 30.0) -> None:
+        """All of ``data``; while the core does not take more, what it sends
+        is read meanwhile (a core that answers as it reads would otherwise
+        fill the other direction and both sides wait for ever). ``guard_s``
+        guards against a core that takes nothing (DeviceError); it times
+        nothing."""
+        deadline = time.monotonic() + guard_s
         while data:
             try:
                 data = data[os.write(self.fd, data):]
             except BlockingIOError:
-                time.sleep(0.001)
+                if time.monotonic() > deadline:
+                    raise DeviceError(f"the core took no input for {guard_s} s: "
+                                      f"{len(data)} bytes left to write") from None
+                self.read(0.001)
 
     def read(self, wait_s: float = 0.0) -> bytes:
         """What has arrived, after ``wait_s`` more seconds of listening."""
