@@ -103,6 +103,13 @@ def open_bus(spec: str) -> can.BusABC:
         raise DeviceError(f"CAN bus {spec!r}: {exc}") from exc
 
 
+#: How long a command may wait to leave (python-can's send timeout): a bus
+#: or an adapter that takes nothing for that long fails the send (counted,
+#: the bus reopened) instead of holding the display's loop; half the
+#: driver's own watchdog (proto/CAN.md: 100 ms).
+SEND_TIMEOUT_S = 0.05
+
+
 @dataclass(frozen=True, slots=True)
 class DriverStatus:
     enabled: bool
@@ -160,7 +167,7 @@ class PeltierDriver:
         self._counter = (self._counter + 1) & 0xF
         try:
             self.bus.send(can.Message(arbitration_id=self.CMD.frame_id, data=data,
-                                      is_extended_id=False))
+                                      is_extended_id=False), timeout=SEND_TIMEOUT_S)
         except can.CanError as exc:
             self._bus_failed(exc)
             return False
