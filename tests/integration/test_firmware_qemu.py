@@ -408,7 +408,13 @@ def test_a_link_cut_mid_touch_puts_the_element_safe_and_the_master_sees_it(pelti
                 out.append((driver.healthy, driver.status.faults if driver.status else None))
             return out
 
-        before = run(30)
+        # Trusted first, however long this host takes to carry the core's
+        # first answers through QEMU's UART (a hang guard, not a timing).
+        guard = time.monotonic() + 60
+        while not driver.healthy:
+            assert time.monotonic() < guard, "the driver never trusted the core"
+            run()
+        before = run(15)
         core.cut.add(0)
         cut_s, guard = clock(), time.monotonic() + 60          # a hang guard
         while clock() < cut_s + 0.7:                           # commands into the void
@@ -421,7 +427,7 @@ def test_a_link_cut_mid_touch_puts_the_element_safe_and_the_master_sees_it(pelti
         answers, trips = clock.answers_and_trips()
         gap = max(zip(answers, answers[1:]), key=lambda a: a[1] - a[0])   # the cut
         assert gap[1] - gap[0] >= 700 and any(gap[0] < ms < gap[1] for ms, _ in trips)
-        assert healthy_or_stalled(before[15:], trips), (before, trips)
+        assert healthy_or_stalled(before, trips), (before, trips)
         assert not any(h for h, _ in cut) and not heard_during_cut
         assert healthy_or_stalled(after[-10:], trips) and driver.alive, (after, trips)
         assert any(h for h, _ in after[-10:]), after
@@ -487,9 +493,9 @@ def test_a_session_with_the_firmware_as_the_displays_boards_matches_the_emulated
         assert c["untrusted_periods"] == 0
     assert c["board_waits_missed"] == c["answers_missed"] == 0
     assert c["board"]["crc"] == c["board"]["seq_gaps"] == 0 and c["board"]["frames"] > 0
-    # A status answers each command; a watchdog trip sends one of its own
-    # (firmware/src/tt_peltier.c), so a tripped run has more.
-    if tripped(pil):
-        assert c["peltier"]["statuses"] >= c["peltier"]["sent"] > 0
-    else:
-        assert c["peltier"]["statuses"] == c["peltier"]["sent"] > 0
+    # A status answers each command, and a watchdog trip sends one of its
+    # own (firmware/src/tt_peltier.c), which the driver counts as a fault
+    # reported; a trip can come with no safety event (a stall after the
+    # last period's command), so it is counted, not ruled out.
+    p = c["peltier"]
+    assert p["sent"] > 0 and p["statuses"] == p["sent"] + p["faults_reported"], p

@@ -4,8 +4,11 @@ traceback (issue 28: the compose demo's ``./out`` made by the engine as
 root while the container runs as uid 1000)."""
 
 import os
+import select
 import shutil
+import signal
 import sys
+import time
 import tempfile
 import traceback
 from pathlib import Path
@@ -43,7 +46,7 @@ def root_owned_folder():
     shutil.rmtree(top)
 
 
-def _as_user(uid: int, argv: list[str]) -> tuple[int, str]:
+def _as_user(uid: int, argv: list[str], guard_s: float = 120.0) -> tuple[int, str]:
     """``telethermal ARGV`` in a forked child running as ``uid``: its exit
     code and what it printed (the interpreter's files need not be readable
     by that user: everything is imported already)."""
@@ -68,9 +71,23 @@ def _as_user(uid: int, argv: list[str]) -> tuple[int, str]:
             sys.stderr.flush()
             os._exit(code)
     os.close(write_fd)
-    with os.fdopen(read_fd) as pipe:
-        text = pipe.read()
-    return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), text
+    # A hang guard (not a timing): a child forked from this threaded worker
+    # that deadlocks (a lock another thread held at the fork) is killed and
+    # the test fails saying so, instead of a read that waits for ever.
+    text, deadline = b"", time.monotonic() + guard_s
+    with os.fdopen(read_fd, "rb") as pipe:
+        while (left := deadline - time.monotonic()) > 0:
+            if select.select([pipe], [], [], left)[0]:
+                chunk = os.read(pipe.fileno(), 65536)
+                if not chunk:
+                    break
+                text += chunk
+        else:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            pytest.fail(f"the child as uid {uid} did not end within {guard_s} s: "
+                        f"{text.decode(errors='replace')[-2000:]}")
+    return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), text.decode(errors="replace")
 
 
 @pytest.mark.parametrize("target", ["demo", "."])

@@ -76,6 +76,7 @@ def test_view_stream_batches_are_protocol_messages(publisher_and_sub):
         pub.period(10.0 + k / 1000, 1000.0, flux, 30.0 + k / 100, 4.0, lambda: dict(STATE))
     assert sub.poll(2000)
     first = decode(sub.recv())
+    assert sub.poll(2000), "the second batch never came"     # a hang guard
     second = decode(sub.recv())
     assert first["kind"] == "measurement_batch" and first["seq"] == 1 and second["seq"] == 2
     assert len(first["flux_w_m2"]) == BATCH and first["t0_s"] == 10.0
