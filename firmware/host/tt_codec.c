@@ -134,6 +134,46 @@ int tt_codec_selftest(void)
     return failures ? 1 : 0;
 }
 
+/* ------------------------------------------------------------ input lines */
+
+/* The line's whitespace-separated words, in place (each cut at its end):
+ * how many, at most `room` (the rest ignored). No scanf here: picolibc's
+ * tinystdio scanf pushes a character back with ungetc, whose single weak
+ * compare-and-swap (LDREXH/STREXH, no retry) fails whenever an interrupt
+ * comes between the two instructions (exception return clears the
+ * exclusive monitor, on silicon as in QEMU); the character is then lost
+ * and the line misread. The codec image on the core misread about one
+ * line in ten thousand under a loaded host's interrupt timing. */
+static int words(char *line, char **word, int room)
+{
+    int n = 0;
+    char *p = line;
+    while (n < room) {
+        p += strspn(p, " \t\r\n");
+        if (*p == '\0') {
+            break;
+        }
+        word[n++] = p;
+        p += strcspn(p, " \t\r\n");
+        if (*p != '\0') {
+            *p++ = '\0';
+        }
+    }
+    return n;
+}
+
+/* A whole word as an unsigned number in `base` (16 takes an optional 0x):
+ * 0, or -1 if the word is not one. */
+static int word_ulong(const char *word, int base, unsigned long *out)
+{
+    char *end;
+    if (word[0] == '-' || word[0] == '+') {
+        return -1;
+    }
+    *out = strtoul(word, &end, base);
+    return end != word && *end == '\0' ? 0 : -1;
+}
+
 /* ------------------------------------------------------------ serial-encode */
 
 int tt_codec_serial_encode(void)
@@ -141,13 +181,21 @@ int tt_codec_serial_encode(void)
     char line[512];
     int lineno = 0;
     while (fgets(line, sizeof line, stdin)) {
-        unsigned version, type, seq, status;
-        unsigned long t_us;
-        char f[7][64] = {"0", "0", "0", "0", "0", "0", "0"};
+        unsigned long version = 0, type = 0, seq = 0, status = 0, t_us = 0;
+        const char *f[7] = {"0", "0", "0", "0", "0", "0", "0"};
+        char copy[sizeof line], *w[13];
         lineno++;
-        int n = sscanf(line, "%u %u %u %lu %63s %63s %63s %63s %u %63s %63s %63s", &version,
-                       &type, &seq, &t_us, f[0], f[1], f[2], f[3], &status, f[4], f[5], f[6]);
-        if ((n != 9 && n != 12) || version > 255 || type > 255 || seq > 0xFFFF ||
+        strcpy(copy, line); /* the line as read, for the error */
+        int n = words(copy, w, 13);
+        if (n == 9 || n == 12) {
+            f[0] = w[4], f[1] = w[5], f[2] = w[6], f[3] = w[7];
+            if (n == 12) {
+                f[4] = w[9], f[5] = w[10], f[6] = w[11];
+            }
+        }
+        if ((n != 9 && n != 12) || word_ulong(w[0], 10, &version) || word_ulong(w[1], 10, &type) ||
+            word_ulong(w[2], 10, &seq) || word_ulong(w[3], 10, &t_us) ||
+            word_ulong(w[8], 10, &status) || version > 255 || type > 255 || seq > 0xFFFF ||
             t_us > 0xFFFFFFFFul || status > 255) {
             fprintf(stderr, "serial-encode: line %d: expected 'version type seq t_us flux_uv "
                             "tc_uv cj_c force_n status [ir_object_c ir_ambient_c pad_drive]', "
@@ -257,28 +305,27 @@ int tt_codec_can(void)
     char line[512];
     int lineno = 0;
     while (fgets(line, sizeof line, stdin)) {
-        char verb[16];
-        unsigned id;
-        int used = 0, ok = -1;
+        char copy[sizeof line], *w[2 + MAX_SIGNALS];
+        unsigned long id;
+        int ok = -1;
         lineno++;
-        if (sscanf(line, "%15s %x %n", verb, &id, &used) >= 2 && used > 0) {
-            if (strcmp(verb, "decode") == 0) {
+        strcpy(copy, line); /* the line as read, for the error */
+        int n = words(copy, w, 2 + MAX_SIGNALS);
+        if (n >= 2 && word_ulong(w[1], 16, &id) == 0 && id <= 0x7FFu) {
+            if (strcmp(w[0], "decode") == 0) {
                 uint8_t data[8];
-                int dlc = tt_codec_parse_hex(line + used, data, 8);
-                ok = dlc < 0 ? -1 : can_decode(id, data, dlc);
-            } else if (strcmp(verb, "encode") == 0) {
+                int dlc = tt_codec_parse_hex(n >= 3 ? w[2] : "", data, 8);
+                ok = dlc < 0 ? -1 : can_decode((unsigned)id, data, dlc);
+            } else if (strcmp(w[0], "encode") == 0) {
                 long v[MAX_SIGNALS];
-                int n = 0;
-                char *p = line + used, *end;
-                while (n < MAX_SIGNALS) {
-                    v[n] = strtol(p, &end, 0);
-                    if (end == p) {
+                int k = 0;
+                for (char *end; k < n - 2; k++) {
+                    v[k] = strtol(w[2 + k], &end, 0);
+                    if (end == w[2 + k] || *end != '\0') {
                         break;
                     }
-                    n++;
-                    p = end;
                 }
-                ok = can_encode(id, v, n);
+                ok = can_encode((unsigned)id, v, k);
             }
         }
         if (ok != 0) {
