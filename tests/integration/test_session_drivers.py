@@ -213,9 +213,9 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
         build = service._simulated_pad
         service._simulated_pad = lambda m, s: build(m, s) if gate.wait(10) else None
         service._lift(100.3)
-        assert service._next.pending and service.pad is used          # the lift did not wait
+        assert service.next_touch_preparing and service.pad is used          # the lift did not wait
         service._step(0.0, 1.0 / service.rate_hz)                      # nor does the loop
-        assert service._next.pending and service.pad is used
+        assert service.next_touch_preparing and service.pad is used
         assert service.status()["next_touch_preparing"] is True
         gate.set()
         touch = dict(master_events(1.0)[0], contact_id=2, t_s=1.0)
@@ -335,7 +335,7 @@ def test_a_slave_stopping_mid_contact_lifts_without_preparing_a_touch(models):
     service._next.start = lambda *a, **k: started.append(a)
     service.shutdown()
     assert service.touch_t0 is None and service.last_touch is not None
-    assert not started and not service._next.pending
+    assert not started and not service.next_touch_preparing
 
 
 def test_admin_requests_on_the_slave_between_and_during_touches(models):
@@ -357,17 +357,17 @@ def test_admin_requests_on_the_slave_between_and_during_touches(models):
         for k in range(300):
             service._sample(100.0 + k / 1000)
         service._lift(100.3)
-        assert service._next.pending
+        assert service.next_touch_preparing
         before = service.sensors
         service._on_admin({"cmd": "calibrate_thermometer"})
         assert replies[-1]["ok"] and replies[-1]["calibrated"] is True
-        assert not service._next.pending and service.sensors is not before
+        assert not service.next_touch_preparing and service.sensors is not before
         assert service._seed == 6 and service.material == "wood"   # the lift's next trial
         assert service.pad.samples_read == 0 and service.touch_t0 is None
         n = len(replies)
         service._on_admin({"cmd": "place", "material": "steel", "seed": 3,
                            "object_id": "the steel cup"})
-        assert len(replies) == n and service._next.pending     # answered once placed
+        assert len(replies) == n and service.next_touch_preparing     # answered once placed
         service._next_prepared(wait=True)
         assert replies[-1]["ok"] and replies[-1]["object_id"] == "the steel cup"
         assert service.material == "steel" and service._seed == 3
@@ -375,7 +375,7 @@ def test_admin_requests_on_the_slave_between_and_during_touches(models):
         assert replies[-1]["ok"] is False and "object_id" in replies[-1]["error"]
         service._on_admin({"cmd": "place", "material": "unobtainium"})
         assert replies[-1]["ok"] is False and "no object of 'unobtainium'" in \
-            replies[-1]["error"] and not service._next.pending
+            replies[-1]["error"] and not service.next_touch_preparing
         service._on_admin({"cmd": "forget"})
         assert replies[-1]["ok"] and replies[-1]["memory"] == service.memory.to_dict()
     finally:

@@ -12,23 +12,22 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import zmq
 
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
-from telethermal.ident.anytime import Reason, unknown_reason
 from telethermal.ident.fitted import clear_cache as clear_fits
-from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene
 from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
 from telethermal.services.admin import ErrorCount, open_service_sockets
 from telethermal.services.background import Background
-from telethermal.services.slave_admin import answer_place, handle_admin, slave_status
+from telethermal.services.slave_admin import (answer_place, handle_admin, slave_status,
+                                              touch_report)
 from telethermal.services.config import SlaveConfig
-from telethermal.services.slave_devices import (calibrate, device_report, flat_counters,
-                                                open_devices)
+from telethermal.services.slave_devices import calibrate, flat_counters, open_devices
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.run import slave_rng, with_finger
@@ -39,6 +38,14 @@ from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, Sess
                                        given, parse)
 
 log = logging.getLogger("telethermal.slave")
+
+
+class NextTouch(NamedTuple):
+    """What the loop needs with a touch prepared in the background."""
+    material: str
+    seed: int
+    object_id: str | None
+    reply: bool                 # an admin ``place`` waits for it
 
 
 class SlaveService:
@@ -99,7 +106,9 @@ class SlaveService:
         self.calibration_error: str | None = None
         self.pad: Slave | None = None
         self.devices = None
-        self._touch_counters: dict = {}
+        #: The devices' counters when the object was placed (a touch's report
+        #: gives what each counted since).
+        self.counters_at_place: dict = {}
         self.last_touch: dict = {}
         self._next = Background("slave-next-touch")   # the simulated pad's next touch
         self._inbox: list[dict] = []            # arrived while devices held the loop
@@ -195,11 +204,11 @@ class SlaveService:
         loop once ready; ``reply``: the admin request waiting answered then."""
         if self.devices is None and background:
             self._next.start(lambda: self._simulated_pad(material, seed),
-                             (material, seed, object_id, reply))
+                             NextTouch(material, seed, object_id, reply))
             return
         self._next.drop()
         if self.devices is not None:
-            self._touch_counters = flat_counters(self.devices.all_counters())
+            self.counters_at_place = flat_counters(self.devices.all_counters())
         if self.devices is not None and self.devices.kind == DeviceKind.HARDWARE:
             pad = Slave.on_hardware(self.scene, self.identifier, self.devices, self.sensors)
         else:
@@ -213,7 +222,7 @@ class SlaveService:
     def next_seed(self) -> int:
         """A fresh trial's seed: after the one being prepared, else the placed one."""
         tag = self._next.tag
-        return (tag[1] if tag is not None else self._seed) + 1
+        return (tag.seed if tag is not None else self._seed) + 1
 
     def _next_prepared(self, wait: bool = False) -> None:
         """The touch prepared in the background placed once ready (``wait``:
@@ -221,10 +230,10 @@ class SlaveService:
         taken = self._next.take(wait)
         if taken is None:
             return
-        pad, error, (material, seed, object_id, reply) = taken
+        pad, error, tag = taken
         try:
             if error is None:
-                self._placed(pad, material, seed, object_id)
+                self._placed(pad, tag.material, tag.seed, tag.object_id)
             elif isinstance(error, TelethermalError):
                 log.error("next touch not prepared: %s", error)
             else:                        # a bug: counted; the next touch places afresh
@@ -232,7 +241,7 @@ class SlaveService:
         except Exception as exc:         # placing it failed: counted, and answered below
             error = exc
             self._count_error("placing the prepared touch", exc)
-        if reply:
+        if tag.reply:
             answer_place(self, error)
 
     def _placed(self, pad: Slave, material: str, seed: int, object_id: str | None) -> None:
@@ -244,7 +253,7 @@ class SlaveService:
         log.info("object placed material=%s object_id=%s object_ir_c=%.2f", material,
                  self.object_id, self.pad.object_ir_c)
         if self.endpoint.peer_version is not None:
-            self._announce_object()
+            self.announce_object()
 
     def _keep_alive(self) -> None:
         """Each period the devices hold this thread (the pad pre-conditioned,
@@ -252,7 +261,8 @@ class SlaveService:
         self.endpoint.state = self.state
         self._inbox.extend(self.endpoint.poll(0.0))
 
-    def _announce_object(self):
+    def announce_object(self) -> None:
+        """The object under the pad (and the memory of it) told to the master."""
         self._send([self.session.announcement(time.monotonic())])
 
     # ------------------------------------------------------------ loop
@@ -268,7 +278,7 @@ class SlaveService:
             if self.touch_t0 is not None and m.session_id != self.session.owner:
                 self._superseded(now, m.session_id)       # lifts; the new object announced
             else:
-                self._announce_object()
+                self.announce_object()
         elif isinstance(m, ContactEvent):
             self._on_contact_event(m, now)
 
@@ -312,10 +322,10 @@ class SlaveService:
         sends, _ = self.session.lift(now)
         self._send(sends)       # the final estimate if unsent (6a), the lift event
         if self.endpoint.peer_version is not None:
-            self._announce_object()     # the memory's update at once (6b), the object again
+            self.announce_object()     # the memory's update at once (6b), the object again
         if self.devices is not None:
             self.devices.hold()                 # the pad leaves the object, held
-        self.last_touch = self._report()
+        self.last_touch = touch_report(self)
         r = self.last_touch
         log.info("touch over contact_id=%d material=%s identified=%s (%s)", contact_id,
                  r["material"], r["identified"], "no decision: " + str(r["reason"])
@@ -351,20 +361,29 @@ class SlaveService:
         self.counters["contacts_superseded"] += 1
         self._lift(now)
 
-    def _place_lift_cause(self) -> str:
-        """The counter of a contact a ``place`` ends (PROTOCOL.md 5a): its
-        owner replaced by a new session (``contacts_superseded``), its owner
-        silent for two heartbeats or more (``masters_lost``: a master killed
-        and restarted is refused "busy" until it is declared dead, and the
-        operator's place can come first), or the operator's move before a
-        live master's lift (``lifted_by_place``)."""
+    def lift_for_place(self) -> None:
+        """A ``place`` during a contact: the pad is moved to another object,
+        so the contact ends first (its lift may still be on the way from the
+        master), without preparing a next touch on the object it leaves.
+        Counted as PROTOCOL.md 5a says: its owner replaced by a new session
+        (``contacts_superseded``), its owner silent for two heartbeats or
+        more (``masters_lost``: a master killed and restarted is refused
+        "busy" until it is declared dead, and the operator's place can come
+        first), or the operator's move before a live master's lift
+        (``lifted_by_place``)."""
         e = self.endpoint
-        if e.peer_session != self.session.owner:
-            return "contacts_superseded"
         silent_s = e.silent_s
-        if silent_s is not None and silent_s >= 2 * self.config.transport.heartbeat_s:
-            return "masters_lost"
-        return "lifted_by_place"
+        if e.peer_session != self.session.owner:
+            cause = "contacts_superseded"
+        elif silent_s is not None and silent_s >= 2 * self.config.transport.heartbeat_s:
+            cause = "masters_lost"
+            self.masters_lost += 1
+        else:
+            cause = "lifted_by_place"
+        log.warning("place during contact_id=%d: the pad is lifted first (%s)",
+                    self.contact_id, cause)
+        self.counters[cause] += 1
+        self._lift(time.monotonic(), prepare_next=False)
 
     def _internal_error(self, what: str, exc: BaseException) -> None:
         """An unexpected error in one message, request or sample period:
@@ -385,25 +404,6 @@ class SlaveService:
         if self.recorder is not None:           # streamed: a kill -9 keeps what came
             self.recorder.slave_stream(self.pad, self.contact_id)
 
-    def _report(self) -> dict:
-        pad = self.pad
-        decision = pad_decision(pad)
-        est = decision.estimate
-        return {"material": self.material, "object_true_c": pad.object_true_c,
-                "object_ir_c": pad.object_ir_c, "onset_s": pad.onset_s,
-                # identified, decision_time_s, identified_at_s: teleop/decision.py
-                **decision.fields(),
-                "thermometer_calibration_residual_k":
-                    self.sensors.calibration.to_dict()["residual_k"],
-                "reason": est.reason if est is not None else Reason.NO_ESTIMATE,
-                "unknown_reason": unknown_reason(est),
-                # a new material's estimate and nearest class (the last window's
-                # estimate otherwise; None: the identifier gives none)
-                **dict.fromkeys(EFFUSIVITY_KEYS), **(effusivity_of(est) if est else {}),
-                "decision_text": touch_text(est),
-                **({"devices": device_report(self.devices, self._touch_counters)}
-                   if self.devices is not None else {})}
-
     def _on_admin(self, request: dict) -> None:
         handle_admin(self, request)
 
@@ -416,12 +416,10 @@ class SlaveService:
                 self.devices.close()
                 self.devices = None
 
-    def _last_sample_t_s(self) -> float | None:
-        """The touch's last sample read (its ``t_s``), while the pad is down."""
-        pad = self.pad
-        down = self.touch_t0 is not None and pad is not None and pad.samples_read > 0
-        return float(pad.channels["t_s"][pad.samples_read - 1]) \
-            if down and "t_s" in pad.channels else None
+    @property
+    def next_touch_preparing(self) -> bool:
+        """A touch is being prepared in the background (not yet placed)."""
+        return self._next.pending
 
     def status(self) -> dict:
         return slave_status(self)
@@ -489,8 +487,8 @@ class SlaveService:
         finally:
             self._close_devices()
             self.endpoint.close()
-            tag = self._next.tag                    # (material, seed, object_id, reply)
-            if tag is not None and tag[3] and self.admin.pending:
+            tag = self._next.tag
+            if tag is not None and tag.reply and self.admin.pending:
                 self.admin.reply(ok=False, error="place: the slave is stopping")
             self.admin.close()
             if self.recorder is not None:

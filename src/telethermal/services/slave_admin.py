@@ -5,10 +5,13 @@ thermometer, forget an object, the last touch's report."""
 from __future__ import annotations
 
 import logging
-import time
 
 from telethermal.devices.kinds import DeviceKind
+from telethermal.ident.anytime import Reason, unknown_reason
+from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
+from telethermal.services.slave_devices import device_report
+from telethermal.teleop.decision import pad_decision
 
 log = logging.getLogger("telethermal.slave")
 
@@ -28,16 +31,7 @@ def handle_admin(service, request: dict) -> None:
             raise ValueError(f"scene {service.scene.name} has no object of {material!r}; it "
                              f"has {', '.join(service.scene.materials)}")
         if service.touch_t0 is not None:
-            # The pad is moved to another object: the contact going on
-            # ends first (its lift may still be on the way from the master),
-            # without preparing a next touch on the object it leaves.
-            cause = service._place_lift_cause()
-            log.warning("place during contact_id=%d: the pad is lifted first (%s)",
-                        service.contact_id, cause)
-            service.counters[cause] += 1
-            if cause == "masters_lost":
-                service.masters_lost += 1
-            service._lift(time.monotonic(), prepare_next=False)
+            service.lift_for_place()
         seed = service.next_seed() if seed is None else seed
         if service.devices is None:
             # Built off the loop (its heartbeats go on), answered once placed.
@@ -55,7 +49,7 @@ def handle_admin(service, request: dict) -> None:
         service.memory.forget(r.get("object_id"))
         log.info("object memory: forgot %s", r.get("object_id") or "every object")
         if service.endpoint.peer_version is not None and service.touch_t0 is None:
-            service._announce_object()          # the master forgets it too
+            service.announce_object()          # the master forgets it too
         return {"memory": service.memory.to_dict()}
 
     service.admin.handle(request, service, {
@@ -82,6 +76,27 @@ def answer_place(service, error: BaseException | None) -> None:
     service.admin.reply(**answer)
 
 
+def touch_report(service) -> dict:
+    """The touch just lifted, as ``admin report`` gives it."""
+    pad = service.pad
+    decision = pad_decision(pad)
+    est = decision.estimate
+    return {"material": service.material, "object_true_c": pad.object_true_c,
+            "object_ir_c": pad.object_ir_c, "onset_s": pad.onset_s,
+            # identified, decision_time_s, identified_at_s: teleop/decision.py
+            **decision.fields(),
+            "thermometer_calibration_residual_k":
+                service.sensors.calibration.to_dict()["residual_k"],
+            "reason": est.reason if est is not None else Reason.NO_ESTIMATE,
+            "unknown_reason": unknown_reason(est),
+            # a new material's estimate and nearest class (the last window's
+            # estimate otherwise; None: the identifier gives none)
+            **dict.fromkeys(EFFUSIVITY_KEYS), **(effusivity_of(est) if est else {}),
+            "decision_text": touch_text(est),
+            **({"devices": device_report(service.devices, service.counters_at_place)}
+               if service.devices is not None else {})}
+
+
 def slave_status(service) -> dict:
     """The slave's ``status`` (services/slave/README.md lists its fields)."""
     e = service.endpoint
@@ -94,12 +109,20 @@ def slave_status(service) -> dict:
             "thermometer_calibration": {**service.sensors.calibration.to_dict(),
                                         "error": service.calibration_error},
             "pad_down": service.touch_t0 is not None,
-            "next_touch_preparing": service._next.pending,
+            "next_touch_preparing": service.next_touch_preparing,
             "contact_id": service.contact_id if service.touch_t0 is not None else None,
-            "last_sample_t_s": service._last_sample_t_s(),
+            "last_sample_t_s": last_sample_t_s(service),
             "peer_session": e.peer_session,
             "offset_s": e.offset.offset_s, "counters": e.all_counters(),
             "admin": dict(service.admin.counters),
             "devices": {"kind": service.config.devices,
                         **({"counters": service.devices.all_counters()}
                            if service.devices is not None else {})}}
+
+
+def last_sample_t_s(service) -> float | None:
+    """The touch's last sample read (its ``t_s``), while the pad is down."""
+    pad = service.pad
+    down = service.touch_t0 is not None and pad is not None and pad.samples_read > 0
+    return float(pad.channels["t_s"][pad.samples_read - 1]) \
+        if down and "t_s" in pad.channels else None
