@@ -52,8 +52,8 @@ from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import MasterStep, SlaveNews
 from telethermal.teleop.memory import ObjectMemory, memory_counts
-from telethermal.teleop.session import (ESTIMATE_ROUTES, ContactRequest, MasterSession, Send,
-                                        SlaveSession)
+from telethermal.teleop.session import (ContactRequest, EstimateRoute, MasterSession, Send,
+                                        SlaveSession, estimate_route)
 from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.display_setup import build_display
 from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
@@ -81,16 +81,14 @@ class NetworkSpec:
     slave_to_master: Direction = Direction()
     master_to_slave: Direction = Direction()
     heartbeat_s: float = 0.1
-    estimates: str = "stream"
+    estimates: EstimateRoute = EstimateRoute.STREAM      # a string is read as its route
     #: From this time (master clock) on, both directions behave as
     #: ``then`` (e.g. a route change mid-contact); None: never.
     change_at_s: float | None = None
     then: Direction | None = None
 
     def __post_init__(self):
-        if self.estimates not in ESTIMATE_ROUTES:
-            raise ValueError(f"estimates must be one of {ESTIMATE_ROUTES}, "
-                             f"got {self.estimates!r}")
+        object.__setattr__(self, "estimates", estimate_route(self.estimates))
         if not self.heartbeat_s > 0:
             raise ValueError(f"heartbeat_s must be > 0, got {self.heartbeat_s}")
         if (self.change_at_s is None) != (self.then is None):
@@ -249,7 +247,8 @@ class SimSlaveService:
     pad going down when the master's touch arrives. Measurement batches are
     left out (nothing on the master reads them)."""
 
-    def __init__(self, pad, curves: dict, estimates: str = "stream",
+    def __init__(self, pad, curves: dict,
+                 estimates: EstimateRoute | str = EstimateRoute.STREAM,
                  object_id: str | None = None, memory: ObjectMemory | None = None,
                  rate_hz: float = 1000.0):
         self.session = SlaveSession(curves, rate_hz, memory, estimates, measurements=False)

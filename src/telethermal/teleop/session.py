@@ -56,7 +56,23 @@ from telethermal.wire.schema import MessageKind
 BATCH = 10
 #: How long the master may render a trajectory with the link lost (s).
 TRAJECTORY_VALID_S = 60.0
-ESTIMATE_ROUTES = ("stream", "lossless")
+
+
+class EstimateRoute(StrEnum):
+    """How the slave sends its estimates (PROTOCOL.md 6a)."""
+    #: On the stream socket, latest value wins; the contact's final one lossless.
+    STREAM = "stream"
+    #: Every estimate on the lossless control socket (an ordered route).
+    LOSSLESS = "lossless"
+
+
+def estimate_route(value: str) -> EstimateRoute:
+    """``value`` as an :class:`EstimateRoute`; ``ValueError`` naming them."""
+    try:
+        return EstimateRoute(value)
+    except ValueError:
+        raise ValueError(f"estimates must be one of {', '.join(map(repr, EstimateRoute))}, "
+                         f"got {value!r}") from None
 
 
 class ContactRequest(StrEnum):
@@ -128,10 +144,9 @@ class SlaveSession:
     counters go (the service passes its own; PROTOCOL.md section 4)."""
 
     def __init__(self, curves: dict, rate_hz: float, memory: ObjectMemory | None = None,
-                 estimates: str = "stream", batch: int = BATCH, measurements: bool = True,
-                 counters: dict | None = None):
-        if estimates not in ESTIMATE_ROUTES:
-            raise ValueError(f"estimates must be one of {ESTIMATE_ROUTES}, got {estimates!r}")
+                 estimates: EstimateRoute | str = EstimateRoute.STREAM, batch: int = BATCH,
+                 measurements: bool = True, counters: dict | None = None):
+        estimates = estimate_route(estimates)
         if batch < 1:
             raise ValueError(f"batch must be >= 1 sample, got {batch}")
         self.curves, self.rate_hz = curves, float(rate_hz)
@@ -284,7 +299,7 @@ class SlaveSession:
 
     def _estimate(self, t: float, e, final: bool) -> list[Send]:
         changed = e.decided and e.label != self._decided_label
-        if self.estimates == "lossless":
+        if self.estimates == EstimateRoute.LOSSLESS:
             out = [self._decision(t, e)]
         else:
             out = [Send(t, PosteriorEstimate(**self._estimate_fields(e)))]
