@@ -43,7 +43,7 @@ class SlaveConfig:
     #: simulator: ``place`` only names the object for the reports); "qemu":
     #: as "emulated" with the firmware images on emulated STM32F405s as the
     #: boards (firmware/README.md, "Processor in the loop").
-    devices: str = "sim"
+    devices: DeviceKind = DeviceKind.SIM           # a string is read as its kind
     board_url: str = ""             # pyserial URL of the slave's sensor board (hardware)
     can_bus: str = ""               # interface:channel of its active pad's driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
@@ -85,7 +85,7 @@ class MasterConfig:
     #: ``can_bus``: the display loop runs all the time and the operator's
     #: force starts each touch); "qemu": as "emulated" with the firmware
     #: images on emulated STM32F405s as the boards, restarted each touch.
-    devices: str = "sim"
+    devices: DeviceKind = DeviceKind.SIM           # a string is read as its kind
     board_url: str = ""             # pyserial URL of the sensor board (hardware)
     can_bus: str = ""               # interface:channel of the Peltier driver (hardware)
     calibration: str = ""           # the board's calibration TOML; empty: the defaults
