@@ -79,3 +79,17 @@ def test_a_restore_the_system_refuses_is_warned_not_raised(monkeypatch):
         with realtime(20) as (granted, refused):
             assert granted == 20 and refused == ""
     assert len(calls) == 2
+
+
+def test_a_sessions_clock_is_named_by_its_enum_or_the_older_spellings():
+    from telethermal.control.loop import SessionClock, session_clock
+
+    assert session_clock(False) is SessionClock.SIMULATED
+    assert session_clock(True) is SessionClock.REAL
+    assert session_clock("master") is SessionClock.WORLD_PAUSED
+    for clock in SessionClock:
+        assert session_clock(clock) is clock and session_clock(clock.value) is clock
+    assert SessionClock.WORLD_PAUSED == WORLD_PAUSED     # what summaries have said
+    for bad in ("fast", 0, 1, 1.0, None):
+        with pytest.raises(ValueError, match="realtime must be a SessionClock"):
+            session_clock(bad)

@@ -28,6 +28,7 @@ import warnings
 from collections import deque
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Callable
 
 import numpy as np
@@ -123,8 +124,37 @@ class RealClock:
             pass
 
 
+class SessionClock(StrEnum):
+    """The clock a simulated session's loop runs on (its value is what the
+    session's summary says in ``clock``)."""
+    #: :class:`SimClock`: exact and instant.
+    SIMULATED = "simulated"
+    #: :class:`RealClock`: the simulated world's time charged to the loop.
+    REAL = "real"
+    #: :class:`WorldPausedClock`: the real clock less the world's time.
+    WORLD_PAUSED = "real, less the world's time"
+
+
 #: What a session's summary calls a run on :class:`WorldPausedClock`.
-WORLD_PAUSED = "real, less the world's time"
+WORLD_PAUSED = SessionClock.WORLD_PAUSED.value
+
+#: The older spellings ``run_session(realtime=...)`` still takes.
+_CLOCK_ALIASES = {False: SessionClock.SIMULATED, True: SessionClock.REAL,
+                  "master": SessionClock.WORLD_PAUSED}
+
+
+def session_clock(value, error: type[Exception] = ValueError) -> SessionClock:
+    """``value`` as a :class:`SessionClock`: one, its value, or False
+    (simulated), True (real) or "master" (world paused); ``error`` naming
+    the choices."""
+    if isinstance(value, SessionClock):
+        return value
+    if isinstance(value, (bool, str)) and value in _CLOCK_ALIASES:
+        return _CLOCK_ALIASES[value]
+    if isinstance(value, str) and value in SessionClock._value2member_map_:
+        return SessionClock(value)
+    raise error(f"realtime must be a SessionClock ({', '.join(map(repr, SessionClock))}), "
+                     f"False, True or 'master', got {value!r}")
 
 
 class WorldPausedClock(RealClock):

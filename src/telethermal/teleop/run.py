@@ -30,8 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.control.loop import (WORLD_PAUSED, FixedRateLoop, LoopStats, RealClock,
-                                      SimClock, WorldPausedClock, master_step_summary)
+from telethermal.control.loop import (FixedRateLoop, LoopStats, RealClock, SessionClock,
+                                      SimClock, WorldPausedClock, master_step_summary,
+                                      session_clock)
 from telethermal.control.dew import dew_point_c
 from telethermal.devices.sim_plant import DisplayPlant
 from telethermal.errors import SceneError
@@ -325,7 +326,7 @@ class SessionResult:
 
 def run_session(scene: Scene, material: str, identifier, generator,
                 config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
-                realtime: bool | str = False, devices: str = "sim",
+                realtime: SessionClock | bool | str = False, devices: str = "sim",
                 record: str | Path | None = None, expected_material=None,
                 news_filter=None, idle_scene: Scene | None = None,
                 fresh_fits: bool = False, junction_lag_scale: float = 1.0,
@@ -340,9 +341,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     material's carries its effusivity), so the touch runs as a repeated one
     does in the services: announced, pre-conditioned for and rendered from
     memory at onset.
-    ``realtime``: False (simulated clock), True (real clock, the simulated
-    world's time charged to the loop) or "master" (the real clock less the
-    time of the slave and the display's plant and sensors: other hardware).
+    ``realtime``: a :class:`~telethermal.control.loop.SessionClock`:
+    SIMULATED (False), REAL (True: the simulated world's time charged to
+    the loop) or WORLD_PAUSED ("master": the real clock less the time of
+    the slave and the display's plant and sensors, other hardware).
     ``news_filter(news, t)``: what the master reads instead of the slave's
     news (:class:`~telethermal.teleop.inprocess.InProcessWire`; a bench's
     oracle or closed set), None: as the services run. ``idle_scene``: the
@@ -355,8 +357,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     stated one: a robustness study). ``display_calibration``: the master's
     display calibration (``DisplayCalibration``): its flux lag in the
     controllers, its flux gain on the readings."""
-    if realtime not in (False, True, "master"):
-        raise SceneError(f"realtime must be False, True or 'master', got {realtime!r}")
+    kind = session_clock(realtime, SceneError)
+    realtime = kind != SessionClock.SIMULATED
     if realtime or fresh_fits:
         # Timed: the slave fits every window as a live slave does. The
         # effusivity fit keeps the process's fits, so a second run of one
@@ -364,7 +366,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         # those with it did not; bench devices' sim run paid them for the
         # emulated one; bench render's CPU at 50 Hz exceeded 100 Hz's).
         clear_fits()
-    if realtime == "master" and devices != "sim":   # driver and emulator share the calls
+    if kind == SessionClock.WORLD_PAUSED and devices != "sim":  # driver, emulator: one thread
         raise SceneError(f"realtime='master' needs devices='sim' (got {devices!r}): the "
                          "driver's time and its emulator's cannot be told apart")
     from telethermal.devices.display import open_display
@@ -410,7 +412,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
     # share the loop's thread here and run on their own hardware in a lab).
     master_busy_s: list[float] = []
 
-    clock = (WorldPausedClock if realtime == "master" else RealClock).for_period(
+    clock = (WorldPausedClock if kind == SessionClock.WORLD_PAUSED else RealClock).for_period(
         1.0 / config.rate_hz) if realtime else SimClock()
     world = clock.world if isinstance(clock, WorldPausedClock) else contextlib.nullcontext
 
@@ -484,7 +486,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         str(getattr(expected_material, "label", expected_material)),
         "memory_counts": memory_counts(wire.master.link.counters, wire.slave.counters),
         **metrics, **safety_summary(master),
-        "clock": {False: "simulated", True: "real", "master": WORLD_PAUSED}[realtime],
+        "clock": kind.value,
         "loop": stats.summary(),
         "devices": devices, "device_counters": device_counters,
         "module": module_summary(touch, master),
