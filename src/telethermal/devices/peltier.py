@@ -38,6 +38,7 @@ from importlib import resources
 
 import can
 import cantools
+import serial
 
 from telethermal.devices.board import DeviceError
 from telethermal.physics.thermoelectric import DEFAULT_MODULE, get_module
@@ -103,11 +104,13 @@ def open_bus(spec: str) -> can.BusABC:
         raise DeviceError(f"CAN bus {spec!r}: {exc}") from exc
 
 
-#: How long a command may wait to leave (python-can's send timeout): a bus
-#: or an adapter that takes nothing for that long fails the send (counted,
-#: the bus reopened) instead of holding the display's loop; half the
-#: driver's own watchdog (proto/CAN.md: 100 ms).
-SEND_TIMEOUT_S = 0.05
+#: How long a command may wait to leave a serial (SLCAN) adapter, whose
+#: python-can send otherwise waits for ever (pyserial's write timeout): an
+#: adapter that takes nothing for that long fails the send (counted, the bus
+#: reopened) instead of holding the display's loop for good; half the
+#: driver's own watchdog (proto/CAN.md: 100 ms). Other interfaces keep
+#: python-can's default, which fails at once on a full queue (socketcan).
+SLCAN_SEND_TIMEOUT_S = 0.05
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +140,7 @@ class PeltierDriver:
         self.version_error: str | None = None
         self.spec = bus
         self.bus = open_bus(bus)
+        self._send_timeout_s = SLCAN_SEND_TIMEOUT_S if parse_bus(bus)[0] == "slcan" else None
         self.clock = clock
         self.heartbeat_timeout_s, self.reopen_s = heartbeat_timeout_s, reopen_s
         self.status: DriverStatus | None = None
@@ -167,7 +171,7 @@ class PeltierDriver:
         self._counter = (self._counter + 1) & 0xF
         try:
             self.bus.send(can.Message(arbitration_id=self.CMD.frame_id, data=data,
-                                      is_extended_id=False), timeout=SEND_TIMEOUT_S)
+                                      is_extended_id=False), timeout=self._send_timeout_s)
         except can.CanError as exc:
             self._bus_failed(exc)
             return False
@@ -180,7 +184,9 @@ class PeltierDriver:
         # and a backend that raises the plain CanError says bus-off only in
         # its text (a third party's message, not one of ours).
         text = str(exc).lower()
-        if "bus-off" in text or "bus off" in text or isinstance(exc, can.CanOperationError):
+        timed_out = isinstance(exc.__cause__, serial.SerialTimeoutException)   # not bus-off
+        if not timed_out and ("bus-off" in text or "bus off" in text or
+                              isinstance(exc, can.CanOperationError)):
             self.counters["bus_off"] += 1
         log.warning("CAN %s: send failed (%s); reopening the bus in %.2f s", self.spec, exc,
                     self.reopen_s)
