@@ -5,6 +5,7 @@
  * described at the top of host/tt_host.c. */
 #include "tt_codec.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -163,15 +164,16 @@ static int words(char *line, char **word, int room)
 }
 
 /* A whole word as an unsigned number in `base` (16 takes an optional 0x):
- * 0, or -1 if the word is not one. */
+ * 0, or -1 if the word is not one, is negative or does not fit. */
 static int word_ulong(const char *word, int base, unsigned long *out)
 {
     char *end;
-    if (word[0] == '-' || word[0] == '+') {
+    if (word[0] == '-') {
         return -1;
     }
+    errno = 0;
     *out = strtoul(word, &end, base);
-    return end != word && *end == '\0' ? 0 : -1;
+    return end != word && *end == '\0' && errno != ERANGE ? 0 : -1;
 }
 
 /* ------------------------------------------------------------ serial-encode */

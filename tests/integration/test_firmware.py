@@ -162,6 +162,27 @@ def can_golden_round_trip(run_codec) -> int:
     return len(golden)
 
 
+#: Lines each codec mode refuses (exit 2, naming the line), the host's
+#: 64-bit and the core's 32-bit unsigned long alike: a field missing or one
+#: too many, a number out of its field's range (t_us past 32 bits, past 64),
+#: a negative or malformed number, an unknown verb or CAN id, bad hex.
+REFUSED = {
+    "serial-encode": ["2 1 0 0 1 2 3 4", "2 1 0 0 1 2 3 4 0 5", "2 1 0 0 1 2 3 4 0 5 6 7 8",
+                      "2 1 0 4294967296 1 2 3 4 0", "2 1 0 18446744073709551616 1 2 3 4 0",
+                      "-1 1 0 0 1 2 3 4 0", "2 1 1x 0 1 2 3 4 0", "2 1 65536 0 1 2 3 4 0"],
+    "can-codec": ["decode zz 00", "decode 101 0g", "decode 800 00", "frobnicate 101 00",
+                  "decode", "encode 101 1 x"],
+}
+
+
+@pytest.mark.parametrize("mode,line", [(m, x) for m, lines in REFUSED.items() for x in lines])
+def test_a_malformed_line_is_refused_naming_it(tt_host, mode, line):
+    done = subprocess.run([str(tt_host), mode], input=line + "\n", capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2, (line, done.stdout, done.stderr)
+    assert f"{mode}: line 1:" in done.stderr and line in done.stderr
+
+
 def test_every_can_golden_vector_both_ways(tt_host):
     assert can_golden_round_trip(lambda script: run(tt_host, "can-codec", stdin=script)) >= 27
 

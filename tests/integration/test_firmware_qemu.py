@@ -26,8 +26,8 @@ from telethermal.bench import firmware
 from telethermal.devices import qemu
 from telethermal.devices.board import SensorBoard
 from telethermal.devices.peltier import PeltierDriver
-from test_firmware import (WATCHDOG_MS, can_golden_round_trip, expected_keys, float_arg,
-                           frame_key, random_samples, serial_line, vectors)
+from test_firmware import (REFUSED, WATCHDOG_MS, can_golden_round_trip, expected_keys,
+                           float_arg, frame_key, random_samples, serial_line, vectors)
 
 pytestmark = pytest.mark.qemu
 REQUIRE = os.environ.get("TELETHERMAL_REQUIRE_QEMU") == "1"
@@ -124,6 +124,17 @@ def test_every_serial_golden_vector_on_the_core(codec):
 
 def test_every_can_golden_vector_both_ways_on_the_core(codec):
     assert can_golden_round_trip(lambda script: run_codec(codec, "can-codec", script)) >= 27
+
+
+def test_every_malformed_line_is_refused_on_the_core(codec):
+    """test_firmware.REFUSED on the core, whose unsigned long is 32 bits
+    (a t_us past them saturates in strtoul: refused as out of range)."""
+    for mode, lines in REFUSED.items():
+        for line in lines:
+            codec.write(f"{mode}\n{line}\n".encode() + b"\x04")
+            m = codec.until(rb"(.*?)\x1eexit (\d+)\n")
+            out = m.group(1).decode()
+            assert m.group(2) == b"2" and f"{mode}: line 1:" in out and line in out, (line, out)
 
 
 def test_a_corrupted_vector_is_caught_on_the_core(codec):
