@@ -153,7 +153,7 @@ def session_clock(value, error: type[Exception] = ValueError) -> SessionClock:
         return _CLOCK_ALIASES[value]
     if isinstance(value, str) and value in SessionClock._value2member_map_:
         return SessionClock(value)
-    raise error(f"realtime must be a SessionClock ({', '.join(map(repr, SessionClock))}), "
+    raise error(f"realtime must be a SessionClock ({', '.join(repr(c.value) for c in SessionClock)}), "
                      f"False, True or 'master', got {value!r}")
 
 

@@ -221,19 +221,23 @@ class QemuCore:
                 time.sleep(0.02)
 
     def messages(self) -> str:
-        """What QEMU has written to its stderr so far."""
-        self._stderr.seek(0)
-        return self._stderr.read().decode(errors="replace")
+        """What QEMU has written to its stderr so far (read at offset 0
+        without moving the file's position, which QEMU shares)."""
+        fd = self._stderr.fileno()
+        return os.pread(fd, os.fstat(fd).st_size, 0).decode(errors="replace")
 
     def _probe(self, name: str, hook, *args):
-        """A test's hook (``tap``, ``line_fault``) that raises is logged and
-        left out, never the end of the bridge: a bridge that stopped would
-        leave the ptys unread, and every writer to them waiting."""
+        """A hook on the bridge (``tap``: a test's, or a pad driver's probe
+        of the core's TX pin; ``line_fault``: a test's) that raises is
+        logged and removed, never the end of the bridge: a bridge that
+        stopped would leave the ptys unread, and every writer to them
+        waiting. A hook replaced meanwhile is left in place."""
         try:
             return hook(*args)
-        except Exception:                  # noqa: BLE001 - a probe's bug, said once
+        except Exception:                  # noqa: BLE001 - a hook's bug, said once
             log.exception("QEMU bridge: the %s hook failed; it is removed", name)
-            setattr(self, name, None)
+            if getattr(self, name) is hook:
+                setattr(self, name, None)
             return None
 
     def _pump(self) -> None:
@@ -385,6 +389,7 @@ class PtyLine:
         while data:
             try:
                 data = data[os.write(self.fd, data):]
+                deadline = time.monotonic() + guard_s        # it took some: not stalled
             except BlockingIOError:
                 if time.monotonic() > deadline:
                     raise DeviceError(f"the core took no input for {guard_s} s: "

@@ -71,7 +71,7 @@ def estimate_route(value: str) -> EstimateRoute:
     try:
         return EstimateRoute(value)
     except ValueError:
-        raise ValueError(f"estimates must be one of {', '.join(map(repr, EstimateRoute))}, "
+        raise ValueError(f"estimates must be one of {', '.join(repr(r.value) for r in EstimateRoute)}, "
                          f"got {value!r}") from None
 
 
