@@ -252,6 +252,40 @@ def test_what_arrived_while_the_devices_held_the_loop_is_handled_first_in_order(
         service.shutdown()
 
 
+def test_what_arrived_while_the_devices_held_the_loop_is_recorded_as_it_arrived(models):
+    # A recording's wire log says when a message came, not when the loop
+    # got to it after the pad's pre-conditioning (a second or more).
+    import time
+
+    class Wire:
+        def __init__(self):
+            self.log = []
+
+        def wire(self, t_s, direction, message):
+            self.log.append((t_s, direction, message["n"]))
+
+    service = wood_slave(models)
+    handled = []
+    service._on_message = lambda m, now: handled.append((now, m["n"]))
+    service.recorder = recorder = Wire()
+    try:
+        service.endpoint.poll = lambda timeout_s=0.0: [{"n": 1}]
+        before = time.monotonic()
+        service._keep_alive()
+        after = time.monotonic()
+        assert [(d, n) for _, d, n in recorder.log] == [("in", 1)] and not handled
+        assert before <= recorder.log[0][0] <= after
+        service.endpoint.poll = lambda timeout_s=0.0: [{"n": 2}]
+        service._step(float("inf"), 1.0 / service.rate_hz)
+        assert [n for _, n in handled] == [1, 2]
+        assert [(d, n) for _, d, n in recorder.log] == [("in", 1), ("in", 2)]
+        assert recorder.log[0][0] <= after <= handled[0][0]      # recorded before handled
+    finally:
+        del service.endpoint.poll
+        service.recorder = None
+        service.shutdown()
+
+
 def test_an_admin_place_is_built_off_the_loop_and_answered_once_placed(models):
     # A place between touches builds the trial on the worker thread (the
     # loop keeps its heartbeats) and is answered when the loop places it;

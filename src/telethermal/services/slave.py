@@ -257,9 +257,17 @@ class SlaveService:
 
     def _keep_alive(self) -> None:
         """Each period the devices hold this thread (the pad pre-conditioned,
-        a second or more): heartbeats go on; what arrives waits for the loop."""
+        a second or more): heartbeats go on; what arrives is recorded now and
+        waits for the loop."""
         self.endpoint.state = self.state
-        self._inbox.extend(self.endpoint.poll(0.0))
+        self._inbox.extend(self._arrived(self.endpoint.poll(0.0)))
+
+    def _arrived(self, messages: list[dict]) -> list[dict]:
+        """``messages`` recorded at their arrival (handled later, maybe)."""
+        if self.recorder is not None:
+            for raw in messages:
+                self.recorder.wire(time.monotonic(), "in", raw)
+        return messages
 
     def announce_object(self) -> None:
         """The object under the pad (and the memory of it) told to the master."""
@@ -267,8 +275,6 @@ class SlaveService:
 
     # ------------------------------------------------------------ loop
     def _on_message(self, raw: dict, now: float) -> None:
-        if self.recorder is not None:
-            self.recorder.wire(now, "in", raw)
         m = parse(raw)
         if isinstance(m, Hello):
             self._send([Send(now, SessionConfig(
@@ -362,15 +368,11 @@ class SlaveService:
         self._lift(now)
 
     def lift_for_place(self) -> None:
-        """A ``place`` during a contact: the pad is moved to another object,
-        so the contact ends first (its lift may still be on the way from the
-        master), without preparing a next touch on the object it leaves.
-        Counted as PROTOCOL.md 5a says: its owner replaced by a new session
-        (``contacts_superseded``), its owner silent for two heartbeats or
-        more (``masters_lost``: a master killed and restarted is refused
-        "busy" until it is declared dead, and the operator's place can come
-        first), or the operator's move before a live master's lift
-        (``lifted_by_place``)."""
+        """A ``place`` during a contact ends it first (its lift may still be
+        on the way), preparing no next touch on the object left. Counted
+        (PROTOCOL.md 5a): ``contacts_superseded`` (a new session owns it),
+        ``masters_lost`` (its owner silent two heartbeats or more: a killed
+        master's restart is refused "busy" until then) or ``lifted_by_place``."""
         e = self.endpoint
         silent_s = e.silent_s
         if e.peer_session != self.session.owner:
@@ -456,7 +458,7 @@ class SlaveService:
         inbox, self._inbox = self._inbox, []      # what came while the devices held the loop
         wait = 0.0 if inbox else max(0.0, min(deadline - time.monotonic(),
                                               self.config.transport.heartbeat_s))
-        for message in inbox + self.endpoint.poll(wait):
+        for message in inbox + self._arrived(self.endpoint.poll(wait)):
             try:
                 self._on_message(message, time.monotonic())
             except Exception as exc:
