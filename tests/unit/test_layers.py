@@ -25,7 +25,7 @@ LAYERS = [
     {"errors"},
     {"filelimits"},
     {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder", "cachedir",
-     "ports"},
+     "ports", "choices"},
     {"physics"},
     {"control", "wire", "faults"},
     {"devices", "data"},

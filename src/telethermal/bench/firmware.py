@@ -128,10 +128,11 @@ def loop_figures(core: qemu.QemuCore, elf: Path) -> dict:
     under a tenth of the period holds at most one). An interrupt costs its
     worst span, what the core measured at boot outside that span
     (``board_isr_overhead_cycles``: the handler's entry and bookkeeping),
-    at :data:`CYCLES_PER_INSTRUCTION_BOUND`, and :data:`EXCEPTION_CYCLES`. The bound is held against a tenth of the
-    period. The processor-in-the-loop stand-in's own work (``plant.c``: its
-    text lines for the ADCs and the H-bridge) is left out by the core and
-    its worst span recorded (``board_aside_worst_cycles``)."""
+    at :data:`CYCLES_PER_INSTRUCTION_BOUND`, and :data:`EXCEPTION_CYCLES`.
+    The bound is held against a tenth of the period. The
+    processor-in-the-loop stand-in's own work (``plant.c``: its text lines
+    for the ADCs and the H-bridge) is left out by the core and its worst
+    span recorded (``board_aside_worst_cycles``)."""
     sym = qemu.symbols(elf)
 
     def instructions(name: str) -> float:

@@ -147,14 +147,14 @@ def session_clock(value, error: type[Exception] = ValueError) -> SessionClock:
     """``value`` as a :class:`SessionClock`: one, its value, or False
     (simulated), True (real) or "master" (world paused); ``error`` naming
     the choices."""
-    if isinstance(value, SessionClock):
-        return value
     if isinstance(value, (bool, str)) and value in _CLOCK_ALIASES:
         return _CLOCK_ALIASES[value]
-    if isinstance(value, str) and value in SessionClock._value2member_map_:
+    try:
         return SessionClock(value)
-    raise error(f"realtime must be a SessionClock ({', '.join(repr(c.value) for c in SessionClock)}), "
-                     f"False, True or 'master', got {value!r}")
+    except (ValueError, TypeError):
+        raise error("realtime must be a SessionClock ("
+                    f"{', '.join(repr(c.value) for c in SessionClock)}), False, True or "
+                    f"'master', got {value!r}") from None
 
 
 class WorldPausedClock(RealClock):

@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from telethermal.choices import choice
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.control.pid import PidGains
 from telethermal.control.safety import SafetyLimits
@@ -132,12 +133,7 @@ class DisplayConfig:
             raise ControlError("slew_k_s, handover_k_s and blend_s must be > 0")
         for name, kind in (("before", Before), ("source", Source),
                            ("feedforward_model", FeedforwardModel), ("idle", Idle)):
-            value = getattr(self, name)
-            try:
-                object.__setattr__(self, name, kind(value))
-            except (ValueError, TypeError):
-                raise ControlError(f"{name} must be one of {[str(v) for v in kind]}, "
-                                   f"got {value!r}") from None
+            object.__setattr__(self, name, choice(kind, getattr(self, name), name, ControlError))
         if not (self.junction_reference_s > 0 and self.current_slew_a_s > 0
                 and self.flux_inverse_s > 0):
             raise ControlError("junction_reference_s, current_slew_a_s and flux_inverse_s must "

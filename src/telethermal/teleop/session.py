@@ -40,6 +40,7 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
+from telethermal.choices import choice
 from telethermal.errors import WindowFull
 from telethermal.ident.openset import effusivity_of
 from telethermal.render.generator import naive_setpoint
@@ -68,11 +69,7 @@ class EstimateRoute(StrEnum):
 
 def estimate_route(value: str) -> EstimateRoute:
     """``value`` as an :class:`EstimateRoute`; ``ValueError`` naming them."""
-    try:
-        return EstimateRoute(value)
-    except ValueError:
-        raise ValueError(f"estimates must be one of {', '.join(repr(r.value) for r in EstimateRoute)}, "
-                         f"got {value!r}") from None
+    return choice(EstimateRoute, value, "estimates")
 
 
 class ContactRequest(StrEnum):
