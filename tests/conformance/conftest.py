@@ -55,7 +55,7 @@ def slave_models(tmp_path_factory, trained_models):
     from telethermal.ident.registry import make
     from telethermal.physics.scene import load_scene
     from telethermal.render.generator import save_generator
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     scene = with_finger(load_scene(SCENE))
     folder = tmp_path_factory.mktemp("conformance-models")

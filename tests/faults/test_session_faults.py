@@ -15,11 +15,10 @@ import pytest
 from realclock import assert_rendered, assert_safe_under_load
 
 from telethermal.errors import TransportError
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -18,10 +18,9 @@ from fuzzing import TALLY, fuzz_settings, keep_peak
 from telethermal.data.csv_import import CsvSpec, read_lab_csv
 from telethermal.errors import CalibrationError, DatasetError, ModelFileError, SceneError
 from telethermal.ident.registry import load_model
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.record.recording import Recorder, RecordingError, read_recording
 from telethermal.render.generator import load_generator
-from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 #: A load's peak memory (tracemalloc) may be 20 times its file's size, or

@@ -8,9 +8,8 @@ import pytest
 
 from telethermal.bench import faults_sim
 from telethermal.errors import BenchError
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.run import with_finger
 
 
 @pytest.mark.slow          # over 10 s here: make test-all and CI run it

@@ -15,8 +15,7 @@ import pytest
 import yaml
 
 from telethermal.services.demo import free_ports, write_configs
-from telethermal.physics.scene import load_scene
-from telethermal.teleop.run import with_finger
+from telethermal.physics.scene import load_scene, with_finger
 
 ROOT = Path(__file__).resolve().parents[2]
 

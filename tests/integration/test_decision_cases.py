@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from telethermal.data.generate import SensorSession
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.physics.sensors import draw_instruments
 from telethermal.services.slave_devices import calibrate
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.models import train_identifier
-from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.sim.touch import slave_rng
 from telethermal.teleop.slave import Slave
 
 SCENE = with_finger(load_scene("fingertip-7"))

@@ -40,7 +40,7 @@ def idle_policy_as_shipped(scene) -> None:
     from telethermal.cachedir import cache_dir
     from telethermal.control import preconditioning as pc
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     key = pc.policy_key(with_finger(scene))
     assert key == pc.policy_key(with_finger(load_scene("fingertip-7")))
@@ -56,7 +56,7 @@ def test_the_demo_calibrates_an_as_built_pad_and_names_every_touch(tmp_path, cap
     from telethermal.physics.scene import load_scene
     from telethermal.services.config import load_config
     from telethermal.teleop.display_calibration import display_calibration
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     path = as_built_scene(tmp_path, seed=5)
     scene = with_finger(load_scene(path))

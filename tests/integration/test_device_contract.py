@@ -17,9 +17,10 @@ import pytest
 from telethermal.control.junction_design import design_display_loop
 from telethermal.devices.display import EmulatedDisplay, HardwareDisplay, SimDisplay
 from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.teleop.master import MasterStep
-from telethermal.teleop.run import DisplayTouch, Operator, run_session, with_finger
+from telethermal.sim.touch import DisplayTouch, Operator
+from telethermal.sim.inprocess import run_session
 
 SCENE = with_finger(load_scene("fingertip-7"))
 OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat_scale=1.0,
@@ -142,7 +143,7 @@ def _emulated_display_and_master():
     """A clock, the emulated display (board on a pty, Peltier driver on a
     virtual CAN bus), a static-PID master holding at the idle, its news."""
     from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
-    from telethermal.teleop.run import pad_resistance
+    from telethermal.physics.layered import pad_resistance
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
     clock = Clock()
     d = EmulatedDisplay(touch, clock=clock)

@@ -8,7 +8,7 @@ import pytest
 from telethermal.control.current_quality import sign_reversals
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.master import JUNCTION_STOPPED
-from telethermal.teleop.run import run_session
+from telethermal.sim.inprocess import run_session
 
 SCENE = load_scene("fingertip-7")
 CONTACT_S = 3.0

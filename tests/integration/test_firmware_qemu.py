@@ -476,7 +476,8 @@ def test_a_session_with_the_firmware_as_the_displays_boards_matches_the_emulated
     and answer arrived."""
     from telethermal.control.safety import Fault
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.run import run_session, with_finger
+    from telethermal.sim.inprocess import run_session
+    from telethermal.physics.scene import with_finger
 
     scene = with_finger(load_scene("fingertip-7"))
     ident, gen = trained_models.pair(scene, 0)

@@ -1,8 +1,8 @@
 """One set of session rules, three drivers: the master's side (issue 26).
 The master service (its per-period ``_touch_period``, a loopback stand-in
 for its transport), the simulated network's master
-(:class:`~telethermal.teleop.netsim.SimMasterService`) and the in-process
-run's (:meth:`~telethermal.teleop.run.InProcessWire.master_step`) are fed
+(:class:`~telethermal.sim.network.SimMasterService`) and the in-process
+run's (:meth:`~telethermal.sim.inprocess.InProcessWire.master_step`) are fed
 one recorded sequence of the slave's messages, each at its arrival period,
 and the same display sensor readings every period. What each sends the
 slave (msgpack bytes, as on the wire), its display's step (flux setpoint,
@@ -32,16 +32,16 @@ import msgpack
 import pytest
 
 from telethermal.control.contact import ContactDetector
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.sampled import sample_curves
 from telethermal.services.config import MasterConfig
 from telethermal.services.demo import free_ports
 from telethermal.services.master import MasterService
 from telethermal.teleop.master import DisplayConfig, MasterStep
-from telethermal.teleop.netsim import SimMasterService
-from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, InProcessWire, draw_operator,
-                                    master_rng, slave_rng, with_finger)
-from telethermal.teleop.session import SlaveSession
+from telethermal.sim.network import SimMasterService
+from telethermal.teleop.session import PRE_CONTACT_S, SlaveSession
+from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng, slave_rng
+from telethermal.sim.inprocess import InProcessWire
 from telethermal.teleop.slave import Slave
 from telethermal.wire.codec import decode, encode
 from telethermal.wire.messages import parse

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import ConfigError, MasterConfig
 from telethermal.services.demo import free_ports
 from telethermal.services.master import MasterService
 from telethermal.teleop.master import MasterStep
-from telethermal.teleop.run import DisplayTouch, Operator, with_finger
+from telethermal.sim.touch import DisplayTouch, Operator
 from telethermal.wire.transport import TransportConfig
 
 SCENE = with_finger(load_scene("fingertip-7"))
@@ -118,7 +118,7 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path, trained_mode
 
     from telethermal.services.admin import call
     from telethermal.services.demo import write_configs
-    from telethermal.teleop.run import compare_with_direct
+    from telethermal.sim.direct import compare_with_direct
 
     ident, gen = trained_models.files(SCENE, 0)
     s_control, s_stream, s_admin, m_admin = free_ports(4)

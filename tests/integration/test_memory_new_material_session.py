@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from telethermal.bench import unseen
-from telethermal.physics.scene import load_scene
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.physics.scene import load_scene, with_finger
+from telethermal.sim.inprocess import run_session
 
 BASE = with_finger(load_scene("fingertip-7"))
 TOUCHED = with_finger(unseen.touch_scene(BASE, unseen.package_objects(

@@ -13,11 +13,10 @@ from pathlib import Path
 import pytest
 
 from telethermal.cli import main
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
 from telethermal.services.demo import Services, free_ports, wait_connected, write_configs
 from telethermal.teleop.models import write_models
-from telethermal.teleop.run import with_finger
 from telethermal.wire.handshake import key_file_fingerprint
 from telethermal.wire.transport import DIAGNOSE_AFTER_S
 

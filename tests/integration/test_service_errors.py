@@ -9,12 +9,11 @@ from types import SimpleNamespace
 
 import pytest
 
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import MasterConfig, SlaveConfig
 from telethermal.services.demo import free_ports
 from telethermal.services.master import MasterService
 from telethermal.services.slave import SlaveService
-from telethermal.teleop.run import with_finger
 from telethermal.teleop.session import Send, send_through
 from telethermal.wire.messages import ContactEvent
 from telethermal.wire.transport import TransportConfig

@@ -9,11 +9,11 @@ from realclock import assert_rendered, assert_safe_under_load
 
 from telethermal.cli import main
 from telethermal.control.loop import DEFAULT_RATE_HZ
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import ConfigError, load_config
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.sim.inprocess import run_session
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -26,11 +26,10 @@ import pytest
 
 from telethermal.control.safety import Fault
 from telethermal.devices import qemu
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.run import with_finger
 from test_firmware_qemu import qemu_or_skip
 
 pytestmark = [pytest.mark.qemu, pytest.mark.slow]

@@ -14,7 +14,7 @@ from telethermal.ident.prepare import FLUX
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.run import run_session
+from telethermal.sim.inprocess import run_session
 from telethermal.teleop.slave import Slave
 
 SCENE = load_scene("fingertip-7")

@@ -11,13 +11,14 @@ import msgpack
 import numpy as np
 import pytest
 
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import SlaveConfig
 from telethermal.services.demo import free_ports
 from telethermal.services.slave import SlaveService
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.netsim import SimSlaveService
-from telethermal.teleop.run import InProcessWire, slave_rng, with_finger
+from telethermal.sim.network import SimSlaveService
+from telethermal.sim.inprocess import InProcessWire
+from telethermal.sim.touch import slave_rng
 from telethermal.teleop.slave import Slave
 from telethermal.wire.messages import parse
 from telethermal.wire.transport import TransportConfig

@@ -6,7 +6,7 @@ import pytest
 
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.run import run_session
+from telethermal.sim.inprocess import run_session
 
 SCENE = load_scene("fingertip-7")
 SEEDS = (1, 2)

@@ -3,11 +3,10 @@ drifting target is refused and the calibration in force stays."""
 
 import pytest
 
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -17,9 +17,9 @@ from telethermal.devices.board import DeviceError
 from telethermal.devices.slave_pad import EmulatedSlavePad, calibrate_on_devices
 from telethermal.errors import CalibrationError
 from telethermal.ident.anytime import UNKNOWN
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import ConfigError, SlaveConfig
-from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.sim.touch import slave_rng
 from telethermal.teleop.slave import BOARD_LOST, NO_OBJECT_TEMPERATURE, Slave
 
 SCENE = with_finger(load_scene("fingertip-7"))

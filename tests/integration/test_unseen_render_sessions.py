@@ -10,10 +10,10 @@ import pytest
 
 from telethermal.bench import unseen, unseen_render as ur
 from telethermal.physics.materials import get_material
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.teleop.display_setup import display_model_args
 from telethermal.teleop.rendering import Estimated
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.sim.inprocess import run_session
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

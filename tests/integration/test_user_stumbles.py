@@ -130,7 +130,8 @@ def test_a_recording_made_on_a_scene_file_replays_with_its_scene(tiny, tmp_path,
     refused) and replays the touch sample for sample."""
     import telethermal.physics.scene as scene_module
     from telethermal.teleop.master import DisplayConfig
-    from telethermal.teleop.run import run_session, with_finger
+    from telethermal.sim.inprocess import run_session
+    from telethermal.physics.scene import with_finger
 
     scene = with_finger(load_scene(tiny))
     rec = tmp_path / "touch.mcap"

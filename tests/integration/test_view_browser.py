@@ -16,10 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.run import with_finger
 from telethermal.view.browser import BrowserUnavailable, find_chromium, launch
 from telethermal.services.viewer import open_view
 

@@ -6,8 +6,8 @@ plant from t = 0."""
 import math
 
 from telethermal.devices.readings import PadSensors
-from telethermal.devices.sim_plant import DisplayPlant
-from telethermal.teleop.run import display_model
+from telethermal.sim.plant import DisplayPlant
+from telethermal.sim.touch import display_model
 
 
 def display_periods(master, news_at, layers, seconds, rate_hz, pre_s, start_c, finger_c,

@@ -197,7 +197,7 @@ def test_generation_json_records_the_pads_as_built(tmp_path):
 
 
 def _display_touch(scene, contact_s=0.3):
-    from telethermal.teleop.run import DisplayTouch, Operator
+    from telethermal.sim.touch import DisplayTouch, Operator
     op = Operator(33.0, 33.0, 1.0, 1.0, 10.0, 5000.0)
     return DisplayTouch(scene, op, 500.0, contact_s, 25.0, np.random.default_rng(0))
 

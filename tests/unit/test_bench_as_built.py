@@ -201,7 +201,7 @@ def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monk
     from types import SimpleNamespace
     pad_cal = SimpleNamespace(chi2_per_dof=1.0)
     monkeypatch.setattr(ra.iab, "calibrate_drawn", lambda scene, built: (pad_cal, 1.0, {}))
-    import telethermal.teleop.display_rig as rig
+    import telethermal.sim.display_rig as rig
 
     class DisplayCal:
         flux_lag_s, flux_lag_s_lo, flux_lag_s_hi, flux_gain = 0.15, 0.14, 0.16, 1.0

@@ -94,7 +94,7 @@ def test_the_dew_margin_is_the_true_surfaces_with_nothing_on_the_pad():
     no air) is not counted; dry air has none."""
     import numpy as np
 
-    from telethermal.teleop.run import idle_surface_minus_dew_k
+    from telethermal.sim.inprocess import idle_surface_minus_dew_k
 
     t = np.arange(-0.2, 3.0, 0.01)
     surface = np.full(t.shape, 22.0)
@@ -111,7 +111,7 @@ def test_a_session_adds_to_its_runs_totals_and_to_no_other(trained_models, monke
     from telethermal.bench import render
     from telethermal.physics.scene import load_scene
     from telethermal.teleop.master import DisplayConfig
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     monkeypatch.setattr(render, "CONTACT_S", 0.5)
     scene = with_finger(load_scene("fingertip-7"))

@@ -313,7 +313,8 @@ class _Quiet:
 def test_replay_into_a_folder_with_the_recorded_and_with_new_gains(tmp_path, capsys, trained_models):
     from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
     from telethermal.teleop.replay import replay_to_folder
-    from telethermal.teleop.run import run_session, with_finger
+    from telethermal.sim.inprocess import run_session
+    from telethermal.physics.scene import with_finger
 
     scene = with_finger(load_scene("fingertip-7"))
     path = tmp_path / "s.mcap"

@@ -11,7 +11,7 @@ from telethermal.errors import ModelFileError
 from telethermal.ident.anytime import StreamingIdentifier, decide, members, unknown_reason
 from telethermal.ident.registry import check_scene, load_model
 from telethermal.physics.scene import load_scene
-from telethermal.teleop.run import slave_rng
+from telethermal.sim.touch import slave_rng
 from telethermal.teleop.slave import Slave
 
 SCENE = load_scene("fingertip-7")

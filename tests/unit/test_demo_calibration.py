@@ -76,7 +76,7 @@ def test_demo_calibration_file_goes_to_each_pad_it_calibrates(tmp_path, monkeypa
     from telethermal.errors import CalibrationError
     from telethermal.ident.pad_calibration import write_calibration
     from telethermal.teleop.display_calibration import write_display_calibration
-    from telethermal.teleop.display_rig import calibrate_simulated
+    from telethermal.sim.display_rig import calibrate_simulated
 
     scene = load_scene("fingertip-7")
     both = write_calibration(_pad_cal(scene), tmp_path / "both.toml")

@@ -1,13 +1,13 @@
 """The direct-contact reference every touch is measured against
-(teleop/direct.py): timed from when the simulated finger met the pad, and
+(sim/direct.py): timed from when the simulated finger met the pad, and
 relative to the direct contact's own peak, whatever the sampling grid."""
 
 import numpy as np
 import pytest
 
-from telethermal.physics.scene import finger_contact_model, load_scene
-from telethermal.teleop.direct import compare_with_direct
-from telethermal.teleop.run import Operator, with_finger
+from telethermal.physics.scene import finger_contact_model, load_scene, with_finger
+from telethermal.sim.direct import compare_with_direct
+from telethermal.sim.touch import Operator
 
 SCENE = with_finger(load_scene("fingertip-7"))
 OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat_scale=1.0,

@@ -18,7 +18,7 @@ from telethermal.physics.scene import parse_scene
 from telethermal.teleop.display_calibration import (DisplayCalibration, calibrate_display,
                                                     keep_other_tables, read_display_calibration,
                                                     write_display_calibration)
-from telethermal.teleop.display_rig import calibrate_simulated
+from telethermal.sim.display_rig import calibrate_simulated
 
 #: A display off its design on every factor the routine reads, and more.
 BUILT = {"layer_thickness": [1.2, 0.8, 1.1], "flux_lag_s": 1.3, "flux_gain": 1.05,
@@ -117,7 +117,7 @@ def test_a_block_not_of_its_named_material_is_refused():
     """An aluminium block fitted as the PMMA it was said to be: the flux it
     takes is ~36x what PMMA would; no sensor is that far off: refused."""
     from telethermal.devices.display import open_display
-    from telethermal.teleop.display_rig import simulated_bench
+    from telethermal.sim.display_rig import simulated_bench
     scene = _scene()
     touch = simulated_bench(scene, "aluminium", 0, routine.RATE_HZ)
     with pytest.raises(CalibrationError, match="is the block plexiglass"):
@@ -222,7 +222,7 @@ def test_the_flux_noise_the_fit_expects_is_the_configured_sensor_s():
     recording fits (the windows average a few times the noise down to about
     the thermocouple's: a misstatement of 8x is not refused)."""
     from telethermal.devices.display import open_display
-    from telethermal.teleop.display_rig import simulated_bench
+    from telethermal.sim.display_rig import simulated_bench
     noisy = _scene(sensors={"flux_adc_lsb_uv": 56.0})
     stated, told = _scene(), _scene(sensors={"flux_adc_lsb_uv": 56.0})
     # The closed form of the configured noise, W/m^2 rms.
@@ -302,7 +302,8 @@ def test_a_recording_carries_the_gain_and_its_playback_reads_the_flux_over_it(bu
     from telethermal.record.recorder import display_params
     from telethermal.teleop.display_setup import display_model_args
     from telethermal.teleop.master import DisplayConfig, MasterDisplay
-    from telethermal.teleop.run import draw_operator, with_finger
+    from telethermal.sim.touch import draw_operator
+    from telethermal.physics.scene import with_finger
     from telethermal.view.playback import _flux_gain
 
     scene, cal = built_cal
@@ -331,7 +332,8 @@ def test_a_calibrated_touch_replays_identical_and_not_without_its_gain(tmp_path,
     from telethermal.physics.scene import load_scene
     from telethermal.teleop.master import DisplayConfig
     from telethermal.teleop.replay import replay
-    from telethermal.teleop.run import run_session, with_finger
+    from telethermal.sim.inprocess import run_session
+    from telethermal.physics.scene import with_finger
     from test_replay_wrong import rewrite
 
     data = tomllib.loads(resources.files("telethermal").joinpath(

@@ -342,7 +342,7 @@ def test_the_master_rearms_a_stopped_loop_only_at_idle_and_says_so(caplog):
     from telethermal.devices.readings import PadSensors
     from telethermal.teleop.master import (JUNCTION_REARMED, JUNCTION_STOPPED, DisplayConfig,
                                            MasterDisplay, SlaveNews)
-    from telethermal.teleop.run import pad_resistance
+    from telethermal.physics.layered import pad_resistance
 
     config = DisplayConfig(feedforward_model="static")
     dt = 1.0 / config.rate_hz
@@ -387,7 +387,7 @@ def test_no_probe_current_flows_in_the_period_a_finger_is_detected():
     for in the period before is cancelled, not run under the finger)."""
     from telethermal.devices.readings import PadSensors
     from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
-    from telethermal.teleop.run import pad_resistance
+    from telethermal.physics.layered import pad_resistance
 
     config = DisplayConfig(feedforward_model="static")
     dt = 1.0 / config.rate_hz

@@ -16,7 +16,7 @@ from telethermal.physics.scene import parse_scene
 from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
 from telethermal.teleop.display_setup import display_model_args
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
-from telethermal.teleop.run import DisplayTouch, Operator
+from telethermal.sim.touch import DisplayTouch, Operator
 
 
 def _scene(sensors=None, as_built=None):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from telethermal.control.feedforward import ImpedanceController, half_integral_modes
-from telethermal.devices.sim_plant import DisplayPlant
+from telethermal.sim.plant import DisplayPlant
 from telethermal.errors import ControlError
 from telethermal.physics.contact import contact_surface_temps_c
 from telethermal.physics.layered import Boundary, Layer, LayeredContact

@@ -9,10 +9,10 @@ import pytest
 
 from telethermal.control import preconditioning as pc
 from telethermal.errors import ControlError, UnknownMaterialError
-from telethermal.physics.scene import list_scenes, load_scene
+from telethermal.physics.scene import list_scenes, load_scene, with_finger
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.run import display_idle, with_finger
+from telethermal.teleop.display_setup import display_idle
 
 
 @pytest.fixture(autouse=True)

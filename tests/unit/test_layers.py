@@ -33,6 +33,7 @@ LAYERS = [
     {"render"},
     {"record"},
     {"teleop"},
+    {"sim"},
     {"view"},
     {"services"},
     {"bench"},

@@ -15,7 +15,7 @@ from telethermal.render.sampled import sample_curves
 from telethermal.teleop.link import SlaveLink
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.master import DisplayConfig, MasterDisplay
-from telethermal.teleop.run import pad_resistance
+from telethermal.physics.layered import pad_resistance
 from telethermal.wire.messages import FluxTrajectory, MaterialEstimate, SessionConfig
 
 from test_master import FINGER_C, OBJECT_C, SCENE, TAU, closed_form_generator

@@ -15,7 +15,7 @@ from telethermal.physics.scene import finger_contact_model, load_scene
 from telethermal.render.generator import NetworkGenerator
 from telethermal.devices.readings import PadSensors
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
-from telethermal.teleop.run import pad_resistance
+from telethermal.physics.layered import pad_resistance
 
 from displayloop import display_periods
 

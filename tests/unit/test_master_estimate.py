@@ -17,7 +17,7 @@ from telethermal.physics.scene import load_scene
 from telethermal.render.generator import ContactGenerator
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
 from telethermal.teleop.rendering import Estimated, estimated_target
-from telethermal.teleop.run import pad_resistance
+from telethermal.physics.layered import pad_resistance
 
 from displayloop import display_periods
 

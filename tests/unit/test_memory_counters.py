@@ -135,7 +135,7 @@ def test_a_touch_against_the_memory_counts_alike_in_process_and_on_the_simulated
     from test_netsim import SCENE, touch
 
     from telethermal.render.sampled import sample_curves
-    from telethermal.teleop.run import run_session
+    from telethermal.sim.inprocess import run_session
 
     identifier, generator = models
     steel = Estimate(0.5, (), "steel", 0.99, True, Reason.CONFIDENT)

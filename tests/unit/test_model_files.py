@@ -17,9 +17,8 @@ import pytest
 from telethermal.errors import ModelFileError
 from telethermal.ident.registry import load_model
 from telethermal.npzfile import read_npz
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import load_generator
-from telethermal.teleop.run import with_finger
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

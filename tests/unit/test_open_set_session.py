@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from telethermal.bench.unseen import package_objects
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.record.recording import read_recording
 from telethermal.teleop.rendering import Estimated
 from telethermal.teleop.replay import replay
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.sim.inprocess import run_session
 
 SCENE = with_finger(load_scene("fingertip-7"))
 #: The scene with a foam object beside its own (the same pad, instruments

@@ -83,7 +83,8 @@ def test_a_recorded_session_replays_the_same_phase_column(tmp_path, trained_mode
     from telethermal.physics.scene import load_scene
     from telethermal.teleop.master import DisplayConfig
     from telethermal.teleop.replay import replay
-    from telethermal.teleop.run import run_session, with_finger
+    from telethermal.sim.inprocess import run_session
+    from telethermal.physics.scene import with_finger
 
     scene = with_finger(load_scene("fingertip-7"))
     path = tmp_path / "session.mcap"

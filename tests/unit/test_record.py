@@ -9,14 +9,14 @@ import pytest
 
 from telethermal.data.dataset import load_dataset
 from telethermal.errors import DatasetError
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.record import recording
 from telethermal.record.importer import import_recordings
 from telethermal.record.recording import Recorder, RecordingError, read_recording
 from telethermal.record.recorder import periods
 from telethermal.teleop.replay import replay
 from telethermal.teleop.master import DisplayConfig
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.sim.inprocess import run_session
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

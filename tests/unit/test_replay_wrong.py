@@ -13,11 +13,11 @@ import math
 import pytest
 
 from telethermal.cli import main
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.record.recording import Recorder, RecordingError, read_recording
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.replay import replay
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.sim.inprocess import run_session
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -182,7 +182,7 @@ def test_the_pad_face_size_is_a_key_and_sets_the_area_the_module_pumps_over(tmp_
                                                       f"gap_k = 10.0\nsize_mm = {bad}")), "x.toml")
     # Every user of the area gets the pad's face: the display's load model,
     # the in-process plant (its pad heat capacity), the display floor.
-    from telethermal.teleop.run import display_model_args
+    from telethermal.teleop.display_setup import display_model_args
     assert display_model_args(with_finger_for_test(sized))["pad_area_m2"] == sized.pad.area_m2
     assert hardware(sized).area_m2 == sized.pad.area_m2
     # The same module's heat over a face a quarter of its own: four times the
@@ -274,7 +274,7 @@ def test_a_bad_materials_table_is_named_by_file_line_and_column(tmp_path, own_ma
 
 
 def with_finger_for_test(scene):
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
     return with_finger(scene)
 
 

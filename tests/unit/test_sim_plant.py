@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from telethermal.devices.sim_plant import DisplayPlant
+from telethermal.sim.plant import DisplayPlant
 from telethermal.errors import ControlError
 from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.materials import get_material as mat

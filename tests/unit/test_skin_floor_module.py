@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from telethermal.control import preconditioning as pc
-from telethermal.devices.sim_plant import DisplayPlant
+from telethermal.sim.plant import DisplayPlant
 from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.physics.scene import load_scene
-from telethermal.teleop.run import display_model
+from telethermal.sim.touch import display_model
 
 
 @pytest.fixture(scope="module")

@@ -10,13 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from telethermal.control.junction import JunctionLoop
-from telethermal.devices.sim_plant import DisplayPlant
+from telethermal.sim.plant import DisplayPlant
 from telethermal.errors import ControlError, SceneError
 from telethermal.physics.scene import load_scene
 from telethermal.physics.thermoelectric import (
     DEFAULT_HEAT_SINK, DEFAULT_MODULE, HBridge, ModuleState, SinkParams, ThermoelectricStack,
     default_driver, derive, get_heat_sink, get_module, hold_current_a, sink_params)
-from telethermal.teleop.run import display_model
+from telethermal.sim.touch import display_model
 
 SPEC = get_module(DEFAULT_MODULE)
 PARAMS = derive(SPEC)

@@ -1,7 +1,7 @@
 """One definition of what a touch decided (issue 45, deliverable 2):
 teleop/decision.py's ``touch_decision`` gives the ``identified``,
 ``decision_time_s`` and ``identified_at_s`` of every touch summary. Cases
-where the summaries used to differ (``teleop/run.py``, the slave service,
+where the summaries used to differ (the in-process run, the slave service,
 the master service): a touch that said only "unknown" (the slave reported
 no time), a group refined later (the master reported the member's time), a
 touch that committed and was then revised to "unknown", estimates that

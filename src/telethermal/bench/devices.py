@@ -44,10 +44,10 @@ from telethermal.bench import firmware
 from telethermal.devices.display import EmulatedDisplay, SimDisplay
 from telethermal.ident.anytime import members
 from telethermal.jsonfile import write_json
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.master import MasterStep, Phase
-from telethermal.teleop.run import DisplayTouch, Operator, with_finger
+from telethermal.sim.touch import DisplayTouch, Operator
 
 OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat_scale=1.0,
                     force_n=4.0, conductance_w_m2k=5000.0)
@@ -111,7 +111,7 @@ def _paths(n: int) -> dict:
 
 def _sessions(contact_s: float) -> dict:
     from telethermal.teleop.models import train_generator, train_identifier
-    from telethermal.teleop.run import run_session
+    from telethermal.sim.inprocess import run_session
     scene = with_finger(load_scene("fingertip-7"))
     ident, gen = train_identifier(scene, 0), train_generator(scene, 0)
     out = {}
@@ -133,7 +133,7 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
     from telethermal.data.generate import sensor_session
     from telethermal.devices.slave_pad import EmulatedSlavePad
     from telethermal.teleop.models import train_identifier
-    from telethermal.teleop.run import slave_rng
+    from telethermal.sim.touch import slave_rng
     from telethermal.teleop.slave import Slave
 
     scene = with_finger(load_scene(scene_name))

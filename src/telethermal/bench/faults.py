@@ -31,10 +31,9 @@ from telethermal.bench.faults_procs import (CONTACT_S, MATERIALS, SETTINGS, conf
                                             processes_report, run_processes)
 from telethermal.bench.faults_text import text_report
 from telethermal.errors import BenchError
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import save_generator
 from telethermal.teleop.models import train_generator, train_identifier
-from telethermal.teleop.run import with_finger
 
 __all__ = ["CONTACT_S", "MATERIALS", "SETTINGS", "SIM_SEEDS", "parse_delays", "plot", "plot_traces", "run",
            "text_report"]

@@ -30,8 +30,7 @@ from telethermal.errors import TransportError
 from telethermal.services.admin import call
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
-from telethermal.teleop.run import PRE_CONTACT_S
-from telethermal.teleop.session import ServiceState
+from telethermal.teleop.session import PRE_CONTACT_S, ServiceState
 from telethermal.wire.transport import TransportConfig
 
 MATERIALS = ("wood", "steel")

@@ -1,6 +1,6 @@
 """``telethermal bench faults``, simulated-clock part: every delay, jitter
 and loss row, every material of the scene, several seeds, every rendering
-mode on the very same touches (:mod:`telethermal.teleop.netsim`).
+mode on the very same touches (:mod:`telethermal.sim.network`).
 
 Modes, per touch:
 
@@ -36,7 +36,7 @@ import numpy as np
 from telethermal.errors import BenchError
 from telethermal.faults.channel import Direction
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.netsim import NetworkSpec, run_network_touch
+from telethermal.sim.network import NetworkSpec, run_network_touch
 
 #: (name, Direction of both ways): the rows a network model can carry.
 ROWS = [
@@ -239,7 +239,7 @@ def _worker(job_path: str, out_path: str) -> None:
     from telethermal.render.generator import load_generator
     from telethermal.render.sampled import sample_curves
     from telethermal.teleop.master import DisplayConfig
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     job = json.loads(Path(job_path).read_text())
     scene = with_finger(load_scene(job["scene"]))

@@ -15,9 +15,9 @@ import numpy as np
 
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.teleop.models import train_generator, train_identifier
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.sim.inprocess import run_session
 
 
 def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:

@@ -32,13 +32,13 @@ from telethermal.control.loop import DEFAULT_RATE_HZ, DEPLOYED_PRIORITY, FixedRa
 from telethermal.control.pid import PidGains
 from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
 from telethermal.teleop.master import (DEFAULT_GAINS, JUNCTION_REARMED, JUNCTION_STOPPED,
                                         DisplayConfig)
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.display_setup import add_limits, limits_report, new_limit_totals
-from telethermal.teleop.run import run_session, with_finger
+from telethermal.sim.inprocess import run_session
 
 RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
 SEEDS = (1, 2)

@@ -38,10 +38,9 @@ from telethermal.bench import identify_as_built as iab
 from telethermal.bench.render import CONTACT_S, _session_row
 from telethermal.bench.render_limits import limits_of
 from telethermal.physics.as_built import draw_as_built, with_as_built
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.models import train_generator, train_identifier
-from telethermal.teleop.run import with_finger
 
 #: Session seeds per pad (each material's first touch on each).
 SEEDS = (1, 2)
@@ -98,7 +97,7 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7",
         out["uncalibrated"].append(_pad_row(k, rows))
         step(f"pad {k}: calibrating both pads")
         from telethermal.errors import CalibrationError
-        from telethermal.teleop.display_rig import calibrate_simulated
+        from telethermal.sim.display_rig import calibrate_simulated
         try:
             pad_cal, pad_cpu_s, _ = iab.calibrate_drawn(scene, built)
             start = time.process_time()

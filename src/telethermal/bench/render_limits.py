@@ -20,7 +20,7 @@ def limits_of(rows) -> dict:
 
 def dew_report(scene, pooled: dict) -> dict:
     """The bench's ``dew``: the scene's humidity, its dew point (None for
-    dry air, 0 %: no dew point, as teleop/run.py reports it) and margin, and
+    dry air, 0 %: no dew point, as sim/inprocess.py reports it) and margin, and
     ``pooled``'s sessions and least idle above the dew point."""
     dew_c = dew_point_c(scene.room_temp_c, scene.room_humidity_pct) \
         if scene.room_humidity_pct > 0 else None

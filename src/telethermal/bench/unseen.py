@@ -46,9 +46,7 @@ from typing import Callable
 
 import numpy as np
 
-from telethermal.bench import unseen_layered as ul
-from telethermal.bench import unseen_render as ur
-from telethermal.bench import unseen_trade as ut
+from telethermal.bench import unseen_layered as ul, unseen_render as ur, unseen_trade as ut
 from telethermal.bench.unseen_text import report_section, text_report  # noqa: F401 (its API)
 from telethermal.errors import IdentificationError, SceneError, UnknownMaterialError
 from telethermal.ident.evaluate import wilson_interval
@@ -441,7 +439,7 @@ def _render(base: Scene, touched: Scene, identifier, materials: dict, seeds: int
     idle policy the trained scene's), their medians put in ``materials``;
     returns how they were run."""
     from telethermal.teleop.models import train_generator
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     step("generator")
     t0 = time.perf_counter()

@@ -2,13 +2,13 @@
 the operator feels on each material, three ways on the very same touches.
 
 Every touch is the in-process session of ``telethermal session``
-(:func:`~telethermal.teleop.run.run_session`: the slave, its session rules,
+(:func:`~telethermal.sim.inprocess.run_session`: the slave, its session rules,
 the display, the operator's finger) on the bench's scene of trained and
 unseen objects, the slave's identifier the bench's (``effusivity-fit``
 trained on the trained materials) and the generator trained on their finger
 database. The slave, its pad, the object and the operator are the same in
 the three; only what the master reads of the slave differs
-(``news_filter``, :class:`~telethermal.teleop.inprocess.InProcessWire`):
+(``news_filter``, :class:`~telethermal.sim.inprocess.InProcessWire`):
 
 ``estimate``
     the slave's news as is: today's live path (a known material from its
@@ -113,7 +113,7 @@ def render_touch(scene, material: str, identifier, generator, seed: int,
     mode the figures of :data:`KEYS`, what the slave decided and when the
     master began to render. ``idle_scene``: whose idle policy the display
     applies (the trained scene's)."""
-    from telethermal.teleop.run import run_session
+    from telethermal.sim.inprocess import run_session
 
     row = {"material": material, "seed": seed}
     obj = scene.object_named(material)
@@ -135,7 +135,7 @@ def render_all(scene, idle_scene, materials, identifier, generator, seeds,
                per_seed: int, progress=None) -> list[dict]:
     """:func:`render_touch` of every material of ``materials``, for each
     bench seed its first ``per_seed`` session seeds (:func:`session_seed`)."""
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     scene, idle_scene = with_finger(scene), with_finger(idle_scene)
     rows = []

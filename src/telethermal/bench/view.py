@@ -25,14 +25,13 @@ import numpy as np
 
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import save_generator
 from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
                                        write_configs)
 from telethermal.services.viewer import open_view
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.master import Phase
-from telethermal.teleop.run import with_finger
 from telethermal.view.browser import launch
 
 MATERIAL = "graphite"

@@ -32,7 +32,7 @@ def cmd_calibrate_pad(args) -> int:
 def cmd_calibrate_display(args) -> int:
     from telethermal.physics.scene import load_scene
     from telethermal.teleop.display_calibration import write_display_calibration
-    from telethermal.teleop.display_rig import calibrate_simulated
+    from telethermal.sim.display_rig import calibrate_simulated
 
     scene = load_scene(args.scene)
     with console.status(f"running {scene.name}'s display routine (simulated bench, "

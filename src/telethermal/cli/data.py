@@ -110,7 +110,7 @@ def _write_idle_policies(names) -> int:
     from telethermal.control.preconditioning import compute_policy, shipped_policy_path
     from telethermal.jsonfile import write_json
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     for name in names:
         scene = with_finger(load_scene(name))

@@ -59,7 +59,8 @@ def cmd_session(args) -> int:
     from telethermal.teleop.master import DisplayConfig
     from telethermal.teleop.models import session_models
     from telethermal.teleop.plots import plot_session
-    from telethermal.teleop.run import run_session, with_finger
+    from telethermal.sim.inprocess import run_session
+    from telethermal.physics.scene import with_finger
 
     scene = load_scene(args.scene)
     if scene.finger is None:

@@ -9,7 +9,7 @@ fingertip. Its input is the heat the module delivers to that node,
 project, from the pad towards the finger). The layers, cells, contact
 conductance and skin scalings are those of
 :class:`~telethermal.physics.layered.LayeredContact` (the display model of
-``teleop/run.py``: the same grid and conductances), with the junction node
+``sim/touch.py``: the same grid and conductances), with the junction node
 added behind the back face, and the system is integrated exactly over each
 5 ms slot with the input held (modal form, as ``DisplayPlant`` does).
 

@@ -133,7 +133,7 @@ class ImpedanceController:
         system = model.modal_system(one, one * 0.0, one * conductance_w_m2k,
                                     (one, one, one, one), 1.0, None, 2)
         lam, f, m_flux = system.lam[0], system.f[0], system.m[0][0]
-        # The pad's contact surface (as sim_plant reads it), per modal state.
+        # The pad's contact surface (as sim/plant.py reads it), per modal state.
         m_surface = system.m[0][1] - system.r_half[0, model.grid.n_a - 1] * m_flux
         horizon = self.n_ahead * dt_s
         self._surface_free = m_surface * np.exp(-lam * horizon)

@@ -29,7 +29,7 @@ The product never reads these: its models are built from the scene's
 nominal values (``Scene.as_built`` is read only by the simulator:
 :func:`simulated_pad_scene`, :func:`simulated_module`; a test proves that
 removing the tables changes no model the product builds). The display's
-simulated pad (teleop/run.py's ``DisplayTouch``) is built by
+simulated pad (sim/touch.py's ``DisplayTouch``) is built by
 :func:`simulated_display`: its layers, flux sensor's lag and gain, module,
 contact and junction sensor's lag times ``[as_built.display]``'s factors.
 """
@@ -260,7 +260,7 @@ class DisplayBuild:
 
 
 def simulated_display(scene) -> DisplayBuild:
-    """The display pad of ``scene`` as built (teleop/run.py's ``DisplayTouch``
+    """The display pad of ``scene`` as built (sim/touch.py's ``DisplayTouch``
     alone reads it): its layers' thicknesses, flux sensor's lag and gain,
     the contact conductance on the finger, the module's S, R, K and the
     junction sensor's lag, each times its factor."""

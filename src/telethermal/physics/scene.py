@@ -28,9 +28,9 @@ from telethermal.physics.materials import (get_material, load_materials, read_ta
                                            unregister_materials)
 from telethermal.physics.model import ModelChoice, choose_model
 from telethermal.physics.scenefile import MAX_OBJECTS, parse_toml, read_scene_text
-from telethermal.physics.scenereader import TableReader as _Reader
-from telethermal.physics.scenereader import parse_dataclass as _parse_dataclass
-from telethermal.physics.scenereader import check_own_name, read_layers, read_material
+from telethermal.physics.scenereader import (TableReader as _Reader, check_own_name,
+                                             parse_dataclass as _parse_dataclass, read_layers,
+                                             read_material)
 
 PAD_KINDS = ("peltier", "water")
 #: Simulated beyond a contact's duration: a recording is cut at the onset its
@@ -467,3 +467,16 @@ def describe_models(scene: Scene) -> list[tuple[str, str, ModelChoice]]:
     if scene.finger is not None:
         rows += [("finger", o.name, finger_contact_model(scene, o)[1]) for o in scene.objects]
     return rows
+
+
+#: The fingertip used where a scene has none (the gripper scenes): the
+#: first paper's operator, nominal skin.
+DEFAULT_FINGER = FingerSpec(temp_c=33.0, temp_sd_c=0.8, persons=5, trials_per_person=10,
+                            contact_duration_s=60.0, contact_conductance_w_m2k=5000.0,
+                            property_sd=0.12)
+
+
+def with_finger(scene: Scene) -> Scene:
+    """``scene`` with :data:`DEFAULT_FINGER` where it names no finger."""
+    return scene if scene.finger is not None else dataclasses.replace(scene,
+                                                                      finger=DEFAULT_FINGER)

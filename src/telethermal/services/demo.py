@@ -27,7 +27,9 @@ from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
 from telethermal.teleop.decision import when_decided
 from telethermal.teleop.plots import plot_session
-from telethermal.teleop.run import SessionResult, compare_with_direct, with_finger
+from telethermal.sim.inprocess import SessionResult
+from telethermal.sim.direct import compare_with_direct
+from telethermal.physics.scene import with_finger
 from telethermal.tomltables import toml_str
 from telethermal.teleop.models import DEFAULT_METHOD, demo_identify
 from telethermal.view.server import ViewServer
@@ -233,7 +235,7 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                   "unknown_reason": result.get("unknown_reason") and Reason.SLAVE_RESTARTED}
     import numpy as np
 
-    from telethermal.teleop.run import Operator
+    from telethermal.sim.touch import Operator
     trace = {k: np.array(v, dtype=object if k == "phase" else float)
              for k, v in result["trace"].items()}
     operator = Operator(**result["operator"])
@@ -296,7 +298,7 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
                 again: bool, echo, display_cal=None) -> dict:
     """One touch of the demo over the network, beside the same touch in one
     process; prints its line and returns its summary."""
-    from telethermal.teleop.run import run_session
+    from telethermal.sim.inprocess import run_session
 
     result = networked_touch(scene, material, ports[:4], seed, contact_s)
     s = result.summary

@@ -8,7 +8,7 @@ pads before it trains anything, as a lab would, and says what it found.
   ``telethermal calibrate pad``'s fit (``ident.pad_calibration``), as
   ``bench identify --as-built`` does;
 - the display with ``telethermal calibrate display``'s routine on the
-  simulated bench (``teleop.display_rig.calibrate_simulated``).
+  simulated bench (``sim.display_rig.calibrate_simulated``).
 
 One file, ``calibration.toml`` in the demo's folder, holds both (the pad's
 at the top level, the display's ``[display]`` table: each command's writer).
@@ -129,7 +129,7 @@ def calibrate_as_built(scene, out: Path, seed: int = 0, echo=print,
     from telethermal.teleop.display_calibration import (display_calibration,
                                                         keep_other_tables,
                                                         write_display_calibration)
-    from telethermal.teleop.display_rig import calibrate_simulated
+    from telethermal.sim.display_rig import calibrate_simulated
 
     status = status or nullcontext
     path = Path(out) / CALIBRATION_FILE

@@ -24,7 +24,7 @@ from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import unknown_reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import ErrorCount, open_service_sockets
 from telethermal.services.requests import MASTER as MASTER_REQUESTS
 from telethermal.services.config import MasterConfig
@@ -33,11 +33,10 @@ from telethermal.services.qemu_boards import close_boards, display_boards
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
-from telethermal.teleop.session import MasterSession, ServiceState, send_through
+from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceState, send_through
 from telethermal.teleop.decision import touch_decision
-from telethermal.teleop.display_setup import build_display
-from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, draw_operator, master_rng,
-                                     safety_summary, with_finger)
+from telethermal.teleop.display_setup import build_display, safety_summary
+from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng
 from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
 from telethermal.wire.messages import SessionConfig, parse
 from telethermal.wire.schema import MessageKind

@@ -19,7 +19,7 @@ import zmq
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
 from telethermal.ident.fitted import clear_cache as clear_fits
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.record.recorder import open_recorder
 from telethermal.render.sampled import sample_curves
 from telethermal.services.admin import ErrorCount, open_service_sockets
@@ -30,7 +30,7 @@ from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import calibrate, flat_counters, open_devices
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.run import slave_rng, with_finger
+from telethermal.sim.touch import slave_rng
 from telethermal.teleop.session import (ContactRequest, Send, ServiceState, SlaveSession,
                                         send_through)
 from telethermal.teleop.slave import BOARD_LOST, Slave

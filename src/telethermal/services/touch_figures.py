@@ -16,9 +16,9 @@ log = logging.getLogger("telethermal.master")
 def touch_figures(scene, touch, result: dict) -> dict:
     """The touch against the same finger touching the object directly, when
     the touch request named the placed object (a simulated scene holding it):
-    flux and skin-temperature errors (``teleop/run.py``'s metrics); ``touch``
+    flux and skin-temperature errors (``sim/direct.py``'s metrics); ``touch``
     is the master's :class:`~telethermal.services.master.Touch`."""
-    from telethermal.teleop.run import compare_with_direct
+    from telethermal.sim.direct import compare_with_direct
 
     n = touch.sim.n_total
     result["trace"] = {k: v[:n] for k, v in touch.sim.trace.items()}

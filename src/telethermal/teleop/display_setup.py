@@ -107,7 +107,7 @@ def build_display(scene: Scene, config: DisplayConfig, finger_c: float, heard, *
 def module_summary(touch, master: MasterDisplay) -> dict:
     """The display's module over the touch: its datasheet limits never
     exceeded (counted), how close it came, how often the current saturated
-    (``touch``: a :class:`~telethermal.teleop.run.DisplayTouch`)."""
+    (``touch``: a :class:`~telethermal.sim.touch.DisplayTouch`)."""
     spec = touch.module.spec
     loop = master.junction_loop
     js = master.junction_sensor          # as the controller was designed for it

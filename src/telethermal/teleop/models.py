@@ -103,7 +103,7 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     from telethermal.data.dataset import load_dataset
     from telethermal.physics.scene import load_scene
     from telethermal.render.generator import save_generator
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

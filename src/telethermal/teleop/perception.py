@@ -21,7 +21,7 @@ rendered touch against the same finger's direct contact.
   drifts slower than 0.1 K/s: an upper bound.
 
 Pure functions of a session's trace (after
-:func:`~telethermal.teleop.direct.compare_with_direct` has added the
+:func:`~telethermal.sim.direct.compare_with_direct` has added the
 direct contact's curves).
 """
 

@@ -4,7 +4,7 @@
 ``now`` and the master's contact events in, and gets back the messages to
 send (:class:`Send`, with the time the rule sends them at). Two drivers run
 it: the slave service (``services/slave.py``, on ZeroMQ and the real clock)
-and the simulated network (``teleop/netsim.py``, ``bench faults``), so the
+and the simulated network (``sim/network.py``, ``bench faults``), so the
 latency figures are measured on the rules the product runs
 (``proto/PROTOCOL.md`` section 6).
 
@@ -52,6 +52,11 @@ from telethermal.wire.messages import (ContactEvent, FluxSetpoint, FluxTrajector
                                        ESTIMATES, MaterialEstimate, MeasurementBatch,
                                        Message, PosteriorEstimate, given)
 from telethermal.wire.schema import MessageKind
+
+#: The session's time before the finger's contact (s): the slave's
+#: announcement reaches the master then, the display idles from then (the
+#: services' touch and every simulated driver of one).
+PRE_CONTACT_S = 0.2
 
 #: Samples per ``measurement_batch``.
 BATCH = 10

@@ -52,7 +52,7 @@ def _conductance(rec) -> float:
     its scene's, loaded by name (a scene file this process loaded, or a
     shipped one)."""
     from telethermal.physics.scene import load_scene, loaded_scene_file
-    from telethermal.teleop.run import with_finger
+    from telethermal.physics.scene import with_finger
     h = _held(rec, "contact_conductance_w_m2k")
     if h is not None:
         return h

@@ -1,4 +1,4 @@
-"""The simulated network of ``bench faults`` (teleop/netsim.py) and issue
+"""The simulated network of ``bench faults`` (sim/network.py) and issue
 15's hard cases on it, all on the simulated clock.
 
 The network model is checked against the protocol's conservation laws:
@@ -15,13 +15,12 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from telethermal.faults.channel import Direction
-from telethermal.physics.scene import load_scene
+from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.sampled import sample_curves
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.netsim import NetworkSpec, SimNetwork, run_network_touch
-from telethermal.teleop.run import with_finger
+from telethermal.sim.network import NetworkSpec, SimNetwork, run_network_touch
 from telethermal.wire.messages import CLASSES, ContactEvent
 
 SCENE = with_finger(load_scene("fingertip-7"))

@@ -52,13 +52,13 @@ from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import MasterStep, SlaveNews
 from telethermal.teleop.memory import ObjectMemory, memory_counts
-from telethermal.teleop.session import (ContactRequest, EstimateRoute, MasterSession, Send,
-                                        SlaveSession, estimate_route)
+from telethermal.teleop.session import (ContactRequest, EstimateRoute, MasterSession, PRE_CONTACT_S,
+                                        Send, SlaveSession, estimate_route)
 from telethermal.teleop.decision import touch_decision
-from telethermal.teleop.display_setup import build_display
-from telethermal.teleop.run import (PRE_CONTACT_S, DisplayTouch, compare_with_direct,
-                                     draw_operator, master_rng, safety_summary, slave_rng,
-                                     with_finger)
+from telethermal.teleop.display_setup import build_display, safety_summary
+from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng, slave_rng
+from telethermal.sim.direct import compare_with_direct
+from telethermal.physics.scene import with_finger
 from telethermal.teleop.slave import Slave
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.loglimit import LogLimiter

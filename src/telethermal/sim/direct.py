@@ -24,7 +24,7 @@ def _drop_first(result):
 def compare_with_direct(scene: Scene, material: str, object_true_c: float, operator,
                         trace: dict, contact_s: float, render_from_s: float | None) -> dict:
     """The issue's metrics against the same finger (``operator``, a
-    :class:`~telethermal.teleop.run.Operator`) touching the object directly;
+    :class:`~telethermal.sim.touch.Operator`) touching the object directly;
     adds the direct-contact curves to ``trace``."""
     obj = next(o for o in scene.objects if o.name == material)
     t = trace["t_s"]

@@ -23,7 +23,7 @@ from telethermal.physics.layered import Boundary, Layer, LayeredContact
 from telethermal.physics.materials import get_material
 from telethermal.teleop.display_calibration import (DEFAULT_BLOCK, DisplayCalibration,
                                                     calibrate_display)
-from telethermal.teleop.run import DisplayTouch, Operator
+from telethermal.sim.touch import DisplayTouch, Operator
 
 #: A block pressed on the pad with thermal grease: a 50 um line of a
 #: 1 W/(m K) compound (common silicone greases: 0.7-3 W/(m K)), 2e4 W/(m^2 K).
@@ -69,7 +69,7 @@ def air_start_s() -> float:
 
 def calibrate_simulated(scene, block: str = DEFAULT_BLOCK, seed: int = 0,
                         devices: str = "sim") -> DisplayCalibration:
-    """The routine on the simulated bench (teleop/display_rig.py): the
+    """The routine on the simulated bench (sim/display_rig.py): the
     display as built (``[as_built.display]``) through ``devices`` ("sim"
     or "emulated": the master's drivers)."""
     from telethermal.devices.display import open_display

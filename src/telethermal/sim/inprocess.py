@@ -1,0 +1,336 @@
+"""An in-process telepresence session on the simulator: the slave touches
+the object, identifies it, the master renders the flux, and the result is
+compared with the operator's finger touching the object directly
+(:func:`run_session`).
+
+The finger touches at session time 0. The two sides run the services'
+session rules (:mod:`telethermal.teleop.session`) over a wire with no delay
+(:class:`InProcessWire`): the slave's pad goes down when the master's
+contact onset reaches it (the paper has both sides touch at once,
+learning-based-thermal-rendering: "contact is established at the same time
+both in the master and the slave side"; the product's slave waits for the
+master's onset, a debounce later), and what the slave sends, the master
+reads the same period. The master runs its loop at ``config.rate_hz`` on a
+simulated clock (exact and instant) or on the real clock (``realtime=True``:
+the same loop, sleeping to absolute deadlines, its period measured).
+
+The operator is drawn like a person of database 2
+(:func:`~telethermal.sim.touch.draw_operator`); the same draws give the
+direct-contact reference, so the comparison is with what *this* finger
+would have felt. A bench may show the master other news than the slave's
+(``news_filter``: the oracle's or the closed set's target, ``bench
+unseen``); the slave, its touch and the display are the same.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from telethermal.control.dew import dew_point_c
+from telethermal.control.loop import (FixedRateLoop, LoopStats, RealClock, SessionClock,
+                                      SimClock, WorldPausedClock, master_step_summary,
+                                      session_clock)
+from telethermal.devices.readings import PadSensors
+from telethermal.errors import SceneError
+from telethermal.ident.anytime import Estimate, Label, Reason
+from telethermal.ident.fitted import clear_cache as clear_fits
+from telethermal.ident.openset import touch_text
+from telethermal.physics.scene import Scene, with_finger
+from telethermal.render.sampled import SampledGenerator, sample_curves
+from telethermal.sim.direct import compare_with_direct
+from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng, slave_rng
+from telethermal.teleop.decision import pad_decision
+from telethermal.teleop.display_setup import build_display, module_summary, safety_summary
+from telethermal.teleop.link import SlaveLink
+from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.teleop.memory import ObjectMemory, memory_counts
+from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
+from telethermal.teleop.session import (PRE_CONTACT_S, ContactRequest, MasterSession,
+                                        SlaveSession)
+from telethermal.teleop.slave import Slave
+from telethermal.wire.messages import Message
+
+class InProcessWire:
+    """Both sides' session rules (:mod:`telethermal.teleop.session`) joined
+    by a wire with no delay and no loss, for the in-process run: each
+    period the slave reads what the master sent and sends what its rules
+    say, which the master reads before its display step (``master_step``,
+    on the display made by ``set_up_display``). ``news_filter(news, t)``:
+    what the master reads instead of the slave's news (a bench's baseline
+    target; the slave and its messages unchanged); None: the news as is."""
+
+    def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str,
+                 memory: ObjectMemory | None = None,
+                 news_filter: Callable[[SlaveNews, float], SlaveNews] | None = None):
+        curves = self.curves = sample_curves(generator, [c for c in identifier.classes_
+                                                         if c in generator.materials])
+        self.slave = SlaveSession(curves, rate_hz, memory=memory, measurements=False)
+        self.slave.place(pad, object_id)
+        self.master = MasterSession(SlaveLink(generator=SampledGenerator(curves),
+                                              classes=tuple(pad.classes)))
+        self.master.on_message(self.slave.announcement(-PRE_CONTACT_S).message, -PRE_CONTACT_S)
+        self._to_slave: list[Message] = []
+        self._to_master: list[Message] = []
+        self.slave_t0_s: float | None = None
+        self.display: MasterDisplay | None = None
+        self.idle_c = math.nan
+        self.finger_c = math.nan
+        self.news_filter = news_filter
+
+    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float,
+                       idle_scene: Scene | None = None, calibration=None) -> MasterDisplay:
+        """The master's display, idled before this touch at its standby: the
+        object's temperature the master heard, pre-conditioned for what the
+        slave announced it expects (object memory) or, for an unknown
+        object, by the idle policy of ``idle_scene`` (:func:`build_display`,
+        as the services build it)."""
+        self.display, self.idle_c = build_display(scene, config, finger_c, self.master.link,
+                                                  calibration=calibration,
+                                                  idle_scene=idle_scene)
+        self.finger_c = finger_c
+        return self.display
+
+    def to_master(self, m: Message, t: float) -> None:
+        """One message from the slave reaches the master (no delay, one clock)."""
+        self.master.on_message(m, t, 0.0)
+
+    def slave_period(self, t: float, deliver: bool = True) -> None:
+        """The slave's period; what it sends reaches the master now or, not
+        ``deliver``, at :meth:`deliver` (the master's work when timed apart)."""
+        out = []
+        for m in self._to_slave:
+            request, sends, _ = self.slave.on_contact_event(m, t)
+            if request == ContactRequest.TOUCH:
+                self.slave_t0_s = t
+            out += sends
+        self._to_slave = []
+        self._to_master += [send.message for send in out + self.slave.step(t)]
+        if deliver:
+            self.deliver(t)
+
+    def deliver(self, t: float) -> None:
+        pending, self._to_master = self._to_master, []
+        for m in pending:
+            self.to_master(m, t)
+
+    def master_step(self, t: float, dt: float, sensors: PadSensors):
+        """One display period on ``sensors`` with what the slave has said:
+        returns the news it read and its step; what it tells the slave
+        goes on the wire."""
+        news = self.master.news(t, True)
+        if self.news_filter is not None:
+            news = self.news_filter(news, t)
+        step = self.display.step(t, dt, sensors, news)
+        self._to_slave += [s.message for s in self.master.period(step, 0.0, sensors.force_n,
+                                                                 self.finger_c)]
+        return news, step
+
+    def end(self, t_end: float) -> None:
+        """The session is over: a contact still open is lifted on both sides."""
+        self._to_slave += [s.message for s in self.master.close_contact(t_end, None)]
+        self.slave_period(t_end)
+
+
+def idle_surface_minus_dew_k(trace: dict, contact_s: float, dew_c: float | None):
+    """The least of the pad's true surface temperature over the periods
+    with nothing on it (before the contact and after the release) less the
+    room's dew point, K: where dew would form, whatever the controller
+    commanded. None in dry air (no dew point) or with no such period."""
+    t, surface = trace["t_s"], trace["pad_surface_c"]
+    free = ((t < 0) | (t >= contact_s)) & np.isfinite(surface)
+    if dew_c is None or not free.any():
+        return None
+    return float(surface[free].min() - dew_c)
+
+
+@dataclass
+class SessionResult:
+    summary: dict
+    trace: dict          # arrays over the master's periods
+    #: The loop's record and the master's step times (s): to pool sessions.
+    loop_stats: LoopStats | None = None
+    master_step_s: tuple = ()
+    #: The slave's final estimate (what its object memory learns of the touch).
+    slave_estimate: Estimate | None = None
+
+
+def run_session(scene: Scene, material: str, identifier, generator,
+                config: DisplayConfig = DisplayConfig(), contact_s: float = 5.0, seed: int = 0,
+                realtime: SessionClock | bool | str = False, devices: str = "sim",
+                record: str | Path | None = None, expected_material=None,
+                news_filter=None, idle_scene: Scene | None = None,
+                fresh_fits: bool = False, junction_lag_scale: float = 1.0,
+                display_calibration=None) -> SessionResult:
+    """One touch; see the module docstring. Returns the summary and the trace.
+    ``devices``: "sim" (the simulator directly) or "emulated" (the master's
+    sensor board on a pty and its Peltier driver on a CAN bus, emulated,
+    read through the real drivers). ``record``: an MCAP file to record the
+    session to (:mod:`telethermal.record.recording`). ``expected_material``:
+    the slave's object memory holds it for this object (an earlier touch
+    decided it; a label, or that touch's decided ``Estimate``: a new
+    material's carries its effusivity), so the touch runs as a repeated one
+    does in the services: announced, pre-conditioned for and rendered from
+    memory at onset.
+    ``realtime``: a :class:`~telethermal.control.loop.SessionClock`:
+    SIMULATED (False), REAL (True: the simulated world's time charged to
+    the loop) or WORLD_PAUSED ("master": the real clock less the time of
+    the slave and the display's plant and sensors, other hardware).
+    ``news_filter(news, t)``: what the master reads instead of the slave's
+    news (:class:`~telethermal.sim.inprocess.InProcessWire`; a bench's
+    oracle or closed set), None: as the services run. ``idle_scene``: the
+    scene whose idle policy the display applies (default ``scene``; a bench
+    touching objects outside the trained ones gives the trained scene).
+    ``fresh_fits``: the slave's fits made afresh, none of the process's
+    kept ones (a run whose CPU is measured; always on the real clock).
+    ``junction_lag_scale``: the display's junction sensor lags this many
+    times its stated time constant (the controller is designed for the
+    stated one: a robustness study). ``display_calibration``: the master's
+    display calibration (``DisplayCalibration``): its flux lag in the
+    controllers, its flux gain on the readings."""
+    kind = session_clock(realtime, SceneError)
+    realtime = kind != SessionClock.SIMULATED
+    if realtime or fresh_fits:
+        # Timed: the slave fits every window as a live slave does. The
+        # effusivity fit keeps the process's fits, so a second run of one
+        # touch made none (bench record's runs without recording paid them,
+        # those with it did not; bench devices' sim run paid them for the
+        # emulated one; bench render's CPU at 50 Hz exceeded 100 Hz's).
+        clear_fits()
+    if kind == SessionClock.WORLD_PAUSED and devices != "sim":  # driver, emulator: one thread
+        raise SceneError(f"realtime='master' needs devices='sim' (got {devices!r}): the "
+                         "driver's time and its emulator's cannot be told apart")
+    from telethermal.devices.display import open_display
+    from telethermal.record.recorder import SessionRecorder
+
+    if not (contact_s > 0 and math.isfinite(contact_s)):
+        raise SceneError(f"contact_s must be > 0, got {contact_s}")
+    scene = with_finger(scene)
+    slave = Slave(scene, material, identifier, slave_rng(seed))
+    rng = master_rng(seed)
+    operator = draw_operator(scene, rng)
+    # The two sides' session rules, as the services run them, over a wire
+    # with no delay: the slave's pad goes down when the master's onset
+    # reaches it, the master renders what the slave sends (its sampled curves).
+    memory = ObjectMemory()
+    if isinstance(expected_material, Estimate):     # an earlier touch's own decision
+        memory.learn(material, expected_material, -PRE_CONTACT_S, classes=identifier.classes_)
+    elif expected_material is not None:   # an earlier touch of this object decided it
+        label = Label.parse(expected_material)
+        memory.learn(material, Estimate(0.0, (), label, 1.0, True, Reason.CONFIDENT_GROUP
+                                        if label.is_group else Reason.CONFIDENT), -PRE_CONTACT_S)
+    wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material,
+                         memory=memory, news_filter=news_filter)
+    # The master has idled at its standby before this touch: the object's
+    # temperature, pre-conditioned for what the slave announced (object
+    # memory) or, for an unknown object, by the idle policy (``config.idle``;
+    # control/preconditioning.py).
+    master = wire.set_up_display(scene, config, operator.finger_ir_c,
+                                 idle_scene and with_finger(idle_scene), display_calibration)
+    idle = wire.idle_c
+    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng,
+                         junction_lag_scale=junction_lag_scale)
+    now = [0.0]
+    display = open_display(devices, touch, clock=lambda: now[0], realtime=bool(realtime),
+                           seed=seed)
+    recorder = SessionRecorder.open(record, scene, material, identifier, generator, config,
+                                    operator, idle, seed, contact_s, devices,
+                                    sampled=list(wire.curves), display=master) \
+        if record else None
+
+    # On the real clock, the master's own share of each period (its news,
+    # display step and messages; not the simulated plants and slave that
+    # share the loop's thread here and run on their own hardware in a lab).
+    master_busy_s: list[float] = []
+
+    clock = (WorldPausedClock if kind == SessionClock.WORLD_PAUSED else RealClock).for_period(
+        1.0 / config.rate_hz) if realtime else SimClock()
+    world = clock.world if isinstance(clock, WorldPausedClock) else contextlib.nullcontext
+
+    def one_period(t_loop: float, dt_loop: float) -> bool:
+        if touch.done:
+            return False
+        # Simulated time follows the loop: exact on the simulated clock, the
+        # real elapsed time on the real one.
+        t = now[0] = t_loop - PRE_CONTACT_S
+        with world():
+            wire.slave_period(t, deliver=False)
+        wire.deliver(t)                 # the master's session reads it: the master's work
+        with world():
+            sensors = display.read(t)
+        started = time.perf_counter()           # reported on the real clock only
+        news, step = wire.master_step(t, dt_loop, sensors)
+        master_busy_s.append(time.perf_counter() - started)
+        with world():
+            display.apply(t, step, dt_loop, sensors.force_n)
+        if recorder is not None:
+            recorder.period(t, dt_loop, sensors, news, step)
+        return True
+
+    try:
+        stats = FixedRateLoop(1.0 / config.rate_hz, clock).run(one_period, touch.n_total)
+    finally:
+        device_counters = display.counters()
+        display.close()
+        wire.end(t_end=now[0])
+        if recorder is not None:
+            recorder.slave(slave)
+    # What the touch decided, as every summary defines it (teleop/decision.py).
+    decision = pad_decision(slave)
+    est = decision.estimate
+    # The slave's trial times are from its pad going down (at the master's
+    # onset, as in the services); on the session's clock they are later by that.
+    slave_t0 = wire.slave_t0_s or 0.0
+    decided = est is not None and est.decided
+    # The error "after identification" starts at the slave's first decision
+    # (a material or a pair it is sure of), never where the master began to
+    # render one material (that hides the transient between the two); when
+    # the slave said only "unknown", where it said so.
+    render_from = None
+    if slave.onset_s is not None and decision.decision_time_s is not None:
+        render_from = slave_t0 + slave.onset_s + decision.decision_time_s
+    metrics = compare_with_direct(scene, material, slave.object_true_c, operator, touch.trace,
+                                  contact_s, render_from)
+    metrics["heat_extraction_ratio_first_s"] = heat_extraction_ratio(touch.trace)
+    dew_c = dew_point_c(scene.room_temp_c, scene.room_humidity_pct) \
+        if scene.room_humidity_pct > 0 else None
+    metrics["skin_above_threshold_s"] = skin_above_threshold_s(touch.trace)
+    summary = {
+        "scene": scene.name, "material": material, "seed": seed,
+        **decision.fields(),                   # identified, decision_time_s, identified_at_s
+        "identified_correctly": decided and est.label == material,
+        "decision_text": touch_text(est),      # a new material: with its estimate
+        "decision_reason": est.reason if decided else Reason.NO_DECISION,
+        "slave_onset_s": None if slave.onset_s is None else slave_t0 + slave.onset_s,
+        "slave_touch_s": wire.slave_t0_s, "master_onset_s": master.last_onset_s,
+        "master_release_s": master.last_release_s, "decision_from_s": render_from,
+        "render_start_s": master.rendered_from_s,
+        "before_identification": config.before, "rate_hz": config.rate_hz,
+        "gains": asdict(config.gains), "contact_s": contact_s,
+        "operator": asdict(operator), "object_true_c": slave.object_true_c,
+        "object_ir_c": slave.object_ir_c, "slave_pad_before_c": slave.pad_before_c,
+        "display_idle_c": idle,
+        "dew_point_c": dew_c,
+        "idle_surface_minus_dew_k": idle_surface_minus_dew_k(touch.trace, touch.contact_s, dew_c),
+        "room_humidity_pct": scene.room_humidity_pct,
+        "expected_material": None if expected_material is None else
+        str(getattr(expected_material, "label", expected_material)),
+        "memory_counts": memory_counts(wire.master.link.counters, wire.slave.counters),
+        **metrics, **safety_summary(master),
+        "clock": kind.value,
+        "loop": stats.summary(),
+        "devices": devices, "device_counters": device_counters,
+        "module": module_summary(touch, master),
+    }
+    if recorder is not None:
+        summary["recording"] = recorder.close(summary, touch.trace)
+    if realtime:
+        summary["loop_period_p99_us"] = summary["loop"]["period_p99_us"]
+        summary["loop"].update(master_step_summary(master_busy_s, config.rate_hz))
+    return SessionResult(summary, touch.trace, stats, tuple(master_busy_s), est)
