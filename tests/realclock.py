@@ -11,7 +11,7 @@ have failed such asserts). They are counted by ``telethermal bench faults``
 (its processes rows: safety events, errors within the simulated spread) and
 asserted on the simulated clock, where the same session code runs
 deterministically: ``tests/integration/test_session.py``,
-``tests/unit/test_netsim.py``, and ``tests/integration/test_master_drivers.py``,
+``tests/unit/test_sim_network.py``, and ``tests/integration/test_master_drivers.py``,
 which holds the service's own touch period equal, bit for bit, to those.
 
 What load cannot change is asserted here: no fault a stall cannot cause (a

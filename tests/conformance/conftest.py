@@ -23,7 +23,7 @@ import zmq.auth
 from doc_peer import DocMaster
 
 # A loopback port finder is not protocol code: the project's own is used.
-from telethermal.services.demo import free_ports  # noqa: E402,F401 (re-exported to tests)
+from telethermal.ports import free_ports  # noqa: E402,F401 (re-exported to tests)
 
 HEARTBEAT_S = 0.05
 DEAD_AFTER_S = 0.5

@@ -21,7 +21,7 @@ import zmq
 
 from telethermal.faults.channel import Direction
 from telethermal.faults.proxy import FaultProfile, FaultProxy, Link
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.transport import Endpoint, TransportConfig
 

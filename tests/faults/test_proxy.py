@@ -9,7 +9,7 @@ import pytest
 
 from telethermal.faults.channel import Direction, FaultProfileError
 from telethermal.faults.proxy import FaultProfile, FaultProxy, Link, load_profile
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.wire.transport import Endpoint, TransportConfig
 
 PLAIN = TransportConfig(security="plain", control_port=0, stream_port=0, heartbeat_s=0.02,

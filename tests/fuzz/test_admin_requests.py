@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from fuzzing import TALLY, fuzz_settings
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import MasterConfig, SlaveConfig
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
 from telethermal.services.requests import MASTER, SLAVE, check_request
 from telethermal.services.slave import SlaveService

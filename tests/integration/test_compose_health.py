@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from telethermal.services.demo import free_ports, write_configs
+from telethermal.ports import free_ports
+from telethermal.demo.run import write_configs
 from telethermal.physics.scene import load_scene, with_finger
 
 ROOT = Path(__file__).resolve().parents[2]

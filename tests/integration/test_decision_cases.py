@@ -20,8 +20,7 @@ from telethermal.physics.sensors import draw_instruments
 from telethermal.services.slave_devices import calibrate
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.models import train_identifier
-from telethermal.sim.touch import slave_rng
-from telethermal.teleop.slave import Slave
+from telethermal.teleop.slave import Slave, slave_rng
 
 SCENE = with_finger(load_scene("fingertip-7"))
 DEMO_SEED = 13
@@ -61,8 +60,8 @@ def test_the_emulated_seed_5_plexiglass_touch_is_never_committed_as_rubber(tmp_p
     # once when this test was written). A class commitment is final, so a
     # touch that ends plexiglass never said rubber; an honest pair on the
     # way is allowed.
-    from telethermal.services.demo import (Services, free_ports, networked_touch,
-                                           wait_connected, write_configs)
+    from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+    from telethermal.ports import free_ports
     from telethermal.teleop.models import DEFAULT_METHOD
 
     seed = 5

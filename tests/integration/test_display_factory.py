@@ -17,14 +17,14 @@ import numpy as np
 
 from telethermal.render.sampled import sample_curves
 from telethermal.services.config import MasterConfig
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.services.master import MasterService, Touch
 from telethermal.teleop.display_setup import build_display, display_idle
 from telethermal.sim.network import SimMasterService
 from telethermal.teleop.session import PRE_CONTACT_S, SlaveSession
 from telethermal.sim.inprocess import InProcessWire
-from telethermal.sim.touch import master_rng, draw_operator, slave_rng
-from telethermal.teleop.slave import Slave
+from telethermal.sim.touch import master_rng, draw_operator
+from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.wire.codec import decode
 from telethermal.wire.transport import TransportConfig
 

@@ -24,7 +24,8 @@ from mcap.reader import NonSeekingReader
 from telethermal.physics.scene import load_scene
 from telethermal.record.recording import FLUSH_S, read_recording
 from telethermal.services.admin import call
-from telethermal.services.demo import Services, free_ports, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.ports import free_ports
 from telethermal.teleop.replay import replay
 
 SCENE = load_scene("fingertip-7")

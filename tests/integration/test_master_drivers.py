@@ -35,14 +35,14 @@ from telethermal.control.contact import ContactDetector
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.sampled import sample_curves
 from telethermal.services.config import MasterConfig
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
 from telethermal.teleop.master import DisplayConfig, MasterStep
 from telethermal.sim.network import SimMasterService
 from telethermal.teleop.session import PRE_CONTACT_S, SlaveSession
-from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng, slave_rng
+from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng
+from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.sim.inprocess import InProcessWire
-from telethermal.teleop.slave import Slave
 from telethermal.wire.codec import decode, encode
 from telethermal.wire.messages import parse
 from telethermal.wire.schema import PROTOCOL_VERSION

@@ -14,7 +14,7 @@ import pytest
 from telethermal.devices.emulators import PeltierEmulator, SensorBoardEmulator
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import ConfigError, MasterConfig
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
 from telethermal.teleop.master import MasterStep
 from telethermal.sim.touch import DisplayTouch, Operator
@@ -117,7 +117,7 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path, trained_mode
     import sys
 
     from telethermal.services.admin import call
-    from telethermal.services.demo import write_configs
+    from telethermal.demo.run import write_configs
     from telethermal.sim.direct import compare_with_direct
 
     ident, gen = trained_models.files(SCENE, 0)

@@ -13,7 +13,7 @@ import pytest
 from telethermal.control import preconditioning as pc
 from telethermal.services import master as master_module
 from telethermal.services.config import MasterConfig
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
 from telethermal.wire.transport import TransportConfig
 

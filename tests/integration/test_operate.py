@@ -15,7 +15,8 @@ import pytest
 from telethermal.cli import main
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
-from telethermal.services.demo import Services, free_ports, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.ports import free_ports
 from telethermal.teleop.models import write_models
 from telethermal.wire.handshake import key_file_fingerprint
 from telethermal.wire.transport import DIAGNOSE_AFTER_S
@@ -85,7 +86,7 @@ def test_admin_operates_a_session_and_reports_the_touch(tmp_path, models, capsys
         # size is a real-clock outcome (this touch ran on the services' real
         # clock; a stalled master integrates the stall open loop): the
         # rendering's accuracy is asserted on the simulated clock
-        # (test_session, test_netsim) and counted by `bench faults`.
+        # (test_session, test_sim_network) and counted by `bench faults`.
         assert math.isfinite(report["direct"]["flux_rms_error_rel_first_s"])
         # A touch lifted early is shorter than asked: lifted once the master's
         # contact has begun (its status says so), not after a sleep.

@@ -11,7 +11,7 @@ import pytest
 
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import MasterConfig, SlaveConfig
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
 from telethermal.services.slave import SlaveService
 from telethermal.teleop.session import Send, send_through

@@ -13,13 +13,12 @@ import pytest
 
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import SlaveConfig
-from telethermal.services.demo import free_ports
+from telethermal.ports import free_ports
 from telethermal.services.slave import SlaveService
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.sim.network import SimSlaveService
 from telethermal.sim.inprocess import InProcessWire
-from telethermal.sim.touch import slave_rng
-from telethermal.teleop.slave import Slave
+from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.wire.messages import parse
 from telethermal.wire.transport import TransportConfig
 

@@ -19,8 +19,7 @@ from telethermal.errors import CalibrationError
 from telethermal.ident.anytime import UNKNOWN
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import ConfigError, SlaveConfig
-from telethermal.sim.touch import slave_rng
-from telethermal.teleop.slave import BOARD_LOST, NO_OBJECT_TEMPERATURE, Slave
+from telethermal.teleop.slave import BOARD_LOST, NO_OBJECT_TEMPERATURE, Slave, slave_rng
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -348,7 +347,7 @@ class FreeRunningRig:
 @pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_the_slave_service_on_hardware_calibrates_holds_its_pad_and_stops_safe(
         tmp_path, identifier, session, trained_models):
-    from telethermal.services.demo import free_ports
+    from telethermal.ports import free_ports
     from telethermal.services.slave import SlaveService
     from telethermal.wire.transport import TransportConfig
 

@@ -16,7 +16,7 @@ from telethermal.ident import evaluate as ident_evaluate
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene
 from telethermal.services import admin_client
-from telethermal.services.demo import DemoResult, demo_identify, demo_materials
+from telethermal.demo.run import DemoResult, demo_identify, demo_materials
 from telethermal.teleop import models as teleop_models
 
 

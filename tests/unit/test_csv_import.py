@@ -79,7 +79,7 @@ def test_import_then_train_a_lab_dataset_at_another_rate_than_the_scene(tmp_path
     from telethermal.errors import ModelFileError
     from telethermal.ident.registry import load_model
     from telethermal.physics.scene import load_scene
-    from telethermal.sim.touch import slave_rng
+    from telethermal.teleop.slave import slave_rng
     from telethermal.teleop.slave import Slave
 
     model = load_model(tmp_path / "m.npz")

@@ -11,8 +11,7 @@ from telethermal.errors import ModelFileError
 from telethermal.ident.anytime import StreamingIdentifier, decide, members, unknown_reason
 from telethermal.ident.registry import check_scene, load_model
 from telethermal.physics.scene import load_scene
-from telethermal.sim.touch import slave_rng
-from telethermal.teleop.slave import Slave
+from telethermal.teleop.slave import Slave, slave_rng
 
 SCENE = load_scene("fingertip-7")
 

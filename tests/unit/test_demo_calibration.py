@@ -5,10 +5,9 @@ path reaches the slave's config under its key ``pad_calibration``. The demo
 on a scene with ``[as_built]`` is tests/integration/test_demo_as_built.py."""
 
 from telethermal.physics.scene import load_scene
-from telethermal.services import demo as demo_mod
+from telethermal.demo import run as demo_mod
 from telethermal.services.config import load_config
-from telethermal.services.demo_calibration import (CALIBRATION_FILE, calibrate_as_built,
-                                                   path_line)
+from telethermal.demo.calibration import CALIBRATION_FILE, calibrate_as_built, path_line
 
 
 def test_a_scene_without_as_built_is_not_calibrated(tmp_path):

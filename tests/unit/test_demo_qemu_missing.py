@@ -15,7 +15,7 @@ GONE = [("qemu-system-arm", "qemu-system-arm"),
 
 def test_demo_on_qemu_without_the_tools_fails_before_anything_is_computed(
         monkeypatch, tmp_path, capsys):
-    from telethermal.services import demo
+    from telethermal.demo import run as demo
 
     monkeypatch.setattr(qemu, "missing", lambda: GONE)
     built = []

@@ -36,6 +36,7 @@ LAYERS = [
     {"sim"},
     {"view"},
     {"services"},
+    {"demo"},
     {"bench"},
     {"cli"},
     {"__main__"},
@@ -150,6 +151,25 @@ def test_no_import_runs_up_the_layers():
 
 def test_no_import_circle():
     assert circles(_graph()) == []
+
+
+#: The product's folders above the simulator's layer: they reach it by name
+#: only (``devices/simulated.py``), never by import, so they run without it.
+PRODUCT_ABOVE_SIM = {"view", "services"}
+
+
+def simulator_imports(graph) -> list[str]:
+    """Imports of the simulator, the demo or the benches by the product."""
+    return [f"{module}:{line} imports {target}"
+            for module, imports in graph.items() if _unit(module) in PRODUCT_ABOVE_SIM
+            for line, target in imports if _unit(target) in {"sim", "demo", "bench"}]
+
+
+def test_the_product_does_not_import_the_simulator():
+    assert simulator_imports(_graph()) == []
+    # The check can fail.
+    assert simulator_imports({"telethermal.services.x": [(3, "telethermal.sim.touch")]}) == [
+        "telethermal.services.x:3 imports telethermal.sim.touch"]
 
 
 FIRMWARE = ROOT.parents[1] / "firmware"

@@ -121,7 +121,7 @@ def test_an_undecided_or_unknown_decision_says_nothing_of_the_memory():
 
 @pytest.fixture(scope="module")
 def models(trained_models):
-    from test_netsim import SCENE
+    from test_sim_network import SCENE
     return trained_models.pair(SCENE, 0)
 
 
@@ -132,7 +132,7 @@ def test_a_touch_against_the_memory_counts_alike_in_process_and_on_the_simulated
     test_services.py, the link's and the slave's status counters): one
     disagreement on each side, nothing kept; and the same decision fields
     (teleop/decision.py)."""
-    from test_netsim import SCENE, touch
+    from test_sim_network import SCENE, touch
 
     from telethermal.render.sampled import sample_curves
     from telethermal.sim.inprocess import run_session

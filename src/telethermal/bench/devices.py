@@ -133,7 +133,7 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
     from telethermal.data.generate import sensor_session
     from telethermal.devices.slave_pad import EmulatedSlavePad
     from telethermal.teleop.models import train_identifier
-    from telethermal.sim.touch import slave_rng
+    from telethermal.teleop.slave import slave_rng
     from telethermal.teleop.slave import Slave
 
     scene = with_finger(load_scene(scene_name))

@@ -28,8 +28,8 @@ import numpy as np
 
 from telethermal.errors import TransportError
 from telethermal.services.admin import call
-from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
-                                       write_configs)
+from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.ports import free_ports
 from telethermal.teleop.session import PRE_CONTACT_S, ServiceState
 from telethermal.wire.transport import TransportConfig
 

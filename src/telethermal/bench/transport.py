@@ -289,7 +289,7 @@ def run(progress=None) -> dict:
         from telethermal.wire.transport import generate_link_keys
         keys = generate_link_keys(Path(tmp))
         step("loopback")
-        from telethermal.services.demo import free_ports
+        from telethermal.ports import free_ports
         loop = {}
         for stack in ("raw", "e2e"):
             for security in ("plain", "curve"):

@@ -27,8 +27,8 @@ from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import save_generator
-from telethermal.services.demo import (Services, free_ports, networked_touch, wait_connected,
-                                       write_configs)
+from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.ports import free_ports
 from telethermal.services.viewer import open_view
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.master import Phase

@@ -17,7 +17,7 @@ def cmd_demo(args) -> int:
     from telethermal.outputfolder import prepare_output_folder
 
     prepare_output_folder(args.out)          # before anything is computed
-    from telethermal.services.demo import demo
+    from telethermal.demo.run import demo
     from telethermal.services.viewer import serve_until_signal
 
     result = demo(args.out, args.scene,

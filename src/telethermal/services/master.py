@@ -20,6 +20,7 @@ from telethermal.control.loop import FixedRateLoop, set_realtime
 from telethermal.control.preconditioning import prepare_policy
 from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
+from telethermal.devices.simulated import simulated
 from telethermal.record.recorder import display_params, open_recorder
 from telethermal.errors import TelethermalError
 from telethermal.ident.anytime import unknown_reason
@@ -36,7 +37,6 @@ from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
 from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceState, send_through
 from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.display_setup import build_display, safety_summary
-from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng
 from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
 from telethermal.wire.messages import SessionConfig, parse
 from telethermal.wire.schema import MessageKind
@@ -51,13 +51,13 @@ class Touch:
                  source: str = "trajectory"):
         scene = service.scene
         cfg = replace(service.display_config, source=source)
-        rng = master_rng(seed)
-        self.operator = draw_operator(scene, rng)
+        world = simulated("master_touch")(scene, seed)
+        self.operator = world.operator
         # Idling before the touch: pre-conditioned for what the slave expects.
         self.display, self.idle_c = build_display(scene, cfg, self.operator.finger_ir_c,
                                                   service.link,
                                                   calibration=service.display_calibration)
-        self.sim = DisplayTouch(scene, self.operator, cfg.rate_hz, contact_s, self.idle_c, rng)
+        self.sim = world.display(cfg.rate_hz, contact_s, self.idle_c)
         opening = time.monotonic()
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
                                     **service.display_options)

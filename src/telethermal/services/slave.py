@@ -30,10 +30,9 @@ from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import calibrate, flat_counters, open_devices
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.sim.touch import slave_rng
+from telethermal.teleop.slave import BOARD_LOST, Slave, slave_rng
 from telethermal.teleop.session import (ContactRequest, Send, ServiceState, SlaveSession,
                                         send_through)
-from telethermal.teleop.slave import BOARD_LOST, Slave
 from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, SessionConfig,
                                        given, parse)
 

@@ -8,6 +8,7 @@ import logging
 
 import numpy as np
 
+from telethermal.devices.simulated import simulated
 from telethermal.teleop.decision import when_decided
 
 log = logging.getLogger("telethermal.master")
@@ -18,8 +19,7 @@ def touch_figures(scene, touch, result: dict) -> dict:
     the touch request named the placed object (a simulated scene holding it):
     flux and skin-temperature errors (``sim/direct.py``'s metrics); ``touch``
     is the master's :class:`~telethermal.services.master.Touch`."""
-    from telethermal.sim.direct import compare_with_direct
-
+    compare_with_direct = simulated("direct_contact")
     n = touch.sim.n_total
     result["trace"] = {k: v[:n] for k, v in touch.sim.trace.items()}
     truth = touch.truth or {}

@@ -45,7 +45,8 @@ from telethermal.ident.openset import touch_text
 from telethermal.physics.scene import Scene, with_finger
 from telethermal.render.sampled import SampledGenerator, sample_curves
 from telethermal.sim.direct import compare_with_direct
-from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng, slave_rng
+from telethermal.sim.touch import MasterWorld
+from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.display_setup import build_display, module_summary, safety_summary
 from telethermal.teleop.link import SlaveLink
@@ -54,7 +55,6 @@ from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
 from telethermal.teleop.session import (PRE_CONTACT_S, ContactRequest, MasterSession,
                                         SlaveSession)
-from telethermal.teleop.slave import Slave
 from telethermal.wire.messages import Message
 
 class InProcessWire:
@@ -213,8 +213,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         raise SceneError(f"contact_s must be > 0, got {contact_s}")
     scene = with_finger(scene)
     slave = Slave(scene, material, identifier, slave_rng(seed))
-    rng = master_rng(seed)
-    operator = draw_operator(scene, rng)
+    world = MasterWorld(scene, seed)
+    operator = world.operator
     # The two sides' session rules, as the services run them, over a wire
     # with no delay: the slave's pad goes down when the master's onset
     # reaches it, the master renders what the slave sends (its sampled curves).
@@ -234,8 +234,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     master = wire.set_up_display(scene, config, operator.finger_ir_c,
                                  idle_scene and with_finger(idle_scene), display_calibration)
     idle = wire.idle_c
-    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, idle, rng,
-                         junction_lag_scale=junction_lag_scale)
+    touch = world.display(config.rate_hz, contact_s, idle,
+                          junction_lag_scale=junction_lag_scale)
     now = [0.0]
     display = open_display(devices, touch, clock=lambda: now[0], realtime=bool(realtime),
                            seed=seed)

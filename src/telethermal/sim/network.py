@@ -56,10 +56,10 @@ from telethermal.teleop.session import (ContactRequest, EstimateRoute, MasterSes
                                         Send, SlaveSession, estimate_route)
 from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.display_setup import build_display, safety_summary
-from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng, slave_rng
+from telethermal.sim.touch import MasterWorld
+from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.sim.direct import compare_with_direct
 from telethermal.physics.scene import with_finger
-from telethermal.teleop.slave import Slave
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.loglimit import LogLimiter
 from telethermal.wire.messages import ContactEvent, Message, parse
@@ -357,15 +357,15 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
     pad = Slave(scene, material, identifier, slave_rng(seed), contact_s=contact_s + 1.0)
     slave = SimSlaveService(pad, curves, network.estimates, object_id, memory,
                             scene.sample_rate_hz)
-    rng = master_rng(seed)
-    operator = draw_operator(scene, rng)
+    world = MasterWorld(scene, seed)
+    operator = world.operator
     net = SimNetwork(network, np.random.default_rng([seed if network_seed is None
                                                      else network_seed, 15]))
     master = SimMasterService(scene, config, curves, pad.classes,
                               slave.announcement(-PRE_CONTACT_S), operator.finger_ir_c,
                               oracle=material if mode == "oracle" else None)
     session = master.session
-    touch = DisplayTouch(scene, operator, config.rate_hz, contact_s, master.idle_c, rng)
+    touch = world.display(config.rate_hz, contact_s, master.idle_c)
     dt = 1.0 / config.rate_hz
 
     def send_s2m(t_msg, m, lossless):

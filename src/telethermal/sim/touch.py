@@ -35,18 +35,13 @@ from telethermal.teleop.session import PRE_CONTACT_S
 #: The session's time the display's trace runs on after the finger lifts (s).
 AFTER_RELEASE_S = 0.2
 
-def slave_rng(seed: int) -> np.random.Generator:
-    """The slave side's draws for a touch (object, pad, sensors)."""
-    return np.random.default_rng([seed, 0])
-
 
 def master_rng(seed: int) -> np.random.Generator:
     """The master side's draws for a touch (operator, display sensors). Apart
-    from the slave's, so a networked touch with the same seed sees the very
-    same physics as the in-process session."""
+    from the slave's (:func:`~telethermal.teleop.slave.slave_rng`), so a
+    networked touch with the same seed sees the very same physics as the
+    in-process session."""
     return np.random.default_rng([seed, 1])
-
-
 
 
 @functools.lru_cache(maxsize=16)
@@ -266,3 +261,21 @@ class DisplayTouch:
                 self.trace[key][self.k] = value
             self.trace["phase"][self.k] = step.phase
         self.k += 1
+
+
+class MasterWorld:
+    """The master's side of one simulated touch, drawn from ``seed`` as
+    every driver of a touch draws it: the operator first (the display idles
+    for the finger's temperature), then the display pad under the finger
+    (:meth:`display`, once the display's idle temperature is known). The
+    master service reaches it by name (``devices/simulated.py``)."""
+
+    def __init__(self, scene: Scene, seed: int):
+        self.scene = scene
+        self._rng = master_rng(seed)
+        self.operator = draw_operator(scene, self._rng)
+
+    def display(self, rate_hz: float, contact_s: float, idle_c: float, **kw) -> DisplayTouch:
+        """The display pad under the operator's finger for a touch of
+        ``contact_s``, idled at ``idle_c`` (``kw``: :class:`DisplayTouch`'s)."""
+        return DisplayTouch(self.scene, self.operator, rate_hz, contact_s, idle_c, self._rng, **kw)

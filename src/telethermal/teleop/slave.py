@@ -42,6 +42,13 @@ NO_OBJECT_TEMPERATURE = Reason.NO_OBJECT_TEMPERATURE
 BOARD_LOST = Reason.BOARD_LOST
 
 
+def slave_rng(seed: int) -> np.random.Generator:
+    """The slave side's draws for a simulated touch (object, pad, sensors),
+    the same in every driver of one (the service, the in-process run, the
+    simulated network)."""
+    return np.random.default_rng([seed, 0])
+
+
 class _ObjectRefused(Exception):
     def __init__(self, true_c: float):
         self.true_c = true_c

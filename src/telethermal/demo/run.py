@@ -16,22 +16,22 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from telethermal.control.loop import DEFAULT_RATE_HZ
+from telethermal.demo.calibration import demo_calibration, path_line
 from telethermal.errors import TelethermalError, TransportError
 from telethermal.ident.anytime import Label, Reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.jsonfile import write_json
-from telethermal.ports import free_ports  # noqa: F401 - the benches' and tests' name here
+from telethermal.physics.scene import with_finger
+from telethermal.ports import free_ports
 from telethermal.services.admin import call
-from telethermal.services.demo_calibration import demo_calibration, path_line
 from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
-from telethermal.teleop.decision import when_decided
-from telethermal.teleop.plots import plot_session
-from telethermal.sim.inprocess import SessionResult
 from telethermal.sim.direct import compare_with_direct
-from telethermal.physics.scene import with_finger
-from telethermal.tomltables import toml_str
+from telethermal.sim.inprocess import SessionResult
+from telethermal.teleop.decision import when_decided
 from telethermal.teleop.models import DEFAULT_METHOD, demo_identify
+from telethermal.teleop.plots import plot_session
+from telethermal.tomltables import toml_str
 from telethermal.view.server import ViewServer
 from telethermal.wire.transport import generate_link_keys
 
