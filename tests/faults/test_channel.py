@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from telethermal.faults.channel import Channel, Direction, FaultProfileError
+from telethermal.sim.channel import Channel, Direction, FaultProfileError
 
 
 def channel(**kw):

@@ -19,8 +19,8 @@ import dataclasses
 import pytest
 import zmq
 
-from telethermal.faults.channel import Direction
-from telethermal.faults.proxy import FaultProfile, FaultProxy, Link
+from telethermal.sim.channel import Direction
+from telethermal.sim.proxy import FaultProfile, FaultProxy, Link
 from telethermal.ports import free_ports
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.transport import Endpoint, TransportConfig

@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from telethermal.faults.channel import Direction, FaultProfileError
-from telethermal.faults.proxy import FaultProfile, FaultProxy, Link, load_profile
+from telethermal.sim.channel import Direction, FaultProfileError
+from telethermal.sim.proxy import FaultProfile, FaultProxy, Link, load_profile
 from telethermal.ports import free_ports
 from telethermal.wire.transport import Endpoint, TransportConfig
 

@@ -27,7 +27,7 @@ LAYERS = [
     {"threads", "tomltables", "npzfile", "jsonfile", "netns", "outputfolder", "cachedir",
      "ports", "choices"},
     {"physics"},
-    {"control", "wire", "faults"},
+    {"control", "wire"},
     {"devices", "data"},
     {"ident"},
     {"render"},

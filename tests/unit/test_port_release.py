@@ -59,8 +59,8 @@ def test_an_admin_sockets_port_is_free_when_close_returns():
 
 
 def test_a_view_publishers_and_a_fault_proxys_ports_are_free_when_close_returns():
-    from telethermal.faults.channel import Direction
-    from telethermal.faults.proxy import FaultProfile, FaultProxy, Link
+    from telethermal.sim.channel import Direction
+    from telethermal.sim.proxy import FaultProfile, FaultProxy, Link
     from telethermal.ports import free_ports
     from telethermal.view.stream import ViewPublisher
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from telethermal.faults.channel import Direction
+from telethermal.sim.channel import Direction
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.sampled import sample_curves
 from telethermal.teleop.link import SlaveLink

@@ -12,7 +12,7 @@ import pytest
 
 from telethermal.devices.simulated import SIMULATED, simulated
 
-PRODUCT = ("physics", "control", "wire", "faults", "devices", "data", "ident", "render",
+PRODUCT = ("physics", "control", "wire", "devices", "data", "ident", "render",
            "record", "teleop", "view", "services")
 
 WITHOUT_SIM = f"""

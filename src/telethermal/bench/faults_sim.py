@@ -34,7 +34,7 @@ from dataclasses import replace
 import numpy as np
 
 from telethermal.errors import BenchError
-from telethermal.faults.channel import Direction
+from telethermal.sim.channel import Direction
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.sim.network import NetworkSpec, run_network_touch
 

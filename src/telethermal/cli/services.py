@@ -107,7 +107,7 @@ def _overrides(items: list[str] | None) -> dict:
 
 def cmd_faults(args) -> int:
     """A faulty network between a real master and slave, until SIGTERM/SIGINT."""
-    from telethermal.faults.proxy import FaultProxy, load_profile
+    from telethermal.sim.proxy import FaultProxy, load_profile
 
     profile = load_profile(args.profile, _overrides(args.set))
     proxy = FaultProxy(profile)

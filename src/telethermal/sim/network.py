@@ -19,7 +19,7 @@ What is modelled, and how:
   ``posterior_estimate`` on the lossy stream, each decision as a lossless
   ``material_estimate``, a ``flux_trajectory`` per decided material, and
   (for the naive baseline) a ``flux_setpoint`` per sample.
-* Lossy stream: each message through a :class:`~telethermal.faults.channel.Channel`
+* Lossy stream: each message through a :class:`~telethermal.sim.channel.Channel`
   (loss, delay, jitter, reordering); a lost one is gone.
 * Lossless stream (PROTOCOL.md section 4): each side runs the services' own
   :class:`~telethermal.wire.lossless.LosslessStream` (numbering, kept
@@ -46,7 +46,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from telethermal.faults.channel import Channel, Direction
+from telethermal.sim.channel import Channel, Direction
 from telethermal.ident.anytime import Estimate, Reason
 from telethermal.render.sampled import SampledGenerator
 from telethermal.teleop.link import SlaveLink

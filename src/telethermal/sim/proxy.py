@@ -3,7 +3,7 @@ master and a real slave (``telethermal faults --profile F``).
 
 The master connects to the proxy as if it were the slave; the proxy
 connects to the slave. Every message of either stream passes one
-:class:`~telethermal.faults.channel.Channel` per direction, which decides
+:class:`~telethermal.sim.channel.Channel` per direction, which decides
 whether, when and how often it arrives. Delivery runs on this process's
 clock; nothing is ever delivered early.
 
@@ -25,7 +25,7 @@ import numpy as np
 import zmq
 
 from telethermal.errors import TransportError
-from telethermal.faults.channel import Channel, Direction, FaultProfileError
+from telethermal.sim.channel import Channel, Direction, FaultProfileError
 from telethermal.tomltables import read_toml, table_values
 from telethermal.ports import close_listeners
 

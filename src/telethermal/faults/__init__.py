@@ -1,1 +1,0 @@
-"""Fault injection: a faulty network between master and slave."""
