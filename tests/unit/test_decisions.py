@@ -211,3 +211,15 @@ def test_a_one_window_spike_does_not_commit_when_two_are_needed():
         ("a", False), ("b", False), ("a|b", True), ("a", True)]
     model.confirm_windows = 1                     # the old rule: the spike commits
     assert decide(model, np.zeros((6, 1)), 10.0).label == "b"
+
+
+def test_the_push_observer_sees_each_sample_the_identifier_reads_once_in_order(model):
+    # A bench times the path into the identifier through this hook (issue 45:
+    # the slave no longer stamps the wall clock for it).
+    slave = Slave(SCENE, "wood", model, slave_rng(3))
+    seen = []
+    slave.on_push = seen.append
+    slave.advance_to(0.5)
+    slave.advance_to(1.0)
+    assert seen == list(range(slave.onset_index, slave.onset_index + len(seen)))
+    assert len(seen) == slave.samples_read - slave.onset_index > 50

@@ -34,6 +34,7 @@ cross toolchain is missing.
 from __future__ import annotations
 
 import datetime
+import functools
 import platform
 import tempfile
 import time
@@ -129,6 +130,10 @@ def _sessions(contact_s: float) -> dict:
     return out
 
 
+def _stamp(stamps_s: np.ndarray, j: int) -> None:
+    stamps_s[j] = time.perf_counter()
+
+
 def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int = 0) -> dict:
     from telethermal.data.generate import sensor_session
     from telethermal.devices.slave_pad import EmulatedSlavePad
@@ -149,20 +154,22 @@ def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int 
                 sim.advance_to(float(sim.t_s[-1]) + 1.0)
                 emu = Slave(scene, material, ident, slave_rng(trial_seed), session=session,
                             devices=devices)
+                pushed_s = np.full(len(emu.t_s), np.nan)       # into the identifier
+                emu.on_push = functools.partial(_stamp, pushed_s)
                 backlog = np.zeros(len(emu.t_s), dtype=bool)
                 t = float(emu.t_s[0])
                 while t <= float(emu.t_s[-1]) + 0.02:            # period by period, 100 Hz
                     emu.advance_to(t)
                     t += 1.0 / scene.sample_rate_hz
-                pushed = np.isfinite(emu.pushed_s)
+                pushed = np.isfinite(pushed_s)
                 if emu.detected_index is not None:
                     # The samples between the onset and its debounced detection
                     # wait for the detector, not for the devices: apart.
                     backlog[emu.onset_index:emu.detected_index] = True
-                    to_ident_backlog += list((emu.pushed_s - devices.write_s)[
+                    to_ident_backlog += list((pushed_s - devices.write_s)[
                         emu.onset_index:emu.detected_index])
                     pushed[emu.onset_index:emu.detected_index] = False
-                to_ident += list(emu.pushed_s[pushed] - devices.write_s[pushed])
+                to_ident += list(pushed_s[pushed] - devices.write_s[pushed])
                 got = np.isfinite(emu.received_s)
                 serial += list(emu.received_s[got] - devices.write_s[got])
                 # What each pad decided: the touch summary's one definition.

@@ -24,14 +24,13 @@ pad goes to its safe state.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from telethermal.control.contact import ContactDetector
 from telethermal.data.generate import pad_database
-import time
-
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import UNKNOWN, Estimate, Reason, StreamingIdentifier
 from telethermal.physics.scene import Scene
@@ -212,8 +211,9 @@ class Slave:
         #: False while a fault's event is still to be returned by advance_to.
         self._fault_sent = True
         self.detected_index: int | None = None
-        #: perf_counter when each sample was pushed into the identifier.
-        self.pushed_s = np.full(len(self.t_s), np.nan)
+        #: An observer called with each sample's index once the identifier
+        #: has it (a bench times the path from the board to the identifier).
+        self.on_push: Callable[[int], None] | None = None
 
     @property
     def classes(self) -> tuple[str, ...]:
@@ -269,7 +269,8 @@ class Slave:
         # pushed as such: the pad-model check does not count it as measured.
         measured = self._measured is None or bool(self._measured[j])
         est = self.stream.push(self._sample(j), float(self.force_n[j]), measured)
-        self.pushed_s[j] = time.perf_counter()
+        if self.on_push is not None:
+            self.on_push(j)
         return est
 
     def _onset_across_lost(self, k: int) -> int:
