@@ -75,6 +75,28 @@ def test_lossless_messages_arrive_once_and_in_order(loss, jitter_s, dup, reorder
     assert len(lossy) <= 2 * 30 and set(lossy) <= set(range(30))
 
 
+@pytest.mark.parametrize("broken", [False, True])
+def test_the_simulated_link_runs_the_services_stream_so_breaking_it_breaks_the_link(
+        monkeypatch, broken):
+    # Issue 45: the simulated rows run wire/lossless.py itself, not a copy
+    # of it. A stream that never sends a kept message again (neither asked
+    # nor on its timer: a broken protocol) loses on the simulated link what
+    # the real stream recovers.
+    if broken:
+        from telethermal.wire.lossless import LosslessStream
+        monkeypatch.setattr(LosslessStream, "resend_from", lambda self, first: None)
+    d = Direction(delay_s=0.05, loss=0.3)
+    net = SimNetwork(NetworkSpec.symmetric(d), np.random.default_rng(7))
+    for i in range(30):
+        net.send(0.01 * i, "s2m", msg(i), lossless=True)
+    got = [m.contact_id for _, m in drain(net, 60.0, 0.05)]
+    c = net.counters("s2m")
+    if broken:
+        assert c["resent"] == 0 and c["skipped"] > 0 and len(got) < 30
+    else:
+        assert c["resent"] > 0 and c["skipped"] == 0 and got == list(range(30))
+
+
 def drop_first(net, direction, kinds=("material_estimate", "posterior_estimate")):
     """``direction`` loses the first message of ``kinds`` sent on it."""
     original, state = net._transmit, {"dropped": False}
