@@ -149,20 +149,14 @@ class FaultProxy:
                     break
                 self._master_id = identity
                 self._schedule(self.m2s, now, "back", data)
-        if self.back in events:
-            while True:
+        for sock, channel, target in ((self.back, self.s2m, "front"),
+                                      (self.back_stream, self.s2m_stream, "front_stream")):
+            while sock in events:
                 try:
-                    data = self.back.recv(zmq.NOBLOCK)
+                    data = sock.recv(zmq.NOBLOCK)
                 except zmq.Again:
                     break
-                self._schedule(self.s2m, now, "front", data)
-        if self.back_stream in events:
-            while True:
-                try:
-                    data = self.back_stream.recv(zmq.NOBLOCK)
-                except zmq.Again:
-                    break
-                self._schedule(self.s2m_stream, now, "front_stream", data)
+                self._schedule(channel, now, target, data)
         now = self.clock()
         while self._queue and self._queue[0][0] <= now:
             _, _, target, data = heapq.heappop(self._queue)
