@@ -81,13 +81,16 @@ MAX_DELAY_MS = 2000.0
 
 def run(progress=None, quick: bool = False, only: str | None = None,
         seeds: int | None = None, processes: bool = True, jobs: int = 2,
-        scene_name: str = "fingertip-7", delays_ms: list[float] | None = None) -> dict:
+        scene_name: str = "fingertip-7", delays_ms: list[float] | None = None,
+        executor=None) -> dict:
     """Both parts; ``quick``: the zero-delay and WAN rows, 2 seeds, the
     processes on one material; ``only``: parts of row names (the zero-delay
     row is always run, every ratio needs it); ``scene_name``: a shipped
     scene or a scene file (its processes touch wood and steel where it has
     them, else its first two materials); ``delays_ms``: the pure-delay rows
-    of both parts (``parse_delays``; default: the committed rows)."""
+    of both parts (``parse_delays``; default: the committed rows); ``executor``:
+    where the simulated rows run (:mod:`telethermal.bench.executor`; None: a
+    pool of ``jobs`` worker processes)."""
     from telethermal.bench import faults_sim
     from telethermal.teleop.master import DisplayConfig
 
@@ -115,7 +118,7 @@ def run(progress=None, quick: bool = False, only: str | None = None,
         gen = save_generator(train_generator(scene, 0), out / "generator.npz")
         simulated = faults_sim.run(scene, ident, gen, DisplayConfig(), scene.materials,
                                    list(range(1, n_seeds + 1)), CONTACT_S, sim_rows, jobs=jobs,
-                                   progress=step)
+                                   progress=step, executor=executor)
         rows, traces, codes = run_processes(scene, out, ident, gen,
                                             settings if processes else [], materials, step)
     report = processes_report(rows, codes, materials)

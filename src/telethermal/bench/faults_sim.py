@@ -28,12 +28,12 @@ direct contact's peak; ``sd`` its spread over touches.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 
 import numpy as np
 
-from telethermal.errors import BenchError
 from telethermal.sim.channel import Direction
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.sim.network import NetworkSpec, run_network_touch
@@ -91,8 +91,7 @@ def _keep(summary: dict) -> dict:
 #: A unit of work: (kind, row name or None for the oracle, material). Kinds:
 #: "modes" (the compensated, naive and repeat touches), "before" (the other
 #: pre-decision rendering), "lossless" (the estimates sent lossless),
-#: "oracle". Weights: touches per seed (every touch costs about the same).
-UNIT_WEIGHTS = {"modes": 3, "before": 1, "lossless": 1, "oracle": 1}
+#: "oracle".
 
 
 def units(names, materials) -> list[tuple[str, str | None, str]]:
@@ -106,21 +105,6 @@ def units(names, materials) -> list[tuple[str, str | None, str]]:
             if name != ZERO:
                 out += [("lossless", name, m) for m in materials]
     return out
-
-
-def balance(work: list, jobs: int) -> list[list]:
-    """``work`` split into at most ``jobs`` parts of nearly equal weight:
-    the heaviest unit first, each to the lightest part so far (the lowest
-    index on a tie); within a part the units keep their order in ``work``.
-    Deterministic; no empty part."""
-    load = [0] * jobs
-    owner = {}
-    for i in sorted(range(len(work)), key=lambda i: -UNIT_WEIGHTS[work[i][0]]):
-        j = min(range(jobs), key=lambda k: (load[k], k))
-        owner[i] = j
-        load[j] += UNIT_WEIGHTS[work[i][0]]
-    parts = [[u for i, u in enumerate(work) if owner[i] == j] for j in range(jobs)]
-    return [p for p in parts if p]
 
 
 def run_unit(touch, unit, link: dict | None, config, seeds) -> dict:
@@ -177,90 +161,73 @@ def assemble(results: dict, rows, materials, seeds) -> dict:
 
 
 def run(scene, identifier_path, generator_path, config, materials, seeds, contact_s: float,
-        rows=ROWS, jobs: int = 2, progress=None) -> dict:
+        rows=ROWS, jobs: int = 2, progress=None, executor=None) -> dict:
     """The simulated section of the report: its units (row, part, material)
-    balanced over ``jobs`` worker processes (each loads the model files;
-    jobs and results cross the process boundary as JSON), then the rows,
-    the oracle and the summary."""
-    import json
-    import subprocess
-    import sys
-    import tempfile
-    from pathlib import Path
+    swept on ``executor`` (:mod:`telethermal.bench.executor`; None: a pool of
+    ``jobs`` worker processes, each loading the model files once; jobs and
+    results cross as JSON), then the rows, the oracle and the summary."""
+    from telethermal.bench.executor import open_executor, sweep
 
-    step = progress or (lambda _m: None)
     rows, materials = list(rows), list(materials)
-    parts = balance(units([n for n, _ in rows], materials), max(1, jobs))
-    results: dict = {}
+    job = {"scene": scene.ref or scene.name, "identifier": str(identifier_path),
+           "generator": str(generator_path), "seeds": list(seeds), "contact_s": contact_s,
+           "links": dict(rows), "rate_hz": config.rate_hz, "before": config.before}
+    work = units([n for n, _ in rows], materials)
+    own = executor is None
+    executor = open_executor("process", jobs) if own else executor
     announced: set = set()
-    with tempfile.TemporaryDirectory() as tmp:
-        procs = []
-        for i, part in enumerate(parts):
-            job = {"scene": scene.ref or scene.name, "identifier": str(identifier_path),
-                   "generator": str(generator_path), "seeds": list(seeds),
-                   "contact_s": contact_s, "units": part, "links": dict(rows),
-                   "rate_hz": config.rate_hz, "before": config.before}
-            path = Path(tmp) / f"job{i}.json"
-            path.write_text(json.dumps(job))
-            with open(path.with_suffix(".err"), "w") as err:
-                procs.append((subprocess.Popen(
-                    [sys.executable, "-m", "telethermal.bench.faults_sim", str(path),
-                     str(path.with_suffix(".out.json"))],
-                    stdout=subprocess.PIPE, stderr=err, text=True), path))
-        for proc, path in procs:
-            with proc.stdout:
-                for line in proc.stdout:
-                    name = line.strip()
-                    if name and name not in announced:      # one step per row
-                        announced.add(name)
-                        step(f"simulated: {name}")
-            if proc.wait() != 0:
-                for other, _ in procs:
-                    other.kill()
-                    other.wait()
-                err = path.with_suffix(".err").read_text()
-                raise BenchError(f"simulated fault worker {path.name} failed: {err[-2000:]}")
-            for unit, result in json.loads(path.with_suffix(".out.json").read_text()):
-                results[tuple(unit)] = result
+
+    def step(text: str) -> None:                # one step per row, as its first unit ends
+        unit = text.rsplit(" (", 1)[0]          # "simulated: modes ROW MATERIAL"
+        if progress is None or not unit.startswith("simulated: modes "):
+            return
+        row = unit.removeprefix("simulated: modes ").rsplit(" ", 1)[0]
+        if row not in announced:
+            announced.add(row)
+            progress(f"simulated: {row}")
+
+    try:
+        done = sweep(executor, unit_job, [(job, list(u)) for u in work], progress=step,
+                     label=lambda c: "simulated: " + " ".join(x for x in c[1] if x))
+    finally:
+        if own:
+            executor.shutdown(cancel_futures=True)
+    results = {tuple(u): r for u, r in zip(work, done)}
     out = assemble(results, rows, materials, seeds)
     out.update({"materials": materials, "seeds": list(seeds), "contact_s": contact_s,
-                "rate_hz": config.rate_hz, "before": config.before, "jobs": len(parts)})
+                "rate_hz": config.rate_hz, "before": config.before})
     out["summary"] = summary(out)
     return out
 
 
-def _worker(job_path: str, out_path: str) -> None:
-    import json
-    import os
-    from pathlib import Path
-
+@functools.lru_cache(maxsize=4)
+def _touches(scene_ref: str, identifier_path: str, generator_path: str, rate_hz: float,
+             before: str):
+    """A worker's scene, models and display config, loaded once per process."""
     from telethermal.ident.registry import load_model
-    from telethermal.physics.scene import load_scene
+    from telethermal.physics.scene import load_scene, with_finger
     from telethermal.render.generator import load_generator
     from telethermal.render.sampled import sample_curves
     from telethermal.teleop.master import DisplayConfig
-    from telethermal.physics.scene import with_finger
 
-    job = json.loads(Path(job_path).read_text())
-    scene = with_finger(load_scene(job["scene"]))
-    identifier = load_model(job["identifier"])
-    generator = load_generator(job["generator"])
+    scene = with_finger(load_scene(scene_ref))
+    identifier = load_model(identifier_path)
+    generator = load_generator(generator_path)
     curves = sample_curves(generator, [m for m in generator.materials
                                        if m in identifier.classes_])
-    config = DisplayConfig(rate_hz=job["rate_hz"], before=job["before"])
+    return scene, identifier, curves, DisplayConfig(rate_hz=rate_hz, before=before)
+
+
+def unit_job(job: dict, unit: list) -> dict:
+    """One unit's touches (:func:`run_unit`) on the models ``job`` names: a
+    sweep's job, in whichever process the executor runs it."""
+    scene, identifier, curves, config = _touches(job["scene"], job["identifier"],
+                                                 job["generator"], job["rate_hz"],
+                                                 job["before"])
     touch = lambda m, seed, spec, **kw: run_network_touch(               # noqa: E731
         scene, m, identifier, curves, kw.pop("config", config), spec, seed=seed,
         contact_s=job["contact_s"], **kw).summary
-    out = []
-    for unit in job["units"]:
-        kind, name, _ = unit
-        if kind == "modes":
-            print(name, flush=True)                 # progress: the row under way
-        out.append((unit, run_unit(touch, unit, job["links"].get(name), config,
-                                   job["seeds"])))
-    tmp = Path(out_path).with_suffix(".tmp")
-    tmp.write_text(json.dumps(out))
-    os.replace(tmp, out_path)
+    return run_unit(touch, tuple(unit), job["links"].get(unit[1]), config, job["seeds"])
 
 
 def _mean(out: dict, row: str, mode: str, window: str) -> float | None:
@@ -302,9 +269,3 @@ def summary(out: dict) -> dict:
         "safety_events": int(sum(m["safety_events"] for r in out["rows"].values()
                                  for m in r["modes"].values())),
     }
-
-
-if __name__ == "__main__":          # a worker of run(): job file in, result file out
-    import sys
-
-    _worker(sys.argv[1], sys.argv[2])

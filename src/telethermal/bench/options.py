@@ -6,9 +6,9 @@ from __future__ import annotations
 import shlex
 
 
-#: Options that say where a bench writes or how many workers it uses, not
-#: what it measures.
-OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs"})
+#: Options that say where a bench writes or where and on how many workers
+#: it runs, not what it measures.
+OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs", "--executor"})
 #: Options at the value the issue's targets name: which bench, not a
 #: reduction of it (``bench identify --as-built 0.15``, its 5 pads).
 TARGET_OPTIONS = frozenset({"--as-built 0.15", "--pads 5"})

@@ -68,14 +68,16 @@ def cmd_bench_transport(args) -> int:
 
 def cmd_bench_faults(args) -> int:
     from telethermal.bench import faults, faults_sim
+    from telethermal.bench.executor import open_executor
     from telethermal.jsonfile import write_json
 
     delays = faults.parse_delays(args.delays) if args.delays else None
     n_rows = len(faults_sim.ROWS) + len(faults.SETTINGS) + 2 * len(delays or ())
-    with _progress(n_rows + 1, "bench faults") as advance:
+    with _progress(n_rows + 1, "bench faults") as advance, \
+            open_executor(args.executor, args.jobs) as executor:
         report = faults.run(progress=advance, quick=args.quick, only=args.only,
-                            seeds=args.seeds, processes=not args.no_processes, jobs=args.jobs,
-                            scene_name=args.scene, delays_ms=delays)
+                            seeds=args.seeds, processes=not args.no_processes,
+                            executor=executor, scene_name=args.scene, delays_ms=delays)
     traces = report.pop("_traces")
     report["command"] = _command()
     png = faults.plot(report, traces, _png(args))
@@ -259,8 +261,7 @@ def _add_faults(bsub) -> None:
                                   "(e.g. 'crash,partition'); 'delay 0 ms' is always run")
     p.add_argument("--seeds", type=int, help="seeds per material on the simulated clock "
                                              "(default 5; 2 with --quick)")
-    p.add_argument("--jobs", type=int, default=2,
-                   help="worker processes for the simulated rows (default 2)")
+    _executor_args(p, "the simulated rows")
     p.add_argument("--scene", default="fingertip-7",
                    help="a shipped scene or a scene file (a lab's own): its materials, seeds "
                         "and processes")
@@ -270,6 +271,15 @@ def _add_faults(bsub) -> None:
     p.add_argument("--no-processes", action="store_true",
                    help="the simulated part only (no services, no fault proxy)")
     p.set_defaults(func=cmd_bench_faults)
+
+
+def _executor_args(p, what: str) -> None:
+    p.add_argument("--executor", default="process", metavar="KIND",
+                   help=f"where {what} run: process (worker processes, the default), serial "
+                        "(this process), dask:ADDRESS (a Dask cluster's scheduler) or "
+                        "dask-local (pip install 'telethermal[dask]'); the same JSON from each")
+    p.add_argument("--jobs", type=_positive(int), default=None,
+                   help="workers of --executor process or dask-local (default: one a CPU)")
 
 
 def _scene_arg(p) -> None:

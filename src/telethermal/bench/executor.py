@@ -1,0 +1,265 @@
+"""The benches' sweeps (seeds, materials, rows, as-built draws) through one
+:class:`concurrent.futures.Executor`.
+
+A sweep is a module-level function and a list of JSON-able arguments; each
+call's result must be JSON-able too. What crosses a process boundary is the
+function's name and JSON text, never a pickled object, and every result is
+read back from its JSON whichever executor ran it, so the same sweep gives
+the same report in one process, on this machine's workers or on a cluster.
+
+* ``process`` (the default): :class:`JsonProcessPool`, worker processes of
+  this Python (``python -m telethermal.bench.worker``) that read one job a
+  line on their stdin and write its result a line on their stdout. A worker
+  lives for the whole sweep, so what it loads once (a model file, a scene)
+  serves every job it runs.
+* ``serial``: :class:`SerialExecutor`, in this process (a debugger's, or a
+  machine with one core).
+* ``dask:ADDRESS`` or ``dask-local``: a Dask ``distributed`` cluster's
+  executor (``pip install 'telethermal[dask]'``), at ``ADDRESS`` (its
+  scheduler, e.g. ``tcp://10.0.0.5:8786``) or a local one of ``jobs``
+  worker processes. Dask's own transport pickles what it sends: here only
+  the function's name and JSON text; use it on a cluster you trust, as
+  Dask's documentation says of any cluster.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import queue
+import subprocess
+import sys
+import tempfile
+import threading
+import traceback
+from collections.abc import Callable, Iterable
+from concurrent.futures import Executor, Future
+
+from telethermal.errors import BenchError
+
+#: The executors :func:`open_executor` knows by name (a Dask one by prefix).
+KINDS = ("process", "serial", "dask:ADDRESS", "dask-local")
+
+
+def function_name(fn: Callable) -> str:
+    """``module:qualname`` of a module-level function; a ValueError for
+    anything a worker could not import by name (a lambda, a closure)."""
+    module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", "")
+    if not module or "<" in qualname or module == "__main__":
+        raise ValueError(f"a sweep runs module-level functions, got {fn!r}")
+    return f"{module}:{qualname}"
+
+
+def _function(name: str) -> Callable:
+    module, _, qualname = name.partition(":")
+    target = importlib.import_module(module)
+    for part in qualname.split("."):
+        target = getattr(target, part)
+    return target
+
+
+def call_json(name: str, args_json: str) -> str:
+    """Run the function ``name`` on ``args_json`` (a JSON list) and return its
+    result as JSON text: every executor runs a job through this."""
+    return json.dumps(_function(name)(*json.loads(args_json)), default=_plain)
+
+
+def _plain(value):
+    """numpy's scalars and arrays, as JSON has them."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"a sweep's result holds {type(value).__name__}, which is not JSON")
+
+
+class SerialExecutor(Executor):
+    """Each job in this process, at submit."""
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:          # the caller's future holds it
+            future.set_exception(exc)
+        return future
+
+
+class JsonProcessPool(Executor):
+    """``max_workers`` worker processes (``python -m telethermal.bench.worker``)
+    that take jobs as JSON lines and give results back as JSON lines. Only
+    :func:`call_json` jobs (a function's name and JSON text) can be
+    submitted; a worker that dies fails its job with its stderr's end and is
+    replaced. No pickle crosses to a worker."""
+
+    def __init__(self, max_workers: int | None = None):
+        self.max_workers = max(1, max_workers or os.cpu_count() or 1)
+        self._jobs: queue.Queue = queue.Queue()
+        self._shutdown = False
+        self._threads = [threading.Thread(target=self._serve, name=f"bench-worker-{i}",
+                                          daemon=True) for i in range(self.max_workers)]
+        for t in self._threads:
+            t.start()
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        if fn is not call_json or kwargs or len(args) != 2:
+            raise ValueError("JsonProcessPool runs call_json(name, args_json) jobs only")
+        if self._shutdown:
+            raise RuntimeError("cannot submit to a pool that was shut down")
+        future: Future = Future()
+        self._jobs.put((future, json.dumps({"call": args[0], "args": args[1]})))
+        return future
+
+    def _start(self):
+        err = tempfile.TemporaryFile(mode="w+")
+        # The worker imports what this process can (a sweep's function may
+        # live in a script's or a test's folder).
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+        proc = subprocess.Popen([sys.executable, "-m", "telethermal.bench.worker"],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err,
+                                text=True, bufsize=1, env=env)
+        return proc, err
+
+    def _serve(self) -> None:
+        proc = err = None
+        try:
+            while True:
+                item = self._jobs.get()
+                if item is None:
+                    return
+                future, line = item
+                if not future.set_running_or_notify_cancel():
+                    continue
+                if proc is None:
+                    proc, err = self._start()
+                try:
+                    proc.stdin.write(line + "\n")
+                    proc.stdin.flush()
+                    answer = proc.stdout.readline()
+                except OSError:
+                    answer = ""
+                if not answer:                  # the worker died
+                    proc.kill()
+                    _close(proc)
+                    err.seek(0)
+                    tail = err.read()[-2000:]
+                    err.close()
+                    proc = err = None
+                    future.set_exception(BenchError(f"a bench worker died: {tail}"))
+                    continue
+                reply = json.loads(answer)
+                if "error" in reply:
+                    future.set_exception(BenchError(reply["error"]))
+                else:
+                    future.set_result(reply["result"])
+        finally:
+            if proc is not None:
+                _close(proc)
+                err.close()
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        self._shutdown = True
+        if cancel_futures:
+            while True:
+                try:
+                    item = self._jobs.get_nowait()
+                except queue.Empty:
+                    break
+                if item is not None:
+                    item[0].cancel()
+        for _ in self._threads:
+            self._jobs.put(None)
+        if wait:
+            for t in self._threads:
+                t.join()
+
+
+def _close(proc: subprocess.Popen) -> None:
+    """A worker's pipes closed (its stdin's end tells it to stop), and the
+    worker waited for."""
+    for pipe in (proc.stdin, proc.stdout):
+        try:
+            pipe.close()
+        except OSError:                  # a dead worker's stdin: its buffer unflushable
+            pass
+    proc.wait()
+
+
+def open_executor(kind: str | None = None, jobs: int | None = None) -> Executor:
+    """The executor ``kind`` names (:data:`KINDS`; None: ``process``) with
+    ``jobs`` workers (None: one a CPU)."""
+    kind = kind or "process"
+    if kind == "process":
+        return JsonProcessPool(jobs)
+    if kind == "serial":
+        return SerialExecutor()
+    if kind == "dask-local" or kind.startswith("dask:"):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise BenchError(f"--executor {kind} needs Dask's distributed: "
+                             "pip install 'telethermal[dask]'") from None
+        if kind == "dask-local":
+            cluster = LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
+                                   processes=True, dashboard_address=None)
+            return _DaskExecutor(Client(cluster), cluster)
+        return _DaskExecutor(Client(kind.removeprefix("dask:")))
+    raise BenchError(f"--executor must be one of {', '.join(KINDS)}, got {kind!r}")
+
+
+class _DaskExecutor(Executor):
+    """A Dask client's executor that closes its client (and local cluster)."""
+
+    def __init__(self, client, cluster=None):
+        self.client, self.cluster = client, cluster
+        self._executor = client.get_executor(pure=False)
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        return self._executor.submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        self._executor.shutdown(wait=wait)
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def sweep(executor: Executor, fn: Callable, calls: Iterable[tuple], progress=None,
+          label: Callable[[tuple], str] | None = None) -> list:
+    """``fn(*args)`` for each ``args`` of ``calls`` on ``executor``, the
+    results in the order of ``calls``, each read back from its JSON.
+    ``progress(text)`` as each finishes; a call that raised is a
+    :class:`BenchError` naming it (the others are cancelled)."""
+    name = function_name(fn)
+    calls = [tuple(c) for c in calls]
+    futures = [executor.submit(call_json, name, json.dumps(list(c), default=_plain))
+               for c in calls]
+    out = []
+    try:
+        for k, (c, f) in enumerate(zip(calls, futures), 1):
+            try:
+                result = json.loads(f.result())
+            except Exception as exc:
+                what = label(c) if label else ", ".join(map(repr, c))
+                raise BenchError(f"{name}({what}) failed: {exc}") from exc
+            out.append(result)
+            if progress is not None:
+                progress(f"{label(c) if label else name} ({k} of {len(calls)})")
+    except BaseException:
+        for f in futures:
+            f.cancel()
+        raise
+    return out
+
+
+def worker_main(stdin=sys.stdin, stdout=sys.stdout) -> None:
+    """A :class:`JsonProcessPool` worker: one job a line in, one answer a
+    line out (``{"result": ...}`` or ``{"error": ...}``), until stdin closes."""
+    for line in stdin:
+        job = json.loads(line)
+        try:
+            reply = {"result": call_json(job["call"], job["args"])}
+        except Exception as exc:            # the job's; the worker goes on
+            reply = {"error": f"{type(exc).__name__}: {exc}\n"
+                              f"{traceback.format_exc()[-3000:]}"}
+        stdout.write(json.dumps(reply) + "\n")
+        stdout.flush()
