@@ -1,5 +1,7 @@
 """bench render's bookkeeping: which sessions the product's safety count holds."""
 
+import pytest
+
 from telethermal.bench.render import _safety_counts
 from telethermal.teleop.master import DEFAULT_GAINS
 
@@ -108,18 +110,32 @@ def test_the_dew_margin_is_the_true_surfaces_with_nothing_on_the_pad():
 def test_a_session_adds_to_its_runs_totals_and_to_no_other(trained_models, monkeypatch):
     # The totals were module globals: another bench's sessions in the same
     # process (bench render --as-built's) were added to bench render's.
-    from telethermal.bench import render
+    from telethermal.bench import render_sessions as rs
     from telethermal.physics.scene import load_scene
     from telethermal.teleop.master import DisplayConfig
     from telethermal.physics.scene import with_finger
 
-    monkeypatch.setattr(render, "CONTACT_S", 0.5)
+    monkeypatch.setattr(rs, "CONTACT_S", 0.5)
     scene = with_finger(load_scene("fingertip-7"))
     ident, gen = trained_models.pair(scene, 0)
-    mine = render.Totals()
-    row = render._session_row(scene, "steel", ident, gen, DisplayConfig(), 1, totals=mine)
-    render._session_row(scene, "steel", ident, gen, DisplayConfig(), 1)      # no totals
+    mine = rs.Totals()
+    row = rs.session_row(scene, "steel", ident, gen, DisplayConfig(), 1, totals=mine)
+    rs.session_row(scene, "steel", ident, gen, DisplayConfig(), 1)      # no totals
     # The session without totals added nothing to this run's.
     assert mine.limits["sessions"] == 1 and mine.dew["sessions"] == 1
     assert mine.limits["current_exceeded"] == row["module_limits"]["current_exceeded"]
     assert mine.limits["contact_s"] == row["module_limits"]["contact_s"] > 0
+
+
+def test_a_display_config_crosses_to_a_worker_whole_or_is_refused():
+    from telethermal.bench.render import GAIN_SETS
+    from telethermal.bench.render_sessions import config_fields, display_config
+    from telethermal.teleop.master import DisplayConfig
+
+    import json
+    for config in (DisplayConfig(), DisplayConfig(rate_hz=50.0, idle="object"),
+                   DisplayConfig(gains=GAIN_SETS["PI 1e-3/1e-2"], r_pad_belief=1.3,
+                                 feedforward_model="static", before="hold")):
+        assert display_config(json.loads(json.dumps(config_fields(config)))) == config
+    with pytest.raises(ValueError, match="cannot carry"):
+        config_fields(DisplayConfig(blend_s=0.3))

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import datetime
 import platform
+import tempfile
 import time
 from pathlib import Path
 from typing import Callable
@@ -34,17 +35,16 @@ from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
-from telethermal.teleop.master import (DEFAULT_GAINS, JUNCTION_REARMED, JUNCTION_STOPPED,
-                                        DisplayConfig)
+from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
 from telethermal.teleop.models import train_generator, train_identifier
-from telethermal.teleop.display_setup import add_limits, limits_report, new_limit_totals
-from telethermal.sim.inprocess import run_session
+from telethermal.teleop.display_setup import limits_report
+from telethermal.bench.render_sessions import (CONTACT_S, KEYS, Totals, config_fields,
+                                               session_job)
 
 RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
 SEEDS = (1, 2)
 SEEDS_5 = (1, 2, 3, 4, 5)
 FEEDFORWARD_MODELS = ("static", "impedance")
-CONTACT_S = 3.0
 _SAT = dict(output_min=-25.0, output_max=25.0)
 GAIN_SETS = {
     "feed-forward only": PidGains(0.0, 0.0, 0.0, **_SAT),
@@ -55,59 +55,6 @@ GAIN_SETS = {
     "PI 1e-3/1e-2": PidGains(1e-3, 1e-2, 0.0, **_SAT),
     "PI 1e-3/3e-2": PidGains(1e-3, 3e-2, 0.0, **_SAT),
 }
-KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
-        "time_to_correct_flux_s", "safety_events", "flux_rms_error_rel_whole")
-#: A session's module summary keys ``add_limits`` reads (kept in each row).
-_LIMIT_KEYS = ("current_exceeded", "hot_side_exceeded", "reversals", "contact_s",
-               "ripple_rms_a", "requested")
-
-
-class Totals:
-    """One run's pools, nothing carried to the next: every session's module
-    limits, counted on the controller's request before any clamp
-    (``limits_all_sessions``; ``limits`` is the shipped display's alone), and
-    the pad's idle against the room's dew point (simulated-clock sessions)."""
-
-    def __init__(self):
-        self.limits = new_limit_totals()
-        self.dew = {"sessions": 0, "min_idle_minus_dew_k": float("inf")}
-
-
-def _session_row(scene, material, identifier, generator, config, seed,
-                 expected_material=None, display_calibration=None, totals: Totals | None = None):
-    """One session's row; its limits and idle added to ``totals`` if given."""
-    start = time.process_time()
-    # The pad idles by config.idle (control/preconditioning.py): by default a
-    # repeated touch (the material known from memory) is pre-conditioned for
-    # it, a first touch idles at the policy's choice for an unknown object.
-    s = run_session(scene, material, identifier, generator, config, contact_s=CONTACT_S,
-                    seed=seed, expected_material=expected_material, fresh_fits=True,
-                    display_calibration=display_calibration).summary
-    cpu = time.process_time() - start
-    module = s["module"]
-    if totals is not None:
-        add_limits(totals.limits, module)
-        # The pad's true surface with nothing on it, not the clamped command.
-        idle_minus_dew_k = s["idle_surface_minus_dew_k"]
-        if idle_minus_dew_k is not None:
-            totals.dew["sessions"] += 1
-            totals.dew["min_idle_minus_dew_k"] = min(totals.dew["min_idle_minus_dew_k"],
-                                                     idle_minus_dew_k)
-    row = {"material": material, "seed": seed, "identified": s["identified"],
-           **{k: s[k] for k in KEYS}, "decision_from_s": s["decision_from_s"],
-           "display_idle_c": s["display_idle_c"], "object_ir_c": s["object_ir_c"],
-           "heat_extraction_ratio_first_s": s["heat_extraction_ratio_first_s"],
-           "skin_above_threshold_s": s["skin_above_threshold_s"],
-           "module_max_current_a": module["max_current_a"],
-           "module_saturated_periods": module["saturated_periods"],
-           "module_reversals_per_s": module["reversals_per_s"],
-           "module_ripple_rms_a": module["ripple_rms_a"],
-           "module_largest_request_a": (module["requested"] or {}).get("largest_request_a"),
-           "module_limits": {k: module[k] for k in _LIMIT_KEYS},
-           "junction_stops": s["display_event_counts"].get(JUNCTION_STOPPED, 0),
-           "junction_rearms": s["display_event_counts"].get(JUNCTION_REARMED, 0),
-           "cpu_s_per_simulated_s": cpu / (CONTACT_S + 0.4)}
-    return row
 
 
 def junction_sensor_report(scene) -> dict:
@@ -294,7 +241,25 @@ def generator_comparison(scene) -> dict:
 
 
 def run(progress: Callable[[str], None] | None = None, quick: bool = False,
-        scene_name: str = "fingertip-7") -> dict:
+        scene_name: str = "fingertip-7", executor=None) -> dict:
+    """The report (see the module); its sessions swept on ``executor``
+    (:mod:`telethermal.bench.executor`; None: one worker process a CPU)."""
+    from telethermal.bench.executor import open_executor
+
+    own = executor is None
+    executor = open_executor("process") if own else executor
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            return _run(progress, quick, scene_name, executor, Path(tmp))
+    finally:
+        if own:
+            executor.shutdown(cancel_futures=True)
+
+
+def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
+    from telethermal.bench.executor import sweep
+    from telethermal.render.generator import save_generator
+
     step = progress or (lambda _msg: None)
     scene = with_finger(load_scene(scene_name))
     materials = scene.materials[::3] if quick else scene.materials
@@ -304,12 +269,21 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     t0 = time.perf_counter()
     identifier, generator = train_identifier(scene, 0), train_generator(scene, 0)
     training_s = time.perf_counter() - t0
+    job = {"scene": scene.ref or scene.name, "contact_s": CONTACT_S,
+           "identifier": str(identifier.save(tmp / "identifier.npz")),
+           "generator": str(save_generator(generator, tmp / "generator.npz"))}
 
     totals = Totals()
 
-    def sweep(config, mats=materials, sds=seeds):
-        return [_session_row(scene, m, identifier, generator, config, s, totals=totals)
-                for m in mats for s in sds]
+    def rows_of(config, mats=materials, sds=seeds, expected=False):
+        """Every material and seed's session on ``config``, in that order;
+        each added to the run's totals."""
+        rows = sweep(executor, session_job, [(job, m, s, config_fields(config),
+                                              m if expected else None)
+                                             for m in mats for s in sds])
+        for row in rows:
+            totals.add(row)
+        return rows
 
     report = {"scene": scene.name, "contact_s": CONTACT_S, "seeds": list(seeds),
               "materials": {m: {} for m in materials}, "training_s": training_s}
@@ -318,22 +292,19 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     step("control rate")
     report["rate"] = []
     for rate in rates:
-        rows = sweep(DisplayConfig(rate_hz=rate), sds=seeds5)
+        rows = rows_of(DisplayConfig(rate_hz=rate), sds=seeds5)
         report["rate"].append({"rate_hz": rate, **_aggregate(rows), "rows": rows})
     report["controller"] = []
     for model in FEEDFORWARD_MODELS:
-        rows = sweep(DisplayConfig(feedforward_model=model), sds=seeds5)
+        rows = rows_of(DisplayConfig(feedforward_model=model), sds=seeds5)
         report["controller"].append({"feedforward_model": model, **_aggregate(rows),
                                      "per_material": _per_material(rows), "rows": rows})
     step("repeated touches (pre-conditioned from memory)")
     first = next(c["rows"] for c in report["controller"]
                  if c["feedforward_model"] == DisplayConfig().feedforward_model)
-    repeat = [_session_row(scene, m, identifier, generator, DisplayConfig(), s,
-                           expected_material=m, totals=totals) for m in materials for s in seeds5]
+    repeat = rows_of(DisplayConfig(), sds=seeds5, expected=True)
     step("first touches with the pad idling at the object (the policy's comparison)")
-    at_object = [_session_row(scene, m, identifier, generator, DisplayConfig(idle="object"), s,
-                              totals=totals)
-                 for m in materials for s in seeds5]
+    at_object = rows_of(DisplayConfig(idle="object"), sds=seeds5)
     report["materials"] = _materials(first, repeat, at_object)
     step("the floor at the slave's decision times")
     report["decision_floor"] = decision_floor_at_the_slaves_times(
@@ -342,15 +313,15 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     report["gains"] = []
     for name, gains in GAIN_SETS.items():
         for belief in (1.0, 1.3):
-            rows = sweep(DisplayConfig(gains=gains, r_pad_belief=belief,
-                                       feedforward_model="static"))
+            rows = rows_of(DisplayConfig(gains=gains, r_pad_belief=belief,
+                                         feedforward_model="static"))
             report["gains"].append({"gains": name, "kp": gains.kp, "ki": gains.ki,
                                     "kd": gains.kd, "pad_resistance_belief": belief,
                                     **_aggregate(rows), "rows": rows})
     step("before identification")
     report["before"] = []
     for before in ("hold", "prior"):
-        rows = sweep(DisplayConfig(before=before))
+        rows = rows_of(DisplayConfig(before=before))
         report["before"].append({"before": before, **_aggregate(rows), "rows": rows})
     step("generators")
     report["generator"] = generator_comparison(scene) if not quick else None
@@ -489,10 +460,10 @@ def plot(report: dict, out_png: str | Path) -> Path:
 
 def run_and_save(json_path: str | Path, png_path: str | Path, quick: bool = False,
                  command: str = "", progress: Callable[[str], None] | None = None,
-                 scene: str = "fingertip-7") -> dict:
+                 scene: str = "fingertip-7", executor=None) -> dict:
     """Run the benchmark on ``scene`` (a shipped name or a scene file), plot
     it to ``png_path`` and write the JSON report; returns the report."""
-    report = run(progress=progress, quick=quick, scene_name=scene)
+    report = run(progress=progress, quick=quick, scene_name=scene, executor=executor)
     report["command"] = command
     report["png"] = str(plot(report, png_path))
     write_json(json_path, report)

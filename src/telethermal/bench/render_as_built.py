@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from telethermal.bench import identify_as_built as iab
-from telethermal.bench.render import CONTACT_S, _session_row
+from telethermal.bench.render_sessions import CONTACT_S, session_row
 from telethermal.bench.render_limits import limits_of
 from telethermal.physics.as_built import draw_as_built, with_as_built
 from telethermal.physics.scene import load_scene, with_finger
@@ -51,8 +51,8 @@ ROWS = ("as_modelled", "uncalibrated", "calibrated")
 
 
 def _rows(scene, materials, identifier, generator, seeds, display_calibration=None) -> list:
-    return [_session_row(scene, m, identifier, generator, DisplayConfig(), s,
-                         display_calibration=display_calibration)
+    return [session_row(scene, m, identifier, generator, DisplayConfig(), s,
+                        display_calibration=display_calibration)
             for m in materials for s in seeds]
 
 

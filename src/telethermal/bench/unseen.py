@@ -41,23 +41,25 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from importlib import resources
 from typing import Callable
 
 import numpy as np
 
 from telethermal.bench import unseen_layered as ul, unseen_render as ur, unseen_trade as ut
+# The unseen set's names here too: the tests' and the as-built bench's (its API).
+from telethermal.bench.unseen_set import (DEFAULT_UNSEEN, SHIPPED_UNSEEN_SCENE,  # noqa: F401
+                                          default_unseen_scene_path, package_objects,
+                                          same_as_trained, scene_objects, touch_scene,
+                                          unseen_objects)
 from telethermal.bench.unseen_text import report_section, text_report  # noqa: F401 (its API)
-from telethermal.errors import IdentificationError, SceneError, UnknownMaterialError
+from telethermal.errors import IdentificationError
 from telethermal.ident.evaluate import wilson_interval
 from telethermal.ident.effusivity import Z95, EffusivityEstimate
-from telethermal.physics.materials import get_material, load_materials, object_materials
-from telethermal.physics.scene import ObjectSpec, Scene, load_scene
+from telethermal.physics.materials import get_material
+from telethermal.physics.scene import Scene, load_scene
 
 #: The windows the estimate is scored at, s (after the detected onset).
 WINDOWS_S = (0.1, 0.25, 0.5, 1.0)
-#: The package's materials touched by default (the scene file adds its own).
-DEFAULT_UNSEEN = ("copper", "carbon_steel", "glass", "foam")
 #: A live slave's estimation period, s (50 Hz): the warm start's distance.
 LIVE_PERIOD_S = 0.02
 #: The issue's targets (quoted, not tuned): unseen materials' median error by
@@ -70,98 +72,6 @@ NOT_RUN = {
     "flux_rms_rel": "not_run: rendering not asked (render=False)",
     "skin_rms_k": "not_run: rendering not asked (render=False)",
 }
-
-
-#: How the report names the shipped unseen scene (not by this machine's path).
-SHIPPED_UNSEEN_SCENE = "shipped: telethermal/bench/unseen_objects/unseen-objects.toml"
-
-
-def default_unseen_scene_path() -> str:
-    """The shipped scene file whose objects (brass, concrete) and materials
-    table add to :data:`DEFAULT_UNSEEN`."""
-    return str(resources.files("telethermal.bench").joinpath(
-        "unseen_objects", "unseen-objects.toml"))
-
-
-def package_objects(names, trained, temp_c: float, thickness_m: float) -> list[ObjectSpec]:
-    """Objects of the package's materials ``names`` (a comma-separated
-    string or a list), at ``temp_c``, ``thickness_m`` thick; an unknown
-    name, a non-object material or a trained one is an error naming it."""
-    if isinstance(names, str):
-        names = [n.strip() for n in names.split(",")]
-    if not names or any(not n for n in names):
-        raise SceneError(f"--unseen: an empty material name in {','.join(names)!r}")
-    out = []
-    for name in names:
-        if name not in load_materials():
-            raise UnknownMaterialError(f"--unseen: unknown material {name!r}; the package's "
-                                       f"objects: {', '.join(object_materials())}")
-        if get_material(name).role != "object":
-            raise SceneError(f"--unseen: {name!r} is a {get_material(name).role} material, "
-                             f"not an object; objects: {', '.join(object_materials())}")
-        if name in trained:
-            raise SceneError(f"--unseen: {name!r} is one of the trained materials "
-                             f"({', '.join(trained)})")
-        out.append(ObjectSpec(name, temp_c, thickness_m))
-    return out
-
-
-def scene_objects(path, trained) -> list[ObjectSpec]:
-    """The objects of the scene file ``path`` (its own materials table
-    registered for this process); a trained material among them is an error
-    (a layered object is its own, whatever its layers)."""
-    scene = load_scene(path)
-    clash = [o.name for o in scene.objects if o.name in trained]
-    if clash:
-        raise SceneError(f"--unseen-scene {path}: {', '.join(clash)} is a trained material")
-    return list(scene.objects)
-
-
-def touch_scene(base: Scene, unseen) -> Scene:
-    """``base`` with the unseen objects after its own (the same pad,
-    instruments and variability): what ``pad_database`` touches."""
-    objects = tuple(base.objects) + tuple(unseen)
-    names = [o.name for o in objects]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise SceneError(f"unseen set: {', '.join(twice)} given twice")
-    return dataclasses.replace(base, objects=objects, name=f"{base.name}+unseen")
-
-
-def same_as_trained(name: str, trained) -> str | None:
-    """The trained material with the very same properties (an alias), if any."""
-    m = get_material(name)
-    for t in trained:
-        o = get_material(t)
-        if (o.conductivity_w_mk, o.volumetric_heat_j_m3k) == (m.conductivity_w_mk,
-                                                                m.volumetric_heat_j_m3k):
-            return t
-    return None
-
-
-def unseen_objects(base: Scene, unseen=None, unseen_scene=None) -> tuple[list, str | None]:
-    """(the unseen objects, the scene file they came from or None):
-    ``unseen`` (package materials, at the temperature and thickness of
-    ``base``'s first object) and the objects of the scene file
-    ``unseen_scene``; with neither, :data:`DEFAULT_UNSEEN` less ``base``'s
-    own (glass on the active pad) and the shipped unseen-objects scene's,
-    at ``base``'s temperature."""
-    trained = base.materials
-    first = base.objects[0]
-    if unseen is None:
-        names = [] if unseen_scene is not None else [m for m in DEFAULT_UNSEEN
-                                                      if m not in trained]
-    else:
-        names = unseen
-    objects = package_objects(names, trained, first.temp_c, first.thickness_m) if names else []
-    if unseen is None and unseen_scene is None:
-        path = default_unseen_scene_path()
-        objects += [dataclasses.replace(o, temp_c=first.temp_c)
-                    for o in scene_objects(path, trained)]
-    else:
-        path = unseen_scene
-        objects += scene_objects(path, trained) if path is not None else []
-    return objects, path
 
 
 # ---------------------------------------------------------------- measuring
@@ -359,14 +269,15 @@ def _targets(materials: dict) -> dict:
 
 def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         scene: str = "fingertip-7", progress: Callable[[str], None] | None = None,
-        render: bool = True) -> dict:
+        render: bool = True, executor=None) -> dict:
     """Run the benchmark (``seeds`` sessions, seeds 0 .. seeds-1). The
     unseen set: ``unseen`` (package materials) and the objects of the scene
     file ``unseen_scene``; with neither, :data:`DEFAULT_UNSEEN` (less the
     scene's own) and the shipped unseen-objects scene. ``quick``: 3 touches
     per material, 1 rendered touch per material and seed. ``render``: the
-    rendered columns (:mod:`~telethermal.bench.unseen_render`). Returns the
-    report."""
+    rendered columns (:mod:`~telethermal.bench.unseen_render`), its touches
+    swept on ``executor`` (:mod:`telethermal.bench.executor`; None: one
+    worker process a CPU). Returns the report."""
     from telethermal.data.generate import pad_database
     from telethermal.ident.fitted import _estimator as fitted_estimator
     from telethermal.ident.prepare import from_trials
@@ -407,7 +318,10 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         if not r["trained"] and r["reported"]["named"]:
             r["reported"]["within_spread"] = ul.NOT_ONE_VALUE if r.get("layered") else \
                 within_spread(identifier, m, r["reported"]["named_as"])
-    rendering = _render(base, touched, identifier, materials, seeds, quick, step) \
+    where = {"scene": scene, "unseen": unseen if unseen is None or isinstance(unseen, str)
+             else list(unseen),
+             "unseen_scene": unseen_scene, "quick": quick}
+    rendering = _render(base, identifier, materials, seeds, quick, step, where, executor) \
         if render else "not_run: render=False"
     return {"benchmark": "unseen", "scene": base.name, "seeds": list(range(seeds)),
             "quick": quick, "windows_s": list(WINDOWS_S), "trained": trained,
@@ -432,12 +346,19 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
             "targets": {**_targets(materials), "rendering": ur.targets(materials)}}
 
 
-def _render(base: Scene, touched: Scene, identifier, materials: dict, seeds: int, quick: bool,
-            step) -> dict:
+def _render(base: Scene, identifier, materials: dict, seeds: int, quick: bool, step,
+            where: dict, executor) -> dict:
     """The rendered columns: every material's touches rendered three ways
-    (:func:`~telethermal.bench.unseen_render.render_all`; the display's
-    idle policy the trained scene's), their medians put in ``materials``;
-    returns how they were run."""
+    (:func:`~telethermal.bench.unseen_render.render_touch`, each a job of a
+    sweep on ``executor``; the display's idle policy the trained scene's),
+    their medians put in ``materials``; returns how they were run.
+    ``where``: how a worker makes the touched scene again (:func:`run`'s
+    arguments)."""
+    import tempfile
+    from pathlib import Path
+
+    from telethermal.bench.executor import open_executor, sweep
+    from telethermal.render.generator import save_generator
     from telethermal.teleop.models import train_generator
     from telethermal.physics.scene import with_finger
 
@@ -445,8 +366,26 @@ def _render(base: Scene, touched: Scene, identifier, materials: dict, seeds: int
     t0 = time.perf_counter()
     generator = train_generator(with_finger(base), 0)
     per_seed = ur.TOUCHES_PER_SEED_QUICK if quick else ur.TOUCHES_PER_SEED
-    rows = ur.render_all(touched, base, list(materials), identifier, generator, range(seeds),
-                         per_seed, step)
+    calls = ur.render_calls(list(materials), range(seeds), per_seed)
+    own = executor is None
+    executor = open_executor("process") if own else executor
+    announced: set = set()
+
+    def progress(text: str) -> None:            # one step per bench seed, as before
+        seed = calls[int(text.rsplit("(", 1)[1].split()[0]) - 1][1]
+        if seed not in announced:
+            announced.add(seed)
+            step(f"rendering, seed {seed}")
+
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            job = {**where, "identifier": str(identifier.save(Path(tmp) / "identifier.npz")),
+                   "generator": str(save_generator(generator, Path(tmp) / "generator.npz"))}
+            rows = sweep(executor, ur.render_job, [(job, m, s) for m, _, s in calls],
+                         progress=progress)
+    finally:
+        if own:
+            executor.shutdown(cancel_futures=True)
     for m, r in materials.items():
         r.update(ur.summarise([x for x in rows if x["material"] == m]))
     return {"contact_s": ur.CONTACT_S, "touches_per_seed": per_seed,

@@ -43,6 +43,7 @@ kept beside it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -131,19 +132,27 @@ def render_touch(scene, material: str, identifier, generator, seed: int,
     return row
 
 
+def render_calls(materials, seeds, per_seed: int) -> list[tuple[str, int, int]]:
+    """(material, bench seed, session seed) of every rendered touch, in the
+    report's order: for each bench seed, every material's first ``per_seed``
+    session seeds (:func:`session_seed`)."""
+    return [(m, seed, session_seed(seed, j)) for seed in seeds for m in materials
+            for j in range(per_seed)]
+
+
 def render_all(scene, idle_scene, materials, identifier, generator, seeds,
                per_seed: int, progress=None) -> list[dict]:
-    """:func:`render_touch` of every material of ``materials``, for each
-    bench seed its first ``per_seed`` session seeds (:func:`session_seed`)."""
+    """:func:`render_touch` of every touch of :func:`render_calls`, in this
+    process."""
     from telethermal.physics.scene import with_finger
 
     scene, idle_scene = with_finger(scene), with_finger(idle_scene)
-    rows = []
-    for seed in seeds:
-        if progress:
+    rows, announced = [], set()
+    for m, seed, session in render_calls(materials, seeds, per_seed):
+        if progress and seed not in announced:
+            announced.add(seed)
             progress(f"rendering, seed {seed}")
-        rows += [render_touch(scene, m, identifier, generator, session_seed(seed, j), idle_scene)
-                 for m in materials for j in range(per_seed)]
+        rows.append(render_touch(scene, m, identifier, generator, session, idle_scene))
     return rows
 
 
@@ -287,3 +296,33 @@ def section_lines(d: dict) -> list[str]:
                      f"{_pct(f['closed_set'], 0)} % | {_k(k['estimate'])} / {_k(k['oracle'])} "
                      f"/ {_k(k['closed_set'])} K | {verdict} |")
     return lines + [""]
+
+
+@functools.lru_cache(maxsize=2)
+def _render_world(scene: str, unseen: tuple | str | None, unseen_scene: str | None, quick: bool,
+                  identifier_path: str, generator_path: str):
+    """A worker's touched scene, trained scene and models, made once per process."""
+    from telethermal.bench.unseen_set import touch_scene, unseen_objects
+    from telethermal.ident.registry import load_model
+    from telethermal.physics.scene import load_scene, with_finger
+    from telethermal.render.generator import load_generator
+
+    base = load_scene(scene)
+    objects, _ = unseen_objects(base, list(unseen) if isinstance(unseen, tuple) else unseen,
+                                unseen_scene)
+    touched = touch_scene(base, objects)
+    if quick:
+        touched = dataclasses.replace(touched, pad=dataclasses.replace(
+            touched.pad, trials_per_material=3))
+    return (with_finger(touched), with_finger(base), load_model(identifier_path),
+            load_generator(generator_path))
+
+
+def render_job(job: dict, material: str, session_seed: int) -> dict:
+    """A sweep's job: one touch of ``material`` rendered three ways
+    (:func:`render_touch`) on the world ``job`` names."""
+    unseen = tuple(job["unseen"]) if isinstance(job["unseen"], list) else job["unseen"]
+    touched, base, identifier, generator = _render_world(
+        job["scene"], unseen, job["unseen_scene"], job["quick"], job["identifier"],
+        job["generator"])
+    return render_touch(touched, material, identifier, generator, session_seed, base)

@@ -18,12 +18,15 @@ def cmd_bench_physics(args) -> int:
 
 def cmd_bench_render(args) -> int:
     from telethermal.bench import render
+    from telethermal.bench.executor import open_executor
 
     if args.as_built is not None:
         return _bench_render_as_built(args)
-    with _progress(7, "bench render") as advance:
+    with _progress(7, "bench render") as advance, \
+            open_executor(args.executor, args.jobs) as executor:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
-                                     command=_command(), progress=advance, scene=args.scene)
+                                     command=_command(), progress=advance, scene=args.scene,
+                                     executor=executor)
     _print_lines(render.text_report(report, args.json))
     return 0
 
@@ -163,14 +166,17 @@ def cmd_bench_skin_floor(args) -> int:
 
 def cmd_bench_unseen(args) -> int:
     from telethermal.bench import unseen
+    from telethermal.bench.executor import open_executor
 
     if args.as_built is not None:
         return _bench_unseen_as_built(args)
     seeds = args.seeds or (1 if args.quick else 3)
-    with _progress(seeds + 2, "bench unseen") as advance:
+    with _progress(seeds + 2, "bench unseen") as advance, \
+            open_executor(args.executor, args.jobs) as executor:
         report = unseen.run_and_save(args.json, command=_command(), seeds=seeds,
                                      unseen=args.unseen, unseen_scene=args.unseen_scene,
-                                     quick=args.quick, scene=args.scene, progress=advance)
+                                     quick=args.quick, scene=args.scene, progress=advance,
+                                     executor=executor)
     _print_lines(unseen.text_report(report, args.json))
     return 0
 
@@ -302,6 +308,7 @@ def _add_render(bsub) -> None:
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
     _scene_arg(p)
+    _executor_args(p, "the sessions")
     p.set_defaults(func=cmd_bench_render)
 
 
@@ -364,6 +371,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
     _scene_arg(p)
+    _executor_args(p, "the rendered touches")
     p.set_defaults(func=cmd_bench_unseen)
 
     p = bsub.add_parser("view", help="the view's first paint, its lag behind a session, and the "
