@@ -26,6 +26,7 @@ def test_simulated_rows_in_two_workers(tmp_path, trained_models):
     # The same sweep in this process gives the same report (issue 45).
     here = faults_sim.run(scene, ident, gen, DisplayConfig(), ["wood"], [1], 1.0, rows,
                           executor=SerialExecutor())
+    assert (here.pop("executor"), out.pop("executor")) == ("this process", "2 worker processes")
     assert json.dumps(here, sort_keys=True) == json.dumps(out, sort_keys=True)
     assert list(out["rows"]) == [faults_sim.ZERO, faults_sim.WAN]
     assert any("simulated" in s for s in seen)

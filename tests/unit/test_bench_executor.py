@@ -10,8 +10,8 @@ import os
 import numpy as np
 import pytest
 
-from telethermal.bench.executor import (JsonProcessPool, SerialExecutor, call_json,
-                                        function_name, open_executor, sweep)
+from telethermal.bench.executor import (JsonProcessPool, SerialExecutor, call_json, describe,
+                                        function_name, open_executor, sweep, work_folder)
 from telethermal.errors import BenchError
 
 
@@ -66,9 +66,48 @@ def test_a_failing_job_is_named_and_the_pool_serves_the_next_sweep():
 
 def test_a_worker_that_dies_fails_its_job_and_is_replaced():
     with JsonProcessPool(1) as pool:
-        with pytest.raises(BenchError, match="a bench worker died"):
+        with pytest.raises(BenchError, match=r"a bench worker died \(exit code 3\)"):
             sweep(pool, die, [(3,)])
         assert sweep(pool, noisy, [(5,), (6,)]) == [5, 6]
+
+
+def cut_answer(x: int) -> None:
+    """A worker killed while writing its answer: half a line, then gone."""
+    from telethermal.bench import executor
+    executor.ANSWERS.write('{"result": "1')
+    executor.ANSWERS.flush()
+    os._exit(9)
+
+
+def test_a_cut_answer_fails_its_job_instead_of_hanging_the_sweep():
+    with JsonProcessPool(1) as pool:
+        with pytest.raises(BenchError, match="a bench worker died"):
+            sweep(pool, cut_answer, [(1,)])
+        assert sweep(pool, fail_on, [(4,)]) == [4]
+
+
+calls_made = []
+
+
+def record_and_fail(x: int) -> int:
+    calls_made.append(x)
+    return fail_on(x)
+
+
+def interrupt(x: int) -> int:
+    calls_made.append(x)
+    raise KeyboardInterrupt
+
+
+def test_serial_jobs_run_in_turn_and_a_failure_or_an_interrupt_stops_the_sweep():
+    calls_made.clear()
+    with pytest.raises(BenchError, match="three is refused"):
+        sweep(SerialExecutor(), record_and_fail, [(k,) for k in range(6)])
+    assert calls_made == [0, 1, 2, 3]                 # none after the failing one
+    calls_made.clear()
+    with pytest.raises(KeyboardInterrupt):
+        sweep(SerialExecutor(), interrupt, [(k,) for k in range(4)])
+    assert calls_made == [0]
 
 
 def test_only_named_functions_and_json_cross():
@@ -90,6 +129,22 @@ def _returns_an_object():
 def test_an_unknown_executor_is_refused_naming_the_known_ones():
     with pytest.raises(BenchError, match="process, serial, dask:ADDRESS, dask-local"):
         open_executor("threads")
+
+
+def test_a_remote_cluster_needs_a_shared_work_folder_and_an_answering_scheduler(tmp_path):
+    with pytest.raises(BenchError, match="needs --work-dir DIR"):
+        open_executor("dask:tcp://127.0.0.1:9")
+    with pytest.raises(BenchError, match="no Dask scheduler answered"):
+        open_executor("dask:nonsense://", work_dir=str(tmp_path))
+
+
+def test_a_sweeps_files_go_where_its_workers_see_them(tmp_path):
+    with open_executor("serial", work_dir=str(tmp_path)) as executor:
+        with work_folder(executor) as folder:
+            assert os.path.dirname(folder) == str(tmp_path)
+        assert describe(executor) == "this process"
+    with open_executor("process", 2) as pool:
+        assert describe(pool) == "2 worker processes"
 
 
 def test_a_local_dask_cluster_gives_the_same_results():

@@ -72,28 +72,54 @@ def _plain(value):
     raise TypeError(f"a sweep's result holds {type(value).__name__}, which is not JSON")
 
 
+class _DeferredFuture(Future):
+    """A serial job's future: the job runs when its result is first asked
+    for, so a sweep reads (and stops at) each job in turn."""
+
+    def __init__(self, fn, args, kwargs):
+        super().__init__()
+        self._call = (fn, args, kwargs)
+
+    def result(self, timeout=None):
+        call, self._call = self._call, None
+        if call is not None and self.set_running_or_notify_cancel():
+            fn, args, kwargs = call
+            try:
+                self.set_result(fn(*args, **kwargs))
+            except Exception as exc:         # the job's; an interrupt goes up
+                self.set_exception(exc)
+        return super().result(timeout)
+
+
 class SerialExecutor(Executor):
-    """Each job in this process, at submit."""
+    """Each job in this process, in turn, when its result is asked for."""
+
+    workers = 1
 
     def submit(self, fn, /, *args, **kwargs) -> Future:
-        future: Future = Future()
-        try:
-            future.set_result(fn(*args, **kwargs))
-        except BaseException as exc:          # the caller's future holds it
-            future.set_exception(exc)
-        return future
+        return _DeferredFuture(fn, args, kwargs)
+
+
+def cpus() -> int:
+    """The CPUs this process may run on (its affinity, not the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:                    # no affinity on this platform
+        return os.cpu_count() or 1
 
 
 class JsonProcessPool(Executor):
-    """``max_workers`` worker processes (``python -m telethermal.bench.worker``)
+    """``max_workers`` worker processes (``python -P -m telethermal.bench.worker``)
     that take jobs as JSON lines and give results back as JSON lines. Only
     :func:`call_json` jobs (a function's name and JSON text) can be
-    submitted; a worker that dies fails its job with its stderr's end and is
-    replaced. No pickle crosses to a worker."""
+    submitted; a worker that dies fails its job and is replaced; what a
+    worker logs goes to this process's stderr. No pickle crosses to a
+    worker."""
 
     def __init__(self, max_workers: int | None = None):
-        self.max_workers = max(1, max_workers or os.cpu_count() or 1)
+        self.max_workers = self.workers = max(1, max_workers or cpus())
         self._jobs: queue.Queue = queue.Queue()
+        self._lock = threading.Lock()
         self._shutdown = False
         self._threads = [threading.Thread(target=self._serve, name=f"bench-worker-{i}",
                                           daemon=True) for i in range(self.max_workers)]
@@ -103,24 +129,25 @@ class JsonProcessPool(Executor):
     def submit(self, fn, /, *args, **kwargs) -> Future:
         if fn is not call_json or kwargs or len(args) != 2:
             raise ValueError("JsonProcessPool runs call_json(name, args_json) jobs only")
-        if self._shutdown:
-            raise RuntimeError("cannot submit to a pool that was shut down")
         future: Future = Future()
-        self._jobs.put((future, json.dumps({"call": args[0], "args": args[1]})))
+        with self._lock:
+            if self._shutdown:
+                raise RuntimeError("cannot submit to a pool that was shut down")
+            self._jobs.put((future, json.dumps({"call": args[0], "args": args[1]})))
         return future
 
-    def _start(self):
-        err = tempfile.TemporaryFile(mode="w+")
+    @staticmethod
+    def _start() -> subprocess.Popen:
         # The worker imports what this process can (a sweep's function may
-        # live in a script's or a test's folder).
+        # live in a script's or a test's folder), and not the working
+        # folder's files first (-P).
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
-        proc = subprocess.Popen([sys.executable, "-m", "telethermal.bench.worker"],
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err,
-                                text=True, bufsize=1, env=env)
-        return proc, err
+        return subprocess.Popen([sys.executable, "-P", "-m", "telethermal.bench.worker"],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                bufsize=1, env=env)
 
     def _serve(self) -> None:
-        proc = err = None
+        proc = None
         try:
             while True:
                 item = self._jobs.get()
@@ -129,35 +156,49 @@ class JsonProcessPool(Executor):
                 future, line = item
                 if not future.set_running_or_notify_cancel():
                     continue
-                if proc is None:
-                    proc, err = self._start()
                 try:
-                    proc.stdin.write(line + "\n")
-                    proc.stdin.flush()
-                    answer = proc.stdout.readline()
-                except OSError:
-                    answer = ""
-                if not answer:                  # the worker died
-                    proc.kill()
-                    _close(proc)
-                    err.seek(0)
-                    tail = err.read()[-2000:]
-                    err.close()
-                    proc = err = None
-                    future.set_exception(BenchError(f"a bench worker died: {tail}"))
-                    continue
-                reply = json.loads(answer)
-                if "error" in reply:
-                    future.set_exception(BenchError(reply["error"]))
-                else:
-                    future.set_result(reply["result"])
+                    if proc is None:
+                        proc = self._start()
+                    proc = self._run(proc, future, line)
+                except BaseException as exc:     # this thread's own failure: the job's
+                    if proc is not None:
+                        proc.kill()
+                        _close(proc)
+                        proc = None
+                    if not future.done():
+                        future.set_exception(BenchError(
+                            f"a bench worker's job failed in the pool: "
+                            f"{type(exc).__name__}: {exc}"))
         finally:
             if proc is not None:
                 _close(proc)
-                err.close()
+
+    @staticmethod
+    def _run(proc: subprocess.Popen, future: Future, line: str) -> subprocess.Popen | None:
+        """One job on ``proc``; the worker to go on with (None: it died)."""
+        try:
+            proc.stdin.write(line + "\n")
+            proc.stdin.flush()
+            answer = proc.stdout.readline()
+        except OSError:
+            answer = ""
+        reply = json.loads(answer) if answer.endswith("\n") else None
+        if reply is None:                       # the worker died, or its line was cut
+            proc.kill()
+            _close(proc)
+            future.set_exception(BenchError(
+                f"a bench worker died (exit code {proc.returncode}); what it said is on "
+                "stderr above"))
+            return None
+        if "error" in reply:
+            future.set_exception(BenchError(reply["error"]))
+        else:
+            future.set_result(reply["result"])
+        return proc
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-        self._shutdown = True
+        with self._lock:
+            self._shutdown = True
         if cancel_futures:
             while True:
                 try:
@@ -184,26 +225,61 @@ def _close(proc: subprocess.Popen) -> None:
     proc.wait()
 
 
-def open_executor(kind: str | None = None, jobs: int | None = None) -> Executor:
+def open_executor(kind: str | None = None, jobs: int | None = None,
+                  work_dir: str | None = None) -> Executor:
     """The executor ``kind`` names (:data:`KINDS`; None: ``process``) with
-    ``jobs`` workers (None: one a CPU)."""
+    ``jobs`` workers (None: one a CPU this process may use). ``work_dir``:
+    where a bench writes the files its jobs read (its models), a folder its
+    workers see at the same path (None: this machine's temporary folder; a
+    remote cluster, ``dask:ADDRESS``, needs one on a file system it shares)."""
     kind = kind or "process"
-    if kind == "process":
-        return JsonProcessPool(jobs)
-    if kind == "serial":
-        return SerialExecutor()
-    if kind == "dask-local" or kind.startswith("dask:"):
-        try:
-            from distributed import Client, LocalCluster
-        except ImportError:
-            raise BenchError(f"--executor {kind} needs Dask's distributed: "
-                             "pip install 'telethermal[dask]'") from None
-        if kind == "dask-local":
-            cluster = LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
-                                   processes=True, dashboard_address=None)
-            return _DaskExecutor(Client(cluster), cluster)
-        return _DaskExecutor(Client(kind.removeprefix("dask:")))
-    raise BenchError(f"--executor must be one of {', '.join(KINDS)}, got {kind!r}")
+    if kind in ("process", "serial"):
+        executor = JsonProcessPool(jobs) if kind == "process" else SerialExecutor()
+    elif kind == "dask-local" or kind.startswith("dask:"):
+        executor = _dask(kind, jobs, work_dir)
+    else:
+        raise BenchError(f"--executor must be one of {', '.join(KINDS)}, got {kind!r}")
+    executor.work_dir = work_dir
+    return executor
+
+
+def _dask(kind: str, jobs: int | None, work_dir: str | None) -> Executor:
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise BenchError(f"--executor {kind} needs Dask's distributed: "
+                         "pip install 'telethermal[dask]'") from None
+    if kind == "dask-local":
+        cluster = LocalCluster(n_workers=jobs or cpus(), threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        return _DaskExecutor(Client(cluster), cluster)
+    if work_dir is None:
+        raise BenchError(f"--executor {kind} needs --work-dir DIR: a folder its workers see at "
+                         "the same path (a shared file system), for the models the jobs read; "
+                         "a scene file given by path must be on it too")
+    try:
+        client = Client(kind.removeprefix("dask:"), timeout=30)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise BenchError(f"--executor {kind}: no Dask scheduler answered there "
+                         f"({type(exc).__name__}: {exc})") from None
+    return _DaskExecutor(client)
+
+
+def work_folder(executor: Executor):
+    """A temporary folder for a sweep's files, where ``executor``'s workers
+    see it (its ``work_dir``; this machine's temporary folder without)."""
+    return tempfile.TemporaryDirectory(prefix="telethermal-bench-",
+                                       dir=getattr(executor, "work_dir", None))
+
+
+def describe(executor: Executor) -> str:
+    """How a report names where its sweep ran."""
+    if isinstance(executor, _DaskExecutor):
+        where = "a local Dask cluster" if executor.cluster is not None else "a Dask cluster"
+        return f"{where}, {len(executor.client.scheduler_info().get('workers', {}))} workers"
+    if isinstance(executor, SerialExecutor):
+        return "this process"
+    return f"{getattr(executor, 'workers', '?')} worker processes"
 
 
 class _DaskExecutor(Executor):
@@ -251,9 +327,15 @@ def sweep(executor: Executor, fn: Callable, calls: Iterable[tuple], progress=Non
     return out
 
 
+#: In a worker, where its answers go (a test cuts one short through it).
+ANSWERS = None
+
+
 def worker_main(stdin=sys.stdin, stdout=sys.stdout) -> None:
     """A :class:`JsonProcessPool` worker: one job a line in, one answer a
     line out (``{"result": ...}`` or ``{"error": ...}``), until stdin closes."""
+    global ANSWERS
+    ANSWERS = stdout
     for line in stdin:
         job = json.loads(line)
         try:

@@ -23,7 +23,6 @@ parts and exports what the command line uses (``run``, ``plot``,
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 from telethermal.bench.faults_plot import plot, plot_traces
@@ -111,7 +110,9 @@ def run(progress=None, quick: bool = False, only: str | None = None,
     materials = MATERIALS if set(MATERIALS) <= set(scene.materials) else \
         tuple(scene.materials[:2])
     materials = materials[:1] if quick else materials
-    with tempfile.TemporaryDirectory() as tmp:
+    from telethermal.bench.executor import work_folder
+
+    with work_folder(executor) as tmp:
         out = Path(tmp)
         step("training")
         ident = train_identifier(scene, 0).save(out / "identifier.npz")

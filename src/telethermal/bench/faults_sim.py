@@ -166,7 +166,7 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
     swept on ``executor`` (:mod:`telethermal.bench.executor`; None: a pool of
     ``jobs`` worker processes, each loading the model files once; jobs and
     results cross as JSON), then the rows, the oracle and the summary."""
-    from telethermal.bench.executor import open_executor, sweep
+    from telethermal.bench.executor import describe, open_executor, sweep
 
     rows, materials = list(rows), list(materials)
     job = {"scene": scene.ref or scene.name, "identifier": str(identifier_path),
@@ -189,13 +189,14 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
     try:
         done = sweep(executor, unit_job, [(job, list(u)) for u in work], progress=step,
                      label=lambda c: "simulated: " + " ".join(x for x in c[1] if x))
+        ran_on = describe(executor)
     finally:
         if own:
             executor.shutdown(cancel_futures=True)
     results = {tuple(u): r for u, r in zip(work, done)}
     out = assemble(results, rows, materials, seeds)
     out.update({"materials": materials, "seeds": list(seeds), "contact_s": contact_s,
-                "rate_hz": config.rate_hz, "before": config.before})
+                "rate_hz": config.rate_hz, "before": config.before, "executor": ran_on})
     out["summary"] = summary(out)
     return out
 

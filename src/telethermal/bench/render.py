@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import datetime
 import platform
-import tempfile
 import time
 from pathlib import Path
 from typing import Callable
@@ -244,13 +243,15 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
         scene_name: str = "fingertip-7", executor=None) -> dict:
     """The report (see the module); its sessions swept on ``executor``
     (:mod:`telethermal.bench.executor`; None: one worker process a CPU)."""
-    from telethermal.bench.executor import open_executor
+    from telethermal.bench.executor import describe, open_executor, work_folder
 
     own = executor is None
     executor = open_executor("process") if own else executor
     try:
-        with tempfile.TemporaryDirectory() as tmp:
-            return _run(progress, quick, scene_name, executor, Path(tmp))
+        with work_folder(executor) as tmp:
+            report = _run(progress, quick, scene_name, executor, Path(tmp))
+        report["executor"] = describe(executor)
+        return report
     finally:
         if own:
             executor.shutdown(cancel_futures=True)

@@ -318,9 +318,9 @@ def run(seeds: int = 3, unseen=None, unseen_scene=None, quick: bool = False,
         if not r["trained"] and r["reported"]["named"]:
             r["reported"]["within_spread"] = ul.NOT_ONE_VALUE if r.get("layered") else \
                 within_spread(identifier, m, r["reported"]["named_as"])
-    where = {"scene": scene, "unseen": unseen if unseen is None or isinstance(unseen, str)
+    where = {"scene": str(scene), "unseen": unseen if unseen is None or isinstance(unseen, str)
              else list(unseen),
-             "unseen_scene": unseen_scene, "quick": quick}
+             "unseen_scene": None if unseen_scene is None else str(unseen_scene), "quick": quick}
     rendering = _render(base, identifier, materials, seeds, quick, step, where, executor) \
         if render else "not_run: render=False"
     return {"benchmark": "unseen", "scene": base.name, "seeds": list(range(seeds)),
@@ -354,10 +354,9 @@ def _render(base: Scene, identifier, materials: dict, seeds: int, quick: bool, s
     their medians put in ``materials``; returns how they were run.
     ``where``: how a worker makes the touched scene again (:func:`run`'s
     arguments)."""
-    import tempfile
     from pathlib import Path
 
-    from telethermal.bench.executor import open_executor, sweep
+    from telethermal.bench.executor import describe, open_executor, sweep, work_folder
     from telethermal.render.generator import save_generator
     from telethermal.teleop.models import train_generator
     from telethermal.physics.scene import with_finger
@@ -378,11 +377,12 @@ def _render(base: Scene, identifier, materials: dict, seeds: int, quick: bool, s
             step(f"rendering, seed {seed}")
 
     try:
-        with tempfile.TemporaryDirectory() as tmp:
+        with work_folder(executor) as tmp:
             job = {**where, "identifier": str(identifier.save(Path(tmp) / "identifier.npz")),
                    "generator": str(save_generator(generator, Path(tmp) / "generator.npz"))}
             rows = sweep(executor, ur.render_job, [(job, m, s) for m, _, s in calls],
                          progress=progress)
+        ran_on = describe(executor)
     finally:
         if own:
             executor.shutdown(cancel_futures=True)
@@ -394,7 +394,8 @@ def _render(base: Scene, identifier, materials: dict, seeds: int, quick: bool, s
             "flux_rms_rel_is": ur.KEYS["flux_rms_rel"], "skin_rms_k_is": ur.KEYS["skin_rms_k"],
             "generator": "network, trained on the trained scene's finger database (seed 0)",
             "identifier": "the bench's (effusivity-fit, trained on session TRAIN_SEED)",
-            "idle_policy_scene": base.name, "wall_s": time.perf_counter() - t0}
+            "idle_policy_scene": base.name, "wall_s": time.perf_counter() - t0,
+            "executor": ran_on}
 
 
 def run_and_save(json_path, command: str = "", **kw) -> dict:

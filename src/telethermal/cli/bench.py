@@ -18,12 +18,11 @@ def cmd_bench_physics(args) -> int:
 
 def cmd_bench_render(args) -> int:
     from telethermal.bench import render
-    from telethermal.bench.executor import open_executor
 
     if args.as_built is not None:
+        _no_executor(args)
         return _bench_render_as_built(args)
-    with _progress(7, "bench render") as advance, \
-            open_executor(args.executor, args.jobs) as executor:
+    with _progress(7, "bench render") as advance, _executor(args) as executor:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene,
                                      executor=executor)
@@ -71,13 +70,11 @@ def cmd_bench_transport(args) -> int:
 
 def cmd_bench_faults(args) -> int:
     from telethermal.bench import faults, faults_sim
-    from telethermal.bench.executor import open_executor
     from telethermal.jsonfile import write_json
 
     delays = faults.parse_delays(args.delays) if args.delays else None
     n_rows = len(faults_sim.ROWS) + len(faults.SETTINGS) + 2 * len(delays or ())
-    with _progress(n_rows + 1, "bench faults") as advance, \
-            open_executor(args.executor, args.jobs) as executor:
+    with _progress(n_rows + 1, "bench faults") as advance, _executor(args) as executor:
         report = faults.run(progress=advance, quick=args.quick, only=args.only,
                             seeds=args.seeds, processes=not args.no_processes,
                             executor=executor, scene_name=args.scene, delays_ms=delays)
@@ -166,13 +163,12 @@ def cmd_bench_skin_floor(args) -> int:
 
 def cmd_bench_unseen(args) -> int:
     from telethermal.bench import unseen
-    from telethermal.bench.executor import open_executor
 
     if args.as_built is not None:
+        _no_executor(args)
         return _bench_unseen_as_built(args)
     seeds = args.seeds or (1 if args.quick else 3)
-    with _progress(seeds + 2, "bench unseen") as advance, \
-            open_executor(args.executor, args.jobs) as executor:
+    with _progress(seeds + 2, "bench unseen") as advance, _executor(args) as executor:
         report = unseen.run_and_save(args.json, command=_command(), seeds=seeds,
                                      unseen=args.unseen, unseen_scene=args.unseen_scene,
                                      quick=args.quick, scene=args.scene, progress=advance,
@@ -282,10 +278,30 @@ def _add_faults(bsub) -> None:
 def _executor_args(p, what: str) -> None:
     p.add_argument("--executor", default="process", metavar="KIND",
                    help=f"where {what} run: process (worker processes, the default), serial "
-                        "(this process), dask:ADDRESS (a Dask cluster's scheduler) or "
-                        "dask-local (pip install 'telethermal[dask]'); the same JSON from each")
+                        "(this process), dask:ADDRESS (a Dask cluster's scheduler; needs "
+                        "--work-dir) or dask-local (pip install 'telethermal[dask]'); the same "
+                        "JSON from each")
     p.add_argument("--jobs", type=_positive(int), default=None,
-                   help="workers of --executor process or dask-local (default: one a CPU)")
+                   help="workers of --executor process or dask-local (default: one a CPU "
+                        "this process may use)")
+    p.add_argument("--work-dir", metavar="DIR",
+                   help="where the bench writes the model files its jobs read: a folder the "
+                        "workers see at the same path (default: the temporary folder)")
+
+
+def _no_executor(args) -> None:
+    """--as-built runs its pads in this process: its executor options refused."""
+    if args.executor != "process" or args.jobs or args.work_dir:
+        from telethermal.errors import BenchError
+        raise BenchError("--executor, --jobs and --work-dir are not for --as-built (its pads "
+                         "run one after another in this process)")
+
+
+def _executor(args):
+    """The executor a bench's options name (BenchError for one it cannot open)."""
+    from telethermal.bench.executor import open_executor
+
+    return open_executor(args.executor, args.jobs, args.work_dir)
 
 
 def _scene_arg(p) -> None:
