@@ -38,7 +38,7 @@ def test_a_fit_is_shared_only_for_the_same_data_and_hyper_parameters():
 
 
 def test_the_run_empties_its_stores_even_when_it_fails(monkeypatch):
-    def failing(report, seed, methods, step, sessions=1):
+    def failing(report, seed, methods, step, sessions=1, **kw):
         identify._trials("fingertip-7", 0)
         identify._FITS["x"] = object()
         raise RuntimeError("stop")

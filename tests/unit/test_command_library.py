@@ -170,7 +170,7 @@ def test_identify_bench_keeps_a_method_run_on_table1_only(tmp_path):
     """effusivity-fit runs Table 1 and the session shift, not the rows on
     another pad: its lines say so, and the plot is made (it had crashed
     the bench after 11 minutes, before the JSON was written)."""
-    from telethermal.bench.identify import plot
+    from telethermal.bench.identify_plot import plot
 
     table1 = {"accuracy_7": {"0.5": 0.9}, "accuracy_5": {"0.5": 0.95},
               "paper_accuracy_5": {}, "train_s_full_database": 1.5,

@@ -362,10 +362,16 @@ def thermometer_ablation(seed: int, method: str = "effusivity-lda") -> dict:
 
 
 def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = None,
-        scene: str | None = None, sessions: int = 3, with_limit: bool = True) -> dict:
+        scene: str | None = None, sessions: int = 3, with_limit: bool = True,
+        executor=None) -> dict:
     """The papers' tables on their scenes; with ``scene`` (a name or a
     path: a lab's own), each method's grouped 5-fold cross-validation on
-    that scene's simulated pad database instead (``identify cv``'s report)."""
+    that scene's simulated pad database instead (``identify cv``'s report).
+    Each method's sections, and each section of no one method, are a job of
+    one sweep on ``executor`` (:mod:`telethermal.bench.executor`; None: one
+    worker process a CPU)."""
+    from telethermal.bench.executor import describe, open_executor
+
     step = progress or (lambda _m: None)
     dropped = [] if methods else [
         f"{m} (not in the defaults: its held-out calibration error {DROPPED[m]}; run it with "
@@ -377,115 +383,103 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
               "seed": seed, "sessions": sessions, "methods": {},
               "not_run": ["lstm and rnn on the temperature channel (5 s sequences: "
                           "minutes of training per fold on this machine)"] + dropped}
+    own = executor is None
+    executor = open_executor("process") if own else executor
     try:
         if scene is not None:
-            from telethermal.ident.crossval import cross_validate
-            report["scene"] = scene
+            report["scene"] = str(scene)
             report["not_run"] = ["the papers' sections (Table 1, active/passive, "
                                  "cross-temperature, session shift): they are the papers' "
                                  "scenes'; run without --scene"]
-            for method in methods:
-                step(f"{method}: 5 folds on {scene}")
-                report["methods"][method] = cross_validate(_trials(scene, seed), method, 5,
-                                                           scene=scene)
-            return report
-        _run_methods(report, seed, methods, step, sessions)
-        if with_limit:
-            step("the physical limit (oracle)")
-            report["limit"] = limit(load_scene("fingertip-7"), [
-                (s, from_trials(_trials("fingertip-7", s), max_s=1.0)[0])
-                for s in range(seed, seed + sessions)])
-            report["limit_gap_points"] = gaps_to_limit(report["methods"], report["limit"])
+        _run_methods(report, seed, methods, step, sessions, executor=executor,
+                     with_limit=with_limit and scene is None, scene=scene)
+        report["executor"] = describe(executor)
     finally:
+        if own:
+            executor.shutdown(cancel_futures=True)
         _database.cache_clear()              # trials and models are kept for one run only
         _shift_session.cache_clear()
         _FITS.clear()
     return report
 
 
-def _run_methods(report: dict, seed: int, methods, step, sessions: int = 1) -> None:
-    for method in methods:
-        step(f"{method}: table 1, {sessions} session(s)")
-        t1 = sessions_table1(table1, method, seed, sessions, table1(method, seed))
-        if getattr(METHODS[method], "needs_scene", False):
-            # It fits one pad's model: the rows below train on one pad (or
-            # object temperature) and test on another.
-            report["methods"][method] = {"table1": t1, "live": t1.pop("live"), "not_run": [
-                "active/passive, cross-temperature and the temperature channel: its estimate "
-                "fits the pad (and object temperature) of the scene it was trained on; these "
-                "rows test on another pad or temperature, or read temperature"]}
-            step(f"{method}: session shift")
-            report["methods"][method]["session_shift"] = session_shift(method, seed)
-            continue
-        step(f"{method}: active/passive")
-        ap = active_passive(method, seed)
-        step(f"{method}: cross-temperature")
-        report["methods"][method] = {"table1": t1, "live": t1.pop("live"),
-                                     "active_passive": ap,
-                                     "cross_temperature": cross_temperature(method, seed)}
-        step(f"{method}: session shift")
-        report["methods"][method]["session_shift"] = session_shift(method, seed)
-        if not make(method).streaming:
-            step(f"{method}: temperature channel")
-            report["methods"][method]["temperature"] = temperature_rows(method, seed)
-    step("object-thermometer ablation")
-    report["thermometer_ablation"] = thermometer_ablation(seed)
-    if "pca-fnn" in methods:
-        step("LM against Adam")
-        report["lm_vs_adam"] = lm_vs_adam(seed)
-    if "lstm" in methods:
-        step("LSTM width sweep")
-        report["lstm_hidden_sweep"] = lstm_hidden_sweep(seed)
+def jobs(methods, with_limit: bool = True, scene: str | None = None) -> list[tuple]:
+    """The sweep's jobs, ``(kind, method)``: a method's sections ("method",
+    or its cross-validation on ``scene``: "cv"), then the sections of no
+    one method."""
+    if scene is not None:
+        return [("cv", m) for m in methods]
+    out = [("method", m) for m in methods] + [("thermometer_ablation", None)]
+    out += [("lm_vs_adam", None)] * ("pca-fnn" in methods)
+    out += [("lstm_hidden_sweep", None)] * ("lstm" in methods)
+    return out + [("limit", None)] * with_limit
 
 
-def plot(report: dict, out_png) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def identify_job(kind: str, method: str | None, seed: int, sessions: int,
+                 scene: str | None = None) -> dict:
+    """One job of the sweep (:func:`jobs`), in whichever process runs it."""
+    if kind == "cv":
+        from telethermal.ident.crossval import cross_validate
+        return cross_validate(_trials(scene, seed), method, 5, scene=scene)
+    if kind == "method":
+        return method_sections(method, seed, sessions)
+    if kind == "limit":
+        return limit(load_scene("fingertip-7"), [
+            (s, from_trials(_trials("fingertip-7", s), max_s=1.0)[0])
+            for s in range(seed, seed + sessions)])
+    return {"thermometer_ablation": thermometer_ablation, "lm_vs_adam": lm_vs_adam,
+            "lstm_hidden_sweep": lstm_hidden_sweep}[kind](seed)
 
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-    for method, rep in report["methods"].items():
-        t1 = rep["table1"]
-        for key, style in (("accuracy_7", "o-"), ("accuracy_5", "s--")):
-            axes[0].plot([float(k) for k in t1[key]], [100 * v for v in t1[key].values()],
-                         style, label=f"{method}, {key[-1]} classes")
-        act = rep.get("active_passive", {}).get("active_accuracy_by_window_s", {})
-        if act:
-            axes[1].plot([float(k) for k in act], [100 * v for v in act.values()], "o-",
-                         label=f"{method}, active I-pro")
-        for name, row in rep.get("cross_temperature", {}).items():
-            acc = row["accuracy_by_window_s"]
-            axes[1].plot([float(k) for k in acc], [100 * v for v in acc.values()], ":",
-                         label=f"{method}, {name}")
-    paper = PAPER1_5_CLASSES
-    axes[0].plot([float(k) for k in paper], [100 * v for v in paper.values()], "k*", ms=10,
-                 label="paper, 5 classes")
-    for ax, title in zip(axes, ("fingertip-7 pad database (leave-trials-out)",
-                                "gripper: active pad and cross-temperature")):
-        ax.set_xlabel("time after contact (s)")
-        ax.set_ylabel("accuracy (%)")
-        ax.set_ylim(0, 102)
-        ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-        ax.set_title(title, fontsize=9)
-    fig.suptitle(f"telethermal bench identify - {report['date']} - {report['machine']}",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
-    plt.close(fig)
+
+def method_sections(method: str, seed: int, sessions: int) -> dict:
+    """``method``'s Table 1 (with its live counts), active/passive,
+    cross-temperature, session shift and temperature-channel rows."""
+    t1 = sessions_table1(table1, method, seed, sessions, table1(method, seed))
+    if getattr(METHODS[method], "needs_scene", False):
+        # It fits one pad's model: the rows below train on one pad (or
+        # object temperature) and test on another.
+        return {"table1": t1, "live": t1.pop("live"), "not_run": [
+            "active/passive, cross-temperature and the temperature channel: its estimate "
+            "fits the pad (and object temperature) of the scene it was trained on; these "
+            "rows test on another pad or temperature, or read temperature"],
+                "session_shift": session_shift(method, seed)}
+    out = {"table1": t1, "live": t1.pop("live"), "active_passive": active_passive(method, seed),
+           "cross_temperature": cross_temperature(method, seed),
+           "session_shift": session_shift(method, seed)}
+    if not make(method).streaming:
+        out["temperature"] = temperature_rows(method, seed)
+    return out
+
+
+def _run_methods(report: dict, seed: int, methods, step, sessions: int = 1, executor=None,
+                 with_limit: bool = False, scene: str | None = None) -> None:
+    from telethermal.bench.executor import SerialExecutor, sweep
+
+    work = jobs(methods, with_limit, scene)
+    done = sweep(executor or SerialExecutor(), identify_job,
+                 [(kind, m, seed, sessions, None if scene is None else str(scene))
+                  for kind, m in work], progress=step,
+                 label=lambda c: f"{c[1]}: 5 folds on {scene}" if c[0] == "cv"
+                 else c[1] or c[0].replace("_", " "))
+    for (kind, m), result in zip(work, done):
+        if kind in ("method", "cv"):
+            report["methods"][m] = result
+        else:
+            report[kind] = result
+    if "limit" in report:
+        report["limit_gap_points"] = gaps_to_limit(report["methods"], report["limit"])
 
 
 def run_and_save(json_path, png_path, seed: int = 0, methods=None, command: str = "",
                  progress: Callable[[str], None] | None = None, scene: str | None = None,
-                 sessions: int = 3, with_limit: bool = True) -> dict:
+                 sessions: int = 3, with_limit: bool = True, executor=None) -> dict:
     """Run the benchmark, write the JSON report (with ``command``), then
     plot it to ``png_path`` (a plot that fails loses no figure); returns
     the report."""
     from telethermal.jsonfile import write_json
 
     report = run(seed=seed, methods=methods, progress=progress, scene=scene, sessions=sessions,
-                 with_limit=with_limit and scene is None)
+                 with_limit=with_limit and scene is None, executor=executor)
     report["command"] = command
     write_json(json_path, report)
     if scene is not None:
@@ -493,5 +487,6 @@ def run_and_save(json_path, png_path, seed: int = 0, methods=None, command: str 
         plot_accuracy(report["methods"], png_path, f"{scene}: each method, 5 folds by group "
                                                     f"(seed {seed})")
     else:
+        from telethermal.bench.identify_plot import plot
         plot(report, png_path)
     return report

@@ -92,13 +92,17 @@ def cmd_bench_identify(args) -> int:
     from telethermal.bench import identify, identify_text
 
     if args.as_built is not None:
+        _no_executor(args)
         return _bench_identify_as_built(args)
     methods = args.methods.split(",") if args.methods else None
     png = _png(args)
-    with _progress(5 * len(methods or identify.DEFAULT_METHODS) + 4, "bench identify") as advance:
+    n_jobs = len(identify.jobs(methods or identify.DEFAULT_METHODS, not args.no_limit,
+                               args.scene))
+    with _progress(n_jobs, "bench identify") as advance, _executor(args) as executor:
         report = identify.run_and_save(args.json, png, seed=args.seed, methods=methods,
                                        command=_command(), progress=advance, scene=args.scene,
-                                       sessions=args.sessions, with_limit=not args.no_limit)
+                                       sessions=args.sessions, with_limit=not args.no_limit,
+                                       executor=executor)
     _print_lines(identify_text.text_report(report, args.json, png))
     return 0
 
@@ -364,6 +368,7 @@ def _add_error(bsub) -> None:
                         "uncalibrated and calibrated (telethermal calibrate pad)")
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
+    _executor_args(p, "the methods and sections")
     p.set_defaults(func=cmd_bench_identify)
 
     p = bsub.add_parser("unseen", help="materials the identifiers never saw: the live "
