@@ -194,7 +194,7 @@ def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monk
                 "flux_rms_error_rel": 0.02, "identified": material, "safety_events": 0,
                 "module_limits": _render_pad(0, {"x": [0]})["rows"][0]["module_limits"]}
 
-    monkeypatch.setattr(ra, "_session_row", session)
+    monkeypatch.setattr(ra, "session_row", session)
     monkeypatch.setattr(ra, "train_generator", lambda scene, seed: "generator")
     monkeypatch.setattr(ra, "train_identifier", lambda scene, seed, calibration=None:
                         ("identifier", calibration))

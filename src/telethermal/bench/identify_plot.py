@@ -3,10 +3,10 @@ and the cross-temperature rows, each method beside the paper."""
 
 from __future__ import annotations
 
-from telethermal.bench.identify import PAPER1_5_CLASSES
-
 
 def plot(report: dict, out_png) -> None:
+    """The figure of ``report`` (the paper's 5-class accuracy: its Table 1
+    rows' ``paper_accuracy_5``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -25,7 +25,8 @@ def plot(report: dict, out_png) -> None:
             acc = row["accuracy_by_window_s"]
             axes[1].plot([float(k) for k in acc], [100 * v for v in acc.values()], ":",
                          label=f"{method}, {name}")
-    paper = PAPER1_5_CLASSES
+    paper = next((rep["table1"]["paper_accuracy_5"] for rep in report["methods"].values()
+                  if "paper_accuracy_5" in rep.get("table1", {})), {})
     axes[0].plot([float(k) for k in paper], [100 * v for v in paper.values()], "k*", ms=10,
                  label="paper, 5 classes")
     for ax, title in zip(axes, ("fingertip-7 pad database (leave-trials-out)",
