@@ -155,3 +155,35 @@ def test_a_local_dask_cluster_gives_the_same_results():
         remote = sweep(cluster, square_and_pid, calls)
     assert strip(remote) == strip(sweep(SerialExecutor(), square_and_pid, calls))
     assert os.getpid() not in {r["pid"] for r in remote}
+
+
+def sleep_then(x: float) -> float:
+    import time
+    time.sleep(x)
+    return x
+
+
+def test_leaving_a_pool_on_an_error_kills_its_running_jobs_instead_of_waiting():
+    # A failed sweep on the pool: the CLI leaves its `with` on the error,
+    # and a job running on another worker (a whole method's sections) is
+    # killed, not waited for. Counted, not timed: the long job's future
+    # fails, it does not finish.
+    pool = JsonProcessPool(2)
+    with pytest.raises(BenchError, match="three is refused"):
+        with pool:
+            long = pool.submit(call_json, f"{__name__}:sleep_then", "[120]")
+            sweep(pool, fail_on, [(3,)])
+    assert long.done() and isinstance(long.exception(), BenchError)
+
+
+def test_a_serial_future_answers_exception_and_result_alike():
+    f = SerialExecutor().submit(fail_on, 3)
+    assert isinstance(f.exception(), ValueError)
+    with pytest.raises(ValueError):
+        f.result()
+    assert SerialExecutor().submit(fail_on, 2).exception() is None
+
+
+def test_a_work_folder_that_is_not_there_is_refused(tmp_path):
+    with pytest.raises(BenchError, match="no such folder"):
+        open_executor("serial", work_dir=str(tmp_path / "missing"))

@@ -73,22 +73,34 @@ def _plain(value):
 
 
 class _DeferredFuture(Future):
-    """A serial job's future: the job runs when its result is first asked
-    for, so a sweep reads (and stops at) each job in turn."""
+    """A serial job's future: the job runs when its result (or exception)
+    is first asked for, so a sweep reads (and stops at) each job in turn."""
 
     def __init__(self, fn, args, kwargs):
         super().__init__()
         self._call = (fn, args, kwargs)
+        self._taking = threading.Lock()
+
+    def _run_once(self) -> None:
+        with self._taking:
+            call, self._call = self._call, None
+        if call is None or not self.set_running_or_notify_cancel():
+            return
+        fn, args, kwargs = call
+        try:
+            self.set_result(fn(*args, **kwargs))
+        except BaseException as exc:         # the job's; an interrupt goes up too
+            self.set_exception(exc)
+            if not isinstance(exc, Exception):
+                raise
 
     def result(self, timeout=None):
-        call, self._call = self._call, None
-        if call is not None and self.set_running_or_notify_cancel():
-            fn, args, kwargs = call
-            try:
-                self.set_result(fn(*args, **kwargs))
-            except Exception as exc:         # the job's; an interrupt goes up
-                self.set_exception(exc)
+        self._run_once()
         return super().result(timeout)
+
+    def exception(self, timeout=None):
+        self._run_once()
+        return super().exception(timeout)
 
 
 class SerialExecutor(Executor):
@@ -121,6 +133,8 @@ class JsonProcessPool(Executor):
         self._jobs: queue.Queue = queue.Queue()
         self._lock = threading.Lock()
         self._shutdown = False
+        #: Each serving thread's worker while it runs a job (killed on cancel).
+        self._busy: dict[int, subprocess.Popen] = {}
         self._threads = [threading.Thread(target=self._serve, name=f"bench-worker-{i}",
                                           daemon=True) for i in range(self.max_workers)]
         for t in self._threads:
@@ -159,6 +173,7 @@ class JsonProcessPool(Executor):
                 try:
                     if proc is None:
                         proc = self._start()
+                    self._busy[threading.get_ident()] = proc
                     proc = self._run(proc, future, line)
                 except BaseException as exc:     # this thread's own failure: the job's
                     if proc is not None:
@@ -169,6 +184,8 @@ class JsonProcessPool(Executor):
                         future.set_exception(BenchError(
                             f"a bench worker's job failed in the pool: "
                             f"{type(exc).__name__}: {exc}"))
+                finally:
+                    self._busy.pop(threading.get_ident(), None)
         finally:
             if proc is not None:
                 _close(proc)
@@ -197,6 +214,9 @@ class JsonProcessPool(Executor):
         return proc
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop the workers once their jobs are done; ``cancel_futures``:
+        the queued jobs cancelled and the running ones killed (their futures
+        fail), as when a sweep failed or was interrupted."""
         with self._lock:
             self._shutdown = True
         if cancel_futures:
@@ -207,11 +227,18 @@ class JsonProcessPool(Executor):
                     break
                 if item is not None:
                     item[0].cancel()
+            for proc in list(self._busy.values()):
+                proc.kill()
         for _ in self._threads:
             self._jobs.put(None)
         if wait:
             for t in self._threads:
                 t.join()
+
+    def __exit__(self, exc_type, exc, tb):
+        # Leaving on an error or an interrupt: no job is waited for.
+        self.shutdown(wait=True, cancel_futures=exc_type is not None)
+        return False
 
 
 def _close(proc: subprocess.Popen) -> None:
@@ -233,6 +260,8 @@ def open_executor(kind: str | None = None, jobs: int | None = None,
     workers see at the same path (None: this machine's temporary folder; a
     remote cluster, ``dask:ADDRESS``, needs one on a file system it shares)."""
     kind = kind or "process"
+    if work_dir is not None and not os.path.isdir(work_dir):
+        raise BenchError(f"--work-dir {work_dir}: no such folder")
     if kind in ("process", "serial"):
         executor = JsonProcessPool(jobs) if kind == "process" else SerialExecutor()
     elif kind == "dask-local" or kind.startswith("dask:"):
@@ -276,7 +305,7 @@ def describe(executor: Executor) -> str:
     """How a report names where its sweep ran."""
     if isinstance(executor, _DaskExecutor):
         where = "a local Dask cluster" if executor.cluster is not None else "a Dask cluster"
-        return f"{where}, {len(executor.client.scheduler_info().get('workers', {}))} workers"
+        return f"{where}, {len(executor.client.nthreads())} workers"
     if isinstance(executor, SerialExecutor):
         return "this process"
     return f"{getattr(executor, 'workers', '?')} worker processes"
@@ -307,10 +336,11 @@ def sweep(executor: Executor, fn: Callable, calls: Iterable[tuple], progress=Non
     :class:`BenchError` naming it (the others are cancelled)."""
     name = function_name(fn)
     calls = [tuple(c) for c in calls]
-    futures = [executor.submit(call_json, name, json.dumps(list(c), default=_plain))
-               for c in calls]
+    futures: list[Future] = []
     out = []
     try:
+        futures += [executor.submit(call_json, name, json.dumps(list(c), default=_plain))
+                    for c in calls]
         for k, (c, f) in enumerate(zip(calls, futures), 1):
             try:
                 result = json.loads(f.result())
@@ -336,6 +366,13 @@ def worker_main(stdin=sys.stdin, stdout=sys.stdout) -> None:
     line out (``{"result": ...}`` or ``{"error": ...}``), until stdin closes."""
     global ANSWERS
     ANSWERS = stdout
+    try:
+        _serve_jobs(stdin, stdout)
+    except KeyboardInterrupt:                # Ctrl-C reaches the workers too: quietly
+        sys.exit(130)
+
+
+def _serve_jobs(stdin, stdout) -> None:
     for line in stdin:
         job = json.loads(line)
         try:

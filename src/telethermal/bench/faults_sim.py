@@ -187,9 +187,9 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
             progress(f"simulated: {row}")
 
     try:
+        ran_on = describe(executor)
         done = sweep(executor, unit_job, [(job, list(u)) for u in work], progress=step,
                      label=lambda c: "simulated: " + " ".join(x for x in c[1] if x))
-        ran_on = describe(executor)
     finally:
         if own:
             executor.shutdown(cancel_futures=True)

@@ -72,11 +72,11 @@ def _database(scene_name: str, seed: int, contact_s: float | None = None) -> tup
     return tuple(pad_database(scene, np.random.default_rng(seed)))
 
 
-#: Models fitted in this run, by method, hyper-parameters and a digest of
-#: the training contacts: a fit that two sections share (the active pad's LSTM
-#: folds and the width sweep's default width; cross-temperature I-pro for
-#: case II and for case III, the same materials) is made once. Training is
-#: seeded by the model, so a fit does not depend on what ran before it.
+#: Models fitted in this process, by method, hyper-parameters and a digest
+#: of the training contacts: a fit that two sections of one job share
+#: (cross-temperature I-pro for case II and for case III, the same
+#: materials) is made once; jobs on other workers fit their own. Training
+#: is seeded by the model, so a fit does not depend on what ran before it.
 _FITS: dict = {}
 
 
@@ -391,9 +391,10 @@ def run(seed: int = 0, methods=None, progress: Callable[[str], None] | None = No
             report["not_run"] = ["the papers' sections (Table 1, active/passive, "
                                  "cross-temperature, session shift): they are the papers' "
                                  "scenes'; run without --scene"]
+        ran_on = describe(executor)
         _run_methods(report, seed, methods, step, sessions, executor=executor,
                      with_limit=with_limit and scene is None, scene=scene)
-        report["executor"] = describe(executor)
+        report["executor"] = ran_on
     finally:
         if own:
             executor.shutdown(cancel_futures=True)

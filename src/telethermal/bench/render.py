@@ -248,9 +248,10 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     own = executor is None
     executor = open_executor("process") if own else executor
     try:
+        ran_on = describe(executor)
         with work_folder(executor) as tmp:
             report = _run(progress, quick, scene_name, executor, Path(tmp))
-        report["executor"] = describe(executor)
+        report["executor"] = ran_on
         return report
     finally:
         if own:

@@ -380,9 +380,9 @@ def _render(base: Scene, identifier, materials: dict, seeds: int, quick: bool, s
         with work_folder(executor) as tmp:
             job = {**where, "identifier": str(identifier.save(Path(tmp) / "identifier.npz")),
                    "generator": str(save_generator(generator, Path(tmp) / "generator.npz"))}
+            ran_on = describe(executor)
             rows = sweep(executor, ur.render_job, [(job, m, s) for m, _, s in calls],
                          progress=progress)
-        ran_on = describe(executor)
     finally:
         if own:
             executor.shutdown(cancel_futures=True)

@@ -22,7 +22,7 @@ def cmd_bench_render(args) -> int:
     if args.as_built is not None:
         _no_executor(args)
         return _bench_render_as_built(args)
-    with _progress(7, "bench render") as advance, _executor(args) as executor:
+    with _progress(9, "bench render") as advance, _executor(args) as executor:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene,
                                      executor=executor)
@@ -172,7 +172,7 @@ def cmd_bench_unseen(args) -> int:
         _no_executor(args)
         return _bench_unseen_as_built(args)
     seeds = args.seeds or (1 if args.quick else 3)
-    with _progress(seeds + 2, "bench unseen") as advance, _executor(args) as executor:
+    with _progress(2 * seeds + 3, "bench unseen") as advance, _executor(args) as executor:
         report = unseen.run_and_save(args.json, command=_command(), seeds=seeds,
                                      unseen=args.unseen, unseen_scene=args.unseen_scene,
                                      quick=args.quick, scene=args.scene, progress=advance,
@@ -280,7 +280,7 @@ def _add_faults(bsub) -> None:
 
 
 def _executor_args(p, what: str) -> None:
-    p.add_argument("--executor", default="process", metavar="KIND",
+    p.add_argument("--executor", metavar="KIND",
                    help=f"where {what} run: process (worker processes, the default), serial "
                         "(this process), dask:ADDRESS (a Dask cluster's scheduler; needs "
                         "--work-dir) or dask-local (pip install 'telethermal[dask]'); the same "
@@ -295,7 +295,7 @@ def _executor_args(p, what: str) -> None:
 
 def _no_executor(args) -> None:
     """--as-built runs its pads in this process: its executor options refused."""
-    if args.executor != "process" or args.jobs or args.work_dir:
+    if args.executor is not None or args.jobs or args.work_dir:
         from telethermal.errors import BenchError
         raise BenchError("--executor, --jobs and --work-dir are not for --as-built (its pads "
                          "run one after another in this process)")
