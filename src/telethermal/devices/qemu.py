@@ -355,7 +355,11 @@ def image_size(elf: str | Path) -> dict[str, int]:
                               check=True, timeout=60)
         text, data, bss = (int(v) for v in done.stdout.splitlines()[1].split()[:3])
     except (OSError, subprocess.SubprocessError, IndexError, ValueError) as exc:
-        raise DeviceError(f"arm-none-eabi-size {elf}: no size read ({exc})") from exc
+        said = (getattr(exc, "stderr", None) or "").strip()[-500:]
+        exists = Path(elf).is_file()
+        raise DeviceError(f"arm-none-eabi-size {elf}: no size read ({exc}"
+                          f"{'; it said: ' + said if said else ''}"
+                          f"{'' if exists else '; the image is not there'})") from exc
     return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}
 
 
