@@ -29,10 +29,10 @@ def test_the_class_density_is_the_t_predictive_of_the_training_touches(model):
     mean and sample sd): checked against scipy for one touch, to 1e-12."""
     held = _contacts(SCENE, 1)
     i = len(model.windows_s_) - 1
-    x = model._window(held.x[:1], model.windows_s_[i])
+    x = model.window(held.x[:1], model.windows_s_[i])
     f = model.log_effusivity(x)[0]
     train = _contacts(SCENE, 0)
-    g = model.log_effusivity(model._window(train.x, model.windows_s_[i]))
+    g = model.log_effusivity(model.window(train.x, model.windows_s_[i]))
     for c, name in enumerate(model.classes_):
         mine = g[np.array(train.labels) == name]
         n = len(mine)

@@ -36,7 +36,7 @@ def _inside(model, x, i, name) -> bool:
     """The touch's ln e at window ``i`` within class ``name``'s two-sided
     1 - outlier_p predictive (what its training touches covered)."""
     params = model.params_[i]
-    z, dof, _ = model._t_terms(params, model._window(x, model.windows_s_[i]))
+    z, dof, _ = model._t_terms(params, model.window(x, model.windows_s_[i]))
     c = list(model.classes_).index(name)
     return abs(z[0, c]) <= student_t.ppf(1 - model.outlier_p / 2, dof[c])
 

@@ -78,8 +78,8 @@ def test_the_misfit_statistic_is_given_against_the_sensor_noise_alone_too(model)
     for i in range(len(contacts.labels)):
         x = contacts.x[i:i + 1, :contacts.lengths[i]]
         chi2, chi2_noise = model.misfit_chi2(x, last)
-        row = model._window(x, model.windows_s_[last])[0, :, 0]
-        ratio = est._noise_var(row, gap_k) / est._noise_var(row, gap_k, allowance=0.0)
+        row = model.window(x, model.windows_s_[last])[0, :, 0]
+        ratio = est.noise_var(row, gap_k) / est.noise_var(row, gap_k, allowance=0.0)
         assert ratio > 1.5                       # the allowance dominates the denominator
         assert chi2_noise == pytest.approx(chi2 * ratio, rel=0.05)
         assert model.misfit(x, last) is (chi2 > CHI2_MAX)
@@ -120,7 +120,7 @@ def test_samples_the_driver_filled_in_are_not_counted_as_measured(model):
         model.misfit_chi2(x, last, measured[:10])
     # A window of 5 samples has 1 degree of freedom over the fit's 4; one of
     # them filled in leaves none: no statistic (nor for a window of 4).
-    sizes = [len(model._window(x, ws)[0, :, 0]) for ws in model.windows_s_]
+    sizes = [len(model.window(x, ws)[0, :, 0]) for ws in model.windows_s_]
     five = sizes.index(5)
     assert model.misfit_chi2(x, five) is not None
     early = np.ones(n, bool)

@@ -42,7 +42,7 @@ def test_the_rule_posterior_is_the_closed_form(model):
     p = np.full(len(model.classes_), 1.0 / len(model.classes_))
     for i in (2, 5, len(model.windows_s_) - 1):
         params = model.params_[i]
-        f = model.log_effusivity(model._window(x, model.windows_s_[i]))[0]
+        f = model.log_effusivity(model.window(x, model.windows_s_[i]))[0]
         scale = np.sqrt(params["var"] * (1 + 1 / params["n"]))
         dens = student_t.pdf((f - params["means"]) / scale, params["n"] - 1) / scale
         for w in (0.25, 1.0, 4.0):

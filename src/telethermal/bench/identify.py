@@ -223,10 +223,10 @@ def lm_vs_adam(seed: int) -> dict:
     model = PcaFnn(max_window_s=1.0, window_step_s=1.0)
     model.classes_ = sorted(set(contacts.labels))
     model.sample_rate_hz_ = contacts.sample_rate_hz
-    x = model._window(contacts.x, 1.0)
+    x = model.window(contacts.x, 1.0)
     from telethermal.ident.pca import SnapshotPCA
     pca = SnapshotPCA(model.n_components).fit(x.reshape(len(x), -1))
-    u = model._features({"mean": pca.mean_, "components": pca.components_,
+    u = model.features({"mean": pca.mean_, "components": pca.components_,
                          "eigenvalues": pca.eigenvalues_}, x)
     y = np.eye(len(model.classes_))[[model.classes_.index(c) for c in contacts.labels]]
     start_net = MLP.init(u.shape[1], model.n_hidden, y.shape[1], np.random.default_rng(seed))

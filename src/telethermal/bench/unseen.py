@@ -100,7 +100,7 @@ def estimates(identifier, contacts, timed: set) -> list[dict]:
                     "samples, fewer than an estimate needs (a scene sampled faster, please)")
             theta, e, lo, hi, sd, _ = got
             _, lap_lo, lap_hi, lap_sd = est.interval_at(x[:n], gap_k, theta)
-            chi2, fits = est._goodness(theta, x[:n], est._noise_var(x[:n], gap_k))
+            chi2, fits = est.goodness(theta, x[:n], est.noise_var(x[:n], gap_k))
             row["windows"][w], row["laplace"][w] = [
                 EffusivityEstimate(e, (a, b), s, (n - 1) / est.sample_rate_hz, n,
                                    est.h_ref_w_m2k * float(np.exp(theta[1])), float(theta[2]),

@@ -240,14 +240,14 @@ class Identifier:
             raise IdentificationError(f"trials are too short ({usable:.3g} s after contact) "
                                       f"for a window of {step:.3g} s")
         self.windows_s_ = [round(w, 6) for w in np.arange(1, int(top / step + 1e-9) + 1) * step]
-        self.params_ = [self._fit_window(self._window(contacts.x, w), y) for w in self.windows_s_]
+        self.params_ = [self._fit_window(self.window(contacts.x, w), y) for w in self.windows_s_]
         self.force_range_n_ = force_ranges(self, contacts)
         self.softmax_temperature_ = np.ones(len(self.windows_s_))
         if self.calibrate and not self.streaming:
             self._calibrate(contacts, y)
         return self
 
-    def _window(self, x: np.ndarray, window_s: float) -> np.ndarray:
+    def window(self, x: np.ndarray, window_s: float) -> np.ndarray:
         """The first ``window_s`` of each contact, (N, n_w, C); n_w includes t = 0."""
         n = int(round(window_s * self.sample_rate_hz_)) + 1
         return x[:, :n]
@@ -281,8 +281,8 @@ class Identifier:
             if len(set(y[train])) < len(self.classes_):
                 return None
             for i, w in enumerate(self.windows_s_):
-                params = self._fit_window(self._window(contacts.x[train], w), y[train])
-                logits[i][test] = self._logits(params, self._window(contacts.x[test], w))
+                params = self._fit_window(self.window(contacts.x[train], w), y[train])
+                logits[i][test] = self._logits(params, self.window(contacts.x[test], w))
         return logits
 
     # ------------------------------------------------------------ predicting
@@ -299,7 +299,7 @@ class Identifier:
     def proba_normalised(self, x: np.ndarray, window_index: int) -> np.ndarray:
         """Posteriors (N, n_classes) for normalised contacts x (N, >= n_w, C)."""
         w = self.windows_s_[window_index]
-        z = self._logits(self.params_[window_index], self._window(x, w))
+        z = self._logits(self.params_[window_index], self.window(x, w))
         z = z / self.softmax_temperature_[window_index]
         z = z - z.max(axis=1, keepdims=True)          # a softmax without scipy's overhead
         e = np.exp(z)

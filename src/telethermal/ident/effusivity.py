@@ -326,17 +326,17 @@ class EffusivityEstimator:
             raise IdentificationError(f"a {(n - 1) / self.sample_rate_hz:g} s window is longer "
                                       "than the estimator's curves: build it with a larger max_s")
         t_s, xs = self._times(n, keep), (x if keep is None else x[keep])
-        s = self._noise_var(xs, gap_k)
+        s = self.noise_var(xs, gap_k)
         theta, hess = self._fit(xs, s, start, t_s)
         sd, (lo, hi), bound = self._interval(theta, hess, resolution_var(self, theta, n))
         return EffusivityEstimate(
             float(math.exp(theta[0])), (lo, hi),
             sd, (n - 1) / self.sample_rate_hz, len(xs),
             self.h_ref_w_m2k * float(math.exp(theta[1])),
-            float(theta[2]), *self._goodness(theta, x, s, slice(None) if keep is None else keep),
+            float(theta[2]), *self.goodness(theta, x, s, slice(None) if keep is None else keep),
             bool(bound), tuple(float(v) for v in theta))
 
-    def _noise_var(self, x: np.ndarray, gap_k: float, allowance: float = 1.0) -> float:
+    def noise_var(self, x: np.ndarray, gap_k: float, allowance: float = 1.0) -> float:
         """The samples' variance: the flux noise over the gap and the curves'
         allowance (see the module) times ``allowance`` (1: the scene's
         tolerance; calibrated: :mod:`telethermal.ident.intervals`)."""
@@ -364,12 +364,12 @@ class EffusivityEstimator:
         x, theta = np.asarray(x, float), np.asarray(theta, float)
         t_s = self._times(len(x), measured)
         x = x if measured is None else x[np.asarray(measured, bool)]
-        _, _, hess = self._objective(theta, x, self._noise_var(x, gap_k, allowance), t_s)
+        _, _, hess = self._objective(theta, x, self.noise_var(x, gap_k, allowance), t_s)
         sd, (lo, hi), _ = self._interval(theta, hess, allowance * resolution_var(
             self, theta, len(x)) if floor_var is None else floor_var)
         return float(math.exp(theta[0])), lo, hi, sd
 
-    def _goodness(self, theta, x, s, keep=slice(None)):
+    def goodness(self, theta, x, s, keep=slice(None)):
         """(chi-square per degree of freedom, fits): the residual after the amplitude's
         posterior mean, against the noise (4 fitted), of the samples ``keep`` (the measured)."""
         a0, sa = self.amplitude

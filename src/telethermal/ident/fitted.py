@@ -256,7 +256,7 @@ class EffusivityFit(Identifier):
         """One window's estimate made afresh (for timing: a cached one
         costs nothing), from the previous window's fit when known, as the
         slave makes it, else from cold (dearer)."""
-        x = np.ascontiguousarray(self._window(row, self.windows_s_[window_index])[0, :, 0])
+        x = np.ascontiguousarray(self.window(row, self.windows_s_[window_index])[0, :, 0])
         if len(x) < MIN_SAMPLES:
             return
         est, gap_k = self.estimator()
@@ -271,7 +271,7 @@ class EffusivityFit(Identifier):
         go (each window's fit starts from the previous one's: the same
         fits, so the same decisions, made as the windows come; measured
         by helper-18 at ~125 ms on one sample at the last window)."""
-        row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
+        row = np.ascontiguousarray(self.window(x, self.windows_s_[window_index])[0, :, 0])
         if _enough(row, len(row)):
             self._theta(row, len(row))
 
@@ -338,7 +338,7 @@ class EffusivityFit(Identifier):
             return p
         est, _ = self.estimator()
         log_other = np.log(self.unseen_weight) - np.log(est.hi[0] - est.lo[0])
-        log_f = self._logits(params, self._window(x, self.windows_s_[window_index]))[0]
+        log_f = self._logits(params, self.window(x, self.windows_s_[window_index]))[0]
         top = max(float(np.max(log_f)), log_other)
         other = np.exp(log_other - top)
         return np.asarray(p) * (1.0 - other / (other + float(np.sum(np.exp(log_f - top)))))
@@ -392,7 +392,7 @@ class EffusivityFit(Identifier):
         the fit itself (:meth:`_theta`, when ``x`` carries it as NaN). None
         with no more measured samples than the fit's 4 parameters
         (docs/calibration.md)."""
-        row = np.ascontiguousarray(self._window(x, self.windows_s_[window_index])[0, :, 0])
+        row = np.ascontiguousarray(self.window(x, self.windows_s_[window_index])[0, :, 0])
         keep = np.isfinite(row)
         if measured is not None:
             flags = np.asarray(measured, bool)[:len(row)]
@@ -407,8 +407,8 @@ class EffusivityFit(Identifier):
         est, gap_k = self.estimator()
         theta = np.asarray(self._theta(row, len(row)), float)
         xs = np.where(keep, row, 0.0)
-        chi2, _ = est._goodness(theta, xs, est._noise_var(xs[keep], gap_k), keep)
-        chi2_noise, _ = est._goodness(theta, xs, est._noise_var(xs[keep], gap_k, allowance=0.0),
+        chi2, _ = est.goodness(theta, xs, est.noise_var(xs[keep], gap_k), keep)
+        chi2_noise, _ = est.goodness(theta, xs, est.noise_var(xs[keep], gap_k, allowance=0.0),
                                       keep)
         return chi2, chi2_noise
 
@@ -416,7 +416,7 @@ class EffusivityFit(Identifier):
         params = self.params_[window_index]
         if "means" not in params:
             return np.zeros(len(x), dtype=bool)
-        z, dof, _ = self._t_terms(params, self._window(x, self.windows_s_[window_index]))
+        z, dof, _ = self._t_terms(params, self.window(x, self.windows_s_[window_index]))
         limit = student_t.ppf(1.0 - self.outlier_p / 2, dof)
         return np.all(np.abs(z) > limit[None], axis=1)
 
@@ -429,7 +429,7 @@ class EffusivityFit(Identifier):
         (Laplace's and the resolution floor, :mod:`telethermal.ident.intervals`)."""
         from telethermal.ident.openset import EffusivityReading
 
-        w = self._window(x, self.windows_s_[window_index])
+        w = self.window(x, self.windows_s_[window_index])
         got = self.interval_of(w[0, :, 0], self.windows_s_[window_index])
         if got is None:
             return None

@@ -109,10 +109,10 @@ def variance_terms(est, x: np.ndarray, gap_k: float, theta) -> np.ndarray:
     g, jac = est.family.curve(theta, np.arange(len(x)) / est.sample_rate_hz, deriv=True)
     mj = a0 * jac
     _, _, lp_hess = est.prior.terms(theta[1:])
-    s_noise = est._noise_var(x, gap_k, 0.0)
+    s_noise = est.noise_var(x, gap_k, 0.0)
     return np.concatenate([(mj.T @ mj).ravel(), mj.T @ g, [float(g @ g)],
                            np.asarray(lp_hess, float).ravel(),
-                           [s_noise, est._noise_var(x, gap_k, 1.0) - s_noise, sa ** 2,
+                           [s_noise, est.noise_var(x, gap_k, 1.0) - s_noise, sa ** 2,
                             resolution_var(est, theta, len(x))]])
 
 

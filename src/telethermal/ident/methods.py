@@ -38,7 +38,7 @@ class PcaFnn(Identifier):
         return {**super().hyper(), "n_components": self.n_components,
                 "n_hidden": self.n_hidden, "max_iter": self.max_iter, "restarts": self.restarts}
 
-    def _features(self, params, x):
+    def features(self, params, x):
         flat = x.reshape(len(x), -1)
         u = (flat - params["mean"]) @ params["components"].T
         # One scale for all components (the first's spread): whitening each
@@ -52,7 +52,7 @@ class PcaFnn(Identifier):
         n_classes = int(y.max()) + 1
         if len(pca.eigenvalues_) == 0:          # nothing varies: no information
             return params
-        u = self._features(params, x)
+        u = self.features(params, x)
         target = np.eye(n_classes)[y]
         rng = np.random.default_rng(self.seed + x.shape[1])
         best = None
@@ -68,7 +68,7 @@ class PcaFnn(Identifier):
         if "w1" not in params:
             return np.zeros((len(x), len(self.classes_)))
         net = MLP(params["w1"], params["b1"], params["w2"], params["b2"])
-        z = net(self._features(params, x))
+        z = net(self.features(params, x))
         return np.log(np.clip(z, 1e-6, None))
 
 
@@ -182,8 +182,8 @@ class EffusivityLda(Identifier):
                                 attr.rstrip("_"), fallback)
                     return fallback
                 for w in windows:
-                    params = self._fit_window(self._window(contacts.x[train], w), y[train])
-                    z = self._logits(params, self._window(contacts.x[test], w))
+                    params = self._fit_window(self.window(contacts.x[train], w), y[train])
+                    z = self._logits(params, self.window(contacts.x[test], w))
                     total -= log_softmax(z, axis=1)[np.arange(len(test)), y[test]].sum()
             losses.append(total)
         best = int(np.argmin(losses))
@@ -235,6 +235,6 @@ class EffusivityLda(Identifier):
 
     def outside_classes(self, x, window_index):
         params = self.params_[window_index]
-        d2 = self._distances(params, self._window(x, self.windows_s_[window_index]))
+        d2 = self._distances(params, self.window(x, self.windows_s_[window_index]))
         limit = chi2.ppf(1.0 - self.outlier_p, df=params["means"].shape[1])
         return d2.min(axis=1) > limit
