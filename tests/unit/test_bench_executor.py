@@ -113,8 +113,8 @@ def test_serial_jobs_run_in_turn_and_a_failure_or_an_interrupt_stops_the_sweep()
 def test_only_named_functions_and_json_cross():
     with pytest.raises(ValueError, match="module-level"):
         function_name(lambda x: x)
-    with pytest.raises(ValueError, match="call_json"):
-        JsonProcessPool(1).submit(print, "x")
+    with JsonProcessPool(1) as pool, pytest.raises(ValueError, match="call_json"):
+        pool.submit(print, "x")
     with pytest.raises(TypeError, match="not JSON"):
         call_json(f"{__name__}:_returns_an_object", "[]")
     assert call_json(f"{__name__}:fail_on", "[2]") == "2"
