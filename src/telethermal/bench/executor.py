@@ -129,14 +129,14 @@ class JsonProcessPool(Executor):
     worker."""
 
     def __init__(self, max_workers: int | None = None):
-        self.max_workers = self.workers = max(1, max_workers or cpus())
+        self.workers = max(1, max_workers or cpus())
         self._jobs: queue.Queue = queue.Queue()
         self._lock = threading.Lock()
         self._shutdown = False
         #: Each serving thread's worker while it runs a job (killed on cancel).
         self._busy: dict[int, subprocess.Popen] = {}
         self._threads = [threading.Thread(target=self._serve, name=f"bench-worker-{i}",
-                                          daemon=True) for i in range(self.max_workers)]
+                                          daemon=True) for i in range(self.workers)]
         for t in self._threads:
             t.start()
 
@@ -329,11 +329,13 @@ class _DaskExecutor(Executor):
 
 
 def sweep(executor: Executor, fn: Callable, calls: Iterable[tuple], progress=None,
-          label: Callable[[tuple], str] | None = None) -> list:
+          label: Callable[[tuple], str] | None = None,
+          done: Callable[[tuple], None] | None = None) -> list:
     """``fn(*args)`` for each ``args`` of ``calls`` on ``executor``, the
     results in the order of ``calls``, each read back from its JSON.
-    ``progress(text)`` as each finishes; a call that raised is a
-    :class:`BenchError` naming it (the others are cancelled)."""
+    ``progress(text)`` as each finishes, or ``done(args)`` (a bench that
+    says its own steps); a call that raised is a :class:`BenchError`
+    naming it (the others are cancelled)."""
     name = function_name(fn)
     calls = [tuple(c) for c in calls]
     futures: list[Future] = []
@@ -348,6 +350,8 @@ def sweep(executor: Executor, fn: Callable, calls: Iterable[tuple], progress=Non
                 what = label(c) if label else ", ".join(map(repr, c))
                 raise BenchError(f"{name}({what}) failed: {exc}") from exc
             out.append(result)
+            if done is not None:
+                done(c)
             if progress is not None:
                 progress(f"{label(c) if label else name} ({k} of {len(calls)})")
     except BaseException:

@@ -177,23 +177,20 @@ def run(scene, identifier_path, generator_path, config, materials, seeds, contac
     executor = open_executor("process", jobs) if own else executor
     announced: set = set()
 
-    def step(text: str) -> None:                # one step per row, as its first unit ends
-        unit = text.rsplit(" (", 1)[0]          # "simulated: modes ROW MATERIAL"
-        if progress is None or not unit.startswith("simulated: modes "):
-            return
-        row = unit.removeprefix("simulated: modes ").rsplit(" ", 1)[0]
-        if row not in announced:
+    def step(call: tuple) -> None:              # one step per row, as its first unit ends
+        kind, row, _ = call[1]
+        if progress is not None and kind == "modes" and row not in announced:
             announced.add(row)
             progress(f"simulated: {row}")
 
     try:
         ran_on = describe(executor)
-        done = sweep(executor, unit_job, [(job, list(u)) for u in work], progress=step,
+        finished = sweep(executor, unit_job, [(job, list(u)) for u in work], done=step,
                      label=lambda c: "simulated: " + " ".join(x for x in c[1] if x))
     finally:
         if own:
             executor.shutdown(cancel_futures=True)
-    results = {tuple(u): r for u, r in zip(work, done)}
+    results = {tuple(u): r for u, r in zip(work, finished)}
     out = assemble(results, rows, materials, seeds)
     out.update({"materials": materials, "seeds": list(seeds), "contact_s": contact_s,
                 "rate_hz": config.rate_hz, "before": config.before, "executor": ran_on})

@@ -370,8 +370,10 @@ def _render(base: Scene, identifier, materials: dict, seeds: int, quick: bool, s
     executor = open_executor("process") if own else executor
     announced: set = set()
 
-    def progress(text: str) -> None:            # one step per bench seed, as before
-        seed = calls[int(text.rsplit("(", 1)[1].split()[0]) - 1][1]
+    seed_of = {session: seed for _, seed, session in calls}
+
+    def progress(call: tuple) -> None:          # one step per bench seed, as before
+        seed = seed_of[call[2]]
         if seed not in announced:
             announced.add(seed)
             step(f"rendering, seed {seed}")
@@ -382,7 +384,7 @@ def _render(base: Scene, identifier, materials: dict, seeds: int, quick: bool, s
                    "generator": str(save_generator(generator, Path(tmp) / "generator.npz"))}
             ran_on = describe(executor)
             rows = sweep(executor, ur.render_job, [(job, m, s) for m, _, s in calls],
-                         progress=progress)
+                         done=progress)
     finally:
         if own:
             executor.shutdown(cancel_futures=True)
