@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import random
 import socket
 import time
 
@@ -14,13 +15,58 @@ log = logging.getLogger(__name__)
 RELEASE_WAIT_S = 2.0
 
 
-def free_ports(n: int) -> list[int]:
-    """``n`` TCP ports on 127.0.0.1 free now (the OS's choice: bound, read
-    and closed; free until someone else takes them)."""
-    socks = [socket.socket() for _ in range(n)]
+#: The lowest port :func:`free_ports` hands out (above the registered
+#: services most machines run).
+LOWEST_PORT = 10000
+#: The kernel's range for ports it picks itself (Linux's file; its default
+#: where the file cannot be read).
+EPHEMERAL_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
+DEFAULT_EPHEMERAL = (32768, 60999)
+
+
+def ephemeral_range(path: str = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
+    """The ports the kernel picks for ``bind(port 0)`` and for a
+    connection's own end: ``(first, last)``, both included."""
     try:
-        for s in socks:
-            s.bind(("127.0.0.1", 0))
+        with open(path) as f:
+            first, last = (int(v) for v in f.read().split())
+        return first, last
+    except (OSError, ValueError):
+        return DEFAULT_EPHEMERAL
+
+
+def free_ports(n: int) -> list[int]:
+    """``n`` distinct TCP ports on 127.0.0.1, free now: drawn at random
+    outside the kernel's ephemeral range and each tried with a bind (free
+    until someone else binds them).
+
+    Outside that range because a port the kernel picks is a port it may
+    pick again: the source port of any outgoing connection, or another
+    program's ``bind(0)``, could take it between this call and the service's
+    bind (a service refused "Address already in use" so, once in a CI run,
+    its port taken meanwhile). Where the ephemeral range leaves no room, the
+    kernel's own choice is taken."""
+    first, last = ephemeral_range()
+    candidates = [p for p in range(LOWEST_PORT, 65536) if not first <= p <= last]
+    rng = random.Random()                   # seeded from the OS: each process its own draw
+    rng.shuffle(candidates)
+    candidates.append(0)                     # the kernel's choice, the last resort
+    socks: list[socket.socket] = []
+    try:
+        for port in candidates:
+            if len(socks) == n:
+                break
+            s = socket.socket()
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                s.close()
+                continue
+            socks.append(s)
+            if port == 0:
+                candidates.extend([0] * (n - len(socks)))
+        if len(socks) < n:
+            raise OSError(errno.EADDRINUSE, f"no {n} free TCP ports on 127.0.0.1")
         return [s.getsockname()[1] for s in socks]
     finally:
         for s in socks:
