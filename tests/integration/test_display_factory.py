@@ -1,15 +1,15 @@
-"""One display factory (issue 45, deliverable 2): the master service, the
-simulated network's master and the in-process run build their display
-through :func:`~telethermal.teleop.display_setup.build_display`, from what
+"""One display factory (issue 45, deliverable 2): the master service and
+the simulator's master (which the in-process run and the simulated network
+both drive: sim/loop.py) build their display through :func:`~telethermal.teleop.display_setup.build_display`, from what
 the master heard of the object (the announcement's temperature and expected
 material, the session config's curves), never from the slave pad's own
-reading. Fed the same messages and the same operator, the three displays are
+reading. Fed the same messages and the same operator, the two displays are
 equal in everything the factory sets: the idle (standby) temperature, the
 pre-conditioning, the skin controller's model and the generator's curves.
 
 The announcement the master hears here says the object is 1.5 K warmer than
 the pad's own reading: before the factory the in-process run idled on the
-pad's reading and the other two on what was heard."""
+pad's reading and the others on what was heard."""
 
 from dataclasses import replace
 
@@ -20,9 +20,8 @@ from telethermal.services.config import MasterConfig
 from telethermal.ports import free_ports
 from telethermal.services.master import MasterService, Touch
 from telethermal.teleop.display_setup import build_display, display_idle
-from telethermal.sim.network import SimMasterService
+from telethermal.sim.sides import SimMasterService
 from telethermal.teleop.session import PRE_CONTACT_S, SlaveSession
-from telethermal.sim.inprocess import InProcessWire
 from telethermal.sim.touch import master_rng, draw_operator
 from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.wire.codec import decode
@@ -48,7 +47,7 @@ def fingerprint(display, idle_c: float) -> tuple:
                   for m in display.generator.materials))
 
 
-def test_the_three_drivers_build_equal_displays_from_what_the_master_heard(trained_models):
+def test_the_drivers_build_equal_displays_from_what_the_master_heard(trained_models):
     identifier, generator = trained_models.pair(SCENE, 0)
     curves = sample_curves(generator, [c for c in identifier.classes_
                                        if c in generator.materials])
@@ -63,13 +62,6 @@ def test_the_three_drivers_build_equal_displays_from_what_the_master_heard(train
         classes=list(identifier.classes_), identifier=identifier.method,
         threshold=float(identifier.threshold), curves=curves), 1, t0)
     finger_c = draw_operator(SCENE, master_rng(SEED)).finger_ir_c     # the service's operator
-
-    # The in-process run: its own announcement first, then what the master heard.
-    wire = InProcessWire(Slave(SCENE, MATERIAL, identifier, slave_rng(SEED)), generator,
-                         identifier, SCENE.sample_rate_hz, MATERIAL)
-    wire.to_master(heard, t0)
-    wire.set_up_display(SCENE, CONFIG, finger_c)
-    inproc = fingerprint(wire.display, wire.idle_c)
 
     sim = SimMasterService(SCENE, CONFIG, curves, list(identifier.classes_), heard, finger_c)
     netsim = fingerprint(sim.display, sim.idle_c)
@@ -90,13 +82,13 @@ def test_the_three_drivers_build_equal_displays_from_what_the_master_heard(train
             touch.devices.close()
         service.shutdown()
 
-    assert inproc == netsim == served
+    assert netsim == served
     # The idle is the factory's on what was heard, not on the pad's reading.
-    link_idle = build_display(SCENE, CONFIG, finger_c, wire.master.link)[1]
+    link_idle = build_display(SCENE, CONFIG, finger_c, sim.session.link)[1]
     pad_idle, _ = display_idle(SCENE, CONFIG, finger_c, pad.object_ir_c,
-                               wire.master.link.expected_material)
-    assert wire.master.link.object_temp_c == heard.object_temp_c
-    assert wire.idle_c == link_idle != pad_idle
+                               sim.session.link.expected_material)
+    assert sim.session.link.object_temp_c == heard.object_temp_c
+    assert sim.idle_c == link_idle != pad_idle
 
 
 def test_the_in_process_run_and_the_services_report_one_decision(trained_models,

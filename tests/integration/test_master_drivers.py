@@ -1,8 +1,8 @@
-"""One set of session rules, three drivers: the master's side (issue 26).
+"""One set of session rules, two drivers: the master's side (issue 26).
 The master service (its per-period ``_touch_period``, a loopback stand-in
-for its transport), the simulated network's master
-(:class:`~telethermal.sim.network.SimMasterService`) and the in-process
-run's (:meth:`~telethermal.sim.inprocess.InProcessWire.master_step`) are fed
+for its transport) and the simulator's master
+(:class:`~telethermal.sim.sides.SimMasterService`, which the in-process run
+and the simulated network both drive, in one loop: sim/loop.py) are fed
 one recorded sequence of the slave's messages, each at its arrival period,
 and the same display sensor readings every period. What each sends the
 slave (msgpack bytes, as on the wire), its display's step (flux setpoint,
@@ -18,7 +18,7 @@ trajectory, setpoints, measurement batches, the final estimate and the lift),
 its pad going down when the master's onset reaches it and lifted when the
 master's release does, a few periods each way, through the wire codec. The
 display's readings are those of the service's own simulated display in
-closed loop (its touch of the same seed); the other two are fed them. The
+closed loop (its touch of the same seed); the other is fed them. The
 issue's hard cases: a trajectory that arrives before its decision, and a
 contact that ends before the identifier decides (the slave's final estimate
 and lift reach a master whose contact is over: stale)."""
@@ -38,11 +38,10 @@ from telethermal.services.config import MasterConfig
 from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
 from telethermal.teleop.master import DisplayConfig, MasterStep
-from telethermal.sim.network import SimMasterService
+from telethermal.sim.sides import SimMasterService, SimSlaveService
 from telethermal.teleop.session import PRE_CONTACT_S, SlaveSession
 from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng
 from telethermal.teleop.slave import Slave, slave_rng
-from telethermal.sim.inprocess import InProcessWire
 from telethermal.wire.codec import decode, encode
 from telethermal.wire.messages import parse
 from telethermal.wire.schema import PROTOCOL_VERSION
@@ -255,29 +254,20 @@ def run_netsim(before, arrivals, readings, source: str, finger_c: float):
     return out, session_output(sim.session)
 
 
-def run_inprocess(models, material, before, arrivals, readings, source: str, finger_c: float):
+def check_inprocess_inputs(models, material, before) -> None:
+    """What the in-process run makes itself, as the recording has it: its
+    object's announcement at -PRE_CONTACT_S (byte for byte) and the curves
+    it samples (the session config's)."""
     identifier, generator, _ = models
-    wire = InProcessWire(Slave(SCENE, material, identifier, slave_rng(SEED)), generator,
-                         identifier, SCENE.sample_rate_hz, material)
-    # The in-process run announces its object itself, at -PRE_CONTACT_S, and
-    # samples its curves itself: the recording's, byte for byte.
+    curves = sample_curves(generator, [c for c in identifier.classes_
+                                       if c in generator.materials])
+    slave = SimSlaveService(Slave(SCENE, material, identifier, slave_rng(SEED)), curves,
+                            object_id=material, rate_hz=SCENE.sample_rate_hz)
     t0 = -PRE_CONTACT_S
     session_config = decode(before[0])
-    assert wire_message("contact_event", wire.slave.announcement(t0).message.fields(), 2,
-                        t0) == before[1]
-    assert msgpack.packb(wire.curves) == msgpack.packb(session_config["curves"])
-    assert list(wire.master.link.classes) == session_config["classes"]
-    wire.set_up_display(SCENE, replace(CONFIG, source=source), finger_c)
-    out = []
-    for k, (t, sensors) in enumerate(readings):
-        for data in arrivals.get(k, ()):
-            wire.to_master(parse(decode(data)), t)
-        n = len(wire._to_slave)
-        _, step = wire.master_step(t, DT, sensors)
-        sent = [msgpack.packb([m.kind, m.fields()], use_bin_type=True)
-                for m in wire._to_slave[n:]]
-        out.append(period_output(sent, step, wire.display, wire.master.link))
-    return out, session_output(wire.master)
+    assert wire_message("contact_event", slave.announcement(t0).fields(), 2, t0) == before[1]
+    assert msgpack.packb(curves) == msgpack.packb(session_config["curves"])
+    assert list(identifier.classes_) == session_config["classes"]
 
 
 PARTS = ("messages to the slave", "display step", "events counted")
@@ -301,7 +291,7 @@ def first_difference(readings, runs: dict) -> str | None:
     ("aluminium", 1.0, "setpoints", False),          # the naive baseline's setpoints
     ("wood", 0.1, "trajectory", False),              # over before the identifier decides
 ])
-def test_the_three_masters_give_the_same_outputs(request, material, contact_s, source, reorder):
+def test_the_master_service_and_the_simulators_give_the_same_outputs(request, material, contact_s, source, reorder):
     models = request.getfixturevalue("models" if contact_s > 0.5 else "slower_models")
     operator, forces = operator_and_forces(contact_s)
     before, arrivals, (k_on, k_off), reordered = slave_recording(
@@ -313,14 +303,13 @@ def test_the_three_masters_give_the_same_outputs(request, material, contact_s, s
     assert [(t, s.force_n) for t, s in readings] == forces
     netsim, netsim_session = run_netsim(before, arrivals, readings, source,
                                         operator.finger_ir_c)
-    inproc, inproc_session = run_inprocess(models, material, before, arrivals, readings, source,
-                                           operator.finger_ir_c)
-    runs = {"service": service, "netsim": netsim, "in-process": inproc}
+    check_inprocess_inputs(models, material, before)
+    runs = {"service": service, "simulator": netsim}
     difference = first_difference(readings, runs)
     if difference is not None:
         pytest.fail(difference)
-    assert service == netsim == inproc
-    ends = (service_session, netsim_session, inproc_session)
+    assert service == netsim
+    ends = (service_session, netsim_session)
     assert len(set(ends)) == 1, [msgpack.unpackb(e) for e in ends]
 
     # The recording is what the masters did: they told the slave of the

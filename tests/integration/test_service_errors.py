@@ -14,7 +14,8 @@ from telethermal.services.config import MasterConfig, SlaveConfig
 from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
 from telethermal.services.slave import SlaveService
-from telethermal.teleop.session import Send, send_through
+from telethermal.teleop.links import EndpointLink
+from telethermal.teleop.session import Send
 from telethermal.wire.messages import ContactEvent
 from telethermal.wire.transport import TransportConfig
 
@@ -134,7 +135,7 @@ def test_a_message_that_cannot_be_sent_is_counted_and_the_rest_go(caplog):
     endpoint = SimpleNamespace(send=send, extra_counters={})
     sends = [Send(0.0, ContactEvent(contact_id=k, touching=True, t_s=0.0, force_n=1.0))
              for k in (1, 2, 3)]
-    sent = send_through(endpoint, sends, __import__("logging").getLogger("test"))
+    sent = EndpointLink(endpoint, __import__("logging").getLogger("test")).send_all(sends)
     assert out == [1, 3] and [s.message.contact_id for s in sent] == [1, 3]
     assert endpoint.extra_counters == {"send_errors": 1}
     assert "contact_event not sent: OverflowError" in caplog.text

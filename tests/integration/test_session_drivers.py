@@ -1,8 +1,11 @@
-"""One set of session rules, three drivers (issue 26): the slave service (on
-its sockets), the simulated network of ``bench faults`` and the in-process
-run all drive the same :class:`~telethermal.teleop.session.SlaveSession`,
-so the same touch fed the same contact events at the same instants gives
-the same messages, byte for byte (msgpack, as on the wire). Before the session core the two differed:
+"""One set of session rules, on three links (issues 26 and 45): the slave
+service (on its sockets) and the simulator's slave
+(:class:`~telethermal.sim.sides.SimSlaveService`, the side the in-process
+run and ``bench faults``' simulated network both drive) over the
+in-process wire and over the simulated network all run the same
+:class:`~telethermal.teleop.session.SlaveSession`, so the same touch fed
+the same contact events at the same instants gives the same messages at
+the master, byte for byte (msgpack, as on the wire). Before the session core the two differed:
 the simulator sent a trajectory only on a label change and a fixed
 ``valid_s``, its touching event left out ``object_material``, and it
 never lifted."""
@@ -16,8 +19,10 @@ from telethermal.services.config import SlaveConfig
 from telethermal.ports import free_ports
 from telethermal.services.slave import SlaveService
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.sim.network import SimSlaveService
-from telethermal.sim.inprocess import InProcessWire
+from telethermal.sim.links import instant_pair
+from telethermal.sim.network import NetworkSpec, SimNetwork
+from telethermal.sim.sides import SimSlaveService
+from telethermal.teleop.session import Send
 from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.wire.messages import parse
 from telethermal.wire.transport import TransportConfig
@@ -44,7 +49,7 @@ def wire(messages):
 
 @pytest.mark.parametrize("material, lift_at_s", [("aluminium", 1.0), ("plexiglass", 1.0),
                                                ("wood", 0.03)])
-def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
+def test_the_slave_sends_the_same_messages_on_the_three_links(models, material, lift_at_s):
     identifier, generator = models
     control, stream, admin = free_ports(3)
     config = SlaveConfig(place=material, seed=5, admin_port=admin, transport=TransportConfig(
@@ -53,34 +58,40 @@ def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
     # The pad the service placed, made again for the simulator: the same
     # trial (seed) read through the same calibrated instruments.
     pad = Slave(SCENE, material, identifier, slave_rng(5), session=service.sensors)
-    sim = SimSlaveService(pad, service.curves, object_id=material, memory=ObjectMemory(),
-                          rate_hz=service.rate_hz)
-    # The in-process run's wire, on a third copy of the same trial.
-    inproc = InProcessWire(Slave(SCENE, material, identifier, slave_rng(5),
-                                 session=service.sensors), generator, identifier,
-                           service.rate_hz, material)
-    from_service, from_sim, from_inproc = [], [], []
-    inproc.master.on_message = lambda m, now, offset_s=None: from_inproc.append(
-        (m.kind, m.fields()))
+    # The simulator's slave on the in-process wire, and on a perfect
+    # simulated network (the services' lossless stream), each on its own
+    # copy of the same trial.
+    net = SimNetwork(NetworkSpec(), np.random.default_rng(0))
+    links = {"in-process": instant_pair(), "network": (net.end("slave"), net.end("master"))}
+    sims = {name: SimSlaveService(Slave(SCENE, material, identifier, slave_rng(5),
+                                        session=service.sensors), service.curves,
+                                  object_id=material, memory=ObjectMemory(),
+                                  rate_hz=service.rate_hz) for name in links}
+    from_service = []
+    heard = {name: [] for name in links}
     service.endpoint.send = lambda kind, **fields: from_service.append((kind, fields)) or 0
     events = master_events(lift_at_s)
     try:
         for k in range(int(round(1000 * (lift_at_s + 0.2)))):
-            now = 100.0 + k / 1000          # the same clock for both drivers
+            now = 100.0 + k / 1000          # the same clock for every driver
             if k in events:
                 service._on_message(events[k], now)        # as the codec decoded it
-                sim.on_message(parse(events[k]), now)
-                inproc._to_slave.append(parse(events[k]))
-            inproc.slave_period(now)
             if service.touch_t0 is not None:
                 service._sample(now)
-            sim.step(now, lambda t, m, lossless: from_sim.append((m.kind, m.fields())))
+            for name, (slave_end, master_end) in links.items():
+                if k in events:
+                    master_end.send(Send(now, parse(events[k])))
+                for m in slave_end.due(now):
+                    sims[name].on_message(m, now)
+                sims[name].step(now, slave_end)
+                heard[name] += [(m.kind, m.fields()) for m in master_end.due(now)]
     finally:
         service.shutdown()
     sent = [(kind, fields) for kind, fields in from_service
             if kind not in ("measurement_batch", "status")]   # the simulator models no reader
-    assert [k for k, _ in sent] == [k for k, _ in from_sim] == [k for k, _ in from_inproc]
-    assert wire(sent) == wire(from_sim) == wire(from_inproc)
+    from_inproc, from_net = heard["in-process"], heard["network"]
+    assert [k for k, _ in sent] == [k for k, _ in from_inproc] == [k for k, _ in from_net]
+    assert wire(sent) == wire(from_inproc) == wire(from_net)
     kinds = [k for k, _ in sent]
     # Both ends of the contact, and the slave's lift last.
     assert kinds.count("contact_event") == 2 and kinds[-1] == "contact_event"
@@ -102,8 +113,9 @@ def test_the_three_drivers_send_the_same_messages(models, material, lift_at_s):
         # trajectory, and the memory learns nothing from it.
         assert "flux_trajectory" not in kinds
         assert service.memory.recall(material) is None
-        assert sim.session.memory.recall(material) is None
-    np.testing.assert_equal(service.memory.to_dict(), sim.session.memory.to_dict())
+        assert all(sim.session.memory.recall(material) is None for sim in sims.values())
+    for sim in sims.values():
+        np.testing.assert_equal(service.memory.to_dict(), sim.session.memory.to_dict())
 
 
 def wood_slave(models) -> SlaveService:

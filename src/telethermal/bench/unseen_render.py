@@ -8,7 +8,7 @@ unseen objects, the slave's identifier the bench's (``effusivity-fit``
 trained on the trained materials) and the generator trained on their finger
 database. The slave, its pad, the object and the operator are the same in
 the three; only what the master reads of the slave differs
-(``news_filter``, :class:`~telethermal.sim.inprocess.InProcessWire`):
+(``news_filter``, :class:`~telethermal.sim.sides.SimMasterService`):
 
 ``estimate``
     the slave's news as is: today's live path (a known material from its

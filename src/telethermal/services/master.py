@@ -34,7 +34,8 @@ from telethermal.services.qemu_boards import close_boards, display_boards
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
 from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
-from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceState, send_through
+from telethermal.teleop.links import EndpointLink
+from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceState
 from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.display_setup import build_display, safety_summary
 from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
@@ -148,7 +149,7 @@ class MasterService:
         return self.session.link
 
     def _send(self, sends) -> None:
-        send_through(self.endpoint, sends, log)
+        EndpointLink(self.endpoint, log).send_all(sends)
 
     # ------------------------------------------------------------ hardware
     def _open_hardware(self) -> None:

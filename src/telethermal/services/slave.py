@@ -31,8 +31,8 @@ from telethermal.services.slave_devices import calibrate, flat_counters, open_de
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.slave import BOARD_LOST, Slave, slave_rng
-from telethermal.teleop.session import (ContactRequest, Send, ServiceState, SlaveSession,
-                                        send_through)
+from telethermal.teleop.links import EndpointLink
+from telethermal.teleop.session import ContactRequest, Send, ServiceState, SlaveSession
 from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, SessionConfig,
                                        given, parse)
 
@@ -60,9 +60,9 @@ class SlaveService:
         # A model that fits the pad's model finds it by the scene's name
         # (a scene file's name is not a path load_scene knows).
         register_scene(self.scene)
-        for key, given in (("identifier", identifier), ("generator", generator)):
+        for key, passed in (("identifier", identifier), ("generator", generator)):
             value = getattr(config, key)
-            if given is None and value and not Path(value).is_file():
+            if passed is None and value and not Path(value).is_file():
                 raise ModelFileError(f"{value}: no such model file ({key} in the slave's "
                                      "config): make both with `telethermal models --out DIR` "
                                      "(deploy/README.md, step 3), or leave it empty to train "
@@ -140,7 +140,7 @@ class SlaveService:
         return self.session.contact_id
 
     def _send(self, sends) -> None:
-        for s in send_through(self.endpoint, sends, log):
+        for s in EndpointLink(self.endpoint, log).send_all(sends):
             if isinstance(s.message, FluxTrajectory):
                 material = s.message.material
                 log.info("decided contact_id=%d material=%s (%s)", self.contact_id, material,

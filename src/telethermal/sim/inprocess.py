@@ -4,8 +4,10 @@ compared with the operator's finger touching the object directly
 (:func:`run_session`).
 
 The finger touches at session time 0. The two sides run the services'
-session rules (:mod:`telethermal.teleop.session`) over a wire with no delay
-(:class:`InProcessWire`): the slave's pad goes down when the master's
+session rules (:mod:`telethermal.sim.sides`) in the loop every simulated
+touch runs (:mod:`telethermal.sim.loop`), over a wire with no delay
+(:func:`~telethermal.sim.links.instant_pair`; or over the simulated
+network, ``network``): the slave's pad goes down when the master's
 contact onset reaches it (the paper has both sides touch at once,
 learning-based-thermal-rendering: "contact is established at the same time
 both in the master and the slave side"; the product's slave waits for the
@@ -26,116 +28,33 @@ from __future__ import annotations
 
 import contextlib
 import math
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from telethermal.control.dew import dew_point_c
-from telethermal.control.loop import (FixedRateLoop, LoopStats, RealClock, SessionClock,
-                                      SimClock, WorldPausedClock, master_step_summary,
-                                      session_clock)
-from telethermal.devices.readings import PadSensors
+from telethermal.control.loop import (LoopStats, RealClock, SessionClock, SimClock,
+                                      WorldPausedClock, master_step_summary, session_clock)
 from telethermal.errors import SceneError
 from telethermal.ident.anytime import Estimate, Label, Reason
 from telethermal.ident.fitted import clear_cache as clear_fits
 from telethermal.ident.openset import touch_text
 from telethermal.physics.scene import Scene, with_finger
-from telethermal.render.sampled import SampledGenerator, sample_curves
+from telethermal.render.sampled import sample_curves
 from telethermal.sim.direct import compare_with_direct
+from telethermal.sim.links import instant_pair
+from telethermal.sim.loop import close_session, run_touch_loop
+from telethermal.sim.network import NetworkSpec, SimNetwork
+from telethermal.sim.sides import SimMasterService, SimSlaveService
 from telethermal.sim.touch import MasterWorld
-from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.teleop.decision import pad_decision
-from telethermal.teleop.display_setup import build_display, module_summary, safety_summary
-from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.teleop.display_setup import module_summary, safety_summary
+from telethermal.teleop.master import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
-from telethermal.teleop.session import (PRE_CONTACT_S, ContactRequest, MasterSession,
-                                        SlaveSession)
-from telethermal.wire.messages import Message
-
-class InProcessWire:
-    """Both sides' session rules (:mod:`telethermal.teleop.session`) joined
-    by a wire with no delay and no loss, for the in-process run: each
-    period the slave reads what the master sent and sends what its rules
-    say, which the master reads before its display step (``master_step``,
-    on the display made by ``set_up_display``). ``news_filter(news, t)``:
-    what the master reads instead of the slave's news (a bench's baseline
-    target; the slave and its messages unchanged); None: the news as is."""
-
-    def __init__(self, pad: Slave, generator, identifier, rate_hz: float, object_id: str,
-                 memory: ObjectMemory | None = None,
-                 news_filter: Callable[[SlaveNews, float], SlaveNews] | None = None):
-        curves = self.curves = sample_curves(generator, [c for c in identifier.classes_
-                                                         if c in generator.materials])
-        self.slave = SlaveSession(curves, rate_hz, memory=memory, measurements=False)
-        self.slave.place(pad, object_id)
-        self.master = MasterSession(SlaveLink(generator=SampledGenerator(curves),
-                                              classes=tuple(pad.classes)))
-        self.master.on_message(self.slave.announcement(-PRE_CONTACT_S).message, -PRE_CONTACT_S)
-        self._to_slave: list[Message] = []
-        self._to_master: list[Message] = []
-        self.slave_t0_s: float | None = None
-        self.display: MasterDisplay | None = None
-        self.idle_c = math.nan
-        self.finger_c = math.nan
-        self.news_filter = news_filter
-
-    def set_up_display(self, scene: Scene, config: DisplayConfig, finger_c: float,
-                       idle_scene: Scene | None = None, calibration=None) -> MasterDisplay:
-        """The master's display, idled before this touch at its standby: the
-        object's temperature the master heard, pre-conditioned for what the
-        slave announced it expects (object memory) or, for an unknown
-        object, by the idle policy of ``idle_scene`` (:func:`build_display`,
-        as the services build it)."""
-        self.display, self.idle_c = build_display(scene, config, finger_c, self.master.link,
-                                                  calibration=calibration,
-                                                  idle_scene=idle_scene)
-        self.finger_c = finger_c
-        return self.display
-
-    def to_master(self, m: Message, t: float) -> None:
-        """One message from the slave reaches the master (no delay, one clock)."""
-        self.master.on_message(m, t, 0.0)
-
-    def slave_period(self, t: float, deliver: bool = True) -> None:
-        """The slave's period; what it sends reaches the master now or, not
-        ``deliver``, at :meth:`deliver` (the master's work when timed apart)."""
-        out = []
-        for m in self._to_slave:
-            request, sends, _ = self.slave.on_contact_event(m, t)
-            if request == ContactRequest.TOUCH:
-                self.slave_t0_s = t
-            out += sends
-        self._to_slave = []
-        self._to_master += [send.message for send in out + self.slave.step(t)]
-        if deliver:
-            self.deliver(t)
-
-    def deliver(self, t: float) -> None:
-        pending, self._to_master = self._to_master, []
-        for m in pending:
-            self.to_master(m, t)
-
-    def master_step(self, t: float, dt: float, sensors: PadSensors):
-        """One display period on ``sensors`` with what the slave has said:
-        returns the news it read and its step; what it tells the slave
-        goes on the wire."""
-        news = self.master.news(t, True)
-        if self.news_filter is not None:
-            news = self.news_filter(news, t)
-        step = self.display.step(t, dt, sensors, news)
-        self._to_slave += [s.message for s in self.master.period(step, 0.0, sensors.force_n,
-                                                                 self.finger_c)]
-        return news, step
-
-    def end(self, t_end: float) -> None:
-        """The session is over: a contact still open is lifted on both sides."""
-        self._to_slave += [s.message for s in self.master.close_contact(t_end, None)]
-        self.slave_period(t_end)
+from telethermal.teleop.session import PRE_CONTACT_S
+from telethermal.teleop.slave import Slave, slave_rng
 
 
 def idle_surface_minus_dew_k(trace: dict, contact_s: float, dew_c: float | None):
@@ -167,7 +86,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 record: str | Path | None = None, expected_material=None,
                 news_filter=None, idle_scene: Scene | None = None,
                 fresh_fits: bool = False, junction_lag_scale: float = 1.0,
-                display_calibration=None) -> SessionResult:
+                display_calibration=None,
+                network: NetworkSpec | None = None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -183,8 +103,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     the loop) or WORLD_PAUSED ("master": the real clock less the time of
     the slave and the display's plant and sensors, other hardware).
     ``news_filter(news, t)``: what the master reads instead of the slave's
-    news (:class:`~telethermal.sim.inprocess.InProcessWire`; a bench's
-    oracle or closed set), None: as the services run. ``idle_scene``: the
+    news (a bench's oracle or closed set; the slave and its messages
+    unchanged), None: as the services run. ``idle_scene``: the
     scene whose idle policy the display applies (default ``scene``; a bench
     touching objects outside the trained ones gives the trained scene).
     ``fresh_fits``: the slave's fits made afresh, none of the process's
@@ -193,7 +113,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
     times its stated time constant (the controller is designed for the
     stated one: a robustness study). ``display_calibration``: the master's
     display calibration (``DisplayCalibration``): its flux lag in the
-    controllers, its flux gain on the readings."""
+    controllers, its flux gain on the readings. ``network``: the simulated
+    network between the sides (its draws seeded by ``seed``); None: the
+    in-process wire, no delay and no loss."""
     kind = session_clock(realtime, SceneError)
     realtime = kind != SessionClock.SIMULATED
     if realtime or fresh_fits:
@@ -215,9 +137,9 @@ def run_session(scene: Scene, material: str, identifier, generator,
     slave = Slave(scene, material, identifier, slave_rng(seed))
     world = MasterWorld(scene, seed)
     operator = world.operator
-    # The two sides' session rules, as the services run them, over a wire
-    # with no delay: the slave's pad goes down when the master's onset
-    # reaches it, the master renders what the slave sends (its sampled curves).
+    # The two sides' session rules, as the services run them: the slave's
+    # pad goes down when the master's onset reaches it, the master renders
+    # what the slave sends (its sampled curves).
     memory = ObjectMemory()
     if isinstance(expected_material, Estimate):     # an earlier touch's own decision
         memory.learn(material, expected_material, -PRE_CONTACT_S, classes=identifier.classes_)
@@ -225,15 +147,25 @@ def run_session(scene: Scene, material: str, identifier, generator,
         label = Label.parse(expected_material)
         memory.learn(material, Estimate(0.0, (), label, 1.0, True, Reason.CONFIDENT_GROUP
                                         if label.is_group else Reason.CONFIDENT), -PRE_CONTACT_S)
-    wire = InProcessWire(slave, generator, identifier, scene.sample_rate_hz, material,
-                         memory=memory, news_filter=news_filter)
+    curves = sample_curves(generator, [c for c in identifier.classes_
+                                       if c in generator.materials])
+    sides = SimSlaveService(slave, curves, object_id=material, memory=memory,
+                            rate_hz=scene.sample_rate_hz)
     # The master has idled at its standby before this touch: the object's
-    # temperature, pre-conditioned for what the slave announced (object
-    # memory) or, for an unknown object, by the idle policy (``config.idle``;
-    # control/preconditioning.py).
-    master = wire.set_up_display(scene, config, operator.finger_ir_c,
-                                 idle_scene and with_finger(idle_scene), display_calibration)
-    idle = wire.idle_c
+    # temperature it heard, pre-conditioned for what the slave announced
+    # (object memory) or, for an unknown object, by the idle policy of
+    # ``idle_scene`` (``config.idle``; control/preconditioning.py), as the
+    # services build it.
+    master_side = SimMasterService(scene, config, curves, slave.classes,
+                                   sides.announcement(-PRE_CONTACT_S), operator.finger_ir_c,
+                                   news_filter=news_filter, calibration=display_calibration,
+                                   idle_scene=idle_scene and with_finger(idle_scene))
+    master, idle = master_side.display, master_side.idle_c
+    if network is None:
+        slave_end, master_end = instant_pair()
+    else:
+        net = SimNetwork(network, np.random.default_rng([seed, 15]))
+        slave_end, master_end = net.end("slave"), net.end("master")
     touch = world.display(config.rate_hz, contact_s, idle,
                           junction_lag_scale=junction_lag_scale)
     now = [0.0]
@@ -241,52 +173,38 @@ def run_session(scene: Scene, material: str, identifier, generator,
                            seed=seed)
     recorder = SessionRecorder.open(record, scene, material, identifier, generator, config,
                                     operator, idle, seed, contact_s, devices,
-                                    sampled=list(wire.curves), display=master) \
+                                    sampled=list(curves), display=master) \
         if record else None
-
-    # On the real clock, the master's own share of each period (its news,
-    # display step and messages; not the simulated plants and slave that
-    # share the loop's thread here and run on their own hardware in a lab).
-    master_busy_s: list[float] = []
 
     clock = (WorldPausedClock if kind == SessionClock.WORLD_PAUSED else RealClock).for_period(
         1.0 / config.rate_hz) if realtime else SimClock()
     world = clock.world if isinstance(clock, WorldPausedClock) else contextlib.nullcontext
 
-    def one_period(t_loop: float, dt_loop: float) -> bool:
-        if touch.done:
-            return False
-        # Simulated time follows the loop: exact on the simulated clock, the
-        # real elapsed time on the real one.
-        t = now[0] = t_loop - PRE_CONTACT_S
-        with world():
-            wire.slave_period(t, deliver=False)
-        wire.deliver(t)                 # the master's session reads it: the master's work
-        with world():
-            sensors = display.read(t)
-        started = time.perf_counter()           # reported on the real clock only
-        news, step = wire.master_step(t, dt_loop, sensors)
-        master_busy_s.append(time.perf_counter() - started)
-        with world():
-            display.apply(t, step, dt_loop, sensors.force_n)
-        if recorder is not None:
-            recorder.period(t, dt_loop, sensors, news, step)
-        return True
+    class _Devices:             # the display's devices, their clock the session's
+        def read(self, t):
+            now[0] = t
+            return display.read(t)
+
+        def apply(self, t, step, dt, force_n):
+            display.apply(t, step, dt, force_n)
 
     try:
-        stats = FixedRateLoop(1.0 / config.rate_hz, clock).run(one_period, touch.n_total)
+        run = run_touch_loop(touch, _Devices(), sides, master_side, slave_end, master_end,
+                             config.rate_hz, clock, world,
+                             recorder.period if recorder is not None else None)
     finally:
         device_counters = display.counters()
         display.close()
-        wire.end(t_end=now[0])
+        close_session(now[0], sides, master_side, slave_end, master_end)
         if recorder is not None:
             recorder.slave(slave)
+    stats, master_busy_s = run.stats, run.master_busy_s
     # What the touch decided, as every summary defines it (teleop/decision.py).
     decision = pad_decision(slave)
     est = decision.estimate
     # The slave's trial times are from its pad going down (at the master's
     # onset, as in the services); on the session's clock they are later by that.
-    slave_t0 = wire.slave_t0_s or 0.0
+    slave_t0 = sides.touch_t0 or 0.0
     decided = est is not None and est.decided
     # The error "after identification" starts at the slave's first decision
     # (a material or a pair it is sure of), never where the master began to
@@ -308,7 +226,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "decision_text": touch_text(est),      # a new material: with its estimate
         "decision_reason": est.reason if decided else Reason.NO_DECISION,
         "slave_onset_s": None if slave.onset_s is None else slave_t0 + slave.onset_s,
-        "slave_touch_s": wire.slave_t0_s, "master_onset_s": master.last_onset_s,
+        "slave_touch_s": sides.touch_t0, "master_onset_s": master.last_onset_s,
         "master_release_s": master.last_release_s, "decision_from_s": render_from,
         "render_start_s": master.rendered_from_s,
         "before_identification": config.before, "rate_hz": config.rate_hz,
@@ -321,7 +239,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
         "room_humidity_pct": scene.room_humidity_pct,
         "expected_material": None if expected_material is None else
         str(getattr(expected_material, "label", expected_material)),
-        "memory_counts": memory_counts(wire.master.link.counters, wire.slave.counters),
+        "memory_counts": memory_counts(master_side.session.link.counters, sides.session.counters),
         **metrics, **safety_summary(master),
         "clock": kind.value,
         "loop": stats.summary(),

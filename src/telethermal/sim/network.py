@@ -46,23 +46,22 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from telethermal.sim.channel import Channel, Direction
-from telethermal.ident.anytime import Estimate, Reason
-from telethermal.render.sampled import SampledGenerator
-from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import MasterStep, SlaveNews
-from telethermal.teleop.memory import ObjectMemory, memory_counts
-from telethermal.teleop.session import (ContactRequest, EstimateRoute, MasterSession, PRE_CONTACT_S,
-                                        Send, SlaveSession, estimate_route)
-from telethermal.teleop.decision import touch_decision
-from telethermal.teleop.display_setup import build_display, safety_summary
-from telethermal.sim.touch import MasterWorld
-from telethermal.teleop.slave import Slave, slave_rng
-from telethermal.sim.direct import compare_with_direct
+from telethermal.devices.display import SimDisplay
+from telethermal.ident.anytime import Reason
 from telethermal.physics.scene import with_finger
+from telethermal.sim.channel import Channel, Direction
+from telethermal.sim.direct import compare_with_direct
+from telethermal.sim.loop import run_touch_loop
+from telethermal.sim.sides import SimMasterService, SimSlaveService
+from telethermal.sim.touch import MasterWorld
+from telethermal.teleop.decision import touch_decision
+from telethermal.teleop.display_setup import safety_summary
+from telethermal.teleop.memory import ObjectMemory, memory_counts
+from telethermal.teleop.session import PRE_CONTACT_S, EstimateRoute, Send, estimate_route
+from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.wire.lossless import LosslessStream
 from telethermal.wire.loglimit import LogLimiter
-from telethermal.wire.messages import ContactEvent, Message, parse
+from telethermal.wire.messages import Message, parse
 from telethermal.wire.schema import PROTOCOL_VERSION
 from telethermal.wire.transport import COUNTERS, ClockOffset, TransportConfig
 
@@ -240,89 +239,27 @@ class SimNetwork:
         out, self._ready[direction] = self._ready[direction], []
         return out
 
-
-class SimSlaveService:
-    """The slave service on the simulated clock: the same
-    :class:`~telethermal.teleop.session.SlaveSession` the service runs, its
-    pad going down when the master's touch arrives. Measurement batches are
-    left out (nothing on the master reads them)."""
-
-    def __init__(self, pad, curves: dict,
-                 estimates: EstimateRoute | str = EstimateRoute.STREAM,
-                 object_id: str | None = None, memory: ObjectMemory | None = None,
-                 rate_hz: float = 1000.0):
-        self.session = SlaveSession(curves, rate_hz, memory, estimates, measurements=False)
-        self.session.place(pad, object_id)
-        self.pad = pad
-        self._out: list = []
-        self.touch_t0: float | None = None     # when the pad went down (kept after the lift)
-
-    def announcement(self, now: float) -> ContactEvent:
-        """The object announcement (the service sends it on ``place``)."""
-        return self.session.announcement(now).message
-
-    def on_message(self, m: Message, now: float) -> None:
-        if not isinstance(m, ContactEvent):
-            return
-        request, out, _ = self.session.on_contact_event(m, now)
-        if request == ContactRequest.TOUCH:
-            self.touch_t0 = now
-        self._out += out
-
-    def step(self, now: float, send) -> None:
-        """Read the pad up to ``now``; ``send(t, message, lossless)``."""
-        out, self._out = self._out + self.session.step(now), []
-        for s in out:
-            send(s.t_s, s.message, s.lossless)
-
-    def lift(self, now: float) -> None:
-        """The session ends with the pad still down (the master's lift had
-        not arrived): the pad leaves the object, the memory learns."""
-        self.session.lift(now)
+    def end(self, role: str) -> "NetworkEnd":
+        """``role``'s ("slave" or "master") end of the network, a
+        :class:`~telethermal.teleop.links.Link`."""
+        sending = next(d for d, (sender, _) in ENDS.items() if sender == role)
+        receiving = next(d for d, (_, receiver) in ENDS.items() if receiver == role)
+        return NetworkEnd(self, sending, receiving)
 
 
-class SimMasterService:
-    """The master service on the simulated clock: the same
-    :class:`~telethermal.teleop.session.MasterSession` the service runs, one
-    clock with the slave (offset 0), and the display, idled for what the
-    slave announced (at ``-PRE_CONTACT_S``, placed long before), stepped on
-    the session's news each period. ``oracle``: the material the display is
-    told at its own onset instead (no network; the floor of any compensation)."""
+class NetworkEnd:
+    """One side's end of a :class:`SimNetwork`: a message is sent at its
+    ``Send.t_s``; :meth:`due` advances the network to ``now_s``."""
 
-    def __init__(self, scene, config, curves: dict, classes, announcement: ContactEvent,
-                 finger_c: float, oracle: str | None = None):
-        generator = SampledGenerator(curves)
-        self.session = MasterSession(SlaveLink(generator=generator, classes=tuple(classes)))
-        self.session.on_message(announcement, -PRE_CONTACT_S)
-        self.finger_c, self.oracle = finger_c, oracle
-        self.classes = tuple(classes)
-        # The display has idled for what the announcement said (as the
-        # services do); the oracle, knowing the material, for that material:
-        # the floor of a repeated touch pre-conditions as the repeated touch does.
-        self.display, self.idle_c = build_display(scene, config, finger_c, self.session.link,
-                                                  expected_material=oracle)
-        self.onset_s: float | None = None       # the display's last onset
+    def __init__(self, net: SimNetwork, sending: str, receiving: str):
+        self.net, self.sending, self.receiving = net, sending, receiving
 
-    def on_message(self, m: Message, now: float) -> None:
-        """One message from the slave, as it arrives."""
-        self.session.on_message(m, now, 0.0)
+    def send(self, s: Send) -> bool:
+        self.net.send(s.t_s, self.sending, s.message, s.lossless)
+        return True
 
-    def news(self, now: float) -> SlaveNews:
-        if self.oracle is None:
-            return self.session.news(now, True)
-        c, est = self.classes, None
-        if self.onset_s is not None:
-            est = Estimate(0.0, tuple(float(n == self.oracle) for n in c), self.oracle, 1.0,
-                           True, "oracle")
-        return SlaveNews(self.session.link.object_temp_c, est, c,
-                         expected_material=self.oracle)
-
-    def period(self, t: float, dt: float, sensors) -> tuple[MasterStep, list[Send]]:
-        """One display period on ``sensors``: (its step, what goes to the slave)."""
-        step = self.display.step(t, dt, sensors, self.news(t))
-        if step.contact is not None and step.contact.touching:
-            self.onset_s = step.contact.t_s
-        return step, self.session.period(step, 0.0, sensors.force_n, self.finger_c)
+    def due(self, now_s: float) -> list[Message]:
+        return self.net.due(now_s, self.receiving)
 
 
 # ---------------------------------------------------------------- one touch
@@ -366,23 +303,8 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
                               oracle=material if mode == "oracle" else None)
     session = master.session
     touch = world.display(config.rate_hz, contact_s, master.idle_c)
-    dt = 1.0 / config.rate_hz
-
-    def send_s2m(t_msg, m, lossless):
-        net.send(t_msg, "s2m", m, lossless)
-
-    while not touch.done:
-        t = touch.k * dt - PRE_CONTACT_S
-        for m in net.due(t, "m2s"):
-            slave.on_message(m, t)
-        slave.step(t, send_s2m)
-        for m in net.due(t, "s2m"):
-            master.on_message(m, t)
-        sensors = touch.sense(t)
-        step, sends = master.period(t, dt, sensors)
-        touch.actuate(t, step, dt, sensors.force_n)
-        for s in sends:
-            net.send(t, "m2s", s.message, s.lossless)
+    t = run_touch_loop(touch, SimDisplay(touch), slave, master, net.end("slave"),
+                       net.end("master"), config.rate_hz).t_end_s
     slave.lift(t)
     display = master.display
     metrics = compare_with_direct(scene, material, pad.object_true_c, operator, touch.trace,

@@ -3,8 +3,9 @@
 :class:`SlaveSession` (below, :class:`MasterSession` for the master) holds no socket and no clock: its driver passes
 ``now`` and the master's contact events in, and gets back the messages to
 send (:class:`Send`, with the time the rule sends them at). Two drivers run
-it: the slave service (``services/slave.py``, on ZeroMQ and the real clock)
-and the simulated network (``sim/network.py``, ``bench faults``), so the
+it: the services (``services/``, on ZeroMQ and the real clock) and the
+simulator's sides (``sim/sides.py``: the in-process run and ``bench
+faults``' simulated network, in one loop over their link), so the
 latency figures are measured on the rules the product runs
 (``proto/PROTOCOL.md`` section 6).
 
@@ -41,7 +42,6 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from telethermal.choices import choice
-from telethermal.errors import WindowFull
 from telethermal.ident.openset import effusivity_of
 from telethermal.render.generator import naive_setpoint
 from telethermal.render.sampled import SampledGenerator
@@ -107,29 +107,6 @@ class Send:
     @property
     def lossless(self) -> bool:
         return self.message.lossless
-
-
-def send_through(endpoint, sends: list[Send], log) -> list[Send]:
-    """Send each of ``sends`` on a transport ``endpoint``; returns those
-    sent. A send the lossless window refuses (the peer has acknowledged
-    nothing for a whole window) is logged and left out: the caller's loop
-    goes on, and nothing it sent before is lost."""
-    sent = []
-    for s in sends:
-        try:
-            endpoint.send(s.kind, **s.message.fields())
-        except WindowFull as exc:
-            log.error("%s", exc)
-            continue
-        except Exception as exc:        # one message's (unencodable, a socket's error)
-            # Counted with the service's own counters; the loop goes on.
-            counters = endpoint.extra_counters
-            counters["send_errors"] = counters.get("send_errors", 0) + 1
-            log.error("%s not sent: %s: %s", s.kind, type(exc).__name__, str(exc)[:200],
-                      exc_info=counters["send_errors"] <= 3)
-            continue
-        sent.append(s)
-    return sent
 
 
 def _finite_or_none(value: float) -> float | None:

@@ -1,0 +1,65 @@
+"""The wire between the master's and the slave's session rules, as each
+side sees it: a :class:`Link` takes the session's typed messages
+(:class:`~telethermal.teleop.session.Send`) and hands back the messages
+that have arrived by ``now``.
+
+Three links carry a touch: the networked services' ZeroMQ transport
+(:class:`EndpointLink`), and on the simulated clock the in-process wire
+with no delay and the simulated network (the services' own lossless stream
+over a faulty channel), both in :mod:`telethermal.sim.links`."""
+
+from __future__ import annotations
+
+import logging
+from typing import Protocol
+
+from telethermal.errors import WindowFull
+from telethermal.teleop.session import Send
+from telethermal.wire.messages import Message, parse
+
+
+class Link(Protocol):
+    """One side's end of the wire."""
+
+    def send(self, s: Send) -> bool:
+        """``s.message`` on its way (lossless or not, as ``s.lossless``
+        says; sent at ``s.t_s``); False: refused and left out."""
+
+    def due(self, now_s: float) -> list[Message]:
+        """The messages that have reached this side by ``now_s``, in the
+        order its application gets them."""
+
+
+class EndpointLink:
+    """The ZeroMQ link: one side's transport
+    :class:`~telethermal.wire.transport.Endpoint`. A send the lossless
+    window refuses (the peer has acknowledged nothing for a whole window)
+    or that fails (unencodable, a socket's error) is logged, counted
+    (``send_errors``) and left out: the caller's loop goes on, and nothing
+    sent before is lost. The services read what arrives from the endpoint
+    itself (each raw message recorded as it came, a bad one counted apart);
+    :meth:`due` parses it for any other reader."""
+
+    def __init__(self, endpoint, log: logging.Logger):
+        self.endpoint, self.log = endpoint, log
+
+    def send(self, s: Send) -> bool:
+        try:
+            self.endpoint.send(s.kind, **s.message.fields())
+        except WindowFull as exc:
+            self.log.error("%s", exc)
+            return False
+        except Exception as exc:        # one message's (unencodable, a socket's error)
+            counters = self.endpoint.extra_counters
+            counters["send_errors"] = counters.get("send_errors", 0) + 1
+            self.log.error("%s not sent: %s: %s", s.kind, type(exc).__name__, str(exc)[:200],
+                           exc_info=counters["send_errors"] <= 3)
+            return False
+        return True
+
+    def send_all(self, sends: list[Send]) -> list[Send]:
+        """Each of ``sends``; returns those sent."""
+        return [s for s in sends if self.send(s)]
+
+    def due(self, now_s: float) -> list[Message]:
+        return [parse(raw) for raw in self.endpoint.poll(0.0)]
