@@ -267,7 +267,7 @@ def check_inprocess_inputs(models, material, before) -> None:
     session_config = decode(before[0])
     assert wire_message("contact_event", slave.announcement(t0).fields(), 2, t0) == before[1]
     assert msgpack.packb(curves) == msgpack.packb(session_config["curves"])
-    assert list(identifier.classes_) == session_config["classes"]
+    assert list(slave.pad.classes) == session_config["classes"]
 
 
 PARTS = ("messages to the slave", "display step", "events counted")

@@ -16,6 +16,7 @@ import pytest
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.sim import sides
 from telethermal.sim.inprocess import run_session
+from telethermal.sim.channel import Direction
 from telethermal.sim.network import NetworkSpec
 from telethermal.teleop.master import DisplayConfig
 
@@ -44,6 +45,8 @@ def _same(a, b) -> bool:
     """Equal, NaN equal to NaN (a field with nothing to measure)."""
     if isinstance(a, dict) and isinstance(b, dict):
         return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
     if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
         return True
     return a == b
@@ -85,3 +88,16 @@ def test_a_perfect_simulated_network_is_the_in_process_wire(monkeypatch, models,
     overruled = int(kw.get("expected_material", material) != material)
     assert counts["master"]["memory_overruled"] == counts["slave"]["memory_overruled"] \
         == overruled
+
+
+def test_a_slave_the_lift_has_not_reached_lifts_itself_and_both_sides_count_alike(
+        monkeypatch, models):
+    # 0.3 s each way: the master's lift is still on the network when the
+    # session ends; the slave lifts its pad itself and judges the touch
+    # against the memory (a remembered steel; the wood decided overrules it).
+    delayed = NetworkSpec.symmetric(Direction(delay_s=0.3))
+    summary, _, heard = _touch(monkeypatch, models, delayed, "wood", 3, contact_s=1.5,
+                               expected_material="steel")
+    assert "flux_trajectory" in [kind for _, kind, _ in heard]
+    counts = summary["memory_counts"]
+    assert counts["master"]["memory_overruled"] == counts["slave"]["memory_overruled"] == 1

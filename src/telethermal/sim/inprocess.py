@@ -44,7 +44,7 @@ from telethermal.physics.scene import Scene, with_finger
 from telethermal.render.sampled import sample_curves
 from telethermal.sim.direct import compare_with_direct
 from telethermal.sim.links import instant_pair
-from telethermal.sim.loop import close_session, run_touch_loop
+from telethermal.sim.loop import LoopRun, close_session, run_touch_loop
 from telethermal.sim.network import NetworkSpec, SimNetwork
 from telethermal.sim.sides import SimMasterService, SimSlaveService
 from telethermal.sim.touch import MasterWorld
@@ -168,8 +168,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
         slave_end, master_end = net.end("slave"), net.end("master")
     touch = world.display(config.rate_hz, contact_s, idle,
                           junction_lag_scale=junction_lag_scale)
-    now = [0.0]
-    display = open_display(devices, touch, clock=lambda: now[0], realtime=bool(realtime),
+    run = LoopRun()             # its t_end_s: the session's clock, the display's too
+    display = open_display(devices, touch, clock=lambda: run.t_end_s, realtime=bool(realtime),
                            seed=seed)
     recorder = SessionRecorder.open(record, scene, material, identifier, generator, config,
                                     operator, idle, seed, contact_s, devices,
@@ -180,22 +180,14 @@ def run_session(scene: Scene, material: str, identifier, generator,
         1.0 / config.rate_hz) if realtime else SimClock()
     world = clock.world if isinstance(clock, WorldPausedClock) else contextlib.nullcontext
 
-    class _Devices:             # the display's devices, their clock the session's
-        def read(self, t):
-            now[0] = t
-            return display.read(t)
-
-        def apply(self, t, step, dt, force_n):
-            display.apply(t, step, dt, force_n)
-
     try:
-        run = run_touch_loop(touch, _Devices(), sides, master_side, slave_end, master_end,
-                             config.rate_hz, clock, world,
-                             recorder.period if recorder is not None else None)
+        run_touch_loop(touch, display, sides, master_side, slave_end, master_end,
+                       config.rate_hz, clock, world,
+                       recorder.period if recorder is not None else None, run)
     finally:
         device_counters = display.counters()
         display.close()
-        close_session(now[0], sides, master_side, slave_end, master_end)
+        close_session(run.t_end_s, sides, master_side, slave_end, master_end)
         if recorder is not None:
             recorder.slave(slave)
     stats, master_busy_s = run.stats, run.master_busy_s

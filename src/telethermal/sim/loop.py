@@ -27,23 +27,27 @@ class LoopRun:
     the simulated plants and slave sharing its thread), and the session
     time of its last period."""
 
-    stats: LoopStats
+    stats: LoopStats | None = None
     master_busy_s: list = field(default_factory=list)
+    #: The session time of the period going on (its start), then of the last.
     t_end_s: float = 0.0
 
 
 def run_touch_loop(touch, display, slave: SimSlaveService, master: SimMasterService,
                    slave_end: Link, master_end: Link, rate_hz: float, clock=None,
                    world: Callable = contextlib.nullcontext,
-                   on_period: Callable | None = None) -> LoopRun:
+                   on_period: Callable | None = None, run: LoopRun | None = None) -> LoopRun:
     """The touch (``touch``: its :class:`~telethermal.sim.touch.DisplayTouch`,
     which says when it is over; ``display``: the devices the master reads
     and drives around it) at ``rate_hz`` on ``clock`` (a
     :class:`~telethermal.control.loop.SimClock` by default). ``world()``:
     a context around the work of what is not the master (the slave, the
-    plant), so a world-paused clock leaves it out. ``on_period(t, dt,
-    sensors, news, step)``: after each period (a recording)."""
-    run = LoopRun(None)
+    plant), so a world-paused clock leaves it out (the simulated network's
+    work, done as the master reads and sends, is charged to the master).
+    ``on_period(t, dt, sensors, news, step)``: after each period (a
+    recording). ``run``: the record to fill (its ``t_end_s`` is the clock of
+    devices opened before the loop), a new one by default."""
+    run = run if run is not None else LoopRun()
 
     def one_period(t_loop: float, dt: float) -> bool:
         if touch.done:
@@ -76,9 +80,10 @@ def run_touch_loop(touch, display, slave: SimSlaveService, master: SimMasterServ
 
 def close_session(t: float, slave: SimSlaveService, master: SimMasterService,
                   slave_end: Link, master_end: Link) -> None:
-    """The session is over: a contact still open is lifted on both sides,
-    by message (the master's lift reaches the slave, whose last words reach
-    the master), at ``t``."""
+    """The session is over: a contact still open is lifted on both sides
+    at ``t``, by message where the link delivers at once (the master's lift
+    reaches the slave, whose last words reach the master); a slave the lift
+    has not reached (a delay, a loss) lifts its pad itself."""
     for s in master.close_contact(t):
         master_end.send(s)
     for m in slave_end.due(t):
@@ -86,3 +91,4 @@ def close_session(t: float, slave: SimSlaveService, master: SimMasterService,
     slave.step(t, slave_end)
     for m in master_end.due(t):
         master.on_message(m, t)
+    slave.lift(t)

@@ -46,7 +46,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from telethermal.devices.display import SimDisplay
 from telethermal.ident.anytime import Reason
 from telethermal.physics.scene import with_finger
 from telethermal.sim.channel import Channel, Direction
@@ -303,6 +302,8 @@ def run_network_touch(scene, material: str, identifier, curves: dict, config,
                               oracle=material if mode == "oracle" else None)
     session = master.session
     touch = world.display(config.rate_hz, contact_s, master.idle_c)
+    from telethermal.devices.display import SimDisplay    # not the drivers, at import
+
     t = run_touch_loop(touch, SimDisplay(touch), slave, master, net.end("slave"),
                        net.end("master"), config.rate_hz).t_end_s
     slave.lift(t)

@@ -3,8 +3,9 @@
 simulated pad in place of the slave's devices and the display built by the
 services' own factory (:func:`~telethermal.teleop.display_setup.build_display`).
 Every simulated touch (the in-process run, the simulated network) drives
-these two over a link (:mod:`telethermal.sim.links`), in one loop
-(:mod:`telethermal.sim.loop`)."""
+these two over a link (the in-process wire, :mod:`telethermal.sim.links`;
+the simulated network's end, :meth:`telethermal.sim.network.SimNetwork.end`)
+in one loop (:mod:`telethermal.sim.loop`)."""
 
 from __future__ import annotations
 

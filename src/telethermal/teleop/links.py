@@ -5,15 +5,16 @@ that have arrived by ``now``.
 
 Three links carry a touch: the networked services' ZeroMQ transport
 (:class:`EndpointLink`), and on the simulated clock the in-process wire
-with no delay and the simulated network (the services' own lossless stream
-over a faulty channel), both in :mod:`telethermal.sim.links`."""
+with no delay (:mod:`telethermal.sim.links`) and the simulated network
+(the services' own lossless stream over a faulty channel:
+:meth:`telethermal.sim.network.SimNetwork.end`)."""
 
 from __future__ import annotations
 
 import logging
 from typing import Protocol
 
-from telethermal.errors import WindowFull
+from telethermal.errors import ProtocolError, WindowFull
 from telethermal.teleop.session import Send
 from telethermal.wire.messages import Message, parse
 
@@ -23,7 +24,8 @@ class Link(Protocol):
 
     def send(self, s: Send) -> bool:
         """``s.message`` on its way (lossless or not, as ``s.lossless``
-        says; sent at ``s.t_s``); False: refused and left out."""
+        says); False: refused and left out. A link that models when a
+        message leaves (the simulated network) sends it at ``s.t_s``."""
 
     def due(self, now_s: float) -> list[Message]:
         """The messages that have reached this side by ``now_s``, in the
@@ -37,8 +39,8 @@ class EndpointLink:
     or that fails (unencodable, a socket's error) is logged, counted
     (``send_errors``) and left out: the caller's loop goes on, and nothing
     sent before is lost. The services read what arrives from the endpoint
-    itself (each raw message recorded as it came, a bad one counted apart);
-    :meth:`due` parses it for any other reader."""
+    itself (each raw message recorded as it came); :meth:`due` is for any
+    other reader, and takes what it returns from the endpoint's queue."""
 
     def __init__(self, endpoint, log: logging.Logger):
         self.endpoint, self.log = endpoint, log
@@ -62,4 +64,14 @@ class EndpointLink:
         return [s for s in sends if self.send(s)]
 
     def due(self, now_s: float) -> list[Message]:
-        return [parse(raw) for raw in self.endpoint.poll(0.0)]
+        """What the endpoint has received (it has checked each against the
+        protocol's schema); one the typed messages refuse all the same is
+        counted ``invalid``, logged and left out, never the rest."""
+        out = []
+        for raw in self.endpoint.poll(0.0):
+            try:
+                out.append(parse(raw))
+            except ProtocolError as exc:
+                self.endpoint.counters["invalid"] += 1
+                self.log.error("a message left out: %s", exc)
+        return out
