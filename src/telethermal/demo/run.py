@@ -295,9 +295,12 @@ def touch_said(s: dict) -> str:
 
 
 def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, generator,
-                again: bool, echo, display_cal=None) -> dict:
+                again: bool, echo, display_cal=None, remembered=None) -> tuple[dict, object]:
     """One touch of the demo over the network, beside the same touch in one
-    process; prints its line and returns its summary."""
+    process; prints its line and returns its summary and the in-process
+    slave's decision. ``remembered``: what the in-process slave's memory
+    holds of the object (an earlier in-process touch's decision), as the
+    networked slave's memory holds its own for a repeated touch."""
     from telethermal.sim.inprocess import run_session
 
     result = networked_touch(scene, material, ports[:4], seed, contact_s)
@@ -306,8 +309,10 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
     plot_session(result, out / f"touch-{name}.png",       # its errors: plots.error_windows
                  f"{scene.name}: {material}{' again' if again else ''} over the network (two "
                  "processes)")
-    local = run_session(scene, material, identifier, generator, contact_s=contact_s,
-                        seed=seed, display_calibration=display_cal).summary
+    local_result = run_session(scene, material, identifier, generator, contact_s=contact_s,
+                               seed=seed, display_calibration=display_cal,
+                               expected_material=remembered)
+    local = local_result.summary
     when = when_decided(s) or "never"
     start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
     memory = "" if s["object_memory"] is None else \
@@ -331,8 +336,11 @@ def _demo_touch(scene, material, ports, seed, contact_s, out, identifier, genera
          "loop_steps": s["loop"]["steps"], "transport": s["transport"],
          "devices": s["devices_per_side"],
          "in_process_identified": local["identified"],
+         "in_process_decision_time_s": local["decision_time_s"],
+         "in_process_render_start_s": local["render_start_s"],
          "in_process_flux_rms_error_rel": local["flux_rms_error_rel"],
-         "network_over_in_process": s["flux_rms_error_rel"] / local["flux_rms_error_rel"]}
+         "network_over_in_process": s["flux_rms_error_rel"] / local["flux_rms_error_rel"]}, \
+        local_result.slave_estimate
 
 
 def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: Path,
@@ -389,10 +397,14 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         # Each material once, then the first again: the slave remembers what it
         # decided on that object and announces it, so the master renders the
         # repeated touch from its onset (object memory).
+        # The in-process touches remember the same way (their own decisions).
         plan = [(m, False) for m in materials] + [(materials[0], True)] if materials else []
+        decided = {}
         for i, (material, again) in enumerate(plan):
-            touches.append(_demo_touch(scene, material, ports, seed + 1 + i, contact_s, out,
-                                       identifier, generator, again, echo, display_cal))
+            row, decided[material] = _demo_touch(
+                scene, material, ports, seed + 1 + i, contact_s, out, identifier, generator,
+                again, echo, display_cal, decided.get(material) if again else None)
+            touches.append(row)
     except BaseException:
         if view is not None:
             view.close()
