@@ -29,7 +29,7 @@ from telethermal.services.viewer import open_view
 from telethermal.sim.direct import compare_with_direct
 from telethermal.sim.inprocess import SessionResult
 from telethermal.teleop.decision import when_decided
-from telethermal.teleop.models import DEFAULT_METHOD, demo_identify
+from telethermal.teleop.models import demo_identify
 from telethermal.teleop.plots import plot_session
 from telethermal.tomltables import toml_str
 from telethermal.view.server import ViewServer
