@@ -17,7 +17,8 @@ from realclock import assert_rendered, assert_safe_under_load
 from telethermal.errors import TransportError
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
-from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 
 SCENE = with_finger(load_scene("fingertip-7"))

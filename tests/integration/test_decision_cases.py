@@ -60,7 +60,8 @@ def test_the_emulated_seed_5_plexiglass_touch_is_never_committed_as_rubber(tmp_p
     # once when this test was written). A class commitment is final, so a
     # touch that ends plexiglass never said rubber; an honest pair on the
     # way is allowed.
-    from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+    from telethermal.demo.run import Services, wait_connected, write_configs
+    from telethermal.demo.touches import networked_touch
     from telethermal.ports import free_ports
     from telethermal.teleop.models import DEFAULT_METHOD
 

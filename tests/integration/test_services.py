@@ -11,7 +11,8 @@ from telethermal.cli import main
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.config import ConfigError, load_config
-from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 from telethermal.sim.inprocess import run_session
 

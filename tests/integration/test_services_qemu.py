@@ -28,7 +28,8 @@ from telethermal.control.safety import Fault
 from telethermal.devices import qemu
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
-from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 from test_firmware_qemu import qemu_or_skip
 

@@ -5,7 +5,8 @@ import pytest
 
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import call
-from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 
 SCENE = with_finger(load_scene("fingertip-7"))

@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from telethermal.physics.scene import load_scene, with_finger
-from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 from telethermal.view.browser import BrowserUnavailable, find_chromium, launch
 from telethermal.services.viewer import open_view

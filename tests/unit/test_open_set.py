@@ -247,7 +247,7 @@ def test_object_memory_keeps_a_new_material_and_one_wrong_touch_does_not_flip_it
 
 
 def test_the_demos_line_says_a_new_materials_estimate():
-    from telethermal.demo.run import touch_said
+    from telethermal.demo.touches import touch_said
     text = "new material, effusivity 42.4 W s^0.5/(m^2 K) (95 %: 41.6 to 43.1), nearest: wood"
     assert touch_said({"identified": "new material", "unknown_reason": None,
                        "decision_text": text}) == text

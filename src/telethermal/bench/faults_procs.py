@@ -28,7 +28,8 @@ import numpy as np
 
 from telethermal.errors import TransportError
 from telethermal.services.admin import call
-from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 from telethermal.teleop.session import PRE_CONTACT_S, ServiceState
 from telethermal.wire.transport import TransportConfig

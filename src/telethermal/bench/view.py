@@ -27,7 +27,8 @@ from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import save_generator
-from telethermal.demo.run import Services, networked_touch, wait_connected, write_configs
+from telethermal.demo.run import Services, wait_connected, write_configs
+from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 from telethermal.services.viewer import open_view
 from telethermal.teleop.models import train_generator, train_identifier
