@@ -199,15 +199,18 @@ def test_the_master_config_key_reads_the_display_table(tmp_path, built_cal):
 
 
 def test_a_hardware_master_refuses_a_calibration_from_a_simulated_bench(built_cal):
-    """The routine runs only on the simulator's display (directly or behind
-    the emulated devices) and says so in the file; a master on a lab's
-    hardware refuses such a file rather than take the simulator's figures
-    for its pad's."""
+    """A routine on the simulator's display (directly or behind the
+    emulated devices) says so in the file; a master on a lab's hardware
+    refuses such a file rather than take the simulator's figures for its
+    pad's, and says how to calibrate its own; one made on hardware it takes."""
+    from dataclasses import replace
+
     from telethermal.teleop.display_calibration import refuse_on_hardware
     _, cal = built_cal
     assert cal.bench == "simulated"
-    with pytest.raises(CalibrationError, match="simulated bench.*no hardware routine"):
+    with pytest.raises(CalibrationError, match="simulated bench.*--devices hardware"):
         refuse_on_hardware(cal)
+    refuse_on_hardware(replace(cal, bench="hardware"))
     refuse_on_hardware(None)
 
 

@@ -6,6 +6,7 @@ file holds both: each command keeps the other's table."""
 from __future__ import annotations
 
 from telethermal.cli._common import _print_lines, console
+from telethermal.errors import CalibrationError
 
 
 def cmd_calibrate_pad(args) -> int:
@@ -32,15 +33,41 @@ def cmd_calibrate_pad(args) -> int:
 def cmd_calibrate_display(args) -> int:
     from telethermal.physics.scene import load_scene
     from telethermal.teleop.display_calibration import write_display_calibration
-    from telethermal.sim.display_rig import calibrate_simulated
 
     scene = load_scene(args.scene)
-    with console.status(f"running {scene.name}'s display routine (simulated bench, "
-                        f"devices {args.devices}) and fitting its sensors"):
-        cal = calibrate_simulated(scene, args.block, args.seed, args.devices)
+    if args.devices == "hardware":
+        cal = _calibrate_hardware_display(scene, args)
+    else:
+        from telethermal.sim.display_rig import calibrate_simulated
+        if args.board or args.can:
+            raise CalibrationError("--board and --can name a lab's display: give --devices "
+                                   "hardware")
+        with console.status(f"running {scene.name}'s display routine (simulated bench, "
+                            f"devices {args.devices}) and fitting its sensors"):
+            cal = calibrate_simulated(scene, args.block, args.seed, args.devices)
     write_display_calibration(cal, args.out)
     _print_lines(cal.describe() + [f"wrote {args.out} ([display])"])
     return 0
+
+
+def _calibrate_hardware_display(scene, args):
+    """The routine on the lab's display: the board and driver it names, the
+    lab asked at the terminal to press and to lift the block."""
+    from telethermal.devices.board import Calibration
+    from telethermal.teleop.display_hardware import calibrate_hardware
+
+    if not (args.board and args.can):
+        raise CalibrationError("--devices hardware needs --board URL (the sensor board) and "
+                               "--can BUS (the Peltier driver), as in the master's config")
+    board_cal = Calibration.load(args.board_calibration) if args.board_calibration \
+        else Calibration()
+
+    def ask(text: str) -> None:
+        console.input(f"[bold]{text}[/bold] ")
+        console.print("running the current steps (6 s); keep the setup still")
+
+    return calibrate_hardware(scene, args.board, args.can, block=args.block,
+                              board_calibration=board_cal, prompt=ask)
 
 
 def add_parser(sub) -> None:
@@ -71,7 +98,18 @@ def add_parser(sub) -> None:
                    help="the reference block's material, of the materials table (default "
                         "plexiglass: a low effusivity, see docs/calibration.md)")
     d.add_argument("--seed", type=int, default=0, help="the simulated bench's draws")
-    d.add_argument("--devices", default="sim", choices=("sim", "emulated"),
+    d.add_argument("--devices", default="sim", choices=("sim", "emulated", "hardware"),
                    help="the display's devices: the simulator, or it behind the emulated "
-                        "board and driver read through the master's drivers")
+                        "board and driver read through the master's drivers, or a lab's "
+                        "display (--board, --can; the routine asks at the terminal to press "
+                        "the block, then to lift it)")
+    d.add_argument("--board", default="",
+                   help="with --devices hardware: the sensor board's URL (a serial port or "
+                        "pyserial URL, as the master's board_url)")
+    d.add_argument("--can", default="",
+                   help="with --devices hardware: the Peltier driver's bus "
+                        "(INTERFACE:CHANNEL, as the master's can_bus)")
+    d.add_argument("--board-calibration", default="",
+                   help="with --devices hardware: the board's ADC calibration file (the "
+                        "master's calibration key)")
     d.set_defaults(func=cmd_calibrate_display)

@@ -57,8 +57,9 @@ class DisplayCalibration:
     residual_block_k: float
     noise_block_k: float
     #: Where the routine ran: "simulated" or "emulated" (the simulator's
-    #: display, directly or behind the emulated devices). No routine runs
-    #: on a lab's hardware yet: a master on hardware refuses these.
+    #: display, directly or behind the emulated devices: a master on
+    #: hardware refuses these) or "hardware" (a lab's display:
+    #: :mod:`telethermal.teleop.display_hardware`).
     bench: str = "simulated"
     source: str = ""
 
@@ -78,7 +79,8 @@ class DisplayCalibration:
         return [
             f"display calibration of {self.scene} (face in air, then a {self.reference_block} "
             "block on grease; current steps of +-1 A):",
-            f"  on a {self.bench} bench (no routine runs on a lab's hardware yet)",
+            f"  on a {self.bench} bench" + ("" if self.bench == "hardware" else
+                                             " (the simulator's display, not a lab's)"),
             f"  junction sensor lag against the face thermocouple: {self.junction_lag_s:.4f} s "
             f"[{self.junction_lag_s_lo:.4f}, {self.junction_lag_s_hi:.4f}] 95 %; residual "
             f"{self.residual_air_k:.4f} K rms against {self.noise_air_k:.4f} K of noise (chi2/dof "
@@ -169,12 +171,19 @@ def calibrate_display(scene, display, block: str = DEFAULT_BLOCK,
     """Run the routine on ``display`` (the devices' ``read``/``apply``; the
     block pressed from session time 0, lifted at ``air_start_s``) and fit
     the display's figures; refused when the model does not fit."""
-    from telethermal.ident.pad_calibration import pad_digest
-    from telethermal.physics.materials import get_material
-
     on_block = routine.run_part(display, 0.0, rate_hz)
     in_air = routine.run_part(display, routine.steps_duration_s()
                               if air_start_s is None else air_start_s, rate_hz)
+    return fit_display(scene, on_block, in_air, block, bench)
+
+
+def fit_display(scene, on_block: routine.Record, in_air: routine.Record, block: str,
+                bench: str) -> DisplayCalibration:
+    """The display's figures fitted to the routine's two parts (read on the
+    routine's grid); refused when the model does not fit."""
+    from telethermal.ident.pad_calibration import pad_digest
+    from telethermal.physics.materials import get_material
+
     sens, js = scene.sensors, scene.sensors.junction_sensor_spec()
     tc_noise_k = sens.thermocouple_noise_uv / routine.TYPE_T_UV_PER_K
     air = routine.fit_junction_lag(in_air, js.tau_s, math.hypot(js.noise_k, js.lsb_k / 12 ** 0.5),
@@ -233,8 +242,9 @@ def refuse_on_hardware(cal: DisplayCalibration | None) -> None:
     if cal is not None and cal.bench != "hardware":
         raise CalibrationError(
             f"{cal.source or 'the display calibration'} was made on a {cal.bench} bench (the "
-            "simulator's display), not on this master's hardware; no hardware routine exists "
-            "yet: run the hardware master without pad_calibration (docs/calibration.md)")
+            "simulator's display), not on this master's hardware: calibrate this display "
+            "(telethermal calibrate display --devices hardware --board URL --can BUS; "
+            "docs/calibration.md)")
 
 
 def display_calibration(path: str, scene) -> DisplayCalibration | None:
