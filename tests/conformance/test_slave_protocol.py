@@ -12,7 +12,7 @@ import msgpack
 import pytest
 
 import protocol_doc as doc
-from conftest import DEAD_AFTER_S, GUARD_S, HEARTBEAT_S
+from conftest import GUARD_S, HEARTBEAT_S
 from doc_peer import pack
 from touch import announcement, assert_pad_safe, place, touch
 

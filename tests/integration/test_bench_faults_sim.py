@@ -11,7 +11,7 @@ from telethermal.bench import faults_sim
 from telethermal.bench.executor import SerialExecutor
 from telethermal.errors import BenchError
 from telethermal.physics.scene import load_scene, with_finger
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 
 
 @pytest.mark.slow          # over 10 s here: make test-all and CI run it

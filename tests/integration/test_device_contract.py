@@ -142,7 +142,8 @@ def test_a_session_through_emulated_devices_writes_the_same_json_as_with_sim(tra
 def _emulated_display_and_master():
     """A clock, the emulated display (board on a pty, Peltier driver on a
     virtual CAN bus), a static-PID master holding at the idle, its news."""
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay, SlaveNews
     from telethermal.physics.layered import pad_resistance
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 1.0, IDLE_C, np.random.default_rng(0))
     clock = Clock()

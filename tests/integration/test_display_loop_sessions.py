@@ -7,7 +7,7 @@ import pytest
 
 from telethermal.control.current_quality import sign_reversals
 from telethermal.physics.scene import load_scene
-from telethermal.teleop.master import JUNCTION_STOPPED
+from telethermal.teleop.display_config import JUNCTION_STOPPED
 from telethermal.sim.inprocess import run_session
 
 SCENE = load_scene("fingertip-7")

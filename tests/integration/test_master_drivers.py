@@ -37,7 +37,8 @@ from telethermal.render.sampled import sample_curves
 from telethermal.services.config import MasterConfig
 from telethermal.ports import free_ports
 from telethermal.services.master import MasterService
-from telethermal.teleop.master import DisplayConfig, MasterStep
+from telethermal.teleop.display_config import DisplayConfig
+from telethermal.teleop.master import MasterStep
 from telethermal.sim.sides import SimMasterService, SimSlaveService
 from telethermal.teleop.session import PRE_CONTACT_S, SlaveSession
 from telethermal.sim.touch import DisplayTouch, draw_operator, master_rng

@@ -7,7 +7,6 @@ decision, remembered, is announced with its estimate, and the second touch
 is rendered from that estimate from the master's onset: closer to direct
 contact than the very same touch without the memory."""
 
-import numpy as np
 import pytest
 
 from telethermal.bench import unseen

@@ -18,7 +18,7 @@ from telethermal.sim import sides
 from telethermal.sim.inprocess import run_session
 from telethermal.sim.channel import Direction
 from telethermal.sim.network import NetworkSpec
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -19,7 +19,7 @@ from telethermal.demo.run import Services, wait_connected, write_configs
 from telethermal.ports import free_ports
 from telethermal.teleop.models import write_models
 from telethermal.wire.handshake import key_file_fingerprint
-from telethermal.wire.transport import DIAGNOSE_AFTER_S
+from telethermal.wire.sockets import DIAGNOSE_AFTER_S
 
 SCENE = with_finger(load_scene("fingertip-7"))
 

@@ -13,7 +13,7 @@ from telethermal.ident.anytime import decide
 from telethermal.ident.prepare import FLUX
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import save_generator
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.sim.inprocess import run_session
 from telethermal.teleop.slave import Slave
 

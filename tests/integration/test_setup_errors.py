@@ -10,8 +10,9 @@ import time
 import pytest
 
 from telethermal.wire.handshake import fingerprint, key_file_fingerprint
-from telethermal.wire.transport import (RECONNECT_IVL_MAX_S, Endpoint, TransportConfig,
-                                        generate_keys)
+from telethermal.wire.sockets import RECONNECT_IVL_MAX_S
+from telethermal.wire.transport import Endpoint, TransportConfig
+from telethermal.wire.keys import generate_keys
 
 CURVE = TransportConfig(security="curve", control_port=0, stream_port=0, heartbeat_s=0.02,
                         dead_after_s=0.3)

@@ -5,7 +5,7 @@ feed-forward, on the same touches, a metal and an insulator."""
 import pytest
 
 from telethermal.physics.scene import load_scene
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.sim.inprocess import run_session
 
 SCENE = load_scene("fingertip-7")

@@ -7,7 +7,8 @@ import time
 import pytest
 
 from telethermal.errors import TransportError
-from telethermal.wire.transport import Endpoint, TransportConfig, generate_keys
+from telethermal.wire.transport import Endpoint, TransportConfig
+from telethermal.wire.keys import generate_keys
 
 PLAIN = TransportConfig(security="plain", control_port=0, stream_port=0, heartbeat_s=0.02,
                         dead_after_s=0.3)

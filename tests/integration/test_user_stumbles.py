@@ -129,7 +129,7 @@ def test_a_recording_made_on_a_scene_file_replays_with_its_scene(tiny, tmp_path,
     did not have. Now replay takes --scene FILE (a file of another name is
     refused) and replays the touch sample for sample."""
     import telethermal.physics.scene as scene_module
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
     from telethermal.sim.inprocess import run_session
     from telethermal.physics.scene import with_finger
 

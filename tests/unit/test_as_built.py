@@ -102,7 +102,7 @@ def test_removing_the_tables_changes_no_model_the_product_builds():
     """Every model the product builds from a scene (the pad's contact
     model, the effusivity estimator's curves, its priors and noise) is the
     same, to the bit, with and without ``[as_built]``."""
-    from telethermal.ident.effusivity import effusivity_family
+    from telethermal.ident.effusivity_curves import effusivity_family
     from telethermal.ident.oracle import draw_nuisances, flux_noise_w_m2
 
     plain, built = _scene(), _scene({"sd": 0.3, "seed": 7})
@@ -121,7 +121,8 @@ def test_removing_the_tables_changes_no_model_the_product_builds():
     assert flux_noise_w_m2(plain) == flux_noise_w_m2(built)
     # The display's: what its controllers are built from, and the controllers.
     from telethermal.teleop.display_setup import display_model_args
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay
     plain, built = _scene(), _scene({"sd": 0.3, "seed": 7})
     assert not built.as_built.display.nominal
     assert display_model_args(plain) == display_model_args(built)

@@ -3,7 +3,7 @@
 import pytest
 
 from telethermal.bench.render import _safety_counts
-from telethermal.teleop.master import DEFAULT_GAINS
+from telethermal.teleop.display_config import DEFAULT_GAINS
 
 
 def _rows(*events):
@@ -112,7 +112,7 @@ def test_a_session_adds_to_its_runs_totals_and_to_no_other(trained_models, monke
     # process (bench render --as-built's) were added to bench render's.
     from telethermal.bench import render_sessions as rs
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
     from telethermal.physics.scene import with_finger
 
     monkeypatch.setattr(rs, "CONTACT_S", 0.5)
@@ -130,7 +130,7 @@ def test_a_session_adds_to_its_runs_totals_and_to_no_other(trained_models, monke
 def test_a_display_config_crosses_to_a_worker_whole_or_is_refused():
     from telethermal.bench.render import GAIN_SETS
     from telethermal.bench.render_sessions import config_fields, display_config
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
 
     import json
     for config in (DisplayConfig(), DisplayConfig(rate_hz=50.0, idle="object"),

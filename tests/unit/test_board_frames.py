@@ -9,9 +9,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from telethermal.devices.board import Calibration, DeviceError
-from telethermal.devices.frames import (FRAME_VERSION, FRAME_VERSION_SLAVE, MAX_FRAME_BYTES,
-                                        TYPE_BOOT, BoardFrame, FrameError, FrameReader, crc16,
-                                        decode, encode)
+from telethermal.devices.frames import (FRAME_VERSION_SLAVE, MAX_FRAME_BYTES, TYPE_BOOT, BoardFrame,
+                                       FrameError, FrameReader, crc16, decode, encode)
 from telethermal.physics.sensors import type_t_emf_mv
 
 f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)

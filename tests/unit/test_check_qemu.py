@@ -2,7 +2,6 @@
 needs, each missing part named with its Debian package, and the firmware
 built (the build itself is tested in tests/integration/test_firmware_qemu.py)."""
 
-import pytest
 
 from telethermal.cli import main
 from telethermal.devices import qemu

@@ -9,8 +9,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from telethermal.bench import (devices, identify_text, physics, record, render,
-                             transport, view)
+from telethermal.bench import devices, identify_text, physics, record, transport, view
 from telethermal.errors import TransportError
 from telethermal.ident import evaluate as ident_evaluate
 from telethermal.jsonfile import write_json
@@ -133,7 +132,8 @@ def test_render_lines_skip_what_the_report_does_not_hold():
            "steel": {}}                                     # a material not run: no line
     report = {"rate": [], "controller": [], "gains": [], "before": [], "materials": per,
               "generator": None, "real_clock": [], "png": "p.png"}
-    assert render.text_report(report, "r.json") == [
+    from telethermal.bench.render_text import text_report
+    assert text_report(report, "r.json") == [
         "wood      : first touch skin 0.60 K (idling at the object 0.14 K), repeated "
         "(pre-conditioned) 0.06 K; flux from the decision 1.57 %, first second 6.45 % of peak; "
         "heat extracted over the first second 0.87x direct contact's (told apart beyond "
@@ -311,7 +311,7 @@ class _Quiet:
 
 # ------------------------------------------------------------------ replay
 def test_replay_into_a_folder_with_the_recorded_and_with_new_gains(tmp_path, capsys, trained_models):
-    from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
+    from telethermal.teleop.display_config import DEFAULT_GAINS, DisplayConfig
     from telethermal.teleop.replay import replay_to_folder
     from telethermal.sim.inprocess import run_session
     from telethermal.physics.scene import with_finger

@@ -10,7 +10,7 @@ from telethermal.control.dew import DEW_MARGIN_K, dew_point_c, idle_floor_c
 from telethermal.errors import ControlError
 from telethermal.physics.scene import load_scene
 from telethermal.teleop.display_setup import display_idle
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 
 SCENE = load_scene("fingertip-7")
 

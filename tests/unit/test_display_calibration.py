@@ -163,7 +163,8 @@ def test_the_master_built_with_the_calibration_carries_its_lags(tmp_path, built_
     routine's in-air lag is reported, not used: JUNCTION_NOT_USED); without
     the calibration, the scene's; the plant (as built) is never read."""
     from telethermal.teleop.display_setup import display_model_args
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay
     scene, cal = built_cal
     master = MasterDisplay(DisplayConfig(), None, finger_temp_c=33.0,
                            **display_model_args(scene, cal))
@@ -262,7 +263,8 @@ def test_the_master_divides_its_flux_readings_by_the_calibrated_gain(built_cal):
     idle, contact, the decision and rendering. Without the gain it does not."""
     from telethermal.devices.readings import PadSensors
     from telethermal.teleop.display_setup import display_model_args
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay, SlaveNews
     from test_master import closed_form_generator, decided
 
     scene, cal = built_cal
@@ -304,7 +306,8 @@ def test_a_recording_carries_the_gain_and_its_playback_reads_the_flux_over_it(bu
 
     from telethermal.record.recorder import display_params
     from telethermal.teleop.display_setup import display_model_args
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay
     from telethermal.sim.touch import draw_operator
     from telethermal.physics.scene import with_finger
     from telethermal.view.playback import _flux_gain
@@ -333,7 +336,7 @@ def test_a_calibrated_touch_replays_identical_and_not_without_its_gain(tmp_path,
     same recording with its gain set to 1 replays different: the gain is
     what the replay's identity rests on, not a value it ignores."""
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
     from telethermal.teleop.replay import replay
     from telethermal.sim.inprocess import run_session
     from telethermal.physics.scene import with_finger

@@ -340,8 +340,8 @@ def test_the_master_rearms_a_stopped_loop_only_at_idle_and_says_so(caplog):
     import logging
 
     from telethermal.devices.readings import PadSensors
-    from telethermal.teleop.master import (JUNCTION_REARMED, JUNCTION_STOPPED, DisplayConfig,
-                                           MasterDisplay, SlaveNews)
+    from telethermal.teleop.display_config import JUNCTION_REARMED, JUNCTION_STOPPED, DisplayConfig
+    from telethermal.teleop.master import MasterDisplay, SlaveNews
     from telethermal.physics.layered import pad_resistance
 
     config = DisplayConfig(feedforward_model="static")
@@ -386,7 +386,8 @@ def test_no_probe_current_flows_in_the_period_a_finger_is_detected():
     master's detector sees the finger, the module gets 0 A (the probe asked
     for in the period before is cancelled, not run under the finger)."""
     from telethermal.devices.readings import PadSensors
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay, SlaveNews
     from telethermal.physics.layered import pad_resistance
 
     config = DisplayConfig(feedforward_model="static")

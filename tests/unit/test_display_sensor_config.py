@@ -15,7 +15,8 @@ from telethermal.errors import SceneError
 from telethermal.physics.scene import parse_scene
 from telethermal.physics.thermoelectric import DEFAULT_JUNCTION_SENSOR, get_junction_sensor
 from telethermal.teleop.display_setup import display_model_args
-from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.display_config import DisplayConfig
+from telethermal.teleop.master import MasterDisplay
 from telethermal.sim.touch import DisplayTouch, Operator
 
 

@@ -10,8 +10,8 @@ import pytest
 
 from telethermal.data.generate import pad_database
 from telethermal.errors import IdentificationError
-from telethermal.ident.effusivity import (EffusivityEstimator, reference_object,
-                                          sensed_unit_flux)
+from telethermal.ident.effusivity import EffusivityEstimator
+from telethermal.ident.effusivity_curves import reference_object, sensed_unit_flux
 from telethermal.ident.prepare import from_trials
 from telethermal.physics.contact import contact_flux_w_m2
 from telethermal.physics.layered import Boundary, Layer

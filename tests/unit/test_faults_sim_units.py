@@ -4,7 +4,7 @@ order one process would make them, whichever order they finished in."""
 
 from telethermal.bench import faults_sim
 from telethermal.bench.faults_sim import assemble, run_unit, units
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 
 MATERIALS = ["aluminium", "steel", "wood"]
 

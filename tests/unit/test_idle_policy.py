@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from telethermal.control import preconditioning as pc
+
+from telethermal.control import display_floor
 from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.physics.scene import list_scenes, load_scene, with_finger
 from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.teleop.display_setup import display_idle
 
 
@@ -187,7 +189,8 @@ def test_the_pairs_idle_read_off_the_table_is_the_floors_there(scene):
     # table's to within that.
     policy = pc.scene_policy(scene)
     row = policy["groups"]["plexiglass|rubber"]
-    search = pc.FloorSearch(scene, pc.hardware(scene), pc.nominal_touch(scene))
+    search = pc.FloorSearch(scene, display_floor.hardware(scene),
+                            display_floor.nominal_touch(scene))
     solved = [search.floor_k(m, row["idle_c"]) for m in ("plexiglass", "rubber")]
     assert max(solved) == pytest.approx(row["worst_floor_k"], abs=0.02)
     assert pc.idle_for(scene, "plexiglass|rubber", 24.0, 33.0) == pytest.approx(

@@ -14,7 +14,8 @@ import pytest
 from telethermal.render.sampled import sample_curves
 from telethermal.teleop.link import SlaveLink
 from telethermal.devices.readings import PadSensors
-from telethermal.teleop.master import DisplayConfig, MasterDisplay
+from telethermal.teleop.display_config import DisplayConfig
+from telethermal.teleop.master import MasterDisplay
 from telethermal.physics.layered import pad_resistance
 from telethermal.wire.messages import FluxTrajectory, MaterialEstimate, SessionConfig
 

@@ -14,7 +14,8 @@ from telethermal.ident.anytime import Estimate
 from telethermal.physics.scene import finger_contact_model, load_scene
 from telethermal.render.generator import NetworkGenerator
 from telethermal.devices.readings import PadSensors
-from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.teleop.display_config import DisplayConfig
+from telethermal.teleop.master import MasterDisplay, SlaveNews
 from telethermal.physics.layered import pad_resistance
 
 from displayloop import display_periods

@@ -15,7 +15,8 @@ from telethermal.physics.contact import (contact_flux_sensed_w_m2, contact_flux_
 from telethermal.physics.materials import get_material
 from telethermal.physics.scene import load_scene
 from telethermal.render.generator import ContactGenerator
-from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+from telethermal.teleop.display_config import DisplayConfig
+from telethermal.teleop.master import MasterDisplay, SlaveNews
 from telethermal.teleop.rendering import Estimated, estimated_target
 from telethermal.physics.layered import pad_resistance
 

@@ -13,7 +13,7 @@ from telethermal.teleop.memory import FROM_MEMORY, Z95, Effusivity, ObjectMemory
 from telethermal.wire.codec import decode, encode
 from telethermal.wire.messages import ContactEvent
 
-from test_link import CLASSES, OBJECT_C, drive, estimate, fresh_link
+from test_link import OBJECT_C, drive, estimate, fresh_link
 
 TRAINED = ("graphite", "marble", "plexiglass")
 

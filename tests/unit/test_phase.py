@@ -81,7 +81,7 @@ def test_a_recorded_session_replays_the_same_phase_column(tmp_path, trained_mode
     # A whole touch: the phases the recording holds are plain strings, and
     # the replay's (Phase members) compare equal to them period by period.
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
     from telethermal.teleop.replay import replay
     from telethermal.sim.inprocess import run_session
     from telethermal.physics.scene import with_finger

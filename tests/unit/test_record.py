@@ -15,7 +15,7 @@ from telethermal.record.importer import import_recordings
 from telethermal.record.recording import Recorder, RecordingError, read_recording
 from telethermal.record.recorder import periods
 from telethermal.teleop.replay import replay
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.sim.inprocess import run_session
 
 SCENE = with_finger(load_scene("fingertip-7"))
@@ -41,7 +41,7 @@ def test_an_impedance_touch_replays_sample_for_sample_and_refuses_gains(models, 
                 contact_s=0.5, seed=1, record=path)
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
-    from telethermal.teleop.master import DEFAULT_GAINS
+    from telethermal.teleop.display_config import DEFAULT_GAINS
     with pytest.raises(RecordingError, match="does not use the flux PID"):
         replay(path, gains=DEFAULT_GAINS)
 
@@ -65,7 +65,7 @@ def test_the_same_models_replay_the_same_commands_sample_for_sample(recorded):
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
     assert same["slave"]["same_estimates"]
-    from telethermal.teleop.master import DEFAULT_GAINS
+    from telethermal.teleop.display_config import DEFAULT_GAINS
     from dataclasses import replace
     other = replay(path, gains=replace(DEFAULT_GAINS, kp=3e-3))["summary"]
     assert not other["identical"] and other["junction_max_abs_diff_c"] > 0.01

@@ -7,15 +7,13 @@ says it is damaged and never identical."""
 from __future__ import annotations
 
 import copy
-import json
-import math
 
 import pytest
 
 from telethermal.cli import main
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.record.recording import Recorder, RecordingError, read_recording
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.teleop.replay import replay
 from telethermal.sim.inprocess import run_session
 

@@ -279,8 +279,6 @@ def with_finger_for_test(scene):
 
 
 def test_what_a_scene_uses_of_the_package_cannot_change_under_it(tmp_path, own_materials):
-    from telethermal.physics.materials import get_material
-
     # A table that redefines a pad layer (alumina): a scene using the
     # package's alumina is refused after it, whatever it touches.
     (tmp_path / "t.csv").write_text(TABLE + "alumina,pad,1.0,3900,880,ours\n")

@@ -144,7 +144,8 @@ def test_a_slave_restarted_mid_contact_reaches_the_display_as_news():
     # its curves from the next period's news (no driver assigns the display's
     # generator), and the master's own contact stays open until its release.
     from telethermal.devices.readings import PadSensors
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay
 
     s = session()
     s.period(Step(ContactChange(True, 0.0)), 10.0, 2.0, 31.0)

@@ -18,7 +18,7 @@ from telethermal.sim.channel import Direction
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.sampled import sample_curves
 from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.sim.network import NetworkSpec, SimNetwork, run_network_touch
 from telethermal.wire.messages import CLASSES, ContactEvent

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from telethermal.control import preconditioning as pc
+
+from telethermal.control import display_floor
 from telethermal.sim.plant import DisplayPlant
 from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.physics.scene import load_scene
@@ -20,7 +22,7 @@ def scene():
 
 @pytest.fixture(scope="module")
 def touch(scene):
-    return pc.nominal_touch(scene)
+    return display_floor.nominal_touch(scene)
 
 
 def test_junction_plant_matches_display_plant(scene, touch):
@@ -28,9 +30,9 @@ def test_junction_plant_matches_display_plant(scene, touch):
     imposed on the display plant (isothermal back, exact per step) at a fine
     step, the skin's surface temperature is the same: the two share cells
     and conductances, and the node only adds its capacity and input."""
-    hw = pc.hardware(scene)
+    hw = display_floor.hardware(scene)
     dt, contact_s = 1e-4, 0.3
-    plant = pc.JunctionPlant(hw, touch, contact_s, dt)
+    plant = display_floor.JunctionPlant(hw, touch, contact_s, dt)
     q = np.where(np.arange(plant.n) * dt < 0.05, -4e4, 1.5e4)     # W/m^2, two levels
     idle = 24.0
     free_j, free_s = plant.free(idle)
@@ -52,12 +54,12 @@ def test_bounded_equals_unbounded_where_limits_do_not_bind(scene, touch):
     optimum asks ~1e13 W/m^2 through the 0.8 mm plate: the inverse through the
     film is ill-conditioned): the bounded
     solve reaches the unconstrained least squares' error (to 1e-6 K)."""
-    hw = pc.hardware(scene, qmax_scale=1e10)
-    plant = pc.JunctionPlant(hw, touch, contact_s=0.4)
-    target = pc.direct_skin_c(scene, "aluminium", touch, plant.n)
+    hw = display_floor.hardware(scene, qmax_scale=1e10)
+    plant = display_floor.JunctionPlant(hw, touch, contact_s=0.4)
+    target = display_floor.direct_skin_c(scene, "aluminium", touch, plant.n)
     free_j, free_s = plant.free(touch.object_c)
-    lo, hi = pc.pump_bounds_w_m2(hw, np.full(plant.n, touch.object_c), touch.object_c)
-    q = pc.bounded_fit(plant.skin_matrix, target - free_s, lo, hi)
+    lo, hi = display_floor.pump_bounds_w_m2(hw, np.full(plant.n, touch.object_c), touch.object_c)
+    q = display_floor.bounded_fit(plant.skin_matrix, target - free_s, lo, hi)
     q_free = np.linalg.lstsq(plant.skin_matrix, target - free_s, rcond=None)[0]
     assert np.all(np.abs(q_free) < 0.5 * np.minimum(-lo, hi))    # the limits do not bind
     bounded = np.sqrt(np.mean((free_s + plant.skin_matrix @ q - target) ** 2))
@@ -69,15 +71,15 @@ def test_limits_hold_on_the_nonlinear_module(scene, touch):
     """The trajectory's realising current on ThermoelectricStack stays within
     Imax (0 violations), the module binds (peak current near Imax on
     aluminium), and the nonlinear skin follows the linear one."""
-    hw = pc.hardware(scene)
-    plant = pc.JunctionPlant(hw, touch, contact_s=0.5)
-    target = pc.direct_skin_c(scene, "aluminium", touch, plant.n)
-    floor = pc.best_touch(hw, plant, target, touch.object_c)
+    hw = display_floor.hardware(scene)
+    plant = display_floor.JunctionPlant(hw, touch, contact_s=0.5)
+    target = display_floor.direct_skin_c(scene, "aluminium", touch, plant.n)
+    floor = display_floor.best_touch(hw, plant, target, touch.object_c)
     v = floor.verified
     assert v.violations == 0
     assert np.abs(v.current_a).max() <= hw.params.spec.imax_a * (1 + 1e-9)
     assert np.abs(v.current_a).max() > 0.9 * hw.params.spec.imax_a
-    lo, hi = pc.pump_bounds_w_m2(hw, v.cold_c, v.hot_c)
+    lo, hi = display_floor.pump_bounds_w_m2(hw, v.cold_c, v.hot_c)
     assert np.all((floor.q_j_w_m2 >= lo) & (floor.q_j_w_m2 <= hi))
     nonlinear = np.sqrt(np.mean((v.skin_c - target) ** 2))
     assert nonlinear == pytest.approx(floor.skin_rms_k, abs=0.02)
@@ -88,10 +90,10 @@ def test_larger_qmax_never_raises_the_floor(scene, touch):
     admissible set only grows: the floor cannot rise (1e-3 K: solver)."""
     floors = []
     for scale in (0.5, 1.0, 2.0, 4.0):
-        hw = pc.hardware(scene, qmax_scale=scale)
-        plant = pc.JunctionPlant(hw, touch, contact_s=0.5)
-        target = pc.direct_skin_c(scene, "aluminium", touch, plant.n)
-        floors.append(pc.best_touch(hw, plant, target, touch.object_c,
+        hw = display_floor.hardware(scene, qmax_scale=scale)
+        plant = display_floor.JunctionPlant(hw, touch, contact_s=0.5)
+        target = display_floor.direct_skin_c(scene, "aluminium", touch, plant.n)
+        floors.append(display_floor.best_touch(hw, plant, target, touch.object_c,
                                     nonlinear=False).skin_rms_k)
     assert np.all(np.diff(floors) <= 1e-3), floors
     assert floors[-1] < floors[0]
@@ -99,11 +101,11 @@ def test_larger_qmax_never_raises_the_floor(scene, touch):
 
 def test_unknown_material_is_named(scene, touch):
     with pytest.raises(UnknownMaterialError, match="unobtainium"):
-        pc.direct_skin_c(scene, "unobtainium", touch, 10)
+        display_floor.direct_skin_c(scene, "unobtainium", touch, 10)
     with pytest.raises(UnknownMaterialError, match="unobtainium"):
         pc.idle_for(scene, "unobtainium", 24.0, 33.0)
     with pytest.raises(ControlError, match="qmax_scale"):
-        pc.hardware(scene, qmax_scale=0.0)
+        display_floor.hardware(scene, qmax_scale=0.0)
 
 
 def test_idle_for_applies_the_rule(scene, monkeypatch):

@@ -4,7 +4,6 @@ display plant driven by current, and a heat sink warming over a session."""
 
 import math
 
-import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st

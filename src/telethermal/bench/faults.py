@@ -91,7 +91,7 @@ def run(progress=None, quick: bool = False, only: str | None = None,
     where the simulated rows run (:mod:`telethermal.bench.executor`; None: a
     pool of ``jobs`` worker processes)."""
     from telethermal.bench import faults_sim
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
 
     step = progress or (lambda _m: None)
     scene = with_finger(load_scene(scene_name))

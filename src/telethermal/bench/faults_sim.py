@@ -206,7 +206,7 @@ def _touches(scene_ref: str, identifier_path: str, generator_path: str, rate_hz:
     from telethermal.physics.scene import load_scene, with_finger
     from telethermal.render.generator import load_generator
     from telethermal.render.sampled import sample_curves
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
 
     scene = with_finger(load_scene(scene_ref))
     identifier = load_model(identifier_path)

@@ -9,7 +9,7 @@ import numpy as np
 from telethermal.teleop.display_setup import add_limits
 
 from telethermal.control.loop import combined_summary, master_step_summary, realtime
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.sim.inprocess import run_session
 
 #: The master's own loop on the real clock at these rates, each row pooled

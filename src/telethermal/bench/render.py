@@ -25,7 +25,6 @@ from typing import Callable
 
 import numpy as np
 
-from telethermal.bench.render_text import text_report  # noqa: F401  (the CLI's)
 from telethermal.bench.real_clock import REAL_CLOCK_PERIODS, REAL_CLOCK_RATES_HZ, real_clock_row
 from telethermal.bench.render_limits import dew_report, limits_of, shipped_limits
 from telethermal.control.loop import DEFAULT_RATE_HZ, DEPLOYED_PRIORITY, FixedRateLoop, RealClock
@@ -34,7 +33,7 @@ from telethermal.data.generate import finger_database
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
-from telethermal.teleop.master import DEFAULT_GAINS, DisplayConfig
+from telethermal.teleop.display_config import DEFAULT_GAINS, DisplayConfig
 from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.display_setup import limits_report
 from telethermal.bench.render_sessions import (CONTACT_S, KEYS, Totals, config_fields,
@@ -178,6 +177,7 @@ def decision_floor_at_the_slaves_times(scene, first: list[dict], materials) -> d
     comparison harsher); the product's display mixes the posteriors before
     the decision, which this floor does not give it."""
     from telethermal.control import preconditioning as pc
+    from telethermal.control import display_floor
     from telethermal.control.decision_floor import decision_floor
 
     times = {}
@@ -189,7 +189,8 @@ def decision_floor_at_the_slaves_times(scene, first: list[dict], materials) -> d
     decided = [m for m in materials if m in times]
     if not decided:
         return {"note": "no first touch was decided"}
-    search = pc.FloorSearch(scene, pc.hardware(scene), pc.nominal_touch(scene))
+    search = pc.FloorSearch(scene, display_floor.hardware(scene),
+                            display_floor.nominal_touch(scene))
     idle_c = pc.idle_for(scene, None, search.touch.object_c, search.touch.finger_c)
     targets = {m: search.targets[m] for m in decided}
     at = {m: times[m] for m in decided}

@@ -39,7 +39,7 @@ from telethermal.bench.render_sessions import CONTACT_S, session_row
 from telethermal.bench.render_limits import limits_of
 from telethermal.physics.as_built import draw_as_built, with_as_built
 from telethermal.physics.scene import load_scene, with_finger
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.teleop.models import train_generator, train_identifier
 
 #: Session seeds per pad (each material's first touch on each).

@@ -12,7 +12,7 @@ import time
 from telethermal.control.pid import PidGains
 from telethermal.sim.inprocess import run_session
 from telethermal.teleop.display_setup import add_limits, new_limit_totals
-from telethermal.teleop.master import JUNCTION_REARMED, JUNCTION_STOPPED, DisplayConfig
+from telethermal.teleop.display_config import JUNCTION_REARMED, JUNCTION_STOPPED, DisplayConfig
 
 CONTACT_S = 3.0
 KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",

@@ -42,14 +42,14 @@ DECISION_S = (0.0, 0.05, 0.1, 0.15)
 def _final(hw, touch, scene, material: str, idle_c: float, plants: dict) -> dict:
     """The floor on 5 ms slots from ``idle_c``, bounds iterated on the
     nonlinear module, which verifies it."""
-    from telethermal.control import preconditioning as pc
+    from telethermal.control import display_floor
 
     key = id(hw)
     if key not in plants:
-        plants[key] = pc.JunctionPlant(hw, touch)
+        plants[key] = display_floor.JunctionPlant(hw, touch)
     plant = plants[key]
-    target = pc.direct_skin_c(scene, material, touch, plant.n)
-    return pc.best_touch(hw, plant, target, idle_c).summary(target)
+    target = display_floor.direct_skin_c(scene, material, touch, plant.n)
+    return display_floor.best_touch(hw, plant, target, idle_c).summary(target)
 
 
 def _module(hw) -> dict:
@@ -85,12 +85,13 @@ def _materials(scene, hw, touch, idles: dict, step) -> dict:
 
 def _sweep(scene, touch, qmax_scales, film_scales, step) -> list[dict]:
     from telethermal.control import preconditioning as pc
+    from telethermal.control import display_floor
 
     rows = []
     for film in film_scales:
         for scale in qmax_scales:
             step(f"sweep: Qmax x{scale:g}, film R x{film:g}")
-            hw = pc.hardware(scene, qmax_scale=scale, film_r_scale=film)
+            hw = display_floor.hardware(scene, qmax_scale=scale, film_r_scale=film)
             search = pc.FloorSearch(scene, hw, touch)
             idle, subset = pc.minimax_idle(search)
             final = _final(hw, touch, scene, "aluminium", idle, {})
@@ -135,6 +136,7 @@ def _verdict(rows) -> str:
 
 def run(progress=None, quick: bool = False, scene_name: str = SCENE) -> dict:
     from telethermal.control import preconditioning as pc
+    from telethermal.control import display_floor
     from telethermal.physics.scene import load_scene
 
     step = progress or (lambda _msg: None)
@@ -144,7 +146,7 @@ def run(progress=None, quick: bool = False, scene_name: str = SCENE) -> dict:
         raise BenchError(f"bench skin-floor --scene {scene_name}: the Qmax and film sweep is "
                          f"on aluminium, which the scene has no object of (it has "
                          f"{', '.join(scene.materials)})")
-    hw, touch = pc.hardware(scene), pc.nominal_touch(scene)
+    hw, touch = display_floor.hardware(scene), display_floor.nominal_touch(scene)
     step("idle search")
     search = pc.FloorSearch(scene, hw, touch)
     idles = pc.search_idles(search, **({"step_k": 7.0} if quick else {}))
@@ -175,8 +177,9 @@ def run(progress=None, quick: bool = False, scene_name: str = SCENE) -> dict:
             **dataclasses.asdict(touch),
             "note": "the scene's nominal operator (mean finger temperature, nominal skin, "
                     "nominal force's contact conductance), object at room temperature"},
-        "contact_s": pc.CONTACT_S, "grid_s": pc.GRID_S, "search_grid_s": pc.SEARCH_GRID_S,
-        "bound_margin": pc.BOUND_MARGIN, "quick": quick, "idle_policy": policy,
+        "contact_s": display_floor.CONTACT_S, "grid_s": display_floor.GRID_S,
+        "search_grid_s": pc.SEARCH_GRID_S,
+        "bound_margin": display_floor.BOUND_MARGIN, "quick": quick, "idle_policy": policy,
         "method": {
             "plant": "pad stack + junction node (cold_heat_j_k/area) on the fingertip, "
                      "LayeredContact's cells, exact per 5 ms slot, input q_j = -Qc/area",

@@ -286,7 +286,7 @@ def run(progress=None) -> dict:
     step = progress or (lambda _m: None)
     report = {"codec": codec_costs()}
     with tempfile.TemporaryDirectory() as tmp:
-        from telethermal.wire.transport import generate_link_keys
+        from telethermal.wire.keys import generate_link_keys
         keys = generate_link_keys(Path(tmp))
         step("loopback")
         from telethermal.ports import free_ports

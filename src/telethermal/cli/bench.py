@@ -18,6 +18,7 @@ def cmd_bench_physics(args) -> int:
 
 def cmd_bench_render(args) -> int:
     from telethermal.bench import render
+    from telethermal.bench.render_text import text_report
 
     if args.as_built is not None:
         _no_executor(args)
@@ -26,7 +27,7 @@ def cmd_bench_render(args) -> int:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene,
                                      executor=executor)
-    _print_lines(render.text_report(report, args.json))
+    _print_lines(text_report(report, args.json))
     return 0
 
 

@@ -56,7 +56,7 @@ def _session_lines(s: dict, scene_name: str, args) -> list[str]:
 def cmd_session(args) -> int:
     """One touch, slave and master in one process; JSON and Fig. 3 plot."""
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.master import DisplayConfig
+    from telethermal.teleop.display_config import DisplayConfig
     from telethermal.teleop.models import session_models
     from telethermal.teleop.plots import plot_session
     from telethermal.sim.inprocess import run_session

@@ -127,7 +127,7 @@ def cmd_faults(args) -> int:
 
 def cmd_keys(args) -> int:
     from telethermal.wire.handshake import key_file_fingerprint
-    from telethermal.wire.transport import generate_keys
+    from telethermal.wire.keys import generate_keys
 
     public, secret = generate_keys(args.out, args.name)
     print(f"wrote {public} (give it to the peer; fingerprint {key_file_fingerprint(public)}) "

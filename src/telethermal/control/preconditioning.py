@@ -25,15 +25,13 @@ import json
 import logging
 import math
 from importlib import resources
-from pathlib import Path
 
 import numpy as np
 
 from telethermal.cachedir import cache_dir
-from telethermal.control.display_floor import (  # noqa: F401  (re-exported)
-    BOUND_MARGIN, CONTACT_S, GRID_S, Floor, Hardware, JunctionPlant, Touch, Verified,
-    best_touch, bounded_fit, direct_skin_c, hardware, idle_hold, nominal_touch,
-    pump_bounds_w_m2, verify)
+from telethermal.control.display_floor import (CONTACT_S, Hardware, JunctionPlant, Touch,
+                                              best_touch, direct_skin_c, hardware,
+                                              nominal_touch)
 from telethermal.control.safety import SafetyLimits
 from telethermal.errors import ControlError, UnknownMaterialError
 from telethermal.jsonfile import write_json

@@ -27,7 +27,7 @@ from telethermal.services.viewer import open_view
 from telethermal.teleop.models import demo_identify
 from telethermal.tomltables import toml_str
 from telethermal.view.server import ViewServer
-from telethermal.wire.transport import generate_link_keys
+from telethermal.wire.keys import generate_link_keys
 
 log = logging.getLogger(__name__)
 

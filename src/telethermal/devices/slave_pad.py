@@ -35,8 +35,7 @@ from telethermal.devices.active_pad import ActivePadEmulator, current_junction_c
 from telethermal.devices.board import DeviceError
 from telethermal.devices.emulators import SensorBoardEmulator
 from telethermal.devices.frames import FRAME_VERSION_SLAVE
-from telethermal.devices.pad_drivers import (ContactSamples, LoopGains,  # noqa: F401 (re-export)
-                                             SlavePadDrivers)
+from telethermal.devices.pad_drivers import ContactSamples, SlavePadDrivers
 
 _bus_names = itertools.count()
 

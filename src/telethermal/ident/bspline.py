@@ -1,7 +1,7 @@
 """Cubic B-splines evaluated without building and checking scipy objects
 per call (issue 29).
 
-:class:`~telethermal.ident.effusivity.EffusivityFamily` evaluates its
+:class:`~telethermal.ident.effusivity_curves.EffusivityFamily` evaluates its
 tensor spline a few times per Newton step of every 20 ms window; building a
 ``scipy.interpolate.BSpline`` per evaluation (its checks), its derivative,
 and an identity-coefficient basis per scalar cost more than the arithmetic.

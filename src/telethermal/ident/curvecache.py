@@ -29,8 +29,8 @@ import numpy as np
 from telethermal import __version__
 from telethermal.cachedir import cache_dir
 from telethermal.errors import ModelFileError
-from telethermal.ident.effusivity import (EFFUSIVITY_RANGE_W_S05_M2K, MODEL_DT_S, N_E,
-                                          REFERENCE_MATERIAL, EffusivityFamily)
+from telethermal.ident.effusivity_curves import (EFFUSIVITY_RANGE_W_S05_M2K, MODEL_DT_S, N_E,
+                                                 REFERENCE_MATERIAL, EffusivityFamily)
 from telethermal.ident.effusivity_curves import effusivity_family
 from telethermal.npzfile import read_npz, write_npz
 

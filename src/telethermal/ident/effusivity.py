@@ -85,9 +85,7 @@ from scipy.special import chdtrc
 
 from telethermal.errors import IdentificationError
 # The curves' grid and forward model, named here too (their former home).
-from telethermal.ident.effusivity_curves import (  # noqa: F401
-    EFFUSIVITY_RANGE_W_S05_M2K, MODEL_DT_S, N_E, N_H, REFERENCE_MATERIAL, EffusivityFamily,
-    effusivity_family, reference_object, sensed_unit_flux)
+from telethermal.ident.effusivity_curves import N_E, N_H, EffusivityFamily, effusivity_family
 from telethermal.ident.intervals import resolution_var
 from telethermal.ident.openset import Z95  # the interval's normal quantile (95 %)
 from telethermal.ident.oracle import KernelPrior, draw_nuisances, flux_noise_w_m2, \

@@ -33,7 +33,8 @@ from telethermal.services.touch_figures import log_touch_figures, touch_figures
 from telethermal.services.qemu_boards import close_boards, display_boards
 from telethermal.view.stream import ViewPublisher
 from telethermal.teleop.link import SlaveLink
-from telethermal.teleop.master import DisplayConfig, MasterDisplay, Phase
+from telethermal.teleop.display_config import DisplayConfig
+from telethermal.teleop.master import MasterDisplay, Phase
 from telethermal.teleop.links import EndpointLink
 from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceState
 from telethermal.teleop.decision import touch_decision

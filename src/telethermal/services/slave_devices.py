@@ -22,7 +22,7 @@ def _emulated(config, scene, instruments, seed, rate_hz):
 
 def _hardware(config, scene, instruments, seed, rate_hz):
     from telethermal.devices.board import Calibration
-    from telethermal.devices.slave_pad import SlavePadDrivers
+    from telethermal.devices.pad_drivers import SlavePadDrivers
     calibration = Calibration.load(config.calibration) if config.calibration else \
         Calibration()
     # Each period waits (up to two sample periods) for the board's next

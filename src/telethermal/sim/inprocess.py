@@ -50,7 +50,7 @@ from telethermal.sim.sides import SimMasterService, SimSlaveService
 from telethermal.sim.touch import MasterWorld
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.display_setup import module_summary, safety_summary
-from telethermal.teleop.master import DisplayConfig
+from telethermal.teleop.display_config import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
 from telethermal.teleop.session import PRE_CONTACT_S

@@ -18,7 +18,8 @@ from telethermal.control.dew import DEW_MARGIN_K, idle_floor_c
 from telethermal.control.safety import safety_event_count
 from telethermal.physics.layered import pad_resistance
 from telethermal.physics.scene import Scene
-from telethermal.teleop.master import DisplayConfig, Idle, MasterDisplay
+from telethermal.teleop.display_config import DisplayConfig, Idle
+from telethermal.teleop.master import MasterDisplay
 
 log = logging.getLogger(__name__)
 

@@ -57,9 +57,8 @@ from telethermal.physics.thermoelectric import (DEFAULT_JUNCTION_SENSOR, Junctio
                                                 ModuleParams, get_junction_sensor)
 from telethermal.render.generator import posterior_weights
 from telethermal.devices.readings import PadSensors
-from telethermal.teleop.display_config import (  # noqa: F401  (re-exported)
-    BEFORE_MODES, DEFAULT_GAINS, FEEDFORWARD_MODELS, IDLES, JUNCTION_REARMED, JUNCTION_STOPPED,
-    SOURCES, Before, DisplayConfig, FeedforwardModel, Idle, Source)
+from telethermal.teleop.display_config import (JUNCTION_REARMED, JUNCTION_STOPPED, Before,
+                                               DisplayConfig, FeedforwardModel, Source)
 from telethermal.teleop.rendering import (Estimated, Handover, blended, estimated_target,
                                           generator_flux, has_estimate, inverse_effusivity)
 

@@ -181,7 +181,8 @@ def _replay_master(rec, params, cid, generator, gains, attached):
     from telethermal.control.preconditioning import precondition_from
     from telethermal.render.generator import load_generator
     from telethermal.devices.readings import PadSensors
-    from telethermal.teleop.master import DisplayConfig, MasterDisplay, SlaveNews
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.master import MasterDisplay, SlaveNews
 
     if "sampled_curves" in params:
         # An in-process session: the display rendered the curves the slave's
@@ -472,7 +473,7 @@ def replay_to_folder(path, out: str | Path, identifier_path=None, generator_path
     the plot. Returns the summary and the plot's path."""
     from telethermal.ident.registry import load_model
     from telethermal.render.generator import load_generator
-    from telethermal.teleop.master import DEFAULT_GAINS
+    from telethermal.teleop.display_config import DEFAULT_GAINS
 
     identifier = load_model(identifier_path) if identifier_path else None
     generator = load_generator(generator_path) if generator_path else None

@@ -30,20 +30,11 @@ import zmq
 from telethermal.errors import ProtocolError, TransportError, UnknownKindError
 from telethermal.wire.codec import decode, encode
 from telethermal.wire.hello import HelloExchange
-# Re-exported: the key files' functions (the command line, preflight, the
-# view and the tests import them from here).
-from telethermal.wire.keys import generate_keys, generate_link_keys  # noqa: F401
-from telethermal.wire.keys import load_public as _load_public  # noqa: F401
-from telethermal.wire.keys import load_secret as _load_secret  # noqa: F401
-from telethermal.wire.lossless import (GAP_GIVE_UP_DEAD, RESEND_BURST,  # noqa: F401
-                                       RETRANSMIT_AFTER, WINDOW, LosslessStream, lossless_seq)
+from telethermal.wire.lossless import WINDOW, LosslessStream, lossless_seq
 from telethermal.wire.loglimit import LogLimiter
-from telethermal.wire.ordering import MAX_BUFFERED, OrderedReceiver  # noqa: F401 (re-export)
 from telethermal.wire.schema import (KINDS, LOSSLESS, MAX_MESSAGE_BYTES, PROTOCOL_VERSION,
                                      MessageKind)
-from telethermal.wire.sockets import (DIAGNOSE_AFTER_S, DIAGNOSE_REPEAT_S,  # noqa: F401
-                                      RECEIVE_LIMIT_BYTES, RECONNECT_IVL_MAX_S,
-                                      REFUSED_RETRY_S, UNANSWERED_S, EndpointSockets)
+from telethermal.wire.sockets import EndpointSockets
 
 log = logging.getLogger(__name__)
 
