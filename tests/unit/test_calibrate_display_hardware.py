@@ -43,13 +43,17 @@ class LockstepRig:
         self.bus = f"virtual:calibrate-hardware-{next(_buses)}"
         self.peltier = PeltierEmulator(self.bus, lambda a: None, clock=self.now,
                                        state=self.touch.module_state)
-        self.frames_missed = 0          # a test may drop the board's frames
+        self.frames_missed = 0          # a test may drop the board's frames: the next n,
+        self.silent = (math.inf, math.inf)  # or those in a window of its time (s)
+        self.interrupt_at = math.inf    # Ctrl-C pressed at this time
         self.lifted_at: float | None = None
 
     def now(self) -> float:
         return self.t
 
     def sleep_until(self, deadline_s: float) -> None:
+        if deadline_s >= self.interrupt_at:
+            raise KeyboardInterrupt
         if self._last is not None and deadline_s > self._last:
             self.peltier.poll()                 # the period's command reaches the board
             step = routine.RoutineStep(self._last, self.peltier.current_a)
@@ -60,7 +64,7 @@ class LockstepRig:
         self.force_n = s.force_n
         if self.frames_missed:
             self.frames_missed -= 1
-        else:
+        elif not self.silent[0] <= self.t < self.silent[1]:
             self.board.send(self.t, s.flux_w_m2, s.pad_temp_c, s.force_n)
         self.peltier.poll()
 
@@ -117,6 +121,86 @@ def test_a_block_never_lifted_is_refused_by_its_force(rig):
         run(rig)
 
 
+def test_an_interrupt_during_the_steps_leaves_the_driver_disabled(rig):
+    """Ctrl-C 3 s into the block part, the driver at +-1 A: disabled, 0 A."""
+    rig.interrupt_at = 3.0
+    with pytest.raises(KeyboardInterrupt):
+        run(rig)
+    assert rig.t == pytest.approx(3.0 - 1 / routine.RATE_HZ) and rig.peltier.current_a != 0.0
+    rig.peltier.poll()
+    assert not rig.peltier.enabled and rig.peltier.current_a == 0.0
+
+
+def test_a_board_silent_mid_part_stops_the_steps_and_the_driver(rig):
+    """The board's frames stop 2 s into the block part (the driver still
+    stepping): after BLIND_MAX periods without a new frame the routine
+    stops, the driver disabled. The board's own reading would have held
+    its last frame for 50 ms (25 periods) as if new."""
+    from telethermal.teleop.display_hardware import BLIND_MAX
+    rig.silent = (2.0, 10.0)
+    with pytest.raises(CalibrationError, match=f"no trusted reading for {BLIND_MAX} periods"):
+        run(rig)
+    assert rig.t < 2.0 + (BLIND_MAX + 1) / routine.RATE_HZ
+    rig.peltier.poll()
+    assert not rig.peltier.enabled and rig.peltier.current_a == 0.0
+
+
+def test_a_short_silence_is_filled_and_the_display_still_found(rig):
+    rig.silent = (2.0, 2.0 + 4 / routine.RATE_HZ)          # 4 frames lost mid-part
+    cal = run(rig)
+    assert cal.flux_lag_s_lo <= 1.3 * _scene(as_built=BUILT).sensors.flux_lag_s <= \
+        cal.flux_lag_s_hi
+
+
+def test_a_period_whose_deadline_passed_is_skipped_and_the_steps_stay_on_time():
+    """A period that overran by 2.5 periods: the one whose whole period
+    passed meanwhile is a row of NaN (missed), the next is read late (its
+    stamp says when), every later row at its deadline; each row with its
+    own current, as the steps are timed."""
+    dt = 1 / routine.RATE_HZ
+
+    class Clock:
+        t = 100.0
+
+        def now(self):
+            return self.t
+
+        def sleep_until(self, d):
+            self.t = max(self.t, d)
+
+    clock = Clock()
+
+    class Display:
+        def read(self, t):
+            if abs(t - 10 * dt) < dt / 2:
+                clock.t += 2.5 * dt                    # this period overran
+            return __import__("telethermal.devices.readings", fromlist=["x"]).PadSensors(
+                1.0, 2.0, 0.0, 3.0)
+
+        def apply(self, t, step, dt_s, force_n):
+            pass
+
+    rec = routine.run_part(Display(), 0.0, routine.RATE_HZ, clock)
+    nan_rows = np.flatnonzero(np.isnan(rec.flux_w_m2))
+    assert list(nan_rows) == [11]
+    k = np.arange(rec.t_s.size)
+    assert rec.t_s[12] == pytest.approx(12.5 * dt)
+    np.testing.assert_allclose(rec.t_s[13:], k[13:] * dt, atol=1e-9)
+    np.testing.assert_array_equal(rec.current_a, [routine.current_at(i * dt) for i in k])
+
+
+def test_on_grid_refuses_a_gap_longer_than_it_fills():
+    n = 1000
+    t = np.arange(n) / routine.RATE_HZ
+    flux = np.ones(n)
+    flux[500:500 + routine.GAP_MAX + 1] = math.nan
+    rec = routine.Record(t, np.zeros(n), np.ones(n), np.ones(n), flux, np.ones(n))
+    with pytest.raises(CalibrationError, match=f"{routine.GAP_MAX + 1} in a row"):
+        routine.on_grid(rec, routine.RATE_HZ, "test")
+    flux[500 + routine.GAP_MAX] = 1.0
+    routine.on_grid(rec, routine.RATE_HZ, "test")
+
+
 def test_an_interrupt_while_the_lab_is_asked_leaves_the_driver_disabled(rig):
     def interrupted(text):
         if text == LIFT_BLOCK:
@@ -128,12 +212,19 @@ def test_an_interrupt_while_the_lab_is_asked_leaves_the_driver_disabled(rig):
     assert not rig.peltier.enabled and rig.peltier.current_a == 0.0
 
 
-def test_a_board_that_misses_frames_is_refused_past_its_share(rig):
-    """A few stale frames are filled from their neighbours; more than
-    MISSING_MAX of a part's periods refuse the routine, naming the part."""
-    n = int(round(routine.steps_duration_s() * routine.RATE_HZ))
-    rig.frames_missed = int(math.ceil(routine.MISSING_MAX * n)) + 5
-    with pytest.raises(CalibrationError, match="part on the block missed a reading"):
+def test_missed_readings_past_their_share_refuse_the_part(rig):
+    """Frames lost one period in four (never BLIND_MAX in a row, nor
+    GAP_MAX): more than MISSING_MAX of the part's periods miss a reading,
+    and the part is refused, named."""
+    sleep_until = rig.sleep_until
+    count = itertools.count()
+
+    def every_fourth_lost(deadline_s):
+        rig.frames_missed = int(next(count) % 4 == 0)
+        sleep_until(deadline_s)
+
+    rig.sleep_until = every_fourth_lost
+    with pytest.raises(CalibrationError, match="part on the block missed a reading in"):
         run(rig)
 
 
@@ -181,9 +272,14 @@ def test_the_command_takes_a_labs_display_and_writes_its_table(rig, tmp_path, mo
 
 
 @pytest.mark.parametrize("args, words", [
-    (["--devices", "hardware"], "needs --board URL"),
-    (["--devices", "hardware", "--board", "/dev/ttyUSB0"], "needs --board URL"),
-    (["--board", "/dev/ttyUSB0", "--can", "socketcan:can0"], "give --devices hardware"),
+    (["--devices", "hardware"], "needs the master's config (--master-config FILE"),
+    (["--devices", "hardware", "--board", "/dev/ttyUSB0"], "or --board URL"),
+    (["--board", "/dev/ttyUSB0", "--can", "socketcan:can0"], "--board, --can name a lab's"),
+    (["--board-calibration", "board.toml"], "--board-calibration name a lab's display"),
+    (["--devices", "hardware", "--seed", "3", "--board", "x", "--can", "y"],
+     "--seed draws the simulated bench's noise"),
+    (["--devices", "hardware", "--master-config", "m.toml", "--board", "x"],
+     "give it alone, or --board and --can"),
 ])
 def test_the_command_says_what_a_labs_display_needs(tmp_path, capsys, args, words):
     from telethermal.cli import main
@@ -192,3 +288,23 @@ def test_the_command_says_what_a_labs_display_needs(tmp_path, capsys, args, word
     assert code != 0 and words in capsys.readouterr().err
     assert not (tmp_path / "cal.toml").exists()
 
+
+
+def test_the_masters_config_names_the_display_and_a_closed_terminal_is_said(
+        rig, tmp_path, monkeypatch, capsys):
+    """``--master-config``: the board, the bus and the board's calibration
+    as the master will use them; run where nothing answers its questions
+    (stdin closed), it stops saying why, the driver left disabled and no
+    file written."""
+    from telethermal.cli import main
+    config = tmp_path / "master.toml"
+    config.write_text(f'[master]\ndevices = "hardware"\nboard_url = "{rig.board.path}"\n'
+                      f'can_bus = "{rig.bus}"\n[transport]\nsecurity = "plain"\n')
+    monkeypatch.setattr("sys.stdin", __import__("io").StringIO(""))
+    out = tmp_path / "cal.toml"
+    assert main(["calibrate", "display", "--scene", "fingertip-7", "--out", str(out),
+                 "--devices", "hardware", "--master-config", str(config)]) != 0
+    assert "its input was closed: run it at a terminal" in capsys.readouterr().err
+    assert not out.exists()
+    rig.peltier.poll()
+    assert not rig.peltier.enabled and rig.peltier.current_a == 0.0

@@ -35,38 +35,57 @@ def cmd_calibrate_display(args) -> int:
     from telethermal.teleop.display_calibration import write_display_calibration
 
     scene = load_scene(args.scene)
+    lab = [f"--{k.replace('_', '-')}" for k in ("master_config", "board", "can",
+                                                 "board_calibration") if getattr(args, k)]
     if args.devices == "hardware":
+        if args.seed is not None:
+            raise CalibrationError("--seed draws the simulated bench's noise: a lab's display "
+                                   "(--devices hardware) has its own")
         cal = _calibrate_hardware_display(scene, args)
     else:
         from telethermal.sim.display_rig import calibrate_simulated
-        if args.board or args.can:
-            raise CalibrationError("--board and --can name a lab's display: give --devices "
+        if lab:
+            raise CalibrationError(f"{', '.join(lab)} name a lab's display: give --devices "
                                    "hardware")
         with console.status(f"running {scene.name}'s display routine (simulated bench, "
                             f"devices {args.devices}) and fitting its sensors"):
-            cal = calibrate_simulated(scene, args.block, args.seed, args.devices)
+            cal = calibrate_simulated(scene, args.block, args.seed or 0, args.devices)
     write_display_calibration(cal, args.out)
     _print_lines(cal.describe() + [f"wrote {args.out} ([display])"])
     return 0
 
 
 def _calibrate_hardware_display(scene, args):
-    """The routine on the lab's display: the board and driver it names, the
-    lab asked at the terminal to press and to lift the block."""
+    """The routine on the lab's display: the board, driver and board
+    calibration its master's config names (or given one by one), the lab
+    asked at the terminal to press and to lift the block."""
     from telethermal.devices.board import Calibration
     from telethermal.teleop.display_hardware import calibrate_hardware
 
-    if not (args.board and args.can):
-        raise CalibrationError("--devices hardware needs --board URL (the sensor board) and "
-                               "--can BUS (the Peltier driver), as in the master's config")
-    board_cal = Calibration.load(args.board_calibration) if args.board_calibration \
-        else Calibration()
+    board, can, board_cal_file = args.board, args.can, args.board_calibration
+    if args.master_config:
+        if board or can or board_cal_file:
+            raise CalibrationError("--master-config names the board, the bus and the board's "
+                                   "calibration: give it alone, or --board and --can")
+        from telethermal.services.config import load_config
+        master = load_config(args.master_config, "master")
+        board, can, board_cal_file = master.board_url, master.can_bus, master.calibration
+    if not (board and can):
+        raise CalibrationError("--devices hardware needs the master's config (--master-config "
+                               "FILE: its board_url, can_bus and calibration) or --board URL "
+                               "(the sensor board) and --can BUS (the Peltier driver)")
+    board_cal = Calibration.load(board_cal_file) if board_cal_file else Calibration()
 
     def ask(text: str) -> None:
-        console.input(f"[bold]{text}[/bold] ")
+        try:
+            console.input(f"[bold]{text}[/bold] ")
+        except EOFError:
+            raise CalibrationError("the routine asks at the terminal (press the block, then "
+                                   "lift it) and its input was closed: run it at a "
+                                   "terminal") from None
         console.print("running the current steps (6 s); keep the setup still")
 
-    return calibrate_hardware(scene, args.board, args.can, block=args.block,
+    return calibrate_hardware(scene, board, can, block=args.block,
                               board_calibration=board_cal, prompt=ask)
 
 
@@ -97,12 +116,17 @@ def add_parser(sub) -> None:
     d.add_argument("--block", default="plexiglass",
                    help="the reference block's material, of the materials table (default "
                         "plexiglass: a low effusivity, see docs/calibration.md)")
-    d.add_argument("--seed", type=int, default=0, help="the simulated bench's draws")
+    d.add_argument("--seed", type=int, default=None,
+                   help="the simulated bench's draws (default 0)")
     d.add_argument("--devices", default="sim", choices=("sim", "emulated", "hardware"),
                    help="the display's devices: the simulator, or it behind the emulated "
                         "board and driver read through the master's drivers, or a lab's "
-                        "display (--board, --can; the routine asks at the terminal to press "
-                        "the block, then to lift it)")
+                        "display (--master-config, or --board and --can; the routine asks "
+                        "at the terminal to press the block, then to lift it)")
+    d.add_argument("--master-config", default="",
+                   help="with --devices hardware: the master's config file, whose board_url, "
+                        "can_bus and calibration (the board's) the routine uses, as the master "
+                        "will (the flux gain it fits is on top of that board calibration)")
     d.add_argument("--board", default="",
                    help="with --devices hardware: the sensor board's URL (a serial port or "
                         "pyserial URL, as the master's board_url)")
@@ -110,6 +134,6 @@ def add_parser(sub) -> None:
                    help="with --devices hardware: the Peltier driver's bus "
                         "(INTERFACE:CHANNEL, as the master's can_bus)")
     d.add_argument("--board-calibration", default="",
-                   help="with --devices hardware: the board's ADC calibration file (the "
-                        "master's calibration key)")
+                   help="with --devices hardware and --board: the board's ADC calibration "
+                        "file (the master's calibration key; the fitted gain is on top of it)")
     d.set_defaults(func=cmd_calibrate_display)

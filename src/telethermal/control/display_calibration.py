@@ -114,20 +114,26 @@ def run_part(display, t0_s: float, rate_hz: float = RATE_HZ, clock=None) -> Reco
     """Drive ``display`` through :data:`STEPS` from session time ``t0_s``,
     one period at a time, as the master drives it; the readings. ``clock``
     (``now()``, ``sleep_until(deadline)``: a lab's display on the real
-    clock) paces the periods, each reading stamped when it was taken; None:
-    back to back, stamped on the routine's grid (a simulated display)."""
+    clock) paces the periods, each reading stamped at its period's start,
+    and a period whose deadline had passed by a whole period is skipped, a
+    row of NaN (missed, as :func:`on_grid` counts it: the steps stay on
+    time); None: back to back, stamped on the routine's grid (a simulated
+    display)."""
     dt = 1.0 / rate_hz
     n = int(round(steps_duration_s() * rate_hz))
     rows = []
     base = None if clock is None else clock.now()
     for k in range(n):
+        current = current_at(k * dt)
         if clock is None:
             t = t0_s + k * dt
         else:
+            if clock.now() - base >= (k + 1) * dt:          # this period is over: missed
+                rows.append((t0_s + k * dt, current) + (math.nan,) * 4)
+                continue
             clock.sleep_until(base + k * dt)
             t = t0_s + (clock.now() - base)
         s = display.read(t)
-        current = current_at(k * dt)
         rows.append((t, current, s.junction_c, s.pad_temp_c, s.flux_w_m2, s.force_n))
         display.apply(t, RoutineStep(t, current), dt, s.force_n)
     return Record(*(np.array(c, float) for c in zip(*rows)))
@@ -139,24 +145,36 @@ def run_part(display, t0_s: float, rate_hz: float = RATE_HZ, clock=None) -> Reco
 MISSING_MAX = 0.02
 
 
+#: The longest run of missed periods filled from its neighbours; a longer
+#: gap (across a current step, say) refuses the part.
+GAP_MAX = 5
+
+
 def on_grid(rec: Record, rate_hz: float, part: str) -> Record:
-    """A part read on the real clock, on the routine's own grid: each
-    column interpolated from its finite readings at the instants they were
-    taken (a late period, a missing reading filled from its neighbours);
-    refused when more than :data:`MISSING_MAX` of the periods miss one."""
+    """A part read on the real clock, on the routine's own grid (one row
+    per period, from :func:`run_part`): the sensors' columns interpolated
+    from their readings at the instants they were taken (a late period,
+    a missed one filled from its neighbours); refused when more than
+    :data:`MISSING_MAX` of the periods miss a reading or :data:`GAP_MAX`
+    in a row do. The force is left as read (NaN where the board has no
+    force channel: the caller says so)."""
     used = np.isfinite(rec.junction_c) & np.isfinite(rec.surface_c) & \
-        np.isfinite(rec.flux_w_m2) & np.isfinite(rec.force_n)
+        np.isfinite(rec.flux_w_m2)
     missing = int(rec.t_s.size - used.sum())
-    if missing > MISSING_MAX * rec.t_s.size or used.sum() < 2:
+    runs = np.diff(np.flatnonzero(np.concatenate(([True], used, [True])))) - 1
+    longest = int(runs.max()) if runs.size else 0
+    if missing > MISSING_MAX * rec.t_s.size or longest > GAP_MAX or used.sum() < 2:
         raise CalibrationError(
-            f"the part {part} missed a reading in {missing} of {rec.t_s.size} periods (over "
-            f"{100 * MISSING_MAX:g} %: the board's frames stale or the Peltier driver not "
-            "answering); check the sensor board's and the driver's links, then run it again")
+            f"the part {part} missed a reading in {missing} of {rec.t_s.size} periods, "
+            f"{longest} in a row (refused over {100 * MISSING_MAX:g} %, or over {GAP_MAX} in "
+            "a row: the board's frames stale, the Peltier driver not answering, or this "
+            "computer late); check the board's and the driver's links and that nothing else "
+            "loads this computer, then run it again")
     grid = rec.t_s[0] + np.arange(rec.t_s.size) / rate_hz
     t = rec.t_s[used]
-    current = np.array([current_at(x - grid[0]) for x in grid])
-    return Record(grid, current, *(np.interp(grid, t, column[used]) for column in
-                                   (rec.junction_c, rec.surface_c, rec.flux_w_m2, rec.force_n)))
+    return Record(grid, rec.current_a, *(np.interp(grid, t, column[used]) for column in
+                                         (rec.junction_c, rec.surface_c, rec.flux_w_m2)),
+                  rec.force_n)
 
 
 @dataclass(frozen=True)

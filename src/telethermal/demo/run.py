@@ -204,13 +204,14 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         # Each material once, then the first again: the slave remembers what it
         # decided on that object and announces it, so the master renders the
         # repeated touch from its onset (object memory).
-        # The in-process touches remember the same way (their own decisions).
+        # The in-process touches remember the same way (their own decisions
+        # of each material's object, as the slave's memory holds its own).
         plan = [(m, False) for m in materials] + [(materials[0], True)] if materials else []
         decided = {}
         for i, (material, again) in enumerate(plan):
             row, decided[material] = demo_touch(
                 scene, material, ports, seed + 1 + i, contact_s, out, identifier, generator,
-                again, echo, display_cal, decided.get(material) if again else None)
+                again, echo, display_cal, decided.get(material))
             touches.append(row)
     except BaseException:
         if view is not None:

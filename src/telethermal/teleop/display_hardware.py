@@ -11,25 +11,65 @@ ends, and on any error or interrupt: the pad is never left driven."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import numpy as np
 
 from telethermal.control import display_calibration as routine
 from telethermal.control.contact import ContactDetector
+from telethermal.control.safety import SafetyLimits
 from telethermal.errors import CalibrationError
 from telethermal.teleop.display_calibration import (DEFAULT_BLOCK, DisplayCalibration,
                                                     fit_display)
 
 #: What the lab is asked before each part; the routine goes on when it answers.
-PRESS_BLOCK = ("press a {block} block (3 cm thick or more, its face flat, at the room's "
-               "temperature) on the display's face over a thin line of thermal grease, "
-               "its weight on it, then press Enter")
+PRESS_BLOCK = ("the display idle at 0 A and the block at the room's temperature for a while, "
+               "press a {block} block (3 cm thick or more, its face flat) on the display's face "
+               "over a thin line of thermal grease and load it to about 10 N (a 1 kg weight), "
+               "then press Enter")
 LIFT_BLOCK = ("lift the block off, wipe the grease from the face, leave the face free in air, "
               "then press Enter")
+#: Periods in a row without a trusted reading, or with the module's junction
+#: outside what the master's safety allows, after which a part is stopped
+#: (the driver disabled): the steps run open loop, and are not driven blind.
+BLIND_MAX = 25
+
+
+class _Guarded:
+    """The display as the routine drives it on hardware: a board frame that
+    is not new this period reads as missing (the board's own reading holds
+    a frame for its ``stale_s``), and a part is stopped when the readings
+    stay missing, or the junction out of the safety limits, for
+    :data:`BLIND_MAX` periods."""
+
+    def __init__(self, display):
+        self.display, self.blind = display, 0
+        self.limits = SafetyLimits()
+
+    def read(self, t_s: float):
+        before = self.display.board.latest
+        s = self.display.read(t_s)
+        if self.display.board.latest is before:             # no new frame this period
+            s = replace(s, flux_w_m2=math.nan, pad_temp_c=math.nan, force_n=math.nan)
+        ok = math.isfinite(s.flux_w_m2) and math.isfinite(s.pad_temp_c) and \
+            self.limits.reading_min_c < s.junction_c < self.limits.reading_max_c
+        self.blind = 0 if ok else self.blind + 1
+        if self.blind >= BLIND_MAX:
+            raise CalibrationError(
+                f"no trusted reading for {self.blind} periods in a row (last: flux "
+                f"{s.flux_w_m2:.4g} W/m^2, face {s.pad_temp_c:.4g} C, junction "
+                f"{s.junction_c:.4g} C): the routine stopped and the driver is disabled; "
+                "check the board's and the driver's links")
+        return s
+
+    def apply(self, t_s: float, step, dt_s: float, force_n: float) -> None:
+        self.display.apply(t_s, step, dt_s, force_n)
 
 
 def _rest(display) -> None:
-    """The driver disabled (0 A) while the routine waits for the lab (its
-    watchdog trips meanwhile, harmlessly; the next part's commands resume it)."""
+    """The driver disabled (0 A) while the routine waits for the lab; the
+    next part's first command enables it again."""
     display.peltier.command(0.0, enable=False)
 
 
@@ -38,7 +78,11 @@ def _check_force(rec: routine.Record, pressed: bool) -> None:
     felt (over the contact detector's onset force) or the face free (under
     its release force)."""
     detector = ContactDetector()
-    force = float(np.median(rec.force_n))
+    if not np.isfinite(rec.force_n).any():
+        raise CalibrationError(
+            "the board gave no force reading: the routine checks with it that the block is on "
+            "the face, then off it; connect or calibrate the board's force channel")
+    force = float(np.nanmedian(rec.force_n))
     if pressed and not force > detector.on_n:
         raise CalibrationError(
             f"the force sensor read {force:.2f} N (median) with the block on the face, under "
@@ -72,12 +116,14 @@ def calibrate_hardware(scene, board_url: str, can_bus: str, block: str = DEFAULT
                               clock=clock.now,
                               wait_s=0.5 / rate_hz if wait_s is None else wait_s)
     try:
+        guarded = _Guarded(display)
         _rest(display)
         prompt(PRESS_BLOCK.format(block=block))
-        on_block = routine.run_part(display, 0.0, rate_hz, clock)
+        on_block = routine.run_part(guarded, 0.0, rate_hz, clock)
         _rest(display)
         prompt(LIFT_BLOCK)
-        in_air = routine.run_part(display, 0.0, rate_hz, clock)
+        guarded.blind = 0
+        in_air = routine.run_part(guarded, 0.0, rate_hz, clock)
     finally:
         display.close()             # disabled, 0 A, whatever happened
     on_block = routine.on_grid(on_block, rate_hz, "on the block")
