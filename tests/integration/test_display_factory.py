@@ -25,6 +25,7 @@ from telethermal.teleop.session import PRE_CONTACT_S, SlaveSession
 from telethermal.sim.touch import master_rng, draw_operator
 from telethermal.teleop.slave import Slave, slave_rng
 from telethermal.wire.codec import decode
+from telethermal.wire.messages import parse
 from telethermal.wire.transport import TransportConfig
 
 from test_master_drivers import CONFIG, SCENE, SEED, wire_message
@@ -71,8 +72,9 @@ def test_the_drivers_build_equal_displays_from_what_the_master_heard(trained_mod
         security="plain", control_port=control, stream_port=stream)))
     touch = None
     try:
-        service._on_message(decode(session_config), t0)
-        service._on_message(decode(wire_message("contact_event", heard.fields(), 2, t0)), t0)
+        service._on_message(parse(decode(session_config)), t0)
+        service._on_message(parse(decode(wire_message("contact_event", heard.fields(), 2, t0))),
+                            t0)
         service.loop.run(None, 0)       # the loop's statistics, as its run starts them
         touch = Touch(service, 1.0, SEED, t0)
         assert touch.operator.finger_ir_c == finger_c

@@ -218,7 +218,7 @@ def run_service(before, arrivals, n_periods: int, source: str, contact_s: float)
     try:
         t0 = -PRE_CONTACT_S
         for data in before:
-            service._on_message(decode(data), t0)
+            service._on_message(parse(decode(data)), t0)
         # The operator's touch, asked for at t0: the display's clock starts
         # PRE_CONTACT_S later, at session time 0 (the others' clock).
         service._on_admin({"cmd": "touch", "contact_s": contact_s, "seed": SEED,
@@ -229,7 +229,7 @@ def run_service(before, arrivals, n_periods: int, source: str, contact_s: float)
         for k in range(n_periods):
             t = k * DT - PRE_CONTACT_S
             for data in arrivals.get(k, ()):
-                service._on_message(decode(data), t)
+                service._on_message(parse(decode(data)), t)
             n = len(service.endpoint.sent)
             service._touch_period(t, DT)
             out.append(period_output(service.endpoint.sent[n:], devices.steps[-1],

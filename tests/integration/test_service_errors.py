@@ -16,7 +16,7 @@ from telethermal.services.master import MasterService
 from telethermal.services.slave import SlaveService
 from telethermal.teleop.links import EndpointLink
 from telethermal.teleop.session import Send
-from telethermal.wire.messages import ContactEvent
+from telethermal.wire.messages import ContactEvent, parse
 from telethermal.wire.transport import TransportConfig
 
 SCENE = with_finger(load_scene("fingertip-7"))
@@ -47,7 +47,7 @@ def _lifts(service) -> list[int]:
 
 
 def test_an_error_in_a_sample_period_lifts_the_pad_and_the_slave_goes_on(slave, monkeypatch):
-    slave._on_message(TOUCH, 100.0)
+    slave._on_message(parse(TOUCH), 100.0)
     assert slave.touch_t0 is not None
 
     def broken(now):
@@ -71,12 +71,26 @@ def test_an_error_in_one_message_is_counted_and_the_next_is_read(slave, monkeypa
         if len(calls) == 1:
             raise KeyError("a field the handler did not expect")
 
+    lift = {**TOUCH, "touching": False}
     monkeypatch.setattr(slave, "_on_message", on_message)
-    monkeypatch.setattr(slave.endpoint, "poll", lambda timeout_s: [{"kind": "a"},
-                                                                   {"kind": "b"}])
+    monkeypatch.setattr(slave.endpoint, "poll", lambda timeout_s: [TOUCH, lift])
     slave._step(0.0, 1e-3)
-    assert [m["kind"] for m in calls] == ["a", "b"]
+    assert [m.touching for m in calls] == [True, False]
     assert slave.counters["internal_errors"] == 1
+
+
+def test_a_message_the_typed_messages_refuse_is_counted_and_the_rest_are_read(
+        slave, monkeypatch):
+    """The endpoint checks each message against the schema; one that passes
+    it but not its typed class all the same (here a kind the link does not
+    know) is counted ``invalid`` and left out, and the next is handled."""
+    calls = []
+    monkeypatch.setattr(slave, "_on_message", lambda m, now: calls.append(m))
+    monkeypatch.setattr(slave.endpoint, "poll", lambda timeout_s: [{"kind": "a"}, TOUCH])
+    before = slave.endpoint.counters["invalid"]
+    slave._step(0.0, 1e-3)
+    assert [m.kind for m in calls] == ["contact_event"]
+    assert slave.endpoint.counters["invalid"] == before + 1
 
 
 @pytest.mark.parametrize("silent_s, peer, counted", [
@@ -86,7 +100,7 @@ def test_an_error_in_one_message_is_counted_and_the_next_is_read(slave, monkeypa
     (None, "new-session", "contacts_superseded"),
 ])
 def test_a_contact_ended_by_place_is_counted_by_its_cause(slave, silent_s, peer, counted):
-    slave._on_message(TOUCH, 100.0)
+    slave._on_message(parse(TOUCH), 100.0)
     if silent_s is not None:
         slave.endpoint.hello._last_heard = slave.endpoint.clock() - silent_s
     if peer is not None:

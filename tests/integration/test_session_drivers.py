@@ -75,7 +75,7 @@ def test_the_slave_sends_the_same_messages_on_the_three_links(models, material, 
         for k in range(int(round(1000 * (lift_at_s + 0.2)))):
             now = 100.0 + k / 1000          # the same clock for every driver
             if k in events:
-                service._on_message(events[k], now)        # as the codec decoded it
+                service._on_message(parse(events[k]), now)        # as the codec decoded it
             if service.touch_t0 is not None:
                 service._sample(now)
             for name, (slave_end, master_end) in links.items():
@@ -136,7 +136,7 @@ def test_placing_another_object_during_a_contact_lifts_the_pad_first(models):
     replies = []
     service.admin.reply = lambda **r: replies.append(r)
     try:
-        service._on_message(master_events(1.0)[0], 100.0)
+        service._on_message(parse(master_events(1.0)[0]), 100.0)
         for k in range(300):
             service._sample(100.0 + k / 1000)
         built, build = [], service._simulated_pad
@@ -161,7 +161,7 @@ def test_a_touch_on_the_slave_service_keeps_no_fits_of_an_earlier_touch(models):
     service = wood_slave(models)
     try:
         fitted._CACHE[("an earlier touch",)] = (0.0, 0.0, 0.0)
-        service._on_message(master_events(1.0)[0], 100.0)
+        service._on_message(parse(master_events(1.0)[0]), 100.0)
         assert service.touch_t0 is not None
         assert ("an earlier touch",) not in fitted._CACHE
     finally:
@@ -217,7 +217,7 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
     service = wood_slave(models)
     service.endpoint.send = lambda kind, **fields: 0
     try:
-        service._on_message(master_events(1.0)[0], 100.0)
+        service._on_message(parse(master_events(1.0)[0]), 100.0)
         for k in range(300):
             service._sample(100.0 + k / 1000)
         used, seed = service.pad, service._seed
@@ -231,7 +231,7 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
         assert service.status()["next_touch_preparing"] is True
         gate.set()
         touch = dict(master_events(1.0)[0], contact_id=2, t_s=1.0)
-        service._on_message(touch, 101.0)
+        service._on_message(parse(touch), 101.0)
         assert service.touch_t0 is not None and service.pad is not used
         assert service.status()["next_touch_preparing"] is False
         assert service._seed == seed + 1 and service.object_id == "wood"
@@ -243,18 +243,27 @@ def test_the_next_touch_is_prepared_off_the_loop_and_placed_before_the_touch(mod
         service.shutdown()
 
 
+def numbered(n: int) -> dict:
+    """A message as the endpoint delivers it, told apart by ``n`` (a lift
+    of contact ``n``: nothing the tests below act on)."""
+    return {"kind": "contact_event", "contact_id": n, "touching": False, "t_s": 0.0,
+            "force_n": 0.0, "finger_temp_c": 31.0}
+
+
 def test_what_arrived_while_the_devices_held_the_loop_is_handled_first_in_order(models):
     # _keep_alive (called by the devices while they pre-condition the pad)
     # reads the transport; the loop's next wake handles what it read before
     # what arrives then, without waiting in the poll.
     service = wood_slave(models)
     handled, timeouts = [], []
-    service._on_message = lambda m, now: handled.append(m["n"])
+    service._on_message = lambda m, now: handled.append(m.contact_id)
     try:
-        service.endpoint.poll = lambda timeout_s=0.0: timeouts.append(timeout_s) or [{"n": 1}]
+        service.endpoint.poll = lambda timeout_s=0.0: timeouts.append(timeout_s) or \
+            [numbered(1)]
         service._keep_alive()
         service._keep_alive()
-        service.endpoint.poll = lambda timeout_s=0.0: timeouts.append(timeout_s) or [{"n": 2}]
+        service.endpoint.poll = lambda timeout_s=0.0: timeouts.append(timeout_s) or \
+            [numbered(2)]
         service._step(float("inf"), 1.0 / service.rate_hz)
         assert handled == [1, 1, 2] and timeouts == [0.0, 0.0, 0.0]
         service._step(float("inf"), 1.0 / service.rate_hz)     # nothing waiting: it waits
@@ -274,20 +283,20 @@ def test_what_arrived_while_the_devices_held_the_loop_is_recorded_as_it_arrived(
             self.log = []
 
         def wire(self, t_s, direction, message):
-            self.log.append((t_s, direction, message["n"]))
+            self.log.append((t_s, direction, message["contact_id"]))
 
     service = wood_slave(models)
     handled = []
-    service._on_message = lambda m, now: handled.append((now, m["n"]))
+    service._on_message = lambda m, now: handled.append((now, m.contact_id))
     service.recorder = recorder = Wire()
     try:
-        service.endpoint.poll = lambda timeout_s=0.0: [{"n": 1}]
+        service.endpoint.poll = lambda timeout_s=0.0: [numbered(1)]
         before = time.monotonic()
         service._keep_alive()
         after = time.monotonic()
         assert [(d, n) for _, d, n in recorder.log] == [("in", 1)] and not handled
         assert before <= recorder.log[0][0] <= after
-        service.endpoint.poll = lambda timeout_s=0.0: [{"n": 2}]
+        service.endpoint.poll = lambda timeout_s=0.0: [numbered(2)]
         service._step(float("inf"), 1.0 / service.rate_hz)
         assert [n for _, n in handled] == [1, 2]
         assert [(d, n) for _, d, n in recorder.log] == [("in", 1), ("in", 2)]
@@ -361,7 +370,7 @@ def test_a_touch_belongs_to_the_master_that_sent_it_even_if_a_hello_comes_meanwh
             prepared(wait)
             hello.peer_session = "new-master"
         service._next_prepared = a_hello_while_preparing
-        service._on_message(master_events(1.0)[0], 100.0)
+        service._on_message(parse(master_events(1.0)[0]), 100.0)
         assert service.touch_t0 is not None and service.session.owner == "old-master"
     finally:
         hello.peer_session = None
@@ -374,7 +383,7 @@ def test_a_slave_stopping_mid_contact_lifts_without_preparing_a_touch(models):
     service = wood_slave(models)
     sent = []
     service.endpoint.send = lambda kind, **fields: sent.append(kind) or 0
-    service._on_message(master_events(1.0)[0], 100.0)
+    service._on_message(parse(master_events(1.0)[0]), 100.0)
     for k in range(100):
         service._sample(100.0 + k / 1000)
     started = []
@@ -396,7 +405,7 @@ def test_admin_requests_on_the_slave_between_and_during_touches(models):
     replies = []
     service.admin.reply = lambda **r: replies.append(r)
     try:
-        service._on_message(master_events(1.0)[0], 100.0)
+        service._on_message(parse(master_events(1.0)[0]), 100.0)
         service._on_admin({"cmd": "calibrate_thermometer"})
         assert replies[-1]["ok"] is False
         assert "cannot calibrate during a contact" in replies[-1]["error"]

@@ -40,7 +40,7 @@ from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceStat
 from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.display_setup import build_display, safety_summary
 from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
-from telethermal.wire.messages import SessionConfig, parse
+from telethermal.wire.messages import Message, SessionConfig
 from telethermal.wire.schema import MessageKind
 
 log = logging.getLogger("telethermal.master")
@@ -206,22 +206,25 @@ class MasterService:
             self.state = ServiceState.RENDERING
 
     # ------------------------------------------------------------ network
-    def _on_message(self, raw: dict, now: float) -> None:
-        if self.recorder is not None:
-            self.recorder.wire(now, "in", raw)
-        m = parse(raw)
+    def _on_message(self, m: Message, now: float) -> None:
         if isinstance(m, SessionConfig):
             log.info("session config from slave: %d classes, scene %s", len(m.classes), m.scene)
         self.session.on_message(m, now, self.endpoint.offset.offset_s)
 
+    def _link(self, now: float) -> EndpointLink:
+        """The link to the slave this period: what arrives recorded at ``now``."""
+        record = None if self.recorder is None else \
+            (lambda raw: self.recorder.wire(now, "in", raw))
+        return EndpointLink(self.endpoint, log, record)
+
     # ------------------------------------------------------------ loop
     def step(self, t_loop: float, dt_s: float) -> bool:
         now = time.monotonic()
-        for message in self.endpoint.poll(0.0):
+        for message in self._link(now).due(now):
             try:
                 self._on_message(message, now)
             except Exception as exc:            # one message's, not the service's
-                self._internal_error("message from the slave", exc)
+                self._internal_error(f"message {message.kind} from the slave", exc)
         request = self.admin.receive()
         if request is not None:
             self._on_admin(request, now)

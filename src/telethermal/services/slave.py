@@ -33,8 +33,8 @@ from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.slave import BOARD_LOST, Slave, slave_rng
 from telethermal.teleop.links import EndpointLink
 from telethermal.teleop.session import ContactRequest, Send, ServiceState, SlaveSession
-from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, SessionConfig,
-                                       given, parse)
+from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, Message,
+                                       SessionConfig, given)
 
 log = logging.getLogger("telethermal.slave")
 
@@ -110,7 +110,7 @@ class SlaveService:
         self.counters_at_place: dict = {}
         self.last_touch: dict = {}
         self._next = Background("slave-next-touch")   # the simulated pad's next touch
-        self._inbox: list[dict] = []            # arrived while devices held the loop
+        self._inbox: list[Message] = []         # arrived while devices held the loop
         try:
             self.recorder = open_recorder(config, "slave", identifier, generator)
             self._start_sensor_session(config.seed)
@@ -259,22 +259,21 @@ class SlaveService:
         a second or more): heartbeats go on; what arrives is recorded now and
         waits for the loop."""
         self.endpoint.state = self.state
-        self._inbox.extend(self._arrived(self.endpoint.poll(0.0)))
+        self._inbox.extend(self._link().due(time.monotonic()))
 
-    def _arrived(self, messages: list[dict]) -> list[dict]:
-        """``messages`` recorded at their arrival (handled later, maybe)."""
-        if self.recorder is not None:
-            for raw in messages:
-                self.recorder.wire(time.monotonic(), "in", raw)
-        return messages
+    def _link(self) -> EndpointLink:
+        """The link to the master: what arrives recorded at its arrival
+        (handled later, maybe)."""
+        record = None if self.recorder is None else \
+            (lambda raw: self.recorder.wire(time.monotonic(), "in", raw))
+        return EndpointLink(self.endpoint, log, record)
 
     def announce_object(self) -> None:
         """The object under the pad (and the memory of it) told to the master."""
         self._send([self.session.announcement(time.monotonic())])
 
     # ------------------------------------------------------------ loop
-    def _on_message(self, raw: dict, now: float) -> None:
-        m = parse(raw)
+    def _on_message(self, m: Message, now: float) -> None:
         if isinstance(m, Hello):
             self._send([Send(now, SessionConfig(
                 scene=self.scene.name, sample_rate_hz=self.rate_hz,
@@ -457,11 +456,11 @@ class SlaveService:
         inbox, self._inbox = self._inbox, []      # what came while the devices held the loop
         wait = 0.0 if inbox else max(0.0, min(deadline - time.monotonic(),
                                               self.config.transport.heartbeat_s))
-        for message in inbox + self._arrived(self.endpoint.poll(wait)):
+        for message in inbox + self._link().due(time.monotonic(), wait):
             try:
                 self._on_message(message, time.monotonic())
             except Exception as exc:
-                self._internal_error(f"message {str(message.get('kind'))[:32]}", exc)
+                self._internal_error(f"message {message.kind}", exc)
         # The master judged lost after what arrived is read (a stall of this
         # process is not the master's silence).
         if self.touch_t0 is not None and not self.endpoint.peer_alive:

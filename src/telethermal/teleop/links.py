@@ -38,12 +38,11 @@ class EndpointLink:
     window refuses (the peer has acknowledged nothing for a whole window)
     or that fails (unencodable, a socket's error) is logged, counted
     (``send_errors``) and left out: the caller's loop goes on, and nothing
-    sent before is lost. The services read what arrives from the endpoint
-    itself (each raw message recorded as it came); :meth:`due` is for any
-    other reader, and takes what it returns from the endpoint's queue."""
+    sent before is lost. ``on_arrival(raw)``: each message as it came off
+    the wire, before it is typed (the services' recording)."""
 
-    def __init__(self, endpoint, log: logging.Logger):
-        self.endpoint, self.log = endpoint, log
+    def __init__(self, endpoint, log: logging.Logger, on_arrival=None):
+        self.endpoint, self.log, self.on_arrival = endpoint, log, on_arrival
 
     def send(self, s: Send) -> bool:
         try:
@@ -63,12 +62,15 @@ class EndpointLink:
         """Each of ``sends``; returns those sent."""
         return [s for s in sends if self.send(s)]
 
-    def due(self, now_s: float) -> list[Message]:
-        """What the endpoint has received (it has checked each against the
-        protocol's schema); one the typed messages refuse all the same is
-        counted ``invalid``, logged and left out, never the rest."""
+    def due(self, now_s: float, wait_s: float = 0.0) -> list[Message]:
+        """What the endpoint has received, waiting up to ``wait_s`` for a
+        first message (the endpoint has checked each against the protocol's
+        schema); one the typed messages refuse all the same is counted
+        ``invalid``, logged and left out, never the rest."""
         out = []
-        for raw in self.endpoint.poll(0.0):
+        for raw in self.endpoint.poll(wait_s):
+            if self.on_arrival is not None:
+                self.on_arrival(raw)
             try:
                 out.append(parse(raw))
             except ProtocolError as exc:
