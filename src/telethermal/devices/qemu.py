@@ -10,8 +10,8 @@ would open ``/dev/ttyUSB0``.
 * USART2, the plant link (``firmware/stm32f4/plant.c``): the analog
   readings in, the H-bridge's command out.
 
-QEMU serves each UART on a Unix socket (no TCP port taken) and waits for
-both to be connected before the core starts, so nothing the firmware sends at reset is
+QEMU serves each UART on a loopback TCP socket and waits for both to be
+connected before the core starts, so nothing the firmware sends at reset is
 lost; a thread copies bytes between each socket and the master side of a
 pty (``os.openpty``), which keeps what the core sends until a driver opens
 the pty. Bytes sent to the core before its firmware has set up the UART
@@ -119,6 +119,18 @@ def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, 
     return {name: out / "stm32f405" / f"{name}.elf" for name in IMAGES}
 
 
+def _free_port() -> int:
+    """A port for QEMU's UART socket, the kernel's choice: from its
+    ephemeral range, which :func:`telethermal.ports.free_ports` (the
+    services' ports) never draws from. TCP, not a Unix socket: a Unix
+    socket's buffer counts each small write whole, and a core that lags
+    under load filled it in a fraction of a second (the bridge's send timed
+    out and dropped a command, once in a CI rehearsal); TCP's holds far more."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 class _PtyBridge:
     """Bytes both ways between a connected socket and a pty's master side;
     the slave side's path is what a driver opens."""
@@ -157,15 +169,11 @@ class QemuCore:
         if not self.image.is_file():
             raise DeviceError(f"firmware image {self.image} not found: build it with "
                               "make -C firmware TARGET=stm32f405")
-        # The UARTs and the monitor on Unix sockets in a folder of the core's
-        # own: no TCP port is taken, so none can be taken from a service
-        # about to bind the port it was configured with.
-        self._sockets = tempfile.mkdtemp(prefix="telethermal-qemu-")
-        paths = [os.path.join(self._sockets, name) for name in ("link", "plant", "mon")]
+        ports = [_free_port() for _ in range(3)]
         serials = []
-        for name, path in zip(("link", "plant", "mon"), paths):
-            serials += ["-chardev", f"socket,id={name},path={path},"
-                        f"server=on,wait={'on' if name != 'mon' else 'off'}"]
+        for name, port in zip(("link", "plant", "mon"), ports):
+            serials += ["-chardev", f"socket,id={name},host=127.0.0.1,port={port},"
+                        f"server=on,nodelay=on,wait={'on' if name != 'mon' else 'off'}"]
         # QEMU's messages to a file, not a pipe nobody reads while it runs (a
         # full pipe would stop the core in its next write).
         self._stderr = tempfile.TemporaryFile()
@@ -192,38 +200,30 @@ class QemuCore:
         #: core's stamps never runs ahead of what a driver can read).
         self.tap = None
         try:
-            for path in paths[:2]:
-                self._bridges.append(_PtyBridge(self._connect(path, start_timeout_s)))
-            self._monitor = self._connect(paths[2], start_timeout_s)
+            for port in ports[:2]:
+                self._bridges.append(_PtyBridge(self._connect(port, start_timeout_s)))
+            self._monitor = self._connect(ports[2], start_timeout_s)
         except BaseException:
             self.close()
             raise
-        # Connected: the paths are needed no more, and a service killed
-        # outright leaves no folder behind.
-        shutil.rmtree(self._sockets, ignore_errors=True)
         self.link_path, self.plant_path = (b.path for b in self._bridges)
         self._thread = threading.Thread(target=self._pump, name="qemu-uarts", daemon=True)
         self._thread.start()
 
-    def _connect(self, path: str, timeout_s: float) -> socket.socket:
+    def _connect(self, port: int, timeout_s: float) -> socket.socket:
         deadline = time.monotonic() + timeout_s
         while True:
             if self.proc.poll() is not None:
                 raise DeviceError(f"{QEMU} exited with {self.proc.returncode}: "
                                   f"{self.messages()}")
             try:
-                sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-                sock.settimeout(1.0)
-                try:
-                    sock.connect(path)
-                except OSError:
-                    sock.close()
-                    raise
+                sock = socket.create_connection(("127.0.0.1", port), timeout=1.0)
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 return sock
             except OSError:
                 if time.monotonic() > deadline:
-                    raise DeviceError(f"{QEMU} did not open its socket {path} "
-                                      f"within {timeout_s} s") from None
+                    raise DeviceError(f"{QEMU} did not open its UART socket on "
+                                      f"127.0.0.1:{port} within {timeout_s} s") from None
                 time.sleep(0.02)
 
     def messages(self) -> str:
@@ -344,7 +344,6 @@ class QemuCore:
             bridge.close()
         if self._monitor is not None:
             self._monitor.close()
-        shutil.rmtree(self._sockets, ignore_errors=True)
 
     def __enter__(self) -> QemuCore:
         return self
