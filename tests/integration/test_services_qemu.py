@@ -114,7 +114,8 @@ def test_the_services_on_the_firmware_name_the_touch_as_the_emulated_boards(
     # Every byte through the drivers intact, every command answered.
     master, slave = pil["devices_per_side"]["master"], pil["devices_per_side"]["slave"]
     c = pil["device_counters"]
-    assert c["board_waits_missed"] == c["answers_missed"] == 0
+    assert c["board_waits_missed"] == c["answers_missed"] == 0, c
+    assert c["bridge_dropped_bytes"] == 0
     assert master["frames"] > 0 and master["crc_errors"] == master["gaps"] == 0
     assert master["garbage"] == master["lost_frames"] == 0
     assert master["peltier_statuses"] >= master["peltier_commands"] > 0

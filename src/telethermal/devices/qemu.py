@@ -288,9 +288,16 @@ class QemuCore:
                 while data:
                     data = data[os.write(dst, data):]
         except BlockingIOError:
-            self.dropped_bytes += len(data)     # nobody reads the pty: a UART overrun
-        except OSError:
-            self.dropped_bytes += len(data)     # the other side went away
+            self._dropped(len(data), "nobody reads the pty: a UART overrun")
+        except OSError as exc:                  # the core not reading for 1 s, or gone
+            self._dropped(len(data), f"{type(exc).__name__}: {exc}")
+
+    def _dropped(self, n: int, why: str) -> None:
+        """Bytes the bridge could not pass on: counted, and said the first time."""
+        if not self.dropped_bytes:
+            log.warning("QEMU bridge (%s): %d bytes dropped (%s); further drops only counted "
+                        "(dropped_bytes)", self.image.name, n, why)
+        self.dropped_bytes += n
 
     def read_u32(self, address: int, guard_s: float = 10.0) -> int:
         """A word of the core's memory (QEMU's monitor, ``xp``): a variable

@@ -148,7 +148,8 @@ class QemuDisplay:
 
     def counters(self) -> dict:
         return {**self.hardware.counters(), **self.counters_,
-                "bridge_bytes": dict(self.cores[0].bytes)}
+                "bridge_bytes": dict(self.cores[0].bytes),
+                "bridge_dropped_bytes": sum(core.dropped_bytes for core in self.cores)}
 
     def close(self) -> None:
         try:
