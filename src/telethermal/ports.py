@@ -48,9 +48,13 @@ def free_ports(n: int) -> list[int]:
     kernel's own choice is taken."""
     first, last = ephemeral_range()
     candidates = [p for p in range(LOWEST_PORT, 65536) if not first <= p <= last]
+    if len(candidates) < 1000:
+        log.warning("the kernel's ephemeral range %d-%d leaves %d ports above %d: free ports "
+                    "may come from it, where another program can take them first", first,
+                    last, len(candidates), LOWEST_PORT)
     rng = random.Random()                   # seeded from the OS: each process its own draw
     rng.shuffle(candidates)
-    candidates.append(0)                     # the kernel's choice, the last resort
+    candidates += [0] * n                   # the kernel's choice, the last resort
     socks: list[socket.socket] = []
     try:
         for port in candidates:
@@ -63,8 +67,6 @@ def free_ports(n: int) -> list[int]:
                 s.close()
                 continue
             socks.append(s)
-            if port == 0:
-                candidates.extend([0] * (n - len(socks)))
         if len(socks) < n:
             raise OSError(errno.EADDRINUSE, f"no {n} free TCP ports on 127.0.0.1")
         return [s.getsockname()[1] for s in socks]

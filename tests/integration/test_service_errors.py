@@ -82,15 +82,18 @@ def test_an_error_in_one_message_is_counted_and_the_next_is_read(slave, monkeypa
 def test_a_message_the_typed_messages_refuse_is_counted_and_the_rest_are_read(
         slave, monkeypatch):
     """The endpoint checks each message against the schema; one that passes
-    it but not its typed class all the same (here a kind the link does not
-    know) is counted ``invalid`` and left out, and the next is handled."""
+    it but not its typed class all the same is counted as the endpoint
+    counts its own refusals (a kind it does not know: ``unknown_kind``; a
+    field missing: ``invalid``) and left out, and the next is handled."""
     calls = []
     monkeypatch.setattr(slave, "_on_message", lambda m, now: calls.append(m))
-    monkeypatch.setattr(slave.endpoint, "poll", lambda timeout_s: [{"kind": "a"}, TOUCH])
-    before = slave.endpoint.counters["invalid"]
+    no_id = {k: v for k, v in TOUCH.items() if k != "contact_id"}
+    monkeypatch.setattr(slave.endpoint, "poll", lambda timeout_s: [{"kind": "a"}, no_id, TOUCH])
+    before = dict(slave.endpoint.counters)
     slave._step(0.0, 1e-3)
     assert [m.kind for m in calls] == ["contact_event"]
-    assert slave.endpoint.counters["invalid"] == before + 1
+    assert slave.endpoint.counters["unknown_kind"] == before["unknown_kind"] + 1
+    assert slave.endpoint.counters["invalid"] == before["invalid"] + 1
 
 
 @pytest.mark.parametrize("silent_s, peer, counted", [

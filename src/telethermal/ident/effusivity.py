@@ -84,7 +84,6 @@ import numpy as np
 from scipy.special import chdtrc
 
 from telethermal.errors import IdentificationError
-# The curves' grid and forward model, named here too (their former home).
 from telethermal.ident.effusivity_curves import N_E, N_H, EffusivityFamily, effusivity_family
 from telethermal.ident.intervals import resolution_var
 from telethermal.ident.openset import Z95  # the interval's normal quantile (95 %)

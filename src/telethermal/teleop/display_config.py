@@ -1,5 +1,5 @@
-"""The display's configuration (:class:`DisplayConfig`) and its choices;
-the master (:mod:`telethermal.teleop.master`) re-exports them."""
+"""The display's configuration (:class:`DisplayConfig`) and its choices,
+which the master's display (:mod:`telethermal.teleop.master`) runs by."""
 
 from __future__ import annotations
 

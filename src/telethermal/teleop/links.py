@@ -65,15 +65,22 @@ class EndpointLink:
     def due(self, now_s: float, wait_s: float = 0.0) -> list[Message]:
         """What the endpoint has received, waiting up to ``wait_s`` for a
         first message (the endpoint has checked each against the protocol's
-        schema); one the typed messages refuse all the same is counted
-        ``invalid``, logged and left out, never the rest."""
+        schema); one the typed messages refuse all the same is counted as
+        the endpoint counts one it refuses (``unknown_kind``, ``invalid``)
+        and left out, never the rest. A recording hook that fails is logged
+        and counted (``record_errors``), the message still handled."""
         out = []
         for raw in self.endpoint.poll(wait_s):
             if self.on_arrival is not None:
-                self.on_arrival(raw)
+                try:
+                    self.on_arrival(raw)
+                except Exception as exc:        # the recording's, not the link's
+                    counters = self.endpoint.extra_counters
+                    counters["record_errors"] = counters.get("record_errors", 0) + 1
+                    self.log.error("a message not recorded: %s: %s", type(exc).__name__,
+                                   str(exc)[:200], exc_info=counters["record_errors"] <= 3)
             try:
                 out.append(parse(raw))
             except ProtocolError as exc:
-                self.endpoint.counters["invalid"] += 1
-                self.log.error("a message left out: %s", exc)
+                self.endpoint.refuse(exc)
         return out

@@ -370,6 +370,13 @@ class Endpoint:
         self.counters[key] += 1
         self._limited.warn(key, now, "%s: dropped a message (%s): " + fmt, self.role, key, *args)
 
+    def refuse(self, exc: ProtocolError) -> None:
+        """A delivered message its reader could not use after all (its typed
+        class refused it): counted as :meth:`poll` counts one it refuses
+        itself (``unknown_kind`` or ``invalid``) and logged, rate-limited."""
+        key = "unknown_kind" if isinstance(exc, UnknownKindError) else "invalid"
+        self._drop(key, self.clock(), "%s", exc)
+
     def _decode(self, data, now):
         """(message, None) or, for a message that cannot be used, (None,
         seq of the lossless slot it occupied, or None)."""
