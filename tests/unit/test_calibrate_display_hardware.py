@@ -33,8 +33,8 @@ class LockstepRig:
     paces itself by: each deadline slept until, the plant is driven up to
     it at the current the board drives, and the board sends its frame."""
 
-    def __init__(self, tmp_path, scene, block="plexiglass", seed=0):
-        self.touch = simulated_bench(scene, block, seed, routine.RATE_HZ)
+    def __init__(self, tmp_path, scene, block="plexiglass", seed=0, touch=None):
+        self.touch = touch or simulated_bench(scene, block, seed, routine.RATE_HZ)
         self.touch.contact_s = math.inf         # on the face until the lab lifts it
         self.t = 0.0
         self._last: float | None = None
@@ -311,3 +311,48 @@ def test_the_masters_config_names_the_display_and_a_closed_terminal_is_said(
     assert not out.exists()
     rig.peltier.poll()
     assert not rig.peltier.enabled and rig.peltier.current_a == 0.0
+
+
+def test_a_block_not_at_the_pads_temperature_is_refused_before_its_fit(tmp_path):
+    """The block 1.5 K warmer than the pad when the steps begin: the face
+    drifts through the first rest, and the routine says so rather than fit
+    a transient its model leaves out (on the simulated bench a pad 1 K off
+    read a flux lag 8 % long, its chi2 passing)."""
+    from telethermal.sim.display_rig import GREASED_CONTACT_W_M2K, BenchTouch
+    from telethermal.sim.touch import Operator
+
+    scene = _scene(as_built=BUILT)
+    room = scene.room_temp_c
+    block = Operator(room + 1.5, room + 1.5, 1.0, 1.0, routine.BLOCK_FORCE_N,
+                     GREASED_CONTACT_W_M2K, 0.0)
+    touch = BenchTouch(scene, block, routine.RATE_HZ, 2 * routine.steps_duration_s(), room,
+                       np.random.default_rng([0, 44]), "plexiglass")
+    warm = LockstepRig(tmp_path, scene, touch=touch)
+    try:
+        with pytest.raises(CalibrationError, match="sensed flux drifted .*before the steps"):
+            run(warm)
+    finally:
+        warm.close()
+
+
+def test_the_drift_check_passes_a_steady_face_and_refuses_a_slow_ramp():
+    """On noise alone (sd 25 mK, the thermocouple's; 20 W/m^2 on the flux)
+    the slopes stay inside their bound; a face ramping 0.2 K/s over the rest,
+    or a flux decaying 400 W/m^2 over it, does not."""
+    n = int(round(routine.steps_duration_s() * routine.RATE_HZ))
+    t = np.arange(n) / routine.RATE_HZ
+    noise = np.random.default_rng(3).normal(0.0, 0.025, n)
+    steady = routine.Record(t, np.zeros(n), np.zeros(n), 24.0 + noise, np.zeros(n), np.ones(n))
+    routine.check_settled(steady, "on the block")
+    ramp = routine.Record(t, np.zeros(n), np.zeros(n), 24.0 + 0.2 * t + noise, np.zeros(n),
+                          np.ones(n))
+    with pytest.raises(CalibrationError, match="face drifted"):
+        routine.check_settled(ramp, "on the block")
+    flux_noise = np.random.default_rng(4).normal(0.0, 20.0, n)
+    decaying = routine.Record(t, np.zeros(n), np.zeros(n), 24.0 + noise,
+                              500.0 * np.exp(-t / 0.5) + flux_noise, np.ones(n))
+    with pytest.raises(CalibrationError, match="sensed flux drifted"):
+        routine.check_settled(decaying, "on the block")
+    steady_flux = routine.Record(t, np.zeros(n), np.zeros(n), 24.0 + noise, 30.0 + flux_noise,
+                                 np.ones(n))
+    routine.check_settled(steady_flux, "on the block")      # an offset is not a drift

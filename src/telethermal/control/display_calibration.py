@@ -145,9 +145,11 @@ def run_part(display, t0_s: float, rate_hz: float = RATE_HZ, clock=None) -> Reco
 MISSING_MAX = 0.02
 
 
-#: The longest run of missed periods filled from its neighbours; a longer
-#: gap (across a current step, say) refuses the part.
-GAP_MAX = 5
+#: The longest run of missed periods filled from its neighbours (20 ms at
+#: 500 Hz: a straight line across a first-order response of 0.1-0.15 s
+#: misses its curve by under g^2 / (8 tau^2), 0.5 % of a step, here under
+#: the sensors' noise); a longer gap refuses the part.
+GAP_MAX = 10
 
 
 def on_grid(rec: Record, rate_hz: float, part: str) -> Record:
@@ -175,6 +177,46 @@ def on_grid(rec: Record, rate_hz: float, part: str) -> Record:
     return Record(grid, rec.current_a, *(np.interp(grid, t, column[used]) for column in
                                          (rec.junction_c, rec.surface_c, rec.flux_w_m2)),
                   rec.force_n)
+
+
+#: How many standard errors of its estimate the face's drift over the
+#: first rest may reach before the pad and the block count as unsettled.
+DRIFT_SIGMAS = 5.0
+
+
+def _drift(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """The least-squares slope of ``y`` over ``t`` and its standard error,
+    the noise taken from the readings' successive differences (sd / sqrt 2:
+    white noise, not the slow curve of a transient, which would inflate a
+    residual-based figure; no noise figure assumed)."""
+    slope = np.polyfit(t, y, 1)[0]
+    noise = np.std(np.diff(y), ddof=1) / np.sqrt(2.0)
+    return float(slope), float(noise / np.sqrt(np.sum((t - t.mean()) ** 2)))
+
+
+def check_settled(rec: Record, part: str) -> None:
+    """Refuse a part whose first rest (0 A, before the steps) shows heat
+    already flowing between the pad and what is on it, which the fit does
+    not model (a block pressed on a pad 1 K off it read a flux lag 8 % long
+    on the simulated bench): the sensed flux or the face's temperature
+    drifting over that rest by more than :data:`DRIFT_SIGMAS` standard
+    errors of its slope. (A pad and a block at two temperatures meet at a
+    nearly steady face; the flux between them decays, so the flux shows it.)"""
+    m = int(round(STEPS[0][1] * (rec.t_s.size - 1) / (rec.t_s[-1] - rec.t_s[0])))
+    t = rec.t_s[:m] - rec.t_s[0]
+    for name, y, unit, scale in (("sensed flux", rec.flux_w_m2[:m], "W/m^2/s", 1.0),
+                                 ("face", rec.surface_c[:m], "mK/s", 1e3)):
+        ok = np.isfinite(y)
+        if ok.sum() < 10:
+            continue                # too few readings to judge; on_grid refuses those
+        slope, se = _drift(t[ok], y[ok])
+        if abs(slope) > DRIFT_SIGMAS * se:
+            raise CalibrationError(
+                f"the {name} drifted {slope * scale:+.1f} {unit} ({abs(slope) / se:.0f} "
+                f"standard errors) while the routine rested at 0 A before the steps {part}: "
+                "heat was already flowing between the pad and the block, which the fit does "
+                "not model; leave them together at rest, the display idle, until the readings "
+                "are steady, then run it again")
 
 
 @dataclass(frozen=True)

@@ -128,6 +128,7 @@ def calibrate_hardware(scene, board_url: str, can_bus: str, block: str = DEFAULT
         display.close()             # disabled, 0 A, whatever happened
     on_block = routine.on_grid(on_block, rate_hz, "on the block")
     in_air = routine.on_grid(in_air, rate_hz, "in air")
+    routine.check_settled(on_block, "on the block")
     _check_force(on_block, True)
     _check_force(in_air, False)
     return fit_display(scene, on_block, in_air, block, "hardware")
