@@ -24,6 +24,19 @@ EPHEMERAL_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
 DEFAULT_EPHEMERAL = (32768, 60999)
 
 
+def kernel_ports(n: int) -> list[int]:
+    """``n`` distinct TCP ports on 127.0.0.1 of the kernel's choice (from
+    its ephemeral range), each held until all are drawn."""
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
 def ephemeral_range(path: str = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
     """The ports the kernel picks for ``bind(port 0)`` and for a
     connection's own end: ``(first, last)``, both included."""

@@ -47,3 +47,10 @@ def test_the_kernels_range_is_read_from_its_file(tmp_path, text, expected):
 
 def test_a_missing_range_file_gives_the_linux_default(tmp_path):
     assert ports.ephemeral_range(str(tmp_path / "absent")) == ports.DEFAULT_EPHEMERAL
+
+
+def test_kernel_ports_are_distinct_and_from_the_ephemeral_range():
+    first, last = ports.ephemeral_range()
+    for _ in range(50):
+        got = ports.kernel_ports(3)
+        assert len(set(got)) == 3 and all(first <= p <= last for p in got)

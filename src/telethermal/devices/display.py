@@ -79,6 +79,9 @@ class HardwareDisplay:
         self._first_command_s: float | None = None
         self.untrusted_periods = 0
         self.stale_readings = 0          # periods the board gave no current reading
+        #: Whether the last :meth:`read` brought a new board frame (False: the
+        #: board's reading held its previous one, within its ``stale_s``).
+        self.fresh = False
 
     def _actuator_trusted(self) -> bool:
         p = self.peltier
@@ -90,7 +93,9 @@ class HardwareDisplay:
                                      p.heartbeat_timeout_s)
 
     def read(self, t_s: float) -> PadSensors:
+        before = self.board.latest
         flux, temp, force = self.board.reading(self.wait_s)
+        self.fresh = self.board.latest is not before
         if not (math.isfinite(flux) and math.isfinite(temp)):
             self.stale_readings += 1
         self.peltier.poll()

@@ -38,6 +38,7 @@ import tty
 from pathlib import Path
 
 from telethermal.devices.board import DeviceError
+from telethermal.ports import kernel_ports
 
 log = logging.getLogger(__name__)
 
@@ -119,24 +120,6 @@ def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, 
     return {name: out / "stm32f405" / f"{name}.elf" for name in IMAGES}
 
 
-def _free_ports(n: int) -> list[int]:
-    """Ports for QEMU's UART sockets, ``n`` distinct ones of the kernel's
-    choice (each held until all are drawn): from its ephemeral range, which
-    :func:`telethermal.ports.free_ports` (the services' ports) never draws
-    from. TCP, not a Unix socket: a Unix socket's buffer counts each small
-    write whole, and a core that lags under load filled it in a fraction of
-    a second (the bridge's send timed out and dropped a command, once in a
-    CI rehearsal); TCP's holds far more."""
-    socks = [socket.socket() for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind(("127.0.0.1", 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
-
-
 class _PtyBridge:
     """Bytes both ways between a connected socket and a pty's master side;
     the slave side's path is what a driver opens."""
@@ -175,7 +158,13 @@ class QemuCore:
         if not self.image.is_file():
             raise DeviceError(f"firmware image {self.image} not found: build it with "
                               "make -C firmware TARGET=stm32f405")
-        ports = _free_ports(3)
+        # Ports of the kernel's choice, from its ephemeral range, which
+        # free_ports (the services' ports) never draws from. TCP, not a Unix
+        # socket: a Unix socket's buffer counts each small write whole, and a
+        # core that lags under load filled it in a fraction of a second (the
+        # bridge's send timed out and dropped a command, once in a CI
+        # rehearsal); TCP's holds far more.
+        ports = kernel_ports(3)
         serials = []
         for name, port in zip(("link", "plant", "mon"), ports):
             serials += ["-chardev", f"socket,id={name},host=127.0.0.1,port={port},"

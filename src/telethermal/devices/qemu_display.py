@@ -123,9 +123,8 @@ class QemuDisplay:
         s = self.touch.sense(t_s)
         self.plants[1].write(self._measure_line())
         self.plants[0].write(self._sample_line(s))
-        before = self.hardware.board.latest
         sensors = self.hardware.read(t_s)
-        if self.hardware.board.latest is before:
+        if not self.hardware.fresh:
             self.counters_["board_waits_missed"] += 1
         return sensors
 

@@ -48,9 +48,8 @@ class _Guarded:
         self.limits = SafetyLimits()
 
     def read(self, t_s: float):
-        before = self.display.board.latest
         s = self.display.read(t_s)
-        if self.display.board.latest is before:             # no new frame this period
+        if not self.display.fresh:                          # no new frame this period
             s = replace(s, flux_w_m2=math.nan, pad_temp_c=math.nan, force_n=math.nan)
         ok = math.isfinite(s.flux_w_m2) and math.isfinite(s.pad_temp_c) and \
             self.limits.reading_min_c < s.junction_c < self.limits.reading_max_c
