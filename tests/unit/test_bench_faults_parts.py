@@ -1,13 +1,12 @@
-"""``bench faults`` in parts (processes, figures, text): the command line
+"""``bench faults`` in parts (processes, figures; its section is in faults_text): the command line
 still finds what it uses in ``telethermal.bench.faults``."""
 
-from telethermal.bench import faults, faults_plot, faults_procs, faults_sim, faults_text
+from telethermal.bench import faults, faults_plot, faults_procs, faults_sim
 
 
 def test_the_facade_exports_what_the_command_line_uses():
     assert faults.run.__module__ == "telethermal.bench.faults"
     assert faults.plot is faults_plot.plot
-    assert faults.text_report is faults_text.text_report
     assert faults.SETTINGS is faults_procs.SETTINGS
     assert faults.SETTINGS[0][0] == "delay 0 ms" == faults_sim.ROWS[0][0]
 

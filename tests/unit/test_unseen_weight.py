@@ -119,9 +119,10 @@ def test_bench_unseens_trade_counts_what_was_said(model):
     assert s[1.0]["unseen_named_trained_ever"] == 0
     assert s[0.0]["materials"]["wood"]["named_right"] == 10
     assert s[0.0]["materials"]["wood"]["first_decision_s_p50"] == pytest.approx(0.06)
-    lines = ut.text_lines({"open_set_trade": {"0": s[0.0], "1": s[1.0]},
-                           "trained": SCENE.materials})
-    assert lines[1].startswith("    weight 0: trained ") and "unseen " in lines[2]
+    lines = ut.section_lines({"open_set_trade": {"0": s[0.0], "1": s[1.0]},
+                              "trained": SCENE.materials})
+    assert lines[4].startswith(f"| 0 | {s[0.0]['trained_named_right']} of {len(wood)} | ")
+    assert lines[5].startswith("| 1 | ") and f"| 0 of {len(copper)} |" in lines[5]
 
 
 def test_inside_at_commit_reads_the_named_classs_predictive_at_the_naming_window(model):

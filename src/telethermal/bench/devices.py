@@ -249,26 +249,6 @@ def run(n: int = 3000, contact_s: float = 3.0, progress=None,
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
 
 
-def slave_lines(report: dict) -> list[str]:
-    """What ``telethermal bench devices`` prints of the slave's side."""
-    s = report.get("slave")
-    if not s:
-        return []
-    out = [f"slave, {s['trials']} touches of {s['scene']} ({s['identifier']}), the same trials "
-           f"both ways: accuracy {100 * s['accuracy_sim']:.1f} % simulated, "
-           f"{100 * s['accuracy_emulated']:.1f} % through the drivers "
-           f"({s['accuracy_difference_points']:+.1f} points; a committed pair counted wrong; "
-           f"with pairs {100 * s['accuracy_with_pairs_sim']:.1f} / "
-           f"{100 * s['accuracy_with_pairs_emulated']:.1f} %), same label on "
-           f"{100 * s['agreement']:.1f} %"]
-    for name in ("sensor_to_identifier", "sensor_to_identifier_onset_backlog",
-                 "serial_sensor_to_driver", "can_controller_to_actuator"):
-        r = s[name]
-        out.append(f"slave {name}: p50 {r['p50_us']:.1f} us, p99 {r['p99_us']:.1f} us, "
-                   f"max {r['max_us']:.0f} us (n {r['n']}){_timed_out(r)}")
-    return out
-
-
 def run_and_save(json_path, n: int = 3000, contact_s: float = 3.0, slave_trials: int = 10,
                  command: str = "", progress=None) -> dict:
     """Run the benchmark and write the JSON report (with ``command``);
@@ -279,26 +259,3 @@ def run_and_save(json_path, n: int = 3000, contact_s: float = 3.0, slave_trials:
     return report
 
 
-def _timed_out(r: dict) -> str:
-    n = r.get("timed_out")
-    return "" if n is None else f", {n} timed out"
-
-
-def text_report(report: dict, json_path) -> list[str]:
-    """What ``telethermal bench devices`` prints of ``report``."""
-    lines = [f"{kind:9s} read p50 {r['read']['p50_us']:6.1f} us p99 {r['read']['p99_us']:6.1f} us;"
-             f" apply p50 {r['apply']['p50_us']:6.1f} us p99 {r['apply']['p99_us']:6.1f} us"
-             for kind, r in report["paths"].items()]
-    emu = report["paths"]["emulated"]
-    lines += [f"emulated {name}: p50 {emu[name]['p50_us']:.1f} us, p99 "
-              f"{emu[name]['p99_us']:.1f} us, max {emu[name]['max_us']:.0f} us"
-              f"{_timed_out(emu[name])}"
-              for name in ("serial_sensor_to_controller", "can_controller_to_actuator")]
-    lines += [f"{r['rate_hz']:g} Hz real-clock session, {kind:8s}: period p99 "
-              f"{r['loop_period_p99_us']:.0f} us, busy p99 {r['busy_p99_us']:.0f} us, "
-              f"{r['deadline_misses']} missed deadlines of "
-              f"{r['steps']}, flux error {100 * r['flux_rms_error_rel_whole']:.2f} %"
-              for kind, r in report["sessions_real_clock"].items()]
-    # An empty line where there is no slave part, as the command always printed.
-    qemu_lines = firmware.report_lines(report["qemu"]) if "qemu" in report else []
-    return lines + (slave_lines(report) or [""]) + qemu_lines + [f"wrote {json_path}"]

@@ -1,6 +1,10 @@
-"""What ``telethermal bench faults`` prints: its report as text lines."""
+"""``telethermal bench faults``' section: what the bench prints and
+``bench report`` writes (:mod:`telethermal.bench.markdown`), from its
+JSON."""
 
 from __future__ import annotations
+
+from telethermal.bench.markdown import Page, figure, pct, provenance
 
 
 def recovery_text(row: dict) -> str:
@@ -13,52 +17,61 @@ def recovery_text(row: dict) -> str:
     return f"{row['recovery_s']:.2f} s ({row['recovery_bound_s']:.2f} s)"
 
 
-def text_report(report: dict) -> list[str]:
-    """What ``telethermal bench faults`` prints."""
-    from telethermal.bench.faults_sim import WINDOWS
+def section(d: dict, page: Page) -> list[str]:
+    """The faults bench's section: the simulated rows, the targets, the
+    processes behind the fault proxy."""
+    if "simulated" not in d:
+        return ["## Rendering under network faults", "",
+                "The results predate the simulated-clock benchmark: re-run "
+                "`telethermal bench faults`.", "", provenance(d), ""]
+    sim, s = d["simulated"], d["summary"]
+    lines = ["## Rendering under network faults: the first touch, a repeated touch, the "
+             "naive baseline", "",
+             f"Simulated clock: {len(sim['materials'])} materials x {len(sim['seeds'])} seeds "
+             f"per row, {sim['contact_s']:g} s contacts, the display at {sim['rate_hz']:g} Hz; "
+             "flux RMS error in % of the direct contact's peak, mean over touches (sd). "
+             "Blind: contact until the first news of the slave reaches the master.", "",
+             "| row | mode | blind | after the news | whole | blind window (s) | safety |",
+             "|---|---|---|---|---|---|---|"]
 
-    def pct(v):
-        return "      -" if v is None else f"{100 * v:6.2f}%"
+    def cell(st):
+        return "-" if st["mean"] is None else f"{100 * st['mean']:.2f} ({100 * st['sd']:.2f})"
 
-    sim = report["simulated"]
-    lines = [f"simulated clock: {len(sim['materials'])} materials x {len(sim['seeds'])} seeds, "
-             f"{sim['contact_s']:g} s contacts; flux RMS error (% of peak), mean over touches",
-             f"{'row':38s} {'mode':12s} " + " ".join(f"{w:>10s}" for w in WINDOWS) +
-             "  blind (s)  safety"]
     for name, row in sim["rows"].items():
         for mode, st in list(row["modes"].items()) + list(row.get("ablations", {}).items()):
-            lines.append(f"{name:38s} {mode:12s} " + " ".join(
-                f"{pct(st[w]['mean']):>10s}" for w in WINDOWS) +
-                f"  {st['blind_s']['mean'] or 0:9.3f}  {st['safety_events']:6d}")
-    o = sim["oracle"]
-    lines.append(f"{'oracle floor':38s} {'':12s} {'':>10s} {'':>10s} "
-                 f"{pct(o['whole']['mean']):>10s}")
-    s = report["summary"]
-
-    def x(key, digits=2):
-        v = s.get(key)
-        return "-" if v is None else f"{v:.{digits}f}x"
-
-    lines.append(
-        f"at {s['ratio_setting']}: first touch after the news "
-        f"{x('first_touch_after_news_ratio_200ms')} zero delay (target <= 1.2), naive "
-        f"{x('naive_after_news_ratio_200ms')} the compensated zero-delay error on that "
-        f"window (target >= 2; {x('naive_after_news_ratio_200ms_own_zero')} its own), whole "
-        f"contact {x('first_touch_whole_ratio_200ms')} (target <= 1.3); repeated touch "
-        f"<= {x('repeat_touch_ratio_to_oracle_max', 3)} the oracle floor at every row "
-        f"(target <= 1.05)")
-    if report["rows"]:
-        lines.append(f"{'processes: fault':38s} {'compensated':>11s} {'naive':>7s} safety  "
-                     "lossless (gaps/recovered/dup/resent/refused)  recovery (bound)")
-        for r in report["rows"]:
+            lines.append(f"| {name} | {mode} | {cell(st['blind'])} | {cell(st['after_news'])} | "
+                         f"{cell(st['whole'])} | {st['blind_s']['mean']:.3f} | "
+                         f"{st['safety_events']} |")
+    lines.append(f"| - | oracle floor | | | {cell(sim['oracle']['whole'])} | 0 | "
+                 f"{sim['oracle']['safety_events']} |")
+    lines += ["", f"At {s['ratio_setting']}: the first touch after the news "
+              f"**{s['first_touch_after_news_ratio_200ms']:.2f}x** its zero-delay error "
+              f"(target <= 1.2), the whole contact **{s['first_touch_whole_ratio_200ms']:.2f}x** "
+              f"(target <= 1.3); naive after the news **{s['naive_after_news_ratio_200ms']:.2f}x** "
+              f"the same zero-delay error (target >= 2; {s['naive_after_news_ratio_200ms_own_zero']:.2f}x "
+              f"its own, {s['naive_after_news_ratio_200ms_to_compensated_200ms']:.2f}x the "
+              f"compensated on the same row). A repeated touch (object memory) is at most "
+              f"**{s['repeat_touch_ratio_to_oracle_max']:.3f}x** the oracle floor over every row "
+              f"(target <= 1.05).", ""]
+    rows = d.get("rows", [])
+    if rows:
+        lines += ["Processes on loopback behind the fault proxy (the same services as a "
+                  "session):", "",
+                  "| fault | compensated | naive | safety events | lossless stream "
+                  "(gaps/recovered/dup/resent/refused) | recovered | recovery (bound) |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in rows:
             lo = r["lossless"]
             rec = recovery_text(r)
-            lines.append(f"{r['fault']:38s} {pct(r['compensated_flux_rms_error_rel']):>11s} "
-                         f"{pct(r['naive_flux_rms_error_rel'])} {r['safety_events']:6d}  "
+            lines.append(f"| {r['fault']} | {pct(r['compensated_flux_rms_error_rel'])} | "
+                         f"{pct(r['naive_flux_rms_error_rel'])} | {r['safety_events']} | "
                          f"{lo['gaps']}/{lo['recovered']}/{lo['duplicates']}/{lo['resent']}/"
-                         f"{lo.get('refused_by_window', lo.get('lossless_dropped')):<22} {rec}")
-        lines.append(f"processes within the simulated spread (mean +- 2 sd): "
-                     f"{s['processes_within_simulated_spread']}; fault matrix: "
-                     f"{s['fault_matrix_safety_events']} safety events, all recovered: "
-                     f"{s['fault_matrix_all_recovered']}")
+                         f"{lo.get('refused_by_window', lo.get('lossless_dropped'))} | {r['recovered']} | "
+                         f"{rec} |")
+        lines += ["", f"The processes' whole-contact errors within the simulated mean +- 2 sd "
+                  f"of the same material: {s.get('processes_within_simulated_spread', '-')}; "
+                  f"the fault matrix: {s.get('fault_matrix_safety_events', '-')} safety events, "
+                  f"all recovered: {s.get('fault_matrix_all_recovered', '-')}.",
+                  ""]
+    lines += [figure(page, d, "faults"), figure(page, d, "faults", "-traces"), provenance(d), ""]
     return lines

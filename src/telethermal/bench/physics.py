@@ -267,17 +267,3 @@ def run_and_save(json_path: str | Path, png_path: str | Path, repeats: int = 3,
     return report
 
 
-def text_report(report: dict, json_path: str | Path) -> list[str]:
-    """What ``telethermal bench physics`` prints of ``report``."""
-    d = report["default"]
-    b = report["batch_70x1s_1khz"]
-    db = report["databases_fingertip_7"]
-    return [f"default model: max relative flux error {d['max_rel_error']:.2e} over "
-            f"{d['window_s'][0]}-{d['window_s'][1]:g} s, "
-            f"{d['runtime_s_per_simulated_s'] * 1e3:.3f} ms per simulated second",
-            f"batch of {b['trials']} one-second trials at 1 kHz: {b['runtime_s']:.3f} s "
-            f"(+ {b['model_choice_s']:.3f} s choosing the models, once per scene)",
-            f"fingertip-7 databases: simulation {db['simulation_s']:.2f} s, "
-            f"with CSV files {db['with_csv_files_s']:.2f} s",
-            f"heat balance over 60 s: {report['heat_balance_60s']['relative_error']:.1e} relative",
-            f"wrote {json_path} and {report['png']}"]

@@ -95,14 +95,3 @@ def run_and_save(json_path, rounds: int = 3, contact_s: float = 3.0, command: st
     return report
 
 
-def text_report(report: dict, json_path) -> list[str]:
-    """What ``telethermal bench record`` prints of ``report``."""
-    b, m = report["busy_mean_us"], report["deadline_misses"]
-    return [f"master loop busy per period: {b['without']:.0f} us without recording, "
-            f"{b['with']:.0f} us with: {report['extra_busy_per_period_us']:+.1f} us = "
-            f"{100 * report['cost_of_period_budget']:+.1f} % of the "
-            f"{1e3 / report.get('rate_hz', 1000.0):g} ms budget",
-            f"recorder call per period: p50 {report['log_call_p50_us']:.1f} us, p99 "
-            f"{report['log_call_p99_us']:.1f} us; deadline misses {m['without']} of "
-            f"{report['steps']['without']} without, {m['with']} of {report['steps']['with']} with",
-            f"wrote {json_path}"]

@@ -270,27 +270,3 @@ def run_and_save(json_path, png_path, quick: bool = False, command: str = "",
     return report
 
 
-def text_report(report: dict, json_path) -> list[str]:
-    mod, pol = report["module"], report["idle_policy"]
-    lines = [f"module {mod['name']}: Imax {mod['imax_a']} A, Qmax {mod['qmax_w']} W, "
-             f"dTmax {mod['dtmax_k']} K; idle policy: {pol['sentence']}"]
-    for m, v in report["materials"].items():
-        lines.append(f"{m:10s} floor {v['floor_k']:.3f} K (idle {v['idle_policy_c']:.1f} C), "
-                     f"at object {v['floor_at_object_k']:.3f} K, preconditioned "
-                     f"{v['floor_preconditioned_k']:.3f} K (idle {v['idle_preconditioned_c']:.1f}"
-                     f" C); peak |I| {v['policy']['peak_current_a']:.2f} A, violations "
-                     f"{v['policy']['violations'] + v['at_object']['violations'] + v['preconditioned']['violations']}")
-    lines += [f"sweep Qmax {r['qmax_w']:5.1f} W, film R {r['film_r_m2k_w']:.1e} m^2K/W: "
-              f"aluminium {r['aluminium_floor_k']:.3f} K (idle {r['idle_policy_c']:.1f} C)"
-              for r in report["sweep"]]
-    lines.append(report["sweep_verdict"])
-    lines += [f"material learnt {r['decision_s']:.2f} s after contact: floor (worst) "
-              f"{r['floor_worst_k']:.3f} K{'' if r['converged'] else ' (SLSQP did not converge)'}"
-              "; on that trajectory " + ", ".join(
-                  f"{m} {v:.3f}" for m, v in r["per_material_k"].items())
-              for r in report.get("decision", {}).get("rows", [])]
-    t = report["timings"]
-    lines.append(f"timings: search {t['idle_search_s']:.0f} s, floors {t['floors_s']:.0f} s, "
-                 f"sweep {t['sweep_s']:.0f} s, decision {t.get('decision_s', 0):.0f} s, "
-                 f"total {t['total_s']:.0f} s")
-    return lines + [f"wrote {json_path} and {report['png']}"]

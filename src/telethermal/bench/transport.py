@@ -339,36 +339,6 @@ def run_and_save(json_path, command: str = "", progress=None) -> dict:
     return report
 
 
-def _pair_lines(where: str, block: dict) -> list[str]:
-    if "skipped" in block:
-        return [f"{where}: skipped ({block['skipped']})"]
-    lines = []
-    for name, r in block.items():
-        if isinstance(r, dict) and name == "slow_receiver":
-            lines.append(f"{where:10s} slow receiver ({r['pause_s']:.0f} s without reading): "
-                         f"{r['sent']} sent, {r['delivered']} delivered, "
-                         f"{r['refused_by_window']} refused by the window, {r['lost']} lost")
-        elif isinstance(r, dict):
-            extra = f", {r['messages_per_s']:.0f} msg/s" if "messages_per_s" in r else ""
-            lines.append(f"{where:10s} {name:10s} one-way p50 {r['p50_us']:6.0f} us, p99 "
-                         f"{r['p99_us']:6.0f} us, max {r['max_us']:6.0f} us{extra}")
-    return lines
-
-
-def text_report(report: dict, json_path) -> list[str]:
-    """What ``telethermal bench transport`` prints of ``report``."""
-    kind, worst = max(report["codec"].items(),
-                      key=lambda kv: kv[1]["encode_us"] + kv[1]["decode_us"])
-    lines = [f"codec: slowest kind {kind} ({worst['bytes']} B) encode "
-             f"{worst['encode_us']:.1f} us, decode {worst['decode_us']:.1f} us"]
-    for where in ("loopback", "namespaces"):
-        lines += _pair_lines(where, report[where])
-    return lines + [f"end to end on loopback: p50 {report['e2e_p50_us']:.0f} us, p99 "
-                    f"{report['e2e_p99_us']:.0f} us; {report['ratio_to_raw_zmq_p50']:.2f}x raw "
-                    f"pyzmq (plain), {report['curve_ratio_to_raw_zmq_p50']:.2f}x with CURVE",
-                    f"wrote {json_path}"]
-
-
 def main(argv=None):
     p = argparse.ArgumentParser()
     p.add_argument("--peer", choices=("sender", "receiver"), required=True, dest="role")

@@ -51,7 +51,6 @@ from telethermal.bench.unseen_set import (DEFAULT_UNSEEN, SHIPPED_UNSEEN_SCENE, 
                                           default_unseen_scene_path, package_objects,
                                           same_as_trained, scene_objects, touch_scene,
                                           unseen_objects)
-from telethermal.bench.unseen_text import report_section, text_report  # noqa: F401 (its API)
 from telethermal.errors import IdentificationError
 from telethermal.ident.evaluate import wilson_interval
 from telethermal.ident.effusivity import Z95, EffusivityEstimate

@@ -81,17 +81,6 @@ def describe(r: dict) -> str:
                        f"(e {la['effusivity_w_s05_m2k']:.0f})" for la in r["stack"])
 
 
-def text_line(name: str, r: dict) -> str:
-    """One layered object's line in ``bench unseen``'s text report."""
-    est = " ".join(f"{v:6.0f}" for v in r["estimate_p50_w_s05_m2k"].values())
-    d = r["drift"]
-    return (f"  layered {name}: {describe(r)}; median estimate {est}; drift "
-            f"{d['from_s']:g} -> {d['to_s']:g} s x{d['ratio_p50']:.2f} (median), toward the "
-            f"base beyond the intervals {d['toward_base_beyond_intervals']} of {d['n']}; "
-            f"fits {' '.join(f'{100 * v:.0f}%' for v in r['fits_rate'].values())} "
-            f"(not in the error and coverage targets: no single true effusivity)")
-
-
 def section_line(name: str, r: dict, windows) -> str:
     """One layered object's row of ``bench report``'s table (its error and
     coverage columns hold the median estimate and the drift instead)."""
@@ -100,6 +89,8 @@ def section_line(name: str, r: dict, windows) -> str:
     d = r["drift"]
     first = rep.get("named_then_new", 0)
     return (f"| {name} (unseen, layered: {describe(r)}) | - | median estimate {est} | drift "
-            f"x{d['ratio_p50']:.2f}, {d['toward_base_beyond_intervals']} of {d['n']} beyond "
-            f"the intervals | - | {rep.get('named', '-')} | {rep.get('new', '-')}"
+            f"{d['from_s']:g} -> {d['to_s']:g} s x{d['ratio_p50']:.2f}, "
+            f"{d['toward_base_beyond_intervals']} of {d['n']} toward the base beyond the "
+            f"intervals; fits {' / '.join(f'{100 * v:.0f}' for v in r['fits_rate'].values())} % "
+            f"| - | {rep.get('named', '-')} | {rep.get('new', '-')}"
             f"{f' ({first})' if first else ''} | {rep.get('unknown', '-')} |")

@@ -81,19 +81,23 @@ def summary(labels, decided, trained, inside=None) -> dict:
             "unseen_n": sum(r["n"] for r in un)}
 
 
-def text_lines(report: dict) -> list[str]:
+def section_lines(report: dict) -> list[str]:
+    """The open-set trade in ``bench unseen``'s section: per weight, the
+    trained touches named right (and each material's first decision p50),
+    the unseen touches named a trained class at any time."""
     trade = report.get("open_set_trade")
     if not isinstance(trade, dict):
         return []
-    lines = ["  open-set trade (unseen_weight: trained named right, first decision p50 per "
-             "material; unseen named a trained class at any time):"]
+    rows = []
     for w, s in trade.items():
-        t50 = ", ".join(f"{m} {r['first_decision_s_p50']:.2f}"
+        t50 = ", ".join(f"{m} {r['first_decision_s_p50']:.2f} s"
                         for m, r in s["materials"].items()
                         if m in report["trained"] and r["first_decision_s_p50"] is not None)
         inside = s.get("unseen_named_trained_inside_at_commit")
-        lines.append(f"    weight {w}: trained {s['trained_named_right']}/{s['trained_n']} "
-                     f"({t50} s); unseen {s['unseen_named_trained_ever']}/{s['unseen_n']}"
-                     + (f" ({inside} inside the named class's predictive then)"
-                        if inside is not None else ""))
-    return lines
+        rows.append([w, f"{s['trained_named_right']} of {s['trained_n']}", t50 or "-",
+                     f"{s['unseen_named_trained_ever']} of {s['unseen_n']}",
+                     "-" if inside is None else inside])
+    return ["The open-set trade (`unseen_weight`):", "",
+            "| weight | trained named right | first decision p50 | unseen named a trained "
+            "class | inside that class's predictive then |", "|---|---|---|---|---|",
+            *("| " + " | ".join(str(c) for c in row) + " |" for row in rows), ""]

@@ -193,17 +193,3 @@ def run_and_save(json_path, touches: int = 3, contact_s: float = 3.0, progress=p
     return report
 
 
-def text_report(report: dict, json_path) -> list[str]:
-    """What ``telethermal bench view`` prints of ``report``."""
-    lines = [f"first paint {report['first_paint_s']:.2f} s after the server started; view lag "
-             f"p99 {1000 * report['lag_p99_s']:.0f} ms at {report['rate_hz']:.0f} Hz; master "
-             f"loop at SCHED_FIFO priority {report['realtime_priority']} (0: normal)"]
-    for mode, text in (("no_view", "no view stream"), ("stream_no_page", "stream, no page"),
-                       ("page_open", "page open")):
-        m = report["loop"][mode]
-        lines.append(f"  master loop, {text:15s}: busy {m['busy_mean_us']:.0f} us mean, "
-                     f"{m['busy_p99_us']:.0f} us p99; period p99 {m['period_p99_us']:.0f} us; "
-                     f"{m['deadline_misses']} of {m['steps']} deadlines missed")
-    call = report["publisher_call"]
-    return lines + [f"  the view stream's call per period alone: {call['mean_us']:.1f} us mean, "
-                    f"{call['p99_us']:.1f} us p99; wrote {json_path}"]

@@ -3,7 +3,13 @@ prints its figures (the work is in ``telethermal.bench``)."""
 
 from __future__ import annotations
 
-from telethermal.cli._common import _command, _png, _positive, _print_lines, _progress
+from telethermal.cli._common import _command, _png, _positive, _progress
+
+
+def bench_text(*args) -> str:
+    """A bench's printout: its section of the report (one renderer)."""
+    from telethermal.bench.report import bench_text as text
+    return text(*args)
 
 
 def cmd_bench_physics(args) -> int:
@@ -12,13 +18,12 @@ def cmd_bench_physics(args) -> int:
     with _progress(6, "bench physics") as advance:
         report = physics.run_and_save(args.json, _png(args), repeats=args.repeats,
                                       command=_command(), progress=advance)
-    _print_lines(physics.text_report(report, args.json))
+    print(bench_text("physics", report, args.json, report["png"]))
     return 0
 
 
 def cmd_bench_render(args) -> int:
     from telethermal.bench import render
-    from telethermal.bench.render_text import text_report
 
     if args.as_built is not None:
         _no_executor(args)
@@ -27,7 +32,7 @@ def cmd_bench_render(args) -> int:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene,
                                      executor=executor)
-    _print_lines(text_report(report, args.json))
+    print(bench_text("render", report, args.json, report["png"]))
     return 0
 
 
@@ -38,7 +43,7 @@ def cmd_bench_devices(args) -> int:
         report = devices.run_and_save(args.json, n=args.samples, contact_s=args.contact_s,
                                       slave_trials=args.slave_trials, command=_command(),
                                       progress=advance)
-    _print_lines(devices.text_report(report, args.json))
+    print(bench_text("devices", report, args.json))
     return 0
 
 
@@ -48,7 +53,7 @@ def cmd_bench_record(args) -> int:
     with _progress(2 * args.rounds, "bench record") as advance:
         report = record.run_and_save(args.json, rounds=args.rounds, contact_s=args.contact_s,
                                      command=_command(), progress=advance)
-    _print_lines(record.text_report(report, args.json))
+    print(bench_text("record", report, args.json))
     return 0
 
 
@@ -65,7 +70,7 @@ def cmd_bench_transport(args) -> int:
 
     with _progress(2, "bench transport") as advance:
         report = transport.run_and_save(args.json, command=_command(), progress=advance)
-    _print_lines(transport.text_report(report, args.json))
+    print(bench_text("transport", report, args.json))
     return 0
 
 
@@ -84,13 +89,12 @@ def cmd_bench_faults(args) -> int:
     png = faults.plot(report, traces, _png(args))
     report["png"] = str(png)
     write_json(args.json, report)
-    _print_lines(faults.text_report(report))
-    print(f"wrote {args.json} and {png}")
+    print(bench_text("faults", report, args.json, png))
     return 0
 
 
 def cmd_bench_identify(args) -> int:
-    from telethermal.bench import identify, identify_text
+    from telethermal.bench import identify
 
     if args.as_built is not None:
         _no_executor(args)
@@ -104,7 +108,7 @@ def cmd_bench_identify(args) -> int:
                                        command=_command(), progress=advance, scene=args.scene,
                                        sessions=args.sessions, with_limit=not args.no_limit,
                                        executor=executor)
-    _print_lines(identify_text.text_report(report, args.json, png))
+    print(bench_text("identify", report, args.json, png))
     return 0
 
 
@@ -126,8 +130,9 @@ def _bench_identify_as_built(args) -> int:
         section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
                          progress=advance, partial=lambda part: write_json(
                              args.json, {"as_built": part, **_stamp()}))
-    write_json(args.json, {"as_built": section, **_stamp()})
-    _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
+    report = {"as_built": section, **_stamp()}
+    write_json(args.json, report)
+    print(bench_text("identify-as-built", report, args.json))
     return 0
 
 
@@ -139,8 +144,9 @@ def _bench_render_as_built(args) -> int:
         section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
                          quick=args.quick, progress=advance, partial=lambda part: write_json(
                              args.json, {"as_built": part, **_stamp()}))
-    write_json(args.json, {"as_built": section, **_stamp()})
-    _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
+    report = {"as_built": section, **_stamp()}
+    write_json(args.json, report)
+    print(bench_text("render-as-built", report, args.json))
     return 0
 
 
@@ -150,7 +156,7 @@ def cmd_bench_view(args) -> int:
     report = view.run_and_save(args.json, touches=args.touches, contact_s=args.contact_s,
                                progress=lambda m: print(m, flush=True),
                                realtime_priority=args.realtime_priority, command=_command())
-    _print_lines(view.text_report(report, args.json))
+    print(bench_text("view", report, args.json))
     return 0
 
 
@@ -162,7 +168,7 @@ def cmd_bench_skin_floor(args) -> int:
         report = skin_floor.run_and_save(args.json, _png(args), quick=args.quick,
                                          command=_command(), progress=advance,
                                          scene=args.scene)
-    _print_lines(skin_floor.text_report(report, args.json))
+    print(bench_text("skin-floor", report, args.json, report["png"]))
     return 0
 
 
@@ -178,7 +184,7 @@ def cmd_bench_unseen(args) -> int:
                                      unseen=args.unseen, unseen_scene=args.unseen_scene,
                                      quick=args.quick, scene=args.scene, progress=advance,
                                      executor=executor)
-    _print_lines(unseen.text_report(report, args.json))
+    print(bench_text("unseen", report, args.json))
     return 0
 
 
@@ -194,8 +200,9 @@ def _bench_unseen_as_built(args) -> int:
         section = ab.run(args.as_built, args.pads, args.seeds or 1, args.scene or "fingertip-7",
                          quick=args.quick, progress=advance, partial=lambda part: write_json(
                              args.json, {"as_built": part, **_stamp()}))
-    write_json(args.json, {"as_built": section, **_stamp()})
-    _print_lines(ab.text_lines(section) + [f"wrote {args.json}"])
+    report = {"as_built": section, **_stamp()}
+    write_json(args.json, report)
+    print(bench_text("unseen-as-built", report, args.json))
     return 0
 
 
