@@ -42,34 +42,36 @@ fuzz: $(STAMP)
 	TELETHERMAL_FUZZ=long $(PY) -m pytest tests/fuzz -q -s
 
 # The benches, in the report's order, in three sizes (each bench's own
-# options: fewer methods, seeds, trials, rounds or settings; each JSON keeps
-# its command and the report names every reduced run):
+# options: fewer methods, seeds, sessions, trials, rounds, messages or
+# settings; each JSON keeps its command and the report names every reduced
+# run):
 #   bench-full   every bench at its defaults into bench/results/ and
 #                bench/report.md: the committed figures (the longest run)
 #   bench        reduced, into $(OUT)/bench/ and $(OUT)/bench/report.md:
 #                identify on the default methods (the slave's effusivity-fit
-#                among them) and one session, faults and unseen on 2 seeds
-#   bench-quick  reduced further, into $(OUT)/bench-quick/: every bench and
-#                every section of each, bar render's generator comparison
-#                and identify's methods other than effusivity-lda (identify
-#                has no smaller knob)
+#                among them) and one session, render and faults on their
+#                smoke runs (--quick), unseen on 2 seeds
+#   bench-quick  reduced further, into $(OUT)/bench-quick/: every bench on
+#                its smallest run, every section of each bar render's
+#                generator comparison, identify's methods other than
+#                effusivity-lda and its physical limit (the oracle)
 # The view bench needs Chromium (apt-get install chromium).
 BENCHES := physics identify render transport faults devices record view unseen
 
 BENCH_physics   :=
 BENCH_identify  := --methods effusivity-fit,effusivity-lda,pca-fnn --sessions 1
-BENCH_render    :=
+BENCH_render    := --quick
 BENCH_transport :=
-BENCH_faults    := --seeds 2
+BENCH_faults    := --quick
 BENCH_devices   :=
 BENCH_record    :=
 BENCH_view      :=
 BENCH_unseen    := --seeds 2
 
 QUICK_physics   := --repeats 1
-QUICK_identify  := --methods effusivity-lda
+QUICK_identify  := --methods effusivity-lda --sessions 1 --no-limit
 QUICK_render    := --quick
-QUICK_transport :=
+QUICK_transport := --quick
 QUICK_faults    := --quick --seeds 1
 QUICK_devices   := --samples 500 --slave-trials 2 --contact-s 1
 QUICK_record    := --rounds 1 --contact-s 1

@@ -54,6 +54,20 @@ def images(tmp_path_factory):
     return qemu.build_images(tmp_path_factory.mktemp("stm32f405"))
 
 
+def test_a_build_run_under_make_keeps_its_images_where_it_was_asked(tmp_path, monkeypatch):
+    """``make bench OUT=dir`` ran the devices bench, whose build inherited
+    make's command-line variables: the images went into ``dir`` (the port's
+    own OUT), and the bench failed on an image that was not there."""
+    qemu_or_skip("building the images")
+    elsewhere = tmp_path / "elsewhere"
+    monkeypatch.setenv("MAKEFLAGS", f" -- OUT={elsewhere}")
+    monkeypatch.setenv("MAKELEVEL", "1")
+    monkeypatch.setenv("MAKEOVERRIDES", "${-*-command-variables-*-}")
+    images = qemu.build_images(tmp_path / "build")
+    assert all(p.is_file() for p in images.values()), images
+    assert not elsewhere.exists()
+
+
 # ------------------------------------------------------------ the codec image
 @pytest.fixture(scope="module")
 def codec(images):

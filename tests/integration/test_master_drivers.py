@@ -211,6 +211,7 @@ def run_service(before, arrivals, n_periods: int, source: str, contact_s: float)
     service = MasterService(MasterConfig(seed=SEED, admin_port=admin, transport=TransportConfig(
         security="plain", control_port=control, stream_port=stream)))
     endpoint, service.endpoint = service.endpoint, Loopback()
+    service.wire.endpoint = service.endpoint        # its typed link over the loopback
     replies = []
     service.admin.reply = lambda **r: replies.append(r)
     service.loop.run(None, 0)           # the loop's statistics, as its run starts them
@@ -237,7 +238,7 @@ def run_service(before, arrivals, n_periods: int, source: str, contact_s: float)
         assert service.touch is None            # its simulated touch is over
         return out, session_output(service.session), touch.operator, devices.readings
     finally:
-        service.endpoint = endpoint
+        service.endpoint = service.wire.endpoint = endpoint
         service.shutdown()
 
 

@@ -71,6 +71,14 @@ def test_a_worker_that_dies_fails_its_job_and_is_replaced():
         assert sweep(pool, noisy, [(5,), (6,)]) == [5, 6]
 
 
+def test_what_a_worker_prints_reaches_this_processs_stderr(capsys):
+    """Through sys.stderr (which a command's progress bar redirects above
+    itself), not straight onto the terminal's file descriptor."""
+    with JsonProcessPool(1) as pool:
+        assert sweep(pool, noisy, [(7,)]) == [7]
+    assert "a job that prints 7" in capsys.readouterr().err
+
+
 def cut_answer(x: int) -> None:
     """A worker killed while writing its answer: half a line, then gone."""
     from telethermal.bench import executor

@@ -156,9 +156,14 @@ class JsonProcessPool(Executor):
         # live in a script's or a test's folder), and not the working
         # folder's files first (-P).
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
-        return subprocess.Popen([sys.executable, "-P", "-m", "telethermal.bench.worker"],
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                bufsize=1, env=env)
+        proc = subprocess.Popen([sys.executable, "-P", "-m", "telethermal.bench.worker"],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, bufsize=1, env=env,
+                                errors="backslashreplace")
+        proc.relay = threading.Thread(target=_relay, args=(proc.stderr,),
+                                      name="bench-worker-stderr", daemon=True)
+        proc.relay.start()
+        return proc
 
     def _serve(self) -> None:
         proc = None
@@ -241,6 +246,20 @@ class JsonProcessPool(Executor):
         return False
 
 
+def _relay(pipe) -> None:
+    """A worker's stderr, line by line, into this process's ``sys.stderr``
+    (where a command's progress bar, which redirects it, prints it above
+    the bar instead of through it)."""
+    try:
+        for line in pipe:
+            sys.stderr.write(line)
+            sys.stderr.flush()
+    except (OSError, ValueError):           # the pipe closed under it
+        pass
+    finally:
+        pipe.close()
+
+
 def _close(proc: subprocess.Popen) -> None:
     """A worker's pipes closed (its stdin's end tells it to stop), and the
     worker waited for."""
@@ -250,6 +269,9 @@ def _close(proc: subprocess.Popen) -> None:
         except OSError:                  # a dead worker's stdin: its buffer unflushable
             pass
     proc.wait()
+    relay = getattr(proc, "relay", None)
+    if relay is not None:                # the worker's last words relayed before it is gone
+        relay.join(timeout=5.0)
 
 
 def open_executor(kind: str | None = None, jobs: int | None = None,

@@ -17,6 +17,12 @@ def recovery_text(row: dict) -> str:
     return f"{row['recovery_s']:.2f} s ({row['recovery_bound_s']:.2f} s)"
 
 
+def _x(v, digits: int, unit: str = "x") -> str:
+    """A ratio (``-`` for none: a row the run left out, or a figure it could
+    not compute)."""
+    return "-" if v is None else f"{v:.{digits}f}{unit}"
+
+
 def section(d: dict, page: Page) -> list[str]:
     """The faults bench's section: the simulated rows, the targets, the
     processes behind the fault proxy."""
@@ -40,19 +46,24 @@ def section(d: dict, page: Page) -> list[str]:
     for name, row in sim["rows"].items():
         for mode, st in list(row["modes"].items()) + list(row.get("ablations", {}).items()):
             lines.append(f"| {name} | {mode} | {cell(st['blind'])} | {cell(st['after_news'])} | "
-                         f"{cell(st['whole'])} | {st['blind_s']['mean']:.3f} | "
+                         f"{cell(st['whole'])} | {_x(st['blind_s']['mean'], 3, '')} | "
                          f"{st['safety_events']} |")
     lines.append(f"| - | oracle floor | | | {cell(sim['oracle']['whole'])} | 0 | "
                  f"{sim['oracle']['safety_events']} |")
-    lines += ["", f"At {s['ratio_setting']}: the first touch after the news "
-              f"**{s['first_touch_after_news_ratio_200ms']:.2f}x** its zero-delay error "
-              f"(target <= 1.2), the whole contact **{s['first_touch_whole_ratio_200ms']:.2f}x** "
-              f"(target <= 1.3); naive after the news **{s['naive_after_news_ratio_200ms']:.2f}x** "
-              f"the same zero-delay error (target >= 2; {s['naive_after_news_ratio_200ms_own_zero']:.2f}x "
-              f"its own, {s['naive_after_news_ratio_200ms_to_compensated_200ms']:.2f}x the "
-              f"compensated on the same row). A repeated touch (object memory) is at most "
-              f"**{s['repeat_touch_ratio_to_oracle_max']:.3f}x** the oracle floor over every row "
-              f"(target <= 1.05).", ""]
+
+    def x(key, digits=2):
+        return _x(s.get(key), digits)
+
+    lines += ["", f"At {s.get('ratio_setting', '-')}: the first touch after the news "
+              f"**{x('first_touch_after_news_ratio_200ms')}** its zero-delay error "
+              f"(target <= 1.2), the whole contact **{x('first_touch_whole_ratio_200ms')}** "
+              f"(target <= 1.3); naive after the news **{x('naive_after_news_ratio_200ms')}** "
+              f"the same zero-delay error (target >= 2; "
+              f"{x('naive_after_news_ratio_200ms_own_zero')} its own, "
+              f"{x('naive_after_news_ratio_200ms_to_compensated_200ms')} the compensated on "
+              f"the same row). A repeated touch (object memory) is at most "
+              f"**{x('repeat_touch_ratio_to_oracle_max', 3)}** the oracle floor over every row "
+              f"(target <= 1.05). (-: a row the run left out.)", ""]
     rows = d.get("rows", [])
     if rows:
         lines += ["Processes on loopback behind the fault proxy (the same services as a "

@@ -38,6 +38,12 @@ def num(x, digits: int = 3) -> str:
     return "-" if x is None else f"{x:.{digits}g}"
 
 
+def val(x, spec: str = ".2f", unit: str = "") -> str:
+    """``x`` formatted with ``spec`` and its unit (``-`` for none: a figure
+    an older or smaller run did not write)."""
+    return "-" if x is None else f"{x:{spec}}{unit}"
+
+
 def table(header: list[str], rows: list[list]) -> list[str]:
     """A Markdown table, then an empty line."""
     return (["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -100,17 +106,56 @@ def save(page: Page, fig, filename: str) -> str:
     return link(page, path, Path(filename).stem)
 
 
+def table_width(lines: list[str]) -> int:
+    """The console width on which rich draws every table of ``lines`` on
+    one line per row (rich squeezes a table too wide for its console, and
+    cuts the words that still do not fit): per column its longest cell over
+    the table's rows, plus the padding and rules rich puts around cells."""
+    widest, cols = 0, []
+    for line in [*lines, ""]:
+        if line.startswith("|") and line.endswith("|"):
+            if set(line) <= set("|-: "):               # the header's rule
+                continue
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            words = [max(len(c), 1) for c in cells]
+            cols = [max(a, b) for a, b in zip(cols, words)] + words[len(cols):] \
+                if len(words) >= len(cols) else \
+                [max(a, b) for a, b in zip(cols, words + [0] * len(cols))]
+        elif cols:                                       # a table ended
+            widest = max(widest, sum(w + 3 for w in cols) + 1)
+            cols = []
+    return widest
+
+
+def _blocks(lines: list[str]) -> list[tuple[bool, list[str]]]:
+    """``lines`` cut into runs: (True, a table's lines) or (False, the rest)."""
+    out: list[tuple[bool, list[str]]] = []
+    for line in lines:
+        is_table = line.startswith("|") and line.endswith("|")
+        if out and out[-1][0] == is_table:
+            out[-1][1].append(line)
+        else:
+            out.append((is_table, [line]))
+    return out
+
+
 def terminal(lines: list[str], width: int | None = None) -> str:
     """Markdown ``lines`` as a terminal shows them (rich's renderer: tables
     drawn in columns, emphasis as styles on a terminal, plain text in a
-    pipe), trailing spaces removed."""
+    pipe), trailing spaces removed. Text wraps at ``width`` (the terminal's;
+    120 in a pipe); a table is drawn as wide as its rows need
+    (:func:`table_width`): a long row, never a cell cut short."""
     from rich.console import Console
     from rich.markdown import Markdown
 
-    buf = io.StringIO()
     tty = os.isatty(1)
-    console = Console(file=buf, width=width or (os.get_terminal_size().columns if tty else 120),
-                      force_terminal=tty, color_system="auto" if tty else None,
-                      highlight=False)
-    console.print(Markdown("\n".join(lines), hyperlinks=False))
-    return "\n".join(line.rstrip() for line in buf.getvalue().splitlines()).strip("\n")
+    width = width or (os.get_terminal_size().columns if tty else 120)
+    out = []
+    for is_table, block in _blocks(lines):
+        buf = io.StringIO()
+        console = Console(file=buf, width=max(width, table_width(block)) if is_table else width,
+                          force_terminal=tty, color_system="auto" if tty else None,
+                          highlight=False)
+        console.print(Markdown("\n".join(block), hyperlinks=False))
+        out.append("\n".join(line.rstrip() for line in buf.getvalue().splitlines()).strip("\n"))
+    return "\n\n".join(o for o in out if o)

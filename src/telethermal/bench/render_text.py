@@ -5,7 +5,7 @@ JSON."""
 from __future__ import annotations
 
 from telethermal.bench.clock_text import real_clock_sentences
-from telethermal.bench.markdown import Page, figure, pct, provenance, save, table
+from telethermal.bench.markdown import Page, figure, pct, provenance, save, table, val
 
 
 def _controller_rows(c: dict) -> list[list]:
@@ -77,10 +77,13 @@ def _materials(d: dict) -> list[str]:
             "than a fingertip detects:", ""] + table(
         ["material", "skin", "idling at the object", "repeated", "flux from the decision",
          "first second", "heat extracted", "skin off"], [
-            [m, f"{v['skin_rms_k']:.2f} K", f"{v['skin_rms_idle_at_object_k']:.2f} K",
-             f"{v['skin_rms_repeat_k']:.2f} K", pct(v["flux_rms_from_decision_rel"]),
-             pct(v["flux_rms_first_second_rel"]), f"{v['heat_extraction_ratio_first_s']:.2f}x",
-             f"{v['skin_above_threshold_s']:.2f} s"] for m, v in per.items() if v])
+            [m, val(v.get("skin_rms_k"), ".2f", " K"),
+             val(v.get("skin_rms_idle_at_object_k"), ".2f", " K"),
+             val(v.get("skin_rms_repeat_k"), ".2f", " K"),
+             pct(v.get("flux_rms_from_decision_rel")), pct(v.get("flux_rms_first_second_rel")),
+             val(v.get("heat_extraction_ratio_first_s"), ".2f", "x"),
+             val(v.get("skin_above_threshold_s"), ".2f", " s")]
+            for m, v in per.items() if v])
 
 
 def _decision_floor(d: dict) -> list[str]:

@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 
 from telethermal.bench import (faults_text, identify_text, render_text,  # noqa: E402
                                sections, unseen_text)
-from telethermal.bench.markdown import Page, terminal  # noqa: E402
+from telethermal.bench.markdown import Page, provenance, terminal  # noqa: E402
 from telethermal.bench.options import reduced_options  # noqa: E402
 
 
@@ -65,7 +65,7 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
         cut = reduced_options(d.get("command", ""))
         if cut:
             reduced.append(f"{name} `{' '.join(cut)}`")
-        body += section(d, page)
+        body += _guarded(name, section, d, page)
     if reduced:
         lines += ["Reduced runs (options other than the bench's defaults: fewer methods, "
                   "seeds, trials, rounds or settings; their figures are not the committed "
@@ -77,6 +77,18 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
     tmp.write_text("\n".join(lines) + "\n")
     os.replace(tmp, out_md)
     return out_md
+
+
+def _guarded(name: str, section, d: dict, page: Page) -> list[str]:
+    """``section(d, page)``, or, for a JSON it cannot read (written by an
+    older bench: a field it lacks), a section that says so: the rest of the
+    report is still written."""
+    try:
+        return section(d, page)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        return [f"## {name}", "", f"The section could not be written from `{name}.json` "
+                f"({type(exc).__name__}: {exc}): a JSON from an older bench; re-run "
+                f"`telethermal bench {name}`.", "", provenance(d), ""]
 
 
 def bench_text(name: str, report: dict, json_path: str | Path, *written,

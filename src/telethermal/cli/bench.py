@@ -3,6 +3,8 @@ prints its figures (the work is in ``telethermal.bench``)."""
 
 from __future__ import annotations
 
+import sys
+
 from telethermal.cli._common import _command, _png, _positive, _progress
 
 
@@ -69,7 +71,8 @@ def cmd_bench_transport(args) -> int:
     from telethermal.bench import transport
 
     with _progress(2, "bench transport") as advance:
-        report = transport.run_and_save(args.json, command=_command(), progress=advance)
+        report = transport.run_and_save(args.json, command=_command(), progress=advance,
+                                        quick=args.quick)
     print(bench_text("transport", report, args.json))
     return 0
 
@@ -234,6 +237,8 @@ def _add_speed(bsub) -> None:
     p = bsub.add_parser("transport", help="codec cost; one-way latency beside raw pyzmq on "
                                           "loopback and across network namespaces")
     p.add_argument("--json", required=True, help="JSON report to write")
+    p.add_argument("--quick", action="store_true",
+                   help="a quarter of the messages per stack (a smoke run)")
     p.set_defaults(func=cmd_bench_transport)
 
     p = bsub.add_parser("report", help="every benchmark's JSON in one Markdown report with "
@@ -270,7 +275,8 @@ def _add_faults(bsub) -> None:
     p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--png", help="the Jepsen-style plot (default: next to the JSON)")
     p.add_argument("--quick", action="store_true",
-                   help="the zero-delay and 200 ms rows, 2 seeds; processes on one material")
+                   help="the zero-delay and 200 ms rows on a third of the materials, 2 "
+                        "seeds; processes on one material")
     p.add_argument("--only", help="comma-separated parts of setting names to run "
                                   "(e.g. 'crash,partition'); 'delay 0 ms' is always run")
     p.add_argument("--seeds", type=int, help="seeds per material on the simulated clock "
@@ -326,7 +332,8 @@ def _add_render(bsub) -> None:
                                        "the loop on the real clock")
     p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--png", help="plot (default: beside the JSON)")
-    p.add_argument("--quick", action="store_true", help="a few materials and rates (tests)")
+    p.add_argument("--quick", action="store_true",
+                   help="a few materials, rates and gains, one seed (a smoke run)")
     p.add_argument("--as-built", type=_as_built_sd, metavar="SD",
                    help="instead: every material's first touch on pads built off their "
                         "datasheet (both pads' factors drawn log-normal with this sd), as "
@@ -421,3 +428,18 @@ def add_parser(sub) -> None:
     _add_speed(bsub)
     _add_faults(bsub)
     _add_error(bsub)
+    for name, p in bsub.choices.items():
+        if name != "report":
+            p.set_defaults(func=_timed(name, p.get_default("func")))
+
+
+def _timed(name: str, func):
+    """A bench's command, and on stderr how long it took (what ``make
+    bench`` logs per bench)."""
+    def run(args) -> int:
+        import time
+        t0 = time.monotonic()
+        code = func(args)
+        print(f"bench {name}: {time.monotonic() - t0:.0f} s", file=sys.stderr)
+        return code
+    return run

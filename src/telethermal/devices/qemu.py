@@ -100,6 +100,17 @@ def _dying_with_parent(argv: list[str]) -> list[str]:
     return [setpriv, "--pdeathsig", "KILL", "--", *argv]
 
 
+#: What a make passes its sub-makes: its command line's variables among them
+#: (``make bench OUT=dir`` had the firmware's images written into ``dir``).
+MAKE_ENV = ("MAKEFLAGS", "MFLAGS", "MAKELEVEL", "MAKEOVERRIDES")
+
+
+def own_make_env() -> dict[str, str]:
+    """This process's environment without what an outer make passes down:
+    the firmware's build is its own, not a sub-make of whatever ran us."""
+    return {k: v for k, v in os.environ.items() if k not in MAKE_ENV}
+
+
 def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, Path]:
     """``make -C firmware TARGET=stm32f405 BUILD=build_dir``: image name ->
     its ELF file. ``DeviceError`` with the compiler's output if it fails.
@@ -112,7 +123,8 @@ def build_images(build_dir: str | Path, firmware: Path = FIRMWARE) -> dict[str, 
             fcntl.flock(lock, fcntl.LOCK_EX)
             done = subprocess.run(["make", "-C", str(firmware), "TARGET=stm32f405",
                                    f"BUILD={out}"],
-                                  capture_output=True, text=True, timeout=300)
+                                  capture_output=True, text=True, timeout=300,
+                                  env=own_make_env())
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise DeviceError(f"the STM32F405 build did not run to its end: {exc}") from exc
     if done.returncode != 0:

@@ -108,6 +108,10 @@ class MasterService:
         # Estimates and setpoints: the lossy stream, newest wins (PROTOCOL.md 6a).
         self.endpoint.deliver_stream = frozenset({MessageKind.POSTERIOR_ESTIMATE,
                                                   MessageKind.FLUX_SETPOINT})
+        #: The typed link to the slave over that endpoint; what arrives is
+        #: recorded at the period it is read in (``_arrival_now``).
+        self.wire = EndpointLink(self.endpoint, log, self._record_arrival)
+        self._arrival_now = 0.0
         #: The session's rules (what the master reads, what it tells the
         #: slave): the simulated network of ``bench faults`` runs the same.
         self.session = MasterSession()
@@ -150,7 +154,7 @@ class MasterService:
         return self.session.link
 
     def _send(self, sends) -> None:
-        EndpointLink(self.endpoint, log).send_all(sends)
+        self.wire.send_all(sends)
 
     # ------------------------------------------------------------ hardware
     def _open_hardware(self) -> None:
@@ -211,16 +215,16 @@ class MasterService:
             log.info("session config from slave: %d classes, scene %s", len(m.classes), m.scene)
         self.session.on_message(m, now, self.endpoint.offset.offset_s)
 
-    def _link(self, now: float) -> EndpointLink:
-        """The link to the slave this period: what arrives recorded at ``now``."""
-        record = None if self.recorder is None else \
-            (lambda raw: self.recorder.wire(now, "in", raw))
-        return EndpointLink(self.endpoint, log, record)
+    def _record_arrival(self, raw: dict) -> None:
+        """A message from the slave, recorded at the period that reads it."""
+        if getattr(self, "recorder", None) is not None:
+            self.recorder.wire(self._arrival_now, "in", raw)
 
     # ------------------------------------------------------------ loop
     def step(self, t_loop: float, dt_s: float) -> bool:
         now = time.monotonic()
-        for message in self._link(now).due(now):
+        self._arrival_now = now
+        for message in self.wire.due(now):
             try:
                 self._on_message(message, now)
             except Exception as exc:            # one message's, not the service's
@@ -440,11 +444,7 @@ class MasterService:
             if self.admin.pending:
                 self.admin.reply(ok=False, error="master stopping")
         try:
-            if self.endpoint.peer_version is not None:
-                self.endpoint.send("status", state=ServiceState.STOPPING,
-                                   counters=dict(self.endpoint.counters),
-                                   message="master stopping; pad at neutral")
-                self.endpoint.poll(0.05)
+            self.endpoint.say_stopping("master stopping; pad at neutral")
         finally:
             close_boards(self.display_options)
             self.endpoint.close()

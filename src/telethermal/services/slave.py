@@ -83,6 +83,9 @@ class SlaveService:
         self.curves = sample_curves(generator, renderable)
         self.rate_hz = self.scene.sample_rate_hz
         self.endpoint, self.admin = open_service_sockets("slave", config)
+        #: The typed link to the master over that endpoint (what arrives
+        #: recorded as it arrives, handled later maybe).
+        self.wire = EndpointLink(self.endpoint, log, self._record_arrival)
         # Opened once the sockets are: a slave refused (a busy port) writes nothing.
         self.recorder = None
         self.stop_requested = False
@@ -140,7 +143,7 @@ class SlaveService:
         return self.session.contact_id
 
     def _send(self, sends) -> None:
-        for s in EndpointLink(self.endpoint, log).send_all(sends):
+        for s in self.wire.send_all(sends):
             if isinstance(s.message, FluxTrajectory):
                 material = s.message.material
                 log.info("decided contact_id=%d material=%s (%s)", self.contact_id, material,
@@ -259,14 +262,12 @@ class SlaveService:
         a second or more): heartbeats go on; what arrives is recorded now and
         waits for the loop."""
         self.endpoint.state = self.state
-        self._inbox.extend(self._link().due(time.monotonic()))
+        self._inbox.extend(self.wire.due(time.monotonic()))
 
-    def _link(self) -> EndpointLink:
-        """The link to the master: what arrives recorded at its arrival
-        (handled later, maybe)."""
-        record = None if self.recorder is None else \
-            (lambda raw: self.recorder.wire(time.monotonic(), "in", raw))
-        return EndpointLink(self.endpoint, log, record)
+    def _record_arrival(self, raw: dict) -> None:
+        """A message from the master, recorded as it arrives."""
+        if getattr(self, "recorder", None) is not None:
+            self.recorder.wire(time.monotonic(), "in", raw)
 
     def announce_object(self) -> None:
         """The object under the pad (and the memory of it) told to the master."""
@@ -456,7 +457,7 @@ class SlaveService:
         inbox, self._inbox = self._inbox, []      # what came while the devices held the loop
         wait = 0.0 if inbox else max(0.0, min(deadline - time.monotonic(),
                                               self.config.transport.heartbeat_s))
-        for message in inbox + self._link().due(time.monotonic(), wait):
+        for message in inbox + self.wire.due(time.monotonic(), wait):
             try:
                 self._on_message(message, time.monotonic())
             except Exception as exc:
@@ -480,10 +481,7 @@ class SlaveService:
         try:
             if self.touch_t0 is not None:           # the master hears the pad left
                 self._lift(time.monotonic(), prepare_next=False)
-            if self.endpoint.peer_version is not None:
-                self.endpoint.send("status", state=ServiceState.STOPPING,
-                                   counters=self.endpoint.all_counters(), message="slave stopping")
-                self.endpoint.poll(0.05)
+            self.endpoint.say_stopping("slave stopping")
         finally:
             self._close_devices()
             self.endpoint.close()

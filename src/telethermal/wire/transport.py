@@ -230,6 +230,17 @@ class Endpoint:
     def close(self) -> None:
         self.sockets.close()
 
+    def say_stopping(self, message: str, linger_s: float = 0.05) -> None:
+        """A service's last word before :meth:`close`: if a peer has said
+        hello, ``status`` STOPPING with every counter and ``message``, and
+        ``linger_s`` for it to leave (and the peer's last messages to be
+        read and dropped)."""
+        if self.peer_version is None:
+            return
+        self.send("status", state="stopping", counters=self.all_counters(),
+                  message=message[:200])
+        self.poll(linger_s)
+
     # ------------------------------------------------------------ sending
     def _raw_send(self, sock, message: dict, data: bytes | None = None) -> bool:
         data = encode(message) if data is None else data
