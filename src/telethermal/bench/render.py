@@ -18,6 +18,7 @@ it runs the "static" controller, the one that uses it.
 from __future__ import annotations
 
 import datetime
+import json
 import platform
 import time
 from pathlib import Path
@@ -26,6 +27,8 @@ from typing import Callable
 import numpy as np
 
 from telethermal.bench.real_clock import REAL_CLOCK_PERIODS, REAL_CLOCK_RATES_HZ, real_clock_row
+from telethermal.bench.render_floor import (decision_floor_at_the_slaves_times, decision_floors,
+                                            decision_times)
 from telethermal.bench.render_limits import dew_report, limits_of, shipped_limits
 from telethermal.control.loop import DEFAULT_RATE_HZ, DEPLOYED_PRIORITY, FixedRateLoop, RealClock
 from telethermal.control.pid import PidGains
@@ -38,6 +41,7 @@ from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.display_setup import limits_report
 from telethermal.bench.render_sessions import (CONTACT_S, KEYS, Totals, config_fields,
                                                session_job)
+from telethermal.bench.render_sessions import mean_of as _mean
 
 RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
 SEEDS = (1, 2)
@@ -63,11 +67,6 @@ def junction_sensor_report(scene) -> dict:
     from telethermal.teleop.display_setup import display_model_args
     js = display_model_args(scene)["junction_sensor"]
     return {"name": js.name, "tau_s": js.tau_s, "source": js.source}
-
-
-def _mean(rows, key):
-    vals = [r[key] for r in rows if r[key] is not None and np.isfinite(r[key])]
-    return float(np.mean(vals)) if vals else None
 
 
 def _aggregate(rows):
@@ -160,73 +159,6 @@ def _safety_counts(report: dict, more_rows: list[dict]) -> dict:
             "safety_events_gain_study": study}
 
 
-def decision_floor_at_the_slaves_times(scene, first: list[dict], materials) -> dict:
-    """The floor of a display that learns each material when this bench's
-    slave decided it (control/decision_floor.py, nested information), from
-    the idle policy's pad for an unknown object, beside the first touches.
-
-    The decision time per material is the mean over seeds of the first
-    touches' ``decision_from_s`` (from contact); the floor is on the
-    scene's nominal touch (as ``bench skin-floor``'s), on 10 ms slots. Its
-    worst material is a bound no causal display that learns nothing before
-    its decision beats on its worst material, on this model and up to the
-    solver's slack; its per-material values are not bounds (a minimax
-    trades materials). Caveats, each stated in the report: the sessions'
-    touches each have their own operator and object (the floor is the
-    nominal touch's), so a session can fall below it; the times include
-    decisions that named a pair, "unknown" or a wrong material (each
-    earlier than naming the material: the floor is then lower, the
-    comparison harsher); the product's display mixes the posteriors before
-    the decision, which this floor does not give it."""
-    from telethermal.control import preconditioning as pc
-    from telethermal.control import display_floor
-    from telethermal.control.decision_floor import decision_floor
-
-    times = {}
-    for m in materials:
-        vals = [r["decision_from_s"] for r in first
-                if r["material"] == m and r["decision_from_s"] is not None]
-        if vals:
-            times[m] = float(np.mean(vals))
-    decided = [m for m in materials if m in times]
-    if not decided:
-        return {"note": "no first touch was decided"}
-    search = pc.FloorSearch(scene, display_floor.hardware(scene),
-                            display_floor.nominal_touch(scene))
-    idle_c = pc.idle_for(scene, None, search.touch.object_c, search.touch.finger_c)
-    targets = {m: search.targets[m] for m in decided}
-    at = {m: times[m] for m in decided}
-    f = decision_floor(search.hw, search.plant, targets, idle_c, at)
-    # Against each material's floor knowing it at contact (the same model):
-    # the least worst ratio any display learning at these times can reach.
-    known = {m: search.floor_k(m, idle_c) for m in decided}
-    rel = decision_floor(search.hw, search.plant, targets, idle_c, at, relative_to=known)
-    skin = {m: _mean([r for r in first if r["material"] == m], "temp_rms_error_c")
-            for m in decided}
-    first_worst = max(decided, key=lambda m: skin[m])
-    return {"decision_s": times, "idle_c": idle_c, "grid_s": search.plant.grid_s,
-            "floor_worst_k": f.worst_k, "per_material_k": f.per_material_k,
-            "converged": f.converged, "first_touch_worst_material": first_worst,
-            "first_touch_worst_k": skin[first_worst], "ratio": skin[first_worst] / f.worst_k,
-            "floor_k_known_at_contact": known,
-            "least_worst_ratio_to_floor_k": rel.worst_ratio,
-            "ratio_converged": rel.converged,
-            "first_touch_ratio_to_floor_k": {m: skin[m] / known[m] for m in decided},
-            "undecided": [m for m in materials if m not in times],
-            "caveats": "the floor is on the scene's nominal touch, each session on its own "
-                       "operator and object; decision times include pairs, unknown and wrong "
-                       "decisions (harsher); the display's posterior mixture before the "
-                       "decision is information this floor does not give it; on 10 ms slots, "
-                       "up to the solver's slack (control/decision_floor.py)",
-            "criterion": "nested: the pad's heat common to the materials not yet decided; "
-                         "minimax over the decided materials; per_material_k: each "
-                         "material on that trajectory, not a bound per material; "
-                         "least_worst_ratio_to_floor_k: the least, over every display "
-                         "learning at these times, of the worst first touch's ratio to its "
-                         "floor knowing the material at contact (floor_k_known_at_contact, "
-                         "the same model)"}
-
-
 def generator_comparison(scene) -> dict:
     """Network against fitted closed form, leave one person out of database 2."""
     trials = finger_database(scene, np.random.default_rng(1000))
@@ -262,7 +194,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
 
 
 def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
-    from telethermal.bench.executor import sweep
+    from telethermal.bench.executor import call_json, function_name, sweep
     from telethermal.render.generator import save_generator
 
     step = progress or (lambda _msg: None)
@@ -280,13 +212,13 @@ def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
 
     totals = Totals()
 
-    def rows_of(config, mats=materials, sds=seeds, expected=False):
+    def rows_of(config, mats=materials, sds=seeds, expected=False, pool=True):
         """Every material and seed's session on ``config``, in that order;
-        each added to the run's totals."""
+        each added to the run's totals (``pool``; else by the caller)."""
         rows = sweep(executor, session_job, [(job, m, s, config_fields(config),
                                               m if expected else None)
                                              for m in mats for s in sds])
-        for row in rows:
+        for row in rows if pool else ():
             totals.add(row)
         return rows
 
@@ -294,26 +226,31 @@ def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
               "materials": {m: {} for m in materials}, "training_s": training_s}
     seeds5 = SEEDS_5[:1] if quick else SEEDS_5
     report["seeds_rate_and_controller"] = list(seeds5)
+    report["rate"], report["controller"] = [], []
+    step("controllers")
+    by_model = {model: rows_of(DisplayConfig(feedforward_model=model), sds=seeds5, pool=False)
+                for model in FEEDFORWARD_MODELS}
+    first = by_model[DisplayConfig().feedforward_model]
+    # The floor at the slave's decision times (from the shipped display's
+    # first touches): a job on the sweep's executor, beside the sessions
+    # below (it needs none of them).
+    times = decision_times(first, materials)
+    floors = executor.submit(call_json, function_name(decision_floors),
+                             json.dumps([job["scene"], times])) if times else None
     step("control rate")
-    report["rate"] = []
     for rate in rates:
         rows = rows_of(DisplayConfig(rate_hz=rate), sds=seeds5)
         report["rate"].append({"rate_hz": rate, **_aggregate(rows), "rows": rows})
-    report["controller"] = []
-    for model in FEEDFORWARD_MODELS:
-        rows = rows_of(DisplayConfig(feedforward_model=model), sds=seeds5)
+    for model, rows in by_model.items():         # pooled after the rates, as always
+        for row in rows:
+            totals.add(row)
         report["controller"].append({"feedforward_model": model, **_aggregate(rows),
                                      "per_material": _per_material(rows), "rows": rows})
     step("repeated touches (pre-conditioned from memory)")
-    first = next(c["rows"] for c in report["controller"]
-                 if c["feedforward_model"] == DisplayConfig().feedforward_model)
     repeat = rows_of(DisplayConfig(), sds=seeds5, expected=True)
     step("first touches with the pad idling at the object (the policy's comparison)")
     at_object = rows_of(DisplayConfig(idle="object"), sds=seeds5)
     report["materials"] = _materials(first, repeat, at_object)
-    step("the floor at the slave's decision times")
-    report["decision_floor"] = decision_floor_at_the_slaves_times(
-        scene, first, materials)
     step("PID gains")
     report["gains"] = []
     for name, gains in GAIN_SETS.items():
@@ -330,6 +267,9 @@ def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
     for before in ("hold", "prior"):
         rows = rows_of(DisplayConfig(before=before))
         report["before"].append({"before": before, **_aggregate(rows), "rows": rows})
+    step("the floor at the slave's decision times")
+    report["decision_floor"] = decision_floor_at_the_slaves_times(
+        first, materials, json.loads(floors.result()) if floors is not None else {})
     step("generators")
     report["generator"] = generator_comparison(scene) if not quick else None
     step("real clock")

@@ -9,6 +9,8 @@ import dataclasses
 import functools
 import time
 
+import numpy as np
+
 from telethermal.control.pid import PidGains
 from telethermal.sim.inprocess import run_session
 from telethermal.teleop.display_setup import add_limits, new_limit_totals
@@ -20,6 +22,13 @@ KEYS = ("flux_rms_error_rel", "flux_rms_error_rel_first_s", "temp_rms_error_c",
 #: A session's module summary keys ``add_limits`` reads (kept in each row).
 _LIMIT_KEYS = ("current_exceeded", "hot_side_exceeded", "reversals", "contact_s",
                "ripple_rms_a", "requested")
+
+
+def mean_of(rows: list[dict], key: str) -> float | None:
+    """The mean of ``key`` over ``rows``, its missing and non-finite values
+    left out (None: none left)."""
+    vals = [r[key] for r in rows if r[key] is not None and np.isfinite(r[key])]
+    return float(np.mean(vals)) if vals else None
 
 
 class Totals:

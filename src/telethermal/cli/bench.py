@@ -30,7 +30,7 @@ def cmd_bench_render(args) -> int:
     if args.as_built is not None:
         _no_executor(args)
         return _bench_render_as_built(args)
-    with _progress(9, "bench render") as advance, _executor(args) as executor:
+    with _progress(10, "bench render") as advance, _executor(args) as executor:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene,
                                      executor=executor)
