@@ -198,3 +198,27 @@ def test_a_bench_prints_every_figure_of_its_report_section(name, tmp_path):
     assert "\u2026" not in printed                          # no cell cut short
     assert printed.rstrip().endswith(f"wrote {tmp_path / f'{name}.json'} and "
                                      f"{tmp_path / f'{name}.png'}")
+
+
+def test_faults_section_says_dash_for_what_a_run_left_out(page):
+    """``bench faults --only crash,partition`` runs no 200 ms row: its
+    ratios are None, and the section says '-' (it had crashed the
+    printout after the JSON was written)."""
+    d = json.loads((RESULTS / "faults.json").read_text())
+    for key in [k for k in d["summary"] if k.endswith("_200ms") or "200ms_" in k]:
+        d["summary"][key] = None
+    d["summary"]["repeat_touch_ratio_to_oracle_max"] = None
+    row = next(iter(d["simulated"]["rows"].values()))
+    next(iter(row["modes"].values()))["blind_s"]["mean"] = None
+    from telethermal.bench import faults_text
+    text = "\n".join(faults_text.section(d, page))
+    assert "the first touch after the news **-** its zero-delay error" in text
+    assert "at most **-** the oracle floor" in text
+    assert bench_text("faults", d, "f.json", width=80)
+
+
+def test_a_bench_says_how_long_it_took_and_keeps_its_exit_code(capsys):
+    from telethermal.cli.bench import _timed
+
+    assert _timed("x", lambda args: 3)(None) == 3
+    assert re.fullmatch(r"bench x: \d+ s\n", capsys.readouterr().err)

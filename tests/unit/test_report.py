@@ -27,6 +27,7 @@ def test_the_report_has_every_section_with_its_provenance_and_figures(tmp_path):
     for image in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text):
         assert (tmp_path / image).is_file(), image
     assert "Not run" not in text
+    assert "could not be written" not in text            # every section read its JSON
 
 
 def test_a_missing_bench_is_named_not_invented(tmp_path):

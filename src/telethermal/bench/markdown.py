@@ -111,13 +111,15 @@ def table_width(lines: list[str]) -> int:
     one line per row (rich squeezes a table too wide for its console, and
     cuts the words that still do not fit): per column its longest cell over
     the table's rows, plus the padding and rules rich puts around cells."""
+    from rich.cells import cell_len           # a wide character takes two columns
+
     widest, cols = 0, []
     for line in [*lines, ""]:
         if line.startswith("|") and line.endswith("|"):
             if set(line) <= set("|-: "):               # the header's rule
                 continue
             cells = [c.strip() for c in line.strip("|").split("|")]
-            words = [max(len(c), 1) for c in cells]
+            words = [max(cell_len(c), 1) for c in cells]
             cols = [max(a, b) for a, b in zip(cols, words)] + words[len(cols):] \
                 if len(words) >= len(cols) else \
                 [max(a, b) for a, b in zip(cols, words + [0] * len(cols))]
@@ -128,10 +130,14 @@ def table_width(lines: list[str]) -> int:
 
 
 def _blocks(lines: list[str]) -> list[tuple[bool, list[str]]]:
-    """``lines`` cut into runs: (True, a table's lines) or (False, the rest)."""
+    """``lines`` cut into runs: (True, a table's lines) or (False, the rest;
+    a fenced block's lines are never a table's)."""
     out: list[tuple[bool, list[str]]] = []
+    fenced = False
     for line in lines:
-        is_table = line.startswith("|") and line.endswith("|")
+        if line.startswith("```"):
+            fenced = not fenced
+        is_table = not fenced and line.startswith("|") and line.endswith("|")
         if out and out[-1][0] == is_table:
             out[-1][1].append(line)
         else:

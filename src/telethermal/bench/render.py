@@ -237,36 +237,42 @@ def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
     times = decision_times(first, materials)
     floors = executor.submit(call_json, function_name(decision_floors),
                              json.dumps([job["scene"], times])) if times else None
-    step("control rate")
-    for rate in rates:
-        rows = rows_of(DisplayConfig(rate_hz=rate), sds=seeds5)
-        report["rate"].append({"rate_hz": rate, **_aggregate(rows), "rows": rows})
-    for model, rows in by_model.items():         # pooled after the rates, as always
-        for row in rows:
-            totals.add(row)
-        report["controller"].append({"feedforward_model": model, **_aggregate(rows),
-                                     "per_material": _per_material(rows), "rows": rows})
-    step("repeated touches (pre-conditioned from memory)")
-    repeat = rows_of(DisplayConfig(), sds=seeds5, expected=True)
-    step("first touches with the pad idling at the object (the policy's comparison)")
-    at_object = rows_of(DisplayConfig(idle="object"), sds=seeds5)
-    report["materials"] = _materials(first, repeat, at_object)
-    step("PID gains")
-    report["gains"] = []
-    for name, gains in GAIN_SETS.items():
-        if quick and name not in QUICK_GAIN_SETS:
-            continue
-        for belief in (1.0, 1.3):
-            rows = rows_of(DisplayConfig(gains=gains, r_pad_belief=belief,
-                                         feedforward_model="static"))
-            report["gains"].append({"gains": name, "kp": gains.kp, "ki": gains.ki,
-                                    "kd": gains.kd, "pad_resistance_belief": belief,
-                                    **_aggregate(rows), "rows": rows})
-    step("before identification")
-    report["before"] = []
-    for before in ("hold", "prior"):
-        rows = rows_of(DisplayConfig(before=before))
-        report["before"].append({"before": before, **_aggregate(rows), "rows": rows})
+    try:                # a failed or interrupted sweep leaves no floor job running
+        step("control rate")
+        for rate in rates:
+            rows = rows_of(DisplayConfig(rate_hz=rate), sds=seeds5)
+            report["rate"].append({"rate_hz": rate, **_aggregate(rows), "rows": rows})
+        for model, rows in by_model.items():         # pooled after the rates, as always
+            for row in rows:
+                totals.add(row)
+            report["controller"].append({"feedforward_model": model, **_aggregate(rows),
+                                         "per_material": _per_material(rows), "rows": rows})
+        step("repeated touches (pre-conditioned from memory)")
+        repeat = rows_of(DisplayConfig(), sds=seeds5, expected=True)
+        step("first touches with the pad idling at the object (the policy's comparison)")
+        at_object = rows_of(DisplayConfig(idle="object"), sds=seeds5)
+        report["materials"] = _materials(first, repeat, at_object)
+        report["decision_floor"] = None         # its place in the report: filled below
+        step("PID gains")
+        report["gains"] = []
+        for name, gains in GAIN_SETS.items():
+            if quick and name not in QUICK_GAIN_SETS:
+                continue
+            for belief in (1.0, 1.3):
+                rows = rows_of(DisplayConfig(gains=gains, r_pad_belief=belief,
+                                             feedforward_model="static"))
+                report["gains"].append({"gains": name, "kp": gains.kp, "ki": gains.ki,
+                                        "kd": gains.kd, "pad_resistance_belief": belief,
+                                        **_aggregate(rows), "rows": rows})
+        step("before identification")
+        report["before"] = []
+        for before in ("hold", "prior"):
+            rows = rows_of(DisplayConfig(before=before))
+            report["before"].append({"before": before, **_aggregate(rows), "rows": rows})
+    except BaseException:
+        if floors is not None:
+            floors.cancel()
+        raise
     step("the floor at the slave's decision times")
     report["decision_floor"] = decision_floor_at_the_slaves_times(
         first, materials, json.loads(floors.result()) if floors is not None else {})

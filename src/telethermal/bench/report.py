@@ -6,6 +6,7 @@ bench itself prints (:mod:`telethermal.bench.markdown`: one renderer)."""
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 
@@ -17,6 +18,9 @@ from telethermal.bench import (faults_text, identify_text, render_text,  # noqa:
                                sections, unseen_text)
 from telethermal.bench.markdown import Page, provenance, terminal  # noqa: E402
 from telethermal.bench.options import reduced_options  # noqa: E402
+
+
+log = logging.getLogger("telethermal.bench")
 
 
 def _load(results: Path, name: str) -> dict | None:
@@ -86,6 +90,8 @@ def _guarded(name: str, section, d: dict, page: Page) -> list[str]:
     try:
         return section(d, page)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
+        log.warning("bench report: the %s section was not written from %s.json: %s: %s",
+                    name, name, type(exc).__name__, exc)
         return [f"## {name}", "", f"The section could not be written from `{name}.json` "
                 f"({type(exc).__name__}: {exc}): a JSON from an older bench; re-run "
                 f"`telethermal bench {name}`.", "", provenance(d), ""]

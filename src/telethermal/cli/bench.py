@@ -367,7 +367,8 @@ def _add_error(bsub) -> None:
     p.add_argument("--seed", type=int, default=0,
                    help="the first session's seed: sessions SEED .. SEED+SESSIONS-1 (default 0)")
     p.add_argument("--methods", help="comma-separated (default: those whose calibration error "
-                                     "is within 0.05: effusivity-lda, pca-fnn)")
+                                     "is within 0.05: effusivity-fit, effusivity-lda, "
+                                     "pca-fnn)")
     p.add_argument("--scene", help="a scene (name or path, a lab's own): each method's grouped "
                                    "5-fold cross-validation on its simulated pad database "
                                    "instead of the papers' tables")
