@@ -4,7 +4,7 @@ JSON."""
 
 from __future__ import annotations
 
-from telethermal.bench.markdown import Page, figure, pct, provenance
+from telethermal.bench.markdown import Page, figure, pct, provenance, val
 
 
 def recovery_text(row: dict) -> str:
@@ -15,12 +15,6 @@ def recovery_text(row: dict) -> str:
     if row["recovery_s"] is None:
         return "not back"
     return f"{row['recovery_s']:.2f} s ({row['recovery_bound_s']:.2f} s)"
-
-
-def _x(v, digits: int, unit: str = "x") -> str:
-    """A ratio (``-`` for none: a row the run left out, or a figure it could
-    not compute)."""
-    return "-" if v is None else f"{v:.{digits}f}{unit}"
 
 
 def section(d: dict, page: Page) -> list[str]:
@@ -46,13 +40,13 @@ def section(d: dict, page: Page) -> list[str]:
     for name, row in sim["rows"].items():
         for mode, st in list(row["modes"].items()) + list(row.get("ablations", {}).items()):
             lines.append(f"| {name} | {mode} | {cell(st['blind'])} | {cell(st['after_news'])} | "
-                         f"{cell(st['whole'])} | {_x(st['blind_s']['mean'], 3, '')} | "
+                         f"{cell(st['whole'])} | {val(st['blind_s']['mean'], '.3f')} | "
                          f"{st['safety_events']} |")
     lines.append(f"| - | oracle floor | | | {cell(sim['oracle']['whole'])} | 0 | "
                  f"{sim['oracle']['safety_events']} |")
 
     def x(key, digits=2):
-        return _x(s.get(key), digits)
+        return val(s.get(key), f".{digits}f", "x")
 
     lines += ["", f"At {s.get('ratio_setting', '-')}: the first touch after the news "
               f"**{x('first_touch_after_news_ratio_200ms')}** its zero-delay error "

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import os
+from itertools import zip_longest
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -120,9 +121,7 @@ def table_width(lines: list[str]) -> int:
                 continue
             cells = [c.strip() for c in line.strip("|").split("|")]
             words = [max(cell_len(c), 1) for c in cells]
-            cols = [max(a, b) for a, b in zip(cols, words)] + words[len(cols):] \
-                if len(words) >= len(cols) else \
-                [max(a, b) for a, b in zip(cols, words + [0] * len(cols))]
+            cols = [max(a, b) for a, b in zip_longest(cols, words, fillvalue=0)]
         elif cols:                                       # a table ended
             widest = max(widest, sum(w + 3 for w in cols) + 1)
             cols = []

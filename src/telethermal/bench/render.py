@@ -275,7 +275,7 @@ def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
         raise
     step("the floor at the slave's decision times")
     report["decision_floor"] = decision_floor_at_the_slaves_times(
-        first, materials, json.loads(floors.result()) if floors is not None else {})
+        first, materials, times, json.loads(floors.result()) if floors is not None else {})
     step("generators")
     report["generator"] = generator_comparison(scene) if not quick else None
     step("real clock")

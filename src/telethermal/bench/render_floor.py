@@ -47,12 +47,13 @@ def decision_floors(scene_ref: str, times: dict[str, float]) -> dict:
             "worst_ratio": rel.worst_ratio, "ratio_converged": rel.converged}
 
 
-def decision_floor_at_the_slaves_times(first: list[dict], materials, floors: dict) -> dict:
+def decision_floor_at_the_slaves_times(first: list[dict], materials, times: dict[str, float],
+                                       floors: dict) -> dict:
     """The floor of a display that learns each material when this bench's
     slave decided it (control/decision_floor.py, nested information), from
     the idle policy's pad for an unknown object, beside the first touches;
-    ``floors``: :func:`decision_floors` at :func:`decision_times` of
-    ``first``.
+    ``times``: :func:`decision_times` of ``first``; ``floors``:
+    :func:`decision_floors` at those times.
 
     The decision time per material is the mean over seeds of the first
     touches' ``decision_from_s`` (from contact); the floor is on the
@@ -67,7 +68,6 @@ def decision_floor_at_the_slaves_times(first: list[dict], materials, floors: dic
     earlier than naming the material: the floor is then lower, the
     comparison harsher); the product's display mixes the posteriors before
     the decision, which this floor does not give it."""
-    times = decision_times(first, materials)
     decided = [m for m in materials if m in times]
     if not decided:
         return {"note": "no first touch was decided"}

@@ -100,8 +100,8 @@ def _guarded(name: str, section, d: dict, page: Page) -> list[str]:
 def bench_text(name: str, report: dict, json_path: str | Path, *written,
                width: int | None = None) -> str:
     """What ``telethermal bench NAME`` prints: its section of the report
-    (the same lines, from the same JSON), its figures linked where the
-    bench wrote them, then the files it wrote (``width``: the terminal's,
+    (the same lines, from the same JSON; its figures left out, a terminal
+    shows no image), then the files it wrote (``width``: the terminal's,
     120 columns in a pipe)."""
     section = dict(SECTIONS + BY_HAND)[name]
     folder = Path(json_path).parent

@@ -97,7 +97,7 @@ def section_lines(report: dict) -> list[str]:
         rows.append([w, f"{s['trained_named_right']} of {s['trained_n']}", t50 or "-",
                      f"{s['unseen_named_trained_ever']} of {s['unseen_n']}",
                      "-" if inside is None else inside])
-    return ["The open-set trade (`unseen_weight`):", "",
-            "| weight | trained named right | first decision p50 | unseen named a trained "
-            "class | inside that class's predictive then |", "|---|---|---|---|---|",
-            *("| " + " | ".join(str(c) for c in row) + " |" for row in rows), ""]
+    from telethermal.bench.markdown import table
+    return ["The open-set trade (`unseen_weight`):", ""] + table(
+        ["weight", "trained named right", "first decision p50",
+         "unseen named a trained class", "inside that class's predictive then"], rows)

@@ -110,6 +110,7 @@ class MasterService:
                                                   MessageKind.FLUX_SETPOINT})
         #: The typed link to the slave over that endpoint; what arrives is
         #: recorded at the period it is read in (``_arrival_now``).
+        self.recorder = None                    # opened last (below)
         self.wire = EndpointLink(self.endpoint, log, self._record_arrival)
         self._arrival_now = 0.0
         #: The session's rules (what the master reads, what it tells the
@@ -217,7 +218,7 @@ class MasterService:
 
     def _record_arrival(self, raw: dict) -> None:
         """A message from the slave, recorded at the period that reads it."""
-        if getattr(self, "recorder", None) is not None:
+        if self.recorder is not None:
             self.recorder.wire(self._arrival_now, "in", raw)
 
     # ------------------------------------------------------------ loop

@@ -83,11 +83,11 @@ class SlaveService:
         self.curves = sample_curves(generator, renderable)
         self.rate_hz = self.scene.sample_rate_hz
         self.endpoint, self.admin = open_service_sockets("slave", config)
+        # Opened once the sockets are: a slave refused (a busy port) writes nothing.
+        self.recorder = None
         #: The typed link to the master over that endpoint (what arrives
         #: recorded as it arrives, handled later maybe).
         self.wire = EndpointLink(self.endpoint, log, self._record_arrival)
-        # Opened once the sockets are: a slave refused (a busy port) writes nothing.
-        self.recorder = None
         self.stop_requested = False
         #: The service's own error counters, reported with the transport's
         #: (status messages and the admin socket); the session counts the
@@ -266,7 +266,7 @@ class SlaveService:
 
     def _record_arrival(self, raw: dict) -> None:
         """A message from the master, recorded as it arrives."""
-        if getattr(self, "recorder", None) is not None:
+        if self.recorder is not None:
             self.recorder.wire(time.monotonic(), "in", raw)
 
     def announce_object(self) -> None:
