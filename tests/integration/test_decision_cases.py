@@ -9,15 +9,10 @@ from the database written to disk): each is decided rubber,
 and the memory the slave builds from them announces rubber before the
 third."""
 
-from dataclasses import replace
-
-import numpy as np
 import pytest
 
-from telethermal.data.generate import SensorSession
 from telethermal.physics.scene import load_scene, with_finger
-from telethermal.physics.sensors import draw_instruments
-from telethermal.services.slave_devices import calibrate
+from telethermal.sim.inprocess import service_sensors
 from telethermal.teleop.memory import ObjectMemory
 from telethermal.teleop.models import train_identifier
 from telethermal.teleop.slave import Slave, slave_rng
@@ -33,9 +28,7 @@ def test_the_soak_rubber_touches_are_rubber_and_remembered_so():
     identifier = train_identifier(SCENE, DEMO_SEED)
     # The slave service's instruments and calibration, drawn as the service
     # draws them for its seed (SlaveService._start_sensor_session).
-    session_rng = np.random.default_rng((DEMO_SEED, 0xCA1))
-    sensors = SensorSession(draw_instruments(SCENE.sensors, session_rng))
-    session = replace(sensors, calibration=calibrate(None, sensors, SCENE, session_rng))
+    session = service_sensors(SCENE, DEMO_SEED)
     memory = ObjectMemory(identifier.threshold)
     announced = []
     for seed in RUBBER_SEEDS:

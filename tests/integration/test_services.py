@@ -14,7 +14,9 @@ from telethermal.services.config import ConfigError, load_config
 from telethermal.demo.run import Services, wait_connected, write_configs
 from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
-from telethermal.sim.inprocess import run_session
+from telethermal.services.admin import call
+from telethermal.sim.inprocess import run_session, service_sensors
+from telethermal.sim.network import NetworkSpec
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -36,12 +38,18 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     services = Services(tmp_path, slave_cfg, master_cfg)
     try:
         wait_connected(services, ports[3])
+        calibration = call(ports[2], "status")["thermometer_calibration"]
         result = networked_touch(SCENE, "wood", ports, seed=4, contact_s=1.5)
     finally:
         codes = services.stop()
     s = result.summary
-    # The same touch in one process (same seeds, so the same physics).
-    local = run_session(SCENE, "wood", identifier, generator, contact_s=1.5, seed=4).summary
+    # The same touch in one process and over the simulated network: the
+    # same seed read through the slave service's instruments (its process
+    # seed 0) and the calibration it reported.
+    sensors = service_sensors(SCENE, 0, calibration)
+    local, simulated = (run_session(SCENE, "wood", identifier, generator, contact_s=1.5,
+                                    seed=4, slave_sensors=sensors, network=network).summary
+                        for network in (None, NetworkSpec()))
     assert codes == {"slave": 0, "master": 0}
     # The touch ran on the real clock: its safety events and its flux error
     # are the machine's load's as much as the code's (tests/realclock.py
@@ -50,6 +58,15 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     # the touch identified as in one process and rendered from it.
     assert_safe_under_load(s, devices)
     assert s["identified"] == local["identified"]
+    if devices == "sim":
+        # On the simulator the slave's touch is the same trial on every
+        # link: the same label, decided at the same instant of the touch
+        # (exact: its samples, not the clock the services ran on, decide).
+        fields = ("identified", "decision_time_s", "identified_at_s", "object_true_c",
+                  "object_ir_c")
+        assert {k: s[k] for k in fields} == {k: local[k] for k in fields} \
+            == {k: simulated[k] for k in fields}
+        assert s["decision_time_s"] is not None
     assert s["unknown_reason"] is None            # named: nothing to explain
     assert_rendered(s)
     assert math.isfinite(local["flux_rms_error_rel"])
@@ -141,7 +158,6 @@ def test_master_and_slave_in_two_network_namespaces(tmp_path, models):
 def _place(ports, material: str, object_id: str, seed: int) -> dict:
     """Put ``material`` under the slave pad as object ``object_id``; return
     the slave's reply once the master has the announcement (its status)."""
-    from telethermal.services.admin import call
     placed = call(ports[2], "place", material=material, object_id=object_id, seed=seed)
     assert placed["ok"], placed
     _until(lambda: (lambda s: s["object_id"] == object_id and
@@ -151,7 +167,6 @@ def _place(ports, material: str, object_id: str, seed: int) -> dict:
 
 
 def _touch(ports, seed: int) -> dict:
-    from telethermal.services.admin import call
     result = call(ports[3], "touch", timeout_s=40, contact_s=1.0, seed=seed)
     assert result["ok"], result
     assert_safe_under_load(result)                # real clock: tests/realclock.py

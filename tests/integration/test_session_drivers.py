@@ -19,6 +19,7 @@ from telethermal.services.config import SlaveConfig
 from telethermal.ports import free_ports
 from telethermal.services.slave import SlaveService
 from telethermal.teleop.memory import ObjectMemory
+from telethermal.sim.inprocess import service_sensors
 from telethermal.sim.links import instant_pair
 from telethermal.sim.network import NetworkSpec, SimNetwork
 from telethermal.sim.sides import SimSlaveService
@@ -55,6 +56,9 @@ def test_the_slave_sends_the_same_messages_on_the_three_links(models, material, 
     config = SlaveConfig(place=material, seed=5, admin_port=admin, transport=TransportConfig(
         security="plain", control_port=control, stream_port=stream))
     service = SlaveService(config, identifier, generator)
+    # The simulator draws and calibrates the service's instruments as the
+    # service did (its seed: service_sensors, as the demo's in-process touches).
+    assert service_sensors(SCENE, 5).describe() == service.sensors.describe()
     # The pad the service placed, made again for the simulator: the same
     # trial (seed) read through the same calibrated instruments.
     pad = Slave(SCENE, material, identifier, slave_rng(5), session=service.sensors)

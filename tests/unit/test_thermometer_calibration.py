@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from telethermal.control.thermometer_calibration import (UNCALIBRATED, SimulatedPadTarget,
+                                                         ThermometerCalibration,
                                                          calibrate_simulated,
                                                          calibrate_thermometer)
 from telethermal.data.generate import SensorSession, pad_database, sensor_session
@@ -92,6 +93,30 @@ def test_a_thermometer_that_does_not_see_the_pad_is_refused():
 def test_uncalibrated_is_the_identity():
     np.testing.assert_array_equal(UNCALIBRATED.correct_c(np.array([21.5, 30.0])), [21.5, 30.0])
     assert not UNCALIBRATED.calibrated
+
+
+def test_a_calibration_reads_back_from_its_dict_exactly():
+    # A slave's status carries its calibration as to_dict wrote it (through
+    # msgpack or JSON: floats exact); the simulator reads it back to read
+    # the pad through the same correction (sim.inprocess.service_sensors).
+    import json
+    cal = calibrate_simulated(_instruments(0.43, 0.012), ROOM_C, np.random.default_rng(3))
+    back = ThermometerCalibration.from_dict(json.loads(json.dumps(cal.to_dict())))
+    assert back == cal
+    assert ThermometerCalibration.from_dict(UNCALIBRATED.to_dict()).correct_c(21.5) == 21.5
+
+
+@pytest.mark.parametrize("d, match", [
+    ({"gain": 1.0}, "offset_k"),
+    ({"offset_k": "x", "gain": 1.0}, "could not convert"),
+    ({"offset_k": 0.1, "gain": 0.0}, "gain > 0"),
+    ({"offset_k": float("nan"), "gain": 1.0}, "finite"),
+    ({"offset_k": 0.1, "gain": 1.0, "points": [[1.0]]}, "not a thermometer calibration"),
+])
+def test_a_calibration_dict_that_is_not_one_is_refused_naming_where(d, match):
+    with pytest.raises(ValueError, match=match) as err:
+        ThermometerCalibration.from_dict(d, "the slave's status")
+    assert "the slave's status" in str(err.value)
 
 
 @pytest.mark.parametrize("bias_k", [0.5, -0.5])

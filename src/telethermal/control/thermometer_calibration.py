@@ -74,6 +74,25 @@ class ThermometerCalibration:
                 "offset_sd_k": None if math.isnan(self.offset_sd_k) else self.offset_sd_k,
                 "points": [list(p) for p in self.points]}
 
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "calibration") -> "ThermometerCalibration":
+        """The calibration :meth:`to_dict` wrote (a slave's ``status`` gives
+        it): ValueError naming ``where`` and the field for one that is
+        missing or not a number."""
+        try:
+            points = tuple((float(a), float(b)) for a, b in d.get("points") or ())
+            nan = math.nan
+            cal = cls(float(d["offset_k"]), float(d["gain"]),
+                      nan if d.get("residual_k") is None else float(d["residual_k"]),
+                      nan if d.get("offset_sd_k") is None else float(d["offset_sd_k"]), points)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{where}: not a thermometer calibration "
+                             f"({type(exc).__name__}: {exc})") from None
+        if not (math.isfinite(cal.offset_k) and math.isfinite(cal.gain) and cal.gain > 0):
+            raise ValueError(f"{where}: offset_k {cal.offset_k} and gain {cal.gain} must be "
+                             "finite and the gain > 0")
+        return cal
+
 
 UNCALIBRATED = ThermometerCalibration()
 

@@ -24,6 +24,7 @@ from telethermal.ports import free_ports
 from telethermal.services.admin import call
 from telethermal.services.qemu_boards import prepare_firmware
 from telethermal.services.viewer import open_view
+from telethermal.sim.inprocess import service_sensors
 from telethermal.teleop.models import demo_identify
 from telethermal.tomltables import toml_str
 from telethermal.view.server import ViewServer
@@ -198,6 +199,9 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                  f"{cal['gain']:.4f}, residual {cal['residual_k']:.3f} K")
         else:
             echo(f"slave's object thermometer NOT calibrated: {cal.get('error')}")
+        # The in-process touches read the pad through the slave service's
+        # instruments and calibration: the same seed, the same touch.
+        sensors = service_sensors(scene, seed, cal)
         if view_port is not None:
             view = open_view(master_cfg, record_dir, view_port)
             echo(f"view: {view.url}")
@@ -211,7 +215,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         for i, (material, again) in enumerate(plan):
             row, decided[material] = demo_touch(
                 scene, material, ports, seed + 1 + i, contact_s, out, identifier, generator,
-                again, echo, display_cal, decided.get(material))
+                again, echo, display_cal, decided.get(material), sensors)
             touches.append(row)
     except BaseException:
         if view is not None:

@@ -120,6 +120,9 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                # a new material's estimate and nearest class, as the slave reports it
                **{k: report.get(k) for k in EFFUSIVITY_KEYS},
                "decision_text": report.get("decision_text"),
+               # the object's temperature, true and as the slave measured it
+               "object_true_c": report["object_true_c"],
+               "object_ir_c": report.get("object_ir_c", placed["object_ir_c"]),
                "render_start_s": result["render_start_s"],
                "object_memory": result.get("object_memory"),
                "rate_hz": 1.0 / float(np.median(np.diff(trace["t_s"]))),
@@ -159,13 +162,36 @@ def touch_said(s: dict) -> str:
         f"{s['identified']} ({s['unknown_reason']})"
 
 
+#: What one touch decided, in every summary (teleop/decision.py).
+DECISION_KEYS = ("identified", "decision_time_s", "identified_at_s")
+
+
+def decided_alike(a: dict, b: dict) -> bool:
+    """Two summaries of a touch decided the same label at the same times."""
+    return all(a.get(k) == b.get(k) for k in DECISION_KEYS)
+
+
+def same_decision(networked: dict, local: dict) -> str:
+    """The in-process touch's decision against the networked one's, as the
+    demo's line says it: "the same decision" when the label and its time
+    are equal, else what the in-process slave decided."""
+    if decided_alike(networked, local):
+        return "the same decision"
+    when = when_decided(local) or "never"
+    return f"decided {local['identified']} {when}"
+
+
 def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generator,
-                again: bool, echo, display_cal=None, remembered=None) -> tuple[dict, object]:
+                again: bool, echo, display_cal=None, remembered=None,
+                slave_sensors=None) -> tuple[dict, object]:
     """One touch of the demo over the network, beside the same touch in one
     process; prints its line and returns its summary and the in-process
     slave's decision. ``remembered``: what the in-process slave's memory
     holds of the object (an earlier in-process touch's decision), as the
-    networked slave's memory holds its own for a repeated touch."""
+    networked slave's memory holds its own for a repeated touch.
+    ``slave_sensors``: the slave service's instruments and calibration
+    (:func:`~telethermal.sim.inprocess.service_sensors`), so the in-process
+    slave makes the service's touch of the seed."""
     from telethermal.sim.inprocess import run_session
 
     result = networked_touch(scene, material, ports[:4], seed, contact_s)
@@ -176,7 +202,7 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
                  "processes)")
     local_result = run_session(scene, material, identifier, generator, contact_s=contact_s,
                                seed=seed, display_calibration=display_cal,
-                               expected_material=remembered)
+                               expected_material=remembered, slave_sensors=slave_sensors)
     local = local_result.summary
     when = when_decided(s) or "never"
     start = "never" if s["render_start_s"] is None else f"{s['render_start_s']:.2f} s"
@@ -191,7 +217,7 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
          f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}; "
          f"master loop p99 {s['loop_period_p99_us']:.0f} us, "
          f"{s['loop']['deadline_misses']} missed deadlines; in one process "
-         f"{100 * local['flux_rms_error_rel']:.2f} %")
+         f"{same_decision(s, local)}, {100 * local['flux_rms_error_rel']:.2f} %")
     return {k: s[k] for k in (
         "material", "identified", "unknown_reason", *EFFUSIVITY_KEYS, "decision_text",
         "decision_time_s", "render_start_s", "object_memory",
@@ -201,6 +227,7 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
          "loop_steps": s["loop"]["steps"], "transport": s["transport"],
          "devices": s["devices_per_side"],
          "in_process_identified": local["identified"],
+         "in_process_same_decision": decided_alike(s, local),
          "in_process_decision_time_s": local["decision_time_s"],
          "in_process_render_start_s": local["render_start_s"],
          "in_process_flux_rms_error_rel": local["flux_rms_error_rel"],

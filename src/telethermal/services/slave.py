@@ -30,7 +30,7 @@ from telethermal.services.config import SlaveConfig
 from telethermal.services.slave_devices import calibrate, flat_counters, open_devices
 from telethermal.teleop.decision import pad_decision
 from telethermal.teleop.memory import ObjectMemory
-from telethermal.teleop.slave import BOARD_LOST, Slave, slave_rng
+from telethermal.teleop.slave import BOARD_LOST, Slave, instruments_rng, slave_rng
 from telethermal.teleop.links import EndpointLink
 from telethermal.teleop.session import ContactRequest, Send, ServiceState, SlaveSession
 from telethermal.wire.messages import (ContactEvent, FluxTrajectory, Hello, Message,
@@ -153,12 +153,10 @@ class SlaveService:
     def _start_sensor_session(self, seed: int) -> None:
         """This process's instruments (a session: the object thermometer's
         bias is drawn once for it), calibrated against the pad at start."""
-        import numpy as np
-
         from telethermal.data.generate import SensorSession
         from telethermal.physics.sensors import draw_instruments
 
-        self._session_rng = np.random.default_rng((seed, 0xCA1))
+        self._session_rng = instruments_rng(seed)
         self.sensors = SensorSession(draw_instruments(self.scene.sensors, self._session_rng))
         self.devices = open_devices(self.config, self.scene, self.sensors.instruments, seed,
                                     self.rate_hz)

@@ -54,7 +54,7 @@ from telethermal.teleop.display_config import DisplayConfig
 from telethermal.teleop.memory import ObjectMemory, memory_counts
 from telethermal.teleop.perception import heat_extraction_ratio, skin_above_threshold_s
 from telethermal.teleop.session import PRE_CONTACT_S
-from telethermal.teleop.slave import Slave, slave_rng
+from telethermal.teleop.slave import Slave, instruments_rng, slave_rng
 
 
 def idle_surface_minus_dew_k(trace: dict, contact_s: float, dew_c: float | None):
@@ -67,6 +67,27 @@ def idle_surface_minus_dew_k(trace: dict, contact_s: float, dew_c: float | None)
     if dew_c is None or not free.any():
         return None
     return float(surface[free].min() - dew_c)
+
+
+def service_sensors(scene: Scene, service_seed: int, calibration: dict | None = None):
+    """The instruments a slave service started with ``service_seed`` reads
+    its pad through (drawn once per process, :func:`instruments_rng`), with
+    ``calibration``: its object thermometer's calibration as the service
+    reports it (``status``' ``thermometer_calibration``; on devices or
+    after a recalibration only the service knows it); None: calibrated on
+    the simulator as the service does at start on ``devices = "sim"``. A
+    :func:`run_session` given it touches as that service touches the same
+    seed: the same trial, the same decisions."""
+    from telethermal.control.thermometer_calibration import ThermometerCalibration
+    from telethermal.data.generate import SensorSession, sensor_session
+    from telethermal.physics.sensors import draw_instruments
+
+    rng = instruments_rng(service_seed)
+    instruments = draw_instruments(with_finger(scene).sensors, rng)
+    if calibration is None:
+        return sensor_session(scene, rng, instruments=instruments)
+    return SensorSession(instruments, ThermometerCalibration.from_dict(
+        calibration, "the slave's thermometer_calibration"))
 
 
 @dataclass
@@ -87,7 +108,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 news_filter=None, idle_scene: Scene | None = None,
                 fresh_fits: bool = False, junction_lag_scale: float = 1.0,
                 display_calibration=None,
-                network: NetworkSpec | None = None) -> SessionResult:
+                network: NetworkSpec | None = None,
+                slave_sensors=None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -115,7 +137,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     display calibration (``DisplayCalibration``): its flux lag in the
     controllers, its flux gain on the readings. ``network``: the simulated
     network between the sides (its draws seeded by ``seed``); None: the
-    in-process wire, no delay and no loss."""
+    in-process wire, no delay and no loss. ``slave_sensors``: the slave's
+    instruments and thermometer calibration (a ``SensorSession``; a slave
+    service's: :func:`service_sensors`, so the touch is the one that
+    service makes of the same seed); None: drawn for this touch."""
     kind = session_clock(realtime, SceneError)
     realtime = kind != SessionClock.SIMULATED
     if realtime or fresh_fits:
@@ -134,7 +159,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
     if not (contact_s > 0 and math.isfinite(contact_s)):
         raise SceneError(f"contact_s must be > 0, got {contact_s}")
     scene = with_finger(scene)
-    slave = Slave(scene, material, identifier, slave_rng(seed))
+    slave = Slave(scene, material, identifier, slave_rng(seed), session=slave_sensors)
     world = MasterWorld(scene, seed)
     operator = world.operator
     # The two sides' session rules, as the services run them: the slave's

@@ -48,6 +48,13 @@ def slave_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng([seed, 0])
 
 
+def instruments_rng(seed: int) -> np.random.Generator:
+    """The slave service's draws of its instruments and of their
+    calibration on the simulator, once per process started with ``seed``
+    (the touches' draws are :func:`slave_rng`'s, one per placed seed)."""
+    return np.random.default_rng((seed, 0xCA1))
+
+
 class _ObjectRefused(Exception):
     def __init__(self, true_c: float):
         self.true_c = true_c
