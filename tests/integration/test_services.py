@@ -66,6 +66,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
                   "object_ir_c")
         assert {k: s[k] for k in fields} == {k: local[k] for k in fields} \
             == {k: simulated[k] for k in fields}
+        assert s["memory_counts"] == local["memory_counts"] == simulated["memory_counts"]
         assert s["decision_time_s"] is not None
     assert s["unknown_reason"] is None            # named: nothing to explain
     assert_rendered(s)
@@ -219,6 +220,8 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         assert repeated["link_counters"]["memory_used"] == 1
         assert repeated["identified"] == "wood"
         assert repeated["link_counters"]["memory_overruled"] == 0
+        assert repeated["memory_judged"] == {"memory_overruled": 0, "memory_kept": 0}
+        assert call(ports[2], "report")["memory_judged"] == {"memory_overruled": 0, "memory_kept": 0}
         memory = slave_status()["memory"]
         assert {k: v["material"] for k, v in memory.items()} == {"cup-a": "wood",
                                                                 "cup-b": "steel"}
@@ -230,12 +233,23 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         fresh = _touch(ports, seed=4)
         assert fresh["identified"] == "steel"
         assert fresh["link_counters"]["memory_overruled"] == 1
+        # This touch's judgement, on each side (as a touch in process counts).
+        assert fresh["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0}
+        _until(lambda: call(ports[2], "report")["memory_judged"] ==
+               {"memory_overruled": 1, "memory_kept": 0}, "the slave's report of the steel touch")
         status = slave_status()
         assert status["counters"]["memory_overruled"] == 1
         assert status["memory"]["cup-a"]["material"] == "wood"
         assert "kept, now wood" in (tmp_path / "slave.log").read_text()
         # ... until a second steel touch in a row: the object was changed.
-        assert _touch(ports, seed=5)["identified"] == "steel"
+        second = _touch(ports, seed=5)
+        assert second["identified"] == "steel"
+        # The link's counters run over the service's life; a touch's own
+        # judgement is counted once, in its own summary, on each side.
+        assert second["link_counters"]["memory_overruled"] == 2
+        assert second["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0}
+        _until(lambda: call(ports[2], "report")["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0},
+               "the slave's report of the second steel touch")
         status = slave_status()
         assert status["memory"]["cup-a"]["material"] == "steel"
         assert status["memory"]["cup-a"]["touches"] == 2

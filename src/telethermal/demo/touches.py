@@ -16,6 +16,7 @@ from telethermal.services.admin import call
 from telethermal.sim.direct import compare_with_direct
 from telethermal.sim.inprocess import SessionResult
 from telethermal.teleop.decision import when_decided
+from telethermal.teleop.memory import memory_counts
 from telethermal.teleop.plots import plot_session
 
 log = logging.getLogger(__name__)
@@ -125,6 +126,9 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                "object_ir_c": report.get("object_ir_c", placed["object_ir_c"]),
                "render_start_s": result["render_start_s"],
                "object_memory": result.get("object_memory"),
+               # the memory's counters of this touch, on each side (as in process)
+               "memory_counts": memory_counts(result["memory_judged"],
+                                              report.get("memory_judged", {})),
                "rate_hz": 1.0 / float(np.median(np.diff(trace["t_s"]))),
                "contact_s": contact_s, **metrics,
                **{k: result[k] for k in ("safety_events", "safety_event_counts",

@@ -12,6 +12,7 @@ from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.services.requests import SLAVE as SLAVE_REQUESTS
 from telethermal.services.slave_devices import device_report
 from telethermal.teleop.decision import pad_decision
+from telethermal.teleop.memory import judged_counts
 
 log = logging.getLogger("telethermal.slave")
 
@@ -88,6 +89,8 @@ def touch_report(service) -> dict:
             "thermometer_calibration_residual_k":
                 service.sensors.calibration.to_dict()["residual_k"],
             "reason": est.reason if est is not None else Reason.NO_ESTIMATE,
+            # what the memory's counters counted of this touch (PROTOCOL.md 6b)
+            "memory_judged": judged_counts(service.session.judgement),
             "unknown_reason": unknown_reason(est),
             # a new material's estimate and nearest class (the last window's
             # estimate otherwise; None: the identifier gives none)

@@ -171,6 +171,12 @@ def judge(held: str, held_effusivity: "Effusivity | None", fresh: Estimate
     return Judgement.VAGUER if verdict == Agreement.VAGUER else Judgement.AGREES
 
 
+def judged_counts(judgement: Judgement | None) -> dict:
+    """One touch's counters from its judgement (:func:`judge`; None: not
+    judged), as :func:`memory_counts` reads them."""
+    return {str(j): int(judgement == j) for j in (Judgement.OVERRULED, Judgement.KEPT)}
+
+
 def memory_counts(master_counters: dict, slave_counters: dict) -> dict:
     """A touch summary's ``memory_counts``: the counters :func:`judge` feeds,
     as the master's link and the slave's session counted them."""

@@ -143,6 +143,9 @@ class SlaveSession:
         self.owner: str | None = None          # the master session that opened the contact
         self.touch_t0: float | None = None
         self.finger_c: float | None = None
+        #: The memory's judgement of the last touch (counted in ``counters``:
+        #: OVERRULED or KEPT), None when it judged none; reset at a touch.
+        self.judgement: Judgement | None = None
         self._decided_label: str | None = None
         self._decision_sent = None             # the last estimate sent lossless
         self._sent = 0                         # samples sent in measurement batches
@@ -213,6 +216,7 @@ class SlaveSession:
         self.finger_c = finger_c
         self._decided_label = self._decision_sent = None
         self._sp_sample = -1
+        self.judgement = None
 
     def lift(self, now: float) -> tuple[list[Send], Verdict]:
         """The pad leaves the object: the final estimate if unsent, the
@@ -231,6 +235,7 @@ class SlaveSession:
             judge(held.material, held.effusivity, est)
         if verdict in (Judgement.OVERRULED, Judgement.KEPT):
             self.counters[str(verdict)] += 1
+            self.judgement = verdict
         return out, self.memory.learn(self.object_id, est, now, classes=self.pad.classes)
 
     @property
