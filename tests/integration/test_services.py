@@ -17,6 +17,7 @@ from telethermal.ports import free_ports
 from telethermal.services.admin import call
 from telethermal.sim.inprocess import run_session, service_sensors
 from telethermal.sim.network import NetworkSpec
+from telethermal.teleop.memory import memory_counts
 
 SCENE = with_finger(load_scene("fingertip-7"))
 
@@ -174,6 +175,13 @@ def _touch(ports, seed: int) -> dict:
     return result
 
 
+def _slave_report(ports) -> dict:
+    """The slave's report of the touch just over: once its pad is up (the
+    master's lift reaches it a network delay after the touch's reply)."""
+    _until(lambda: not call(ports[2], "status")["pad_down"], "the slave's pad going up")
+    return call(ports[2], "report")
+
+
 def _until(done, what: str, timeout_s: float = 20.0) -> None:
     """Wait for ``done()`` (a service that does not answer yet: not done)."""
     import time
@@ -199,8 +207,7 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
     # the master, logged and counted; the slave's memory keeps A's evidence
     # until a second touch in a row disagrees) and a restarted slave (its
     # memory is gone).
-    from telethermal.services.admin import call
-    ident_path, gen_path, _, _ = models
+    ident_path, gen_path, identifier, generator = models
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports, 0)
     services = Services(tmp_path, slave_cfg, master_cfg)
@@ -221,7 +228,7 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         assert repeated["identified"] == "wood"
         assert repeated["link_counters"]["memory_overruled"] == 0
         assert repeated["memory_judged"] == {"memory_overruled": 0, "memory_kept": 0}
-        assert call(ports[2], "report")["memory_judged"] == {"memory_overruled": 0, "memory_kept": 0}
+        assert _slave_report(ports)["memory_judged"] == {"memory_overruled": 0, "memory_kept": 0}
         memory = slave_status()["memory"]
         assert {k: v["material"] for k, v in memory.items()} == {"cup-a": "wood",
                                                                 "cup-b": "steel"}
@@ -233,10 +240,18 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         fresh = _touch(ports, seed=4)
         assert fresh["identified"] == "steel"
         assert fresh["link_counters"]["memory_overruled"] == 1
-        # This touch's judgement, on each side (as a touch in process counts).
-        assert fresh["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0}
-        _until(lambda: call(ports[2], "report")["memory_judged"] ==
-               {"memory_overruled": 1, "memory_kept": 0}, "the slave's report of the steel touch")
+        # This touch's judgement, on each side, as the same touch in one
+        # process counts it (the slave's trial: the place's seed, read through
+        # the service's instruments; the memory holding wood).
+        report = _slave_report(ports)
+        assert fresh["memory_judged"] == report["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0}
+        local = run_session(SCENE, "steel", identifier, generator, contact_s=1.0, seed=3,
+                            expected_material="wood", slave_sensors=service_sensors(
+                                SCENE, 0, slave_status()["thermometer_calibration"])).summary
+        assert local["memory_counts"] == memory_counts(fresh["memory_judged"],
+                                                       report["memory_judged"])
+        assert (local["identified"], local["decision_time_s"]) == \
+            (report["identified"], report["decision_time_s"])
         status = slave_status()
         assert status["counters"]["memory_overruled"] == 1
         assert status["memory"]["cup-a"]["material"] == "wood"
@@ -248,8 +263,7 @@ def test_object_memory_across_objects_a_disagreement_and_a_restart(tmp_path, mod
         # judgement is counted once, in its own summary, on each side.
         assert second["link_counters"]["memory_overruled"] == 2
         assert second["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0}
-        _until(lambda: call(ports[2], "report")["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0},
-               "the slave's report of the second steel touch")
+        assert _slave_report(ports)["memory_judged"] == {"memory_overruled": 1, "memory_kept": 0}
         status = slave_status()
         assert status["memory"]["cup-a"]["material"] == "steel"
         assert status["memory"]["cup-a"]["touches"] == 2

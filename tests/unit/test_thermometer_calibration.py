@@ -112,6 +112,7 @@ def test_a_calibration_reads_back_from_its_dict_exactly():
     ({"offset_k": 0.1, "gain": 0.0}, "gain > 0"),
     ({"offset_k": float("nan"), "gain": 1.0}, "finite"),
     ({"offset_k": 0.1, "gain": 1.0, "points": [[1.0]]}, "not a thermometer calibration"),
+    (None, "not a table"),
 ])
 def test_a_calibration_dict_that_is_not_one_is_refused_naming_where(d, match):
     with pytest.raises(ValueError, match=match) as err:

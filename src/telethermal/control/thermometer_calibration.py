@@ -79,6 +79,9 @@ class ThermometerCalibration:
         """The calibration :meth:`to_dict` wrote (a slave's ``status`` gives
         it): ValueError naming ``where`` and the field for one that is
         missing or not a number."""
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: not a thermometer calibration (a "
+                             f"{type(d).__name__}, not a table)")
         try:
             points = tuple((float(a), float(b)) for a, b in d.get("points") or ())
             nan = math.nan

@@ -73,11 +73,13 @@ def service_sensors(scene: Scene, service_seed: int, calibration: dict | None = 
     """The instruments a slave service started with ``service_seed`` reads
     its pad through (drawn once per process, :func:`instruments_rng`), with
     ``calibration``: its object thermometer's calibration as the service
-    reports it (``status``' ``thermometer_calibration``; on devices or
-    after a recalibration only the service knows it); None: calibrated on
-    the simulator as the service does at start on ``devices = "sim"``. A
-    :func:`run_session` given it touches as that service touches the same
-    seed: the same trial, the same decisions."""
+    reports it (``status``' ``thermometer_calibration``: after a
+    recalibration only the service knows it); None: calibrated on the
+    simulator as the service does at start. A :func:`run_session` given it
+    touches as that service touches the same seed on ``devices = "sim"``:
+    the same trial, the same decisions (on a service's emulated or QEMU
+    boards the pad goes through their drivers, which this run does not
+    model)."""
     from telethermal.control.thermometer_calibration import ThermometerCalibration
     from telethermal.data.generate import SensorSession, sensor_session
     from telethermal.physics.sensors import draw_instruments
