@@ -22,8 +22,10 @@ rounds, not iterated to convergence as
 :func:`~telethermal.control.display_floor.best_touch` does: on fingertip-7
 at 0.08 s a third round moved the worst material by under 1e-4 K).
 
-How exact: the tails are solved by a fast bounded least squares, the
-bounds in two rounds, SLSQP to its tolerance; each can only leave the
+How exact: the tails are solved by bounded least squares (bvls, warm-
+started from the last active set while its KKT conditions hold: within
+1e-6 of the squared error, tested), the bounds in two rounds, SLSQP to its
+tolerance; each can only leave the
 computed minimax higher than the model's true one, so "no controller does
 better" holds up to that slack (2e-3 K against the exact per-material
 floor at t_d = 0, tested).
