@@ -200,7 +200,8 @@ def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monk
                         ("identifier", calibration))
     from types import SimpleNamespace
     pad_cal = SimpleNamespace(chi2_per_dof=1.0)
-    monkeypatch.setattr(ra.iab, "calibrate_drawn", lambda scene, built: (pad_cal, 1.0, {}))
+    monkeypatch.setattr(ra.iab, "calibrate_drawn",
+                        lambda scene, built, references: (pad_cal, 1.0, {}))
     import telethermal.sim.display_rig as rig
 
     class DisplayCal:
@@ -222,3 +223,53 @@ def test_bench_render_as_built_refuses_an_sd_out_of_range(capsys):
         main(["bench", "render", "--as-built", "-0.1", "--json", "x.json"])
     assert exit_.value.code == 2
     assert "--as-built: '-0.1' must be an sd in [0.0, 1.0]" in capsys.readouterr().err
+
+
+def test_the_reference_materials_are_the_scenes_and_two_at_least():
+    from telethermal.ident.calibration import REFERENCE_MATERIALS, reference_materials
+    from telethermal.physics.scene import load_scene
+
+    scene = load_scene("fingertip-7")
+    assert reference_materials(scene) == list(REFERENCE_MATERIALS)
+    assert reference_materials(scene, ("aluminium", "steel", "wood", "steel")) == \
+        ["aluminium", "steel", "wood"]
+    with pytest.raises(ValueError, match="'copper' is not one of scene fingertip-7's: "
+                                         "aluminium, steel"):
+        reference_materials(scene, ("steel", "copper"))
+    with pytest.raises(ValueError, match="at least 2 reference materials"):
+        reference_materials(scene, ("steel", "steel"))
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["bench", "unseen", "--references", "steel,wood"], "--references is for --as-built"),
+    (["bench", "identify", "--as-built", "0.15", "--references", "steel,copper"],
+     "--references: reference material 'copper' is not one of scene fingertip-7's"),
+    (["bench", "render", "--as-built", "0.15", "--references", "wood"],
+     "--references: a calibration needs at least 2 reference materials"),
+    (["bench", "unseen", "--as-built", "0.15", "--references", "glass,wood"],
+     "--references: reference material 'glass' is not one of scene fingertip-7's"),
+])
+def test_reference_materials_a_bench_cannot_use_are_refused_before_it_runs(
+        tmp_path, capsys, argv, said):
+    from telethermal.cli import main
+
+    out = tmp_path / "x.json"
+    assert main([*argv, "--json", str(out)]) != 0
+    assert said in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_an_as_built_printout_names_its_references_and_the_worst_pad_by_pad():
+    from telethermal.bench import unseen_as_built as ua
+
+    out = {"sd": 0.15, "pads": 2, "seeds": [0], "method": "effusivity-fit", "window_s": 0.5,
+           "targets": {"median_rel_error_max": 0.10, "coverage": [0.9, 0.98]},
+           "reference": {"materials": ["aluminium", "steel", "wood"], "touches_each": 5},
+           "as_modelled": _unseen_row({"copper": 0.05}, 19, 20),
+           "uncalibrated": [_unseen_row({"copper": 0.5}, 10, 20)] * 2,
+           "calibrated": [_unseen_row({"copper": 0.06}, 18, 20),
+                          _unseen_row({"copper": 0.324}, 19, 20)]}
+    out["summary"] = ua.summary(out)
+    text = "\n".join(ua.text_lines(out))
+    assert "calibrated from 5 touches each of aluminium, steel, wood" in text
+    assert "calibrated copper pad by pad: 6.0 %, 32.4 %" in text

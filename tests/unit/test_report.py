@@ -17,11 +17,12 @@ def test_the_report_has_every_section_with_its_provenance_and_figures(tmp_path):
     assert len(present) == len(SECTIONS)          # every bench has committed results
     by_hand = [name for name, _ in BY_HAND if (RESULTS / f"{name}.json").is_file()]
     assert by_hand == ["skin-floor", "identify-as-built", "unseen-as-built",
-                       "render-as-built"]                                 # reported
+                       "unseen-as-built-aluminium", "render-as-built"]    # reported
     assert text.count("*Machine ") == len(present) + len(by_hand)
     assert "## The display's floor on the real module" in text
     assert "## Identification on pads built off their datasheet" in text
     assert "## Unseen materials on pads built off their datasheet" in text
+    assert "## Unseen materials on pads built off their datasheet, an aluminium" in text
     assert "## First touches on pads built off their datasheet" in text
     assert "calibrated    0.5 s 100.0 %" in text            # the as-built bench's own text
     for image in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text):

@@ -6,7 +6,8 @@ import re
 import shutil
 from pathlib import Path
 
-from telethermal.bench.report import reduced_options, write_report
+from telethermal.bench.options import off_defaults, reduced_options
+from telethermal.bench.report import write_report
 
 RESULTS = Path(__file__).parents[2] / "bench" / "results"
 
@@ -63,6 +64,10 @@ def test_reduced_options_are_those_that_change_what_is_measured():
     assert reduced_options("telethermal bench unseen --as-built=0.15 --pads 5 --json x") == []
     assert reduced_options("telethermal bench identify --as-built 0.3 --pads 2 --json x") == [
         "--as-built 0.3", "--pads 2"]
+    # Other reference blocks are another setting to compare, not a reduction.
+    assert off_defaults("telethermal bench unseen --as-built 0.15 --references "
+                        "aluminium,steel,wood --seeds 2 --json x") == (
+        ["--seeds 2"], ["--references aluminium,steel,wood"])
 
 
 def test_a_reduced_run_is_named_in_the_report(tmp_path):
@@ -76,6 +81,8 @@ def test_a_reduced_run_is_named_in_the_report(tmp_path):
     assert text.count("**Reduced run**") == 1
     full = write_report(RESULTS, tmp_path / "full.md").read_text()
     assert "Reduced run" not in full
+    # The committed comparison with other reference blocks says it is one.
+    assert "**Another setting** (`--references aluminium,steel,wood`)" in full
 
 
 def test_a_reduced_view_run_is_named_from_its_command(tmp_path):

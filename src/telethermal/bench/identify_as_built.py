@@ -15,8 +15,9 @@ cross-validated (grouped, 5 folds) four ways:
   slave's) naming the touches the pad-model check refuses;
 - ``calibrated``: the drawn pad's touches, the product's model calibrated
   (``telethermal calibrate pad``) from reference touches of that pad on
-  :data:`REFERENCE_MATERIALS`, :data:`REFERENCE_TOUCHES` each (another
-  seed: not the touches scored).
+  the reference materials (``references``: by default
+  ``ident.calibration``'s, steel, plexiglass and wood),
+  :data:`REFERENCE_TOUCHES` each (another seed: not the touches scored).
 
 Each row: accuracy at 0.5 s and 1 s, the live decisions (named alone, pair,
 unknown, wrong). The calibration's: each fitted parameter against the drawn
@@ -31,13 +32,13 @@ import time
 import numpy as np
 
 from telethermal.data.generate import pad_database, sensor_session
-from telethermal.ident.calibration import SD_MAX
+from telethermal.errors import BenchError
+from telethermal.ident.calibration import MAX_TOUCHES, SD_MAX, reference_materials
 from telethermal.ident.crossval import cross_validate
 from telethermal.physics.as_built import draw_as_built, with_as_built
 from telethermal.physics.scene import load_scene
 
-REFERENCE_MATERIALS = ("steel", "plexiglass", "wood")
-REFERENCE_TOUCHES = 5
+REFERENCE_TOUCHES = MAX_TOUCHES
 #: Seeds: the scored touches', and the reference touches' (another session).
 TOUCH_SEED, REFERENCE_SEED = 0, 1000
 METHOD = "effusivity-fit"
@@ -71,12 +72,29 @@ def truth_of(as_built, gain: float) -> dict:
     return out
 
 
-def calibrate_drawn(scene, built) -> tuple:
-    """(the calibration of ``built``'s pad from its reference touches, CPU s, truth)."""
+def references_of(scene, references=None) -> list[str]:
+    """The reference materials of ``scene`` the calibrations touch
+    (``ident.calibration.reference_materials``), a BenchError naming the
+    one that is not the scene's."""
+    try:
+        return reference_materials(scene, references)
+    except ValueError as exc:
+        raise BenchError(f"--references: {exc}") from None
+
+
+def reference_section(scene, references=None) -> dict:
+    """A report's ``reference``: the materials and the touches of each."""
+    return {"materials": references_of(scene, references), "touches_each": REFERENCE_TOUCHES}
+
+
+def calibrate_drawn(scene, built, references=None) -> tuple:
+    """(the calibration of ``built``'s pad from its reference touches on
+    ``references`` (:func:`references_of`), CPU s, truth)."""
     from telethermal.ident.pad_calibration import calibrate_pad
+    materials = references_of(scene, references)
     ref_scene = dataclasses.replace(
         built, pad=dataclasses.replace(built.pad, trials_per_material=REFERENCE_TOUCHES),
-        objects=tuple(o for o in built.objects if o.material in REFERENCE_MATERIALS))
+        objects=tuple(o for o in built.objects if o.material in materials))
     trials = pad_database(ref_scene, np.random.default_rng(REFERENCE_SEED))
     gain = sensor_session(ref_scene, np.random.default_rng(REFERENCE_SEED)).instruments.flux_gain
     start = time.process_time()
@@ -111,18 +129,19 @@ def coverage(cal, truth: dict, scene) -> list[dict]:
 
 
 def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7", folds: int = 5,
-        progress=None, partial=None) -> dict:
+        progress=None, partial=None, references=None) -> dict:
     """The ``as_built`` section of ``bench identify``'s report (see the
-    module); ``partial(section)``: called after each pad with the section
+    module); ``references``: the calibrations' reference materials (None:
+    the default set); ``partial(section)``: called after each pad with the section
     so far (a long run's figures kept as they come)."""
     step = progress or (lambda _m: None)
     # The design: a scene file's own [as_built] table is not the reference.
     scene = with_as_built(load_scene(scene_name), None)
+    references = references_of(scene, references)          # refused before any touch
     step(f"as modelled: {folds} folds on {scene.name}")
     touches = list(pad_database(scene, np.random.default_rng(TOUCH_SEED)))
     out = {"sd": sd, "pads": pads, "scene": scene.name, "method": METHOD, "folds": folds,
-           "reference": {"materials": list(REFERENCE_MATERIALS),
-                         "touches_each": REFERENCE_TOUCHES},
+           "reference": reference_section(scene, references),
            "as_modelled": _row(cross_validate(touches, METHOD, folds, scene=scene)),
            "uncalibrated": [], "uncalibrated_fallback": [], "calibrated": [],
            "calibrations": []}
@@ -135,7 +154,7 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7", folds:
         out["uncalibrated_fallback"].append(_row(cross_validate(drawn, METHOD, folds,
                                                                 scene=scene, fallback=True)))
         step(f"pad {k}: calibrating")
-        cal, cpu_s, truth = calibrate_drawn(scene, built)
+        cal, cpu_s, truth = calibrate_drawn(scene, built, references)
         out["calibrations"].append({"seed": k, "as_built": built.as_built.pad.to_dict(),
                                     "cpu_s": cpu_s, "chi2_per_dof": cal.chi2_per_dof,
                                     "parameters": coverage(cal, truth, scene),
@@ -168,6 +187,13 @@ def summary(out: dict) -> dict:
             "calibrate_cpu_s_max": max((c["cpu_s"] for c in out["calibrations"]), default=None)}
 
 
+def references_line(out: dict) -> str:
+    """An as-built report's reference touches, as its printout says them."""
+    ref = out.get("reference") or {}
+    return (f"  calibrated from {ref.get('touches_each', '?')} touches each of "
+            f"{', '.join(ref.get('materials') or ['?'])}")
+
+
 def text_lines(out: dict) -> list[str]:
     """What ``bench identify --as-built`` prints."""
     def pct(x):
@@ -177,7 +203,8 @@ def text_lines(out: dict) -> list[str]:
     lines = [f"pads built off their datasheet: "
              + (f"{out['pads']}" if done == out["pads"] else f"{done} of {out['pads']}")
              + f" drawn at sd {out['sd']:g} "
-             f"({out['method']}, {out['folds']} folds, mean over the pads)"]
+             f"({out['method']}, {out['folds']} folds, mean over the pads)",
+             references_line(out)]
     for key in ("as_modelled", "uncalibrated", "uncalibrated_fallback", "calibrated"):
         r = s[key]
         lines.append(f"  {key:13s} 0.5 s {pct(r['accuracy_0.5'])}, 1 s {pct(r['accuracy_1.0'])};"

@@ -14,7 +14,7 @@ from itertools import zip_longest
 from dataclasses import dataclass
 from pathlib import Path
 
-from telethermal.bench.options import reduced_options
+from telethermal.bench.options import off_defaults
 
 
 @dataclass(frozen=True)
@@ -54,11 +54,14 @@ def table(header: list[str], rows: list[list]) -> list[str]:
 def provenance(d: dict) -> str:
     """Under every section: the machine, the date, the command, and whether
     the run was reduced from the bench's defaults."""
-    reduced = reduced_options(d.get("command", ""))
+    reduced, settings = off_defaults(d.get("command", ""))
     note = "" if not reduced else (
         f" **Reduced run** (`{' '.join(reduced)}`): fewer methods, seeds, trials, rounds or "
         "settings than the bench's defaults, so its figures are not those of the committed "
         "run (`make bench-full`, every bench at its defaults).")
+    if settings:
+        note += (f" **Another setting** (`{' '.join(settings)}`): a comparison beside the "
+                 "bench's default run, not its committed figures.")
     return (f"*Machine {d.get('machine', '?')}; {d.get('date', '?')}; "
             f"`{d.get('command', '?')}`.*{note}")
 

@@ -12,6 +12,18 @@ OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs", "--executor"})
 #: Options at the value the issue's targets name: which bench, not a
 #: reduction of it (``bench identify --as-built 0.15``, its 5 pads).
 TARGET_OPTIONS = frozenset({"--as-built 0.15", "--pads 5"})
+#: Options that choose another setting to compare, not a smaller run
+#: (``--references aluminium,steel,wood``: other reference blocks).
+SETTING_OPTIONS = frozenset({"--references"})
+
+
+def off_defaults(command: str) -> tuple[list[str], list[str]]:
+    """:func:`reduced_options` of ``command`` split in two: the reductions
+    (fewer seeds, methods, ...) and the other settings
+    (:data:`SETTING_OPTIONS`)."""
+    off = reduced_options(command)
+    settings = [o for o in off if o.split("=")[0].split()[0] in SETTING_OPTIONS]
+    return [o for o in off if o not in settings], settings
 
 
 def reduced_options(command: str) -> list[str]:

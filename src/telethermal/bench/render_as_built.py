@@ -71,21 +71,23 @@ def _per_material(rows: list[dict]) -> dict:
 
 
 def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7",
-        seeds: tuple = SEEDS, quick: bool = False, progress=None, partial=None) -> dict:
+        seeds: tuple = SEEDS, quick: bool = False, progress=None, partial=None,
+        references=None) -> dict:
     """The ``as_built`` section of ``bench render``'s report (see the module);
-    ``quick``: a third of the materials; ``partial(section)``: called after
+    ``quick``: a third of the materials; ``references``: the sensing pad's
+    reference materials (None: the default set); ``partial(section)``: called after
     each pad with the section so far."""
     step = progress or (lambda _m: None)
     # The design: a scene file's own [as_built] table is not the reference.
     scene = with_finger(with_as_built(load_scene(scene_name), None))
     materials = scene.materials[::3] if quick else scene.materials
+    references = iab.references_of(scene, references)      # refused before any touch
     step("as modelled")
     generator = train_generator(scene, 0)
     modelled = _rows(scene, materials, train_identifier(scene, 0), generator, seeds)
     out = {"sd": sd, "pads": pads, "scene": scene.name, "seeds": list(seeds),
            "contact_s": CONTACT_S, "target_ratio": TARGET_RATIO,
-           "reference": {"materials": list(iab.REFERENCE_MATERIALS),
-                         "touches_each": iab.REFERENCE_TOUCHES},
+           "reference": iab.reference_section(scene, references),
            "as_modelled": {"rows": modelled,
                            "per_material": _per_material(modelled),
                            "limits": limits_of(modelled)},
@@ -99,7 +101,7 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7",
         from telethermal.errors import CalibrationError
         from telethermal.sim.display_rig import calibrate_simulated
         try:
-            pad_cal, pad_cpu_s, _ = iab.calibrate_drawn(scene, built)
+            pad_cal, pad_cpu_s, _ = iab.calibrate_drawn(scene, built, references)
             start = time.process_time()
             display_cal = calibrate_simulated(built, seed=k)
             display_cpu_s = time.process_time() - start
@@ -181,6 +183,7 @@ def text_lines(out: dict) -> list[str]:
              + f" drawn at sd {out['sd']:g}, seeds {', '.join(map(str, out['seeds']))} "
              "(skin RMS over the contact, mean over the pads and seeds; the calibrated "
              f"against as modelled, target <= {TARGET_RATIO:g}x)",
+             iab.references_line(out) + " (the sensing pad)",
              f"  {'material':11s} {'as modelled':>12s} {'uncalibrated':>13s} "
              f"{'calibrated':>11s} {'ratio':>6s}{'':18s}  named right (uncal. / cal.)"]
 

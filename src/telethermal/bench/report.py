@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 from telethermal.bench import (faults_text, identify_text, render_text,  # noqa: E402
                                sections, unseen_text)
 from telethermal.bench.markdown import Page, provenance, terminal  # noqa: E402
-from telethermal.bench.options import reduced_options  # noqa: E402
+from telethermal.bench.options import off_defaults  # noqa: E402
 
 
 log = logging.getLogger("telethermal.bench")
@@ -43,6 +43,11 @@ BY_HAND = (("skin-floor", sections.skin_floor),
                "Identification on pads built off their datasheet", "identify_as_built")),
            ("unseen-as-built", sections.as_built(
                "Unseen materials on pads built off their datasheet", "unseen_as_built")),
+           # The same with a metal as high as brass among the references
+           # (--references aluminium,steel,wood): does it pin the outer layers?
+           ("unseen-as-built-aluminium", sections.as_built(
+               "Unseen materials on pads built off their datasheet, an aluminium reference",
+               "unseen_as_built")),
            ("render-as-built", sections.as_built(
                "First touches on pads built off their datasheet", "render_as_built")))
 
@@ -66,7 +71,7 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
             if (name, section) in SECTIONS:
                 missing.append(name)
             continue
-        cut = reduced_options(d.get("command", ""))
+        cut, _ = off_defaults(d.get("command", ""))
         if cut:
             reduced.append(f"{name} `{' '.join(cut)}`")
         body += _guarded(name, section, d, page)

@@ -16,7 +16,8 @@ and estimates the effusivity of every touch, trained and unseen, of
 - ``calibrated``: the drawn pad's touches, the model calibrated from
   reference touches of that pad (``telethermal calibrate pad``, as
   :func:`~telethermal.bench.identify_as_built.calibrate_drawn`: steel,
-  plexiglass and wood, 5 touches each, another session).
+  plexiglass and wood unless ``references`` names others, 5 touches
+  each, another session).
 
 Per row: each unseen material's median relative error at 0.5 s (the issue's
 10 % target) and the pooled coverage of the 95 % intervals over the unseen
@@ -86,21 +87,22 @@ def score(model_scene, built, calibration, objects, seeds: int, quick: bool) -> 
 
 
 def run(sd: float = 0.15, pads: int = 5, seeds: int = 1, scene_name: str = "fingertip-7",
-        quick: bool = False, progress=None, partial=None) -> dict:
+        quick: bool = False, progress=None, partial=None, references=None) -> dict:
     """The ``as_built`` section of ``bench unseen``'s report (see the
-    module); ``partial(section)`` is called after each pad."""
+    module); ``references``: the calibrations' reference materials (None:
+    the default set); ``partial(section)`` is called after each pad."""
     step = progress or (lambda _m: None)
     # The design: a scene file's own [as_built] table is not the reference.
     base = with_as_built(load_scene(scene_name), None)
     objects, _ = un.unseen_objects(base)
+    references = iab.references_of(base, references)       # refused before any touch
     step("as modelled")
     out = {"sd": sd, "pads": pads, "seeds": list(range(seeds)), "scene": base.name,
            "quick": quick, "method": "effusivity-fit", "window_s": un.TARGET_WINDOW_S,
            "unseen": [o.name for o in objects],
            "targets": {"median_rel_error_max": un.TARGET_REL_ERROR,
                        "coverage": list(un.TARGET_COVERAGE)},
-           "reference": {"materials": list(iab.REFERENCE_MATERIALS),
-                         "touches_each": iab.REFERENCE_TOUCHES},
+           "reference": iab.reference_section(base, references),
            "as_modelled": score(base, base, None, objects, seeds, quick),
            "uncalibrated": [], "calibrated": [], "calibrations": []}
     for k in range(pads):
@@ -108,7 +110,7 @@ def run(sd: float = 0.15, pads: int = 5, seeds: int = 1, scene_name: str = "fing
         step(f"pad {k}: uncalibrated")
         out["uncalibrated"].append(score(base, built, None, objects, seeds, quick))
         step(f"pad {k}: calibrating")
-        cal, cpu_s, truth = iab.calibrate_drawn(base, built)
+        cal, cpu_s, truth = iab.calibrate_drawn(base, built, references)
         out["calibrations"].append({"seed": k, "as_built": built.as_built.pad.to_dict(),
                                     "cpu_s": cpu_s, "chi2_per_dof": cal.chi2_per_dof,
                                     "parameters": iab.coverage(cal, truth, base)})
@@ -150,7 +152,8 @@ def text_lines(out: dict) -> list[str]:
              f"{out['window_s']:g} s; targets: median error <= "
              f"{100 * out['targets']['median_rel_error_max']:.0f} %, coverage "
              f"{100 * out['targets']['coverage'][0]:.0f}-"
-             f"{100 * out['targets']['coverage'][1]:.0f} %)"]
+             f"{100 * out['targets']['coverage'][1]:.0f} %)",
+             iab.references_line(out)]
     for key in ("as_modelled", "uncalibrated", "calibrated"):
         r = s.get(key) or {}
         if not r:
@@ -158,4 +161,10 @@ def text_lines(out: dict) -> list[str]:
         lines.append(f"  {key:13s} worst median error {100 * r['worst_rel_error_0.5']:.1f} % "
                      f"({r['worst_material']}), coverage "
                      f"{100 * r['unseen_coverage_0.5']:.1f} % of {r['n']} touches")
+    cal = out.get("calibrated") or []
+    if cal:
+        # The worst material's error pad by pad: one pad off, or all.
+        worst = s["calibrated"]["worst_material"]
+        lines.append(f"  calibrated {worst} pad by pad: " + ", ".join(
+            f"{100 * r['unseen_rel_error_0.5'][worst]:.1f} %" for r in cal))
     return lines

@@ -30,6 +30,7 @@ def cmd_bench_render(args) -> int:
     if args.as_built is not None:
         _no_executor(args)
         return _bench_render_as_built(args)
+    _no_references(args)
     with _progress(10, "bench render") as advance, _executor(args) as executor:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene,
@@ -102,6 +103,7 @@ def cmd_bench_identify(args) -> int:
     if args.as_built is not None:
         _no_executor(args)
         return _bench_identify_as_built(args)
+    _no_references(args)
     methods = args.methods.split(",") if args.methods else None
     png = _png(args)
     n_jobs = len(identify.jobs(methods or identify.DEFAULT_METHODS, not args.no_limit,
@@ -131,7 +133,8 @@ def _bench_identify_as_built(args) -> int:
 
     with _progress(1 + 3 * args.pads, "bench identify --as-built") as advance:
         section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
-                         progress=advance, partial=lambda part: write_json(
+                         progress=advance, references=args.references,
+                         partial=lambda part: write_json(
                              args.json, {"as_built": part, **_stamp()}))
     report = {"as_built": section, **_stamp()}
     write_json(args.json, report)
@@ -145,7 +148,8 @@ def _bench_render_as_built(args) -> int:
 
     with _progress(1 + 3 * args.pads, "bench render --as-built") as advance:
         section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
-                         quick=args.quick, progress=advance, partial=lambda part: write_json(
+                         quick=args.quick, progress=advance, references=args.references,
+                         partial=lambda part: write_json(
                              args.json, {"as_built": part, **_stamp()}))
     report = {"as_built": section, **_stamp()}
     write_json(args.json, report)
@@ -181,6 +185,7 @@ def cmd_bench_unseen(args) -> int:
     if args.as_built is not None:
         _no_executor(args)
         return _bench_unseen_as_built(args)
+    _no_references(args)
     seeds = args.seeds or (1 if args.quick else 3)
     with _progress(2 * seeds + 3, "bench unseen") as advance, _executor(args) as executor:
         report = unseen.run_and_save(args.json, command=_command(), seeds=seeds,
@@ -201,12 +206,29 @@ def _bench_unseen_as_built(args) -> int:
                          "--unseen and --unseen-scene are for the pad as modelled")
     with _progress(1 + 2 * args.pads, "bench unseen --as-built") as advance:
         section = ab.run(args.as_built, args.pads, args.seeds or 1, args.scene or "fingertip-7",
-                         quick=args.quick, progress=advance, partial=lambda part: write_json(
+                         quick=args.quick, progress=advance, references=args.references,
+                         partial=lambda part: write_json(
                              args.json, {"as_built": part, **_stamp()}))
     report = {"as_built": section, **_stamp()}
     write_json(args.json, report)
     print(bench_text("unseen-as-built", report, args.json))
     return 0
+
+
+def _references_arg(p) -> None:
+    p.add_argument("--references", type=_names, metavar="M,M,...",
+                   help="with --as-built: the reference materials each drawn pad is "
+                        "calibrated from, materials of the scene (default: steel, "
+                        "plexiglass and wood, those of them the scene has)")
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """A comma-separated list of names, none empty."""
+    import argparse
+    names = tuple(n.strip() for n in text.split(","))
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"an empty name in {text!r}")
+    return names
 
 
 def _as_built_sd(text: str) -> float:
@@ -307,6 +329,14 @@ def _executor_args(p, what: str) -> None:
                         "workers see at the same path (default: the temporary folder)")
 
 
+def _no_references(args) -> None:
+    """--references calibrates the drawn pads of --as-built alone."""
+    if args.references is not None:
+        from telethermal.errors import BenchError
+        raise BenchError("--references is for --as-built (the reference materials its drawn "
+                         "pads are calibrated from)")
+
+
 def _no_executor(args) -> None:
     """--as-built runs its pads in this process: its executor options refused."""
     if args.executor is not None or args.jobs or args.work_dir:
@@ -342,6 +372,7 @@ def _add_render(bsub) -> None:
                         "third of the materials")
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
+    _references_arg(p)
     _scene_arg(p)
     _executor_args(p, "the sessions")
     p.set_defaults(func=cmd_bench_render)
@@ -384,6 +415,7 @@ def _add_error(bsub) -> None:
                         "uncalibrated and calibrated (telethermal calibrate pad)")
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
+    _references_arg(p)
     _executor_args(p, "the methods and sections")
     p.set_defaults(func=cmd_bench_identify)
 
@@ -407,6 +439,7 @@ def _add_error(bsub) -> None:
                         "--seeds sessions per pad (default 1)")
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
+    _references_arg(p)
     _scene_arg(p)
     _executor_args(p, "the rendered touches")
     p.set_defaults(func=cmd_bench_unseen)

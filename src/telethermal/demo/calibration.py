@@ -3,7 +3,8 @@ on a scene with ``[as_built]`` tables, ``telethermal demo`` calibrates both
 pads before it trains anything, as a lab would, and says what it found.
 
 - the sensing pad from reference touches of that pad (the simulator's, as
-  built) on :data:`REFERENCE_MATERIALS`, :data:`REFERENCE_TOUCHES` each, in
+  built) on the reference materials (``ident.calibration.reference_materials``),
+  :data:`REFERENCE_TOUCHES` each, in
   a session of its own (another seed than the databases' and the touches'):
   ``telethermal calibrate pad``'s fit (``ident.pad_calibration``), as
   ``bench identify --as-built`` does;
@@ -27,14 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-#: The reference blocks a lab touches (those of them the scene has; its
-#: first three if none): a metal, a plastic and a wood, effusivities 11,000,
-#: 570 and 470 apart (docs/calibration.md: three, so a block off its table
-#: value stands out).
-REFERENCE_MATERIALS = ("steel", "plexiglass", "wood")
+from telethermal.ident.calibration import MAX_TOUCHES, reference_materials
+
 #: Touches per reference material: what ``calibrate pad`` reads (5; more
 #: are ignored).
-REFERENCE_TOUCHES = 5
+REFERENCE_TOUCHES = MAX_TOUCHES
 #: The reference session's seed beside the demo's: its own draws.
 REFERENCE_STREAM = 44
 #: The file written in the demo's folder.
@@ -95,11 +93,6 @@ def path_line(key: str, path: str | Path) -> str:
     """A service config's line ``key = "PATH"`` (absolute), "" without a path."""
     from telethermal.tomltables import toml_str
     return f"{key} = {toml_str(str(Path(path).resolve()))}\n" if path else ""
-
-
-def reference_materials(scene) -> list[str]:
-    """:data:`REFERENCE_MATERIALS` the scene has, else its first three."""
-    return [m for m in REFERENCE_MATERIALS if m in scene.materials] or scene.materials[:3]
 
 
 def reference_touches(scene, seed: int) -> list:

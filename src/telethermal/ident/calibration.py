@@ -56,6 +56,32 @@ from telethermal.errors import CalibrationError
 MIN_MATERIALS, MIN_TOUCHES = 2, 3
 #: Touches of each material read at most (the first, by trial order).
 MAX_TOUCHES = 5
+#: The reference blocks the demo and the as-built benches touch (those of
+#: them a scene has; its first three if none): a metal, a plastic and a
+#: wood, effusivities about 7,500, 570 and 470 W s^0.5/(m^2 K) from the
+#: materials table (docs/calibration.md: three, so a block off its table
+#: value stands out). A lab touches its own.
+REFERENCE_MATERIALS = ("steel", "plexiglass", "wood")
+
+
+def reference_materials(scene, wanted=None) -> list[str]:
+    """The reference blocks a calibration of ``scene``'s pad touches.
+    ``wanted`` (names): those, each a material of the scene and at least
+    :data:`MIN_MATERIALS` of them, else ValueError naming the one that is
+    not and the scene's materials; None: :data:`REFERENCE_MATERIALS` the
+    scene has, else its first three."""
+    if wanted is None:
+        return [m for m in REFERENCE_MATERIALS if m in scene.materials] or \
+            list(scene.materials[:3])
+    names = list(dict.fromkeys(wanted))
+    for m in names:
+        if m not in scene.materials:
+            raise ValueError(f"reference material {m!r} is not one of scene "
+                             f"{scene.name}'s: {', '.join(scene.materials)}")
+    if len(names) < MIN_MATERIALS:
+        raise ValueError(f"a calibration needs at least {MIN_MATERIALS} reference materials "
+                         f"(3 recommended); got {', '.join(names) or 'none'}")
+    return names
 #: The window fitted from the detected onset, s (the identifier's longest).
 WINDOW_S = 1.0
 #: The curves are solved to this fraction of the scene's tolerance: the
