@@ -171,20 +171,26 @@ class EffusivityLda(Identifier):
         usable = float(np.min(contacts.lengths - 1)) / self.sample_rate_hz_
         windows = [w for w in np.arange(1, 11) * 0.1 if w <= min(usable, self.max_window_s) + 1e-9]
         windows = windows or [usable]
+        # Each fold's and window's features once (they do not depend on the
+        # value tried), in the order the loss sums them.
+        cases = []
+        for test in folds:
+            train = np.setdiff1d(np.arange(len(y)), test)
+            if len(set(y[train])) < len(self.classes_):
+                log.warning("%s: a fold lacks a class; %g used without cross-validation",
+                            attr.rstrip("_"), fallback)
+                return fallback
+            for w in windows:
+                cases.append((self._raw_features(self.window(contacts.x[train], w)), y[train],
+                              self._raw_features(self.window(contacts.x[test], w)), y[test]))
         losses = []
         for value in grid:
             setattr(self, attr, value)
             total = 0.0
-            for test in folds:
-                train = np.setdiff1d(np.arange(len(y)), test)
-                if len(set(y[train])) < len(self.classes_):
-                    log.warning("%s: a fold lacks a class; %g used without cross-validation",
-                                attr.rstrip("_"), fallback)
-                    return fallback
-                for w in windows:
-                    params = self._fit_window(self.window(contacts.x[train], w), y[train])
-                    z = self._logits(params, self.window(contacts.x[test], w))
-                    total -= log_softmax(z, axis=1)[np.arange(len(test)), y[test]].sum()
+            for f_train, y_train, f_test, y_test in cases:
+                params = self._fit_features(f_train, y_train)
+                z = self._logits_of_features(params, f_test)
+                total -= log_softmax(z, axis=1)[np.arange(len(y_test)), y_test].sum()
             losses.append(total)
         best = int(np.argmin(losses))
         if best in (0, len(grid) - 1):
@@ -193,7 +199,10 @@ class EffusivityLda(Identifier):
         return float(grid[best])
 
     def _fit_window(self, x, y):
-        f = self._raw_features(x)
+        return self._fit_features(self._raw_features(x), y)
+
+    def _fit_features(self, f, y):
+        """:meth:`_fit_window` on the window's features (:meth:`_raw_features`)."""
         centre, scale = f.mean(axis=0), np.maximum(f.std(axis=0), 1e-9)
         z = (f - centre) / scale
         classes = np.arange(int(y.max()) + 1)
@@ -208,19 +217,21 @@ class EffusivityLda(Identifier):
                     "precision": np.linalg.pinv(cov, hermitian=True)}
         # Regularised discriminant analysis (Friedman 1989): each class's own
         # scatter blended with the pooled one.
-        precisions, logdets = [], []
+        blends = []
         for c in classes:
             r = resid[y == c]
             own = r.T @ r / max(len(r) - 1, 1)
-            blend = self.pooled_weight_ * cov + (1 - self.pooled_weight_) * own
-            sign, logdet = np.linalg.slogdet(blend)
-            precisions.append(np.linalg.pinv(blend, hermitian=True))
-            logdets.append(logdet)
+            blends.append(self.pooled_weight_ * cov + (1 - self.pooled_weight_) * own)
+        blends = np.stack(blends)           # one LAPACK call per kind for every class
+        _, logdets = np.linalg.slogdet(blends)
         return {"centre": centre, "scale": scale, "means": means,
-                "precision": np.stack(precisions), "logdet": np.asarray(logdets)}
+                "precision": np.linalg.pinv(blends, hermitian=True), "logdet": logdets}
 
     def _distances(self, params, x):
-        z = (self._raw_features(x) - params["centre"]) / params["scale"]
+        return self._distances_of_features(params, self._raw_features(x))
+
+    def _distances_of_features(self, params, f):
+        z = (f - params["centre"]) / params["scale"]
         diff = z[:, None, :] - params["means"][None]
         prec = params["precision"]
         if prec.ndim == 3:
@@ -228,7 +239,10 @@ class EffusivityLda(Identifier):
         return np.sum((diff @ prec) * diff, axis=2)
 
     def _logits(self, params, x):
-        d = self._distances(params, x)
+        return self._logits_of_features(params, self._raw_features(x))
+
+    def _logits_of_features(self, params, f):
+        d = self._distances_of_features(params, f)
         if "logdet" in params:
             return -0.5 * (d + params["logdet"][None])
         return -0.5 * d
