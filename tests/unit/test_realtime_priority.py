@@ -93,3 +93,12 @@ def test_a_sessions_clock_is_named_by_its_enum_or_the_older_spellings():
     for bad in ("fast", 0, 1, 1.0, None):
         with pytest.raises(ValueError, match="realtime must be a SessionClock"):
             session_clock(bad)
+
+
+def test_a_row_says_how_many_touches_of_what_length_it_pooled():
+    one = {**_row(0), "sessions": 1, "contact_s": 0.5}
+    four = {**_row(2), "sessions": 4, "contact_s": 3.0}
+    text = "\n".join(real_clock_sentences({"real_clock": [one, four]}))
+    assert "0 deadline misses of 6800 (1 touch of 0.5 s)" in text
+    assert "2 deadline misses of 6800 (4 touches of 3 s)" in text
+    assert "touch" not in "\n".join(real_clock_sentences({"real_clock": [_row(1)]}))

@@ -36,7 +36,10 @@ def real_clock_sentences(report: dict) -> list[str]:
             out.append(f"real clock at {r['rate_hz']:g} Hz, {who}: period p50 "
                        f"{r['period_p50_us']:.0f} us, p99 {r['period_p99_us']:.0f} us, max "
                        f"{r['period_max_us']:.0f} us, {r['deadline_misses']} deadline misses of "
-                       f"{r['steps']}, {r['stalls']} stalls; busy p99 {r['busy_p99_us']:.0f} us"
+                       f"{r['steps']}" + (f" ({r['sessions']} touch{'es' if r['sessions'] != 1 else ''} of "
+                                           f"{r['contact_s']:g} s)"
+                                          if "contact_s" in r else "") +
+                       f", {r['stalls']} stalls; busy p99 {r['busy_p99_us']:.0f} us"
                        f"{own}")
     default = report.get("default_rate_hz")
     for key, how in (("real_clock", "at normal priority"),

@@ -49,6 +49,7 @@ def real_clock_row(scene, identifier, generator, rate_hz: float, mode, contact_s
             flux.append(res.summary["flux_rms_error_rel"])
             clock = res.summary["clock"]
     return {"rate_hz": rate_hz, "material": material, "clock": clock, "sessions": len(runs),
+            "contact_s": contact_s,
             "realtime_priority": granted, **({"realtime_refused": refused} if refused else {}),
             **combined_summary(runs), **master_step_summary(steps_s, rate_hz),
             "flux_rms_error_rel": float(np.mean(flux))}
