@@ -67,6 +67,12 @@ def clear_cache() -> None:
 _SCENES: dict = {}
 
 
+#: Shipped scenes :func:`scene_of` read, by name: a live slave asks for its
+#: model's scene at every window (the file was parsed each time: a sixth
+#: of bench unseen's rendered touches).
+_SHIPPED: dict = {}
+
+
 def register_scene(scene) -> None:
     """Make ``scene`` the one a model naming ``scene.name`` fits its pad's
     model to, in this process (the slave service gives the scene of its
@@ -79,18 +85,23 @@ def scene_of(scene_ref: str):
     this process loaded, else ``load_scene(scene_ref)`` (a shipped scene's
     name or a scene file's path)."""
     from telethermal.errors import SceneError
-    from telethermal.physics.scene import load_scene, loaded_scene_file
+    from telethermal.physics.scene import list_scenes, load_scene, loaded_scene_file
     if scene_ref in _SCENES:
         return _SCENES[scene_ref]
     if loaded_scene_file(scene_ref) is not None:
         return loaded_scene_file(scene_ref)
+    if scene_ref in _SHIPPED:
+        return _SHIPPED[scene_ref]
     try:
-        return load_scene(scene_ref)
+        scene = load_scene(scene_ref)
     except SceneError as exc:
         raise IdentificationError(
             f"effusivity-fit needs the pad model of scene {scene_ref!r}, which is neither a "
             f"shipped scene nor a scene file, and no scene file of that name was loaded by "
             f"this process (give the scene file: --scene FILE): {exc}") from exc
+    if scene_ref in list_scenes():    # a shipped scene (package data): read once
+        _SHIPPED[scene_ref] = scene
+    return scene
 
 
 def serves(scene) -> str | None:
