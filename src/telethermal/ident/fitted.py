@@ -63,13 +63,9 @@ def clear_cache() -> None:
 
 
 #: Scenes given to this process by name (:func:`register_scene`), before
-#: the scene files it loaded (``physics.scene.loaded_scene_file``).
+#: the scene files it loaded (``physics.scene.loaded_scene_file``); the
+#: shipped scenes :func:`scene_of` read, by name (asked at every window).
 _SCENES: dict = {}
-
-
-#: Shipped scenes :func:`scene_of` read, by name: a live slave asks for its
-#: model's scene at every window (the file was parsed each time: a sixth
-#: of bench unseen's rendered touches).
 _SHIPPED: dict = {}
 
 
@@ -90,7 +86,7 @@ def scene_of(scene_ref: str):
         return _SCENES[scene_ref]
     if loaded_scene_file(scene_ref) is not None:
         return loaded_scene_file(scene_ref)
-    if scene_ref in _SHIPPED:
+    if scene_ref in _SHIPPED:            # package data: read once
         return _SHIPPED[scene_ref]
     try:
         scene = load_scene(scene_ref)
@@ -99,9 +95,7 @@ def scene_of(scene_ref: str):
             f"effusivity-fit needs the pad model of scene {scene_ref!r}, which is neither a "
             f"shipped scene nor a scene file, and no scene file of that name was loaded by "
             f"this process (give the scene file: --scene FILE): {exc}") from exc
-    if scene_ref in list_scenes():    # a shipped scene (package data): read once
-        _SHIPPED[scene_ref] = scene
-    return scene
+    return _SHIPPED.setdefault(scene_ref, scene) if scene_ref in list_scenes() else scene
 
 
 def serves(scene) -> str | None:
