@@ -110,11 +110,8 @@ def _paths(n: int) -> dict:
     return out
 
 
-def _sessions(contact_s: float) -> dict:
-    from telethermal.teleop.models import train_generator, train_identifier
+def _sessions(scene, ident, gen, contact_s: float) -> dict:
     from telethermal.sim.inprocess import run_session
-    scene = with_finger(load_scene("fingertip-7"))
-    ident, gen = train_identifier(scene, 0), train_generator(scene, 0)
     out = {}
     for kind in ("sim", "emulated"):
         s = run_session(scene, "wood", ident, gen, contact_s=contact_s, seed=1, realtime=True,
@@ -134,15 +131,14 @@ def _stamp(stamps_s: np.ndarray, j: int) -> None:
     stamps_s[j] = time.perf_counter()
 
 
-def _slave(trials_per_material: int, scene_name: str = "fingertip-7", seed: int = 0) -> dict:
+def _slave(scene, ident, trials_per_material: int, seed: int = 0) -> dict:
+    """The slave's side on ``scene`` with the identifier ``ident`` (trained
+    on its database of ``seed``)."""
     from telethermal.data.generate import sensor_session
     from telethermal.devices.slave_pad import EmulatedSlavePad
-    from telethermal.teleop.models import train_identifier
     from telethermal.teleop.slave import slave_rng
     from telethermal.teleop.slave import Slave
 
-    scene = with_finger(load_scene(scene_name))
-    ident = train_identifier(scene, seed)
     session = sensor_session(scene, np.random.default_rng((seed, 0xBE)))
     devices = EmulatedSlavePad(scene, session.instruments, seed=seed)
     rows, to_ident, to_ident_backlog, serial = [], [], [], []
@@ -233,10 +229,14 @@ def run(n: int = 3000, contact_s: float = 3.0, progress=None,
     load_before = os.getloadavg()
     step("paths")
     paths = _paths(n)
+    from telethermal.teleop.models import train_generator, train_identifier
+    step("training")
+    scene = with_finger(load_scene("fingertip-7"))
+    ident, gen = train_identifier(scene, 0), train_generator(scene, 0)   # for both sides
     step("sessions")
-    sessions = _sessions(contact_s)
+    sessions = _sessions(scene, ident, gen, contact_s)
     step("slave")
-    slave = _slave(slave_trials)
+    slave = _slave(scene, ident, slave_trials)
     step("qemu")
     with tempfile.TemporaryDirectory(prefix="telethermal-qemu-") as build:
         on_core = firmware.measure(build)

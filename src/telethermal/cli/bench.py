@@ -42,7 +42,7 @@ def cmd_bench_render(args) -> int:
 def cmd_bench_devices(args) -> int:
     from telethermal.bench import devices
 
-    with _progress(4, "bench devices") as advance:
+    with _progress(5, "bench devices") as advance:
         report = devices.run_and_save(args.json, n=args.samples, contact_s=args.contact_s,
                                       slave_trials=args.slave_trials, command=_command(),
                                       progress=advance)
