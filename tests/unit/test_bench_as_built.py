@@ -238,6 +238,11 @@ def test_the_reference_materials_are_the_scenes_and_two_at_least():
         reference_materials(scene, ("steel", "copper"))
     with pytest.raises(ValueError, match="at least 2 reference materials"):
         reference_materials(scene, ("steel", "steel"))
+    # One of the default blocks only: the scene's first three instead.
+    import dataclasses
+    metals = dataclasses.replace(scene, objects=tuple(
+        o for o in scene.objects if o.material in ("aluminium", "steel", "marble", "graphite")))
+    assert reference_materials(metals) == ["aluminium", "steel", "marble"]
 
 
 @pytest.mark.parametrize("argv, said", [

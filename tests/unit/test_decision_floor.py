@@ -184,7 +184,7 @@ def test_a_warm_started_tail_is_the_bounded_least_squares_optimum():
     floor plant (300 slots of 10 ms; its columns span 12 orders of
     magnitude) with aluminium's residual less the common slots' response,
     the common slots moving 2 % per call, as SLSQP's steps move them: the
-    box kept and the squared error within 1e-6 of bvls's (seen: 4e-8;
+    box kept and the squared error within 1e-5 of bvls's (seen: 4e-8;
     without the KKT check, 2.4e-5 and 7 slots out of their bounds), most
     calls warm and the check turning some away."""
     import numpy as np
@@ -212,6 +212,24 @@ def test_a_warm_started_tail_is_the_bounded_least_squares_optimum():
         cold = dfl.bounded_fit(a_t, rest, lo[k:], hi[k:], exact=True)
         assert np.all(q >= lo[k:] - 1e-6) and np.all(q <= hi[k:] + 1e-6), step
         e_warm, e_cold = a_t @ q - rest, a_t @ cold - rest
-        assert e_warm @ e_warm <= (e_cold @ e_cold) * (1 + 1e-6), step
+        assert e_warm @ e_warm <= (e_cold @ e_cold) * (1 + 1e-5), step
     assert box.calls["warm"] >= 20 and box.calls["cold"] >= 2
     assert box.calls["warm"] + box.calls["cold"] == 30
+
+
+def test_a_kept_active_slot_the_gradient_would_free_sends_the_tail_back_to_bvls():
+    """The KKT check's gradient half: slot 0 at its lower bound for the
+    first residual; for the second, keeping it there leaves slot 1 inside
+    its box (the bounds half passes) but the gradient would raise slot 0,
+    so the kept set is not the optimum and bvls runs again."""
+    import numpy as np
+
+    from telethermal.control.decision_floor import _Box
+
+    box = _Box(np.eye(2), np.zeros(2), np.full(2, 10.0))
+    np.testing.assert_allclose(box(np.array([-1.0, 5.0])), [0.0, 5.0], atol=1e-9)
+    q = box(np.array([3.0, 5.0]))
+    np.testing.assert_allclose(q, [3.0, 5.0], atol=1e-9)
+    assert box.calls == {"warm": 0, "cold": 2}
+    np.testing.assert_allclose(box(np.array([3.5, 4.0])), [3.5, 4.0], atol=1e-9)
+    assert box.calls == {"warm": 1, "cold": 2}        # the same (empty) set: kept

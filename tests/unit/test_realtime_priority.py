@@ -102,3 +102,13 @@ def test_a_row_says_how_many_touches_of_what_length_it_pooled():
     assert "0 deadline misses of 6800 (1 touch of 0.5 s)" in text
     assert "2 deadline misses of 6800 (4 touches of 3 s)" in text
     assert "touch" not in "\n".join(real_clock_sentences({"real_clock": [_row(1)]}))
+
+
+
+def test_a_row_too_short_for_the_target_is_not_judged_against_it():
+    # 1 of 450 is 0.22 %: one miss says nothing of a 0.1 % rate.
+    short = {**_row(1, 20), "steps": 450}
+    text = "\n".join(real_clock_sentences({"default_rate_hz": 500.0,
+                                            "real_clock_deployed": [short]}))
+    assert "1 of 450 deadlines missed (0.222 %, target 0.1 %: too few periods to judge)" \
+        in text

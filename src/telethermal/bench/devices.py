@@ -132,8 +132,8 @@ def _stamp(stamps_s: np.ndarray, j: int) -> None:
 
 
 def _slave(scene, ident, trials_per_material: int, seed: int = 0) -> dict:
-    """The slave's side on ``scene`` with the identifier ``ident`` (trained
-    on its database of ``seed``)."""
+    """The slave's side on ``scene`` with the identifier ``ident``; ``seed``:
+    its instruments' and touches' draws."""
     from telethermal.data.generate import sensor_session
     from telethermal.devices.slave_pad import EmulatedSlavePad
     from telethermal.teleop.slave import slave_rng

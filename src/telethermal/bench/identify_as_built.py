@@ -94,7 +94,7 @@ def calibrate_drawn(scene, built, references=None) -> tuple:
     materials = references_of(scene, references)
     ref_scene = dataclasses.replace(
         built, pad=dataclasses.replace(built.pad, trials_per_material=REFERENCE_TOUCHES),
-        objects=tuple(o for o in built.objects if o.material in materials))
+        objects=tuple(o for o in built.objects if o.name in materials))
     trials = pad_database(ref_scene, np.random.default_rng(REFERENCE_SEED))
     gain = sensor_session(ref_scene, np.random.default_rng(REFERENCE_SEED)).instruments.flux_gain
     start = time.process_time()

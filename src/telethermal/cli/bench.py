@@ -218,8 +218,9 @@ def _bench_unseen_as_built(args) -> int:
 def _references_arg(p) -> None:
     p.add_argument("--references", type=_names, metavar="M,M,...",
                    help="with --as-built: the reference materials each drawn pad is "
-                        "calibrated from, materials of the scene (default: steel, "
-                        "plexiglass and wood, those of them the scene has)")
+                        "calibrated from, two or more of the scene's objects (default: "
+                        "steel, plexiglass and wood, those of them the scene has, else "
+                        "its first three)")
 
 
 def _names(text: str) -> tuple[str, ...]:

@@ -23,9 +23,9 @@ rounds, not iterated to convergence as
 at 0.08 s a third round moved the worst material by under 1e-4 K).
 
 How exact: the tails are solved by bounded least squares (bvls, warm-
-started from the last active set while its KKT conditions hold: within
-1e-6 of the squared error, tested), the bounds in two rounds, SLSQP to its
-tolerance; each can only leave the
+started from the last active set while its KKT conditions hold to a
+tolerance: within about 1e-6 of bvls's squared error, tested), the bounds
+in two rounds, SLSQP to its tolerance; each can only leave the
 computed minimax higher than the model's true one, so "no controller does
 better" holds up to that slack (2e-3 K against the exact per-material
 floor at t_d = 0, tested).
@@ -141,11 +141,12 @@ class _Box:
             return False
         err = self.a @ q - r
         g = self.a.T @ err                       # half the objective's gradient
-        # A slot's gradient against its column's reach (the columns span 28
-        # orders of magnitude: the last slots barely reach the skin): an
-        # active slot freed alone lowers the squared error by at most
-        # (g_i / |a_i|)^2, under 1e-8 of it within this tolerance (bvls
-        # itself leaves some at about 1e-5).
+        # A slot's gradient against its column's reach (on render's plant
+        # the columns span 12 orders of magnitude: the last slots barely
+        # reach the skin): an active slot freed alone lowers the squared
+        # error by at most (g_i / |a_i|)^2, under 1e-8 of it within this
+        # tolerance (bvls itself leaves some at about 1e-5); many such
+        # slots at once, more (1.35e-6 of it seen on a hard path).
         gtol = KKT_COSINE * self._col * (np.linalg.norm(err) + 1e-12)
         return not (np.any(g[self._active < 0] < -gtol[self._active < 0]) or
                     np.any(g[self._active > 0] > gtol[self._active > 0]))

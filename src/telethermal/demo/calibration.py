@@ -103,7 +103,7 @@ def reference_touches(scene, seed: int) -> list:
     materials = reference_materials(scene)
     ref = dataclasses.replace(
         scene, pad=dataclasses.replace(scene.pad, trials_per_material=REFERENCE_TOUCHES),
-        objects=tuple(o for o in scene.objects if o.material in materials))
+        objects=tuple(o for o in scene.objects if o.name in materials))
     return list(pad_database(ref, np.random.default_rng([seed, REFERENCE_STREAM])))
 
 

@@ -65,14 +65,14 @@ REFERENCE_MATERIALS = ("steel", "plexiglass", "wood")
 
 
 def reference_materials(scene, wanted=None) -> list[str]:
-    """The reference blocks a calibration of ``scene``'s pad touches.
-    ``wanted`` (names): those, each a material of the scene and at least
-    :data:`MIN_MATERIALS` of them, else ValueError naming the one that is
-    not and the scene's materials; None: :data:`REFERENCE_MATERIALS` the
-    scene has, else its first three."""
+    """The reference blocks (the scene's objects, by name: ``scene.materials``)
+    a calibration of ``scene``'s pad touches. ``wanted`` (names): those;
+    None: :data:`REFERENCE_MATERIALS` the scene has when two or more, else
+    its first three. ValueError, naming the scene's objects, for a name the
+    scene has not, and for fewer than :data:`MIN_MATERIALS`."""
     if wanted is None:
-        return [m for m in REFERENCE_MATERIALS if m in scene.materials] or \
-            list(scene.materials[:3])
+        present = [m for m in REFERENCE_MATERIALS if m in scene.materials]
+        wanted = present if len(present) >= MIN_MATERIALS else scene.materials[:3]
     names = list(dict.fromkeys(wanted))
     for m in names:
         if m not in scene.materials:
@@ -80,7 +80,8 @@ def reference_materials(scene, wanted=None) -> list[str]:
                              f"{scene.name}'s: {', '.join(scene.materials)}")
     if len(names) < MIN_MATERIALS:
         raise ValueError(f"a calibration needs at least {MIN_MATERIALS} reference materials "
-                         f"(3 recommended); got {', '.join(names) or 'none'}")
+                         f"(3 recommended); got {', '.join(names) or 'none'} (scene "
+                         f"{scene.name}'s: {', '.join(scene.materials)})")
     return names
 #: The window fitted from the detected onset, s (the identifier's longest).
 WINDOW_S = 1.0
