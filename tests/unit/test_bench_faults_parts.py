@@ -66,3 +66,22 @@ def test_the_benches_take_a_scene_from_the_command_line(monkeypatch, tmp_path):
             pass
     assert seen == {"render": "lab.toml", "skin-floor": "lab.toml", "faults": "lab.toml"}
     assert main(["bench", "faults", "--json", str(tmp_path / "x.json"), "--delays", "x"]) == 2
+
+
+def test_a_process_touch_is_judged_against_a_spread_of_two_simulated_touches_or_more():
+    """Within mean +- 2 sd of the simulated touches of its material; one
+    simulated touch (bench-quick's --seeds 1) is a point, no spread: not
+    judged, and said so, where it read "0 of 4"."""
+    def sim(n, sd):
+        stats = {"wood": {"mean": 0.05, "sd": sd, "n": n}}
+        return {"rows": {"delay 0 ms": {"modes": {m: {"by_material": stats}
+                                                   for m in ("compensated", "naive")}}}}
+    rows = [{"fault": "delay 0 ms", "safety_events": 0, "recovered": True,
+             "runs": {"trajectory": [{"material": "wood", "flux_rms_error_rel_whole": 0.052}],
+                      "setpoints": [{"material": "wood", "flux_rms_error_rel_whole": 0.08}]}}]
+    two = faults_procs.confirm(rows, sim(2, 0.005))
+    assert two["processes_within_simulated_spread"] == "1 of 2"
+    one = faults_procs.confirm(rows, sim(1, 0.0))
+    assert one["processes_within_simulated_spread"].startswith(
+        "0 of 0 (2 not judged: one simulated touch of their material, no spread")
+    assert one["processes_confirm"] == {}
