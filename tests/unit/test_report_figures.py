@@ -68,6 +68,8 @@ def test_reduced_options_are_those_that_change_what_is_measured():
     assert off_defaults("telethermal bench unseen --as-built 0.15 --references "
                         "aluminium,steel,wood --seeds 2 --json x") == (
         ["--seeds 2"], ["--references aluminium,steel,wood"])
+    assert off_defaults("telethermal bench identify --as-built 0.15 --references "
+                        "wood,steel,plexiglass --json x") == ([], [])      # the default set
 
 
 def test_a_reduced_run_is_named_in_the_report(tmp_path):

@@ -21,9 +21,16 @@ def off_defaults(command: str) -> tuple[list[str], list[str]]:
     """:func:`reduced_options` of ``command`` split in two: the reductions
     (fewer seeds, methods, ...) and the other settings
     (:data:`SETTING_OPTIONS`)."""
+    from telethermal.ident.calibration import REFERENCE_MATERIALS
+
     off = reduced_options(command)
     settings = [o for o in off if o.split("=")[0].split()[0] in SETTING_OPTIONS]
-    return [o for o in off if o not in settings], settings
+    reduced = [o for o in off if o not in settings]
+    # The default reference blocks named explicitly (in any order): the default.
+    default = sorted(REFERENCE_MATERIALS)
+    settings = [o for o in settings
+                if sorted(o.replace("=", " ").split(" ", 1)[-1].split(",")) != default]
+    return reduced, settings
 
 
 def reduced_options(command: str) -> list[str]:
