@@ -356,3 +356,53 @@ def test_the_drift_check_passes_a_steady_face_and_refuses_a_slow_ramp():
     steady_flux = routine.Record(t, np.zeros(n), np.zeros(n), 24.0 + noise, 30.0 + flux_noise,
                                  np.ones(n))
     routine.check_settled(steady_flux, "on the block")      # an offset is not a drift
+
+
+def test_the_board_columns_go_on_the_grid_at_the_instants_the_board_sampled_them():
+    # A board streaming on its own: each period reads the frame it took
+    # 1.3 ms before the period's start (up to 2 ms: a period at 500 Hz).
+    # Interpolated at the board's instants the face and the flux are the
+    # ramp they sampled, exactly; at the periods' starts they would lag it
+    # by 1.3 ms of slope (0.65 of a unit here), which a lag fit reads as
+    # lag.
+    n = 200
+    t = np.arange(n) / routine.RATE_HZ
+    board = t - 1.3e-3
+    ramp = board * routine.RATE_HZ
+    rec = routine.Record(t, np.zeros(n), t * routine.RATE_HZ, ramp, ramp, np.full(n, 5.0),
+                         board)
+    got = routine.on_grid(rec, routine.RATE_HZ, "test")
+    inside = got.t_s <= board[-1]                     # np.interp holds the end flat
+    np.testing.assert_allclose(got.flux_w_m2[inside], (got.t_s * routine.RATE_HZ)[inside],
+                               atol=1e-9)
+    np.testing.assert_allclose(got.surface_c[inside], (got.t_s * routine.RATE_HZ)[inside],
+                               atol=1e-9)
+    np.testing.assert_allclose(got.junction_c, got.t_s * routine.RATE_HZ, atol=1e-9)
+    stamped_late = routine.on_grid(routine.Record(*[getattr(rec, f) for f in (
+        "t_s", "current_a", "junction_c", "surface_c", "flux_w_m2", "force_n")]),
+        routine.RATE_HZ, "test")
+    assert np.allclose(stamped_late.flux_w_m2[:-1] - got.flux_w_m2[:-1], -0.65, atol=1e-9)
+
+
+def test_the_boards_clock_maps_to_the_hosts_by_the_shortest_latency_and_unwraps():
+    """Frames sampled every 2 ms on the board's clock (starting 0.5 s
+    before its 32-bit microsecond counter wraps), received 0.4-6 ms later
+    on a host clock 1,000 s ahead: once the first frames have set the
+    offset, each frame's instant on the host's clock is its sample instant
+    plus the shortest latency seen, within 10 us, across the wrap."""
+    from telethermal.teleop.display_hardware import BoardClock
+
+    rng = np.random.default_rng(2)
+    clock = BoardClock()
+    start_us = BoardClock.WRAP_US - 500_000
+    latency = 0.4e-3 + rng.exponential(1.5e-3, 600)
+    latency[::50] = 0.4e-3                                  # the line's own floor, now and then
+    errors = []
+    for k in range(600):
+        true_board_s = (start_us + 2000 * k) * 1e-6
+        t_us = (start_us + 2000 * k) % BoardClock.WRAP_US
+        host_sampled = 1000.0 + true_board_s
+        mapped = clock.sampled_s(t_us, host_sampled + latency[k])
+        errors.append(mapped - (host_sampled + 0.4e-3))
+    assert np.max(np.abs(errors[50:])) < 1e-5               # after the first floor frame
+    assert clock._wraps == 1
