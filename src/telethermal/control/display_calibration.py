@@ -108,20 +108,14 @@ class Record:
     surface_c: np.ndarray
     flux_w_m2: np.ndarray
     force_n: np.ndarray
-    #: When the sensor board sampled each row's surface and flux, on the
-    #: same time axis (its own clock mapped to the routine's); None: at
-    #: ``t_s`` (a simulated display, or a display that cannot say).
-    board_t_s: np.ndarray | None = None
 
 
 def run_part(display, t0_s: float, rate_hz: float = RATE_HZ, clock=None) -> Record:
     """Drive ``display`` through :data:`STEPS` from session time ``t0_s``,
     one period at a time, as the master drives it; the readings. ``clock``
     (``now()``, ``sleep_until(deadline)``: a lab's display on the real
-    clock) paces the periods, each reading stamped at its period's start
-    (and the board's columns, where ``display.sample_clock_s()`` says when
-    the board sampled them on that clock, stamped then: ``board_t_s``), and
-    a period whose deadline had passed by a whole period is skipped, a
+    clock) paces the periods, each reading stamped at its period's start,
+    and a period whose deadline had passed by a whole period is skipped, a
     row of NaN (missed, as :func:`on_grid` counts it: the steps stay on
     time); None: back to back, stamped on the routine's grid (a simulated
     display)."""
@@ -135,15 +129,12 @@ def run_part(display, t0_s: float, rate_hz: float = RATE_HZ, clock=None) -> Reco
             t = t0_s + k * dt
         else:
             if clock.now() - base >= (k + 1) * dt:          # this period is over: missed
-                rows.append((t0_s + k * dt, current) + (math.nan,) * 5)
+                rows.append((t0_s + k * dt, current) + (math.nan,) * 4)
                 continue
             clock.sleep_until(base + k * dt)
             t = t0_s + (clock.now() - base)
         s = display.read(t)
-        sampled = getattr(display, "sample_clock_s", None)
-        board_t = t if clock is None or sampled is None else t0_s + (sampled() - base)
-        rows.append((t, current, s.junction_c, s.pad_temp_c, s.flux_w_m2, s.force_n,
-                     board_t if math.isfinite(board_t) else t))
+        rows.append((t, current, s.junction_c, s.pad_temp_c, s.flux_w_m2, s.force_n))
         display.apply(t, RoutineStep(t, current), dt, s.force_n)
     return Record(*(np.array(c, float) for c in zip(*rows)))
 
@@ -183,14 +174,9 @@ def on_grid(rec: Record, rate_hz: float, part: str) -> Record:
             "loads this computer, then run it again")
     grid = rec.t_s[0] + np.arange(rec.t_s.size) / rate_hz
     t = rec.t_s[used]
-    # The board's columns at the instants the board sampled them (a frame
-    # read a period after it was taken is that much earlier), the
-    # driver's junction at its period's.
-    tb = (rec.t_s if rec.board_t_s is None else rec.board_t_s)[used]
-    order = np.argsort(tb, kind="stable")
-    return Record(grid, rec.current_a, np.interp(grid, t, rec.junction_c[used]),
-                  *(np.interp(grid, tb[order], column[used][order])
-                    for column in (rec.surface_c, rec.flux_w_m2)), rec.force_n)
+    return Record(grid, rec.current_a, *(np.interp(grid, t, column[used]) for column in
+                                         (rec.junction_c, rec.surface_c, rec.flux_w_m2)),
+                  rec.force_n)
 
 
 #: How many standard errors of its estimate the face's drift over the

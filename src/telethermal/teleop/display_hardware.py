@@ -36,33 +36,6 @@ LIFT_BLOCK = ("lift the block off, wipe the grease from the face, leave the face
 BLIND_MAX = 25
 
 
-class BoardClock:
-    """The sensor board's own clock (a frame's ``t_us``, 32 bits that wrap
-    every 71.6 minutes) on the host's: the least of ``received - sampled``
-    over the frames so far is the clocks' offset plus the line's shortest
-    latency (a frame is never received before it was sampled), so a frame's
-    sample instant is its ``t_us`` plus that. The line's jitter and a late
-    read of the frame fall out; the shortest latency (a frame's time on the
-    line, well under a period) stays in. Drift between the two crystals
-    (tens of ppm: under a millisecond over the routine's parts) is not
-    modelled."""
-
-    WRAP_US = 1 << 32
-
-    def __init__(self):
-        self._last_us = None
-        self._wraps = 0
-        self.offset_s = math.inf
-
-    def sampled_s(self, t_us: int, received_s: float) -> float:
-        if self._last_us is not None and t_us < self._last_us - self.WRAP_US // 2:
-            self._wraps += 1                     # the board's counter wrapped
-        self._last_us = t_us
-        board_s = (t_us + self._wraps * self.WRAP_US) * 1e-6
-        self.offset_s = min(self.offset_s, received_s - board_s)
-        return board_s + self.offset_s
-
-
 class _Guarded:
     """The display as the routine drives it on hardware: a board frame that
     is not new this period reads as missing (the board's own reading holds
@@ -73,13 +46,6 @@ class _Guarded:
     def __init__(self, display):
         self.display, self.blind = display, 0
         self.limits = SafetyLimits()
-        self.board_clock = BoardClock()
-
-    def sample_clock_s(self) -> float:
-        """When the board sampled the frame last read, on the routine's
-        clock (:class:`BoardClock`); NaN before any frame."""
-        r = self.display.board.latest
-        return math.nan if r is None else self.board_clock.sampled_s(r.t_us, r.received_s)
 
     def read(self, t_s: float):
         s = self.display.read(t_s)
