@@ -26,19 +26,18 @@ truth (whether its 95 % interval holds it: the coverage) and its CPU time.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
 
 from telethermal.data.generate import pad_database, sensor_session
 from telethermal.errors import BenchError
-from telethermal.ident.calibration import MAX_TOUCHES, SD_MAX, reference_materials
+from telethermal.ident.calibration import (REFERENCE_TOUCHES, SD_MAX, reference_materials,
+                                           reference_scene)
 from telethermal.ident.crossval import cross_validate
 from telethermal.physics.as_built import draw_as_built, with_as_built
 from telethermal.physics.scene import load_scene
 
-REFERENCE_TOUCHES = MAX_TOUCHES
 #: Seeds: the scored touches', and the reference touches' (another session).
 TOUCH_SEED, REFERENCE_SEED = 0, 1000
 METHOD = "effusivity-fit"
@@ -91,10 +90,7 @@ def calibrate_drawn(scene, built, references=None) -> tuple:
     """(the calibration of ``built``'s pad from its reference touches on
     ``references`` (:func:`references_of`), CPU s, truth)."""
     from telethermal.ident.pad_calibration import calibrate_pad
-    materials = references_of(scene, references)
-    ref_scene = dataclasses.replace(
-        built, pad=dataclasses.replace(built.pad, trials_per_material=REFERENCE_TOUCHES),
-        objects=tuple(o for o in built.objects if o.name in materials))
+    ref_scene = reference_scene(built, references_of(scene, references))
     trials = pad_database(ref_scene, np.random.default_rng(REFERENCE_SEED))
     gain = sensor_session(ref_scene, np.random.default_rng(REFERENCE_SEED)).instruments.flux_gain
     start = time.process_time()

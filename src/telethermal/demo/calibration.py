@@ -28,11 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.ident.calibration import MAX_TOUCHES, reference_materials
+from telethermal.ident.calibration import (REFERENCE_TOUCHES, reference_materials,
+                                           reference_scene)
 
-#: Touches per reference material: what ``calibrate pad`` reads (5; more
-#: are ignored).
-REFERENCE_TOUCHES = MAX_TOUCHES
 #: The reference session's seed beside the demo's: its own draws.
 REFERENCE_STREAM = 44
 #: The file written in the demo's folder.
@@ -100,10 +98,7 @@ def reference_touches(scene, seed: int) -> list:
     as built on each reference material: a lab's session on its blocks."""
     from telethermal.data.generate import pad_database
 
-    materials = reference_materials(scene)
-    ref = dataclasses.replace(
-        scene, pad=dataclasses.replace(scene.pad, trials_per_material=REFERENCE_TOUCHES),
-        objects=tuple(o for o in scene.objects if o.name in materials))
+    ref = reference_scene(scene, reference_materials(scene))
     return list(pad_database(ref, np.random.default_rng([seed, REFERENCE_STREAM])))
 
 

@@ -201,7 +201,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
             echo(f"slave's object thermometer NOT calibrated: {cal.get('error')}")
         # The in-process touches read the pad through the slave service's
         # instruments and calibration: the same seed, the same touch.
-        sensors = service_sensors(scene, seed, cal)
+        sensors = service_sensors(scene, seed, cal or None)   # none reported: as at start
         if view_port is not None:
             view = open_view(master_cfg, record_dir, view_port)
             echo(f"view: {view.url}")

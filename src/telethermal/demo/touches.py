@@ -15,7 +15,7 @@ from telethermal.ident.openset import EFFUSIVITY_KEYS
 from telethermal.services.admin import call
 from telethermal.sim.direct import compare_with_direct
 from telethermal.sim.inprocess import SessionResult
-from telethermal.teleop.decision import when_decided
+from telethermal.teleop.decision import DECISION_KEYS, when_decided
 from telethermal.teleop.memory import memory_counts
 from telethermal.teleop.plots import plot_session
 
@@ -164,10 +164,6 @@ def touch_said(s: dict) -> str:
         return s["decision_text"]
     return s["identified"] if s["unknown_reason"] is None else \
         f"{s['identified']} ({s['unknown_reason']})"
-
-
-#: What one touch decided, in every summary (teleop/decision.py).
-DECISION_KEYS = ("identified", "decision_time_s", "identified_at_s")
 
 
 def decided_alike(a: dict, b: dict) -> bool:

@@ -56,12 +56,24 @@ from telethermal.errors import CalibrationError
 MIN_MATERIALS, MIN_TOUCHES = 2, 3
 #: Touches of each material read at most (the first, by trial order).
 MAX_TOUCHES = 5
+#: Touches per reference block the demo and the as-built benches make:
+#: what a calibration reads.
+REFERENCE_TOUCHES = MAX_TOUCHES
 #: The reference blocks the demo and the as-built benches touch (those of
 #: them a scene has; its first three if none): a metal, a plastic and a
 #: wood, effusivities about 7,500, 570 and 470 W s^0.5/(m^2 K) from the
 #: materials table (docs/calibration.md: three, so a block off its table
 #: value stands out). A lab touches its own.
 REFERENCE_MATERIALS = ("steel", "plexiglass", "wood")
+
+
+def reference_scene(scene, materials):
+    """``scene`` with the objects named ``materials`` alone (by name, as
+    :func:`reference_materials` gives them), :data:`REFERENCE_TOUCHES` of
+    each: the reference session's scene."""
+    return dataclasses.replace(
+        scene, pad=dataclasses.replace(scene.pad, trials_per_material=REFERENCE_TOUCHES),
+        objects=tuple(o for o in scene.objects if o.name in materials))
 
 
 def reference_materials(scene, wanted=None) -> list[str]:

@@ -143,9 +143,11 @@ class EffusivityLda(Identifier):
         # The shrinkage first, as linear discriminant analysis; then how much
         # of each class's own scatter to keep, with that shrinkage.
         self.pooled_weight_ = 1.0
-        self.shrinkage_ = self._cv_choose(contacts, "shrinkage_", self.SHRINKAGE_GRID, 0.1) \
+        cases = self._cv_cases(contacts) if "cv" in (self.shrinkage, self.pooled_weight) \
+            else None
+        self.shrinkage_ = self._cv_choose(cases, "shrinkage_", self.SHRINKAGE_GRID, 0.1) \
             if self.shrinkage == "cv" else float(self.shrinkage)
-        self.pooled_weight_ = self._cv_choose(contacts, "pooled_weight_",
+        self.pooled_weight_ = self._cv_choose(cases, "pooled_weight_",
                                               self.POOLED_WEIGHT_GRID, 1.0) \
             if self.pooled_weight == "cv" else float(self.pooled_weight)
         return super().fit(contacts)
@@ -154,35 +156,45 @@ class EffusivityLda(Identifier):
         return {**super().learned(), "shrinkage_": self.shrinkage_,
                 "pooled_weight_": self.pooled_weight_}
 
-    def _cv_choose(self, contacts, attr: str, grid, fallback: float) -> float:
-        """The value of ``attr`` in ``grid`` with the lowest held-out log
-        loss, pooled over windows every 0.1 s up to 1 s; folds grouped by the
-        trials' group (``trial-k`` within one session of a generated
-        database; a dataset of several sessions can name sessions as
-        groups), so a group never both trains and scores. ``fallback``
-        when there are too few groups, or a fold lacks a class."""
+    def _cv_cases(self, contacts):
+        """The cross-validation's cases: folds grouped by the trials' group
+        (``trial-k`` within one session of a generated database; a dataset
+        of several sessions can name sessions as groups), so a group never
+        both trains and scores, and windows every 0.1 s up to 1 s; each
+        fold's and window's features, train and test, in the order the loss
+        sums them (they do not depend on the value tried: made once for
+        both choices). "few groups" or "a fold lacks a class" when there
+        are none to make."""
         from telethermal.ident.base import group_folds
-        from scipy.special import log_softmax
 
         y = np.array([self.classes_.index(c) for c in contacts.labels])
         folds = group_folds(contacts.groups, 5)
         if len(folds) < 2:
-            return fallback
+            return "few groups"
         usable = float(np.min(contacts.lengths - 1)) / self.sample_rate_hz_
         windows = [w for w in np.arange(1, 11) * 0.1 if w <= min(usable, self.max_window_s) + 1e-9]
         windows = windows or [usable]
-        # Each fold's and window's features once (they do not depend on the
-        # value tried), in the order the loss sums them.
         cases = []
         for test in folds:
             train = np.setdiff1d(np.arange(len(y)), test)
             if len(set(y[train])) < len(self.classes_):
-                log.warning("%s: a fold lacks a class; %g used without cross-validation",
-                            attr.rstrip("_"), fallback)
-                return fallback
+                return "a fold lacks a class"
             for w in windows:
                 cases.append((self._raw_features(self.window(contacts.x[train], w)), y[train],
                               self._raw_features(self.window(contacts.x[test], w)), y[test]))
+        return cases
+
+    def _cv_choose(self, cases, attr: str, grid, fallback: float) -> float:
+        """The value of ``attr`` in ``grid`` with the lowest held-out log
+        loss, pooled over the :meth:`_cv_cases`; ``fallback`` when there
+        are none (too few groups, or a fold lacks a class: said)."""
+        from scipy.special import log_softmax
+
+        if isinstance(cases, str):                    # none to make: why
+            if cases == "a fold lacks a class":
+                log.warning("%s: a fold lacks a class; %g used without cross-validation",
+                            attr.rstrip("_"), fallback)
+            return fallback
         losses = []
         for value in grid:
             setattr(self, attr, value)

@@ -38,7 +38,7 @@ from telethermal.teleop.master import MasterDisplay, Phase
 from telethermal.teleop.links import EndpointLink
 from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceState
 from telethermal.teleop.decision import touch_decision
-from telethermal.teleop.memory import memory_counts
+from telethermal.teleop.memory import judged_of
 from telethermal.teleop.display_setup import build_display, safety_summary
 from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
 from telethermal.wire.messages import Message, SessionConfig
@@ -80,7 +80,7 @@ class Touch:
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
         self.gc0 = list(service.loop.stats.gc_collections)
-        self.memory0 = memory_counts(service.link.counters, {})["master"]
+        self.memory0 = judged_of(service.link.counters)
         self.reply_when_done = True          # the admin "touch" request waits for the end
         self.truth: dict | None = None       # the placed object (simulation), for the figures
 
@@ -341,8 +341,8 @@ class MasterService:
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,
             "link_counters": dict(link.counters), "devices": self.config.devices,
             # what the memory's counters counted of this touch (PROTOCOL.md 6b)
-            "memory_judged": {k: v - touch.memory0[k] for k, v in
-                              memory_counts(link.counters, {})["master"].items()},
+            "memory_judged": {k: v - touch.memory0[k]
+                              for k, v in judged_of(link.counters).items()},
             "device_counters": devices, **safety_summary(touch.display), "loop": loop,
             "transport": dict(self.endpoint.counters), "rtt_s": self.endpoint.offset.rtt_s,
         }

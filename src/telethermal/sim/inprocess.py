@@ -80,16 +80,15 @@ def service_sensors(scene: Scene, service_seed: int, calibration: dict | None = 
     the same trial, the same decisions (on a service's emulated or QEMU
     boards the pad goes through their drivers, which this run does not
     model)."""
-    from telethermal.control.thermometer_calibration import ThermometerCalibration
-    from telethermal.data.generate import SensorSession, sensor_session
-    from telethermal.physics.sensors import draw_instruments
+    from dataclasses import replace
 
-    rng = instruments_rng(service_seed)
-    instruments = draw_instruments(with_finger(scene).sensors, rng)
-    if calibration is None:
-        return sensor_session(scene, rng, instruments=instruments)
-    return SensorSession(instruments, ThermometerCalibration.from_dict(
-        calibration, "the slave's thermometer_calibration"))
+    from telethermal.control.thermometer_calibration import ThermometerCalibration
+    from telethermal.data.generate import sensor_session
+
+    session = sensor_session(scene, instruments_rng(service_seed), calibration is None)
+    return session if calibration is None else replace(
+        session, calibration=ThermometerCalibration.from_dict(
+            calibration, "the slave's thermometer_calibration"))
 
 
 @dataclass

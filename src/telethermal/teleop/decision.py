@@ -34,6 +34,10 @@ if TYPE_CHECKING:               # the admin client imports this module: kept lig
     from telethermal.ident.anytime import Estimate
 
 
+#: The fields of a touch summary :meth:`TouchDecision.fields` gives.
+DECISION_KEYS = ("identified", "decision_time_s", "identified_at_s")
+
+
 @dataclass(frozen=True)
 class TouchDecision:
     """What a touch decided (see the module)."""
@@ -45,8 +49,8 @@ class TouchDecision:
 
     def fields(self) -> dict:
         """The summary's fields, by their names."""
-        return {"identified": self.identified, "decision_time_s": self.decision_time_s,
-                "identified_at_s": self.identified_at_s}
+        return dict(zip(DECISION_KEYS, (self.identified, self.decision_time_s,
+                                        self.identified_at_s)))
 
     def text(self) -> str:
         """When the identified label was decided, and the group the pad

@@ -171,18 +171,25 @@ def judge(held: str, held_effusivity: "Effusivity | None", fresh: Estimate
     return Judgement.VAGUER if verdict == Agreement.VAGUER else Judgement.AGREES
 
 
+#: The counters :func:`judge` feeds (PROTOCOL.md 6b).
+JUDGED = (str(Judgement.OVERRULED), str(Judgement.KEPT))
+
+
+def judged_of(counters: dict) -> dict:
+    """Those of ``counters`` that :func:`judge` feeds (0 where absent)."""
+    return {k: int(counters.get(k, 0)) for k in JUDGED}
+
+
 def judged_counts(judgement: Judgement | None) -> dict:
     """One touch's counters from its judgement (:func:`judge`; None: not
     judged), as :func:`memory_counts` reads them."""
-    return {str(j): int(judgement == j) for j in (Judgement.OVERRULED, Judgement.KEPT)}
+    return {k: int(judgement == k) for k in JUDGED}
 
 
 def memory_counts(master_counters: dict, slave_counters: dict) -> dict:
     """A touch summary's ``memory_counts``: the counters :func:`judge` feeds,
     as the master's link and the slave's session counted them."""
-    names = (str(Judgement.OVERRULED), str(Judgement.KEPT))
-    return {side: {k: int(c.get(k, 0)) for k in names}
-            for side, c in (("master", master_counters), ("slave", slave_counters))}
+    return {"master": judged_of(master_counters), "slave": judged_of(slave_counters)}
 
 
 @dataclass(frozen=True)
