@@ -210,6 +210,35 @@ def test_recurrent_learns_levels_and_round_trips(tmp_path, rng, method):
     assert d.label == "unknown" and d.reason == "gap too small"
 
 
+def test_torch_is_imported_by_the_recurrent_methods_alone(tmp_path, rng):
+    """A process that loads the registry, a session's models or a service
+    imports no torch (about a second each: the services, the benches'
+    workers); a recurrent model saved by another process loads and answers
+    there as here (torch then imported on its first use)."""
+    import subprocess
+    import sys
+
+    data = contacts(rng, per_class=3)
+    model = make("lstm", epochs=5, n_hidden=4).fit(data)
+    path = model.save(tmp_path / "lstm.npz")
+    np.save(tmp_path / "x.npy", data.x)
+    expected = model.proba_normalised(data.x, 10)
+    code = (
+        "import sys, numpy as np\n"
+        "import telethermal.ident.registry, telethermal.teleop.models\n"
+        "import telethermal.services.slave, telethermal.services.master\n"
+        "import telethermal.bench.worker, telethermal.bench.models\n"
+        "assert 'torch' not in sys.modules, 'torch imported'\n"
+        "from telethermal.ident.registry import load_model\n"
+        f"m = load_model({str(path)!r})\n"
+        "assert 'torch' not in sys.modules, 'torch imported by loading'\n"
+        f"np.save({str(tmp_path / 'p.npy')!r}, m.proba_normalised(np.load({str(tmp_path / 'x.npy')!r}), 10))\n"
+        "assert 'torch' in sys.modules\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    np.testing.assert_allclose(np.load(tmp_path / "p.npy"), expected, atol=1e-6)
+
+
 # ------------------------------------------------------------------ streaming
 def _stream(model, raw, gap):
     stream = StreamingIdentifier(model, gap)

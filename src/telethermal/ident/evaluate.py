@@ -117,9 +117,13 @@ def _unknown_reasons(decisions) -> dict[str, int]:
 def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> dict:
     """Milliseconds for one posterior update (one window, one contact), on one
     CPU thread, over ``repeats`` updates at random windows."""
-    import torch  # only to pin its thread pool, for methods that use it
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
+    from telethermal.ident.recurrent import Recurrent, torch_module
+    # torch's thread pool pinned for the methods that use it (imported here,
+    # not in the timed calls); the others never import it.
+    torch = torch_module() if isinstance(model, Recurrent) else None
+    threads = torch.get_num_threads() if torch else None
+    if torch:
+        torch.set_num_threads(1)
     rng = np.random.default_rng(0)
     costs = []
     try:
@@ -130,7 +134,8 @@ def inference_cost_ms(model: Identifier, x: np.ndarray, repeats: int = 300) -> d
             model.update_probe(row, i)
             costs.append((time.perf_counter() - start) * 1e3)
     finally:
-        torch.set_num_threads(threads)
+        if torch:
+            torch.set_num_threads(threads)
     return {"inference_ms_p50": float(np.percentile(costs, 50)),
             "inference_ms_p99": float(np.percentile(costs, 99))}
 

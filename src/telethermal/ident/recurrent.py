@@ -13,9 +13,9 @@ whose own response time is 0.2 s.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-import torch
-from torch import nn
 
 from telethermal.errors import IdentificationError
 from telethermal.ident.base import Identifier
@@ -29,17 +29,32 @@ def _softmax(z: np.ndarray) -> np.ndarray:
     return e / e.sum(axis=-1, keepdims=True)
 
 
-class _Net(nn.Module):
-    def __init__(self, n_in, n_hidden, n_out, cell):
-        super().__init__()
-        self.encoder = nn.Linear(n_in, n_hidden)
-        rnn = nn.LSTM if cell == "lstm" else nn.RNN
-        self.rnn = rnn(n_hidden, n_hidden, batch_first=True)
-        self.decoder = nn.Linear(n_hidden, n_out)
+def torch_module():
+    """torch, imported when a recurrent model first trains or predicts: the
+    other methods, and every process that only loads them (the services,
+    the benches' workers), do without its import (about a second)."""
+    import torch
+    return torch
 
-    def forward(self, x, state=None):
-        h, state = self.rnn(self.encoder(x), state)
-        return self.decoder(h), state
+
+@functools.cache
+def _net_class():
+    """The network: encoder -> LSTM or RNN -> decoder (a torch module)."""
+    nn = torch_module().nn
+
+    class _Net(nn.Module):
+        def __init__(self, n_in, n_hidden, n_out, cell):
+            super().__init__()
+            self.encoder = nn.Linear(n_in, n_hidden)
+            rnn = nn.LSTM if cell == "lstm" else nn.RNN
+            self.rnn = rnn(n_hidden, n_hidden, batch_first=True)
+            self.decoder = nn.Linear(n_hidden, n_out)
+
+        def forward(self, x, state=None):
+            h, state = self.rnn(self.encoder(x), state)
+            return self.decoder(h), state
+
+    return _Net
 
 
 class Recurrent(Identifier):
@@ -60,7 +75,7 @@ class Recurrent(Identifier):
         # Learned by fit(): the inputs' scale per channel, the last loss.
         self.scale_: np.ndarray | None = None
         self.final_loss_: float | None = None
-        self._module: _Net | None = None           # the network, built on first use
+        self._module = None                        # the network, built on first use
         self._probe_state = None                   # update_probe's carried state
 
     def hyper(self) -> dict:
@@ -73,16 +88,20 @@ class Recurrent(Identifier):
     def _factor(self) -> int:
         return max(1, int(round(self.sample_rate_hz_ / self.input_rate_hz)))
 
-    def _steps(self, x: np.ndarray) -> torch.Tensor:
-        """Box-average (N, n, C) to (N, n // factor, C) and scale."""
+    def _steps(self, x: np.ndarray):
+        """Box-average (N, n, C) to (N, n // factor, C) and scale: a float32
+        tensor."""
+        torch = torch_module()
         f = self._factor
         n = (x.shape[1] // f) * f
         boxed = x[:, :n].reshape(len(x), n // f, f, x.shape[2]).mean(axis=2)
         return torch.as_tensor(boxed / self.scale_, dtype=torch.float32)
 
-    def _net(self) -> _Net:
+    def _net(self):
         if self._module is None:
-            self._module = _Net(len(self.channels), self.n_hidden, len(self.classes_), self.cell)
+            torch = torch_module()
+            self._module = _net_class()(len(self.channels), self.n_hidden, len(self.classes_),
+                                        self.cell)
             self._module.load_state_dict({k: torch.as_tensor(v) for k, v in
                                           self.params_[0].items() if k != "scale"})
             self._module.eval()
@@ -118,7 +137,7 @@ class Recurrent(Identifier):
         if part.classes_ != sorted(set(contacts.labels)):
             return None
         n = int(np.min(held.lengths))
-        with torch.no_grad():
+        with torch_module().no_grad():
             logits, _ = part._net()(part._steps(held.x[:, :n]))
         z = logits.numpy().astype(np.float64).transpose(1, 0, 2)     # (steps, N, classes)
         y = np.array([part.classes_.index(c) for c in held.labels])
@@ -142,11 +161,12 @@ class Recurrent(Identifier):
         self.windows_s_ = [round(((j + 1) * self._factor - 1) / self.sample_rate_hz_, 6)
                            for j in range(steps)]
         first = next(j for j, w in enumerate(self.windows_s_) if w >= self.loss_from_s)
+        torch = torch_module()
         target = torch.as_tensor([self.classes_.index(c) for c in contacts.labels])
         torch.manual_seed(self.seed)
-        net = _Net(len(self.channels), self.n_hidden, len(self.classes_), self.cell)
+        net = _net_class()(len(self.channels), self.n_hidden, len(self.classes_), self.cell)
         optimiser = torch.optim.Adam(net.parameters(), lr=self.lr)
-        loss_fn = nn.CrossEntropyLoss()
+        loss_fn = torch.nn.CrossEntropyLoss()
         for _ in range(self.epochs):
             optimiser.zero_grad()
             logits, _ = net(inputs)
@@ -168,7 +188,7 @@ class Recurrent(Identifier):
     @single_threaded_torch
     def posterior_path(self, x: np.ndarray) -> np.ndarray:
         """Posteriors after every input step of one contact, (steps, n_classes)."""
-        with torch.no_grad():
+        with torch_module().no_grad():
             logits, _ = self._net()(self._steps(x[None]))
         z = logits[0].numpy().astype(np.float64)
         return _softmax(z / self._temperatures(len(z))[:, None])
@@ -176,7 +196,7 @@ class Recurrent(Identifier):
     @single_threaded_torch
     def proba_normalised(self, x: np.ndarray, window_index: int) -> np.ndarray:
         n = (window_index + 1) * self._factor
-        with torch.no_grad():
+        with torch_module().no_grad():
             logits, _ = self._net()(self._steps(x[:, :n]))
         z = logits[:, -1].numpy().astype(np.float64)
         return _softmax(z / self._temperatures(window_index + 1)[window_index])
@@ -193,6 +213,7 @@ class Recurrent(Identifier):
     def update_probe(self, row: np.ndarray, window_index: int) -> None:
         """One streaming update: a single step from a carried state."""
         net = self._net()
+        torch = torch_module()
         with torch.no_grad():
             if self._probe_state is None:
                 _, self._probe_state = net(self._steps(row[:, :self._factor]))
