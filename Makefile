@@ -55,8 +55,13 @@ fuzz: $(STAMP)
 #                its smallest run, every section of each bar render's
 #                generator comparison, identify's methods other than
 #                effusivity-lda and its physical limit (the oracle)
+# `bench` and `bench-quick` train the sessions' identifier and generator once
+# (`telethermal models`, fingertip-7, seed 0: the files each bench would train
+# by itself, byte for byte) and give them to the benches that run sessions
+# (--models); `bench-full` trains them in each bench.
 # The view bench needs Chromium (apt-get install chromium).
 BENCHES := physics identify render transport faults devices record view unseen
+SESSION_BENCHES := render faults devices record view
 
 BENCH_physics   :=
 BENCH_identify  := --methods effusivity-fit,effusivity-lda,pca-fnn --sessions 1
@@ -83,6 +88,8 @@ define bench-run
 	$(TT) bench $(1) --json $(2)/$(1).json $(3)
 
 endef
+# $(call shared-models,NAME,FOLDER): --models FOLDER/models for a session bench.
+shared-models = $(if $(filter $(1),$(SESSION_BENCHES)),--models $(2)/models)
 
 bench-full: $(STAMP)
 	mkdir -p bench/results
@@ -91,12 +98,14 @@ bench-full: $(STAMP)
 
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench
-	$(foreach b,$(BENCHES),$(call bench-run,$(b),$(OUT)/bench,$(BENCH_$(b))))
+	$(TT) models --scene fingertip-7 --seed 0 --out $(OUT)/bench/models
+	$(foreach b,$(BENCHES),$(call bench-run,$(b),$(OUT)/bench,$(BENCH_$(b)) $(call shared-models,$(b),$(OUT)/bench)))
 	$(TT) bench report --results $(OUT)/bench --out $(OUT)/bench/report.md
 
 bench-quick: $(STAMP)
 	mkdir -p $(OUT)/bench-quick
-	$(foreach b,$(BENCHES),$(call bench-run,$(b),$(OUT)/bench-quick,$(QUICK_$(b))))
+	$(TT) models --scene fingertip-7 --seed 0 --out $(OUT)/bench-quick/models
+	$(foreach b,$(BENCHES),$(call bench-run,$(b),$(OUT)/bench-quick,$(QUICK_$(b)) $(call shared-models,$(b),$(OUT)/bench-quick)))
 	$(TT) bench report --results $(OUT)/bench-quick --out $(OUT)/bench-quick/report.md
 
 clean:

@@ -59,6 +59,54 @@ def test_models_writes_loadable_files_and_their_checksums(models):
         assert hashlib.sha256((folder / name).read_bytes()).hexdigest() == digest
 
 
+def test_a_bench_given_the_models_folder_runs_on_what_it_would_train(models, trained_models):
+    """`make bench` trains once (`telethermal models`) and gives the folder
+    to its session benches (--models): the files are, byte for byte, what
+    a bench trains by itself (the scene's databases, seed 0), so its
+    sessions are the same; the JSON's `models` says which files."""
+    import hashlib
+
+    from telethermal.bench.models import TRAINING_SEED, bench_models
+    folder = models[0].parent
+    own = trained_models.files(SCENE, TRAINING_SEED)
+    assert [p.read_bytes() for p in own] == [p.read_bytes() for p in models]
+    _, _, provenance = bench_models(SCENE, folder)
+    assert provenance == {"trained": False, "scene": SCENE.name, "files": {
+        p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in models}}
+
+
+def test_a_bench_refuses_a_models_folder_it_cannot_trust(models, tmp_path):
+    """Each refusal names the folder and what is wrong, before any session
+    runs: no such folder, a file missing, one not matching SHA256SUMS, and
+    models trained on another scene (their checksums right)."""
+    from telethermal.bench.models import bench_models
+    from telethermal.errors import BenchError
+    from telethermal.ident.registry import load_model
+    from telethermal.teleop.models import write_sums
+
+    with pytest.raises(BenchError, match="no such folder"):
+        bench_models(SCENE, tmp_path / "none")
+    for case in ("missing", "changed", "other scene"):
+        folder = tmp_path / case
+        shutil.copytree(models[0].parent, folder)
+        if case == "missing":
+            (folder / "generator.npz").unlink()
+            match = "no generator.npz"
+        elif case == "changed":
+            with open(folder / "identifier.npz", "ab") as f:
+                f.write(b"\0")
+            match = "identifier.npz does not match SHA256SUMS"
+        else:
+            other = load_model(folder / "identifier.npz")
+            other.scene_ = "gripper-case-II"
+            other.save(folder / "identifier.npz")
+            write_sums(folder, [folder / "identifier.npz", folder / "generator.npz"])
+            match = "trained on gripper-case-II, this bench runs fingertip-7"
+        with pytest.raises(BenchError, match=match) as err:
+            bench_models(SCENE, folder)
+        assert str(folder) in str(err.value)
+
+
 @pytest.mark.slow          # over 10 s here: make test-all and CI run it
 def test_admin_operates_a_session_and_reports_the_touch(tmp_path, models, capsys):
     ports = free_ports(4)

@@ -28,12 +28,46 @@ def _commands(target: str) -> list[list[str]]:
     ("bench-quick", "outdir/bench-quick", "outdir/bench-quick/report.md")])
 def test_every_bench_into_one_folder_then_its_report(target, folder, report):
     commands = _commands(target)
-    benches = [c for c in commands if c[1] != "report"]
+    benches = [c for c in commands if c[0] == "bench" and c[1] != "report"]
     assert [c[1] for c in benches] == [name for name, _ in SECTIONS]
     for c in benches:
         assert c[:4] == ["bench", c[1], "--json", f"{folder}/{c[1]}.json"]
         assert "--png" not in c                     # the figure beside its JSON
     assert commands[-1] == ["bench", "report", "--results", folder, "--out", report]
+
+
+@pytest.mark.parametrize("target, folder", [("bench", "outdir/bench"),
+                                             ("bench-quick", "outdir/bench-quick")])
+def test_the_reduced_runs_train_once_and_give_the_session_benches_the_files(target, folder):
+    """First `telethermal models` on the benches' scene and seed, then
+    --models on every bench that takes it (those that run sessions), each
+    command one the CLI parses."""
+    from telethermal.bench.models import TRAINING_SEED
+    from telethermal.cli import build_parser
+
+    commands = _commands(target)
+    models = f"{folder}/models"
+    assert commands[0] == ["models", "--scene", "fingertip-7", "--seed", str(TRAINING_SEED),
+                           "--out", models]
+    parser = build_parser()
+    given = set()
+    for c in commands[1:-1]:
+        args = parser.parse_args(c)
+        if getattr(args, "models", None) is not None:
+            assert args.models == models
+            given.add(c[1])
+    assert given == {name for name, _ in SECTIONS
+                     if "--models" in _help(parser, name)}
+    assert given == {"render", "faults", "devices", "record", "view"}
+
+
+def _help(parser, bench: str) -> str:
+    import contextlib
+    import io
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
+        parser.parse_args(["bench", bench, "--help"])
+    return out.getvalue()
 
 
 def test_bench_full_runs_the_defaults_and_the_others_reduce():

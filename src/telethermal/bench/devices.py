@@ -222,17 +222,21 @@ def _slave(scene, ident, trials_per_material: int, seed: int = 0) -> dict:
 
 
 def run(n: int = 3000, contact_s: float = 3.0, progress=None,
-        slave_trials: int = 10) -> dict:
+        slave_trials: int = 10, models=None) -> dict:
+    """The report; ``models``: a folder of ``telethermal models`` for
+    fingertip-7 (:func:`telethermal.bench.models.bench_models`; None:
+    trained here)."""
     import os
+
+    from telethermal.bench.models import bench_models
 
     step = progress or (lambda _m: None)
     load_before = os.getloadavg()
     step("paths")
     paths = _paths(n)
-    from telethermal.teleop.models import train_generator, train_identifier
-    step("training")
+    step("training" if models is None else "loading the models")
     scene = with_finger(load_scene("fingertip-7"))
-    ident, gen = train_identifier(scene, 0), train_generator(scene, 0)   # for both sides
+    ident, gen, provenance = bench_models(scene, models)   # for both sides
     step("sessions")
     sessions = _sessions(scene, ident, gen, contact_s)
     step("slave")
@@ -241,6 +245,7 @@ def run(n: int = 3000, contact_s: float = 3.0, progress=None,
     with tempfile.TemporaryDirectory(prefix="telethermal-qemu-") as build:
         on_core = firmware.measure(build)
     return {"paths": paths, "sessions_real_clock": sessions, "slave": slave, "qemu": on_core,
+            "models": provenance,
             # The machine's load (1, 5, 15 min) before and after: p99 figures
             # on a shared machine carry the other jobs' scheduling.
             "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
@@ -250,10 +255,11 @@ def run(n: int = 3000, contact_s: float = 3.0, progress=None,
 
 
 def run_and_save(json_path, n: int = 3000, contact_s: float = 3.0, slave_trials: int = 10,
-                 command: str = "", progress=None) -> dict:
+                 command: str = "", progress=None, models=None) -> dict:
     """Run the benchmark and write the JSON report (with ``command``);
     returns the report."""
-    report = run(n=n, contact_s=contact_s, progress=progress, slave_trials=slave_trials)
+    report = run(n=n, contact_s=contact_s, progress=progress, slave_trials=slave_trials,
+                 models=models)
     report["command"] = command
     write_json(json_path, report)
     return report

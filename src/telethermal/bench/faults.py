@@ -26,12 +26,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from telethermal.bench.faults_plot import plot, plot_traces
+from telethermal.bench.models import bench_models
 from telethermal.bench.faults_procs import (CONTACT_S, MATERIALS, SETTINGS, confirm,
                                             processes_report, run_processes)
 from telethermal.errors import BenchError
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import save_generator
-from telethermal.teleop.models import train_generator, train_identifier
 
 __all__ = ["CONTACT_S", "MATERIALS", "SETTINGS", "SIM_SEEDS", "parse_delays", "plot", "plot_traces",
            "run"]
@@ -80,7 +80,7 @@ MAX_DELAY_MS = 2000.0
 def run(progress=None, quick: bool = False, only: str | None = None,
         seeds: int | None = None, processes: bool = True, jobs: int = 2,
         scene_name: str = "fingertip-7", delays_ms: list[float] | None = None,
-        executor=None) -> dict:
+        executor=None, models=None) -> dict:
     """Both parts; ``quick``: the zero-delay and WAN rows on a third of the
     materials, 2 seeds, the processes on one material; ``only``: parts of row names (the zero-delay
     row is always run, every ratio needs it); ``scene_name``: a shipped
@@ -88,7 +88,9 @@ def run(progress=None, quick: bool = False, only: str | None = None,
     them, else its first two materials); ``delays_ms``: the pure-delay rows
     of both parts (``parse_delays``; default: the committed rows); ``executor``:
     where the simulated rows run (:mod:`telethermal.bench.executor`; None: a
-    pool of ``jobs`` worker processes)."""
+    pool of ``jobs`` worker processes); ``models``: a folder of ``telethermal
+    models`` for the scene (:func:`telethermal.bench.models.bench_models`;
+    None: trained here)."""
     from telethermal.bench import faults_sim
     from telethermal.teleop.display_config import DisplayConfig
 
@@ -113,9 +115,10 @@ def run(progress=None, quick: bool = False, only: str | None = None,
 
     with work_folder(executor) as tmp:
         out = Path(tmp)
-        step("training")
-        ident = train_identifier(scene, 0).save(out / "identifier.npz")
-        gen = save_generator(train_generator(scene, 0), out / "generator.npz")
+        step("training" if models is None else "loading the models")
+        identifier, generator, provenance = bench_models(scene, models)
+        ident = identifier.save(out / "identifier.npz")
+        gen = save_generator(generator, out / "generator.npz")
         # --quick: a third of the materials, and those the processes touch
         # (their errors are checked against the simulated spread of theirs).
         sim_materials = [m for m in scene.materials
@@ -127,6 +130,7 @@ def run(progress=None, quick: bool = False, only: str | None = None,
                                             settings if processes else [], materials, step)
     report = processes_report(rows, codes, materials)
     report["simulated"] = simulated
+    report["models"] = provenance
     report["summary"] = {**simulated["summary"], **report["summary"],
                          **confirm(rows, simulated)}
     report["_traces"] = traces

@@ -6,9 +6,10 @@ from __future__ import annotations
 import shlex
 
 
-#: Options that say where a bench writes or where and on how many workers
-#: it runs, not what it measures.
-OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs", "--executor"})
+#: Options that say where a bench writes, where and on how many workers it
+#: runs, or where it reads the models it would otherwise train (``--models``:
+#: the same files; the JSON's ``models`` says which), not what it measures.
+OUTPUT_OPTIONS = frozenset({"--json", "--png", "--jobs", "--executor", "--models"})
 #: Options at the value the issue's targets name: which bench, not a
 #: reduction of it (``bench identify --as-built 0.15``, its 5 pads).
 TARGET_OPTIONS = frozenset({"--as-built 0.15", "--pads 5"})

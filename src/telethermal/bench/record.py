@@ -16,14 +16,17 @@ import numpy as np
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene, with_finger
-from telethermal.teleop.models import train_generator, train_identifier
+from telethermal.bench.models import bench_models
 from telethermal.sim.inprocess import run_session
 
 
-def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
+def run(rounds: int = 3, contact_s: float = 3.0, progress=None, models=None) -> dict:
+    """The report; ``models``: a folder of ``telethermal models`` for
+    fingertip-7 (:func:`telethermal.bench.models.bench_models`; None:
+    trained here)."""
     step = progress or (lambda _m: None)
     scene = with_finger(load_scene("fingertip-7"))
-    ident, gen = train_identifier(scene, 0), train_generator(scene, 0)
+    ident, gen, provenance = bench_models(scene, models)
     rows = {"without": [], "with": []}
     period_s = 1.0 / DEFAULT_RATE_HZ
     log_calls = []
@@ -70,6 +73,7 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
     extra = mean("with", "busy_mean_us") - mean("without", "busy_mean_us")
     return {
         "rounds": rows, "contact_s": contact_s, "rate_hz": DEFAULT_RATE_HZ,
+        "models": provenance,
         "busy_mean_us": {m: mean(m, "busy_mean_us") for m in rows},
         "busy_p99_us": {m: mean(m, "busy_p99_us") for m in rows},
         "deadline_misses": {m: int(sum(x["deadline_misses"] for x in rows[m])) for m in rows},
@@ -86,10 +90,10 @@ def run(rounds: int = 3, contact_s: float = 3.0, progress=None) -> dict:
 
 
 def run_and_save(json_path, rounds: int = 3, contact_s: float = 3.0, command: str = "",
-                 progress=None) -> dict:
+                 progress=None, models=None) -> dict:
     """Run the benchmark and write the JSON report (with ``command``);
     returns the report."""
-    report = run(rounds=rounds, contact_s=contact_s, progress=progress)
+    report = run(rounds=rounds, contact_s=contact_s, progress=progress, models=models)
     report["command"] = command
     write_json(json_path, report)
     return report

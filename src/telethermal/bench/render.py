@@ -26,6 +26,7 @@ from typing import Callable
 
 import numpy as np
 
+from telethermal.bench.models import bench_models
 from telethermal.bench.real_clock import REAL_CLOCK_PERIODS, REAL_CLOCK_RATES_HZ, real_clock_row
 from telethermal.bench.render_floor import (decision_floor_at_the_slaves_times, decision_floors,
                                             decision_times)
@@ -37,7 +38,6 @@ from telethermal.jsonfile import write_json
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.render.generator import ContactGenerator, NetworkGenerator, rendering_error
 from telethermal.teleop.display_config import DEFAULT_GAINS, DisplayConfig
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.display_setup import limits_report
 from telethermal.bench.render_sessions import (CONTACT_S, KEYS, Totals, config_fields,
                                                session_job)
@@ -179,9 +179,11 @@ def generator_comparison(scene) -> dict:
 
 
 def run(progress: Callable[[str], None] | None = None, quick: bool = False,
-        scene_name: str = "fingertip-7", executor=None) -> dict:
+        scene_name: str = "fingertip-7", executor=None, models=None) -> dict:
     """The report (see the module); its sessions swept on ``executor``
-    (:mod:`telethermal.bench.executor`; None: one worker process a CPU)."""
+    (:mod:`telethermal.bench.executor`; None: one worker process a CPU);
+    ``models``: a folder of ``telethermal models`` for the scene
+    (:func:`telethermal.bench.models.bench_models`; None: trained here)."""
     from telethermal.bench.executor import describe, open_executor, work_folder
 
     own = executor is None
@@ -189,7 +191,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
     try:
         ran_on = describe(executor)
         with work_folder(executor) as tmp:
-            report = _run(progress, quick, scene_name, executor, Path(tmp))
+            report = _run(progress, quick, scene_name, executor, Path(tmp), models)
         report["executor"] = ran_on
         return report
     finally:
@@ -197,7 +199,7 @@ def run(progress: Callable[[str], None] | None = None, quick: bool = False,
             executor.shutdown(cancel_futures=True)
 
 
-def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
+def _run(progress, quick: bool, scene_name: str, executor, tmp: Path, models) -> dict:
     from telethermal.bench.executor import call_json, function_name, sweep
     from telethermal.render.generator import save_generator
 
@@ -206,10 +208,10 @@ def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
     materials = scene.materials[::3] if quick else scene.materials
     seeds = SEEDS[:1] if quick else SEEDS
     rates = (100.0, DEFAULT_RATE_HZ, 1000.0) if quick else RATES_HZ
-    step("training")
+    step("training" if models is None else "loading the models")
     t0 = time.perf_counter()
-    identifier, generator = train_identifier(scene, 0), train_generator(scene, 0)
-    training_s = time.perf_counter() - t0
+    identifier, generator, provenance = bench_models(scene, models)
+    training_s = time.perf_counter() - t0 if provenance["trained"] else None
     job = {"scene": scene.ref or scene.name, "contact_s": CONTACT_S,
            "identifier": str(identifier.save(tmp / "identifier.npz")),
            "generator": str(save_generator(generator, tmp / "generator.npz"))}
@@ -227,7 +229,8 @@ def _run(progress, quick: bool, scene_name: str, executor, tmp: Path) -> dict:
         return rows
 
     report = {"scene": scene.name, "contact_s": CONTACT_S, "seeds": list(seeds),
-              "materials": {m: {} for m in materials}, "training_s": training_s}
+              "materials": {m: {} for m in materials}, "training_s": training_s,
+              "models": provenance}
     seeds5 = SEEDS_5[:1] if quick else SEEDS_5
     report["seeds_rate_and_controller"] = list(seeds5)
     report["rate"], report["controller"] = [], []
@@ -419,10 +422,11 @@ def plot(report: dict, out_png: str | Path) -> Path:
 
 def run_and_save(json_path: str | Path, png_path: str | Path, quick: bool = False,
                  command: str = "", progress: Callable[[str], None] | None = None,
-                 scene: str = "fingertip-7", executor=None) -> dict:
+                 scene: str = "fingertip-7", executor=None, models=None) -> dict:
     """Run the benchmark on ``scene`` (a shipped name or a scene file), plot
     it to ``png_path`` and write the JSON report; returns the report."""
-    report = run(progress=progress, quick=quick, scene_name=scene, executor=executor)
+    report = run(progress=progress, quick=quick, scene_name=scene, executor=executor,
+                 models=models)
     report["command"] = command
     report["png"] = str(plot(report, png_path))
     write_json(json_path, report)

@@ -31,7 +31,6 @@ from telethermal.demo.run import Services, wait_connected, write_configs
 from telethermal.demo.touches import networked_touch
 from telethermal.ports import free_ports
 from telethermal.services.viewer import open_view
-from telethermal.teleop.models import train_generator, train_identifier
 from telethermal.teleop.master import Phase
 from telethermal.view.browser import launch
 
@@ -113,16 +112,22 @@ def _summary(rows: list[dict]) -> dict:
 
 
 def run_view_bench(touches: int = 3, contact_s: float = 3.0, progress=print,
-                   realtime_priority: int = REALTIME_PRIORITY) -> dict:
+                   realtime_priority: int = REALTIME_PRIORITY, models=None) -> dict:
+    """The report; ``models``: a folder of ``telethermal models`` for
+    fingertip-7 (:func:`telethermal.bench.models.bench_models`; None:
+    trained here)."""
     from playwright.sync_api import sync_playwright
+
+    from telethermal.bench.models import bench_models
 
     scene = with_finger(load_scene("fingertip-7"))
     rows = {m: [] for m in MODES}
     lags: list[float] = []
     with tempfile.TemporaryDirectory() as tmp, sync_playwright() as pw:
         tmp = Path(tmp)
-        ident = train_identifier(scene, 0).save(tmp / "identifier.npz")
-        gen = save_generator(train_generator(scene, 0), tmp / "generator.npz")
+        identifier, generator, provenance = bench_models(scene, models)
+        ident = identifier.save(tmp / "identifier.npz")
+        gen = save_generator(generator, tmp / "generator.npz")
         browser = launch(pw)
         for mode_set in (("no_view",), ("stream_no_page", "page_open")):
             out = tmp / mode_set[0]
@@ -160,7 +165,7 @@ def run_view_bench(touches: int = 3, contact_s: float = 3.0, progress=print,
     lag = np.asarray(lags)
     return {
         "material": MATERIAL, "touches_per_mode": touches, "contact_s": contact_s,
-        "rate_hz": DEFAULT_RATE_HZ,
+        "rate_hz": DEFAULT_RATE_HZ, "models": provenance,
         "first_paint_s": max(p["first_paint_s"] for p in paints),
         "first_frame_s": max(p["first_frame_s"] for p in paints), "first_paints": paints,
         "lag_frames": int(len(lag)),
@@ -182,11 +187,12 @@ def run_view_bench(touches: int = 3, contact_s: float = 3.0, progress=print,
 
 
 def run_and_save(json_path, touches: int = 3, contact_s: float = 3.0, progress=print,
-                 realtime_priority: int = REALTIME_PRIORITY, command: str = "") -> dict:
+                 realtime_priority: int = REALTIME_PRIORITY, command: str = "",
+                 models=None) -> dict:
     """:func:`run_view_bench`, its report written to ``json_path`` with
     ``command`` (the command line as typed; the bench's default when empty)."""
     report = run_view_bench(touches=touches, contact_s=contact_s, progress=progress,
-                            realtime_priority=realtime_priority)
+                            realtime_priority=realtime_priority, models=models)
     if command:
         report["command"] = command
     write_json(json_path, report)

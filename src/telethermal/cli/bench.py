@@ -34,7 +34,7 @@ def cmd_bench_render(args) -> int:
     with _progress(10, "bench render") as advance, _executor(args) as executor:
         report = render.run_and_save(args.json, _png(args), quick=args.quick,
                                      command=_command(), progress=advance, scene=args.scene,
-                                     executor=executor)
+                                     executor=executor, models=args.models)
     print(bench_text("render", report, args.json, report["png"]))
     return 0
 
@@ -45,7 +45,7 @@ def cmd_bench_devices(args) -> int:
     with _progress(5, "bench devices") as advance:
         report = devices.run_and_save(args.json, n=args.samples, contact_s=args.contact_s,
                                       slave_trials=args.slave_trials, command=_command(),
-                                      progress=advance)
+                                      progress=advance, models=args.models)
     print(bench_text("devices", report, args.json))
     return 0
 
@@ -55,7 +55,7 @@ def cmd_bench_record(args) -> int:
 
     with _progress(2 * args.rounds, "bench record") as advance:
         report = record.run_and_save(args.json, rounds=args.rounds, contact_s=args.contact_s,
-                                     command=_command(), progress=advance)
+                                     command=_command(), progress=advance, models=args.models)
     print(bench_text("record", report, args.json))
     return 0
 
@@ -87,7 +87,8 @@ def cmd_bench_faults(args) -> int:
     with _progress(n_rows + 1, "bench faults") as advance, _executor(args) as executor:
         report = faults.run(progress=advance, quick=args.quick, only=args.only,
                             seeds=args.seeds, processes=not args.no_processes,
-                            executor=executor, scene_name=args.scene, delays_ms=delays)
+                            executor=executor, scene_name=args.scene, delays_ms=delays,
+                            models=args.models)
     traces = report.pop("_traces")
     report["command"] = _command()
     png = faults.plot(report, traces, _png(args))
@@ -162,7 +163,8 @@ def cmd_bench_view(args) -> int:
 
     report = view.run_and_save(args.json, touches=args.touches, contact_s=args.contact_s,
                                progress=lambda m: print(m, flush=True),
-                               realtime_priority=args.realtime_priority, command=_command())
+                               realtime_priority=args.realtime_priority, command=_command(),
+                               models=args.models)
     print(bench_text("view", report, args.json))
     return 0
 
@@ -276,6 +278,7 @@ def _add_speed(bsub) -> None:
                    help="rounds of touches without and with recording (default 3)")
     p.add_argument("--contact-s", type=_positive(), default=3.0,
                    help="each touch's contact time, seconds (default 3)")
+    _models_arg(p)
     p.set_defaults(func=cmd_bench_record)
 
     p = bsub.add_parser("devices", help="both sides' latencies through the emulated serial "
@@ -289,6 +292,7 @@ def _add_speed(bsub) -> None:
     p.add_argument("--slave-trials", type=int, default=10,
                    help="touches per material on the slave's side (simulated and through the "
                         "emulated drivers, the same trials)")
+    _models_arg(p)
     p.set_defaults(func=cmd_bench_devices)
 
 
@@ -313,6 +317,7 @@ def _add_faults(bsub) -> None:
                                     "default: the committed rows)")
     p.add_argument("--no-processes", action="store_true",
                    help="the simulated part only (no services, no fault proxy)")
+    _models_arg(p)
     p.set_defaults(func=cmd_bench_faults)
 
 
@@ -330,6 +335,13 @@ def _executor_args(p, what: str) -> None:
                         "workers see at the same path (default: the temporary folder)")
 
 
+def _models_arg(p) -> None:
+    p.add_argument("--models", metavar="DIR",
+                   help="the identifier and generator `telethermal models --out DIR` wrote "
+                        "for the bench's scene, checked against its SHA256SUMS (default: "
+                        "trained here on the scene's databases, seed 0: the same files)")
+
+
 def _no_references(args) -> None:
     """--references calibrates the drawn pads of --as-built alone."""
     if args.references is not None:
@@ -339,11 +351,14 @@ def _no_references(args) -> None:
 
 
 def _no_executor(args) -> None:
-    """--as-built runs its pads in this process: its executor options refused."""
+    """--as-built runs its pads in this process and trains on each: its
+    executor options and --models refused."""
+    from telethermal.errors import BenchError
     if args.executor is not None or args.jobs or args.work_dir:
-        from telethermal.errors import BenchError
         raise BenchError("--executor, --jobs and --work-dir are not for --as-built (its pads "
                          "run one after another in this process)")
+    if getattr(args, "models", None):
+        raise BenchError("--models is not for --as-built (it trains on each drawn pad)")
 
 
 def _executor(args):
@@ -376,6 +391,7 @@ def _add_render(bsub) -> None:
     _references_arg(p)
     _scene_arg(p)
     _executor_args(p, "the sessions")
+    _models_arg(p)
     p.set_defaults(func=cmd_bench_render)
 
 
@@ -454,6 +470,7 @@ def _add_error(bsub) -> None:
     p.add_argument("--realtime-priority", type=int, default=20,
                    help="the master loop's SCHED_FIFO priority, as in the demo (0: normal "
                         "scheduling, where the browser competes with the loop for the CPU)")
+    _models_arg(p)
     p.set_defaults(func=cmd_bench_view)
 
 

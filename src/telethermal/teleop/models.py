@@ -3,8 +3,10 @@ memory), when no saved identifier or generator is given."""
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from contextlib import nullcontext
+from pathlib import Path
 
 import numpy as np
 
@@ -97,8 +99,6 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     closed forms and layered solutions the simulator is checked against).
     ``echo(line)``: told which identifier was trained and why;
     ``calibration``: the pad's CAL.toml (``telethermal calibrate pad``)."""
-    import hashlib
-    from pathlib import Path
 
     from telethermal.data.dataset import load_dataset
     from telethermal.physics.scene import load_scene
@@ -135,10 +135,16 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
              f"it names a touch {method}'s pad-model check refuses (pad model does not fit)")
     paths = [Path(identifier.save(out / "identifier.npz")),
              Path(save_generator(generator, out / "generator.npz"))]
-    sums = out / "SHA256SUMS"
-    sums.write_text("".join(f"{hashlib.sha256(p.read_bytes()).hexdigest()}  {p.name}\n"
-                            for p in paths))
-    return paths + [sums]
+    return paths + [write_sums(out, paths)]
+
+
+def write_sums(out, paths) -> Path:
+    """``out/SHA256SUMS`` for ``paths`` (files in ``out``), in
+    ``sha256sum``'s format; returns its path."""
+    sums = Path(out) / "SHA256SUMS"
+    sums.write_text("".join(f"{hashlib.sha256(Path(p).read_bytes()).hexdigest()}  "
+                            f"{Path(p).name}\n" for p in paths))
+    return sums
 
 
 def _dataset_method(scene: Scene, named: str | None):
@@ -171,7 +177,6 @@ def demo_identify(scene, out, seed: int, echo=print, method: str | None = None,
     ``identify.png`` in ``out``, echoes one line; returns the model.
     ``calibration``: the pad's (a PadCalibration), for the methods that fit
     its model (recorded in the model file)."""
-    from pathlib import Path
 
     from telethermal.jsonfile import write_json
 
