@@ -77,8 +77,9 @@ def test_a_bench_given_the_models_folder_runs_on_what_it_would_train(models, tra
 
 def test_a_bench_refuses_a_models_folder_it_cannot_trust(models, tmp_path):
     """Each refusal names the folder and what is wrong, before any session
-    runs: no such folder, a file missing, one not matching SHA256SUMS, and
-    models trained on another scene (their checksums right)."""
+    runs: no such folder, a file missing, no SHA256SUMS, a file not matching
+    it, and models trained on another scene or on a dataset (their
+    checksums right)."""
     from telethermal.bench.models import bench_models
     from telethermal.errors import BenchError
     from telethermal.ident.registry import load_model
@@ -86,22 +87,29 @@ def test_a_bench_refuses_a_models_folder_it_cannot_trust(models, tmp_path):
 
     with pytest.raises(BenchError, match="no such folder"):
         bench_models(SCENE, tmp_path / "none")
-    for case in ("missing", "changed", "other scene"):
+    for case in ("missing", "no sums", "changed", "other scene", "a dataset"):
         folder = tmp_path / case
         shutil.copytree(models[0].parent, folder)
         if case == "missing":
             (folder / "generator.npz").unlink()
             match = "no generator.npz"
+        elif case == "no sums":
+            (folder / "SHA256SUMS").unlink()
+            match = "no SHA256SUMS"
         elif case == "changed":
             with open(folder / "identifier.npz", "ab") as f:
                 f.write(b"\0")
             match = "identifier.npz does not match SHA256SUMS"
         else:
             other = load_model(folder / "identifier.npz")
-            other.scene_ = "gripper-case-II"
+            if case == "other scene":
+                other.scene_ = "gripper-case-II"
+                match = "trained on gripper-case-II, this bench runs fingertip-7"
+            else:
+                other.training_digests_ = ["0" * 64]
+                match = r"trained on a dataset \(models --data\)"
             other.save(folder / "identifier.npz")
             write_sums(folder, [folder / "identifier.npz", folder / "generator.npz"])
-            match = "trained on gripper-case-II, this bench runs fingertip-7"
         with pytest.raises(BenchError, match=match) as err:
             bench_models(SCENE, folder)
         assert str(folder) in str(err.value)

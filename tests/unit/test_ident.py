@@ -213,8 +213,9 @@ def test_recurrent_learns_levels_and_round_trips(tmp_path, rng, method):
 def test_torch_is_imported_by_the_recurrent_methods_alone(tmp_path, rng):
     """A process that loads the registry, a session's models or a service
     imports no torch (about a second each: the services, the benches'
-    workers); a recurrent model saved by another process loads and answers
-    there as here (torch then imported on its first use)."""
+    workers); a recurrent model saved by another process loads there
+    without it, imports it when prepared (as a slave prepares its model at
+    start, not in the first touch) and answers as here."""
     import subprocess
     import sys
 
@@ -232,8 +233,9 @@ def test_torch_is_imported_by_the_recurrent_methods_alone(tmp_path, rng):
         "from telethermal.ident.registry import load_model\n"
         f"m = load_model({str(path)!r})\n"
         "assert 'torch' not in sys.modules, 'torch imported by loading'\n"
-        f"np.save({str(tmp_path / 'p.npy')!r}, m.proba_normalised(np.load({str(tmp_path / 'x.npy')!r}), 10))\n"
-        "assert 'torch' in sys.modules\n")
+        "m = m.prepare()      # as a slave does at start: torch and the network now\n"
+        "assert 'torch' in sys.modules and m._module is not None\n"
+        f"np.save({str(tmp_path / 'p.npy')!r}, m.proba_normalised(np.load({str(tmp_path / 'x.npy')!r}), 10))\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     np.testing.assert_allclose(np.load(tmp_path / "p.npy"), expected, atol=1e-6)

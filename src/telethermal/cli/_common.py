@@ -81,3 +81,16 @@ def _finite(text):
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} must be finite")
     return value
+
+
+def _models_folder(value: str) -> str:
+    """``--models DIR`` of a bench, checked before the bench starts: its
+    files there and matching their SHA256SUMS (the scene is checked when
+    the bench has loaded its own)."""
+    from telethermal.bench.models import checked_folder
+    from telethermal.errors import BenchError
+    try:
+        checked_folder(value, f"`telethermal models --out {value}`")
+    except BenchError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--models {value}: ")) from None
+    return value

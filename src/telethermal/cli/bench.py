@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from telethermal.cli._common import _command, _png, _positive, _progress
+from telethermal.cli._common import _command, _models_folder, _png, _positive, _progress
 
 
 def bench_text(*args) -> str:
@@ -336,7 +336,7 @@ def _executor_args(p, what: str) -> None:
 
 
 def _models_arg(p) -> None:
-    p.add_argument("--models", metavar="DIR",
+    p.add_argument("--models", metavar="DIR", type=_models_folder,
                    help="the identifier and generator `telethermal models --out DIR` wrote "
                         "for the bench's scene, checked against its SHA256SUMS (default: "
                         "trained here on the scene's databases, seed 0: the same files)")

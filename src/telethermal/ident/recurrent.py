@@ -107,6 +107,15 @@ class Recurrent(Identifier):
             self._module.eval()
         return self._module
 
+    def prepare(self) -> "Recurrent":
+        """torch imported and the network built (about a second) before the
+        first touch, not in its first posterior."""
+        if getattr(self, "params_", None):
+            self._net()
+        else:
+            torch_module()
+        return self
+
     # ------------------------------------------------------------ fitting
     @single_threaded_torch
     def fit(self, contacts: Contacts) -> "Recurrent":
