@@ -3,6 +3,8 @@ columns mapped and units converted, the onset found or given, and every bad
 input an error naming the file, the line and the column; nothing written
 when anything is wrong."""
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -121,7 +123,6 @@ def test_bad_files_are_named_by_line_and_column(tmp_path, capsys, damage, messag
                  "--pad-c", "34", "--room-c", "22"]) == 2
     err = " ".join(capsys.readouterr().err.split())
     assert "lab.csv" in err
-    import re
     assert re.search(message, err), err
     assert not into.exists()                                       # nothing half-written
 
@@ -221,7 +222,6 @@ def test_line_numbers_count_blank_lines_and_one_file_is_imported_once(tmp_path, 
     (lambda s: s, ["--material", "m" * 10_000], r"material 'm+'\.\.\.: 10000 characters, over 64"),
 ])
 def test_limits_of_a_lab_file_are_named(tmp_path, capsys, damage, options, message):
-    import re
     f = tmp_path / "lab.csv"
     lab_file(f)
     f.write_text(damage(f.read_text()))
@@ -233,3 +233,36 @@ def test_limits_of_a_lab_file_are_named(tmp_path, capsys, damage, options, messa
     err = " ".join(capsys.readouterr().err.split())
     assert "lab.csv" in err and re.search(message, err), err[:500]
     assert not into.exists()                                       # nothing half-written
+
+
+def test_import_into_a_folder_that_is_not_a_dataset_is_refused_and_loses_nothing(tmp_path,
+                                                                                  capsys):
+    """--into is a dataset, an empty folder or a new path: a generated
+    database folder (pad/ and finger/), a folder of other files or a file
+    (the lab's own CSV) would have been replaced by the dataset; each is
+    refused, named, and left as it was."""
+    f = tmp_path / "lab.csv"
+    lab_file(f)
+    args = ["dataset", "import", str(f), "--columns", COLUMNS, "--units", UNITS,
+            "--material", "glass", "--group", "g", "--pad-c", "34", "--room-c", "22",
+            "--object-c", "24"]
+    generated = tmp_path / "db"
+    (generated / "pad").mkdir(parents=True)
+    (generated / "pad" / "manifest.csv").write_text("x\n")
+    (generated / "generation.json").write_text("{}")
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "keep.txt").write_text("mine")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    for into, message in ((generated, rf"give {generated / 'pad'} to add to its pad"),
+                          (other, r"it holds keep\.txt"),
+                          (f, "a file, not a dataset folder")):
+        assert main(args + ["--into", str(into)]) == 2
+        err = " ".join(capsys.readouterr().err.split())
+        assert f"--into {into}" in err and re.search(message, err), err
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+    # An empty folder is taken, and the dataset then grows in place.
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(args + ["--into", str(empty)]) == 0
+    assert len(load_dataset(empty)) == 1

@@ -126,6 +126,7 @@ def import_recordings(paths, into: str | Path, material: str | None = None,
     from telethermal.data.csv_import import CsvSpec, is_recording, lab_trial, read_lab_manifest
 
     into = Path(into)
+    _check_into(into)
     spec = spec or CsvSpec({}, {})
     new = []
     if manifest is not None and Path(manifest).is_file() and is_dataset_manifest(manifest):
@@ -161,3 +162,25 @@ def import_recordings(paths, into: str | Path, material: str | None = None,
         raise DatasetError(f"{into} already holds {', '.join(clash[:3])}: imported before?")
     write_dataset(into, existing + new, overwrite=True)
     return len(existing), len(existing) + len(new)
+
+
+def _check_into(into: Path) -> None:
+    """``--into`` must be a dataset (its manifest there), an empty folder or
+    a path not yet taken: anything else would be replaced by the dataset."""
+    if not into.exists():
+        return
+    if not into.is_dir():
+        raise DatasetError(f"--into {into}: a file, not a dataset folder (give a new or empty "
+                           "folder, or a dataset's)")
+    if (into / MANIFEST).is_file():
+        return
+    held = sorted(p.name + ("/" if p.is_dir() else "") for p in into.iterdir())
+    if not held:
+        return
+    parts = [d for d in ("pad", "finger") if (into / d / MANIFEST).is_file()]
+    hint = (f"a generated database folder: give {into / parts[0]} to add to its "
+            f"{parts[0]} contacts, or a new folder" if parts
+            else "give a new or empty folder, or a dataset's")
+    raise DatasetError(f"--into {into}: not a dataset (no {MANIFEST}) and not empty (it holds "
+                       f"{', '.join(held[:5])}{', ...' if len(held) > 5 else ''}), and importing "
+                       f"would replace what it holds: {hint}")
