@@ -93,6 +93,29 @@ def test_the_keys_command_under_umask_000(tmp_path, umask000, capsys):
     assert modes["keys/slave.key_secret"] == 0o600 and modes["keys/slave.key"] == 0o644
 
 
+def test_the_keys_command_keeps_a_pair_it_made_and_names_only_files(tmp_path, capsys):
+    """A second `keys` into the same folder would lock out every peer given
+    the first public key: refused, the pair kept byte for byte, unless
+    --force; a name that is a path, and --out a file, refused."""
+    out = tmp_path / "keys"
+    assert main(["keys", "--out", str(out), "--name", "master"]) == 0
+    pair = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    capsys.readouterr()
+    assert main(["keys", "--out", str(out), "--name", "master"]) == 2
+    assert "master.key exists" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == pair
+    assert main(["keys", "--out", str(out), "--name", "master", "--force"]) == 0
+    assert (out / "master.key").read_bytes() != pair["master.key"]
+    for name in ("../../evil", "a/b", ""):
+        assert main(["keys", "--out", str(out), "--name", name]) == 2
+        assert "a file name in --out, not a path" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*evil*")) and not (tmp_path.parent / "evil.key").exists()
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert main(["keys", "--out", str(afile), "--name", "slave"]) == 2
+    assert "a file, not a folder" in capsys.readouterr().err
+
+
 def _slave_keys(tmp_path) -> Path:
     keys.generate_keys(tmp_path / "slave", "slave")
     keys.make_allowed_folder(tmp_path / "allowed")

@@ -129,7 +129,7 @@ def cmd_keys(args) -> int:
     from telethermal.wire.handshake import key_file_fingerprint
     from telethermal.wire.keys import generate_keys
 
-    public, secret = generate_keys(args.out, args.name)
+    public, secret = generate_keys(args.out, args.name, replace=args.force)
     print(f"wrote {public} (give it to the peer; fingerprint {key_file_fingerprint(public)}) "
           f"and {secret} (keep it here: mode 600, its folder 700)")
     if args.name == "slave":                 # where the masters' public keys go
@@ -161,5 +161,8 @@ def add_parsers(sub) -> None:
     p.set_defaults(func=cmd_faults)
     p = sub.add_parser("keys", help="make a CURVE key pair (name.key, name.key_secret)")
     p.add_argument("--out", required=True, help="folder")
-    p.add_argument("--name", required=True, help="e.g. slave or master")
+    p.add_argument("--name", required=True, help="e.g. slave or master (a file name)")
+    p.add_argument("--force", action="store_true",
+                   help="replace a pair already there (every peer given its public key "
+                        "is then locked out until given the new one)")
     p.set_defaults(func=cmd_keys)

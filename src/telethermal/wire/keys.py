@@ -73,10 +73,24 @@ def _certificate(banner: str, public: bytes, secret: bytes | None = None) -> byt
     return ("\n".join(lines) + "\n").encode("ascii")
 
 
-def generate_keys(folder: str | Path, name: str) -> tuple[Path, Path]:
+def generate_keys(folder: str | Path, name: str, replace: bool = False) -> tuple[Path, Path]:
     """``name.key`` (public, 644) and ``name.key_secret`` (600) in ``folder``
-    (made 700 if missing; an existing one others can write is refused)."""
+    (made 700 if missing; an existing one others can write is refused).
+    ``name``: a plain file name (letters, digits, ``_``, ``-``, ``.``; no
+    folder). A pair already there is refused unless ``replace``: every peer
+    given its public key would be locked out."""
+    import re
+
+    if not re.fullmatch(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*", name or ""):
+        raise TransportError(f"key name {name!r}: letters, digits, '_', '-' and '.' only "
+                             "(a file name in --out, not a path), e.g. slave or master")
     folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise TransportError(f"{folder}: a file, not a folder for the keys")
+    taken = [p for p in (folder / f"{name}.key", folder / f"{name}.key_secret") if p.exists()]
+    if taken and not replace:
+        raise TransportError(f"{taken[0]} exists: a new pair would lock out every peer given "
+                             f"the old public key; keep it, or replace both with --force")
     if folder.exists():
         check_not_writable_by_others(folder)
     else:
@@ -105,8 +119,8 @@ def generate_link_keys(folder: str | Path) -> Path:
     ``slave/`` (the slave's pair), ``master/`` (the master's pair and the
     slave's public key), ``allowed/`` (the master's public key)."""
     folder = Path(folder)
-    generate_keys(folder / "slave", "slave")
-    generate_keys(folder / "master", "master")
+    generate_keys(folder / "slave", "slave", replace=True)       # the link's own, made anew
+    generate_keys(folder / "master", "master", replace=True)
     make_allowed_folder(folder / "allowed")
     write_private(folder / "allowed" / "master.key",
                   (folder / "master" / "master.key").read_bytes(), PUBLIC_MODE)
