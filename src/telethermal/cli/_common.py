@@ -72,6 +72,18 @@ def _positive(kind=float):
     return parse
 
 
+def _seed(text):
+    """An argument type: a random seed, an integer >= 0 (numpy's generators
+    take no negative seed)."""
+    try:
+        value = int(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from exc
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: a seed is a whole number >= 0")
+    return value
+
+
 def _finite(text):
     """An argument type: a finite float."""
     try:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import sys
 
-from telethermal.cli._common import _command, _models_folder, _png, _positive, _progress
+from telethermal.cli._common import (_command, _models_folder, _png, _positive, _progress,
+                                     _seed)
 
 
 def bench_text(*args) -> str:
@@ -412,7 +413,7 @@ def _add_error(bsub) -> None:
     p = bsub.add_parser("identify", help="the papers' identification tables, ours beside")
     p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--png", help="plot (default: beside the JSON)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=_seed, default=0,
                    help="the first session's seed: sessions SEED .. SEED+SESSIONS-1 (default 0)")
     p.add_argument("--methods", help="comma-separated (default: those whose calibration error "
                                      "is within 0.05: effusivity-fit, effusivity-lda, "

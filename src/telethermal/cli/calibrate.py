@@ -5,7 +5,7 @@ file holds both: each command keeps the other's table."""
 
 from __future__ import annotations
 
-from telethermal.cli._common import _print_lines, console
+from telethermal.cli._common import _print_lines, _seed, console
 from telethermal.errors import CalibrationError
 
 
@@ -116,7 +116,7 @@ def add_parser(sub) -> None:
     d.add_argument("--block", default="plexiglass",
                    help="the reference block's material, of the materials table (default "
                         "plexiglass: a low effusivity, see docs/calibration.md)")
-    d.add_argument("--seed", type=int, default=None,
+    d.add_argument("--seed", type=_seed, default=None,
                    help="the simulated bench's draws (default 0)")
     d.add_argument("--devices", default="sim", choices=("sim", "emulated", "hardware"),
                    help="the display's devices: the simulator, or it behind the emulated "

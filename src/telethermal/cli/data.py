@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from telethermal.cli._common import _finite, _positive, _progress, console, log
+from telethermal.cli._common import _finite, _positive, _progress, _seed, console, log
 
 
 def cmd_scenes(args) -> int:
@@ -138,7 +138,7 @@ def add_dataset(sub) -> None:
     p = dsub.add_parser("generate", help="write a scene's databases (pad/ and finger/)")
     p.add_argument("--scene", required=True, help="shipped scene name or TOML path")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=_seed, default=0,
                    help="random seed of the sensors' errors and the trials (default 0)")
     p.add_argument("--force", action="store_true", help="replace a non-empty --out")
     p.set_defaults(func=cmd_dataset_generate)
@@ -195,7 +195,7 @@ def add_simulate(sub) -> None:
                    help="perfect contact, no sensor, no noise: the closed form")
     p.add_argument("--contact-conductance-w-m2k", type=_positive(), default=3000.0,
                    help="pad-object contact conductance, W/(m^2 K) (default 3000)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=_seed, default=0,
                    help="random seed of the sensors' noise (default 0)")
     p.add_argument("--force", action="store_true", help="replace a non-empty --out")
     p.set_defaults(func=cmd_simulate)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 
+from telethermal.cli._common import _seed
 from telethermal.errors import TelethermalError
 from telethermal.services import admin_client as ac
 
@@ -35,7 +36,7 @@ def add_parsers(sub) -> None:
                                   "lab's `dataset import`: the generator is then the scene's "
                                   "direct-contact model), instead of the scene's simulated "
                                   "databases")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=_seed, default=0,
                    help="random seed of the simulated databases (default 0)")
     p.add_argument("--calibration", metavar="CAL.toml",
                    help="the sensing pad's calibration (telethermal calibrate pad): the "
@@ -62,7 +63,7 @@ def _admin_parser(sub) -> None:
                         "exit 1 if a role asked for does not answer (a healthcheck)")
     q = asub.add_parser("place", help="put an object under the slave pad (simulation)")
     q.add_argument("material", help="the object's material (one of the slave's scene)")
-    q.add_argument("--seed", type=int,
+    q.add_argument("--seed", type=_seed,
                    help="seed of the object's touch (default: the slave's next)")
     q.add_argument("--object-id", help="the object's name, its key in the slave's object "
                                        "memory (default: the scene object of MATERIAL)")
@@ -70,7 +71,7 @@ def _admin_parser(sub) -> None:
                                       "prints the touch's figures")
     q.add_argument("--contact-s", type=float, default=5.0,
                    help="contact time, seconds (default 5)")
-    q.add_argument("--seed", type=int, default=0,
+    q.add_argument("--seed", type=_seed, default=0,
                    help="seed of the simulated operator's touch (default 0)")
     q.add_argument("--no-wait", action="store_true", help="return at once (then lift, report)")
     q.add_argument("--session-wait", type=float, default=30.0, metavar="S",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from telethermal.cli._common import _positive, _progress, console
+from telethermal.cli._common import _positive, _progress, _seed, console
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TelethermalError
 from telethermal.jsonfile import write_json
@@ -199,7 +199,7 @@ def add_session(sub) -> None:
                         "static: the flux PID on the generator's flux")
     p.add_argument("--contact-s", type=_positive(), default=5.0,
                    help="contact time, seconds (default 5)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the touch (default 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="random seed of the touch (default 0)")
     p.add_argument("--realtime", action="store_true",
                    help="run the master loop on the real clock and report its timing")
     p.add_argument("--record", help="record the session to this MCAP file")
@@ -228,7 +228,7 @@ def add_demo(sub) -> None:
     p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
     p.add_argument("--contact-s", type=_positive(), default=5.0,
                    help="each touch's contact time, seconds (default 5)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=_seed, default=0,
                    help="random seed of the databases and the touches (default 0)")
     p.add_argument("--devices", choices=("sim", "emulated", "qemu"), default="sim",
                    help="emulated: master and slave each on emulated boards (ptys) and CAN "
