@@ -1,6 +1,6 @@
 """JSON reports (benchmarks, evaluations, sessions): NaN and infinities
 written as null, written through a temporary file (a failure leaves the old
-file or none, never half of one)."""
+file or none, never half of one); figures written the same way."""
 
 from __future__ import annotations
 
@@ -28,8 +28,11 @@ def write_json(path: str | Path, payload: dict) -> Path:
 
 def write_text(path: str | Path, text: str) -> Path:
     """Write ``text`` to ``path`` atomically: all of it or, on any failure,
-    nothing (the old file kept)."""
+    nothing (the old file kept). A path that is a folder is refused,
+    naming it."""
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(21, "a folder, not a file's path", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     # One temporary file per process: two processes writing the same file
     # (an idle policy in the cache, two test workers) do not write into
@@ -37,6 +40,24 @@ def write_text(path: str | Path, text: str) -> Path:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         tmp.write_text(text)
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_figure(fig, path: str | Path, dpi: int = 110, fmt: str | None = None) -> Path:
+    """Save a matplotlib figure to ``path`` atomically, as :func:`write_text`
+    (``fmt``: its format; default the path's suffix, else PNG). A path that
+    is a folder is refused before anything is drawn, naming it."""
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(21, "a folder, not an image file's path", str(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        fig.savefig(tmp, dpi=dpi, format=fmt or path.suffix.lstrip(".") or "png")
         tmp.replace(path)
     except BaseException:
         tmp.unlink(missing_ok=True)

@@ -18,6 +18,7 @@ from telethermal.bench import (faults_text, identify_text, render_text,  # noqa:
                                sections, unseen_text)
 from telethermal.bench.markdown import Page, provenance, terminal  # noqa: E402
 from telethermal.bench.options import off_defaults  # noqa: E402
+from telethermal.jsonfile import write_text  # noqa: E402
 
 
 log = logging.getLogger("telethermal.bench")
@@ -82,10 +83,7 @@ def write_report(results: str | Path, out_md: str | Path, command: str = "") -> 
     lines += body
     if missing:
         lines += [f"Not run: {', '.join(missing)} (no JSON in {results})."]
-    tmp = out_md.with_name(f".{out_md.name}.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, out_md)
-    return out_md
+    return write_text(out_md, "\n".join(lines) + "\n")
 
 
 def _guarded(name: str, section, d: dict, page: Page) -> list[str]:

@@ -77,4 +77,14 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
+    except OSError as exc:
+        # A path the command could not use (a folder given for a file, a
+        # file for a folder, no permission): named with the system's reason,
+        # not a traceback. The writers leave no part of a file behind.
+        if exc.filename is None:
+            raise
+        where = exc.filename + (f" -> {exc.filename2}" if exc.filename2 else "")
+        console.print(f"[red]error:[/red] {escape(where)}: {escape(exc.strerror or str(exc))}",
+                      highlight=False, soft_wrap=True)
+        return 2
 

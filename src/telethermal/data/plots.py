@@ -44,14 +44,16 @@ def _mean_band(trials: list[Trial], channel: str):
 
 def plot_datasets(root: str | Path, out_png: str | Path) -> Path:
     """Plot one dataset, or every dataset in a folder (one row each)."""
-    fig = datasets_figure(root)
+    from telethermal.jsonfile import write_figure
+
     out_png = Path(out_png)
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_png.with_name(f".{out_png.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(out_png)
-    return out_png
+    if out_png.is_dir():             # said before the datasets are read and drawn
+        raise IsADirectoryError(21, "a folder, not an image file's path", str(out_png))
+    fig = datasets_figure(root)
+    try:
+        return write_figure(fig, out_png, dpi=110, fmt="png")
+    finally:
+        plt.close(fig)
 
 
 def datasets_figure(root: str | Path):

@@ -9,7 +9,6 @@ holds the display's flux into the finger, so it is drawn negated."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
@@ -21,14 +20,13 @@ import numpy as np  # noqa: E402
 
 def plot_session(result, path: str | Path, title: str | None = None) -> Path:
     """Draw :func:`session_figure` into ``path`` (written whole or not at all)."""
+    from telethermal.jsonfile import write_figure
+
     fig = session_figure(result, title)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    try:
+        return write_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
 
 
 def session_figure(result, title: str | None = None):

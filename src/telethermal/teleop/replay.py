@@ -416,17 +416,14 @@ def replay_figure(result: dict):
 
 
 def _save(fig, path) -> Path:
-    import os
-
     import matplotlib.pyplot as plt
+
+    from telethermal.jsonfile import write_figure
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    try:
+        return write_figure(fig, path, dpi=100, fmt="png")
+    finally:
+        plt.close(fig)
 
 
 def _plot_slave(result: dict, path) -> Path:
