@@ -119,6 +119,29 @@ def test_bad_configs_are_refused_with_the_file_and_key(tmp_path, capsys):
     assert main(["slave", "--config", str(tmp_path / "missing.toml")]) == 2
 
 
+@pytest.mark.parametrize("role, text, message", [
+    ("master", "[master]\nrate_hz = nan\n", r"rate_hz = nan: the display loop's rate"),
+    ("master", "[master]\nrate_hz = 0.0\n", r"rate_hz = 0.0: the display loop's rate"),
+    ("master", "[master]\nview_port = -5\n", r"view_port = -5: a port is 1-65535 \(0: off\)"),
+    ("master", "[master]\nadmin_port = 0\n", r"admin_port = 0: a port is 1-65535$"),
+    ("slave", "[slave]\nadmin_port = 70000\n", r"admin_port = 70000: a port is 1-65535"),
+    ("slave", "[transport]\ncontrol_port = 99999\n",
+     r"\[transport\]: control_port = 99999: a port is 1-65535"),
+    ("master", "[transport]\nstream_port = 0\n", r"stream_port = 0: a port is 1-65535")])
+def test_a_port_or_rate_out_of_range_is_refused_when_the_config_loads(tmp_path, role, text,
+                                                                       message):
+    """`check` and the services load the file the same way: a port outside
+    1-65535 (a socket's bind had raised OverflowError, or a service started
+    on port 0) and a loop rate that is not a positive number are refused
+    naming the file and key."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text + ("[transport]\nsecurity = \"plain\"\n" if "[transport]" not in text
+                           else 'security = "plain"\n'))
+    with pytest.raises(ConfigError, match=message) as err:
+        load_config(cfg, role)
+    assert str(cfg) in str(err.value)
+
+
 def test_shipped_service_configs_load():
     root = Path(__file__).resolve().parents[2] / "services"
     assert load_config(root / "slave" / "config.toml", "slave").transport.security == "curve"

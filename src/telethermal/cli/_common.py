@@ -59,8 +59,9 @@ def _print_lines(lines: list[str]) -> None:
         print(line)
 
 
-def _positive(kind=float):
-    """An argument type: a positive, finite ``kind``."""
+def _positive(kind=float, at_most: float | None = None, why: str = ""):
+    """An argument type: a positive, finite ``kind``, no more than
+    ``at_most`` when given (``why``: the bound's reason, said with it)."""
     def parse(text):
         try:
             value = kind(text)
@@ -68,8 +69,31 @@ def _positive(kind=float):
             raise argparse.ArgumentTypeError(f"{text!r} is not a number") from exc
         if not (value > 0 and math.isfinite(value)):
             raise argparse.ArgumentTypeError(f"{text!r} must be positive and finite")
+        if at_most is not None and value > at_most:
+            raise argparse.ArgumentTypeError(f"{text!r} is over {at_most:g}" +
+                                             (f" ({why})" if why else ""))
         return value
     return parse
+
+
+#: The longest touch a command simulates, s: a session's trace (every
+#: period's row) is held in memory until it is written.
+CONTACT_MAX_S = 600.0
+CONTACT_WHY = "a touch of up to 10 minutes: its trace is held in memory"
+#: The fastest display loop a session runs, Hz (the benches sweep 100-1000).
+RATE_MAX_HZ = 10000.0
+RATE_WHY = "the display loop's period must stay over 0.1 ms"
+
+
+def _port(text):
+    """An argument type: a TCP port, 1-65535, or 0 (a free one)."""
+    try:
+        value = int(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from exc
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r}: a port is 1-65535 (0: a free one)")
+    return value
 
 
 def _seed(text):

@@ -466,7 +466,7 @@ def _add_error(bsub) -> None:
                                      "master's loop timing with and without the page")
     p.add_argument("--json", required=True, help="JSON report to write")
     p.add_argument("--touches", type=int, default=3, help="touches per mode (default 3)")
-    p.add_argument("--contact-s", type=float, default=3.0,
+    p.add_argument("--contact-s", type=_positive(), default=3.0,
                    help="each touch's contact time, seconds (default 3)")
     p.add_argument("--realtime-priority", type=int, default=20,
                    help="the master loop's SCHED_FIFO priority, as in the demo (0: normal "

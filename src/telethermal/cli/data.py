@@ -6,7 +6,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from telethermal.cli._common import _finite, _positive, _progress, _seed, console, log
+from telethermal.cli._common import (CONTACT_MAX_S, CONTACT_WHY, _finite, _positive,
+                                     _progress, _seed, console, log)
 
 
 def cmd_scenes(args) -> int:
@@ -186,9 +187,11 @@ def add_simulate(sub) -> None:
                    help="the pad's (or finger's) temperature before contact, C")
     p.add_argument("--object-temp-c", type=_finite, required=True,
                    help="the object's temperature before contact, C")
-    p.add_argument("--seconds", type=_positive(), required=True,
-                   help="contact time to simulate, seconds")
-    p.add_argument("--rate-hz", type=_positive(), required=True,
+    p.add_argument("--seconds", type=_positive(at_most=CONTACT_MAX_S, why=CONTACT_WHY),
+                   required=True, help="contact time to simulate, seconds (up to 600)")
+    p.add_argument("--rate-hz", type=_positive(at_most=100000.0, why="the samples of a "
+                                               "10-minute trial held in memory"),
+                   required=True,
                    help="sample rate of the written trial, Hz")
     p.add_argument("--out", required=True, help="output dataset folder")
     p.add_argument("--ideal", action="store_true",

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 
-from telethermal.cli._common import _seed
+from telethermal.cli._common import CONTACT_MAX_S, CONTACT_WHY, _positive, _seed
 from telethermal.errors import TelethermalError
 from telethermal.services import admin_client as ac
 
@@ -22,7 +22,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--devices", choices=("qemu",),
                    help="qemu: QEMU, the Arm toolchain and picolibc (each missing one with "
                         "its apt package), and the firmware's STM32F405 images built")
-    p.add_argument("--timeout-s", type=float, default=3.0,
+    p.add_argument("--timeout-s", type=_positive(at_most=3600.0), default=3.0,
                    help="how long the master waits for the slave's handshake")
     p.set_defaults(func=cmd_check)
     p = sub.add_parser("models", help="train the slave's identifier and generator "
@@ -69,7 +69,8 @@ def _admin_parser(sub) -> None:
                                        "memory (default: the scene object of MATERIAL)")
     q = asub.add_parser("touch", help="the simulated operator touches the master's pad; "
                                       "prints the touch's figures")
-    q.add_argument("--contact-s", type=float, default=5.0,
+    q.add_argument("--contact-s", type=_positive(at_most=CONTACT_MAX_S, why=CONTACT_WHY),
+                   default=5.0,
                    help="contact time, seconds (default 5)")
     q.add_argument("--seed", type=_seed, default=0,
                    help="seed of the simulated operator's touch (default 0)")
@@ -88,7 +89,7 @@ def _admin_parser(sub) -> None:
                    help="the admin request's name (its list: proto/PROTOCOL.md, admin requests)")
     q.add_argument("args", nargs="*", metavar="key=value",
                    help="the request's arguments, each key=value")
-    q.add_argument("--timeout-s", type=float, default=10.0,
+    q.add_argument("--timeout-s", type=_positive(at_most=3600.0), default=10.0,
                    help="how long to wait for the reply, seconds (default 10)")
     p.set_defaults(func=cmd_admin)
 

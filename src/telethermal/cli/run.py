@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from telethermal.cli._common import _positive, _progress, _seed, console
+from telethermal.cli._common import (CONTACT_MAX_S, CONTACT_WHY, RATE_MAX_HZ, RATE_WHY,
+                                     _positive, _progress, _seed, console)
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TelethermalError
 from telethermal.jsonfile import write_json
@@ -189,7 +190,8 @@ def add_session(sub) -> None:
     p.add_argument("--plot", help="PNG of flux and temperature against direct contact")
     p.add_argument("--identifier", help="saved identifier (.npz); default: train one")
     p.add_argument("--generator", help="saved flux generator (.npz); default: train one")
-    p.add_argument("--rate-hz", type=_positive(), default=DEFAULT_RATE_HZ,
+    p.add_argument("--rate-hz", type=_positive(at_most=RATE_MAX_HZ, why=RATE_WHY),
+                   default=DEFAULT_RATE_HZ,
                    help=f"display loop rate (default {DEFAULT_RATE_HZ:g} Hz)")
     p.add_argument("--before", choices=("prior", "hold"), default="prior",
                    help="before identification: track the posterior-weighted flux (prior) "
@@ -197,7 +199,8 @@ def add_session(sub) -> None:
     p.add_argument("--controller", choices=("impedance", "static"), default="impedance",
                    help="impedance: the pad's surface behaves as the object's (default); "
                         "static: the flux PID on the generator's flux")
-    p.add_argument("--contact-s", type=_positive(), default=5.0,
+    p.add_argument("--contact-s", type=_positive(at_most=CONTACT_MAX_S, why=CONTACT_WHY),
+                   default=5.0,
                    help="contact time, seconds (default 5)")
     p.add_argument("--seed", type=_seed, default=0, help="random seed of the touch (default 0)")
     p.add_argument("--realtime", action="store_true",
@@ -226,7 +229,8 @@ def add_demo(sub) -> None:
                    help="output folder: plots, demo.json, models, logs (default out/demo)")
     p.add_argument("--json", help="per-touch summary (default: OUT/demo.json)")
     p.add_argument("--materials", help="comma-separated (default: aluminium,plexiglass,wood)")
-    p.add_argument("--contact-s", type=_positive(), default=5.0,
+    p.add_argument("--contact-s", type=_positive(at_most=CONTACT_MAX_S, why=CONTACT_WHY),
+                   default=5.0,
                    help="each touch's contact time, seconds (default 5)")
     p.add_argument("--seed", type=_seed, default=0,
                    help="random seed of the databases and the touches (default 0)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from telethermal.cli._common import _port
 from telethermal.view.server import DEFAULT_PORT
 
 
@@ -22,7 +23,7 @@ def add_parser(sub) -> None:
                                     "its view stream and the slave's stream are shown live")
     p.add_argument("--recordings", help="folder of MCAP recordings to play (default: the "
                                         "config's record_dir)")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+    p.add_argument("--port", type=_port, default=DEFAULT_PORT,
                    help=f"HTTP port on 127.0.0.1 (default {DEFAULT_PORT}; 0: a free one)")
     p.add_argument("--bind", default="127.0.0.1", metavar="ADDRESS",
                    help="the address the page is served on (default 127.0.0.1; 0.0.0.0 "

@@ -17,6 +17,16 @@ class ConfigError(TelethermalError):
     """A service configuration file that cannot be used."""
 
 
+def _check_ports(config, names: tuple[str, ...], off_ok: tuple[str, ...] = ()) -> None:
+    """Each of ``names`` a TCP port, 1-65535 (0 too for ``off_ok``: off)."""
+    for name in names:
+        value = getattr(config, name)
+        low = 0 if name in off_ok else 1
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 65535:
+            raise ConfigError(f"{name} = {value!r}: a port is 1-65535"
+                              + (" (0: off)" if low == 0 else ""))
+
+
 def _devices(config, example_tty: str) -> DeviceKind:
     """The config's device kind, validated (the one place it is)."""
     try:
@@ -56,6 +66,7 @@ class SlaveConfig:
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):
+        _check_ports(self, ("admin_port",))
         self.devices = _devices(self, "/dev/ttyUSB1")
 
 
@@ -105,6 +116,12 @@ class MasterConfig:
     transport: TransportConfig = field(default_factory=TransportConfig)
 
     def __post_init__(self):
+        import math
+        _check_ports(self, ("admin_port", "view_port"), off_ok=("view_port",))
+        if not (isinstance(self.rate_hz, (int, float)) and math.isfinite(self.rate_hz)
+                and 0 < self.rate_hz <= 10000):
+            raise ConfigError(f"rate_hz = {self.rate_hz!r}: the display loop's rate, over 0 "
+                              "and up to 10000 Hz")
         self.devices = _devices(self, "/dev/ttyUSB0")
 
 

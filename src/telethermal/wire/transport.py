@@ -72,6 +72,10 @@ class TransportConfig:
     stream_hwm: int = 64
 
     def validate(self, role: str) -> None:
+        for name in ("control_port", "stream_port"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 65535:
+                raise TransportError(f"{name} = {value!r}: a port is 1-65535")
         if self.security not in ("curve", "plain"):
             raise TransportError(f"security must be 'curve' or 'plain', got {self.security!r}")
         if self.security == "plain":

@@ -1,0 +1,55 @@
+"""Numbers the command line refuses when it is parsed: every ``--seed``
+takes a whole number >= 0 (numpy's generators take no negative seed: a -1
+had reached them as a traceback), and contact times, loop rates, timeouts
+and ports are bounded."""
+
+import argparse
+
+import pytest
+
+from telethermal.cli import build_parser
+
+
+def _seed_actions(parser, path=()):
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _seed_actions(sub, path + (name,))
+        elif "--seed" in action.option_strings:
+            yield path, action
+
+
+SEEDS = list(_seed_actions(build_parser()))
+
+
+def test_the_commands_with_a_seed_are_found():
+    assert len(SEEDS) >= 9, [p for p, _ in SEEDS]
+
+
+@pytest.mark.parametrize("path, action", SEEDS, ids=[" ".join(p) for p, _ in SEEDS])
+def test_a_seed_is_a_whole_number_not_below_zero(path, action):
+    assert action.type("0") == 0 and action.type("7") == 7
+    for bad in ("-1", "1.5", "x", ""):
+        with pytest.raises(argparse.ArgumentTypeError, match="seed|whole number"):
+            action.type(bad)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["session", "--contact-s", "1e6"], "'1e6' is over 600 (a touch of up to 10 minutes"),
+    (["session", "--rate-hz", "1e9"], "'1e9' is over 10000"),
+    (["demo", "--contact-s", "700"], "'700' is over 600"),
+    (["simulate", "--seconds", "1e9"], "'1e9' is over 600"),
+    (["admin", "send", "slave", "status", "--timeout-s", "-1"], "must be positive and finite"),
+    (["admin", "send", "slave", "status", "--timeout-s", "nan"], "must be positive and finite"),
+    (["admin", "touch", "--contact-s", "1e6"], "'1e6' is over 600"),
+    (["view", "--port", "99999"], "a port is 1-65535 (0: a free one)"),
+    (["view", "--port", "-1"], "a port is 1-65535")])
+def test_sizes_and_ports_out_of_range_are_refused_when_parsed(argv, message, capsys):
+    """A contact or rate that would fill memory (a 1e6 s session had been
+    killed by the kernel, a 1e9 Hz one asked numpy for 452 GiB), a timeout
+    that waits forever, a port no socket takes: refused before anything
+    runs, saying the bound and why."""
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args(argv)
+    assert stop.value.code == 2
+    assert message in " ".join(capsys.readouterr().err.split())
