@@ -92,6 +92,20 @@ def test_missing_manifest_column_is_named(tmp_path):
         read_manifest(root)
 
 
+def test_a_manifest_that_is_not_utf8_text_is_named_not_a_traceback(tmp_path):
+    # A binary file saved as manifest.csv (an export gone wrong): named as
+    # such by every reader of a dataset, and by the import's manifest check.
+    from telethermal.record.importer import is_dataset_manifest
+
+    root = written(tmp_path)
+    (root / "manifest.csv").write_bytes(b"trial_id,material\n\xff\xfe\x00garbage\n")
+    with pytest.raises(DatasetError, match=r"manifest.csv: not UTF-8 text \(byte 18\)"):
+        load_dataset(root)
+    (root / "manifest.csv").write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(DatasetError, match=r"manifest.csv: not UTF-8 text \(byte 0\)"):
+        is_dataset_manifest(root / "manifest.csv")
+
+
 def test_t_s_must_increase(tmp_path):
     path = tmp_path / "x.csv"
     path.write_text("t_s,heat_flux_W_m2\n0.0,1\n0.01,2\n0.01,3\n")

@@ -79,18 +79,13 @@ def read_manifest(root: str | Path) -> list[Trial]:
             f"; {root} holds the databases {' and '.join(p + '/' for p in parts)}: give "
             + " or ".join(f"{root / p}" for p in parts) + " (pad/: the pad's touches, "
             "for identification; finger/: the finger's, for the generator)" if parts else ""))
-    with path.open(newline="") as fh:
-        reader = csv.DictReader(fh)
-        header = reader.fieldnames or []
-        missing = [c for c in MANIFEST_COLUMNS if c not in header]
-        if missing:
-            raise DatasetError(f"{path}: missing column(s) {', '.join(missing)}")
-        trials, seen = [], set()
-        for line, row in enumerate(reader, start=2):
-            trials.append(_manifest_trial(row, path, line, root))
-            if trials[-1].trial_id in seen:
-                raise DatasetError(f"{path} row {line}: trial_id {trials[-1].trial_id!r} repeats")
-            seen.add(trials[-1].trial_id)
+    try:
+        trials = _manifest_trials(path, root)
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}): not a manifest") \
+            from None
+    except csv.Error as exc:
+        raise DatasetError(f"{path}: not CSV: {exc}") from None
     if not trials:
         raise DatasetError(f"{path}: no trials")
     return trials
@@ -218,6 +213,22 @@ def check_identifier_channels(trials: list[Trial], root: str | Path = "") -> Non
         if FLUX_CHANNEL not in names:
             raise DatasetError(f"{where}: no '{FLUX_CHANNEL}' column, which every "
                                f"identifier reads (columns: {', '.join(names) or 'none'})")
+
+
+def _manifest_trials(path: Path, root: Path) -> list[Trial]:
+    with path.open(newline="", encoding="utf-8") as fh:
+        reader = csv.DictReader(fh)
+        header = reader.fieldnames or []
+        missing = [c for c in MANIFEST_COLUMNS if c not in header]
+        if missing:
+            raise DatasetError(f"{path}: missing column(s) {', '.join(missing)}")
+        trials, seen = [], set()
+        for line, row in enumerate(reader, start=2):
+            trials.append(_manifest_trial(row, path, line, root))
+            if trials[-1].trial_id in seen:
+                raise DatasetError(f"{path} row {line}: trial_id {trials[-1].trial_id!r} repeats")
+            seen.add(trials[-1].trial_id)
+    return trials
 
 
 def load_dataset(root: str | Path) -> list[Trial]:

@@ -91,8 +91,12 @@ def _number(values: dict, key: str, where) -> float | None:
 def is_dataset_manifest(path) -> bool:
     """A dataset's own manifest (as ``dataset generate`` or ``import``
     write it): its header has ``trial_id`` and ``sample_rate_hz``."""
-    with Path(path).open(newline="", encoding="utf-8-sig") as fh:
-        header = {h.strip() for h in fh.readline().split(",")}
+    try:
+        with Path(path).open(newline="", encoding="utf-8-sig") as fh:
+            header = {h.strip() for h in fh.readline().split(",")}
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}): not a manifest") \
+            from None
     return {"trial_id", "sample_rate_hz"} <= header
 
 
