@@ -196,3 +196,28 @@ def test_the_unseen_weight_is_effusivity_fits_and_kept_in_its_model(gripper_db, 
                  "--max-window-s", "0.2", "--unseen-weight", "1",
                  "--out", str(tmp_path / "fit.npz")]) == 0
     assert load_model(tmp_path / "fit.npz").unseen_weight == 1.0
+
+
+def test_a_finger_database_given_for_the_pads_touches_is_refused_naming_the_pad(tmp_path,
+                                                                                 capsys):
+    """The finger database (fingertip touches, the generator's) given where
+    the pad's touches go had been read as pad contacts (calibrate pad and
+    models --data ran on for minutes, saying nothing): each command says
+    what it is and which folder to give, and models writes no folder."""
+    scene = load_scene("fingertip-7")
+    scene = dataclasses.replace(
+        scene, objects=scene.objects[:2],
+        pad=dataclasses.replace(scene.pad, trials_per_material=2),
+        finger=dataclasses.replace(scene.finger, persons=1, trials_per_person=1,
+                                   contact_duration_s=1.0))
+    generate_databases(scene, tmp_path / "db", seed=2)
+    finger, pad = tmp_path / "db" / "finger", tmp_path / "db" / "pad"
+    for argv in (["calibrate", "pad", "--scene", "fingertip-7", "--data", str(finger),
+                  "--out", str(tmp_path / "cal.toml")],
+                 ["models", "--data", str(finger), "--out", str(tmp_path / "models")],
+                 ["identify", "cv", "--data", str(finger), "--method", "effusivity-lda"]):
+        assert main(argv) == 2, argv
+        captured = capsys.readouterr()
+        err = " ".join((captured.out + captured.err).split())
+        assert f"{finger} is a finger database" in err and f"give {pad}" in err, (argv, err)
+    assert not (tmp_path / "models").exists() and not (tmp_path / "cal.toml").exists()

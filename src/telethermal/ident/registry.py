@@ -124,7 +124,23 @@ def pad_dataset(data: str | Path) -> Path:
         log.info("%s holds the databases pad/ and finger/: identification reads %s", root,
                  root / "pad")
         return root / "pad"
+    if _finger_database(root / MANIFEST):
+        pad = root.parent / "pad"
+        raise IdentificationError(
+            f"{root} is a finger database (fingertip touches, the generator's), not the pad's "
+            "touches" + (f": give {pad}" if (pad / MANIFEST).is_file() else ""))
     return root
+
+
+def _finger_database(manifest: Path) -> bool:
+    """Whether ``manifest`` is a generated finger database's (its columns
+    name the person and the finger's true temperature)."""
+    try:
+        with manifest.open(encoding="utf-8") as fh:
+            header = {h.strip() for h in fh.readline().split(",")}
+    except (OSError, UnicodeDecodeError):
+        return False                     # the dataset's own reader says what is wrong
+    return {"person", "T_finger_true_C"} <= header
 
 
 def touches_scene(data: str | Path, scene: Scene | None):

@@ -106,7 +106,8 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     from telethermal.physics.scene import with_finger
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, "a file, not the models' folder", str(out))
     from telethermal.ident.pad_calibration import pad_calibration
     scene = with_finger(load_scene(scene_name))
     cal = pad_calibration(calibration or "", scene)
@@ -117,7 +118,8 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     else:
         from telethermal.data.dataset import MANIFEST, trial_digest
         from telethermal.ident.registry import dataset_scene
-        pad = Path(data) / "pad" if (Path(data) / "pad" / MANIFEST).is_file() else Path(data)
+        from telethermal.ident.registry import pad_dataset
+        pad = pad_dataset(data)
         trials = load_dataset(pad)
         named = dataset_scene(pad)                      # None when it has no record
         method, data_scene, why = _dataset_method(scene, named)
@@ -133,6 +135,7 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     if identifier.fallback_ is not None:
         echo(f"fallback: {identifier.fallback_.method} on the same touches, in the same file: "
              f"it names a touch {method}'s pad-model check refuses (pad model does not fit)")
+    out.mkdir(parents=True, exist_ok=True)          # once there is something to write
     paths = [Path(identifier.save(out / "identifier.npz")),
              Path(save_generator(generator, out / "generator.npz"))]
     return paths + [write_sums(out, paths)]
