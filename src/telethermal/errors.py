@@ -69,3 +69,8 @@ class BenchError(TelethermalError, ValueError):
 
 class OutputFolderError(TelethermalError, PermissionError):
     """A folder for results that this process cannot create or write."""
+
+
+class UsageError(TelethermalError, ValueError):
+    """A command-line value that cannot be used, said with its option (an
+    output path that is a folder, a figure's suffix no format has)."""

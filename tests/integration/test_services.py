@@ -127,7 +127,7 @@ def test_bad_configs_are_refused_with_the_file_and_key(tmp_path, capsys):
     ("slave", "[slave]\nadmin_port = 70000\n", r"admin_port = 70000: a port is 1-65535"),
     ("slave", "[transport]\ncontrol_port = 99999\n",
      r"\[transport\]: control_port = 99999: a port is 1-65535"),
-    ("master", "[transport]\nstream_port = 0\n", r"stream_port = 0: a port is 1-65535")])
+    ("master", "[transport]\nstream_port = -1\n", r"stream_port = -1: a port is 1-65535")])
 def test_a_port_or_rate_out_of_range_is_refused_when_the_config_loads(tmp_path, role, text,
                                                                        message):
     """`check` and the services load the file the same way: a port outside

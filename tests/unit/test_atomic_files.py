@@ -42,3 +42,27 @@ def test_the_command_line_names_the_path_instead_of_a_traceback(tmp_path, capsys
     captured = capsys.readouterr()
     err = " ".join((captured.out + captured.err).split())
     assert f"error: {folder}: a folder, not a file's path" in err, err
+
+
+def test_a_figure_path_is_checked_before_any_work(tmp_path):
+    """--png: a folder, or a suffix no figure is written as, refused by name
+    before the command runs (identify eval had written its JSON, then
+    failed on the figure with a traceback); the default beside the JSON."""
+    import argparse
+
+    from telethermal.cli._common import _png
+    from telethermal.errors import UsageError
+
+    def png(value, json="r.json"):
+        return _png(argparse.Namespace(png=value, json=str(tmp_path / json)))
+
+    assert png(None) == tmp_path / "r.png"
+    assert png(str(tmp_path / "new" / "fig.svg")) == tmp_path / "new" / "fig.svg"
+    with pytest.raises(UsageError, match=r"a figure is written as \.png, \.pdf, \.svg"):
+        png(str(tmp_path / "fig.xyz"))
+    with pytest.raises(UsageError, match="a folder; give the figure's file"):
+        png(str(tmp_path))
+    fig = plt.figure()
+    write_figure(fig, tmp_path / "deep" / "er" / "fig.png")    # its folder made
+    plt.close(fig)
+    assert (tmp_path / "deep" / "er" / "fig.png").stat().st_size > 0

@@ -41,5 +41,6 @@ def plot(report: dict, out_png) -> None:
     fig.suptitle(f"telethermal bench identify - {report['date']} - {report['machine']}",
                  fontsize=9)
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
+    from telethermal.jsonfile import write_figure
+    write_figure(fig, out_png, dpi=110)
     plt.close(fig)

@@ -235,7 +235,8 @@ def plot(report: dict, out_png) -> Path:
     fig.tight_layout()
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_png, dpi=110)
+    from telethermal.jsonfile import write_figure
+    write_figure(fig, out_png, dpi=110)
     plt.close(fig)
     return out_png
 

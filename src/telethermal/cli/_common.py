@@ -49,9 +49,23 @@ def portable_command(command: str) -> str:
     return " ".join(_portable_word(w) for w in command.split(" "))
 
 
+#: The figure formats a ``--png`` may name by its suffix.
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
 def _png(args) -> Path:
-    """``--png``, or the JSON's path with ``.png``."""
-    return args.png or Path(args.json).with_suffix(".png")
+    """``--png``, or the JSON's path with ``.png``; checked before any work
+    (a folder, or a suffix no figure is written as, refused by name)."""
+    from telethermal.errors import UsageError
+
+    path = Path(args.png) if args.png else Path(args.json).with_suffix(".png")
+    if path.is_dir():
+        raise UsageError(f"--png {path}: a folder; give the figure's file, e.g. "
+                                f"{path / 'figure.png'}")
+    if path.suffix.lower() not in FIGURE_SUFFIXES:
+        raise UsageError(f"--png {path}: a figure is written as "
+                                f"{', '.join(FIGURE_SUFFIXES)}; give a file with one of them")
+    return path
 
 
 def _print_lines(lines: list[str]) -> None:

@@ -253,7 +253,8 @@ def plot_accuracy(reports: dict[str, dict], out_png, title: str = "") -> None:
     ax.legend()
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
+    from telethermal.jsonfile import write_figure
+    write_figure(fig, out_png, dpi=110)
     plt.close(fig)
 
 
