@@ -38,10 +38,23 @@ def test_a_figure_that_fails_to_save_keeps_the_old_file_and_leaves_no_part(tmp_p
 def test_the_command_line_names_the_path_instead_of_a_traceback(tmp_path, capsys):
     folder = tmp_path / "report.md"
     folder.mkdir()
+    (tmp_path / "physics.json").write_text("{}")
     assert main(["bench", "report", "--results", str(tmp_path), "--out", str(folder)]) == 2
     captured = capsys.readouterr()
     err = " ".join((captured.out + captured.err).split())
     assert f"error: {folder}: a folder, not a file's path" in err, err
+
+
+def test_a_report_of_no_results_is_refused_not_written(tmp_path, capsys):
+    """bench report on a folder that is not there, or holds no bench's JSON
+    (a typo in --results), had written a page of "Not run" and exited 0."""
+    out = tmp_path / "report.md"
+    for results, message in ((tmp_path / "nowhere", "no such folder"),
+                             (tmp_path, "no bench's JSON in it")):
+        assert main(["bench", "report", "--results", str(results), "--out", str(out)]) == 2
+        captured = capsys.readouterr()
+        assert message in " ".join((captured.out + captured.err).split())
+    assert not out.exists()
 
 
 def test_a_figure_path_is_checked_before_any_work(tmp_path):
@@ -66,3 +79,19 @@ def test_a_figure_path_is_checked_before_any_work(tmp_path):
     write_figure(fig, tmp_path / "deep" / "er" / "fig.png")    # its folder made
     plt.close(fig)
     assert (tmp_path / "deep" / "er" / "fig.png").stat().st_size > 0
+
+
+def test_a_bench_refuses_its_json_path_and_methods_before_any_work(tmp_path, capsys):
+    """--json a folder (bench physics had run to its end first) and an
+    unknown or empty --methods (bench identify had trained for seconds, then
+    shown a traceback): refused at once, naming the value."""
+    for argv, message in (
+            (["bench", "physics", "--json", str(tmp_path)], "a folder; give the report's file"),
+            (["bench", "identify", "--json", str(tmp_path / "i.json"), "--methods", "nosuch"],
+             "'nosuch' not a method; methods: effusivity-fit"),
+            (["bench", "identify", "--json", str(tmp_path / "i.json"), "--methods", ","],
+             "not a method")):
+        assert main(argv) == 2
+        captured = capsys.readouterr()
+        assert message in " ".join((captured.out + captured.err).split()), argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -55,3 +55,17 @@ def reduced_options(command: str) -> list[str]:
         if option.replace("=", " ") not in TARGET_OPTIONS:
             out.append(option)
     return out
+
+
+def parse_methods(text: str) -> list[str]:
+    """``--methods a,b``: the names, each a method of the registry
+    (BenchError naming an unknown or empty one, before any work)."""
+    from telethermal.errors import BenchError
+    from telethermal.ident.registry import METHODS
+
+    names = [m.strip() for m in text.split(",")]
+    bad = [m for m in names if m not in METHODS]
+    if bad or not names:
+        raise BenchError(f"--methods {text!r}: {', '.join(repr(m) for m in bad) or 'none'} "
+                         f"not a method; methods: {', '.join(sorted(METHODS))}")
+    return list(dict.fromkeys(names))

@@ -55,6 +55,13 @@ BY_HAND = (("skin-floor", sections.skin_floor),
 
 def write_report(results: str | Path, out_md: str | Path, command: str = "") -> Path:
     results, out_md = Path(results), Path(out_md)
+    from telethermal.errors import BenchError
+    if not results.is_dir():
+        raise BenchError(f"--results {results}: no such folder (the benches' JSON files: "
+                         "bench/results, or make bench's out/bench)")
+    if not any((results / f"{name}.json").is_file() for name, _ in SECTIONS + BY_HAND):
+        raise BenchError(f"--results {results}: no bench's JSON in it (physics.json, "
+                         "render.json, ...): run the benches into it first")
     out = out_md.parent
     out.mkdir(parents=True, exist_ok=True)
     where = Path(os.path.relpath(results.resolve(), out.resolve())).as_posix()

@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import sys
+from pathlib import Path
 
 from rich.markup import escape
 
@@ -51,6 +52,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_json_path(args) -> None:
+    """A command's ``--json`` report path that is a folder, refused before
+    the command does any work (a bench had run to its end first)."""
+    path = getattr(args, "json", None)
+    if isinstance(path, str) and path and Path(path).is_dir():
+        from telethermal.errors import UsageError
+        raise UsageError(f"--json {path}: a folder; give the report's file, e.g. "
+                         f"{Path(path) / 'report.json'}")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     service = args.command in ("slave", "master")
@@ -58,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s" if service
                         else "%(levelname)s %(name)s: %(message)s")
     try:
+        _check_json_path(args)
         return args.func(args)
     except TelethermalError as exc:
         # escape: the text is the error's, not markup ("[pad]" is a TOML

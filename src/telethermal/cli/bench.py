@@ -101,12 +101,13 @@ def cmd_bench_faults(args) -> int:
 
 def cmd_bench_identify(args) -> int:
     from telethermal.bench import identify
+    from telethermal.bench.options import parse_methods
 
     if args.as_built is not None:
         _no_executor(args)
         return _bench_identify_as_built(args)
     _no_references(args)
-    methods = args.methods.split(",") if args.methods else None
+    methods = parse_methods(args.methods) if args.methods else None
     png = _png(args)
     n_jobs = len(identify.jobs(methods or identify.DEFAULT_METHODS, not args.no_limit,
                                args.scene))
