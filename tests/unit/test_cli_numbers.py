@@ -53,3 +53,13 @@ def test_sizes_and_ports_out_of_range_are_refused_when_parsed(argv, message, cap
         build_parser().parse_args(argv)
     assert stop.value.code == 2
     assert message in " ".join(capsys.readouterr().err.split())
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--object-temp-c", "-300"], ["simulate", "--pad-temp-c", "-273.15"],
+    ["dataset", "import", "x.csv", "--into", "d", "--room-c", "-400"],
+    ["admin", "touch", "--object-c", "-274"]])
+def test_a_temperature_below_absolute_zero_is_refused(argv, capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(argv)
+    assert "below absolute zero (-273.15 C)" in capsys.readouterr().err

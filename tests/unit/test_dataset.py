@@ -138,6 +138,22 @@ def test_existing_dataset_is_kept_unless_overwrite(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
 
 
+def test_overwrite_replaces_a_dataset_and_nothing_else(tmp_path):
+    # --force on a mistyped --out: a file, or a folder of other things, is
+    # not a dataset to replace; each is refused and left as it was.
+    afile = tmp_path / "notes.bin"
+    afile.write_bytes(b"mine")
+    folder = tmp_path / "home"
+    folder.mkdir()
+    (folder / "keep.txt").write_text("mine")
+    with pytest.raises(DatasetError, match="a file, not a dataset folder"):
+        write_dataset(afile, [make_trial(1)], overwrite=True)
+    with pytest.raises(DatasetError, match="not a dataset .no manifest.csv or generation.json"):
+        write_dataset(folder, [make_trial(1)], overwrite=True)
+    assert afile.read_bytes() == b"mine" and (folder / "keep.txt").read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["home", "notes.bin"]
+
+
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False)
 
 

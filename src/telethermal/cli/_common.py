@@ -122,6 +122,14 @@ def _seed(text):
     return value
 
 
+def _temperature_c(text):
+    """An argument type: a temperature in C, finite and above absolute zero."""
+    value = _finite(text)
+    if not value > -273.15:
+        raise argparse.ArgumentTypeError(f"{text!r} C is below absolute zero (-273.15 C)")
+    return value
+
+
 def _finite(text):
     """An argument type: a finite float."""
     try:

@@ -6,8 +6,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from telethermal.cli._common import (CONTACT_MAX_S, CONTACT_WHY, _finite, _positive,
-                                     _progress, _seed, console, log)
+from telethermal.cli._common import (CONTACT_MAX_S, CONTACT_WHY, _positive, _progress, _seed,
+                                     _temperature_c, console, log)
 
 
 def cmd_scenes(args) -> int:
@@ -169,10 +169,11 @@ def add_dataset(sub) -> None:
                                      "(t_s=time,heat_flux_W_m2=flux,temperature_C=T,force_N=F)")
     p.add_argument("--units", help="dataset column=unit: t_s s|ms, heat_flux_W_m2 "
                                    "W/m2|kW/m2|W/cm2, temperature_C C|K, force_N N|kN|gf")
-    p.add_argument("--object-c", type=float, help="the object's temperature before contact (C)")
-    p.add_argument("--pad-c", type=float, help="the pad's measured temperature before "
+    p.add_argument("--object-c", type=_temperature_c,
+                   help="the object's temperature before contact (C)")
+    p.add_argument("--pad-c", type=_temperature_c, help="the pad's measured temperature before "
                                                "contact (C; not its set point)")
-    p.add_argument("--room-c", type=float, help="the room's temperature (C)")
+    p.add_argument("--room-c", type=_temperature_c, help="the room's temperature (C)")
     p.add_argument("--onset-s", type=float, help="the contact's start on the file's clock (s); "
                                                  "default: t = 0 when the time goes below 0, "
                                                  "else the first force >= 1 N")
@@ -183,9 +184,9 @@ def add_simulate(sub) -> None:
     p = sub.add_parser("simulate", help="one contact between two semi-infinite bodies")
     p.add_argument("--pad", required=True, help="material of the pad (or finger: skin)")
     p.add_argument("--object", required=True, help="material of the object")
-    p.add_argument("--pad-temp-c", type=_finite, required=True,
+    p.add_argument("--pad-temp-c", type=_temperature_c, required=True,
                    help="the pad's (or finger's) temperature before contact, C")
-    p.add_argument("--object-temp-c", type=_finite, required=True,
+    p.add_argument("--object-temp-c", type=_temperature_c, required=True,
                    help="the object's temperature before contact, C")
     p.add_argument("--seconds", type=_positive(at_most=CONTACT_MAX_S, why=CONTACT_WHY),
                    required=True, help="contact time to simulate, seconds (up to 600)")

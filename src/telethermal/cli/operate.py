@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 
-from telethermal.cli._common import CONTACT_MAX_S, CONTACT_WHY, _positive, _seed
+from telethermal.cli._common import CONTACT_MAX_S, CONTACT_WHY, _positive, _seed, _temperature_c
 from telethermal.errors import TelethermalError
 from telethermal.services import admin_client as ac
 
@@ -75,12 +75,12 @@ def _admin_parser(sub) -> None:
     q.add_argument("--seed", type=_seed, default=0,
                    help="seed of the simulated operator's touch (default 0)")
     q.add_argument("--no-wait", action="store_true", help="return at once (then lift, report)")
-    q.add_argument("--session-wait", type=float, default=30.0, metavar="S",
+    q.add_argument("--session-wait", type=_positive(at_most=3600.0), default=30.0, metavar="S",
                    help="wait up to S seconds for the master's session with the slave "
                         "(right after start, the slave may still be training; default 30)")
     q.add_argument("--material", help="the placed object, if the slave's admin is not "
                                       "reachable from here (for the direct-contact figures)")
-    q.add_argument("--object-c", type=float, help="its true temperature (C)")
+    q.add_argument("--object-c", type=_temperature_c, help="its true temperature (C)")
     asub.add_parser("lift", help="end the touch in progress now")
     asub.add_parser("report", help="the last touch's figures (master and slave)")
     q = asub.add_parser("send", help="any admin request: send ROLE CMD [key=value ...]")

@@ -266,8 +266,17 @@ def staged_dir(root: str | Path, overwrite: bool = False):
     (an old ``root`` is removed only after the rename), on any error it is
     removed and ``root`` is left as it was."""
     root = Path(root)
-    if root.exists() and (not root.is_dir() or any(root.iterdir())) and not overwrite:
-        raise DatasetError(f"{root} exists and is not empty: give --force to replace it")
+    if root.exists() and (not root.is_dir() or any(root.iterdir())):
+        if not overwrite:
+            raise DatasetError(f"{root} exists and is not empty: give --force to replace it")
+        # --force replaces a dataset or a generated database, nothing else (a
+        # mistyped --out had deleted a file, or would a whole folder).
+        if not root.is_dir():
+            raise DatasetError(f"{root}: a file, not a dataset folder; --force replaces a "
+                               "dataset, not other files: give a new folder")
+        if not ((root / MANIFEST).is_file() or (root / "generation.json").is_file()):
+            raise DatasetError(f"{root}: not a dataset (no {MANIFEST} or generation.json in "
+                               "it); --force replaces only a dataset: give a new folder")
     root.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
     try:
