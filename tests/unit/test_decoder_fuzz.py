@@ -74,3 +74,16 @@ def test_any_admin_request_gets_a_reply(admin, data):
     reply = msgpack.unpackb(client.recv(), raw=False)
     assert isinstance(reply, dict) and isinstance(reply.get("ok"), bool)
     assert not server.pending
+
+
+def test_a_request_missing_a_field_says_which(admin):
+    """`admin send slave place` without its material had been answered
+    "place: 'material'" (a KeyError's text): now the field and the form."""
+    server, client = admin
+    client.send(msgpack.packb({"cmd": "place"}))
+    assert server.sock.poll(2000)
+    server.handle(server.receive(), _Service(),
+                  {"place": lambda r: {"placed": str(r["material"])}})
+    assert client.poll(2000)
+    reply = msgpack.unpackb(client.recv(), raw=False)
+    assert reply == {"ok": False, "error": "place: needs material=... (a key=value argument)"}

@@ -132,7 +132,13 @@ class AdminServer:
                                            f"{', '.join(['status', 'stop', *handlers])}")
         except (TelethermalError, KeyError, ValueError, TypeError) as exc:
             self.counters["refused"] += 1
-            self.reply(ok=False, error=f"{cmd[:64]}: {str(exc)[:400]}")
+            key = exc.args[0] if isinstance(exc, KeyError) and exc.args else None
+            if not isinstance(exc, TelethermalError) and isinstance(key, str) \
+                    and key not in request:          # a field the request left out
+                why = f"needs {key[:64]}=... (a key=value argument)"
+            else:
+                why = str(exc)[:400]
+            self.reply(ok=False, error=f"{cmd[:64]}: {why}")
         except Exception as exc:                # a bug: one request's, not the service's
             self._internal_error(f"admin {cmd[:64]!r}", exc)
             if self.pending:
