@@ -110,3 +110,24 @@ def test_the_unchanged_copy_replays_identical(recorded, tmp_path):
     path = rewrite(recorded, tmp_path / "same.mcap")
     summary = replay(path)["summary"]
     assert summary["identical"] and summary["damaged"] is None
+
+
+def test_a_recording_cut_before_its_first_period_says_so(recorded, tmp_path, trained_models):
+    """A recording cut short (a copy stopped at 20 kB): its attachments,
+    written at its end, are gone, and the touch holds no period; the error
+    said only "no generator.npz attached", and with models given the replay
+    had printed "0 periods replayed" and exited 0."""
+    data = recorded.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    for size in (len(data) // 8, 20_000):
+        cut.write_bytes(data[:size])
+        rec = read_recording(cut)
+        if not rec.truncated or rec.messages("/master/periods"):
+            continue                       # this cut kept a period: not the case here
+        with pytest.raises(RecordingError, match=r"was cut.*attachments.*are lost"):
+            replay(cut)
+        with pytest.raises(RecordingError, match="holds no period to replay.*was cut"):
+            replay(cut, *trained_models.pair(SCENE, 0))
+        return
+    pytest.fail("no cut of the recording lost every period: the case was not built")
+

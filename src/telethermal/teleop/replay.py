@@ -142,7 +142,9 @@ def _replay(path, identifier, generator, gains, touch: int) -> dict:
 
     def attached(name, loader):
         if name not in rec.attachments:
-            raise RecordingError(f"{path}: no {name} attached; pass one to replay with")
+            cut = (f" (the recording was cut, {rec.truncated}: its attachments, written at "
+                   "its end, are lost)") if rec.truncated else ""
+            raise RecordingError(f"{path}: no {name} attached{cut}; pass one to replay with")
         with tempfile.TemporaryDirectory() as tmp:
             f = Path(tmp) / name
             f.write_bytes(rec.attachments[name])
@@ -161,6 +163,9 @@ def _replay(path, identifier, generator, gains, touch: int) -> dict:
     slave = _replay_slave(rec, cid, identifier, attached)
     if slave is not None:
         summary["slave"] = slave
+    if summary.get("periods") == 0 and slave is None:
+        raise RecordingError(f"{path}: touch {touch} holds no period to replay" + (
+            f" (the recording was cut, {rec.truncated})" if rec.truncated else ""))
     if rec.damaged and summary.get("identical"):
         summary["identical"] = False            # what was skipped was not compared
     ends = [m for m in rec.messages("/master/touch") if m.get("contact_id", 0) == cid]
