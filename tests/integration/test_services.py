@@ -127,13 +127,16 @@ def test_bad_configs_are_refused_with_the_file_and_key(tmp_path, capsys):
     ("slave", "[slave]\nadmin_port = 70000\n", r"admin_port = 70000: a port is 1-65535"),
     ("slave", "[transport]\ncontrol_port = 99999\n",
      r"\[transport\]: control_port = 99999: a port is 1-65535"),
-    ("master", "[transport]\nstream_port = -1\n", r"stream_port = -1: a port is 1-65535")])
+    ("master", "[transport]\nstream_port = -1\n", r"stream_port = -1: a port is 1-65535"),
+    ("master", '[master]\ncpus = "1,,x"\n', r"cpus = '1,,x': comma-separated core numbers"),
+    ("master", "[master]\nrealtime_priority = 120\n", r"realtime_priority = 120: 1-99")])
 def test_a_port_or_rate_out_of_range_is_refused_when_the_config_loads(tmp_path, role, text,
                                                                        message):
     """`check` and the services load the file the same way: a port outside
     1-65535 (a socket's bind had raised OverflowError, or a service started
-    on port 0) and a loop rate that is not a positive number are refused
-    naming the file and key."""
+    on port 0), a loop rate that is not a positive number, cores that are
+    not numbers and a priority outside SCHED_FIFO's are refused naming the
+    file and key (check had passed them, and the master warned at start)."""
     cfg = tmp_path / "c.toml"
     cfg.write_text(text + ("[transport]\nsecurity = \"plain\"\n" if "[transport]" not in text
                            else 'security = "plain"\n'))

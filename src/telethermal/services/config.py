@@ -122,6 +122,14 @@ class MasterConfig:
                 and 0 < self.rate_hz <= 10000):
             raise ConfigError(f"rate_hz = {self.rate_hz!r}: the display loop's rate, over 0 "
                               "and up to 10000 Hz")
+        cores = [c.strip() for c in str(self.cpus).split(",")] if self.cpus else []
+        if not all(c.isdigit() for c in cores):
+            raise ConfigError(f"cpus = {self.cpus!r}: comma-separated core numbers, e.g. '1' "
+                              "or '2,3' (empty: any)")
+        if isinstance(self.realtime_priority, bool) or not isinstance(
+                self.realtime_priority, int) or not 0 <= self.realtime_priority <= 99:
+            raise ConfigError(f"realtime_priority = {self.realtime_priority!r}: 1-99 "
+                              "(SCHED_FIFO), or 0 for the default scheduler")
         self.devices = _devices(self, "/dev/ttyUSB0")
 
 
