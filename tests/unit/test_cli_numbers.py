@@ -63,3 +63,17 @@ def test_a_temperature_below_absolute_zero_is_refused(argv, capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(argv)
     assert "below absolute zero (-273.15 C)" in capsys.readouterr().err
+
+
+def test_a_calibration_window_of_nothing_is_refused_when_parsed(capsys):
+    # calibrate pad --window-s 0 had run the fit and blamed the pad's model.
+    for value, message in (("0", "must be positive"), ("-0.5", "must be positive"),
+                           ("1e4", "is over 60")):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["calibrate", "pad", "--scene", "s", "--data", "d",
+                                       "--out", "o", "--window-s", value])
+        assert message in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["calibrate", "pad", "--scene", "s", "--data", "d",
+                                   "--out", "o", "--design-sd", "-1"])
+    assert "must be >= 0" in capsys.readouterr().err

@@ -110,6 +110,14 @@ def _port(text):
     return value
 
 
+def _non_negative(text):
+    """An argument type: a finite float >= 0."""
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+    return value
+
+
 def _seed(text):
     """An argument type: a random seed, an integer >= 0 (numpy's generators
     take no negative seed)."""

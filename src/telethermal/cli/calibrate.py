@@ -5,7 +5,7 @@ file holds both: each command keeps the other's table."""
 
 from __future__ import annotations
 
-from telethermal.cli._common import _print_lines, _seed, console
+from telethermal.cli._common import _non_negative, _positive, _print_lines, _seed, console
 from telethermal.errors import CalibrationError
 
 
@@ -99,9 +99,10 @@ def add_parser(sub) -> None:
                    help="a dataset of reference touches: at least 3 touches of each of at "
                         "least 2 materials of the scene's table (5 of each of 3 recommended)")
     q.add_argument("--out", required=True, help="the calibration file to write (TOML)")
-    q.add_argument("--window-s", type=float, default=1.0,
+    q.add_argument("--window-s", type=_positive(at_most=60.0, why="a touch's first minute"),
+                   default=1.0,
                    help="seconds of each touch fitted from the onset (default 1)")
-    q.add_argument("--design-sd", type=float, default=None,
+    q.add_argument("--design-sd", type=_non_negative, default=None,
                    help="how far (log sd) the parts the touches cannot identify may be off "
                         "their design, carried into the intervals (default 0.2: a part "
                         "known to about 20 %%; 0: statistical intervals alone)")
