@@ -31,6 +31,8 @@ def read_toml(path: str | Path, what: str, error=TelethermalError) -> dict:
     a missing file, one over ``MAX_TOML_BYTES``, not UTF-8, or bad TOML is
     ``error``, naming the file (``docs/limits.md``)."""
     path = Path(path)
+    if path.is_dir():
+        raise error(f"{path}: a folder, not a {what} (give the file in it)")
     if not path.is_file():
         raise error(f"{path}: no such {what}")
     return loads_checked(read_text(path, MAX_TOML_BYTES, what, error), str(path), error)

@@ -95,3 +95,19 @@ def test_a_bench_refuses_its_json_path_and_methods_before_any_work(tmp_path, cap
         captured = capsys.readouterr()
         assert message in " ".join((captured.out + captured.err).split()), argv
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_folder_given_where_a_file_is_read_is_called_a_folder(tmp_path):
+    """It had been reported as missing ("no such config file", "does not
+    exist"), which sends a user looking for a typo."""
+    from telethermal.errors import DatasetError, SceneError, TelethermalError
+    from telethermal.physics.scene import load_scene
+    from telethermal.record.importer import import_recordings
+    from telethermal.tomltables import read_toml
+
+    with pytest.raises(TelethermalError, match="a folder, not a config file"):
+        read_toml(tmp_path, "config file")
+    with pytest.raises(SceneError, match="a folder, not a scene file"):
+        load_scene(str(tmp_path))
+    with pytest.raises(DatasetError, match="a folder, not a recording or CSV file"):
+        import_recordings([tmp_path], tmp_path / "ds")

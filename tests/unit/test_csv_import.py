@@ -266,3 +266,18 @@ def test_import_into_a_folder_that_is_not_a_dataset_is_refused_and_loses_nothing
     empty.mkdir()
     assert main(args + ["--into", str(empty)]) == 0
     assert len(load_dataset(empty)) == 1
+
+
+def test_a_manifest_row_short_or_long_of_the_header_is_named_by_line(tmp_path, capsys):
+    # A row missing its group cell had been reported as "no group given".
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    lab_file(lab / "a.csv")
+    args = ["dataset", "import", "--into", str(tmp_path / "ds"), "--columns", COLUMNS,
+            "--units", UNITS, "--object-c", "24", "--pad-c", "34", "--room-c", "22"]
+    for rows, message in (("a.csv,glass\n", "line 2: no cell for group (the row is shorter"),
+                          ("a.csv,glass,g1,x\n", "line 2: more cells than the header")):
+        (lab / "manifest.csv").write_text("file,material,group\n" + rows)
+        assert main(args + ["--manifest", str(lab / "manifest.csv")]) == 2
+        assert message in " ".join(capsys.readouterr().err.split())
+    assert not (tmp_path / "ds").exists()

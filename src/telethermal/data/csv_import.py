@@ -291,6 +291,12 @@ def _manifest_rows(path: Path) -> dict[str, dict]:
         out = {}
         for row in reader:
             line = reader.line_num                  # the file's line (blank lines counted)
+            short = [k.strip() for k, v in row.items() if k and v is None]
+            if short or None in row:                # cells missing, or more than the header
+                raise DatasetError(
+                    f"{path} line {line}: " + (f"no cell for {', '.join(short)} (the row is "
+                                               "shorter than the header)" if short else
+                                               "more cells than the header has columns"))
             row = {k.strip(): (v or "").strip() for k, v in row.items() if k}
             file = path.parent / row["file"]
             if not file.is_file():

@@ -405,6 +405,9 @@ def load_scene(name_or_path: str | Path) -> Scene:
     if name not in shipped and (path.suffix or path.exists() or "/" in name):
         # A path (shipped names have no dot and no slash): the file, or an
         # error that names it and, for a near miss, the file meant.
+        if path.is_dir():
+            raise SceneError(f"scene file {path}: a folder, not a scene file (give the .toml "
+                             "in it)")
         if not path.is_file():
             near = difflib.get_close_matches(path.name, [p.name for p in path.parent.glob(
                 "*.toml")] if path.parent.is_dir() else [], n=1)

@@ -138,7 +138,8 @@ def import_recordings(paths, into: str | Path, material: str | None = None,
     rows = read_lab_manifest(manifest) if manifest is not None else {}
     for p in paths:
         if not Path(p).is_file():
-            raise DatasetError(f"{p}: no such file")
+            raise DatasetError(f"{p}: " + ("a folder, not a recording or CSV file"
+                                           if Path(p).is_dir() else "no such file"))
     # One file, however it is spelt, once (the command line's and the manifest's).
     files = list(dict.fromkeys([str(Path(p).resolve()) for p in paths] + list(rows)))
     if not files and not new:
