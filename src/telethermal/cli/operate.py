@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 
-from telethermal.cli._common import CONTACT_MAX_S, CONTACT_WHY, _positive, _seed, _temperature_c
+from telethermal.cli._common import _positive, _seed, _temperature_c
 from telethermal.errors import TelethermalError
 from telethermal.services import admin_client as ac
 
@@ -69,9 +69,9 @@ def _admin_parser(sub) -> None:
                                        "memory (default: the scene object of MATERIAL)")
     q = asub.add_parser("touch", help="the simulated operator touches the master's pad; "
                                       "prints the touch's figures")
-    q.add_argument("--contact-s", type=_positive(at_most=CONTACT_MAX_S, why=CONTACT_WHY),
-                   default=5.0,
-                   help="contact time, seconds (default 5)")
+    q.add_argument("--contact-s", type=_positive(at_most=60.0, why="the master's touch "
+                                                 "request takes up to 60 s"),
+                   default=5.0, help="contact time, seconds (default 5)")
     q.add_argument("--seed", type=_seed, default=0,
                    help="seed of the simulated operator's touch (default 0)")
     q.add_argument("--no-wait", action="store_true", help="return at once (then lift, report)")
