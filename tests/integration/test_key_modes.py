@@ -110,6 +110,10 @@ def test_the_keys_command_keeps_a_pair_it_made_and_names_only_files(tmp_path, ca
         assert main(["keys", "--out", str(out), "--name", name]) == 2
         assert "a file name in --out, not a path" in capsys.readouterr().err
     assert not list(tmp_path.glob("*evil*")) and not (tmp_path.parent / "evil.key").exists()
+    (out / "master.key_secret").unlink()            # half a pair: nothing to keep
+    assert main(["keys", "--out", str(out), "--name", "master"]) == 2
+    assert "the pair is broken; make a new one with --force" in " ".join(
+        capsys.readouterr().err.split())
     afile = tmp_path / "afile"
     afile.write_text("x")
     assert main(["keys", "--out", str(afile), "--name", "slave"]) == 2

@@ -127,8 +127,9 @@ def test_bad_configs_are_refused_with_the_file_and_key(tmp_path, capsys):
     ("slave", "[slave]\nadmin_port = 70000\n", r"admin_port = 70000: a port is 1-65535"),
     ("slave", "[transport]\ncontrol_port = 99999\n",
      r"\[transport\]: control_port = 99999: a port is 1-65535"),
-    ("master", "[transport]\nstream_port = -1\n", r"stream_port = -1: a port is 1-65535"),
-    ("master", '[master]\ncpus = "1,,x"\n', r"cpus = '1,,x': comma-separated core numbers"),
+    ("master", "[transport]\nstream_port = -1\n",
+     r"stream_port = -1: a port is 1-65535 \(0: the system picks one\)"),
+    ("master", '[master]\ncpus = "1,,x"\n', r"cpus = '1,,x': core numbers and ranges"),
     ("master", "[master]\nrealtime_priority = 120\n", r"realtime_priority = 120: 1-99")])
 def test_a_port_or_rate_out_of_range_is_refused_when_the_config_loads(tmp_path, role, text,
                                                                        message):
@@ -143,6 +144,14 @@ def test_a_port_or_rate_out_of_range_is_refused_when_the_config_loads(tmp_path, 
     with pytest.raises(ConfigError, match=message) as err:
         load_config(cfg, role)
     assert str(cfg) in str(err.value)
+
+
+def test_cores_given_as_numbers_or_ranges_load(tmp_path):
+    from telethermal.services.config import parse_cpus
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[master]\ncpus = "0-1,3"\nrealtime_priority = 20\n'
+                   '[transport]\nsecurity = "plain"\n')
+    assert parse_cpus(load_config(cfg, "master").cpus) == {0, 1, 3}
 
 
 def test_shipped_service_configs_load():

@@ -71,8 +71,13 @@ def test_a_figure_path_is_checked_before_any_work(tmp_path):
 
     assert png(None) == tmp_path / "r.png"
     assert png(str(tmp_path / "new" / "fig.svg")) == tmp_path / "new" / "fig.svg"
-    with pytest.raises(UsageError, match=r"a figure is written as \.png, \.pdf, \.svg"):
+    assert png(str(tmp_path / "fig.eps")).suffix == ".eps"      # what matplotlib writes
+    with pytest.raises(UsageError, match=r"--png .*fig\.xyz: no figure format ends so; "
+                                         r"matplotlib writes .*\.png"):
         png(str(tmp_path / "fig.xyz"))
+    (tmp_path / "q.png").mkdir()
+    with pytest.raises(UsageError, match=r"the figure beside --json, .*q\.png: a folder"):
+        png(None, json="q.json")
     with pytest.raises(UsageError, match="a folder; give the figure's file"):
         png(str(tmp_path))
     fig = plt.figure()

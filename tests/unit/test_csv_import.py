@@ -268,16 +268,25 @@ def test_import_into_a_folder_that_is_not_a_dataset_is_refused_and_loses_nothing
     assert len(load_dataset(empty)) == 1
 
 
-def test_a_manifest_row_short_or_long_of_the_header_is_named_by_line(tmp_path, capsys):
-    # A row missing its group cell had been reported as "no group given".
+def test_a_manifest_row_with_cells_past_its_header_or_no_file_is_named_by_line(tmp_path,
+                                                                               capsys):
+    # Cells past a row's end are blank (the columns are filled where known)
+    # and a trailing empty cell is a spreadsheet's comma; a non-empty cell
+    # past the header, or a row naming no file, is refused by line.
     lab = tmp_path / "lab"
     lab.mkdir()
     lab_file(lab / "a.csv")
-    args = ["dataset", "import", "--into", str(tmp_path / "ds"), "--columns", COLUMNS,
-            "--units", UNITS, "--object-c", "24", "--pad-c", "34", "--room-c", "22"]
-    for rows, message in (("a.csv,glass\n", "line 2: no cell for group (the row is shorter"),
-                          ("a.csv,glass,g1,x\n", "line 2: more cells than the header")):
+    args = ["dataset", "import", "--columns", COLUMNS, "--units", UNITS, "--object-c", "24",
+            "--pad-c", "34", "--room-c", "22", "--group", "g1"]
+    for k, (rows, message) in enumerate((("a.csv,glass,g1,x\n", "line 2: 1 more cell(s)"),
+                                         (",glass,g1\n", "line 2: no file named"))):
         (lab / "manifest.csv").write_text("file,material,group\n" + rows)
-        assert main(args + ["--manifest", str(lab / "manifest.csv")]) == 2
+        assert main(args + ["--manifest", str(lab / "manifest.csv"),
+                            "--into", str(tmp_path / f"bad{k}")]) == 2
         assert message in " ".join(capsys.readouterr().err.split())
-    assert not (tmp_path / "ds").exists()
+        assert not (tmp_path / f"bad{k}").exists()
+    for k, rows in enumerate(("a.csv,glass\n", "a.csv,glass,g1,\n")):
+        (lab / "manifest.csv").write_text("file,material,group\n" + rows)
+        assert main(args + ["--manifest", str(lab / "manifest.csv"),
+                            "--into", str(tmp_path / f"ok{k}")]) == 0
+        assert len(load_dataset(tmp_path / f"ok{k}")) == 1

@@ -95,7 +95,7 @@ def test_missing_manifest_column_is_named(tmp_path):
 def test_a_manifest_that_is_not_utf8_text_is_named_not_a_traceback(tmp_path):
     # A binary file saved as manifest.csv (an export gone wrong): named as
     # such by every reader of a dataset, and by the import's manifest check.
-    from telethermal.record.importer import is_dataset_manifest
+    from telethermal.data.dataset import is_dataset_manifest
 
     root = written(tmp_path)
     (root / "manifest.csv").write_bytes(b"trial_id,material\n\xff\xfe\x00garbage\n")
@@ -148,10 +148,18 @@ def test_overwrite_replaces_a_dataset_and_nothing_else(tmp_path):
     (folder / "keep.txt").write_text("mine")
     with pytest.raises(DatasetError, match="a file, not a dataset folder"):
         write_dataset(afile, [make_trial(1)], overwrite=True)
-    with pytest.raises(DatasetError, match="not a dataset .no manifest.csv or generation.json"):
+    with pytest.raises(DatasetError, match="not a dataset .no dataset's manifest.csv or generation.json"):
         write_dataset(folder, [make_trial(1)], overwrite=True)
     assert afile.read_bytes() == b"mine" and (folder / "keep.txt").read_text() == "mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["home", "notes.bin"]
+    # A lab's raw folder has a manifest.csv too (its list of files): not a dataset.
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    (lab / "manifest.csv").write_text("file,material\na0.csv,wood\n")
+    (lab / "a0.csv").write_text("time_ms,q\n0,1\n")
+    with pytest.raises(DatasetError, match="a lab's own manifest.csv is not one"):
+        write_dataset(lab, [make_trial(1)], overwrite=True)
+    assert sorted(p.name for p in lab.iterdir()) == ["a0.csv", "manifest.csv"]
 
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False)

@@ -21,8 +21,6 @@ def plot(report: dict, traces: dict, path: str | Path) -> Path:
 def _plot_delay(sim: dict, path: Path) -> None:
     """Error against one-way delay, one line per mode, +- 1 sd shaded, the
     oracle floor; one panel per window."""
-    import os
-
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -58,10 +56,9 @@ def _plot_delay(sim: dict, path: Path) -> None:
                  f"materials x {len(sim['seeds'])} seeds per point, mean +- 1 sd over touches, "
                  f"{sim['contact_s']:g} s contacts at {sim['rate_hz']:g} Hz", fontsize=9)
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=100, format="png")
+    from telethermal.jsonfile import write_figure
+    write_figure(fig, path, dpi=100)
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 def plot_traces(report: dict, traces: dict, path: str | Path) -> Path:
@@ -70,8 +67,6 @@ def plot_traces(report: dict, traces: dict, path: str | Path) -> Path:
     fault's window shaded (red: partition or crash until the service is back;
     grey: the delay's blind interval, 2 x one-way delay, before which no news
     of the remote contact can reach the master)."""
-    import os
-
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -116,9 +111,7 @@ def plot_traces(report: dict, traces: dict, path: str | Path) -> Path:
     fig.suptitle(f"telethermal bench faults: {report['materials'][0]}, first touch of each "
                  f"setting; {report['machine']}, {report['date']}", fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=100, format="png")
+    from telethermal.jsonfile import write_figure
+    write_figure(fig, path, dpi=100)
     plt.close(fig)
-    os.replace(tmp, path)
     return path

@@ -93,9 +93,9 @@ def main(argv: list[str] | None = None) -> int:
         # A path the command could not use (a folder given for a file, a
         # file for a folder, no permission): named with the system's reason,
         # not a traceback. The writers leave no part of a file behind.
-        if exc.filename is None:
+        if exc.filename is None or args.verbose:          # -v: the traceback, for a bug
             raise
-        where = exc.filename + (f" -> {exc.filename2}" if exc.filename2 else "")
+        where = str(exc.filename) + (f" -> {exc.filename2}" if exc.filename2 else "")
         console.print(f"[red]error:[/red] {escape(where)}: {escape(exc.strerror or str(exc))}",
                       highlight=False, soft_wrap=True)
         return 2

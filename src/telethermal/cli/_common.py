@@ -49,22 +49,22 @@ def portable_command(command: str) -> str:
     return " ".join(_portable_word(w) for w in command.split(" "))
 
 
-#: The figure formats a ``--png`` may name by its suffix.
-FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
-
-
 def _png(args) -> Path:
     """``--png``, or the JSON's path with ``.png``; checked before any work
-    (a folder, or a suffix no figure is written as, refused by name)."""
+    (a folder, or a suffix matplotlib writes no figure as, refused by name)."""
+    from matplotlib.figure import Figure
+
     from telethermal.errors import UsageError
 
     path = Path(args.png) if args.png else Path(args.json).with_suffix(".png")
+    what = "--png" if args.png else "the figure beside --json,"
     if path.is_dir():
-        raise UsageError(f"--png {path}: a folder; give the figure's file, e.g. "
-                                f"{path / 'figure.png'}")
-    if path.suffix.lower() not in FIGURE_SUFFIXES:
-        raise UsageError(f"--png {path}: a figure is written as "
-                                f"{', '.join(FIGURE_SUFFIXES)}; give a file with one of them")
+        raise UsageError(f"{what} {path}: a folder; give the figure's file, e.g. "
+                         f"{path / 'figure.png'}")
+    kinds = sorted(Figure().canvas.get_supported_filetypes())
+    if path.suffix.lstrip(".").lower() not in kinds:
+        raise UsageError(f"{what} {path}: no figure format ends so; matplotlib writes "
+                         f"{', '.join('.' + k for k in kinds)}")
     return path
 
 
@@ -115,6 +115,14 @@ def _non_negative(text):
     value = _finite(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+    return value
+
+
+def _wait_s(text):
+    """An argument type: a wait in seconds, 0 (look once) to an hour."""
+    value = _non_negative(text)
+    if value > 3600:
+        raise argparse.ArgumentTypeError(f"{text!r} is over 3600 s")
     return value
 
 

@@ -84,6 +84,7 @@ def cmd_bench_faults(args) -> int:
     from telethermal.jsonfile import write_json
 
     delays = faults.parse_delays(args.delays) if args.delays else None
+    png = _png(args)                                        # checked before the run
     n_rows = len(faults_sim.ROWS) + len(faults.SETTINGS) + 2 * len(delays or ())
     with _progress(n_rows + 1, "bench faults") as advance, _executor(args) as executor:
         report = faults.run(progress=advance, quick=args.quick, only=args.only,
@@ -92,7 +93,7 @@ def cmd_bench_faults(args) -> int:
                             models=args.models)
     traces = report.pop("_traces")
     report["command"] = _command()
-    png = faults.plot(report, traces, _png(args))
+    png = faults.plot(report, traces, png)
     report["png"] = str(png)
     write_json(args.json, report)
     print(bench_text("faults", report, args.json, png))

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 
-from telethermal.cli._common import _positive, _seed, _temperature_c
+from telethermal.cli._common import _positive, _seed, _temperature_c, _wait_s
 from telethermal.errors import TelethermalError
 from telethermal.services import admin_client as ac
 
@@ -75,7 +75,7 @@ def _admin_parser(sub) -> None:
     q.add_argument("--seed", type=_seed, default=0,
                    help="seed of the simulated operator's touch (default 0)")
     q.add_argument("--no-wait", action="store_true", help="return at once (then lift, report)")
-    q.add_argument("--session-wait", type=_positive(at_most=3600.0), default=30.0, metavar="S",
+    q.add_argument("--session-wait", type=_wait_s, default=30.0, metavar="S",
                    help="wait up to S seconds for the master's session with the slave "
                         "(right after start, the slave may still be training; default 30)")
     q.add_argument("--material", help="the placed object, if the slave's admin is not "

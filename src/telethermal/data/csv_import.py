@@ -291,13 +291,16 @@ def _manifest_rows(path: Path) -> dict[str, dict]:
         out = {}
         for row in reader:
             line = reader.line_num                  # the file's line (blank lines counted)
-            short = [k.strip() for k, v in row.items() if k and v is None]
-            if short or None in row:                # cells missing, or more than the header
-                raise DatasetError(
-                    f"{path} line {line}: " + (f"no cell for {', '.join(short)} (the row is "
-                                               "shorter than the header)" if short else
-                                               "more cells than the header has columns"))
+            # Cells past the row's end are blank (filled "where known"); cells
+            # past the header's end are refused unless empty (a trailing comma).
+            extra = [c for c in row.get(None) or [] if c.strip()]
+            if extra:
+                raise DatasetError(f"{path} line {line}: {len(extra)} more cell(s) than the "
+                                   f"header has columns ({extra[0][:32]!r}...)")
             row = {k.strip(): (v or "").strip() for k, v in row.items() if k}
+            if not row.get("file"):
+                raise DatasetError(f"{path} line {line}: no file named (its 'file' cell is "
+                                   "empty)")
             file = path.parent / row["file"]
             if not file.is_file():
                 raise DatasetError(f"{path} line {line}: file {row['file']!r} does not exist")

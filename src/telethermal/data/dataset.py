@@ -215,6 +215,22 @@ def check_identifier_channels(trials: list[Trial], root: str | Path = "") -> Non
                                f"identifier reads (columns: {', '.join(names) or 'none'})")
 
 
+def is_dataset_manifest(path) -> bool:
+    """Whether ``path`` is a dataset's own manifest (as ``dataset generate``
+    or ``import`` write it: its header has ``trial_id`` and
+    ``sample_rate_hz``), not a lab's list of files; False if there is none."""
+    path = Path(path)
+    if not path.is_file():
+        return False
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            header = {h.strip() for h in fh.readline().split(",")}
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}): not a manifest") \
+            from None
+    return {"trial_id", "sample_rate_hz"} <= header
+
+
 def _manifest_trials(path: Path, root: Path) -> list[Trial]:
     with path.open(newline="", encoding="utf-8") as fh:
         reader = csv.DictReader(fh)
@@ -274,9 +290,10 @@ def staged_dir(root: str | Path, overwrite: bool = False):
         if not root.is_dir():
             raise DatasetError(f"{root}: a file, not a dataset folder; --force replaces a "
                                "dataset, not other files: give a new folder")
-        if not ((root / MANIFEST).is_file() or (root / "generation.json").is_file()):
-            raise DatasetError(f"{root}: not a dataset (no {MANIFEST} or generation.json in "
-                               "it); --force replaces only a dataset: give a new folder")
+        if not (is_dataset_manifest(root / MANIFEST) or (root / "generation.json").is_file()):
+            raise DatasetError(f"{root}: not a dataset (no dataset's {MANIFEST} or "
+                               "generation.json in it: a lab's own manifest.csv is not one); "
+                               "--force replaces only a dataset: give a new folder")
     root.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
     try:
@@ -306,14 +323,14 @@ def write_trials(root: Path, trials: Iterable[Trial]) -> None:
             raise DatasetError(f"trial {trial.trial_id}: no channels to write")
         dest = root / trial.file
         dest.parent.mkdir(parents=True, exist_ok=True)
-        dest.write_text(_trial_csv(trial.channels))
+        dest.write_text(_trial_csv(trial.channels), encoding="utf-8")
         rows.append(trial.manifest_row())
     if not rows:
         raise DatasetError("no trials to write")
     # Every trial's extra columns (trials from different sources carry
     # different ones: blank where a trial has none).
     columns = list(dict.fromkeys(list(MANIFEST_COLUMNS) + [c for r in rows for c in r]))
-    with (root / MANIFEST).open("w", newline="") as fh:
+    with (root / MANIFEST).open("w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=columns, restval="")
         writer.writeheader()
         writer.writerows(rows)

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from telethermal.data.dataset import MANIFEST, Trial, load_dataset, write_dataset
+from telethermal.data.dataset import (MANIFEST, Trial, is_dataset_manifest, load_dataset,
+                                      write_dataset)
 from telethermal.errors import DatasetError
 from telethermal.record.recording import read_recording
 
@@ -86,18 +87,6 @@ def _number(values: dict, key: str, where) -> float | None:
     if not math.isfinite(out):
         raise DatasetError(f"{where}: {key} {value!r} is not a finite number")
     return out
-
-
-def is_dataset_manifest(path) -> bool:
-    """A dataset's own manifest (as ``dataset generate`` or ``import``
-    write it): its header has ``trial_id`` and ``sample_rate_hz``."""
-    try:
-        with Path(path).open(newline="", encoding="utf-8-sig") as fh:
-            header = {h.strip() for h in fh.readline().split(",")}
-    except UnicodeDecodeError as exc:
-        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}): not a manifest") \
-            from None
-    return {"trial_id", "sample_rate_hz"} <= header
 
 
 def _dataset_trials(manifest, material, group, spec, values) -> list[Trial]:
@@ -177,7 +166,7 @@ def _check_into(into: Path) -> None:
     if not into.is_dir():
         raise DatasetError(f"--into {into}: a file, not a dataset folder (give a new or empty "
                            "folder, or a dataset's)")
-    if (into / MANIFEST).is_file():
+    if is_dataset_manifest(into / MANIFEST):
         return
     held = sorted(p.name + ("/" if p.is_dir() else "") for p in into.iterdir())
     if not held:

@@ -27,6 +27,19 @@ def _check_ports(config, names: tuple[str, ...], off_ok: tuple[str, ...] = ()) -
                               + (" (0: off)" if low == 0 else ""))
 
 
+def parse_cpus(text: str) -> set[int]:
+    """A config's ``cpus``: core numbers and ranges, comma-separated ("1",
+    "2,3", "2-3", as taskset takes them); empty: none (any core)."""
+    cores: set[int] = set()
+    for part in (p.strip() for p in str(text).split(",")) if text else ():
+        lo, _, hi = part.partition("-")
+        if not (lo.isdigit() and (hi.isdigit() or not _)) or (hi and int(hi) < int(lo)):
+            raise ConfigError(f"cpus = {text!r}: core numbers and ranges, e.g. '1', '2,3' or "
+                              "'2-3' (empty: any)")
+        cores.update(range(int(lo), int(hi or lo) + 1))
+    return cores
+
+
 def _devices(config, example_tty: str) -> DeviceKind:
     """The config's device kind, validated (the one place it is)."""
     try:
@@ -122,10 +135,7 @@ class MasterConfig:
                 and 0 < self.rate_hz <= 10000):
             raise ConfigError(f"rate_hz = {self.rate_hz!r}: the display loop's rate, over 0 "
                               "and up to 10000 Hz")
-        cores = [c.strip() for c in str(self.cpus).split(",")] if self.cpus else []
-        if not all(c.isdigit() for c in cores):
-            raise ConfigError(f"cpus = {self.cpus!r}: comma-separated core numbers, e.g. '1' "
-                              "or '2,3' (empty: any)")
+        parse_cpus(self.cpus)
         if isinstance(self.realtime_priority, bool) or not isinstance(
                 self.realtime_priority, int) or not 0 <= self.realtime_priority <= 99:
             raise ConfigError(f"realtime_priority = {self.realtime_priority!r}: 1-99 "

@@ -28,7 +28,7 @@ from telethermal.ident.openset import EFFUSIVITY_KEYS, effusivity_of, touch_text
 from telethermal.physics.scene import load_scene, with_finger
 from telethermal.services.admin import ErrorCount, open_service_sockets
 from telethermal.services.requests import MASTER as MASTER_REQUESTS
-from telethermal.services.config import MasterConfig
+from telethermal.services.config import MasterConfig, parse_cpus
 from telethermal.services.touch_figures import log_touch_figures, touch_figures
 from telethermal.services.qemu_boards import close_boards, display_boards
 from telethermal.view.stream import ViewPublisher
@@ -421,7 +421,7 @@ class MasterService:
         cfg = self.config
         if cfg.cpus:
             try:
-                os.sched_setaffinity(0, {int(c) for c in cfg.cpus.split(",")})
+                os.sched_setaffinity(0, parse_cpus(cfg.cpus))
             except (OSError, ValueError) as exc:
                 log.warning("cpus=%r not applied: %s", cfg.cpus, exc)
         if cfg.realtime_priority:

@@ -75,7 +75,9 @@ def _scene(config) -> list[Finding]:
 def _key_pair(t, name: str) -> list[Finding]:
     secret = Path(t.keys_dir) / f"{name}.key_secret"
     public = Path(t.keys_dir) / f"{name}.key"
-    make = f"telethermal keys --out {t.keys_dir} --name {name}"
+    make = f"telethermal keys --out {t.keys_dir} --name {name}" + (
+        " --force (a new pair: give its public key to the peer again)"
+        if secret.exists() or public.exists() else "")
     if not secret.is_file():
         return [Finding(False, f"{secret}: no such file", make)]
     try:

@@ -99,15 +99,27 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     closed forms and layered solutions the simulator is checked against).
     ``echo(line)``: told which identifier was trained and why;
     ``calibration``: the pad's CAL.toml (``telethermal calibrate pad``)."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, "a file, not the models' folder", str(out))
+    # Made now, so a folder that cannot be made is said before any training;
+    # removed again if nothing is written into it.
+    made = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _write_models(out, scene_name, data, seed, echo, calibration)
+    except BaseException:
+        if made and not any(out.iterdir()):
+            out.rmdir()
+        raise
 
+
+def _write_models(out: Path, scene_name: str, data, seed: int, echo, calibration) -> list:
     from telethermal.data.dataset import load_dataset
     from telethermal.physics.scene import load_scene
     from telethermal.render.generator import save_generator
     from telethermal.physics.scene import with_finger
 
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(20, "a file, not the models' folder", str(out))
     from telethermal.ident.pad_calibration import pad_calibration
     scene = with_finger(load_scene(scene_name))
     cal = pad_calibration(calibration or "", scene)
@@ -135,7 +147,6 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     if identifier.fallback_ is not None:
         echo(f"fallback: {identifier.fallback_.method} on the same touches, in the same file: "
              f"it names a touch {method}'s pad-model check refuses (pad model does not fit)")
-    out.mkdir(parents=True, exist_ok=True)          # once there is something to write
     paths = [Path(identifier.save(out / "identifier.npz")),
              Path(save_generator(generator, out / "generator.npz"))]
     return paths + [write_sums(out, paths)]

@@ -87,8 +87,13 @@ def generate_keys(folder: str | Path, name: str, replace: bool = False) -> tuple
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise TransportError(f"{folder}: a file, not a folder for the keys")
-    taken = [p for p in (folder / f"{name}.key", folder / f"{name}.key_secret") if p.exists()]
+    pair = (folder / f"{name}.key", folder / f"{name}.key_secret")
+    taken = [p for p in pair if p.exists()]
     if taken and not replace:
+        if len(taken) < 2:             # half a pair: nothing to keep, the peer must be told
+            raise TransportError(f"{taken[0]} exists but {({*pair} - {*taken}).pop().name} "
+                                 "does not: the pair is broken; make a new one with --force "
+                                 "and give its public key to the peer again")
         raise TransportError(f"{taken[0]} exists: a new pair would lock out every peer given "
                              f"the old public key; keep it, or replace both with --force")
     if folder.exists():

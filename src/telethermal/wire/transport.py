@@ -76,7 +76,8 @@ class TransportConfig:
             value = getattr(self, name)
             # 0: the system picks a free port (a slave bound in a test).
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
-                raise TransportError(f"{name} = {value!r}: a port is 1-65535")
+                raise TransportError(f"{name} = {value!r}: a port is 1-65535 (0: the system "
+                                     "picks one)")
         if self.security not in ("curve", "plain"):
             raise TransportError(f"security must be 'curve' or 'plain', got {self.security!r}")
         if self.security == "plain":
