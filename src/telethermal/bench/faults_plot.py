@@ -10,7 +10,8 @@ import numpy as np
 
 def plot(report: dict, traces: dict, path: str | Path) -> Path:
     """The simulated part against one-way delay (``path``) and, beside it
-    (``<stem>-traces.png``), the processes' traces; returns ``path``."""
+    (``<stem>-traces`` with its suffix), the processes' traces, each in the
+    format its suffix names; returns ``path``."""
     path = Path(path)
     _plot_delay(report["simulated"], path)
     if report["rows"]:
