@@ -224,10 +224,9 @@ def test_the_watchdog_disables_the_element_within_100_ms_and_a_period_over_20_tr
         peltier, images):
     """Bursts of commands at about 100 Hz, then silence, 20 times. Timed by
     the core: each command's status answer and each change of the H-bridge
-    carry ``hal_millis``. Every disable is a watchdog trip 100 ms (the
-    answer's stamp can be a millisecond late: see bench/firmware.py) or 101
-    ms after the last command, within 100 ms + one 10 ms command period;
-    the element is never disabled otherwise. The driver's loop, measured
+    carry ``hal_millis``. Every disable is a watchdog trip within 100 ms +
+    one 10 ms command period of the last command (100 or 101 ms on an idle
+    host: see bench/firmware.py); the element is never disabled otherwise. The driver's loop, measured
     by the core meanwhile, stays under a tenth of its 1 ms period."""
     core, link, plant = peltier
     w = firmware.watchdog_trials(link, plant, trials=20)
@@ -240,8 +239,12 @@ def test_the_watchdog_disables_the_element_within_100_ms_and_a_period_over_20_tr
     assert all(0 <= ms - off <= 1 for (ms, _), off in zip(trips, offs)), (trips, offs)
     assert {(e, ma) for _, e, ma in changes[1:]} == {(1, 1250), (0, 0)}
     assert all(s["enabled"] == 0 and s["current_a"] == 0.0 for _, s in trips)
+    # The issue's bound, over every trial. Not tighter: 100 or 101 ms on an
+    # idle host, but the idle core's clock follows the host's (-icount
+    # sleep=on), so a host that leaves QEMU unscheduled for a millisecond
+    # steps it (a CI rehearsal under load read 102 once): a real-clock
+    # outcome, which the bench reports and no test asserts.
     assert all(WATCHDOG_MS <= d <= WATCHDOG_MS + 1000 * PERIOD_S for d in delays), delays
-    assert set(delays) <= {WATCHDOG_MS, WATCHDOG_MS + 1}, delays   # polled every millisecond
     loop = firmware.loop_figures(core, images["tt_peltier"])
     assert loop["iterations"] > 1000 and loop["under_a_tenth"], loop
 

@@ -17,7 +17,10 @@
   The driver trips at the first poll more than 100 ms after the one that
   handled the command; the answer's stamp is taken when it is sent, which
   can be the next millisecond when that poll crossed one, so a delay
-  measured this way is 100 or 101 ms.
+  measured this way is 100 or 101 ms on an idle host. The idle core's
+  clock follows the host's (``-icount sleep=on``): a loaded host that
+  leaves QEMU unscheduled for a millisecond steps it, and a delay then
+  reads more (102 seen once in a CI rehearsal).
 """
 
 from __future__ import annotations
