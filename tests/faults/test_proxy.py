@@ -97,3 +97,8 @@ def test_profiles_from_files_with_overrides(tmp_path):
     path.write_text('[both]\nloss = 2\n')
     with pytest.raises(FaultProfileError, match="master_to_slave.*loss"):
         load_profile(path)
+    # A port no socket takes, from the file or from --set: refused when the
+    # profile loads (it had raised OverflowError at the bind, then hung).
+    path.write_text('[link]\nseed = 4\n')
+    with pytest.raises(FaultProfileError, match=r"\[link\]: control_port = 99999: a port"):
+        load_profile(path, {"link.control_port": 99999})

@@ -42,6 +42,13 @@ class Link:
     slave_stream_port: int = 5561
     seed: int = 0
 
+    def __post_init__(self):
+        for name in ("control_port", "stream_port", "slave_control_port", "slave_stream_port"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
+                raise FaultProfileError(f"{name} = {value!r}: a port is 1-65535 (0: the system "
+                                        "picks one)")
+
 
 @dataclass(frozen=True)
 class FaultProfile:
