@@ -78,11 +78,9 @@ def checked_folder(folder: str | Path, remake: str = "`telethermal models --out 
     if not sums.is_file():
         raise BenchError(f"--models {folder}: no SHA256SUMS beside the models (a folder "
                          f"telethermal models did not write); write it with {remake}")
-    listed = {}
+    from telethermal.teleop.models import read_sums
     try:
-        for line in sums.read_text().splitlines():
-            digest, _, name = line.partition(" ")
-            listed[name.strip().removeprefix("*")] = digest.strip()
+        listed = read_sums(folder)
         digests = {}
         for name in FILES:
             path = folder / name

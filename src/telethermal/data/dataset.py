@@ -215,20 +215,25 @@ def check_identifier_channels(trials: list[Trial], root: str | Path = "") -> Non
                                f"identifier reads (columns: {', '.join(names) or 'none'})")
 
 
+def manifest_header(path) -> set[str]:
+    """The column names of a manifest's first line (empty if there is no
+    such file); DatasetError if it is not UTF-8 text."""
+    path = Path(path)
+    if not path.is_file():
+        return set()
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            return {h.strip() for h in fh.readline().split(",")}
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}): not a manifest") \
+            from None
+
+
 def is_dataset_manifest(path) -> bool:
     """Whether ``path`` is a dataset's own manifest (as ``dataset generate``
     or ``import`` write it: its header has ``trial_id`` and
     ``sample_rate_hz``), not a lab's list of files; False if there is none."""
-    path = Path(path)
-    if not path.is_file():
-        return False
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            header = {h.strip() for h in fh.readline().split(",")}
-    except UnicodeDecodeError as exc:
-        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}): not a manifest") \
-            from None
-    return {"trial_id", "sample_rate_hz"} <= header
+    return {"trial_id", "sample_rate_hz"} <= manifest_header(path)
 
 
 def _manifest_trials(path: Path, root: Path) -> list[Trial]:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from telethermal.data.dataset import load_dataset, trial_digest
-from telethermal.errors import IdentificationError, ModelFileError
+from telethermal.errors import DatasetError, IdentificationError, ModelFileError
 from telethermal.ident.base import (FALLBACK_PREFIX, Identifier, check_identifier_header,
                                    read_model_file)
 from telethermal.ident.fitted import EffusivityFit
@@ -135,10 +135,10 @@ def pad_dataset(data: str | Path) -> Path:
 def _finger_database(manifest: Path) -> bool:
     """Whether ``manifest`` is a generated finger database's (its columns
     name the person and the finger's true temperature)."""
+    from telethermal.data.dataset import manifest_header
     try:
-        with manifest.open(encoding="utf-8") as fh:
-            header = {h.strip() for h in fh.readline().split(",")}
-    except (OSError, UnicodeDecodeError):
+        header = manifest_header(manifest)
+    except (OSError, DatasetError):
         return False                     # the dataset's own reader says what is wrong
     return {"person", "T_finger_true_C"} <= header
 

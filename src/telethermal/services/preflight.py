@@ -127,18 +127,15 @@ def _allowed(t) -> list[Finding]:
 
 
 def _checksum(path: Path) -> list[Finding]:
-    sums = path.parent / "SHA256SUMS"
-    if not sums.is_file():
+    from telethermal.teleop.models import read_sums
+    sums, digest = path.parent / "SHA256SUMS", read_sums(path.parent).get(path.name)
+    if digest is None:
         return []
-    for line in sums.read_text().splitlines():
-        digest, _, name = line.partition("  ")
-        if name.strip() == path.name:
-            if hashlib.sha256(path.read_bytes()).hexdigest() != digest.strip():
-                return [Finding(False, f"{path}: does not match {sums} (a partial or other "
-                                       "copy)", f"copy {path.name} again, then "
-                                                f"`sha256sum -c SHA256SUMS` in {path.parent}")]
-            return [Finding(True, f"{path.name} matches {sums.name}")]
-    return []
+    if hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+        return [Finding(False, f"{path}: does not match {sums} (a partial or other copy)",
+                        f"copy {path.name} again, then `sha256sum -c SHA256SUMS` in "
+                        f"{path.parent}")]
+    return [Finding(True, f"{path.name} matches {sums.name}")]
 
 
 def _models(config) -> list[Finding]:

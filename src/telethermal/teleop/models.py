@@ -152,6 +152,19 @@ def _write_models(out: Path, scene_name: str, data, seed: int, echo, calibration
     return paths + [write_sums(out, paths)]
 
 
+def read_sums(folder) -> dict[str, str]:
+    """``folder/SHA256SUMS`` as {file name: sha256} (``sha256sum``'s text
+    and binary lines, ``name`` and ``*name``); empty if there is none."""
+    sums = Path(folder) / "SHA256SUMS"
+    if not sums.is_file():
+        return {}
+    listed = {}
+    for line in sums.read_text().splitlines():
+        digest, _, name = line.partition(" ")
+        listed[name.strip().removeprefix("*")] = digest.strip()
+    return listed
+
+
 def write_sums(out, paths) -> Path:
     """``out/SHA256SUMS`` for ``paths`` (files in ``out``), in
     ``sha256sum``'s format; returns its path."""
