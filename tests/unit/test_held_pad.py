@@ -139,6 +139,48 @@ def test_batch_loop_is_the_junction_loop():
     np.testing.assert_allclose(batch.integral_a, [s.integral_a for s in scalar], atol=1e-12)
 
 
+def test_one_pads_float_loop_is_the_batch_loop_bit_for_bit():
+    """``update_one`` (a batch of one, on floats) gives the very bits of
+    ``update`` on a batch of one, saturating (a 1 A limit) and not: the
+    same IEEE operations in the same order, so equality is exact."""
+    driver = HBridge(1.0, 5.0)
+    batch, one = (BatchJunctionLoop(PARAMS, driver, 1) for _ in range(2))
+    rng = np.random.default_rng(4)
+    cuts = 0
+    for _ in range(500):
+        target, junction = 30.0 + rng.normal(0, 5.0), 30.0 + rng.normal(0, 5.0)
+        hot, load = 25.0 + rng.normal(0, 1.0), rng.normal(0, 2.0)
+        current, cut = batch.update(np.array([target]), np.array([junction]), np.array([hot]),
+                                    1e-3, np.array([load]))
+        got = one.update_one(target, junction, hot, 1e-3, load)
+        assert got == (current[0], cut[0])
+        assert one.integral_a[0] == batch.integral_a[0]
+        cuts += got[1]
+    assert 0 < cuts < 500 and one.saturated_periods[0] == batch.saturated_periods[0] == cuts
+
+
+@pytest.mark.parametrize("driver,oracle", [(None, False), (HBridge(0.3, 5.0), False),
+                                           (HBridge(1e6, 1e6), True)],
+                         ids=["datasheet", "saturating", "oracle-load"])
+def test_one_trial_is_stepped_as_in_a_batch_bit_for_bit(driver, oracle):
+    """A batch of one (a live touch) is stepped on floats; every output is
+    the same trial's row of a batch of three, exactly (``==``, not a
+    tolerance): the one-trial path is a speed-up, not another model."""
+    plant = _plant("aluminium", driver)
+    t_s = T_S[1]            # one time axis: as many periods in both runs (the energy sums)
+    batch = plant.run(t_s, PAD_C, OBJECT_C, H_W_M2K, oracle_load=oracle)
+    for i in (0, 2):
+        one = plant.run(t_s, PAD_C[i:i + 1], OBJECT_C[i:i + 1], H_W_M2K[i:i + 1],
+                        oracle_load=oracle)
+        for field in dataclasses.fields(one):
+            got, want = getattr(one, field.name), getattr(batch, field.name)
+            if isinstance(got, np.ndarray) and got.shape[:1] == (1,):
+                want = want[i:i + 1]
+            np.testing.assert_array_equal(got, want, err_msg=field.name)
+    if driver is not None and not oracle:
+        assert one.saturated_periods[0] > 0          # the cut path was taken
+
+
 @pytest.mark.parametrize("driver", [None, HBridge(0.3, 5.0)], ids=["datasheet", "saturating"])
 def test_energy_balance_over_a_contact(driver):
     """Electrical energy - heat to the room = change of the heat stored in

@@ -45,7 +45,8 @@ import numpy as np
 from telethermal.errors import ModelError
 from telethermal.physics.layered import LayeredContact, _batch_args
 from telethermal.physics.modal import _psi, lag_kernels, phi_any
-from telethermal.physics.thermoelectric import KELVIN, HBridge, ModuleParams, SinkParams
+from telethermal.physics.thermoelectric import (KELVIN, HBridge, ModuleParams, SinkParams,
+                                                hold_current_a)
 
 #: The pad's own control rate (its junction loop), Hz.
 PAD_LOOP_RATE_HZ = 1000.0
@@ -112,6 +113,20 @@ class BatchJunctionLoop:
         integrate = ~cut | ((free > current) != (error > 0))
         self.integral_a += np.where(integrate, self.ki_a_ks * error * dt_s, 0.0)
         self.saturated_periods += cut
+        return current, cut
+
+    def update_one(self, target_c: float, junction_c: float, hot_c: float, dt_s: float,
+                   load_w: float = 0.0) -> tuple[float, bool]:
+        """:meth:`update` for a batch of one, on floats: the same arithmetic
+        bit for bit (the scalar hold current and H-bridge of
+        ``thermoelectric``), without numpy's cost per call on one element."""
+        error = junction_c - target_c
+        free = (hold_current_a(self.params, target_c, hot_c, load_w) + self.kp_a_k * error
+                + float(self.integral_a[0]))
+        current, cut = self.driver.limit(self.params, free, junction_c, hot_c)
+        if not cut or ((free > current) != (error > 0)):
+            self.integral_a[0] += self.ki_a_ks * error * dt_s
+        self.saturated_periods[0] += cut
         return current, cut
 
 
@@ -369,10 +384,18 @@ class HeldPad:
         return self._outputs(t, tc, lay, hist, target, (current0, ta, hot0, sink0))
 
     def _step(self, lay: _Layers, loop, target, state, periods: int, oracle_load: bool) -> dict:
-        """Step every trial ``periods`` times; the history each output needs."""
+        """Step every trial ``periods`` times; the history each output needs.
+
+        A batch of one (a live touch: the slave's one trial) is stepped on
+        Python floats, every operation the batch's own in the same order
+        (elementwise IEEE arithmetic, the modal sums still by ``einsum``), so
+        its history is the batch path's bit for bit at a fraction of its
+        cost: numpy's overhead per call, not arithmetic, is what a period
+        of one trial costs."""
         batch, n_modes = lay.w0.shape
         dt, area, room = self.dt_s, self.area_m2, self.room_c
-        module = _ModuleStepper(self.params, self.sink, room, dt)
+        one = batch == 1 and isinstance(loop, BatchJunctionLoop)
+        module = _ModuleStepper(self.params, self.sink, room, dt)   # floats or arrays alike
         w = lay.w0.copy()
         hist = {"w": np.empty((periods, batch, n_modes)), "sensed": np.zeros((periods, batch)),
                 "state": np.empty((periods, batch, 3)), "current": np.empty((periods, batch)),
@@ -382,8 +405,6 @@ class HeldPad:
             ge, gp = lag_kernels(lay.lam, dt, self.sensor_lag_s)
             e_tau, ge_m = np.exp(-dt / self.sensor_lag_s), ge * lay.m[:, 0]
             gp_m = np.einsum("bn,bn->b", gp * lay.f_unit, lay.m[:, 0])
-        sensed = np.zeros(batch)
-        electrical, to_air = np.zeros(batch), np.zeros(batch)
         stored0 = module_stored_j(self.params, self.sink, room, state)
         layers0 = np.einsum("bn,bn->b", lay.m[:, 3], w)
         xc, xh, xs = (state[:, k] - room for k in range(3))
@@ -392,22 +413,37 @@ class HeldPad:
         load_b = -area * lay.back_u
         load_a0 = area * lay.back_u * lay.ref_c
         back_w = -area * lay.back_w
+        ref_c = lay.ref_c
+
+        def dot(a, b):                       # the modal sums, per trial
+            sums = np.einsum("bn,bn->b", a, b)
+            return sums.item() if one else sums
+
+        update = loop.update_one if one else loop.update
+        if one:                              # every per-trial quantity a float
+            xc, xh, xs, load_b, load_a0, target, ref_c = (
+                float(v[0]) for v in (xc, xh, xs, load_b, load_a0, target, ref_c))
+            gp_m = None if gp_m is None else float(gp_m[0])
+        sensed, electrical, to_air = ((0.0 if one else np.zeros(batch)) for _ in range(3))
         feed = 0.0
         for p in range(periods):
-            load_a = load_a0 + np.einsum("bn,bn->b", back_w, w)
+            load_a = load_a0 + dot(back_w, w)
             if oracle_load:
                 feed = load_a + load_b * target
-            current, cut = loop.update(target, xc + room, xh + room, dt, feed)
+            current, cut = update(target, xc + room, xh + room, dt, feed)
             hist["saturated"] += cut
             xc, xh, xs, power, air = module(xc, xh, xs, current, load_a, load_b)
             electrical += power
             to_air += air
             hist["w"][p], hist["sensed"][p], hist["current"][p] = w, sensed, current
             hist["state"][p, :, 0], hist["state"][p, :, 1], hist["state"][p, :, 2] = xc, xh, xs
-            u = xc + (room - lay.ref_c)
+            u = xc + (room - ref_c)
             if e_tau is not None:
-                sensed = e_tau * sensed + np.einsum("bn,bn->b", ge_m, w) + gp_m * u
-            w = lay.decay * w + lay.drive * u[:, None]
+                sensed = e_tau * sensed + dot(ge_m, w) + gp_m * u
+            w = lay.decay * w + lay.drive * (u if one else u[:, None])
+        if one:
+            xc, xh, xs, electrical, to_air = (np.array([v]) for v in
+                                              (xc, xh, xs, electrical, to_air))
         hist["state"] += room
         end = np.stack([xc, xh, xs], axis=1) + room
         hist["accounts"] = (electrical * dt, to_air * dt,

@@ -358,7 +358,10 @@ def hold_current_a(params: ModuleParams, cold_c: float, hot_c: float, load_w: fl
     tc = cold_c + KELVIN
     # (r/2) I^2 - s Tc I + (k dT + load) = 0
     c = k * (hot_c - cold_c) + load_w
-    disc = (s * tc) ** 2 - 2.0 * r * c
+    # Squared by multiplying (correctly rounded, as numpy squares its arrays;
+    # ``x ** 2`` on a float is the C library's pow, off by an ulp now and
+    # then): the same bits as the array twin in ``physics/held_pad.py``.
+    disc = (s * tc) * (s * tc) - 2.0 * r * c
     if disc < 0:
         return s * tc / r
     return (s * tc - math.sqrt(disc)) / r
