@@ -184,18 +184,21 @@ def test_a_burst_of_lost_estimates_does_not_delay_the_decision():
     assert proxy["slave_to_master"]["partitioned"] > 0                  # heartbeats too
     assert resent_clean == resent_lost == 0
     # Nothing was resent: the lost estimates were never asked for, and the
-    # decision arrives as it would have with nothing lost (the simulated
-    # clock moves in 5 ms steps; loopback delivers within the step).
+    # decision arrives as it would have with nothing lost: after the link's
+    # delay (the simulated clock moves in 5 ms steps; loopback delivers
+    # within the step, or a step or two later on a loaded host, so each run
+    # is held to the link's delay, not to another run's lateness).
     for name in ("decision", "lift"):
-        assert clean[name] == pytest.approx(DELAY_S, abs=3 * STEP_S), clean
-        assert lost[name] == pytest.approx(clean[name], abs=2 * STEP_S), (clean, lost)
+        for run in (clean, lost):
+            assert run[name] == pytest.approx(DELAY_S, abs=3 * STEP_S), (clean, lost)
     # The old flow, every estimate lossless: the decision waits behind the
     # lost ones until they are resent, at least a round trip later.
     old, resent_old, _ = burst_then_decision(burst, estimates_lossless=True)
     assert resent_old >= BURST
-    # (resend request and resend: one round trip, 2 DELAY_S, to within a step)
-    assert old["decision"] >= clean["decision"] + 2 * DELAY_S - STEP_S / 2, (clean, old)
-    assert old["lift"] >= clean["lift"] + 2 * DELAY_S - STEP_S / 2
+    # (resend request and resend: one round trip, 2 DELAY_S, after the one
+    # way the decision takes anyway, to within a step; lateness only adds)
+    for name in ("decision", "lift"):
+        assert old[name] >= DELAY_S + 2 * DELAY_S - STEP_S / 2, (clean, old)
 
 
 @pytest.mark.parametrize("delay_s", [0.05, 0.2])
