@@ -214,6 +214,20 @@ class CoreClock:
         return answers, trips
 
 
+def command_periods(driver: PeltierDriver, current_a: float,
+                    periods: int = 1) -> list[tuple[bool, tuple | None]]:
+    """``periods`` commands of ``current_a``, a command period apart on the
+    host's clock (pacing only), each followed by a poll: the driver's
+    (healthy, faults) after each."""
+    out = []
+    for _ in range(periods):
+        driver.command(current_a)
+        time.sleep(PERIOD_S)
+        driver.poll()
+        out.append((driver.healthy, driver.status.faults if driver.status else None))
+    return out
+
+
 def healthy_or_stalled(polls: list[tuple[bool, tuple]], trips: list[tuple[int, int]]) -> bool:
     """Every poll healthy, save those that saw a watchdog status, provided
     each trip the core logged came within the watchdog's bound (100 ms
@@ -266,12 +280,7 @@ def test_python_can_slcan_and_the_projects_driver_trust_the_core(peltier):
     clock = CoreClock(core)
     driver = PeltierDriver(f"slcan:{core.link_path}", clock=clock)
     try:
-        polls = []
-        for _ in range(40):
-            driver.command(1.25)
-            time.sleep(PERIOD_S)                  # pacing only
-            driver.poll()
-            polls.append((driver.healthy, driver.status.faults if driver.status else None))
+        polls = command_periods(driver, 1.25, 40)
         guard = time.monotonic() + 30             # a hang guard
         while driver.state != 128 or not driver.status.faults:
             assert time.monotonic() < guard, (driver.state, driver.status)
@@ -332,21 +341,12 @@ def test_a_restarted_core_says_boot_and_the_driver_counts_the_reboot(peltier):
     clock = CoreClock(core)
     driver = PeltierDriver(f"slcan:{core.link_path}", clock=clock)
     try:
-        def run(periods: int) -> list[tuple[bool, tuple | None]]:
-            out = []
-            for _ in range(periods):
-                driver.command(1.0)
-                time.sleep(PERIOD_S)              # pacing only
-                driver.poll()
-                out.append((driver.healthy, driver.status.faults if driver.status else None))
-            return out
-
-        run(20)
+        command_periods(driver, 1.0, 20)
         core.reset()
         guard = time.monotonic() + 30                 # a hang guard
         while driver.counters["reboots"] == 0:        # its boot heartbeat heard
             assert time.monotonic() < guard, driver.counters
-            run(1)
+            command_periods(driver, 1.0)
         # The reset turned the core's SLCAN timestamps off (its default):
         # on again, through a second writer on the line, for CoreClock.
         stamped = len(clock.frames)
@@ -355,7 +355,7 @@ def test_a_restarted_core_says_boot_and_the_driver_counts_the_reboot(peltier):
             os.write(fd, b"Z1\r")
         finally:
             os.close(fd)
-        after = run(40)
+        after = command_periods(driver, 1.0, 40)
         _, trips = clock.answers_and_trips()
         assert len(clock.frames) - stamped >= 30          # judged by the core's clock again
         assert driver.counters["reboots"] == 1 and driver.peer_version == 2
@@ -467,13 +467,7 @@ def test_a_link_cut_mid_touch_puts_the_element_safe_and_the_master_sees_it(pelti
     driver = PeltierDriver(f"slcan:{core.link_path}", clock=clock)
     try:
         def run(periods: int = 1) -> list[tuple[bool, tuple | None]]:
-            out = []
-            for _ in range(periods):
-                driver.command(1.25)
-                time.sleep(PERIOD_S)              # pacing only
-                driver.poll()
-                out.append((driver.healthy, driver.status.faults if driver.status else None))
-            return out
+            return command_periods(driver, 1.25, periods)
 
         # Trusted first, however long this host takes to carry the core's
         # first answers through QEMU's UART (a hang guard, not a timing).
