@@ -389,12 +389,13 @@ class HeldPad:
         A batch of one (a live touch: the slave's one trial) is stepped on
         Python floats, every operation the batch's own in the same order
         (elementwise IEEE arithmetic, the modal sums still by ``einsum``), so
-        its history is the batch path's bit for bit at a fraction of its
-        cost: numpy's overhead per call, not arithmetic, is what a period
-        of one trial costs."""
+        its history is the batch path's bit for bit (finite temperatures) at
+        a fraction of its cost: numpy's overhead per call, not arithmetic,
+        is what a period of one trial costs. The loop's own class only (a
+        subclass may change ``update``), made for one trial."""
         batch, n_modes = lay.w0.shape
         dt, area, room = self.dt_s, self.area_m2, self.room_c
-        one = batch == 1 and isinstance(loop, BatchJunctionLoop)
+        one = batch == 1 and type(loop) is BatchJunctionLoop and loop.integral_a.shape == (1,)
         module = _ModuleStepper(self.params, self.sink, room, dt)   # floats or arrays alike
         w = lay.w0.copy()
         hist = {"w": np.empty((periods, batch, n_modes)), "sensed": np.zeros((periods, batch)),
@@ -423,7 +424,7 @@ class HeldPad:
         if one:                              # every per-trial quantity a float
             xc, xh, xs, load_b, load_a0, target, ref_c = (
                 float(v[0]) for v in (xc, xh, xs, load_b, load_a0, target, ref_c))
-            gp_m = None if gp_m is None else float(gp_m[0])
+            e_tau, gp_m = (None, None) if gp_m is None else (float(e_tau), float(gp_m[0]))
         sensed, electrical, to_air = ((0.0 if one else np.zeros(batch)) for _ in range(3))
         feed = 0.0
         for p in range(periods):
