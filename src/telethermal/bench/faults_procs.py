@@ -50,8 +50,10 @@ SETTINGS = [
     ("master crash and restart mid-contact", {"delay_s": 0.005, "crash": "master"}),
 ]
 #: The proxy starts; a partition row's touches begin this long after (its
-#: window is placed from the proxy's start, in the profile it reads). Other
-#: rows start as soon as the link is up again through the new proxy.
+#: window is placed from the proxy's start, in the profile it reads), and a
+#: master-crash row's (its touch is asked for without waiting to hear the
+#: placement through the new proxy). Other rows start once the master has
+#: heard the placement through it (``networked_touch``).
 SETTLE_S = 1.5
 #: Faults mid-contact start this long after the contact onset.
 FAULT_AT_S = 0.5
@@ -253,7 +255,7 @@ def _source(scene, services, ports, profile, kind, source, materials, dead_after
     try:
         wait_connected(services, m_admin, timeout_s=60)
         before = call(m_admin, "status")["counters"]
-        if kind == "partition":
+        if kind in ("partition", "master"):
             time.sleep(max(0.0, started + SETTLE_S - time.monotonic()))
         runs = []
         for i, m in enumerate(materials):
