@@ -185,12 +185,14 @@ def test_a_burst_of_lost_estimates_does_not_delay_the_decision():
     assert resent_clean == resent_lost == 0
     # Nothing was resent: the lost estimates were never asked for, and the
     # decision arrives as it would have with nothing lost: after the link's
-    # delay (the simulated clock moves in 5 ms steps; loopback delivers
-    # within the step, or a step or two later on a loaded host, so each run
-    # is held to the link's delay, not to another run's lateness).
+    # delay, and before waiting behind a resend could bring it (a round trip
+    # more). The simulated clock moves in 5 ms steps and loopback delivers
+    # within the step, or some steps later on a loaded host (the settle ends
+    # after two quiet 1 ms polls): lateness only adds, so each run is held
+    # between the two, not to another run's lateness.
     for name in ("decision", "lift"):
         for run in (clean, lost):
-            assert run[name] == pytest.approx(DELAY_S, abs=3 * STEP_S), (clean, lost)
+            assert DELAY_S - STEP_S / 2 <= run[name] < 3 * DELAY_S - STEP_S / 2, (clean, lost)
     # The old flow, every estimate lossless: the decision waits behind the
     # lost ones until they are resent, at least a round trip later.
     old, resent_old, _ = burst_then_decision(burst, estimates_lossless=True)
@@ -219,9 +221,12 @@ def test_a_lost_tail_is_asked_for_at_the_next_heartbeat(delay_s):
         took = net.delivered_at(seq, "contact_event") - at
         assert net.arrivals[seq][0] - at > delay_s + STEP_S        # the first copy was lost
         heartbeat = PLAIN.heartbeat_s
-        assert took <= heartbeat + 3 * delay_s + 2 * STEP_S, took
         retransmission = max(3 * heartbeat, 2 * (2 * delay_s) + heartbeat) + delay_s
-        assert took < retransmission
+        # Asked for at the heartbeat (a heartbeat and three crossings), not
+        # by the retransmission timer: nearer the first. Loopback's lateness
+        # on a loaded host (steps of the simulated clock) only adds, so the
+        # bound is halfway between the two, not the first plus two steps.
+        assert took <= (heartbeat + 3 * delay_s + retransmission) / 2, (took, retransmission)
         assert net.master.counters["gaps"] >= 1
     finally:
         net.close()
