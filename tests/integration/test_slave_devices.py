@@ -307,9 +307,13 @@ class FreeRunningRig:
 
         self.board = SensorBoardEmulator(tmp_path / "slave-board", SCENE.room_temp_c,
                                          version=2)
+        # Its watchdog (0.1 s on the host's clock by default) is not under
+        # test here (tests/unit/test_active_pad.py, test_firmware*.py): the
+        # test reads the pad after place() returns, with no command since,
+        # and a loaded host's stall would have turned it off meanwhile.
         self.pad = ActivePadEmulator(bus, self._on_current, heatsink_c=SCENE.room_temp_c,
                                      state=lambda: (self.junction_c, SCENE.room_temp_c,
-                                                    self.pad.current_a))
+                                                    self.pad.current_a), watchdog_s=60.0)
         self.instruments, self.rng = instruments, np.random.default_rng(5)
         self.tc = Thermocouple(cold_junction_c=SCENE.room_temp_c,
                                bias_k=instruments.pad_tc_bias_k)

@@ -4,6 +4,7 @@ not deadlock a write, and a peer that takes nothing is an error, not a hang."""
 
 import os
 import threading
+import time
 import tty
 
 import pytest
@@ -44,7 +45,9 @@ def test_a_write_reads_what_the_peer_sends_meanwhile(pty_pair):
     thread.join(60)
     assert not thread.is_alive()
     assert bytes(got) == ours
-    line.read(0.05)
+    guard = time.monotonic() + 30               # a hang guard: what is left, however slowly
+    while len(line.buf) < len(theirs) and time.monotonic() < guard:
+        line.read(0.01)
     assert line.buf == theirs
 
 
