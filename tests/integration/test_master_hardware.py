@@ -45,7 +45,7 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
     touches = []          # the board measures the simulated module's state
     peltier = PeltierEmulator(bus, applied.append,
                               state=lambda: touches[-1].module_state() if touches
-                              else (33.0, 24.0, 0.0))
+                              else (33.0, 24.0, 0.0), watchdog_s=60.0)
     control, stream, admin = free_ports(3)
     config = MasterConfig(devices="hardware", board_url=board.path, can_bus=bus,
                           rate_hz=1000.0,              # stepped every 1 ms below
@@ -57,7 +57,11 @@ def test_a_hardware_master_finds_the_touch_by_force_and_keeps_the_driver_safe(tm
     # be descheduled that long between two periods (seen once, the suite's
     # other worker building a docker image): the board's staleness rule
     # working (tests/integration/test_device_contract.py), not this test's.
+    # So with the driver's heartbeat timeout (0.5 s) and the emulated
+    # driver's watchdog (0.1 s), both on the real clock: given 60 s here
+    # (tested in test_device_contract.py and the firmware tests).
     service.hardware.board.stale_s = 1.0
+    service.hardware.peltier.heartbeat_timeout_s = 60.0
     steps = record_steps(service)
     touch = DisplayTouch(SCENE, OPERATOR, 1000.0, 0.6, 33.0, np.random.default_rng(0))
     touches.append(touch)
@@ -133,7 +137,7 @@ def test_a_hardware_master_renders_what_a_real_slave_says(tmp_path, trained_mode
     touches = []          # the board measures the simulated module's state
     peltier = PeltierEmulator(bus, applied.append,
                               state=lambda: touches[-1].module_state() if touches
-                              else (33.0, 24.0, 0.0))
+                              else (33.0, 24.0, 0.0), watchdog_s=60.0)
     service = None
     try:
         # The slave up (its admin answers; a hang guard of 120 s), then the
