@@ -380,10 +380,12 @@ def test_a_restarted_core_says_boot_and_the_driver_counts_the_reboot(peltier):
 def test_python_can_counts_a_corrupted_line_from_the_core_and_goes_on(peltier):
     """The link garbles one of the core's lines (a hex digit becomes 'G'):
     python-can's slcan cannot parse it, PeltierDriver counts it as
-    undecodable and stays healthy on the lines after it."""
+    undecodable and stays healthy on the lines after it (judged by the
+    core's clock, save a gap the core timed: :func:`healthy_or_stalled`)."""
     core, link, _ = peltier
     link.close()
-    driver = PeltierDriver(f"slcan:{core.link_path}")
+    clock = CoreClock(core)
+    driver = PeltierDriver(f"slcan:{core.link_path}", clock=clock)
     garbled = []
 
     def garble_once(uart: int, data: bytes) -> bytes:
@@ -394,14 +396,15 @@ def test_python_can_counts_a_corrupted_line_from_the_core_and_goes_on(peltier):
         return data
 
     try:
-        for k in range(60):
-            if k == 20:
-                core.line_fault = garble_once
-            driver.command(1.0)
-            time.sleep(PERIOD_S)
-            driver.poll()
+        command_periods(driver, 1.0, 20)
+        core.line_fault = garble_once
+        polls = command_periods(driver, 1.0, 40)
+        guard = time.monotonic() + 30                 # a hang guard: QEMU's UART may lag
+        while driver.counters["statuses"] < 50:
+            assert time.monotonic() < guard, driver.counters
+            driver.poll(wait_s=0.02)
         assert garbled and driver.counters["undecodable"] == 1
-        assert driver.healthy and driver.counters["statuses"] >= 50
+        assert healthy_or_stalled(polls[-10:], clock.answers_and_trips()[1]), polls
     finally:
         driver.close()
 
