@@ -59,6 +59,16 @@ OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat
 CAN_WAIT_S = 0.05
 
 
+def _timed_to_board(t0: float, poll, arrived) -> tuple[float, bool]:
+    """Poll the emulated board until ``arrived()`` or CAN_WAIT_S since
+    ``t0``, polling once more when the wait is over (a stall of this process
+    is a late command, not a lost one): (seconds since ``t0``, arrived)."""
+    while True:
+        poll()
+        if arrived() or time.perf_counter() - t0 >= CAN_WAIT_S:
+            return time.perf_counter() - t0, arrived()
+
+
 def _percentiles(samples_s) -> dict:
     us = np.asarray(samples_s) * 1e6
     return {"n": int(len(us)), "p50_us": float(np.percentile(us, 50)),
@@ -73,7 +83,7 @@ def _paths(n: int) -> dict:
                              np.random.default_rng(0))
         clock = [0.0]
         d = SimDisplay(touch) if kind == "sim" else EmulatedDisplay(touch, clock=lambda: clock[0])
-        read, apply_, serial, can = [], [], [], []
+        read, apply_, serial, can, lost = [], [], [], [], 0
         try:
             for k in range(n + 200):
                 t = clock[0] = -0.2 + k * 1e-3
@@ -93,9 +103,10 @@ def _paths(n: int) -> dict:
                     # sign; timed until the board drives it (CAN_WAIT_S: timed out).
                     d.clear_applied()
                     d.hardware.peltier.command(0.5 if k % 2 else -0.5)
-                    while d.applied_a is None and time.perf_counter() - t0 < CAN_WAIT_S:
-                        d.peltier_emulator.poll()
-                    can.append(time.perf_counter() - t0)
+                    took, ok = _timed_to_board(t0, d.peltier_emulator.poll,
+                                               lambda: d.applied_a is not None)
+                    can.append(took)
+                    lost += not ok
                     d.hardware.peltier.poll()
                 t0 = time.perf_counter()
                 d.apply(t, step, 1e-3, s.force_n)
@@ -106,7 +117,7 @@ def _paths(n: int) -> dict:
         if kind == "emulated":
             out[kind]["serial_sensor_to_controller"] = _percentiles(serial)
             out[kind]["can_controller_to_actuator"] = {
-                **_percentiles(can), "timed_out": int(sum(c >= CAN_WAIT_S for c in can))}
+                **_percentiles(can), "timed_out": lost}
     return out
 
 
@@ -176,17 +187,17 @@ def _slave(scene, ident, trials_per_material: int, seed: int = 0) -> dict:
                              "emulated_decision_s": d_emu.decision_time_s,
                              "pad_true_c_sim": float(sim.trial.extra["T_pad_true_C"]),
                              "pad_true_c_emulated": float(emu.trial.extra["T_pad_true_C"])})
-        can = []
+        can, lost = [], 0
         for k in range(1000):                   # the pad's CAN: command to applied
             # A current inside the module's limits, alternating sign, timed
             # until the pad's board drives it (CAN_WAIT_S: timed out).
             target = 0.5 if k % 2 else -0.5
             t0 = time.perf_counter()
             devices.pad.command(target)
-            while abs(devices.pad_emulator.current_a - target) > 1e-3 and \
-                    time.perf_counter() - t0 < CAN_WAIT_S:
-                devices.pad_emulator.poll()
-            can.append(time.perf_counter() - t0)
+            took, ok = _timed_to_board(t0, devices.pad_emulator.poll, lambda: abs(
+                devices.pad_emulator.current_a - target) <= 1e-3)
+            can.append(took)
+            lost += not ok
             devices.pad.poll()
         counters = devices.all_counters()
     finally:
@@ -217,7 +228,7 @@ def _slave(scene, ident, trials_per_material: int, seed: int = 0) -> dict:
             "sensor_to_identifier_onset_backlog": _percentiles(to_ident_backlog),
             "serial_sensor_to_driver": _percentiles(serial),
             "can_controller_to_actuator": {
-                **_percentiles(can), "timed_out": int(sum(c >= CAN_WAIT_S for c in can))},
+                **_percentiles(can), "timed_out": lost},
             "device_counters": counters, "touches": rows}
 
 
