@@ -50,11 +50,7 @@ from telethermal.record.recording import read_recording
 # dependency layer before the first test (module fixtures count in the guard).
 pytestmark = [pytest.mark.compose, pytest.mark.timeout(2700)]
 #: The warnings a stalled display loop causes (tests/realclock.py).
-#: What a stall logs: the master's own loop (the surface out of band), or
-#: either service silent past the link's 1 s liveness (the link lost, the
-#: peer silent), each judged below with the stall on record.
-STALL_WARNING = re.compile(r"safe state entered: surface out of band|link lost mid-contact|"
-                           r"peer silent for|master lost mid-contact")
+STALL_WARNING = re.compile(r"safe state entered: surface out of band|link lost mid-contact")
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = "telethermal-test-base:bookworm"
@@ -440,18 +436,12 @@ def test_up_waits_for_training_then_a_touch_through_exec(stack, timings):
     assert " ERROR " not in logs, logs[-3000:]
     warnings = [line for line in logs.splitlines() if " WARNING " in line]
     if warnings:
-        # Only what a stall causes, with the stall on record (tests/realclock.py:
-        # a loaded machine's outcome, not the stack's): the master's display
-        # loop's, or a service silent past the link's liveness, which the
-        # master's transport counts (conftest.py's LONGEST_FIRST: the slave's
-        # loop stalled over 1 s once beside a CPU-bound test).
+        # Only what a stalled display loop causes, with the stall on record
+        # (tests/realclock.py: a loaded machine's outcome, not the stack's).
         assert all(STALL_WARNING.search(line) for line in warnings), warnings
         report = json.loads(stack("exec", "-T", "master", "telethermal", "admin", "--json",
                                   "report", timeout_s=60).stdout)
-        status = json.loads(stack("exec", "-T", "master", "telethermal", "admin", "--json",
-                                  "status", timeout_s=60).stdout)
-        assert stalled(report["loop"]) or status["counters"]["heartbeats_missed"] > 0, \
-            (warnings, report["loop"], status["counters"])
+        assert stalled(report["loop"]), (warnings, report["loop"])
     assert "touch over contact_id=1" in logs
 
 
