@@ -103,14 +103,18 @@ def write_models(out, scene_name: str = "fingertip-7", data=None, seed: int = 0,
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, "a file, not the models' folder", str(out))
     # Made now, so a folder that cannot be made is said before any training;
-    # removed again if nothing is written into it.
-    made = not out.exists()
+    # removed again if nothing is written into it, with the parents made for
+    # it (deepest first, each only while empty).
+    made = [p for p in (out, *out.parents) if not p.exists()]
     out.mkdir(parents=True, exist_ok=True)
     try:
         return _write_models(out, scene_name, data, seed, echo, calibration)
     except BaseException:
-        if made and not any(out.iterdir()):
-            out.rmdir()
+        for folder in made:
+            try:
+                folder.rmdir()
+            except OSError:             # not empty (or not ours to remove): kept
+                break
         raise
 
 
