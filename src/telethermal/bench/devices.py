@@ -54,8 +54,9 @@ OPERATOR = Operator(finger_c=33.0, finger_ir_c=33.0, skin_k_scale=1.0, skin_heat
                     force_n=4.0, conductance_w_m2k=5000.0)
 
 
-#: How long a CAN command may take to reach the emulated board before the
-#: bench counts it timed out (s).
+#: How long the bench waits for a CAN command to reach the emulated board;
+#: one that has not arrived by then (polled once more after the wait) is
+#: counted timed out (s).
 CAN_WAIT_S = 0.05
 
 
