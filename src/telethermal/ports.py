@@ -11,6 +11,15 @@ import time
 
 log = logging.getLogger(__name__)
 
+def port_problem(value, zero_means: str | None = None) -> str | None:
+    """Why ``value`` is not a TCP port (1-65535; 0 too where ``zero_means``
+    says what 0 does), or None: the one check of a configured or typed port."""
+    low = 0 if zero_means else 1
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 65535:
+        return "a port is 1-65535" + (f" (0: {zero_means})" if zero_means else "")
+    return None
+
+
 #: :func:`wait_released`'s longest wait for a closed listener's port.
 RELEASE_WAIT_S = 2.0
 

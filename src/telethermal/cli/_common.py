@@ -105,8 +105,11 @@ def _port(text):
         value = int(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from exc
-    if not 0 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"{text!r}: a port is 1-65535 (0: a free one)")
+    from telethermal.ports import port_problem
+
+    why = port_problem(value, "a free one")
+    if why:
+        raise argparse.ArgumentTypeError(f"{text!r}: {why}")
     return value
 
 

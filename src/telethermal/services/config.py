@@ -19,12 +19,13 @@ class ConfigError(TelethermalError):
 
 def _check_ports(config, names: tuple[str, ...], off_ok: tuple[str, ...] = ()) -> None:
     """Each of ``names`` a TCP port, 1-65535 (0 too for ``off_ok``: off)."""
+    from telethermal.ports import port_problem
+
     for name in names:
         value = getattr(config, name)
-        low = 0 if name in off_ok else 1
-        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 65535:
-            raise ConfigError(f"{name} = {value!r}: a port is 1-65535"
-                              + (" (0: off)" if low == 0 else ""))
+        why = port_problem(value, "off" if name in off_ok else None)
+        if why:
+            raise ConfigError(f"{name} = {value!r}: {why}")
 
 
 def parse_cpus(text: str) -> set[int]:

@@ -27,7 +27,7 @@ import zmq
 from telethermal.errors import TransportError
 from telethermal.sim.channel import Channel, Direction, FaultProfileError
 from telethermal.tomltables import read_toml, table_values
-from telethermal.ports import close_listeners
+from telethermal.ports import close_listeners, port_problem
 
 log = logging.getLogger("telethermal.faults")
 
@@ -44,10 +44,9 @@ class Link:
 
     def __post_init__(self):
         for name in ("control_port", "stream_port", "slave_control_port", "slave_stream_port"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
-                raise FaultProfileError(f"{name} = {value!r}: a port is 1-65535 (0: the system "
-                                        "picks one)")
+            why = port_problem(getattr(self, name), "the system picks one")
+            if why:
+                raise FaultProfileError(f"{name} = {getattr(self, name)!r}: {why}")
 
 
 @dataclass(frozen=True)

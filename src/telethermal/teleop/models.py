@@ -133,8 +133,7 @@ def _write_models(out: Path, scene_name: str, data, seed: int, echo, calibration
         generator = train_generator(scene, seed)
     else:
         from telethermal.data.dataset import MANIFEST, trial_digest
-        from telethermal.ident.registry import dataset_scene
-        from telethermal.ident.registry import pad_dataset
+        from telethermal.ident.registry import dataset_scene, pad_dataset
         pad = pad_dataset(data)
         trials = load_dataset(pad)
         named = dataset_scene(pad)                      # None when it has no record

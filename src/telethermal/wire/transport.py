@@ -72,12 +72,13 @@ class TransportConfig:
     stream_hwm: int = 64
 
     def validate(self, role: str) -> None:
+        from telethermal.ports import port_problem
+
         for name in ("control_port", "stream_port"):
-            value = getattr(self, name)
             # 0: the system picks a free port (a slave bound in a test).
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
-                raise TransportError(f"{name} = {value!r}: a port is 1-65535 (0: the system "
-                                     "picks one)")
+            why = port_problem(getattr(self, name), "the system picks one")
+            if why:
+                raise TransportError(f"{name} = {getattr(self, name)!r}: {why}")
         if self.security not in ("curve", "plain"):
             raise TransportError(f"security must be 'curve' or 'plain', got {self.security!r}")
         if self.security == "plain":
