@@ -130,7 +130,15 @@ def test_view_section(page):
                         "call per display period alone: 8.5 us mean, 125.7 us p99. The master's "
                         "loop at SCHED_FIFO priority 20 (0: normal scheduling). ")
     for text in ("no view stream", "view stream, no page", "view stream, page open"):
-        assert f"| {text} | 300 us | 500 us | 1001 us | 2 of 1000 |" in lines
+        assert f"| {text} | 300 us | 500 us | 1001 us | 2 of 1000 | - |" in lines
+    assert not any("set aside" in line for line in lines)
+    # A report with each touch's set-up (the set-aside deadlines beside the missed).
+    report["loop"] = dict.fromkeys(report["loop"], mode | {"setup_s_max": 0.0123,
+                                                           "deadlines_set_aside": 17})
+    lines = sections.view(report, page)
+    assert "| no view stream | 300 us | 500 us | 1001 us | 2 of 1000 | 12 ms, 17 set aside |" \
+        in lines
+    assert any(line.startswith("Each touch is set up") for line in lines)
 
 
 def test_render_section_skips_what_the_report_does_not_hold(page):

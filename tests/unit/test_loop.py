@@ -38,6 +38,47 @@ def test_an_overrun_skips_missed_deadlines_and_reports_the_true_step():
     assert s["deadline_misses"] == 2 and s["overruns"] == 1
 
 
+def test_a_step_that_restarts_the_deadlines_sets_its_overrun_aside():
+    # The same step 5 taking 2.5 periods, but asking for the deadlines to
+    # restart (a service setting up a touch): the 2 deadlines that passed are
+    # set aside, none missed; the next step starts when step 5 ended, told
+    # dt = 1 period (as a first step), and the grid runs from there.
+    clock = SimClock()
+    seen = []
+    loop = FixedRateLoop(0.01, clock)
+
+    def step(t, dt):
+        seen.append((round(t / 0.01, 9), round(dt / 0.01, 9)))
+        if len(seen) == 6:
+            clock.advance(0.025)
+            loop.restart_deadlines()
+
+    stats = loop.run(step, 10)
+    assert [k for k, _ in seen] == [0, 1, 2, 3, 4, 5, 7.5, 8.5, 9.5, 10.5]
+    assert [d for _, d in seen] == [1.0] * 10
+    s = stats.summary()
+    assert s["deadline_misses"] == 0 and s["deadlines_set_aside"] == 2
+    assert s["lateness_max_us"] == 0.0
+    # The pause still shows in the periods (2.5 periods from step 5 to 6).
+    assert s["period_max_us"] == pytest.approx(2.5e4)
+
+
+def test_a_restart_asked_for_in_one_step_does_not_carry_to_the_next():
+    clock = SimClock()
+    loop = FixedRateLoop(0.01, clock)
+    n = [0]
+
+    def step(t, dt):
+        n[0] += 1
+        if n[0] == 2:
+            loop.restart_deadlines()            # a quick set-up: nothing passed
+        if n[0] == 4:
+            clock.advance(0.025)                # an overrun: missed as ever
+
+    s = loop.run(step, 6).summary()
+    assert s["deadlines_set_aside"] == 0 and s["deadline_misses"] == 2
+
+
 def test_a_step_that_ends_exactly_on_the_next_deadline_misses_nothing():
     clock = SimClock()
     stats = FixedRateLoop(0.01, clock).run(lambda t, dt: clock.advance(0.01), 5)

@@ -98,7 +98,8 @@ def _touches(ports, scene, n: int, contact_s: float, seed0: int) -> list[dict]:
         s = networked_touch(scene, MATERIAL, ports, seed0 + i, contact_s).summary
         loop = s["loop"]
         rows.append({k: loop[k] for k in ("busy_mean_us", "busy_p99_us", "period_p99_us",
-                                          "lateness_p99_us", "deadline_misses", "steps")}
+                                          "lateness_p99_us", "deadline_misses", "steps",
+                                          "deadlines_set_aside", "setup_s")}
                     | {"identified": s["identified"]})
     return rows
 
@@ -108,7 +109,10 @@ def _summary(rows: list[dict]) -> dict:
             "busy_p99_us": float(np.mean([r["busy_p99_us"] for r in rows])),
             "period_p99_us": float(np.mean([r["period_p99_us"] for r in rows])),
             "deadline_misses": int(sum(r["deadline_misses"] for r in rows)),
-            "steps": int(sum(r["steps"] for r in rows)), "touches": rows}
+            "steps": int(sum(r["steps"] for r in rows)),
+            # Each touch's set-up, before its first period (services/master.py).
+            "deadlines_set_aside": int(sum(r["deadlines_set_aside"] for r in rows)),
+            "setup_s_max": float(max(r["setup_s"] for r in rows)), "touches": rows}
 
 
 def run_view_bench(touches: int = 3, contact_s: float = 3.0, progress=print,

@@ -211,6 +211,10 @@ class LoopStats:
     lateness_s: list = field(default_factory=list)     # start - its deadline
     busy_s: list = field(default_factory=list)         # how long each step took
     missed_deadlines: int = 0                          # deadlines skipped
+    #: Deadlines that passed during a step that then restarted the loop's
+    #: deadlines (:meth:`FixedRateLoop.restart_deadlines`): counted here,
+    #: never in ``missed_deadlines``.
+    set_aside: int = 0
     count: int = 0                                     # steps run (all, even if not kept)
     #: Python's garbage collections during the run, per generation, and the
     #: longest (s): a pause inside a step the loop's own figures cannot name.
@@ -252,6 +256,7 @@ def combined_summary(runs: list[LoopStats], last: int | None = None) -> dict:
             "busy_mean_us": float(np.mean(busy) * 1e6) if len(busy) else math.nan,
             "overruns": int(np.sum(busy > period_s)),
             "deadline_misses": int(sum(r.missed_deadlines for r in runs)),
+            "deadlines_set_aside": int(sum(r.set_aside for r in runs)),
             "stalls": int(np.sum(late > STALL_S)),
             "gc_collections": [int(sum(r.gc_collections[g] for r in runs)) for g in range(3)],
             "gc_max_us": max(r.gc_max_s for r in runs) * 1e6}
@@ -296,6 +301,18 @@ class FixedRateLoop:
                                f"got {period_s}")
         self.period_s = period_s
         self.clock = clock if clock is not None else RealClock.for_period(period_s)
+        self._restart = False
+
+    def restart_deadlines(self) -> None:
+        """Called from a step that did work no period was waiting for (a
+        service setting up a touch while nothing is being controlled): when
+        the step returns, the next step starts at once (given the period as
+        its ``dt_s``, as a first step is) and the deadlines follow a period
+        apart from it. The deadlines that passed during this
+        step are counted in :attr:`LoopStats.set_aside`, not as missed; the
+        steps' start times stay on the clock, so the pause shows in the
+        periods."""
+        self._restart = True
 
     def run(self, step: Callable[[float, float], bool | None], n_steps: int,
             keep_last: int | None = None) -> LoopStats:
@@ -318,26 +335,36 @@ class FixedRateLoop:
     def _run(self, stats: LoopStats, step, n_steps) -> LoopStats:
         clock, period = self.clock, self.period_s
         t0 = clock.now()
+        grid = t0                               # deadline k is at grid + k * period
         k = 0                                   # index of the next deadline
         last_start = None
         done = 0
         while done < n_steps:
             done += 1
             stats.count += 1
-            deadline = t0 + k * period
+            deadline = grid + k * period
             clock.sleep_until(deadline)
             start = clock.now()
             dt = period if last_start is None else start - last_start
             last_start = start
             stats.starts_s.append(start - t0)
             stats.lateness_s.append(start - deadline)
+            self._restart = False
             keep_going = step(start - t0, dt)
             end = clock.now()
             stats.busy_s.append(end - start)
             # The first deadline not yet passed; count the ones skipped.
-            nxt = max(k + 1, math.ceil((end - t0) / period - 1e-9))
-            stats.missed_deadlines += nxt - (k + 1)
-            k = nxt
+            nxt = max(k + 1, math.ceil((end - grid) / period - 1e-9))
+            if self._restart:
+                # The next deadline is now, the grid moved with it, and the
+                # next step's dt is the period, as at the loop's first.
+                stats.set_aside += nxt - (k + 1)
+                k += 1
+                grid = end - k * period
+                last_start = None
+            else:
+                stats.missed_deadlines += nxt - (k + 1)
+                k = nxt
             if keep_going is False:
                 break
         return stats

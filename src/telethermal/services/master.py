@@ -61,15 +61,13 @@ class Touch:
                                                   service.link,
                                                   calibration=service.display_calibration)
         self.sim = world.display(cfg.rate_hz, contact_s, self.idle_c)
-        opening = time.monotonic()
         self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
                                     **service.display_options)
         #: Session time 0 (the finger's contact) on the service's clock: the display's
         #: time is ``now - origin_s``; its onset goes back at ``origin_s`` plus its time
-        #: (as ``t0`` on hardware). QEMU's cores restart first, in real time: counted
-        #: from when they are open (other devices open at once; ``now`` may be a test's).
-        restart_s = time.monotonic() - opening if service.display_options else 0.0
-        self.origin_s = now + restart_s + PRE_CONTACT_S
+        #: (as ``t0`` on hardware). From ``now`` here (``now`` may be a test's); the
+        #: service's loop moves it to when the touch is set up (:meth:`start_clock`).
+        self.origin_s = now + PRE_CONTACT_S
         self.contact_s = contact_s
         # The id the session gives the contact at the display's onset.
         self.contact_id = service.session.next_contact_id
@@ -79,10 +77,21 @@ class Touch:
                                                         self.display))
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
+        self.set_aside0 = service.loop.stats.set_aside
         self.gc0 = list(service.loop.stats.gc_collections)
         self.memory0 = judged_of(service.link.counters)
         self.reply_when_done = True          # the admin "touch" request waits for the end
         self.truth: dict | None = None       # the placed object (simulation), for the figures
+        self.setup_s = 0.0                   # asked for -> set up, on the service's clock
+
+    def start_clock(self, asked_s: float, ready_s: float) -> None:
+        """The touch's clock starts when it is set up (``ready_s``: its
+        simulated operator and display pad built, its devices open, QEMU's
+        cores restarted in real time), not when it was asked for
+        (``asked_s``): its first period is then its first, at
+        ``-PRE_CONTACT_S``."""
+        self.setup_s = ready_s - asked_s
+        self.origin_s = ready_s + PRE_CONTACT_S
 
 
 @dataclass(frozen=True)
@@ -234,7 +243,17 @@ class MasterService:
                 self._internal_error(f"message {message.kind} from the slave", exc)
         request = self.admin.receive()
         if request is not None:
+            touch = self.touch
             self._on_admin(request, now)
+            if self.touch is not None and self.touch is not touch:
+                # A touch was set up in this period while nothing was being
+                # controlled (a simulated display exists only in a touch): its
+                # clock and the loop's deadlines start when it is ready, and
+                # its first period is the next one (set-up time: its report).
+                self.touch.start_clock(now, time.monotonic())
+                self.loop.restart_deadlines()
+                self.endpoint.state = self.state
+                return not self.stop_requested
         if self.hardware is not None:
             self._hardware_period(now, dt_s)
         elif self.touch is not None:
@@ -323,6 +342,9 @@ class MasterService:
         est = decision.estimate
         loop = stats.summary(last=stats.count - touch.loop_count0)
         loop["deadline_misses"] = stats.missed_deadlines - touch.misses0
+        # Its set-up's, outside its periods (Touch.start_clock).
+        loop["deadlines_set_aside"] = stats.set_aside - touch.set_aside0
+        loop["setup_s"] = touch.setup_s
         loop["gc_collections"] = [a - b for a, b in zip(stats.gc_collections, touch.gc0)]
         loop.pop("gc_max_us")                   # the service's run's, not this touch's
         result = {

@@ -1,0 +1,97 @@
+"""A simulated touch is set up inside one period of the master service's
+loop (its operator and display pad built, its devices opened: about 8 ms on
+a 2 ms period). Nothing is controlled meanwhile: a simulated display exists
+only in a touch. Its clock and the loop's deadlines start when it is set up,
+and the deadlines that passed are set aside, not missed
+(``FixedRateLoop.restart_deadlines``; docs/concepts/loop.md).
+
+The loop runs on the simulated clock, and the service reads the same clock,
+so the set-up "takes" a chosen time and every figure here is exact."""
+
+from types import SimpleNamespace
+
+import pytest
+
+from telethermal.control.loop import FixedRateLoop, SimClock
+from telethermal.ports import free_ports
+from telethermal.services import master as master_service
+from telethermal.services.config import MasterConfig
+from telethermal.services.master import MasterService
+from telethermal.teleop.session import PRE_CONTACT_S
+from telethermal.wire.codec import decode
+from telethermal.wire.messages import parse
+from telethermal.wire.transport import TransportConfig
+
+from test_master_drivers import (DT, SCENE, SEED, Loopback, Recorder, _models,
+                                 operator_and_forces, slave_recording)
+
+class QuietLoopback(Loopback):
+    """The stand-in transport with nothing arriving (the service's loop
+    polls it every period)."""
+
+    def poll(self, wait_s: float = 0.0) -> list:
+        return []
+
+
+#: The touch's set-up, as the simulated clock has it: 3.5 periods.
+SETUP_S = 3.5 * DT
+#: The period (of the loop's run) whose admin request asks for the touch.
+ASKED_AT = 3
+
+
+@pytest.fixture(scope="module")
+def models(trained_models):
+    return _models(trained_models.pair(SCENE, 0))
+
+
+def test_a_touch_set_up_inside_a_period_starts_its_clock_and_deadlines_when_ready(
+        models, monkeypatch):
+    operator, forces = operator_and_forces(1.0)
+    before, _, _, _ = slave_recording(models, "aluminium", forces, operator.finger_ir_c, False)
+    clock = SimClock(100.0)
+    monkeypatch.setattr(master_service, "time", SimpleNamespace(monotonic=clock.now))
+    made = []
+
+    class SlowTouch(master_service.Touch):
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            clock.advance(SETUP_S)               # the set-up's time
+            self.devices = Recorder(self.devices)
+            made.append(self)
+
+    monkeypatch.setattr(master_service, "Touch", SlowTouch)
+    control, stream, admin = free_ports(3)
+    service = MasterService(MasterConfig(seed=SEED, admin_port=admin, transport=TransportConfig(
+        security="plain", control_port=control, stream_port=stream)))
+    endpoint, service.endpoint = service.endpoint, QuietLoopback()
+    service.wire.endpoint = service.endpoint
+    replies, steps = [], [0]
+    service.admin.reply = lambda **r: replies.append(r)
+    request = {"cmd": "touch", "contact_s": 1.0, "seed": SEED, "wait": False}
+    service.admin.receive = lambda: request if steps[0] == ASKED_AT else None
+    service.loop = FixedRateLoop(DT, clock)
+
+    def step(t_loop, dt_s):
+        keep = service.step(t_loop, dt_s)
+        steps[0] += 1
+        return keep
+
+    try:
+        for data in before:
+            service._on_message(parse(decode(data)), clock.now())
+        stats = service.loop.run(step, ASKED_AT + 6)
+    finally:
+        service.endpoint = service.wire.endpoint = endpoint
+        service.shutdown()
+
+    assert replies and replies[-1]["ok"], replies
+    (touch,) = made
+    assert stats.set_aside == 3 and stats.missed_deadlines == 0
+    assert touch.setup_s == pytest.approx(SETUP_S, abs=1e-12)
+    # Its first period is its first: at -PRE_CONTACT_S on its own clock, in
+    # the loop's next step (none in the step that set it up), a period apart.
+    times = [t for t, _ in touch.devices.readings]
+    assert len(times) == 5
+    assert times[0] == pytest.approx(-PRE_CONTACT_S, abs=1e-12)
+    assert times[1:] == pytest.approx([-PRE_CONTACT_S + k * DT for k in range(1, 5)],
+                                      abs=1e-12)
