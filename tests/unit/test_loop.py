@@ -79,6 +79,26 @@ def test_a_restart_asked_for_in_one_step_does_not_carry_to_the_next():
     assert s["deadlines_set_aside"] == 0 and s["deadline_misses"] == 2
 
 
+def test_a_summary_taken_inside_a_step_pairs_its_steps_with_their_busy_times():
+    # A service reports a touch from inside its last step: the last 3 steps'
+    # starts are kept, but only 2 of them have finished. Step k "takes"
+    # (k + 1) ms; inside step 5 the last 3 are steps 3, 4 and 5 (running).
+    clock = SimClock()
+    loop = FixedRateLoop(0.01, clock)
+    seen = {}
+
+    def step(t, dt):
+        k = loop.stats.count - 1
+        if k == 5:
+            seen.update(loop.stats.summary(last=3))
+        clock.advance((k + 1) * 1e-3)
+
+    loop.run(step, 7)
+    assert seen["steps"] == 3
+    assert seen["busy_mean_us"] == pytest.approx(4500.0)       # steps 3 and 4, not 2
+    assert loop.stats.summary(last=3)["busy_mean_us"] == pytest.approx(6000.0)   # 4, 5, 6
+
+
 def test_a_step_that_ends_exactly_on_the_next_deadline_misses_nothing():
     clock = SimClock()
     stats = FixedRateLoop(0.01, clock).run(lambda t, dt: clock.advance(0.01), 5)

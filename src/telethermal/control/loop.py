@@ -216,6 +216,9 @@ class LoopStats:
     #: never in ``missed_deadlines``.
     set_aside: int = 0
     count: int = 0                                     # steps run (all, even if not kept)
+    #: Steps finished (their busy time kept): ``count`` less one while a
+    #: step is running (a summary taken from inside one).
+    finished: int = 0
     #: Python's garbage collections during the run, per generation, and the
     #: longest (s): a pause inside a step the loop's own figures cannot name.
     gc_collections: list = field(default_factory=lambda: [0, 0, 0])
@@ -238,10 +241,20 @@ def combined_summary(runs: list[LoopStats], last: int | None = None) -> dict:
         xs = list(xs)
         return np.asarray(xs[-last:] if last else xs, dtype=float)
 
+    def busy_tail(r):
+        # A step still running (a summary taken inside it) has its start
+        # kept and no busy time yet: the last ``last`` steps' busy times
+        # are then the ``last - 1`` kept, not the one before them too.
+        running = r.count - r.finished
+        n = None if not last else last - running
+        xs = list(r.busy_s)
+        return np.asarray(xs if n is None else xs[max(0, len(xs) - n):] if n > 0 else [],
+                          dtype=float)
+
     starts = [tail(r.starts_s) for r in runs]
     periods = np.concatenate([np.diff(s) for s in starts if len(s) > 1] or [np.zeros(0)])
     late = np.concatenate([tail(r.lateness_s) for r in runs])
-    busy = np.concatenate([tail(r.busy_s) for r in runs])
+    busy = np.concatenate([busy_tail(r) for r in runs])
     period_s = runs[0].period_s
 
     def pct(a, q):
@@ -353,6 +366,7 @@ class FixedRateLoop:
             keep_going = step(start - t0, dt)
             end = clock.now()
             stats.busy_s.append(end - start)
+            stats.finished += 1
             # The first deadline not yet passed; count the ones skipped.
             nxt = max(k + 1, math.ceil((end - grid) / period - 1e-9))
             if self._restart:

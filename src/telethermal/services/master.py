@@ -53,7 +53,7 @@ class Touch:
     def __init__(self, service: "MasterService", contact_s: float, seed: int, now: float,
                  source: str = "trajectory"):
         scene = service.scene
-        cfg = replace(service.display_config, source=source)
+        cfg = self.config = replace(service.display_config, source=source)
         world = simulated("master_touch")(scene, seed)
         self.operator = world.operator
         # Idling before the touch: pre-conditioned for what the slave expects.
@@ -71,10 +71,9 @@ class Touch:
         self.contact_s = contact_s
         # The id the session gives the contact at the display's onset.
         self.contact_id = service.session.next_contact_id
-        if service.recorder is not None:
-            service.recorder.touch_start(now, self.contact_id,
-                                         display_params(scene, cfg, self.operator, self.idle_c,
-                                                        self.display))
+        #: A recording's start of this touch: made at its first period (the
+        #: time its clock starts: ``origin_s - PRE_CONTACT_S``).
+        self.start_recorded = False
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
         self.set_aside0 = service.loop.stats.set_aside
@@ -245,7 +244,7 @@ class MasterService:
         if request is not None:
             touch = self.touch
             self._on_admin(request, now)
-            if self.touch is not None and self.touch is not touch:
+            if self.hardware is None and self.touch is not None and self.touch is not touch:
                 # A touch was set up in this period while nothing was being
                 # controlled (a simulated display exists only in a touch): its
                 # clock and the loop's deadlines start when it is ready, and
@@ -286,6 +285,11 @@ class MasterService:
 
     def _touch_period(self, now: float, dt_s: float) -> None:
         touch, session = self.touch, self.session
+        if self.recorder is not None and not touch.start_recorded:
+            touch.start_recorded = True
+            self.recorder.touch_start(touch.origin_s - PRE_CONTACT_S, touch.contact_id,
+                                      display_params(self.scene, touch.config, touch.operator,
+                                                     touch.idle_c, touch.display))
         t = self.last_period_t_s = now - touch.origin_s
         news = session.news(now, self.endpoint.peer_alive)
         sensors = touch.devices.read(t)
