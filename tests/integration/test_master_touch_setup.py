@@ -1,6 +1,6 @@
 """A simulated touch is set up inside one period of the master service's
-loop (its operator and display pad built, its devices opened: about 8 ms on
-a 2 ms period). Nothing is controlled meanwhile: a simulated display exists
+loop (its operator and display pad built, its devices opened: several
+periods long). Nothing is controlled meanwhile: a simulated display exists
 only in a touch. Its clock and the loop's deadlines start when it is set up,
 and the deadlines that passed are set aside, not missed
 (``FixedRateLoop.restart_deadlines``; docs/concepts/loop.md).

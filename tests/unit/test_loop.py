@@ -87,16 +87,24 @@ def test_a_summary_taken_inside_a_step_pairs_its_steps_with_their_busy_times():
     loop = FixedRateLoop(0.01, clock)
     seen = {}
 
+    ask = {"last": 3}
+
     def step(t, dt):
         k = loop.stats.count - 1
         if k == 5:
-            seen.update(loop.stats.summary(last=3))
+            seen.update(loop.stats.summary(last=ask["last"]))
         clock.advance((k + 1) * 1e-3)
 
     loop.run(step, 7)
     assert seen["steps"] == 3
     assert seen["busy_mean_us"] == pytest.approx(4500.0)       # steps 3 and 4, not 2
     assert loop.stats.summary(last=3)["busy_mean_us"] == pytest.approx(6000.0)   # 4, 5, 6
+    # The same with only 3 steps kept and more asked for: the starts kept are
+    # steps 3-5, so the busy times are 3 and 4 again (kept: 2, 3 and 4).
+    seen.clear()
+    ask["last"] = 10
+    loop.run(step, 7, keep_last=3)
+    assert seen["steps"] == 3 and seen["busy_mean_us"] == pytest.approx(4500.0)
 
 
 def test_a_step_that_ends_exactly_on_the_next_deadline_misses_nothing():

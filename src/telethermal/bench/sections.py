@@ -191,7 +191,7 @@ def view(d: dict, page: Page) -> list[str]:
                     + ([f"{1e3 * m['setup_s_max']:.0f} ms, {m['deadlines_set_aside']} set aside"]
                        if "setup_s_max" in m else ["-"]))
     lines += table(["master loop", "busy mean", "busy p99", "period p99", "deadline misses",
-                    "touch set-up (longest; its deadlines)"], rows)
+                    "touch set-up: longest; deadlines set aside, all touches"], rows)
     if "setup_s_max" in d["loop"]["no_view"]:
         lines += ["Each touch is set up (its simulated operator and display pad) inside one "
                   "period, with nothing controlled; the deadlines that pass meanwhile are set "

@@ -246,7 +246,7 @@ def combined_summary(runs: list[LoopStats], last: int | None = None) -> dict:
         # kept and no busy time yet: the last ``last`` steps' busy times
         # are then the ``last - 1`` kept, not the one before them too.
         running = r.count - r.finished
-        n = None if not last else last - running
+        n = None if not last else min(last, len(r.starts_s)) - running
         xs = list(r.busy_s)
         return np.asarray(xs if n is None else xs[max(0, len(xs) - n):] if n > 0 else [],
                           dtype=float)

@@ -286,10 +286,10 @@ class MasterService:
     def _touch_period(self, now: float, dt_s: float) -> None:
         touch, session = self.touch, self.session
         if self.recorder is not None and not touch.start_recorded:
+            params = display_params(self.scene, touch.config, touch.operator, touch.idle_c,
+                                    touch.display)
+            self.recorder.touch_start(touch.origin_s - PRE_CONTACT_S, touch.contact_id, params)
             touch.start_recorded = True
-            self.recorder.touch_start(touch.origin_s - PRE_CONTACT_S, touch.contact_id,
-                                      display_params(self.scene, touch.config, touch.operator,
-                                                     touch.idle_c, touch.display))
         t = self.last_period_t_s = now - touch.origin_s
         news = session.news(now, self.endpoint.peer_alive)
         sensors = touch.devices.read(t)
@@ -321,7 +321,8 @@ class MasterService:
             touch.devices.close()
         finally:
             try:
-                if self.recorder is not None:
+                if self.recorder is not None and touch.start_recorded:
+                    # (a touch whose start was never recorded has no end there either)
                     self.recorder.touch_end({"contact_id": touch.contact_id, "error": error}, {})
                 self._send(self.session.close_contact(time.monotonic(),
                                                       touch.operator.finger_ir_c))
