@@ -38,6 +38,7 @@ def test_a_seed_is_a_whole_number_not_below_zero(path, action):
     (["session", "--contact-s", "1e6"], "'1e6' is over 600 (a touch of up to 10 minutes"),
     (["session", "--rate-hz", "1e9"], "'1e9' is over 10000"),
     (["demo", "--contact-s", "700"], "'700' is over 600"),
+    (["demo", "--rate-hz", "1e9"], "'1e9' is over 10000"),
     (["simulate", "--seconds", "1e9"], "'1e9' is over 600"),
     (["admin", "send", "slave", "status", "--timeout-s", "-1"], "must be positive and finite"),
     (["admin", "send", "slave", "status", "--timeout-s", "nan"], "must be positive and finite"),

@@ -26,7 +26,7 @@ def cmd_demo(args) -> int:
                   seed=args.seed, contact_s=args.contact_s, record_dir=args.record,
                   view_port=args.view, devices=args.devices, json_path=args.json,
                   progress=_progress, status=console.status, method=args.method,
-                  calibration=args.calibration or "")
+                  calibration=args.calibration or "", rate_hz=args.rate_hz)
     if result.view is not None:
         print(f"the view stays up at {result.view.url} (recordings play there); Ctrl-C to "
               "stop", flush=True)
@@ -251,6 +251,11 @@ def add_demo(sub) -> None:
                         "calibration it holds and the master given its [display] table "
                         "(each service's config key pad_calibration); either may be absent. "
                         "Without it, a scene with [as_built] is calibrated first")
+    p.add_argument("--rate-hz", type=_positive(at_most=RATE_MAX_HZ, why=RATE_WHY),
+                   default=DEFAULT_RATE_HZ,
+                   help=f"the master's display loop rate (default {DEFAULT_RATE_HZ:g} Hz; "
+                        "under --devices qemu a lower rate keeps the emulated boards on time: "
+                        "firmware/README.md)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
                    help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
                         "(default 8050); it stays up after the touches until Ctrl-C")

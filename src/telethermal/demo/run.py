@@ -155,11 +155,13 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
              materials, seed: int = 0, contact_s: float = 5.0, echo=print,
              realtime_priority: int = 20, record_dir: Path | None = None,
              view_port: int | None = None, devices: str = "sim", firmware_build: str = "",
-             display_calibration: str = "", pad_calibration: str = "") -> dict:
+             display_calibration: str = "", pad_calibration: str = "",
+             rate_hz: float = DEFAULT_RATE_HZ) -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
     in-process session's (``in_process_flux_rms_error_rel``). ``view_port``:
     the live view (``telethermal view``) on that HTTP port, started once the
-    services are up and returned, still running, as ``report["view"]``."""
+    services are up and returned, still running, as ``report["view"]``.
+    ``rate_hz``: the master's display rate, networked and in process."""
     from telethermal.physics.scene import load_scene
 
     from telethermal.ident.registry import load_model
@@ -175,7 +177,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     prepare_policy(scene, echo)
     ports = free_ports(5)
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
-                                          ports[:4], seed, realtime_priority=realtime_priority,
+                                          ports[:4], seed, rate_hz=rate_hz,
+                                          realtime_priority=realtime_priority,
                                           record_dir=record_dir, devices=devices,
                                           view_port=ports[4] if view_port is not None else 0,
                                           firmware_build=firmware_build,
@@ -187,7 +190,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     view = None
     try:
         wait_connected(services, ports[3])
-        echo("slave and master up as two processes on loopback (CURVE)" +
+        echo(f"slave and master up as two processes on loopback (CURVE), the display at "
+             f"{rate_hz:g} Hz" +
              ("; each on its emulated devices (boards on ptys, CAN drivers on virtual "
               "buses), read through the drivers" if devices == "emulated" else "") +
              ("; their boards the firmware on emulated STM32F405s (QEMU)"
@@ -215,7 +219,7 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
         for i, (material, again) in enumerate(plan):
             row, decided[material] = demo_touch(
                 scene, material, ports, seed + 1 + i, contact_s, out, identifier, generator,
-                again, echo, display_cal, decided.get(material), sensors)
+                again, echo, display_cal, decided.get(material), sensors, rate_hz)
             touches.append(row)
     except BaseException:
         if view is not None:
@@ -224,7 +228,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     finally:
         codes = services.stop()
     echo(f"services stopped: exit codes slave {codes['slave']}, master {codes['master']}")
-    return {"scene": scene.name, "devices": devices, "touches": touches, "exit_codes": codes,
+    return {"scene": scene.name, "devices": devices, "rate_hz": rate_hz, "touches": touches,
+            "exit_codes": codes,
             "slave_thermometer_calibration": cal,
             "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports)),
             **({"view": view} if view is not None else {})}
@@ -285,7 +290,7 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
          contact_s: float = 5.0, record_dir: str | Path | None = None,
          view_port: int | None = None, devices: str = "sim", json_path=None, echo=print,
          progress=_no_progress, status=nullcontext, method: str | None = None,
-         calibration: str = "") -> DemoResult:
+         calibration: str = "", rate_hz: float = DEFAULT_RATE_HZ) -> DemoResult:
     """``telethermal demo``: the scene's databases, an identifier and a flux
     generator trained on them, then slave and master as two processes on
     loopback and a touch on each material (:func:`run_demo`); the summary
@@ -293,7 +298,8 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     line to show; ``progress(total, what)`` and ``status(text)`` are context
     managers held around the long steps (the first yields a callable taking
     a step's label); ``method``: the identifier's (default: ``teleop.models.
-    default_method``); ``calibration``: a file (``demo_calibration``'s)."""
+    default_method``); ``calibration``: a file (``demo_calibration``'s);
+    ``rate_hz``: the master's display rate."""
     from telethermal.physics.scene import describe_models, load_scene
 
     out = Path(out)
@@ -309,7 +315,7 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
                       echo=echo, record_dir=Path(record_dir) if record_dir else None,
                       view_port=view_port, devices=devices, firmware_build=firmware,
                       display_calibration=cal.display_path if cal else "",
-                      pad_calibration=cal.pad_path if cal else "")
+                      pad_calibration=cal.pad_path if cal else "", rate_hz=rate_hz)
     report |= {"calibration": cal.summary()} if cal else {}
     view = report.pop("view", None)
     path = write_json(json_path or out / "demo.json", report)

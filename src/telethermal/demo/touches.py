@@ -9,6 +9,7 @@ import logging
 import math
 import time
 
+from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.errors import TelethermalError, TransportError
 from telethermal.ident.anytime import Label, Reason
 from telethermal.ident.openset import EFFUSIVITY_KEYS
@@ -183,7 +184,7 @@ def same_decision(networked: dict, local: dict) -> str:
 
 def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generator,
                 again: bool, echo, display_cal=None, remembered=None,
-                slave_sensors=None) -> tuple[dict, object]:
+                slave_sensors=None, rate_hz: float = DEFAULT_RATE_HZ) -> tuple[dict, object]:
     """One touch of the demo over the network, beside the same touch in one
     process; prints its line and returns its summary and the in-process
     slave's decision. ``remembered``: what the in-process slave's memory
@@ -191,8 +192,10 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
     networked slave's memory holds its own for a repeated touch.
     ``slave_sensors``: the slave service's instruments and calibration
     (:func:`~telethermal.sim.inprocess.service_sensors`), so the in-process
-    slave makes the service's touch of the seed."""
+    slave makes the service's touch of the seed. ``rate_hz``: the master's
+    display rate (its config's), the in-process touch's too."""
     from telethermal.sim.inprocess import run_session
+    from telethermal.teleop.display_config import DisplayConfig
 
     result = networked_touch(scene, material, ports[:4], seed, contact_s)
     s = result.summary
@@ -200,7 +203,8 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
     plot_session(result, out / f"touch-{name}.png",       # its errors: plots.error_windows
                  f"{scene.name}: {material}{' again' if again else ''} over the network (two "
                  "processes)")
-    local_result = run_session(scene, material, identifier, generator, contact_s=contact_s,
+    local_result = run_session(scene, material, identifier, generator,
+                               DisplayConfig(rate_hz=rate_hz), contact_s=contact_s,
                                seed=seed, display_calibration=display_cal,
                                expected_material=remembered, slave_sensors=slave_sensors)
     local = local_result.summary
