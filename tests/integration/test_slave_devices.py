@@ -81,6 +81,30 @@ def test_through_the_drivers_the_identifier_decides_as_on_the_simulator(identifi
         <= 0.02
 
 
+def test_a_pad_held_between_its_preparation_and_its_touch_keeps_its_samples(identifier,
+                                                                              session, devices):
+    """The slave service prepares the next touch's pad (its trial, the
+    contact's buffer) when the last one lifts, and holds the pad at
+    temperature every sample period until the operator touches: those
+    periods' frames are not the contact's. Each contact sample is the
+    trial's own, at its own index (a networked demo on emulated boards had
+    read 28 held frames' worth of the pre-contact sample first, its onset
+    0.28 s late)."""
+    sim = Slave(SCENE, "plexiglass", identifier, slave_rng(11), session=session)
+    sim.advance_to(10.0)
+    emu = Slave(SCENE, "plexiglass", identifier, slave_rng(11), session=session,
+                devices=devices)
+    for _ in range(25):                 # the service's idle periods before the touch
+        devices.hold()
+    run_touch(emu)
+    c = devices.all_counters()
+    assert c["held_samples"] == 0
+    assert emu.onset_index == sim.onset_index
+    got, expected = emu.channels["force_N"], sim.channels["force_N"]
+    assert np.max(np.abs(got - expected)) < 0.01
+    assert emu.committed_at_s == pytest.approx(sim.committed_at_s, abs=0.05)
+
+
 def test_lost_frames_are_held_and_counted_and_the_decision_stands(identifier, session, devices):
     devices.board_emulator.dropout = 0.05
     emu = Slave(SCENE, "wood", identifier, slave_rng(12), session=session, devices=devices)

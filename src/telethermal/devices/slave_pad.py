@@ -201,6 +201,12 @@ class EmulatedSlavePad(SlavePadDrivers):
         if self._trial is None:
             return super().feed(upto_t_s)
         t, flux, temp, force = self._trial
+        if self._sent == 0:
+            # The pad may have been held since the contact was prepared (a
+            # service holds it every sample period until the touch): those
+            # periods' frames were the board's, not the contact's. The
+            # contact starts at the trial's first frame, the next one.
+            self.begin_contact()
         while self._sent < len(t) and t[self._sent] <= upto_t_s + 1e-12:
             i = self._sent
             self.t_s += 1.0 / self.rate_hz
