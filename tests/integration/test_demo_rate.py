@@ -35,5 +35,6 @@ def test_the_demo_runs_its_display_at_the_rate_asked_for(tmp_path, capsys):
     touches = report["touches"]
     assert [t["material"] for t in touches] == ["wood", "wood"]
     assert [t["loop_steps"] for t in touches] == [periods, periods]
-    # And the in-process touch beside each made the same decision at it.
+    # And the in-process touch beside each ran at it, and decided alike.
+    assert [t["in_process_rate_hz"] for t in touches] == [RATE_HZ, RATE_HZ]
     assert all(t["in_process_same_decision"] for t in touches), touches

@@ -87,15 +87,16 @@ def test_a_pad_held_between_its_preparation_and_its_touch_keeps_its_samples(iden
     contact's buffer) when the last one lifts, and holds the pad at
     temperature every sample period until the operator touches: those
     periods' frames are not the contact's. Each contact sample is the
-    trial's own, at its own index (a networked demo on emulated boards had
-    read 28 held frames' worth of the pre-contact sample first, its onset
-    0.28 s late)."""
+    trial's own, at its own index, even when the last held period's frame
+    was lost on the line."""
     sim = Slave(SCENE, "plexiglass", identifier, slave_rng(11), session=session)
     sim.advance_to(10.0)
     emu = Slave(SCENE, "plexiglass", identifier, slave_rng(11), session=session,
                 devices=devices)
-    for _ in range(25):                 # the service's idle periods before the touch
+    for k in range(25):                 # the service's idle periods before the touch
+        devices.board_emulator.dropout = 1.0 if k == 24 else 0.0
         devices.hold()
+    devices.board_emulator.dropout = 0.0
     run_touch(emu)
     c = devices.all_counters()
     assert c["held_samples"] == 0

@@ -254,7 +254,7 @@ def add_demo(sub) -> None:
     p.add_argument("--rate-hz", type=_positive(at_most=RATE_MAX_HZ, why=RATE_WHY),
                    default=DEFAULT_RATE_HZ,
                    help=f"the master's display loop rate (default {DEFAULT_RATE_HZ:g} Hz; "
-                        "under --devices qemu a lower rate keeps the emulated boards on time: "
+                        "under --devices qemu a lower rate keeps the cores nearly on time: "
                         "firmware/README.md)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
                    help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "

@@ -233,6 +233,7 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
          "loop_steps": s["loop"]["steps"], "transport": s["transport"],
          "devices": s["devices_per_side"],
          "in_process_identified": local["identified"],
+         "in_process_rate_hz": local["rate_hz"],
          "in_process_same_decision": decided_alike(s, local),
          "in_process_decision_time_s": local["decision_time_s"],
          "in_process_render_start_s": local["render_start_s"],

@@ -189,9 +189,7 @@ class EmulatedSlavePad(SlavePadDrivers):
                        np.asarray(force_n))
         self._sent = 0
         self.write_s = np.full(len(t_s), np.nan)
-        contact = self.contact(len(t_s))
-        self._begun = True                     # in lockstep: the next frame is sample 0
-        return contact
+        return self.contact(len(t_s))     # begun at the trial's first frame (feed)
 
     def feed(self, upto_t_s: float) -> bool:
         """Write the frames of the samples up to ``upto_t_s`` and read them
@@ -205,8 +203,14 @@ class EmulatedSlavePad(SlavePadDrivers):
             # The pad may have been held since the contact was prepared (a
             # service holds it every sample period until the touch): those
             # periods' frames were the board's, not the contact's. The
-            # contact starts at the trial's first frame, the next one.
+            # contact starts at the trial's first frame, the next one: the
+            # emulator's next sequence number where it has one (a held
+            # period's frame lost on the line changes nothing then), else
+            # the one after the last frame read (the firmware numbers its own).
             self.begin_contact()
+            next_seq = getattr(self.board_emulator, "seq", None)
+            if next_seq is not None:
+                self._seq0 = next_seq
         while self._sent < len(t) and t[self._sent] <= upto_t_s + 1e-12:
             i = self._sent
             self.t_s += 1.0 / self.rate_hz
