@@ -122,6 +122,9 @@ def test_bad_configs_are_refused_with_the_file_and_key(tmp_path, capsys):
 @pytest.mark.parametrize("role, text, message", [
     ("master", "[master]\nrate_hz = nan\n", r"rate_hz = nan: the display loop's rate"),
     ("master", "[master]\nrate_hz = 0.0\n", r"rate_hz = 0.0: the display loop's rate"),
+    ("master", "[master]\nrate_hz = 10.0\n",
+     r"rate_hz = 10.0: the display loop's rate, from 20 Hz \(two commands inside the Peltier "
+     r"driver's 100 ms watchdog\)"),
     ("master", "[master]\nview_port = -5\n", r"view_port = -5: a port is 1-65535 \(0: off\)"),
     ("master", "[master]\nadmin_port = 0\n", r"admin_port = 0: a port is 1-65535$"),
     ("slave", "[slave]\nadmin_port = 70000\n", r"admin_port = 70000: a port is 1-65535"),

@@ -73,9 +73,11 @@ def _print_lines(lines: list[str]) -> None:
         print(line)
 
 
-def _positive(kind=float, at_most: float | None = None, why: str = ""):
+def _positive(kind=float, at_most: float | None = None, why: str = "",
+              at_least: float | None = None, why_least: str = ""):
     """An argument type: a positive, finite ``kind``, no more than
-    ``at_most`` when given (``why``: the bound's reason, said with it)."""
+    ``at_most`` and no less than ``at_least`` when given (``why``,
+    ``why_least``: each bound's reason, said with it)."""
     def parse(text):
         try:
             value = kind(text)
@@ -86,6 +88,9 @@ def _positive(kind=float, at_most: float | None = None, why: str = ""):
         if at_most is not None and value > at_most:
             raise argparse.ArgumentTypeError(f"{text!r} is over {at_most:g}" +
                                              (f" ({why})" if why else ""))
+        if at_least is not None and value < at_least:
+            raise argparse.ArgumentTypeError(f"{text!r} is under {at_least:g}" +
+                                             (f" ({why_least})" if why_least else ""))
         return value
     return parse
 

@@ -7,6 +7,7 @@ from pathlib import Path
 from telethermal.cli._common import (CONTACT_MAX_S, CONTACT_WHY, RATE_MAX_HZ, RATE_WHY,
                                      _positive, _progress, _seed, console)
 from telethermal.control.loop import DEFAULT_RATE_HZ
+from telethermal.services.config import MIN_RATE_HZ, MIN_RATE_WHY
 from telethermal.errors import TelethermalError
 from telethermal.jsonfile import write_json
 
@@ -251,9 +252,11 @@ def add_demo(sub) -> None:
                         "calibration it holds and the master given its [display] table "
                         "(each service's config key pad_calibration); either may be absent. "
                         "Without it, a scene with [as_built] is calibrated first")
-    p.add_argument("--rate-hz", type=_positive(at_most=RATE_MAX_HZ, why=RATE_WHY),
+    p.add_argument("--rate-hz", type=_positive(at_most=RATE_MAX_HZ, why=RATE_WHY,
+                                               at_least=MIN_RATE_HZ, why_least=MIN_RATE_WHY),
                    default=DEFAULT_RATE_HZ,
-                   help=f"the master's display loop rate (default {DEFAULT_RATE_HZ:g} Hz; "
+                   help=f"the master's display loop rate (default {DEFAULT_RATE_HZ:g} Hz, at "
+                        f"least {MIN_RATE_HZ:g}; "
                         "under --devices qemu a lower rate keeps the cores nearly on time: "
                         "firmware/README.md)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",

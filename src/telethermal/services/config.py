@@ -84,6 +84,13 @@ class SlaveConfig:
         self.devices = _devices(self, "/dev/ttyUSB1")
 
 
+#: The slowest display loop a master runs, Hz: two of its commands inside
+#: the Peltier driver's 100 ms watchdog (proto/CAN.md), so that one late
+#: period does not disable the element.
+MIN_RATE_HZ = 20.0
+MIN_RATE_WHY = "two commands inside the Peltier driver's 100 ms watchdog"
+
+
 @dataclass
 class MasterConfig:
     scene: str = "fingertip-7"
@@ -133,9 +140,9 @@ class MasterConfig:
         import math
         _check_ports(self, ("admin_port", "view_port"), off_ok=("view_port",))
         if not (isinstance(self.rate_hz, (int, float)) and math.isfinite(self.rate_hz)
-                and 0 < self.rate_hz <= 10000):
-            raise ConfigError(f"rate_hz = {self.rate_hz!r}: the display loop's rate, over 0 "
-                              "and up to 10000 Hz")
+                and MIN_RATE_HZ <= self.rate_hz <= 10000):
+            raise ConfigError(f"rate_hz = {self.rate_hz!r}: the display loop's rate, from "
+                              f"{MIN_RATE_HZ:g} Hz ({MIN_RATE_WHY}) up to 10000 Hz")
         parse_cpus(self.cpus)
         if isinstance(self.realtime_priority, bool) or not isinstance(
                 self.realtime_priority, int) or not 0 <= self.realtime_priority <= 99:
