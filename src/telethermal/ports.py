@@ -11,6 +11,7 @@ import time
 
 log = logging.getLogger(__name__)
 
+
 def port_problem(value, zero_means: str | None = None) -> str | None:
     """Why ``value`` is not a TCP port (1-65535; 0 too where ``zero_means``
     says what 0 does), or None: the one check of a configured or typed port."""

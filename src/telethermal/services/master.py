@@ -53,7 +53,7 @@ class Touch:
     def __init__(self, service: "MasterService", contact_s: float, seed: int, now: float,
                  source: str = "trajectory"):
         scene = service.scene
-        cfg = self.config = replace(service.display_config, source=source)
+        cfg = replace(service.display_config, source=source)
         world = simulated("master_touch")(scene, seed)
         self.operator = world.operator
         # Idling before the touch: pre-conditioned for what the slave expects.
@@ -71,8 +71,11 @@ class Touch:
         self.contact_s = contact_s
         # The id the session gives the contact at the display's onset.
         self.contact_id = service.session.next_contact_id
-        #: A recording's start of this touch: made at its first period (the
+        #: A recording's start of this touch: its display's parameters, made
+        #: here (the set-up, not a period), written at its first period (the
         #: time its clock starts: ``origin_s - PRE_CONTACT_S``).
+        self.record_params = None if service.recorder is None else display_params(
+            scene, cfg, self.operator, self.idle_c, self.display)
         self.start_recorded = False
         self.loop_count0 = service.loop.stats.count
         self.misses0 = service.loop.stats.missed_deadlines
@@ -286,9 +289,8 @@ class MasterService:
     def _touch_period(self, now: float, dt_s: float) -> None:
         touch, session = self.touch, self.session
         if self.recorder is not None and not touch.start_recorded:
-            params = display_params(self.scene, touch.config, touch.operator, touch.idle_c,
-                                    touch.display)
-            self.recorder.touch_start(touch.origin_s - PRE_CONTACT_S, touch.contact_id, params)
+            self.recorder.touch_start(touch.origin_s - PRE_CONTACT_S, touch.contact_id,
+                                      touch.record_params)
             touch.start_recorded = True
         t = self.last_period_t_s = now - touch.origin_s
         news = session.news(now, self.endpoint.peer_alive)
