@@ -113,3 +113,21 @@ def test_a_humid_room_lifts_a_remembered_metals_idle_above_the_dew_point(models)
     assert s["idle_surface_minus_dew_k"] > 0.0
     assert s["display_event_counts"].get("idle lifted above the dew point", 0) >= 1
     assert s["safety_events"] == 0
+
+
+def test_a_posterior_collapsing_onto_a_conductor_does_not_send_the_pad_the_wrong_way(models):
+    """Graphite, seed 2: the pad is held at its idle until the first
+    posterior; the posterior mixture (mostly insulators by 1/e) then asks a
+    junction far above the idle, and the hand-over closes that step at its
+    slope. The posterior then collapses onto graphite, a conductor: the
+    controller's wish falls to a few kelvin above the idle, still above it
+    and rising. The junction command must then never go below where the
+    touch started (with the hand-over's offset kept whole it went kelvins
+    below the idle, cooling the finger the controller wanted warmed). The
+    bound: 0.05 K (the command's own slope is 0.2 K a period)."""
+    res = touch(models, 1.0, material="graphite", seed=2)
+    tr = res.trace
+    first = (tr["t_s"] >= 0.0) & (tr["t_s"] < 0.5)
+    command = tr["junction_cmd_c"][first]
+    assert command.min() >= command[0] - 0.05
+    assert res.summary["safety_events"] == 0

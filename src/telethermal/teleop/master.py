@@ -371,9 +371,7 @@ class MasterDisplay:
         if not h.pid_running:
             h.offset_k = self.safety.applied_temp_c - command if h.held else 0.0
             h.pid_running = True
-        step = self.config.handover_k_s * dt_s
-        h.offset_k -= min(max(h.offset_k, -step), step)
-        return h.offset_k
+        return h.close_offset(self.safety.applied_temp_c, command, self.config.handover_k_s * dt_s)
 
     def _track(self, t_s: float, dt_s: float, sensors: PadSensors, news: SlaveNews,
                standby: float, naive: bool) -> tuple[float, float]:

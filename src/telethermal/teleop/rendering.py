@@ -93,6 +93,23 @@ class Handover:
     #: The phase to return to when a lost link comes back.
     lost_from: object | None = None
 
+    def close_offset(self, applied_c: float, command_c: float, step_k: float) -> float:
+        """The offset for this period: ``step_k`` closer to zero, and never
+        more than what separates the command from what is applied. The
+        command may move while the step closes (a new posterior or decision
+        changes what the controller asks for); when it comes back towards
+        what is applied, or past it, the offset shrinks with it: added to the
+        command it never drives the pad further from the command than it
+        was. Kept whole, a stale offset would ask for a junction beyond
+        both what is applied and what the controller wants (a posterior
+        collapsing from insulators onto a conductor: the wish falls by
+        several kelvin while the step opened towards the insulators is
+        still open)."""
+        self.offset_k -= min(max(self.offset_k, -step_k), step_k)
+        gap = applied_c - command_c
+        self.offset_k = min(max(self.offset_k, min(gap, 0.0)), max(gap, 0.0))
+        return self.offset_k
+
 
 def blended(h: Handover, t_s: float, weights: dict, blend_s: float) -> dict:
     """``weights`` (what is rendered now), reached from the blend's starting
