@@ -41,6 +41,8 @@ def test_a_seed_is_a_whole_number_not_below_zero(path, action):
     (["demo", "--rate-hz", "1e9"], "'1e9' is over 10000"),
     (["demo", "--rate-hz", "5"], "'5' is under 20 (two commands inside the Peltier driver's "
                                  "100 ms watchdog)"),
+    (["session", "--rate-hz", "10"], "'10' is under 20 (two commands inside the Peltier "
+                                     "driver's 100 ms watchdog)"),
     (["simulate", "--seconds", "1e9"], "'1e9' is over 600"),
     (["admin", "send", "slave", "status", "--timeout-s", "-1"], "must be positive and finite"),
     (["admin", "send", "slave", "status", "--timeout-s", "nan"], "must be positive and finite"),

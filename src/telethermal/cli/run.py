@@ -191,9 +191,11 @@ def add_session(sub) -> None:
     p.add_argument("--plot", help="PNG of flux and temperature against direct contact")
     p.add_argument("--identifier", help="saved identifier (.npz); default: train one")
     p.add_argument("--generator", help="saved flux generator (.npz); default: train one")
-    p.add_argument("--rate-hz", type=_positive(at_most=RATE_MAX_HZ, why=RATE_WHY),
+    p.add_argument("--rate-hz", type=_positive(at_most=RATE_MAX_HZ, why=RATE_WHY,
+                                               at_least=MIN_RATE_HZ, why_least=MIN_RATE_WHY),
                    default=DEFAULT_RATE_HZ,
-                   help=f"display loop rate (default {DEFAULT_RATE_HZ:g} Hz)")
+                   help=f"display loop rate (default {DEFAULT_RATE_HZ:g} Hz, at least "
+                        f"{MIN_RATE_HZ:g}, as a master service runs)")
     p.add_argument("--before", choices=("prior", "hold"), default="prior",
                    help="before identification: track the posterior-weighted flux (prior) "
                         "or hold the pad at the object temperature (hold, the paper's)")
