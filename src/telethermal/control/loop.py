@@ -242,14 +242,14 @@ def combined_summary(runs: list[LoopStats], last: int | None = None) -> dict:
         return np.asarray(xs[-last:] if last else xs, dtype=float)
 
     def busy_tail(r):
+        xs = list(r.busy_s)
+        if not last:
+            return np.asarray(xs, dtype=float)
         # A step still running (a summary taken inside it) has its start
         # kept and no busy time yet: the last ``last`` steps' busy times
         # are then the ``last - 1`` kept, not the one before them too.
-        running = r.count - r.finished
-        n = None if not last else min(last, len(r.starts_s)) - running
-        xs = list(r.busy_s)
-        return np.asarray(xs if n is None else xs[max(0, len(xs) - n):] if n > 0 else [],
-                          dtype=float)
+        n = min(last, len(r.starts_s)) - (r.count - r.finished)
+        return np.asarray(xs[max(0, len(xs) - n):] if n > 0 else [], dtype=float)
 
     starts = [tail(r.starts_s) for r in runs]
     periods = np.concatenate([np.diff(s) for s in starts if len(s) > 1] or [np.zeros(0)])
