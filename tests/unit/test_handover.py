@@ -2,6 +2,8 @@
 from what is applied to what the controller asks for, at a bounded slope,
 and never past what separates the two."""
 
+import math
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -53,4 +55,17 @@ def test_the_offset_never_asks_past_what_is_applied(start, steps, step_k):
         offset = h.close_offset(applied, command, step_k)
         lo, hi = min(applied, command), max(applied, command)
         assert lo - 1e-9 <= command + offset <= hi + 1e-9
-        assert abs(offset) <= before + 1e-12
+        # Closer to zero by the step each period, or by more where the
+        # command came towards what is applied.
+        assert abs(offset) <= min(max(before - step_k, 0.0), abs(applied - command)) + 1e-9
+
+
+@pytest.mark.parametrize("command", [math.nan, math.inf])
+def test_a_command_that_is_not_a_number_leaves_no_offset(command):
+    # A reading lost in the hand-over's first period makes the command (and
+    # so the offset opened on it) not a number: no offset is carried on, in
+    # that period or the next (an offset of NaN would poison every command
+    # after it in the contact).
+    h = Handover(offset_k=20.0 - command)
+    assert h.close_offset(20.0, command, 0.1) == 0.0
+    assert h.close_offset(20.0, 25.0, 0.1) == 0.0

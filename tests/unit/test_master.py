@@ -149,6 +149,14 @@ def test_a_dead_flux_sensor_is_the_safe_state_within_one_period(exact):
     after = [r for r in rows if r[0] >= 1.3]
     assert not any(r[3] for r in after)                        # back once the reading is
     assert master.safety.events["entered safe state"] == 1
+    # Leaving it, the controller starts from what the pad was given (the
+    # neutral temperature), not from its own last command before the fault:
+    # the junction moves within the controller's own slew limit, and the
+    # supervisor's looser rate limit (its backstop) never has to cut it.
+    config = static()
+    junction = np.array([r[2] for r in rows if r[0] >= 1.2 - 1e-9])
+    assert np.max(np.abs(np.diff(junction))) <= config.slew_k_s / config.rate_hz + 1e-9
+    assert "clamped: rate" not in master.safety.events
 
 
 def test_release_returns_to_standby_and_bad_config_is_refused(exact):

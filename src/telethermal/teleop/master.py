@@ -406,6 +406,7 @@ class MasterDisplay:
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
         applied, self.safety = supervise(self.safety, reading, request, self.config.limits, dt_s)
+        self._command_c = applied.temp_c        # the next slew from what the pad was given
         if self.detector.touching and self.junction_loop is not None:
             self.junction_loop.cancel_probe()       # no re-arm probe current under a finger
         current_a, junction_c = self._current(applied.temp_c, sensors, dt_s)

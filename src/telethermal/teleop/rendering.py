@@ -104,9 +104,15 @@ class Handover:
         both what is applied and what the controller wants (a posterior
         collapsing from insulators onto a conductor: the wish falls by
         several kelvin while the step opened towards the insulators is
-        still open)."""
-        self.offset_k -= min(max(self.offset_k, -step_k), step_k)
+        still open). Once shrunk it stays small: a command that then moves
+        away again is followed at the controller's own slew limit, not at
+        the hand-over's slope. A step from or to a non-finite command (a
+        reading lost in the hand-over's first period) leaves no offset."""
         gap = applied_c - command_c
+        if not (math.isfinite(self.offset_k) and math.isfinite(gap)):
+            self.offset_k = 0.0
+            return self.offset_k
+        self.offset_k -= min(max(self.offset_k, -step_k), step_k)
         self.offset_k = min(max(self.offset_k, min(gap, 0.0)), max(gap, 0.0))
         return self.offset_k
 
