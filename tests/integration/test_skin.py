@@ -40,8 +40,9 @@ def _session(models, material, model, seed, idle, expected):
                        contact_s=1.5, seed=seed, expected_material=expected).summary
 
 
-#: Why the wood first-touch assertion below is expected to fail (issue 43,
-#: open): idling at the object, wood's first touch misses 0.3 K with either
+#: Why the wood first-touch assertion below is expected to fail (an earlier
+#: issue's skin target, 0.3 K; issue 43's are on the policy's idle): idling
+#: at the object, wood's first touch misses 0.3 K with either
 #: controller (docs/display-loop.md, "Not done here"): the pad's own layers
 #: draw a metal's flux in the first instants, before the slave has named
 #: anything, and the junction loop (current slewed at 100 A/s, the
