@@ -74,7 +74,10 @@ def estimated_target(estimate) -> Estimated | None:
 class Handover:
     """What the display carries from one way of driving the pad to the next
     (holding, tracking, the posterior mixture, the decided material, the
-    link lost and back), so none of these changes makes a step."""
+    link lost and back), so none of these changes makes a step. A hand-over
+    (the PID restarted from what is read, the step closed at
+    ``handover_k_s``) follows holding and the safe state; a link that comes
+    back is followed at the controller's slew limit, the PID carried on."""
 
     #: The pad was held (not tracking) during this contact.
     held: bool = False
