@@ -221,7 +221,7 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
          f"{s['temp_rms_error_c']:.2f} K RMS; safety events {s['safety_events']}; "
          f"master loop p99 {s['loop_period_p99_us']:.0f} us, "
          f"{s['loop']['deadline_misses']} missed deadlines (set up in "
-         f"{1e3 * s['loop'].get('setup_s', 0.0):.0f} ms before its first period); in one process "
+         f"{1e3 * s['loop']['setup_s']:.0f} ms before its first period); in one process "
          f"{same_decision(s, local)}, {100 * local['flux_rms_error_rel']:.2f} %")
     return {k: s[k] for k in (
         "material", "identified", "unknown_reason", *EFFUSIVITY_KEYS, "decision_text",
@@ -229,7 +229,7 @@ def demo_touch(scene, material, ports, seed, contact_s, out, identifier, generat
         "flux_rms_error_rel", "flux_rms_error_rel_first_s", "flux_rms_error_rel_whole",
         "temp_rms_error_c", "time_to_correct_flux_s", "safety_events", "loop_period_p99_us")} | \
         {"again": again, "deadline_misses": s["loop"]["deadline_misses"],
-         "setup_s": s["loop"].get("setup_s"),
+         "setup_s": s["loop"]["setup_s"],
          "loop_steps": s["loop"]["steps"], "transport": s["transport"],
          "devices": s["devices_per_side"],
          "in_process_identified": local["identified"],

@@ -244,19 +244,19 @@ class MasterService:
             except Exception as exc:            # one message's, not the service's
                 self._internal_error(f"message {message.kind} from the slave", exc)
         request = self.admin.receive()
+        set_up = False
         if request is not None:
             touch = self.touch
             self._on_admin(request, now)
-            if self.hardware is None and self.touch is not None and self.touch is not touch:
-                # A touch was set up in this period while nothing was being
-                # controlled (a simulated display exists only in a touch): its
-                # clock and the loop's deadlines start when it is ready, and
-                # its first period is the next one (set-up time: its report).
-                self.touch.start_clock(now, time.monotonic())
-                self.loop.restart_deadlines()
-                self.endpoint.state = self.state
-                return not self.stop_requested
-        if self.hardware is not None:
+            set_up = self.hardware is None and self.touch is not None and self.touch is not touch
+        if set_up:
+            # A touch was set up in this period while nothing was being
+            # controlled (a simulated display exists only in a touch): its
+            # clock and the loop's deadlines start when it is ready, and its
+            # first period is the next one (set-up time: its report).
+            self.touch.start_clock(now, time.monotonic())
+            self.loop.restart_deadlines()
+        elif self.hardware is not None:
             self._hardware_period(now, dt_s)
         elif self.touch is not None:
             try:

@@ -402,7 +402,6 @@ class MasterDisplay:
             if not lo <= command <= hi:
                 command = min(max(command, lo), hi)
                 self._count("rendering limited by the surface band")
-        self._command_c = command
         request = Request(command, 0.0 if math.isnan(desired) else desired, t_s)
         reading = Reading(t_s, sensors.pad_temp_c, sensors.flux_w_m2)
         applied, self.safety = supervise(self.safety, reading, request, self.config.limits, dt_s)
