@@ -6,6 +6,7 @@
 #include "regs.h"
 
 static volatile uint32_t millis;
+static uint32_t stamp_base; /* board_stamp's count when the tick changed (board_time_scale) */
 static bool emulated;
 
 #define RING 512u
@@ -140,7 +141,33 @@ uint32_t board_stamp(void)
         ms = millis;
         cycles = SYST_RVR - SYST_CVR;
     } while (ms != millis);
-    return ms * (BOARD_SYSCLK_HZ / 1000u) + cycles;
+    return stamp_base + ms * (SYST_RVR + 1u) + cycles;
+}
+
+bool board_time_scale(uint32_t scale_milli)
+{
+    if (scale_milli < BOARD_TIME_SCALE_MIN_MILLI || scale_milli > BOARD_TIME_SCALE_MAX_MILLI) {
+        return false;
+    }
+    /* One tick every scale_milli / 1000 ms of the core's clock: at 168 MHz,
+     * 168 counts a thousandth (24 bits hold 99 ms). The tick under way
+     * ends now, counted whole (hal_micros never goes back), and the stamps
+     * go on from where they were (stamp_base). */
+    uint32_t primask;
+    __asm__ volatile("mrs %0, primask\n\tcpsid i" : "=r"(primask)::"memory");
+    SYST_CSR = 0;
+    if (SCB_ICSR & SCB_ICSR_PENDSTSET) { /* a tick ended since the mask: its count */
+        millis++;
+        SCB_ICSR = SCB_ICSR_PENDSTCLR;
+    }
+    uint32_t stamp = board_stamp();
+    SYST_RVR = (BOARD_SYSCLK_HZ / 1000000u) * scale_milli - 1u;
+    SYST_CVR = 0;
+    millis++;
+    stamp_base = stamp - millis * (SYST_RVR + 1u);
+    SYST_CSR = SYST_CSR_CLKSOURCE | SYST_CSR_TICKINT | SYST_CSR_ENABLE;
+    __asm__ volatile("msr primask, %0" ::"r"(primask) : "memory");
+    return true;
 }
 
 uint32_t board_loop_begin(void)
@@ -238,7 +265,10 @@ uint32_t hal_micros(void)
         ms = millis;
         cycles = SYST_RVR - SYST_CVR;
     } while (ms != millis);
-    return ms * 1000u + cycles / (BOARD_SYSCLK_HZ / 1000000u);
+    /* The counts of a tick (SYST_RVR + 1) are its 1000 us, whatever the
+     * time scale (board_time_scale): the FPU's division (exact to well
+     * under a microsecond for a tick's at most 24 bits of counts). */
+    return ms * 1000u + (uint32_t)((float)cycles * 1000.0f / (float)(SYST_RVR + 1u));
 }
 
 /* A received byte into the ring. A full ring leaves the byte in the data

@@ -38,6 +38,16 @@ void board_fault(void) __attribute__((noreturn));
  * differences). */
 uint32_t board_stamp(void);
 
+/* Processor in the loop, a rig slower than real time: SysTick's tick (the
+ * HAL's millisecond: hal_millis, hal_micros, every timeout and the
+ * watchdog) every scale_milli / 1000 ms of the core's clock, so that the
+ * firmware's time runs as the simulated plant's and the services' do
+ * (telethermal's time_scale; plant.c's "k" line). 1000 (the default) is
+ * real time; 1000-99000, else refused (false). On silicon nothing sends it. */
+#define BOARD_TIME_SCALE_MIN_MILLI 1000u
+#define BOARD_TIME_SCALE_MAX_MILLI 99000u
+bool board_time_scale(uint32_t scale_milli);
+
 /* The loop-time measurement, in core cycles (a debugger, or QEMU's monitor,
  * reads the figures). An iteration begins with board_loop_begin and ends
  * with board_loop_done, having handled `units` pieces of work (command

@@ -11,6 +11,9 @@
  *                      one sample for the sensor board, stamped with
  *                      hal_micros() when the board takes it (floats in any
  *                      strtof form, hexadecimal ones exact)
+ *   k <scale_milli>    the rig runs scale_milli / 1000 times slower than
+ *                      real time: the core's millisecond stretched as much
+ *                      (board_time_scale); answered "k <scale_milli>"
  * board -> plant:
  *   ready                                at start, the UARTs set up
  *   set <ms> <enabled> <current_ma>      every change of the H-bridge
@@ -137,6 +140,17 @@ static void handle_line(void)
             measure.drive_milli = (int16_t)v[3];
             measure.sensors_ok = v[4] != 0;
             measured = true;
+        }
+    } else if (line[0] == 'k' && line[1] == ' ') {
+        char *end;
+        long milli = strtol(line + 2, &end, 10);
+        bool taken = end != line + 2 && *end == '\0' && milli > 0 &&
+                     board_time_scale((uint32_t)milli);
+        bad = taken ? 0 : -1;
+        if (!bad) {
+            put_str("k ");
+            put_int((int32_t)milli);
+            put_str("\n");
         }
     } else if (line[0] == 's' && line[1] == ' ' && !sample_ready) {
         bad = parse_sample(line + 1, &sample);

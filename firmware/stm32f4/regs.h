@@ -93,6 +93,9 @@
 #define NVIC_ICER(n) REG32(0xE000E180u + 4u * (n))
 #define NVIC_ISPR(n) REG32(0xE000E200u + 4u * (n))
 #define SCB_CPACR REG32(0xE000ED88u)
+#define SCB_ICSR REG32(0xE000ED04u) /* ARMv7-M B3.2.4 */
+#define SCB_ICSR_PENDSTSET (1u << 26)
+#define SCB_ICSR_PENDSTCLR (1u << 25)
 #define SCB_VTOR REG32(0xE000ED08u)
 
 #endif

@@ -23,7 +23,7 @@ import time
 import pytest
 
 from telethermal.bench import firmware
-from telethermal.devices import qemu
+from telethermal.devices import qemu, qemu_elf
 from telethermal.devices.board import SensorBoard
 from telethermal.devices.peltier import PeltierDriver
 from test_firmware import (REFUSED, WATCHDOG_MS, can_golden_round_trip, expected_keys,
@@ -91,7 +91,7 @@ def test_the_arm_build_is_warning_free_and_small(images):
     each image fits the part's 1 MB of flash and 128 KB of SRAM with room
     to spare: a tenth of each, the budget the README states."""
     for name, elf in images.items():
-        size = qemu.image_size(elf)
+        size = qemu_elf.image_size(elf)
         assert 0 < size["flash"] <= 1024 * 1024 // 10, (name, size)
         assert 0 < size["ram"] <= 128 * 1024 // 10, (name, size)
 
@@ -103,7 +103,7 @@ def test_no_image_links_ungetc(images):
     about one line in 350 runs of the CAN vectors under load while it used
     sscanf."""
     for name, elf in images.items():
-        linked = {s for s in qemu.symbols(elf) if "ungetc" in s or "scanf" in s}
+        linked = {s for s in qemu_elf.symbols(elf) if "ungetc" in s or "scanf" in s}
         assert not linked, (name, sorted(linked))
 
 
@@ -115,7 +115,7 @@ def test_check_devices_qemu_builds_and_reports_the_same_sizes(images):
     findings = qemu_findings()
     assert all(f.ok for f in findings), [f.text() for f in findings]
     for name, elf in images.items():
-        size = qemu.image_size(elf)
+        size = qemu_elf.image_size(elf)
         assert f"firmware image {name}: flash {size['flash']:,} B, RAM {size['ram']:,} B" in \
             [f.what for f in findings]
 
@@ -276,6 +276,32 @@ def test_the_watchdog_disables_the_element_after_100_ms_of_silence_over_20_trial
     assert all(WATCHDOG_MS <= d <= TRIP_LATE_MS for d in delays), delays
     loop = firmware.loop_figures(core, images["tt_peltier"])
     assert loop["iterations"] > 1000 and loop["under_a_tenth"], loop
+
+
+#: SysTick's reload value register (ARMv7-M B3.3.3): the counts of a tick, less one.
+SYST_RVR = 0xE000E014
+
+
+def test_the_plant_link_stretches_the_cores_millisecond(peltier, images):
+    """A rig slower than real time (a service's ``time_scale``): the plant
+    link's ``k <scale_milli>`` sets SysTick's tick to that many thousandths
+    of a millisecond of the core's clock (168 counts each at 168 MHz), and
+    is answered; a scale outside 1-99 or a malformed line is counted in
+    ``plant_bad_lines``, unanswered, the tick left as it was. On the
+    stretched tick the watchdog still trips 100 ms of the firmware's time
+    after the last command (its SLCAN stamps), never early."""
+    core, link, plant = peltier
+    assert core.read_u32(SYST_RVR) == 168_000 - 1                 # 1 ms from reset
+    plant.write(b"k 999\nk 99001\nk 4000x\nk\n")
+    plant.write(b"k 4000\n")
+    plant.until(rb"k 4000\n")
+    assert re.findall(rb"^k \d+", plant.log, re.M) == [b"k 4000"]
+    bad = qemu_elf.symbols(images["tt_peltier"])["plant_bad_lines"]
+    assert core.read_u32(bad) == 4
+    assert core.read_u32(SYST_RVR) == 168 * 4000 - 1
+    w = firmware.watchdog_trials(link, plant, trials=3)
+    assert len(w["trips"]) >= 3, w
+    assert all(WATCHDOG_MS <= d <= TRIP_LATE_MS for d in w["delays_ms"]), w["delays_ms"]
 
 
 def test_python_can_slcan_and_the_projects_driver_trust_the_core(peltier):

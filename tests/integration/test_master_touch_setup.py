@@ -52,7 +52,6 @@ def test_a_touch_set_up_inside_a_period_starts_its_clock_and_deadlines_when_read
     operator, forces = operator_and_forces(CONTACT_S)
     before, _, _, _ = slave_recording(models, "aluminium", forces, operator.finger_ir_c, False)
     clock = SimClock(100.0)
-    monkeypatch.setattr(master_service, "time", SimpleNamespace(monotonic=clock.now))
     made = []
 
     class SlowTouch(master_service.Touch):
@@ -74,6 +73,7 @@ def test_a_touch_set_up_inside_a_period_starts_its_clock_and_deadlines_when_read
     request = {"cmd": "touch", "contact_s": CONTACT_S, "seed": SEED, "wait": False}
     service.admin.receive = lambda: request if steps[0] == ASKED_AT else None
     service.loop = FixedRateLoop(DT, clock)
+    service.clock = SimpleNamespace(monotonic=clock.now, scale=1.0)     # its messages' too
 
     def step(t_loop, dt_s):
         keep = service.step(t_loop, dt_s)

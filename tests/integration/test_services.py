@@ -27,19 +27,24 @@ def models(trained_models):
     return (*trained_models.files(SCENE, 0), *trained_models.pair(SCENE, 0))
 
 
-@pytest.mark.parametrize("devices", ["sim", pytest.param("emulated", marks=pytest.mark.slow)])
-def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices):
+@pytest.mark.parametrize("devices, time_scale", [
+    ("sim", 1.0), ("sim", 3.0), pytest.param("emulated", 1.0, marks=pytest.mark.slow)])
+def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices, time_scale):
     # devices = "emulated": the master's display pad and the slave's sensing
     # pad are read and driven through the serial and CAN drivers and their
-    # emulators.
+    # emulators. time_scale 3: both services' clocks three times slower
+    # than the machine's, as under QEMU's cores; the touch the same.
     ident_path, gen_path, identifier, generator = models
     ports = free_ports(4)
     slave_cfg, master_cfg = write_configs(tmp_path, SCENE.name, ident_path, gen_path, ports, 0,
-                                          devices=devices, record_dir=tmp_path / "rec")
+                                          devices=devices, record_dir=tmp_path / "rec",
+                                          time_scale=time_scale)
     services = Services(tmp_path, slave_cfg, master_cfg)
     try:
         wait_connected(services, ports[3])
-        calibration = call(ports[2], "status")["thermometer_calibration"]
+        status = call(ports[2], "status")
+        calibration = status["thermometer_calibration"]
+        assert status["time_scale"] == call(ports[3], "status")["time_scale"] == time_scale
         result = networked_touch(SCENE, "wood", ports, seed=4, contact_s=1.5)
     finally:
         codes = services.stop()
@@ -73,7 +78,7 @@ def test_two_processes_render_a_touch_and_stop_cleanly(tmp_path, models, devices
     assert_rendered(s)
     assert math.isfinite(local["flux_rms_error_rel"])
     assert s["transport"]["invalid"] == 0 and s["transport"]["refused_by_window"] == 0
-    assert s["devices"] == devices
+    assert s["devices"] == devices and s["time_scale"] == time_scale
     if devices == "emulated":
         board = s["device_counters"]["board"]
         # A frame per display period at least over the 1.5 s contact.

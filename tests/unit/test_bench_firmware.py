@@ -55,9 +55,9 @@ def loop_of(own_instructions, isr_counts=42, per_unit_instructions=3000, monkeyp
     cost in a burst, worst interrupt and interrupt overhead are these
     (SysTick counts are 1.344 per instruction: 42 counts = 31.25
     instructions, 21 = 15.625)."""
-    from telethermal.devices import qemu
+    from telethermal.devices import qemu_elf
 
-    monkeypatch.setattr(qemu, "symbols", lambda elf: {n: n for n in (
+    monkeypatch.setattr(qemu_elf, "symbols", lambda elf: {n: n for n in (
         "board_loop_worst_cycles", "board_isr_worst_cycles", "board_loop_count",
         "board_loop_bursts", "board_loop_worst_unit_cycles", "board_isr_overhead_cycles",
         "board_aside_worst_cycles")})

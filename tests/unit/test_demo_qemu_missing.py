@@ -40,7 +40,8 @@ def test_a_service_on_qemu_without_the_tools_names_them(monkeypatch):
     monkeypatch.setattr(qemu, "missing", lambda: GONE[:1])
     with pytest.raises(DeviceError, match=r"master's devices = 'qemu' needs qemu-system-arm "
                                           r"\(apt-get install qemu-system-arm\)"):
-        display_boards(SimpleNamespace(devices=DeviceKind.QEMU, firmware_build=""))
+        display_boards(SimpleNamespace(devices=DeviceKind.QEMU, firmware_build="",
+                                       time_scale=1.0))
     assert display_boards(SimpleNamespace(devices=DeviceKind.EMULATED)) == {}
 
 

@@ -30,7 +30,7 @@ import re
 import time
 from pathlib import Path
 
-from telethermal.devices import qemu
+from telethermal.devices import qemu, qemu_elf
 from telethermal.devices.peltier import CMD, DB
 
 #: The part's clock and QEMU's instruction clock (2**ICOUNT_SHIFT ns).
@@ -136,7 +136,7 @@ def loop_figures(core: qemu.QemuCore, elf: Path) -> dict:
     processor-in-the-loop stand-in's own work (``plant.c``: its text lines
     for the ADCs and the H-bridge) is left out by the core and its worst
     span recorded (``board_aside_worst_cycles``)."""
-    sym = qemu.symbols(elf)
+    sym = qemu_elf.symbols(elf)
 
     def instructions(name: str) -> float:
         return core.read_u32(sym[name]) / SYSTICK_PER_INSTRUCTION
@@ -198,7 +198,7 @@ def measure(build_dir: str | Path, trials: int = 20, board_samples: int = 200) -
     images = qemu.build_images(build_dir)
     row = {"machine": qemu.MACHINE, "icount_shift": qemu.ICOUNT_SHIFT,
            "sysclk_hz": SYSCLK_HZ, "part": "STM32F405RG (1 MB flash, 128 KB SRAM)",
-           "sizes": {name: qemu.image_size(elf) for name, elf in images.items()}}
+           "sizes": {name: qemu_elf.image_size(elf) for name, elf in images.items()}}
     with qemu.QemuCore(images["tt_peltier"]) as core:
         link, plant = open_peltier(core)
         try:

@@ -132,9 +132,11 @@ def _place(args, where) -> int:
 
 
 def _touch(args, where) -> int:
-    ac.wait_for_session(where["master"], args.session_wait)
+    status = ac.wait_for_session(where["master"], args.session_wait)
     truth = ac.truth_for_touch(where["slave"], args.material, args.object_c)
-    r = ac.request(where["master"], "master", "touch", timeout_s=args.contact_s + 30,
+    # The contact lasts contact_s of the master's clock (time_scale of the machine's).
+    scale = float(status.get("time_scale", 1.0))
+    r = ac.request(where["master"], "master", "touch", timeout_s=scale * args.contact_s + 30,
                    contact_s=args.contact_s, seed=args.seed, wait=not args.no_wait,
                    truth=truth)
     if args.no_wait:

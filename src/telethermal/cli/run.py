@@ -6,7 +6,7 @@ from pathlib import Path
 
 from telethermal.cli._common import (CONTACT_MAX_S, CONTACT_WHY, RATE_MAX_HZ, RATE_WHY,
                                      _positive, _progress, _seed, console)
-from telethermal.control.loop import DEFAULT_RATE_HZ
+from telethermal.control.loop import DEFAULT_RATE_HZ, MAX_TIME_SCALE
 from telethermal.services.config import MIN_RATE_HZ, MIN_RATE_WHY
 from telethermal.errors import TelethermalError
 from telethermal.jsonfile import write_json
@@ -27,7 +27,8 @@ def cmd_demo(args) -> int:
                   seed=args.seed, contact_s=args.contact_s, record_dir=args.record,
                   view_port=args.view, devices=args.devices, json_path=args.json,
                   progress=_progress, status=console.status, method=args.method,
-                  calibration=args.calibration or "", rate_hz=args.rate_hz)
+                  calibration=args.calibration or "", rate_hz=args.rate_hz,
+                  time_scale=args.time_scale)
     if result.view is not None:
         print(f"the view stays up at {result.view.url} (recordings play there); Ctrl-C to "
               "stop", flush=True)
@@ -258,9 +259,13 @@ def add_demo(sub) -> None:
                                                at_least=MIN_RATE_HZ, why_least=MIN_RATE_WHY),
                    default=DEFAULT_RATE_HZ,
                    help=f"the master's display loop rate (default {DEFAULT_RATE_HZ:g} Hz, at "
-                        f"least {MIN_RATE_HZ:g}; "
-                        "under --devices qemu a lower rate keeps the cores nearly on time: "
-                        "firmware/README.md)")
+                        f"least {MIN_RATE_HZ:g})")
+    p.add_argument("--time-scale", type=_positive(at_most=MAX_TIME_SCALE,
+                                                  why="a 500 Hz period then lasts 0.2 s",
+                                                  at_least=1.0, why_least="real time"),
+                   help="how many of the machine's seconds one second of the services (and "
+                        "of the cores' firmware) lasts (default 1; under --devices qemu what "
+                        "QEMU's slow UARTs need to carry each period: firmware/README.md)")
     p.add_argument("--view", type=int, nargs="?", const=8050, metavar="PORT",
                    help="open the live view alongside (telethermal view) on 127.0.0.1:PORT "
                         "(default 8050); it stays up after the touches until Ctrl-C")

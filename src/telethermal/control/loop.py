@@ -101,27 +101,54 @@ def realtime(priority: int):
 
 
 class RealClock:
-    """``time.perf_counter`` with an absolute-deadline sleep."""
+    """``time.perf_counter`` with an absolute-deadline sleep.
 
-    def __init__(self, spin_s: float = 200e-6):
+    ``scale``: how many of the machine's seconds one of this clock's lasts
+    (1: the machine's time). A loop on a scaled clock runs ``scale`` times
+    slower than its period says, every time it reads and every deadline it
+    sleeps to: for boards emulated slower than real time (QEMU's cores,
+    ``time_scale`` in the services' configs), whose plant waits for them.
+    ``spin_s`` stays in the machine's seconds."""
+
+    def __init__(self, spin_s: float = 200e-6, scale: float = 1.0):
         if not (spin_s >= 0 and math.isfinite(spin_s)):
             raise ControlError(f"spin_s must be a finite time >= 0, got {spin_s}")
-        self.spin_s = spin_s
+        check_time_scale(scale)
+        self.spin_s, self.scale = spin_s, float(scale)
 
     @classmethod
-    def for_period(cls, period_s: float):
+    def for_period(cls, period_s: float, scale: float = 1.0):
         """A clock for a loop of ``period_s``: it spins ``SPIN_FRACTION`` of it."""
-        return cls(SPIN_FRACTION * period_s)
+        return cls(SPIN_FRACTION * period_s, scale)
 
     def now(self) -> float:
-        return time.perf_counter()
+        return time.perf_counter() / self.scale
+
+    def monotonic(self) -> float:
+        """``time.monotonic`` on this clock's scale (the services' message times)."""
+        return time.monotonic() / self.scale
 
     def sleep_until(self, deadline_s: float) -> None:
-        remaining = deadline_s - time.perf_counter()
+        remaining = (deadline_s - self.now()) * self.scale      # the machine's seconds
         if remaining > self.spin_s:
             time.sleep(remaining - self.spin_s)
-        while time.perf_counter() < deadline_s:
+        while self.now() < deadline_s:
             pass
+
+
+#: The slowest a scaled clock may run: past it a period of a 500 Hz display
+#: lasts over 0.2 s of the machine's time.
+MAX_TIME_SCALE = 100.0
+
+
+def check_time_scale(scale, error: type[Exception] = ControlError, name: str = "scale") -> float:
+    """``scale`` if it is a number from 1 to :data:`MAX_TIME_SCALE`, else
+    ``error`` naming ``name``."""
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or \
+            not (1.0 <= scale <= MAX_TIME_SCALE):
+        raise error(f"{name} = {scale!r}: how many of the machine's seconds one second of "
+                    f"the services lasts, from 1 (real time) to {MAX_TIME_SCALE:g}")
+    return float(scale)
 
 
 class SessionClock(StrEnum):
@@ -165,7 +192,10 @@ class WorldPausedClock(RealClock):
     outside the world's spans included); the world's time is not charged
     to it."""
 
-    def __init__(self, spin_s: float = 200e-6):
+    def __init__(self, spin_s: float = 200e-6, scale: float = 1.0):
+        if scale != 1.0:
+            raise ControlError(f"a world-paused clock runs on the machine's time, got scale "
+                               f"{scale!r}")
         super().__init__(spin_s)
         self.paused_s = 0.0
 

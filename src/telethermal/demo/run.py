@@ -12,11 +12,13 @@ import sys
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
+from types import SimpleNamespace
 from pathlib import Path
 
 from telethermal.control.loop import DEFAULT_RATE_HZ
 from telethermal.demo.calibration import demo_calibration, path_line
 from telethermal.demo.touches import demo_touch
+from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import TransportError
 from telethermal.jsonfile import write_json
 from telethermal.physics.scene import with_finger
@@ -39,12 +41,13 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
                   master_ports: tuple[int, int] | None = None,
                   devices: str = "sim", record_dir: str | Path | None = None,
                   view_port: int = 0, firmware_build: str = "", pad_calibration: str = "",
-                  slave_pad_calibration: str = "") -> tuple[Path, Path]:
+                  slave_pad_calibration: str = "", time_scale: float = 1.0) -> tuple[Path, Path]:
     """Keys and the two config files. ``ports``: control, stream, and the two
     admin addresses (ports on 127.0.0.1, or ``ipc://`` paths).
     ``master_ports``: where the master connects, if not to the slave itself
     (a fault proxy in between; plain loopback sockets then). ``pad_calibration``:
-    the master's (its display's), ``slave_pad_calibration`` the slave's (its pad's)."""
+    the master's (its display's), ``slave_pad_calibration`` the slave's (its pad's).
+    ``time_scale``: both services' (their configs')."""
     generate_link_keys(out / "keys")
     control, stream, slave_admin, master_admin = ports
 
@@ -63,6 +66,7 @@ def write_configs(out: Path, scene: str, identifier: Path, generator: Path, port
     ident, gen = (os.path.relpath(Path(p).resolve(), out.resolve()) for p in (identifier, generator))
     record = f"record_dir = {toml_str(Path(record_dir).resolve())}\n" if record_dir else ""
     record += f"firmware_build = {toml_str(firmware_build)}\n" if firmware_build else ""
+    record += f"time_scale = {float(time_scale)!r}\n" if time_scale != 1.0 else ""
     slave.write_text(f"[slave]\nscene = {toml_str(scene)}\nidentifier = {toml_str(ident)}\n"
                      f'{record}{path_line("pad_calibration", slave_pad_calibration)}'
                      f'generator = {toml_str(gen)}\nseed = {seed}\ndevices = "{devices}"\n'
@@ -156,12 +160,13 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
              realtime_priority: int = 20, record_dir: Path | None = None,
              view_port: int | None = None, devices: str = "sim", firmware_build: str = "",
              display_calibration: str = "", pad_calibration: str = "",
-             rate_hz: float = DEFAULT_RATE_HZ) -> dict:
+             rate_hz: float = DEFAULT_RATE_HZ, time_scale: float = 1.0) -> dict:
     """Returns per touch the networked figures and, for the same seeds, the
     in-process session's (``in_process_flux_rms_error_rel``). ``view_port``:
     the live view (``telethermal view``) on that HTTP port, started once the
     services are up and returned, still running, as ``report["view"]``.
-    ``rate_hz``: the master's display rate, networked and in process."""
+    ``rate_hz``: the master's display rate, networked and in process;
+    ``time_scale``: the services' (:func:`demo_time_scale`)."""
     from telethermal.physics.scene import load_scene
 
     from telethermal.ident.registry import load_model
@@ -183,7 +188,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
                                           view_port=ports[4] if view_port is not None else 0,
                                           firmware_build=firmware_build,
                                           pad_calibration=display_calibration,
-                                          slave_pad_calibration=pad_calibration)
+                                          slave_pad_calibration=pad_calibration,
+                                          time_scale=time_scale)
     services = Services(out, slave_cfg, master_cfg)
     touches = []
     cal = {}
@@ -195,7 +201,9 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
              ("; each on its emulated devices (boards on ptys, CAN drivers on virtual "
               "buses), read through the drivers" if devices == "emulated" else "") +
              ("; their boards the firmware on emulated STM32F405s (QEMU)"
-              if devices == "qemu" else ""))
+              if devices == "qemu" else "") +
+             (f"; their clocks {time_scale:g} times slower than the machine's (time_scale)"
+              if time_scale != 1.0 else ""))
         cal = call(ports[2], "status").get("thermometer_calibration") or {}
         if cal.get("calibrated"):
             echo(f"slave's object thermometer calibrated against its pad at "
@@ -228,7 +236,8 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     finally:
         codes = services.stop()
     echo(f"services stopped: exit codes slave {codes['slave']}, master {codes['master']}")
-    return {"scene": scene.name, "devices": devices, "rate_hz": rate_hz, "touches": touches,
+    return {"scene": scene.name, "devices": devices, "rate_hz": rate_hz,
+            "time_scale": time_scale, "touches": touches,
             "exit_codes": codes,
             "slave_thermometer_calibration": cal,
             "ports": dict(zip(("control", "stream", "slave_admin", "master_admin"), ports)),
@@ -286,11 +295,25 @@ def _demo_models(scene, out: Path, seed: int, echo, progress, status,
     save_generator(generator, out / "generator.npz")
 
 
+def demo_time_scale(devices: str, rate_hz: float, sample_rate_hz: float,
+                    time_scale: float | None = None) -> float:
+    """The services' ``time_scale``: ``time_scale`` if given (checked as the
+    configs check it); else 1, and on QEMU's cores what their UARTs need
+    (:func:`~telethermal.services.qemu_boards.qemu_time_scale`)."""
+    from telethermal.services.config import time_scale_of
+    from telethermal.services.qemu_boards import qemu_time_scale
+
+    if time_scale is None:
+        return qemu_time_scale(rate_hz, sample_rate_hz) if devices == "qemu" else 1.0
+    return time_scale_of(SimpleNamespace(time_scale=time_scale, devices=DeviceKind(devices)))
+
+
 def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed: int = 0,
          contact_s: float = 5.0, record_dir: str | Path | None = None,
          view_port: int | None = None, devices: str = "sim", json_path=None, echo=print,
          progress=_no_progress, status=nullcontext, method: str | None = None,
-         calibration: str = "", rate_hz: float = DEFAULT_RATE_HZ) -> DemoResult:
+         calibration: str = "", rate_hz: float = DEFAULT_RATE_HZ,
+         time_scale: float | None = None) -> DemoResult:
     """``telethermal demo``: the scene's databases, an identifier and a flux
     generator trained on them, then slave and master as two processes on
     loopback and a touch on each material (:func:`run_demo`); the summary
@@ -299,12 +322,14 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
     managers held around the long steps (the first yields a callable taking
     a step's label); ``method``: the identifier's (default: ``teleop.models.
     default_method``); ``calibration``: a file (``demo_calibration``'s);
-    ``rate_hz``: the master's display rate."""
+    ``rate_hz``: the master's display rate; ``time_scale``: the services'
+    (None: :func:`demo_time_scale`'s)."""
     from telethermal.physics.scene import describe_models, load_scene
 
     out = Path(out)
-    firmware = prepare_firmware(out, devices, echo)         # qemu: what is missing, at once
     scene = with_finger(load_scene(scene_name))
+    time_scale = demo_time_scale(devices, rate_hz, scene.sample_rate_hz, time_scale)
+    firmware = prepare_firmware(out, devices, echo)         # qemu: what is missing, at once
     echo(f"scene {scene.name}: {scene.description.splitlines()[0]}")
     for side, material, choice in describe_models(scene):
         echo(f"  {side:6s} on {material:10s} {choice.describe()}")
@@ -315,7 +340,8 @@ def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed:
                       echo=echo, record_dir=Path(record_dir) if record_dir else None,
                       view_port=view_port, devices=devices, firmware_build=firmware,
                       display_calibration=cal.display_path if cal else "",
-                      pad_calibration=cal.pad_path if cal else "", rate_hz=rate_hz)
+                      pad_calibration=cal.pad_path if cal else "", rate_hz=rate_hz,
+                      time_scale=time_scale)
     report |= {"calibration": cal.summary()} if cal else {}
     view = report.pop("view", None)
     path = write_json(json_path or out / "demo.json", report)

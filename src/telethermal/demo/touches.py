@@ -77,8 +77,11 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
     if during is not None:
         thread = threading.Thread(target=during, daemon=True)
         thread.start()
-    # A hang guard: on QEMU's cores a display period takes many times its length.
-    slow = 60.0 if call(master_admin, "status").get("devices") == "qemu" else 1.0
+    # A hang guard: the contact lasts contact_s of the master's clock, time_scale
+    # of the machine's (and on QEMU's cores a period may take several times its length).
+    status = call(master_admin, "status")
+    slow = float(status.get("time_scale", 1.0)) * (6.0 if status.get("devices") == "qemu"
+                                                   else 1.0)
     try:
         result = call(master_admin, "touch", timeout_s=slow * contact_s + 30,
                       contact_s=contact_s, seed=seed, source=source)
@@ -135,7 +138,8 @@ def networked_touch(scene, material: str, ports, seed: int, contact_s: float,
                **{k: result[k] for k in ("safety_events", "safety_event_counts",
                                          "display_event_counts", "loop", "transport",
                                          "trajectory_at_s", "rtt_s", "link_counters",
-                                         "anchor_lag_s", "devices", "device_counters")},
+                                         "anchor_lag_s", "devices", "device_counters",
+                                         "time_scale")},
                "loop_period_p99_us": result["loop"]["period_p99_us"], "clock": "real",
                "devices_per_side": {"master": master_device_summary(result),
                                     "slave": slave_devices}}

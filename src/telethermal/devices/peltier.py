@@ -108,7 +108,8 @@ def open_bus(spec: str) -> can.BusABC:
 #: python-can send otherwise waits for ever (pyserial's write timeout): an
 #: adapter that takes nothing for that long fails the send (counted, the bus
 #: reopened) instead of holding the display's loop for good; half the
-#: driver's own watchdog (proto/CAN.md: 100 ms). Other interfaces keep
+#: driver's own watchdog (proto/CAN.md: 100 ms) at real time (a rig slowed
+#: by its time_scale only gives the write more room). Other interfaces keep
 #: python-can's default, which fails at once on a full queue (socketcan).
 SLCAN_SEND_TIMEOUT_S = 0.05
 

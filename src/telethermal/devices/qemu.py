@@ -366,35 +366,6 @@ class QemuCore:
         self.close()
 
 
-def image_size(elf: str | Path) -> dict[str, int]:
-    """``arm-none-eabi-size`` of an image: text, data, bss in bytes; flash
-    = text + data (the initial values live in flash), ram = data + bss (the
-    4 KB stack reserved by the linker script is not counted)."""
-    try:
-        done = subprocess.run(["arm-none-eabi-size", str(elf)], capture_output=True, text=True,
-                              check=True, timeout=60)
-        text, data, bss = (int(v) for v in done.stdout.splitlines()[1].split()[:3])
-    except (OSError, subprocess.SubprocessError, IndexError, ValueError) as exc:
-        said = (getattr(exc, "stderr", None) or "").strip()[-500:]
-        exists = Path(elf).is_file()
-        raise DeviceError(f"arm-none-eabi-size {elf}: no size read ({exc}"
-                          f"{'; it said: ' + said if said else ''}"
-                          f"{'' if exists else '; the image is not there'})") from exc
-    return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}
-
-
-def symbols(elf: str | Path) -> dict[str, int]:
-    """The image's symbols (``arm-none-eabi-nm``): name -> address."""
-    done = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True,
-                          check=True)
-    out = {}
-    for line in done.stdout.splitlines():
-        parts = line.split()
-        if len(parts) == 3:
-            out[parts[2]] = int(parts[0], 16)
-    return out
-
-
 class PtyLine:
     """One end of a core's UART pty, opened by path: bytes in; what came
     back kept in ``buf`` (consumed by :meth:`until`) and ``log`` (all)."""
@@ -458,11 +429,20 @@ class QemuBoards:
     built once (in ``build_dir``, make's own incremental build, or a
     temporary folder), each core started and its plant link open.
     ``cores[name]``, ``plants[name]``; :meth:`restart` gives a new touch
-    boards fresh from reset; :meth:`close` stops every core."""
+    boards fresh from reset; :meth:`close` stops every core.
+
+    ``time_scale``: the rig's (a service's ``time_scale``): each core, once
+    ready, told to stretch its millisecond as much (the plant link's ``k``
+    line, answered), so that its timeouts, heartbeats and watchdog run on
+    the services' time; QEMU's own clock keeps the machine's."""
 
     def __init__(self, names: tuple[str, ...], build_dir: str | Path = "",
-                 purpose: str = "devices = 'qemu'"):
+                 purpose: str = "devices = 'qemu'", time_scale: float = 1.0):
         require(purpose)
+        self.scale_milli = round(1000 * time_scale)
+        if not 1000 <= self.scale_milli <= 99000:
+            raise DeviceError(f"time_scale {time_scale!r}: the cores stretch their "
+                              "millisecond from 1 to 99 times")
         self._tmp = None if build_dir else tempfile.TemporaryDirectory(prefix="telethermal-qemu-")
         self.cores: dict[str, QemuCore] = {}
         self.plants: dict[str, PtyLine] = {}
@@ -472,14 +452,29 @@ class QemuBoards:
                 self.cores[name] = QemuCore(images[name])
                 self.plants[name] = PtyLine(self.cores[name].plant_path)
             self.wait_ready()
+            if self.scale_milli != 1000:
+                log.info("%s: each core's millisecond stretched to %g of the machine's "
+                         "milliseconds (time scale)", ", ".join(names), self.scale_milli / 1000)
         except BaseException:
             self.close()
             raise
 
     def wait_ready(self) -> None:
-        """Until every core's plant link says ``ready`` (its UARTs are up)."""
+        """Until every core's plant link says ``ready`` (its UARTs are up),
+        then its time scale set and answered (none to set at 1)."""
         for plant in self.plants.values():
             plant.until(rb"ready\n")
+        if self.scale_milli == 1000:
+            return
+        for name, plant in self.plants.items():
+            plant.write(b"k %d\n" % self.scale_milli)
+        for name, plant in self.plants.items():
+            try:
+                plant.until(rb"k %d\n" % self.scale_milli, guard_s=10.0)
+            except DeviceError as exc:
+                raise DeviceError(f"{name}: its core did not take the time scale (an image "
+                                  f"built before the plant link's k line? rebuild it): "
+                                  f"{exc}") from None
 
     def restart(self) -> None:
         """Every core from its reset vector, nothing of its last run left on

@@ -18,7 +18,11 @@ simulated clock:
 The cores keep their own clocks (the watchdog, the heartbeat, the
 frames' ``t_us``); the loop waits for each of their answers, so a period
 takes as long as the cores need to hear and answer it (the emulated UART
-takes a byte in about 0.1 ms of the host's time).
+takes a byte in about 0.1 ms of the host's time). A master service on a
+slowed clock (``time_scale``) has its boards' cores stretch their
+millisecond as much (:class:`~telethermal.devices.qemu.QemuBoards`) and
+gives the drivers its clock, so their timeouts, heartbeats and watchdog
+run on its time.
 """
 
 from __future__ import annotations
@@ -73,16 +77,21 @@ class QemuDisplay:
             raise
 
     def _heard(self) -> None:
-        """Until the driver has heard the core's heartbeat (every 100 ms; a
-        driver that has not cannot trust the core, and the touch would start
-        with its readings untrusted); a hang guard of ANSWER_WAIT_S."""
+        """Until the driver has heard the core's heartbeat (every 100 ms of
+        the core's time, which the rig's time scale stretches; a driver that
+        has not cannot trust the core, and the touch would start with its
+        readings untrusted); a hang guard of ANSWER_WAIT_S plus two
+        heartbeats of the machine's time."""
         driver = self.hardware.peltier
-        deadline = time.monotonic() + ANSWER_WAIT_S
+        scale = self.boards.scale_milli / 1000
+        guard_s = ANSWER_WAIT_S + 2 * 0.1 * scale
+        deadline = time.monotonic() + guard_s
         while not driver.alive and time.monotonic() < deadline:
             driver.poll(wait_s=0.01)
         if not driver.alive:
             raise DeviceError(f"the Peltier driver's core sent no heartbeat within "
-                              f"{ANSWER_WAIT_S} s ({self.cores[1].link_path})")
+                              f"{guard_s:g} s of the machine's time (time scale {scale:g}; "
+                              f"{self.cores[1].link_path})")
 
     # ------------------------------------------------------------ the bridge
     def _sample_line(self, s: PadSensors) -> bytes:

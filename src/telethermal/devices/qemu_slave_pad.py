@@ -21,9 +21,12 @@ the simulated clock:
   (junction, heat sink, current) goes to the core before each period.
 
 The cores keep their own clocks (the watchdog, the heartbeat, the frames'
-``t_us``), which follow the host's while they wait: between touches, when
-the slave sends no command for more than 100 ms, the pad's driver turns the
-element off and says so (counted by the driver), as a real board would.
+``t_us``), which follow the host's while they wait, stretched by the
+service's ``time_scale`` (:class:`~telethermal.devices.qemu.QemuBoards`;
+the drivers then read the service's clock too): between touches, when the
+slave sends no command for more than 100 ms of that time, the pad's driver
+turns the element off and says so (counted by the driver), as a real board
+would.
 """
 
 from __future__ import annotations
@@ -148,8 +151,11 @@ class QemuSlavePad(EmulatedSlavePad):
 
     kind = DeviceKind.QEMU
 
-    def __init__(self, scene, instruments, seed: int = 0, build_dir: str = "", **kw):
-        self._build_dir = build_dir
+    def __init__(self, scene, instruments, seed: int = 0, build_dir: str = "",
+                 time_scale: float = 1.0, **kw):
+        """``time_scale``: the service's (the cores' millisecond stretched
+        as much: :class:`~telethermal.devices.qemu.QemuBoards`)."""
+        self._build_dir, self._time_scale = build_dir, time_scale
         self.counters_ = {"answers_missed": 0}
         super().__init__(scene, instruments, seed=seed, wait_s=kw.pop("wait_s", ANSWER_WAIT_S),
                          **kw)
@@ -157,7 +163,8 @@ class QemuSlavePad(EmulatedSlavePad):
     def _open_boards(self, seed: int, board_noise_uv: float) -> tuple[str, str]:
         del seed, board_noise_uv        # the instruments' noise is the simulator's
         self.boards = qemu.QemuBoards(NAMES, self._build_dir,
-                                      purpose="the slave's devices = 'qemu'")
+                                      purpose="the slave's devices = 'qemu'",
+                                      time_scale=self._time_scale)
         try:
             board, pad = (self.boards.cores[n] for n in NAMES)
             self.board_emulator = _BoardFeed(board, self.boards.plants["tt_board2"],

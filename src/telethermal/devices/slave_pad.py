@@ -52,7 +52,7 @@ class EmulatedSlavePad(SlavePadDrivers):
     kind = DeviceKind.EMULATED
 
     def __init__(self, scene, instruments, seed: int = 0, wait_s: float = 0.05,
-                 pad_tau_s: float = 0.5, board_noise_uv: float = 0.0):
+                 pad_tau_s: float = 0.5, board_noise_uv: float = 0.0, clock=time.monotonic):
         from telethermal.physics.sensors import Thermocouple
 
         if scene.pad.kind != "peltier":
@@ -75,7 +75,7 @@ class EmulatedSlavePad(SlavePadDrivers):
         self.ir_fault: str | float | None = None
         board_url, bus = self._open_boards(seed, board_noise_uv)
         try:
-            super().__init__(board_url, bus, scene.sample_rate_hz, wait_s=wait_s)
+            super().__init__(board_url, bus, scene.sample_rate_hz, wait_s=wait_s, clock=clock)
         except Exception:
             self._close_boards()
             raise
@@ -157,8 +157,10 @@ class EmulatedSlavePad(SlavePadDrivers):
         self.pad_emulator.poll()
         if self.board._ser is None:
             # The driver's port is closed (the board is away): in lockstep the
-            # period passes on the real clock too, so its reopening runs.
-            time.sleep(dt)
+            # period passes on the drivers' clock too, so its reopening runs.
+            end = self.clock() + dt
+            while self.clock() < end:
+                time.sleep(dt / 10)
         return super().tick()
 
     def measure_object(self, true_c, rng: np.random.Generator) -> np.ndarray:

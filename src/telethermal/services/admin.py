@@ -171,12 +171,14 @@ def call(port, cmd: str, timeout_s: float = 10.0, context=None, **args) -> dict:
         sock.close(linger=0)
 
 
-def open_service_sockets(role: str, config) -> tuple:
-    """A service's transport endpoint and its admin socket; if the admin
-    socket cannot be opened, the endpoint is closed again (nothing leaks)."""
+def open_service_sockets(role: str, config, clock) -> tuple:
+    """A service's transport endpoint on ``clock`` (its
+    :class:`~telethermal.control.loop.RealClock`, of the config's
+    ``time_scale``) and its admin socket; if the admin socket cannot be
+    opened, the endpoint is closed again (nothing leaks)."""
     from telethermal.wire.transport import Endpoint
 
-    endpoint = Endpoint(role, config.transport)
+    endpoint = Endpoint(role, config.transport, clock=clock.monotonic, time_scale=clock.scale)
     try:
         return endpoint, AdminServer(config.admin_ipc or config.admin_port)
     except TelethermalError:

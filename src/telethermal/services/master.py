@@ -2,7 +2,7 @@
 
 Owns: the transport's master end (control DEALER and stream SUB, connecting),
 the simulated display pad, operator and force sensor, and the display loop at
-``rate_hz`` on the real clock. Each period it reads the network and the admin
+``rate_hz`` on the real clock (slowed by ``time_scale``). Each period it reads the network and the admin
 socket and, in a touch, runs one period of the display (teleop/master.py) with
 what the slave has said. Rendering is timed from the master's own contact onset,
 so the network's delay shifts nothing once the trajectory is here.
@@ -13,10 +13,9 @@ from __future__ import annotations
 import logging
 import math
 import os
-import time
 from dataclasses import dataclass, replace
 
-from telethermal.control.loop import FixedRateLoop, set_realtime
+from telethermal.control.loop import FixedRateLoop, RealClock, set_realtime
 from telethermal.control.preconditioning import prepare_policy
 from telethermal.devices.display import open_display
 from telethermal.devices.kinds import DeviceKind
@@ -61,8 +60,8 @@ class Touch:
                                                   service.link,
                                                   calibration=service.display_calibration)
         self.sim = world.display(cfg.rate_hz, contact_s, self.idle_c)
-        self.devices = open_display(service.config.devices, self.sim, realtime=True, seed=seed,
-                                    **service.display_options)
+        self.devices = open_display(service.config.devices, self.sim, service.clock.monotonic,
+                                    realtime=True, seed=seed, **service.display_options)
         #: Session time 0 (the finger's contact) on the service's clock: the display's
         #: time is ``now - origin_s``; its onset goes back at ``origin_s`` plus its time
         #: (as ``t0`` on hardware). From ``now`` here (``now`` may be a test's); the
@@ -117,7 +116,10 @@ class MasterService:
                                             idle=config.idle)
         if config.idle == "policy":       # before the sockets: no touch waits for it
             prepare_policy(self.scene, log.warning)
-        self.endpoint, self.admin = open_service_sockets("master", config)
+        #: The service's clock (the loop's, and its messages'): the
+        #: machine's, or slowed by ``time_scale``.
+        self.clock = RealClock.for_period(1.0 / config.rate_hz, config.time_scale)
+        self.endpoint, self.admin = open_service_sockets("master", config, self.clock)
         # Estimates and setpoints: the lossy stream, newest wins (PROTOCOL.md 6a).
         self.endpoint.deliver_stream = frozenset({MessageKind.POSTERIOR_ESTIMATE,
                                                   MessageKind.FLUX_SETPOINT})
@@ -129,8 +131,8 @@ class MasterService:
         #: The session's rules (what the master reads, what it tells the
         #: slave): the simulated network of ``bench faults`` runs the same.
         self.session = MasterSession()
-        #: The display loop on the real clock (``run``); its statistics: each touch's report.
-        self.loop = FixedRateLoop(1.0 / config.rate_hz)     # the real clock, for its period
+        #: The display loop (``run``); its statistics: each touch's report.
+        self.loop = FixedRateLoop(1.0 / config.rate_hz, self.clock)
         self.hardware = None
         #: The hardware display's controller and its clock origin (hardware only).
         self.display: MasterDisplay | None = None
@@ -187,7 +189,7 @@ class MasterService:
         self.display, _ = build_display(self.scene, self.display_config, cfg.finger_temp_c,
                                         self.link, calibration=self.display_calibration,
                                         idling=False)
-        self.t0 = time.monotonic()
+        self.t0 = self.clock.monotonic()
         log.info("display on hardware: board %s, Peltier driver on %s", cfg.board_url,
                  cfg.can_bus)
 
@@ -236,7 +238,7 @@ class MasterService:
 
     # ------------------------------------------------------------ loop
     def step(self, t_loop: float, dt_s: float) -> bool:
-        now = time.monotonic()
+        now = self.clock.monotonic()
         self._arrival_now = now
         for message in self.wire.due(now):
             try:
@@ -254,7 +256,7 @@ class MasterService:
             # controlled (a simulated display exists only in a touch): its
             # clock and the loop's deadlines start when it is ready, and its
             # first period is the next one (set-up time: its report).
-            self.touch.start_clock(now, time.monotonic())
+            self.touch.start_clock(now, self.clock.monotonic())
             self.loop.restart_deadlines()
         elif self.hardware is not None:
             self._hardware_period(now, dt_s)
@@ -326,7 +328,7 @@ class MasterService:
                 if self.recorder is not None and touch.start_recorded:
                     # (a touch whose start was never recorded has no end there either)
                     self.recorder.touch_end({"contact_id": touch.contact_id, "error": error}, {})
-                self._send(self.session.close_contact(time.monotonic(),
+                self._send(self.session.close_contact(self.clock.monotonic(),
                                                       touch.operator.finger_ir_c))
             except Exception as send_exc:
                 self._internal_error("lift after an error", send_exc)
@@ -341,7 +343,7 @@ class MasterService:
         link, session = self.link, self.session
         trajectory_at = None if session.trajectory_at_s is None else \
             session.trajectory_at_s - touch.origin_s
-        self._send(session.close_contact(time.monotonic(), touch.operator.finger_ir_c))
+        self._send(session.close_contact(self.clock.monotonic(), touch.operator.finger_ir_c))
         # What the slave itself decided on this touch (not the recollection
         # the display may have rendered from; that is reported apart), by
         # the definition every summary uses (teleop/decision.py).
@@ -369,6 +371,7 @@ class MasterService:
             "estimates": len(link.estimates), "trajectory_at_s": trajectory_at,
             "anchor_lag_s": None if math.isnan(link.anchor_lag_s) else link.anchor_lag_s,
             "link_counters": dict(link.counters), "devices": self.config.devices,
+            "time_scale": self.clock.scale,
             # what the memory's counters counted of this touch (PROTOCOL.md 6b)
             "memory_judged": {k: v - touch.memory0[k]
                               for k, v in judged_of(link.counters).items()},
@@ -440,7 +443,8 @@ class MasterService:
                 "object_material": (self.link.remembered or (None,))[0],
                 "rtt_s": e.offset.rtt_s, "offset_s": e.offset.offset_s,
                 "counters": e.all_counters(), "admin": dict(self.admin.counters),
-                "devices": self.config.devices, "last_period_t_s": self.last_period_t_s,
+                "devices": self.config.devices, "time_scale": self.clock.scale,
+                "last_period_t_s": self.last_period_t_s,
                 **({"device_counters": self.hardware.counters(),
                     "display_phase": self.display.phase, "contact_id": self.session.contact_id}
                    if self.hardware is not None else {})}

@@ -272,7 +272,7 @@ def qemu_findings() -> list[Finding]:
     (into a temporary folder) and their flash and RAM sizes."""
     import tempfile
 
-    from telethermal.devices import qemu
+    from telethermal.devices import qemu, qemu_elf
     from telethermal.devices.board import DeviceError
 
     gone = qemu.missing()
@@ -288,7 +288,7 @@ def qemu_findings() -> list[Finding]:
     with tempfile.TemporaryDirectory(prefix="telethermal-check-") as build:
         try:
             images = qemu.build_images(build)
-            sizes = {name: qemu.image_size(elf) for name, elf in images.items()}
+            sizes = {name: qemu_elf.image_size(elf) for name, elf in images.items()}
         except (DeviceError, OSError, ValueError) as exc:
             return out + [Finding(False, f"make -C firmware TARGET=stm32f405: {exc}",
                                   "see firmware/README.md ('Build')")]

@@ -19,6 +19,31 @@ from telethermal.devices.kinds import DeviceKind
 
 log = logging.getLogger(__name__)
 
+#: What QEMU's emulated UART takes per byte received, of the machine's time:
+#: one turn of QEMU's main loop (about 0.1 ms on a loaded 2-core host, with
+#: or without ``-icount``; firmware/README.md, "Processor in the loop").
+UART_BYTE_S = 1e-4
+#: The bytes the cores take in a period on its critical path: the display's
+#: (its sample line, then the command after the frame came back: about 45
+#: and 22, the measurement line beside them on the other core) and the
+#: slave's (its version-2 sample line).
+DISPLAY_PERIOD_BYTES = 70
+SLAVE_SAMPLE_BYTES = 80
+#: The share of a period the cores' bytes may take in the machine's time:
+#: the rest is the services' own work and the host's (a 2-core host runs
+#: four cores and two services).
+BYTES_SHARE = 0.4
+
+
+def qemu_time_scale(rate_hz: float, sample_rate_hz: float) -> float:
+    """The ``time_scale`` at which QEMU's UARTs carry each side's period in
+    :data:`BYTES_SHARE` of it (at least 1), rounded up to a whole number."""
+    import math
+
+    need = max(DISPLAY_PERIOD_BYTES * rate_hz, SLAVE_SAMPLE_BYTES * sample_rate_hz) * \
+        UART_BYTE_S / BYTES_SHARE
+    return float(max(1, math.ceil(need - 1e-9)))
+
 
 def display_boards(config) -> dict:
     """The master's display options for :func:`~telethermal.devices.display.open_display`:
@@ -30,7 +55,8 @@ def display_boards(config) -> dict:
     from telethermal.devices.qemu_display import NAMES
 
     boards = qemu.QemuBoards(NAMES, config.firmware_build,
-                             purpose="the master's devices = 'qemu'")
+                             purpose="the master's devices = 'qemu'",
+                             time_scale=config.time_scale)
     log.info("display boards on QEMU: %s", ", ".join(
         f"{name} (pid {core.proc.pid})" for name, core in boards.cores.items()))
     return {"boards": boards}

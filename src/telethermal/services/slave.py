@@ -2,7 +2,8 @@
 
 Owns: the transport's slave end (control ROUTER and stream PUB, bound), the
 simulated sensing pad and the object under it, the identifier and the flux
-generator, and a loop at the scene's sample rate on the real clock. Each period
+generator, and a loop at the scene's sample rate on the real clock (slowed by
+``time_scale``). Each period
 it reads the network, the admin socket and, in a contact, the pad's new samples;
 it streams estimates and then the flux trajectory (``proto/PROTOCOL.md`` 6).
 """
@@ -10,12 +11,12 @@ it streams estimates and then the flux trajectory (``proto/PROTOCOL.md`` 6).
 from __future__ import annotations
 
 import logging
-import time
 from pathlib import Path
 from typing import NamedTuple
 
 import zmq
 
+from telethermal.control.loop import RealClock
 from telethermal.devices.kinds import DeviceKind
 from telethermal.errors import CalibrationError, ModelFileError, TelethermalError
 from telethermal.ident.fitted import clear_cache as clear_fits
@@ -82,7 +83,9 @@ class SlaveService:
         renderable = [c for c in identifier.classes_ if c in generator.materials]
         self.curves = sample_curves(generator, renderable)
         self.rate_hz = self.scene.sample_rate_hz
-        self.endpoint, self.admin = open_service_sockets("slave", config)
+        #: The service's clock: the machine's, or slowed by ``time_scale``.
+        self.clock = RealClock(scale=config.time_scale)
+        self.endpoint, self.admin = open_service_sockets("slave", config, self.clock)
         # Opened once the sockets are: a slave refused (a busy port) writes nothing.
         self.recorder = None
         #: The typed link to the master over that endpoint (what arrives
@@ -260,16 +263,16 @@ class SlaveService:
         a second or more): heartbeats go on; what arrives is recorded now and
         waits for the loop."""
         self.endpoint.state = self.state
-        self._inbox.extend(self.wire.due(time.monotonic()))
+        self._inbox.extend(self.wire.due(self.clock.monotonic()))
 
     def _record_arrival(self, raw: dict) -> None:
         """A message from the master, recorded as it arrives."""
         if self.recorder is not None:
-            self.recorder.wire(time.monotonic(), "in", raw)
+            self.recorder.wire(self.clock.monotonic(), "in", raw)
 
     def announce_object(self) -> None:
         """The object under the pad (and the memory of it) told to the master."""
-        self._send([self.session.announcement(time.monotonic())])
+        self._send([self.session.announcement(self.clock.monotonic())])
 
     # ------------------------------------------------------------ loop
     def _on_message(self, m: Message, now: float) -> None:
@@ -382,7 +385,7 @@ class SlaveService:
         log.warning("place during contact_id=%d: the pad is lifted first (%s)",
                     self.contact_id, cause)
         self.counters[cause] += 1
-        self._lift(time.monotonic(), prepare_next=False)
+        self._lift(self.clock.monotonic(), prepare_next=False)
 
     def _internal_error(self, what: str, exc: BaseException) -> None:
         """An unexpected error in one message, request or sample period:
@@ -391,7 +394,7 @@ class SlaveService:
         self._count_error(what, exc)
         if self.touch_t0 is not None:
             try:
-                self._lift(time.monotonic())
+                self._lift(self.clock.monotonic())
             except Exception as lift_exc:       # the pad safe whatever the lift did
                 self._count_error("lift after an error", lift_exc)
                 self.session.touch_t0 = self.session.owner = None
@@ -429,7 +432,7 @@ class SlaveService:
         the master's contact event without a period's delay."""
         self.endpoint.poller.register(self.admin.sock, zmq.POLLIN)
         period = 1.0 / self.rate_hz
-        deadline = time.monotonic()
+        deadline = self.clock.monotonic()
         try:
             while not self.stop_requested:
                 deadline = self._step(deadline, period)
@@ -441,7 +444,7 @@ class SlaveService:
         the admin request waiting; an unexpected error in any of them is the
         piece's (``_internal_error``), not the service's. Returns the next
         sample deadline."""
-        now = time.monotonic()
+        now = self.clock.monotonic()
         if now >= deadline:
             deadline = max(deadline + period, now)
             try:
@@ -453,18 +456,18 @@ class SlaveService:
             except Exception as exc:
                 self._internal_error("sample period", exc)
         inbox, self._inbox = self._inbox, []      # what came while the devices held the loop
-        wait = 0.0 if inbox else max(0.0, min(deadline - time.monotonic(),
+        wait = 0.0 if inbox else max(0.0, min(deadline - self.clock.monotonic(),
                                               self.config.transport.heartbeat_s))
-        for message in inbox + self.wire.due(time.monotonic(), wait):
+        for message in inbox + self.wire.due(self.clock.monotonic(), wait):
             try:
-                self._on_message(message, time.monotonic())
+                self._on_message(message, self.clock.monotonic())
             except Exception as exc:
                 self._internal_error(f"message {message.kind}", exc)
         # The master judged lost after what arrived is read (a stall of this
         # process is not the master's silence).
         if self.touch_t0 is not None and not self.endpoint.peer_alive:
             try:
-                self._master_lost(time.monotonic())
+                self._master_lost(self.clock.monotonic())
             except Exception as exc:
                 self._internal_error("master lost", exc)
         request = self.admin.receive()
@@ -478,7 +481,7 @@ class SlaveService:
         log.info("stopping: pad to safe state, sockets closed")
         try:
             if self.touch_t0 is not None:           # the master hears the pad left
-                self._lift(time.monotonic(), prepare_next=False)
+                self._lift(self.clock.monotonic(), prepare_next=False)
             self.endpoint.say_stopping("slave stopping")
         finally:
             self._close_devices()

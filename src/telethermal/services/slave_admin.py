@@ -117,7 +117,7 @@ def slave_status(service) -> dict:
             "last_sample_t_s": last_sample_t_s(service),
             "peer_session": e.peer_session,
             "offset_s": e.offset.offset_s, "counters": e.all_counters(),
-            "admin": dict(service.admin.counters),
+            "admin": dict(service.admin.counters), "time_scale": service.clock.scale,
             "devices": {"kind": service.config.devices,
                         **({"counters": service.devices.all_counters()}
                            if service.devices is not None else {})}}

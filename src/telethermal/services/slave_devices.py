@@ -32,8 +32,13 @@ def _hardware(config, scene, instruments, seed, rate_hz):
 
 
 def _qemu(config, scene, instruments, seed, rate_hz):
+    from telethermal.control.loop import RealClock
     from telethermal.devices.qemu_slave_pad import QemuSlavePad
-    return QemuSlavePad(scene, instruments, seed=seed, build_dir=config.firmware_build)
+
+    # The cores keep the service's time (time_scale): so do their drivers.
+    return QemuSlavePad(scene, instruments, seed=seed, build_dir=config.firmware_build,
+                        time_scale=config.time_scale,
+                        clock=RealClock(scale=config.time_scale).monotonic)
 
 
 #: The sensing pad's devices by kind (the simulator alone has none):

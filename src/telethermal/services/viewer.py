@@ -7,6 +7,7 @@ import signal
 import threading
 from pathlib import Path
 
+from telethermal.control.loop import RealClock
 from telethermal.services.config import load_config
 from telethermal.view.feed import LiveFeed
 from telethermal.view.server import ViewServer
@@ -25,7 +26,9 @@ def live_feed(config) -> tuple[LiveFeed, str]:
     master_url = f"tcp://127.0.0.1:{config.view_port}" if config.view_port else None
     note = "" if master_url else ("the master's config has view_port = 0: its pad, the "
                                   "posterior, safety and link are not shown")
-    return LiveFeed(master_url, f"tcp://{t.host}:{t.stream_port}", curve), note
+    # The services' times are on their clock (time_scale): so are the feed's.
+    clock = RealClock(scale=config.time_scale).monotonic
+    return LiveFeed(master_url, f"tcp://{t.host}:{t.stream_port}", curve, clock=clock), note
 
 
 def open_view(master_config: str | Path | None, recordings: str | Path | None,

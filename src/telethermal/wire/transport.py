@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ipaddress
 import logging
+import math
 import socket
 import time
 import uuid
@@ -131,14 +132,20 @@ class Endpoint:
     """One side of a master-slave link: owns its ``sockets``
     (:class:`~telethermal.wire.sockets.EndpointSockets`), its ``lossless``
     stream (:class:`~telethermal.wire.lossless.LosslessStream`) and its
-    ``hello`` exchange (:class:`~telethermal.wire.hello.HelloExchange`)."""
+    ``hello`` exchange (:class:`~telethermal.wire.hello.HelloExchange`).
+
+    ``time_scale``: how many of the machine's seconds one of ``clock``'s
+    lasts (a service's ``time_scale``): :meth:`poll` waits ``clock``'s time."""
 
     def __init__(self, role: str, config: TransportConfig, context: zmq.Context | None = None,
-                 clock=time.monotonic):
+                 clock=time.monotonic, time_scale: float = 1.0):
         if role not in ("master", "slave"):
             raise TransportError(f"role must be master or slave, got {role!r}")
+        if not (isinstance(time_scale, (int, float)) and 1.0 <= time_scale < math.inf):
+            raise TransportError(f"time_scale must be a finite number >= 1, got {time_scale!r}")
         config.validate(role)
         self.role, self.config, self.clock = role, config, clock
+        self.time_scale = float(time_scale)
         self.ctx = context or zmq.Context.instance()
         self.session_id = uuid.uuid4().hex[:16]
         self.counters = dict.fromkeys(COUNTERS, 0)
@@ -240,13 +247,13 @@ class Endpoint:
     def say_stopping(self, message: str, linger_s: float = 0.05) -> None:
         """A service's last word before :meth:`close`: if a peer has said
         hello, ``status`` STOPPING with every counter and ``message``, and
-        ``linger_s`` for it to leave (and the peer's last messages to be
-        read and dropped)."""
+        ``linger_s`` of the machine's time for it to leave (and the peer's
+        last messages to be read and dropped)."""
         if self.peer_version is None:
             return
         self.send("status", state="stopping", counters=self.all_counters(),
                   message=message[:200])
-        self.poll(linger_s)
+        self.poll(linger_s / self.time_scale)            # the machine's seconds
 
     # ------------------------------------------------------------ sending
     def _raw_send(self, sock, message: dict, data: bytes | None = None) -> bool:
@@ -356,7 +363,7 @@ class Endpoint:
                 self._last_heartbeat_sent = now
         if self.peer_version is not None and alive:
             self._publish_status(now)
-        events = dict(self.poller.poll(max(0.0, timeout_s) * 1000))
+        events = dict(self.poller.poll(max(0.0, timeout_s) * 1000 * self.time_scale))
         out += self._receive(control=self.control in events, stream=self.stream in events)
         return out
 
