@@ -94,3 +94,25 @@ def test_unknown_reason_is_none_only_for_a_name():
     assert unknown_reason(Estimate(0.2, (0.0, 1.0), "wood", 1.0, True, Reason.CONFIDENT)) is None
     assert unknown_reason(Estimate(0.2, (0.5, 0.5), "plexiglass|rubber", 0.99, True,
                                    Reason.CONFIDENT_GROUP)) is None
+
+
+def test_services_on_different_clocks_are_no_live_session(monkeypatch):
+    """Each service judges the other's heartbeats and times on its own
+    clock (``time_scale``): two scales are said, and the session not live."""
+    import telethermal.services.admin_client as ac
+
+    def status(role, scale):
+        return {"role": role, "state": "idle", "peer_alive": True, "session": "s",
+                "rtt_s": 1e-4, "counters": {}, "time_scale": scale}
+
+    scales = {"slave": 1.0, "master": 9.0}
+    monkeypatch.setattr(ac, "request", lambda where, role, cmd, timeout_s: status(
+        role, scales[role]))
+    poll = ac.poll_status({"slave": 1, "master": 2}, ("slave", "master"))
+    assert not poll.live
+    assert poll.lines[-1] == ("problem: the services run on different clocks (time_scale: "
+                              "slave 1, master 9): give both configs the same time_scale")
+    assert poll.lines[2] == "master: idle, peer alive, rtt 0.10 ms, time scale 9"
+    scales["slave"] = 9.0
+    poll = ac.poll_status({"slave": 1, "master": 2}, ("slave", "master"))
+    assert poll.live and not any("different clocks" in line for line in poll.lines)

@@ -136,6 +136,14 @@ def _poll_once(where: dict, roles) -> StatusPoll:
             poll.live = False               # a role that does not answer is not live
             poll.lines.append(f"{role}: not reachable here ({exc})")
     poll.live &= bool(poll.replies)
+    scales = {role: float(s.get("time_scale", 1.0)) for role, s in poll.replies.items()}
+    if len(set(scales.values())) > 1:
+        # Each judges the other's heartbeats and times on its own clock: no
+        # session on two clocks is to be trusted (the services cannot tell).
+        poll.live = False
+        poll.lines.append("problem: the services run on different clocks (time_scale: "
+                          + ", ".join(f"{r} {v:g}" for r, v in scales.items())
+                          + "): give both configs the same time_scale")
     return poll
 
 
@@ -176,7 +184,9 @@ def describe_status(status: dict) -> list[str]:
     lines = [f"{status['role']}: {status['state']}, peer "
              f"{'alive' if status['peer_alive'] else 'silent'}, rtt {_ms(status.get('rtt_s'))}"
              + (f", slave at {status['slave']}" if status.get("slave") else "")
-             + (f", object {status['material']}" if status.get("material") else ""),
+             + (f", object {status['material']}" if status.get("material") else "")
+             + (f", time scale {status['time_scale']:g}"
+                if status.get("time_scale", 1.0) != 1.0 else ""),
              f"  counters: {moved or 'all zero'}"]
     if "memory" in status:                  # the slave's object memory
         known = ", ".join(f"{name}: {m['material']} ({m['confidence']:.3f})"

@@ -109,8 +109,9 @@ class SlaveConfig:
     #: real time): for boards slower than real time (devices = "qemu":
     #: QEMU's UARTs, firmware/README.md), whose plant waits for them and
     #: whose cores' millisecond is stretched as much. Both services of a
-    #: session must run on the same (they do not check each other's: the
-    #: demo writes both); the simulator's and QEMU's devices only.
+    #: session must run on the same (the services cannot tell; ``telethermal
+    #: admin status`` says when they differ); the simulator's and QEMU's
+    #: devices only.
     time_scale: float = 1.0
     transport: TransportConfig = field(default_factory=TransportConfig)
 
