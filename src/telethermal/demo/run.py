@@ -12,7 +12,6 @@ import sys
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
-from types import SimpleNamespace
 from pathlib import Path
 
 from telethermal.control.loop import DEFAULT_RATE_HZ
@@ -300,12 +299,12 @@ def demo_time_scale(devices: str, rate_hz: float, sample_rate_hz: float,
     """The services' ``time_scale``: ``time_scale`` if given (checked as the
     configs check it); else 1, and on QEMU's cores what their UARTs need
     (:func:`~telethermal.services.qemu_boards.qemu_time_scale`)."""
-    from telethermal.services.config import time_scale_of
+    from telethermal.services.config import check_config_time_scale
     from telethermal.services.qemu_boards import qemu_time_scale
 
     if time_scale is None:
         return qemu_time_scale(rate_hz, sample_rate_hz) if devices == "qemu" else 1.0
-    return time_scale_of(SimpleNamespace(time_scale=time_scale, devices=DeviceKind(devices)))
+    return check_config_time_scale(time_scale, DeviceKind(devices))
 
 
 def demo(out: str | Path, scene_name: str = "fingertip-7", materials=None, seed: int = 0,

@@ -54,6 +54,10 @@ FIRMWARE = Path(__file__).resolve().parents[3] / "firmware"
 #: The images: the display's sensor board (frame version 1), the slave's
 #: (version 2), the Peltier driver, the active pad's driver, the codecs.
 IMAGES = ("tt_board", "tt_board2", "tt_peltier", "tt_pad", "tt_codec")
+#: How many times the cores stretch their millisecond at most (a rig's
+#: time scale; firmware's board_time_scale: SysTick's 24 bits at 168 MHz).
+MAX_TIME_SCALE = 99.0
+HEARTBEAT_S = 0.1      #: the drivers' heartbeat period, s of the core's time (proto/CAN.md)
 
 
 def missing() -> list[tuple[str, str]]:
@@ -440,9 +444,9 @@ class QemuBoards:
                  purpose: str = "devices = 'qemu'", time_scale: float = 1.0):
         require(purpose)
         self.scale_milli = round(1000 * time_scale)
-        if not 1000 <= self.scale_milli <= 99000:
+        if not 1000 <= self.scale_milli <= 1000 * MAX_TIME_SCALE:
             raise DeviceError(f"time_scale {time_scale!r}: the cores stretch their "
-                              "millisecond from 1 to 99 times")
+                              f"millisecond from 1 to {MAX_TIME_SCALE:g} times")
         self._tmp = None if build_dir else tempfile.TemporaryDirectory(prefix="telethermal-qemu-")
         self.cores: dict[str, QemuCore] = {}
         self.plants: dict[str, PtyLine] = {}

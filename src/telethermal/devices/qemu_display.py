@@ -84,7 +84,7 @@ class QemuDisplay:
         heartbeats of the machine's time."""
         driver = self.hardware.peltier
         scale = self.boards.scale_milli / 1000
-        guard_s = ANSWER_WAIT_S + 2 * 0.1 * scale
+        guard_s = ANSWER_WAIT_S + 2 * qemu.HEARTBEAT_S * scale
         deadline = time.monotonic() + guard_s
         while not driver.alive and time.monotonic() < deadline:
             driver.poll(wait_s=0.01)

@@ -49,25 +49,22 @@ def _devices(config, example_tty: str) -> DeviceKind:
         raise ConfigError(str(exc)) from None
 
 
-def time_scale_of(config) -> float:
-    """The config's ``time_scale``, validated: a number from 1 up; other than
-    1 only with devices that wait for the service (the simulator; QEMU's
-    cores, whose millisecond the bridge stretches as much)."""
-    scale = check_time_scale(config.time_scale, ConfigError, "time_scale")
-    if scale != 1.0 and config.devices not in (DeviceKind.SIM, DeviceKind.QEMU):
-        raise ConfigError(f"time_scale = {config.time_scale!r} with devices = "
-                          f"{config.devices.value!r}: only the simulator's and QEMU's devices "
-                          "run on a slowed clock (emulated boards and hardware keep the "
-                          "machine's time): use 1")
-    if config.devices == DeviceKind.QEMU and scale > QEMU_MAX_TIME_SCALE:
-        raise ConfigError(f"time_scale = {config.time_scale!r} with devices = 'qemu': the "
-                          f"cores stretch their millisecond at most {QEMU_MAX_TIME_SCALE:g} "
-                          "times (SysTick's 24 bits at 168 MHz)")
+def check_config_time_scale(time_scale, devices: DeviceKind) -> float:
+    """A ``time_scale`` for ``devices``, validated: a number from 1 up; other
+    than 1 only with devices that wait for the service (the simulator;
+    QEMU's cores, whose millisecond the bridge stretches as much)."""
+    from telethermal.devices.qemu import MAX_TIME_SCALE as QEMU_MAX
+
+    scale = check_time_scale(time_scale, ConfigError, "time_scale")
+    if scale != 1.0 and devices not in (DeviceKind.SIM, DeviceKind.QEMU):
+        raise ConfigError(f"time_scale = {time_scale!r} with devices = {devices.value!r}: "
+                          "only the simulator's and QEMU's devices run on a slowed clock "
+                          "(emulated boards and hardware keep the machine's time): use 1")
+    if devices == DeviceKind.QEMU and scale > QEMU_MAX:
+        raise ConfigError(f"time_scale = {time_scale!r} with devices = 'qemu': the cores "
+                          f"stretch their millisecond at most {QEMU_MAX:g} times (SysTick's 24 "
+                          "bits at 168 MHz)")
     return scale
-
-
-#: How far QEMU's cores stretch their millisecond (firmware's board_time_scale).
-QEMU_MAX_TIME_SCALE = 99.0
 
 
 #: The slowest display loop a master runs, Hz: two of its commands inside
@@ -118,7 +115,7 @@ class SlaveConfig:
     def __post_init__(self):
         _check_ports(self, ("admin_port",))
         self.devices = _devices(self, "/dev/ttyUSB1")
-        self.time_scale = time_scale_of(self)
+        self.time_scale = check_config_time_scale(self.time_scale, self.devices)
 
 
 @dataclass
@@ -164,11 +161,7 @@ class MasterConfig:
     #: The view stream (a PUB socket on 127.0.0.1, read by ``telethermal
     #: view``); 0: off.
     view_port: int = 0
-    #: How many of the machine's seconds one second of the service lasts (1:
-    #: real time): for boards slower than real time (devices = "qemu":
-    #: QEMU's UARTs, firmware/README.md), whose plant waits for them and
-    #: whose cores' millisecond is stretched as much. Both services of a
-    #: session run on the same; the simulator's and QEMU's devices only.
+    #: As the slave's (:attr:`SlaveConfig.time_scale`): the same in both.
     time_scale: float = 1.0
     transport: TransportConfig = field(default_factory=TransportConfig)
 
@@ -185,7 +178,7 @@ class MasterConfig:
             raise ConfigError(f"realtime_priority = {self.realtime_priority!r}: 1-99 "
                               "(SCHED_FIFO), or 0 for the default scheduler")
         self.devices = _devices(self, "/dev/ttyUSB0")
-        self.time_scale = time_scale_of(self)
+        self.time_scale = check_config_time_scale(self.time_scale, self.devices)
 
 
 def load_config(path: str | Path, role: str):

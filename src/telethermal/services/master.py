@@ -2,9 +2,9 @@
 
 Owns: the transport's master end (control DEALER and stream SUB, connecting),
 the simulated display pad, operator and force sensor, and the display loop at
-``rate_hz`` on the real clock (slowed by ``time_scale``). Each period it reads the network and the admin
-socket and, in a touch, runs one period of the display (teleop/master.py) with
-what the slave has said. Rendering is timed from the master's own contact onset,
+``rate_hz`` on the real clock (slowed by ``time_scale``). Each period it reads
+the network and the admin socket and, in a touch, runs one period of the
+display (teleop/master.py) with what the slave has said. Rendering is timed from the master's own contact onset,
 so the network's delay shifts nothing once the trajectory is here.
 """
 
