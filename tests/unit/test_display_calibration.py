@@ -60,6 +60,71 @@ def test_the_true_lags_and_gain_lie_in_their_intervals(built_cal):
     assert 0.8 < cal.chi2_per_dof_air < 1.3 and 0.8 < cal.chi2_per_dof_block < 1.3
 
 
+def lumped_face(scene, factors) -> float:
+    """The face layer's factor that carries the drawn film's and grease's
+    resistance (every layer but the junction's), the grease at its design:
+    what the fit's lumped face layer should read."""
+    from telethermal.physics.layered import pad_resistance
+    layers = scene.pad.layers
+    drawn = sum(la.thickness_m * f / la.material.conductivity_w_mk
+                for la, f in zip(layers[:-1], factors[:-1]))
+    return (drawn - pad_resistance(layers[1:-1])) / pad_resistance(layers[:1])
+
+
+def test_the_pads_layers_are_found_on_the_block(built_cal):
+    """The face layer (film x1.2, grease x0.8 lumped into it: x1.196) inside
+    its interval and the design outside it; the junction-side layer (x1.1)
+    and the junction sensor's lag (x1.5) beside it, inside theirs; the
+    residual at the noise (chi2/dof 0.8-1.3)."""
+    scene, cal = built_cal
+    face = lumped_face(scene, BUILT["layer_thickness"])
+    assert cal.face_layer_thickness_lo <= face <= cal.face_layer_thickness_hi, (
+        cal.face_layer_thickness_lo, cal.face_layer_thickness, cal.face_layer_thickness_hi, face)
+    assert not cal.face_layer_thickness_lo <= 1.0 <= cal.face_layer_thickness_hi
+    assert cal.back_layer_thickness_lo <= 1.1 <= cal.back_layer_thickness_hi
+    tau = 1.5 * scene.sensors.junction_sensor_spec().tau_s
+    assert cal.stack_junction_lag_s_lo <= tau <= cal.stack_junction_lag_s_hi
+    assert 0.8 < cal.chi2_per_dof_stack < 1.3
+
+
+def test_the_master_models_its_pad_with_the_calibrated_face_layer(built_cal):
+    """The calibration's face layer reaches the master's model (its layers
+    and resistance) and the scene the idle policy is searched on; the other
+    layers stay the design's; without a calibration, the design's."""
+    from telethermal.physics.layered import pad_resistance
+    from telethermal.teleop.display_calibration import modelled_scene
+    from telethermal.teleop.display_setup import display_model_args
+    scene, cal = built_cal
+    args = display_model_args(scene, cal)
+    design = scene.pad.layers
+    assert args["pad_layers"][0].thickness_m == pytest.approx(
+        design[0].thickness_m * cal.face_layer_thickness, rel=1e-12)
+    assert args["pad_layers"][1:] == tuple(design[1:])
+    assert args["pad_resistance_m2k_w"] == pad_resistance(args["pad_layers"])
+    assert modelled_scene(scene, cal).pad.layers == args["pad_layers"]
+    assert display_model_args(scene)["pad_layers"] == tuple(design)
+    assert modelled_scene(scene, None) is scene
+
+
+def test_a_calibrated_display_idles_by_the_policy_of_its_own_layers(built_cal, monkeypatch):
+    """The display built with a calibration asks for the idle policy of its
+    calibrated layers (a key of its own: searched and cached for them), not
+    the design's (the policy's search itself stubbed: minutes)."""
+    from telethermal.control import preconditioning as pc
+    from telethermal.teleop.display_calibration import modelled_scene
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.display_setup import display_idle
+    scene, cal = built_cal
+    asked = []
+    shipped = pc.policy_fractions(pc.load_scene("fingertip-7"))
+    monkeypatch.setattr(pc, "policy_fractions", lambda s: asked.append(s) or shipped)
+    display_idle(scene, DisplayConfig(), 33.0, 24.0, calibration=cal)
+    display_idle(scene, DisplayConfig(), 33.0, 24.0)
+    assert [s.pad.layers for s in asked] == [modelled_scene(scene, cal).pad.layers,
+                                             scene.pad.layers]
+    assert pc.policy_key(asked[0]) != pc.policy_key(asked[1])
+
+
 def test_the_table_reads_back_and_shares_a_file_with_the_pads(tmp_path, built_cal):
     from telethermal.ident.pad_calibration import (CalibratedParameter, PadCalibration,
                                                    read_calibration)

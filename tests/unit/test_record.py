@@ -273,23 +273,38 @@ def test_a_recording_written_before_the_session_core_replays_sample_for_sample()
 
 def test_a_calibrated_displays_touch_records_its_lags_and_replays_sample_for_sample(models,
                                                                                    tmp_path):
-    """A master built with a display calibration records the lags its
-    controllers used (the calibrated flux lag, not the scene's stated one;
-    the junction's stays the configured one, the calibration's is not used):
-    the replay rebuilds the same controllers and comes out identical."""
+    """A master built with a display calibration records the lags and the
+    layers its controllers used (the calibrated flux lag, not the scene's
+    stated one; the face layer at its fitted thickness; the junction's lag
+    stays the configured one, the calibration's is not used): the replay
+    rebuilds the same controllers and comes out identical. (Idling on the
+    object's temperature: a policy for the calibrated layers is minutes to
+    search, and the recording of the policy is another test's.)"""
     from telethermal.ident.pad_calibration import pad_digest
     from telethermal.teleop.display_calibration import DisplayCalibration
 
     lag, tau = 1.2 * SCENE.sensors.flux_lag_s, 1.5 * SCENE.sensors.junction_sensor_spec().tau_s
-    cal = DisplayCalibration("telethermal-calibration", 1, SCENE.name, pad_digest(SCENE),
-                             "plexiglass", lag, lag, lag, tau, tau, tau, 1.0, 1.0, 1.0,
-                             1.0, 1.0, 0.01, 0.01, 0.01, 0.01)
+    figures = {"flux_lag_s": lag, "junction_lag_s": tau, "flux_gain": 1.0,
+               "face_layer_thickness": 1.3, "back_layer_thickness": 1.0,
+               "stack_junction_lag_s": tau}
+    cal = DisplayCalibration(
+        "telethermal-calibration", 1, SCENE.name, pad_digest(SCENE), "plexiglass",
+        **{k + end: v for k, v in figures.items() for end in ("", "_lo", "_hi")},
+        **{f"{stat}_{part}": 1.0 for stat in ("chi2_per_dof",)
+           for part in ("air", "block", "stack")},
+        **{f"{stat}_{part}_k": 0.01 for stat in ("residual", "noise")
+           for part in ("air", "block", "stack")})
     path = tmp_path / "calibrated.mcap"
-    run_session(SCENE, "aluminium", *models, DisplayConfig(feedforward_model="impedance"),
+    run_session(SCENE, "aluminium", *models,
+                DisplayConfig(feedforward_model="impedance", idle="object"),
                 contact_s=0.5, seed=1, record=path, display_calibration=cal)
     params = read_recording(path).config
     assert params["sensor_lag_s"] == lag != SCENE.sensors.flux_lag_s
     assert params["junction_sensor"]["tau_s"] == SCENE.sensors.junction_sensor_spec().tau_s
+    face = SCENE.pad.layers[0]
+    assert params["pad_layers"][0] == [face.material.name, 1.3 * face.thickness_m]
+    assert params["pad_layers"][1:] == [[la.material.name, la.thickness_m]
+                                        for la in SCENE.pad.layers[1:]]
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
 

@@ -172,13 +172,14 @@ def run_demo(out: Path, scene_name: str, identifier_path: Path, generator_path: 
     from telethermal.render.generator import load_generator
 
     from telethermal.teleop.display_calibration import display_calibration as read_cal
+    from telethermal.teleop.display_calibration import modelled_scene
 
     scene = with_finger(load_scene(scene_name))
     display_cal = read_cal(display_calibration, scene)          # refused before anything runs
     identifier, generator = load_model(identifier_path), load_generator(generator_path)
     from telethermal.control.preconditioning import prepare_policy
 
-    prepare_policy(scene, echo)
+    prepare_policy(modelled_scene(scene, display_cal), echo)   # the display's layers
     ports = free_ports(5)
     slave_cfg, master_cfg = write_configs(out, scene_name, identifier_path, generator_path,
                                           ports[:4], seed, rate_hz=rate_hz,

@@ -11,7 +11,7 @@ trace, which holds the truth a lab cannot measure. Replaying a recording is
 from __future__ import annotations
 
 import tempfile
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -98,6 +98,12 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
     from telethermal.control.dew import idle_floor_c
     from telethermal.control.preconditioning import policy_fractions
 
+    # The pad's layers as the display modelled them (a calibrated face layer),
+    # and the idle policy searched on them.
+    layers = display.pad_layers if display is not None and display.pad_layers \
+        else tuple(scene.pad.layers)
+    model = replace(scene, pad=replace(scene.pad, layers=tuple(layers)))
+
     return {"display": {"rate_hz": config.rate_hz, "before": config.before,
                         "idle": config.idle,
                         "source": config.source, "gains": asdict(config.gains),
@@ -110,8 +116,8 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
                         "current_slew_a_s": config.current_slew_a_s,
                         "flux_inverse_s": config.flux_inverse_s,
                         "impedance_bias_filter_s": config.impedance_bias_filter_s},
-            "pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
-            "pad_layers": [[layer.material.name, layer.thickness_m] for layer in scene.pad.layers],
+            "pad_resistance_m2k_w": pad_resistance(layers),
+            "pad_layers": [[layer.material.name, layer.thickness_m] for layer in layers],
             "contact_conductance_w_m2k": (scene.finger.contact_conductance_w_m2k
                                           if scene.finger is not None else None),
             "sensor_lag_s": (scene.sensors.flux_lag_s if display is None
@@ -119,7 +125,7 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
             "flux_gain": 1.0 if display is None else display.flux_gain,
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
             # The idle policy the display applied (fractions of finger - object).
-            "idle_policy": policy_fractions(scene) if config.idle == "policy" else None,
+            "idle_policy": policy_fractions(model) if config.idle == "policy" else None,
             "operator": asdict(operator),
             "module": asdict(scene.pad.module_params()[0]), "pad_area_m2": scene.pad.area_m2,
             "junction_sensor": asdict(scene.sensors.junction_sensor_spec() if display is None

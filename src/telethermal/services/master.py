@@ -39,7 +39,8 @@ from telethermal.teleop.session import MasterSession, PRE_CONTACT_S, ServiceStat
 from telethermal.teleop.decision import touch_decision
 from telethermal.teleop.memory import judged_of
 from telethermal.teleop.display_setup import build_display, safety_summary
-from telethermal.teleop.display_calibration import display_calibration, refuse_on_hardware
+from telethermal.teleop.display_calibration import (display_calibration, modelled_scene,
+                                                    refuse_on_hardware)
 from telethermal.wire.messages import Message, SessionConfig
 from telethermal.wire.schema import MessageKind
 
@@ -115,7 +116,7 @@ class MasterService:
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before,
                                             idle=config.idle)
         if config.idle == "policy":       # before the sockets: no touch waits for it
-            prepare_policy(self.scene, log.warning)
+            prepare_policy(modelled_scene(self.scene, self.display_calibration), log.warning)
         #: The service's clock (the loop's, and its messages'): the
         #: machine's, or slowed by ``time_scale``.
         self.clock = RealClock.for_period(1.0 / config.rate_hz, config.time_scale)

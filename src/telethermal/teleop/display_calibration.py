@@ -15,7 +15,7 @@ from telethermal.control import display_calibration as routine
 from telethermal.errors import CalibrationError
 from telethermal.tomltables import table_values, toml_str
 
-FORMAT, FORMAT_VERSION = "telethermal-display-calibration", 2
+FORMAT, FORMAT_VERSION = "telethermal-display-calibration", 3
 #: Where a routine may have run (``DisplayCalibration.bench``).
 BENCHES = ("simulated", "emulated", "hardware")
 #: The reference block a lab presses on the pad (docs/calibration.md: a
@@ -50,12 +50,28 @@ class DisplayCalibration:
     flux_gain: float
     flux_gain_lo: float
     flux_gain_hi: float
+    #: The pad's layers on the block (control/display_stack.py): the face
+    #: layer's thickness factor (lumped: the stack's resistance; the
+    #: master's model takes it), the junction-side layer's and the junction
+    #: sensor's lag against them (reported, not used).
+    face_layer_thickness: float
+    face_layer_thickness_lo: float
+    face_layer_thickness_hi: float
+    back_layer_thickness: float
+    back_layer_thickness_lo: float
+    back_layer_thickness_hi: float
+    stack_junction_lag_s: float
+    stack_junction_lag_s_lo: float
+    stack_junction_lag_s_hi: float
     chi2_per_dof_air: float
     chi2_per_dof_block: float
+    chi2_per_dof_stack: float
     residual_air_k: float
     noise_air_k: float
     residual_block_k: float
     noise_block_k: float
+    residual_stack_k: float
+    noise_stack_k: float
     #: Where the routine ran: "simulated" or "emulated" (the simulator's
     #: display, directly or behind the emulated devices: a master on
     #: hardware refuses these) or "hardware" (a lab's display:
@@ -91,7 +107,18 @@ class DisplayCalibration:
             f"{self.flux_gain_hi:.4f}] 95 % (against the block's table effusivity; the "
             "master divides its flux readings by it)",
             f"  on the block: residual {self.residual_block_k:.4f} K rms against "
-            f"{self.noise_block_k:.4f} K of noise (chi2/dof {self.chi2_per_dof_block:.2f})"]
+            f"{self.noise_block_k:.4f} K of noise (chi2/dof {self.chi2_per_dof_block:.2f})",
+            f"  pad layers, junction to face on the block: the face layer x"
+            f"{self.face_layer_thickness:.4f} [{self.face_layer_thickness_lo:.4f}, "
+            f"{self.face_layer_thickness_hi:.4f}] 95 % its design thickness (lumped: the "
+            "stack's resistance; the master's model takes it); residual "
+            f"{self.residual_stack_k:.4f} K rms against {self.noise_stack_k:.4f} K of noise "
+            f"(chi2/dof {self.chi2_per_dof_stack:.2f})",
+            f"  beside it, not used (they trade against each other): the junction-side layer x"
+            f"{self.back_layer_thickness:.3f} [{self.back_layer_thickness_lo:.3f}, "
+            f"{self.back_layer_thickness_hi:.3f}], the junction sensor's lag "
+            f"{self.stack_junction_lag_s:.4f} s [{self.stack_junction_lag_s_lo:.4f}, "
+            f"{self.stack_junction_lag_s_hi:.4f}]"]
 
     def to_toml(self) -> str:
         lines = ["[display]"]
@@ -117,7 +144,8 @@ class DisplayCalibration:
         if values["bench"] not in BENCHES:
             raise CalibrationError(f"{where}: bench = {values['bench']!r}: one of "
                                    f"{', '.join(BENCHES)}")
-        for name in ("flux_lag_s", "junction_lag_s", "flux_gain"):
+        for name in ("flux_lag_s", "junction_lag_s", "flux_gain", "face_layer_thickness",
+                     "back_layer_thickness", "stack_junction_lag_s"):
             lo, x, hi = (values[name + "_lo"], values[name], values[name + "_hi"])
             if not all(math.isfinite(v) and v > 0 for v in (lo, x, hi)) or not lo <= x <= hi:
                 raise CalibrationError(f"{where}: {name} = {x!r} with interval [{lo!r}, "
@@ -181,6 +209,7 @@ def fit_display(scene, on_block: routine.Record, in_air: routine.Record, block: 
                 bench: str) -> DisplayCalibration:
     """The display's figures fitted to the routine's two parts (read on the
     routine's grid); refused when the model does not fit."""
+    from telethermal.control.display_stack import fit_stack
     from telethermal.ident.pad_calibration import pad_digest
     from telethermal.physics.materials import get_material
 
@@ -202,15 +231,49 @@ def fit_display(scene, on_block: routine.Record, in_air: routine.Record, block: 
             f"effusivity ({effusivity:.0f} W s^0.5/(m^2 K)) takes: no sensor is that far off "
             f"its datasheet (refused outside {GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g}); is the "
             f"block {block}, and 3 cm thick? (--block names its material)")
+    stack = fit_stack(on_block, scene.pad.layers, blk.params["flux_lag_s"].value, gain,
+                      js.tau_s, math.hypot(js.noise_k, js.lsb_k / 12 ** 0.5), tc_noise_k,
+                      flux_noise)
+    routine.refuse_misfit(f"on the {block} block (the pad's layers)", stack)
     values = {}
-    for name, fit in (("junction_lag_s", air), ("flux_lag_s", blk), ("flux_gain", blk)):
+    for key, name, fit in (("junction_lag_s", "junction_lag_s", air),
+                           ("flux_lag_s", "flux_lag_s", blk), ("flux_gain", "flux_gain", blk),
+                           ("face_layer_thickness", "face_layer_thickness", stack),
+                           ("back_layer_thickness", "back_layer_thickness", stack),
+                           ("stack_junction_lag_s", "junction_lag_s", stack)):
         p = fit.params[name]
-        values.update({name: p.value, name + "_lo": p.lo, name + "_hi": p.hi})
+        values.update({key: p.value, key + "_lo": p.lo, key + "_hi": p.hi})
     return DisplayCalibration(FORMAT, FORMAT_VERSION, scene.name, pad_digest(scene), block,
                               chi2_per_dof_air=air.chi2_per_dof, chi2_per_dof_block=blk.chi2_per_dof,
+                              chi2_per_dof_stack=stack.chi2_per_dof,
                               residual_air_k=air.residual_rms, noise_air_k=air.noise_rms,
                               residual_block_k=blk.residual_rms, noise_block_k=blk.noise_rms,
+                              residual_stack_k=stack.residual_rms, noise_stack_k=stack.noise_rms,
                               bench=bench, **{k: float(v) for k, v in values.items()})
+
+
+def calibrated_layers(scene, cal: DisplayCalibration | None) -> tuple:
+    """The display pad's layers as the master models them: the scene's
+    (``[pad] layers``), the face layer's thickness times the calibration's
+    ``face_layer_thickness`` when given (the caller checks ``cal`` against
+    ``scene``: :func:`calibrated_lags`, :func:`display_calibration`)."""
+    from telethermal.physics.layered import Layer
+    layers = tuple(scene.pad.layers)
+    if cal is None:
+        return layers
+    face = layers[0]
+    return (Layer(face.material, face.thickness_m * cal.face_layer_thickness),) + layers[1:]
+
+
+def modelled_scene(scene, cal: DisplayCalibration | None):
+    """``scene`` with the display pad's layers as the master models them
+    (:func:`calibrated_layers`): what the idle policy is searched on, so a
+    calibrated display idles for its own layers (a policy of its own, cached
+    under its own key: control/preconditioning.py)."""
+    if cal is None:
+        return scene
+    from dataclasses import replace
+    return replace(scene, pad=replace(scene.pad, layers=calibrated_layers(scene, cal)))
 
 
 def calibrated_lags(scene, cal: DisplayCalibration | None) -> tuple[float, float]:

@@ -32,12 +32,14 @@ def display_model_args(scene: Scene, calibration=None) -> dict:
     (``junction_sensor``, ``junction_lag_s``); with ``calibration`` (a
     :class:`~telethermal.teleop.display_calibration.DisplayCalibration`,
     checked against ``scene``) the flux sensor's lag and gain it measured
-    (the junction sensor keeps its stated lag: docs/calibration.md).
+    and the pad's layers with its face layer's fitted thickness (the
+    junction sensor keeps its stated lag: docs/calibration.md).
     ``MasterDisplay(config, generator, finger_temp_c=..., **these)``."""
-    from telethermal.teleop.display_calibration import calibrated_lags
+    from telethermal.teleop.display_calibration import calibrated_lags, calibrated_layers
     flux_lag_s, junction_lag_s = calibrated_lags(scene, calibration)
-    return {"pad_resistance_m2k_w": pad_resistance(scene.pad.layers),
-            "sensor_lag_s": flux_lag_s, "pad_layers": tuple(scene.pad.layers),
+    layers = calibrated_layers(scene, calibration)
+    return {"pad_resistance_m2k_w": pad_resistance(layers),
+            "sensor_lag_s": flux_lag_s, "pad_layers": layers,
             "contact_conductance_w_m2k": scene.finger.contact_conductance_w_m2k,
             "module": scene.pad.module_params()[0], "pad_area_m2": scene.pad.area_m2,
             "junction_sensor": replace(scene.sensors.junction_sensor_spec(),
@@ -46,23 +48,29 @@ def display_model_args(scene: Scene, calibration=None) -> dict:
             "flux_gain": 1.0 if calibration is None else calibration.flux_gain}
 
 
-def precondition_for(scene: Scene, finger_c: float):
+def precondition_for(scene: Scene, finger_c: float, calibration=None):
     """The display's pre-conditioning for this scene and operator:
-    ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
+    ``f(material or None, object_temp_c) -> idle offset from the object, K``;
+    the idle policy searched on the display's layers as ``calibration``
+    (the display's, or None) models them."""
     from telethermal.control.preconditioning import policy_fractions, precondition_from
-    return precondition_from(policy_fractions(scene), finger_c)
+    from telethermal.teleop.display_calibration import modelled_scene
+    return precondition_from(policy_fractions(modelled_scene(scene, calibration)), finger_c)
 
 
 def display_idle(scene: Scene, config: DisplayConfig, finger_c: float,
-                 object_temp_c: float | None, expected_material: str | None = None):
+                 object_temp_c: float | None, expected_material: str | None = None,
+                 calibration=None):
     """Where the display's pad idles before a touch, and the pre-conditioning
     the display keeps applying (``MasterDisplay(precondition=...)``): with
     ``config.idle`` "policy" the object's temperature shifted by the scene's
     idle policy for ``expected_material`` (None: an unknown object, the
-    minimax idle); "object": the object's temperature. Every driver (the
-    in-process run, the services, the simulated network) starts its display
-    here. Returns (idle C, precondition or None)."""
-    shift = precondition_for(scene, finger_c) if config.idle == Idle.POLICY else None
+    minimax idle); "object": the object's temperature. The policy is the
+    one of the display's layers as its ``calibration`` models them. Every
+    driver (the in-process run, the services, the simulated network) starts
+    its display here. Returns (idle C, precondition or None)."""
+    shift = precondition_for(scene, finger_c, calibration) \
+        if config.idle == Idle.POLICY else None
     obj = object_temp_c
     if shift is not None and obj is not None and math.isfinite(obj):
         obj = obj + shift(expected_material, obj)
@@ -98,7 +106,8 @@ def build_display(scene: Scene, config: DisplayConfig, finger_c: float, heard, *
     Returns the display and its idle temperature (C; None when not idling)."""
     expected = heard.expected_material if expected_material is None else expected_material
     idle_c, shift = display_idle(idle_scene or scene, config, finger_c,
-                                 heard.object_temp_c if idling else None, expected)
+                                 heard.object_temp_c if idling else None, expected,
+                                 calibration)
     display = MasterDisplay(config, heard.generator, finger_temp_c=finger_c,
                             idle_c=idle_c if idling else None, precondition=shift,
                             **display_model_args(scene, calibration))
