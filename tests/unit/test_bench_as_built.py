@@ -206,6 +206,7 @@ def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monk
 
     class DisplayCal:
         flux_lag_s, flux_lag_s_lo, flux_lag_s_hi, flux_gain = 0.15, 0.14, 0.16, 1.0
+        face_layer_thickness, face_layer_thickness_lo, face_layer_thickness_hi = 1.1, 1.09, 1.11
     monkeypatch.setattr(rig, "calibrate_simulated", lambda scene, seed: DisplayCal)
     out = ra.run(0.15, pads=1, quick=True)
     n = len(out["as_modelled"]["rows"])
@@ -213,7 +214,9 @@ def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monk
     assert {c for c in calls[:n]} == {(False, ("identifier", id(None)), None)}
     assert {c for c in calls[n:2 * n]} == {(True, ("identifier", id(None)), None)}
     assert {c for c in calls[2 * n:]} == {(True, ("identifier", id(pad_cal)), DisplayCal)}
-    assert out["summary"]["met"] and out["calibrations"][0]["display"]["flux_lag_s"] == 0.15
+    display = out["calibrations"][0]["display"]
+    assert out["summary"]["met"] and display["flux_lag_s"] == 0.15
+    assert display["face_layer_thickness"] == 1.1 and display["face_layer_thickness_true"] > 0
 
 
 def test_bench_render_as_built_refuses_an_sd_out_of_range(capsys):

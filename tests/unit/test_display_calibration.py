@@ -60,24 +60,15 @@ def test_the_true_lags_and_gain_lie_in_their_intervals(built_cal):
     assert 0.8 < cal.chi2_per_dof_air < 1.3 and 0.8 < cal.chi2_per_dof_block < 1.3
 
 
-def lumped_face(scene, factors) -> float:
-    """The face layer's factor that carries the drawn film's and grease's
-    resistance (every layer but the junction's), the grease at its design:
-    what the fit's lumped face layer should read."""
-    from telethermal.physics.layered import pad_resistance
-    layers = scene.pad.layers
-    drawn = sum(la.thickness_m * f / la.material.conductivity_w_mk
-                for la, f in zip(layers[:-1], factors[:-1]))
-    return (drawn - pad_resistance(layers[1:-1])) / pad_resistance(layers[:1])
-
-
 def test_the_pads_layers_are_found_on_the_block(built_cal):
     """The face layer (film x1.2, grease x0.8 lumped into it: x1.196) inside
     its interval and the design outside it; the junction-side layer (x1.1)
     and the junction sensor's lag (x1.5) beside it, inside theirs; the
     residual at the noise (chi2/dof 0.8-1.3)."""
     scene, cal = built_cal
-    face = lumped_face(scene, BUILT["layer_thickness"])
+    from telethermal.bench.render_as_built import lumped_face_true
+    face = lumped_face_true(scene, BUILT["layer_thickness"])
+    assert face == pytest.approx(1.2 - 0.2 * 2e-5 / 0.9 / (3e-4 / 0.3), rel=1e-9)
     assert cal.face_layer_thickness_lo <= face <= cal.face_layer_thickness_hi, (
         cal.face_layer_thickness_lo, cal.face_layer_thickness, cal.face_layer_thickness_hi, face)
     assert not cal.face_layer_thickness_lo <= 1.0 <= cal.face_layer_thickness_hi

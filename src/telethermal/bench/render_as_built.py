@@ -19,8 +19,10 @@ rendered on the same session seeds three ways:
   :func:`~telethermal.bench.identify_as_built.calibrate_drawn`), the display
   by ``telethermal calibrate display``'s routine on the simulated bench
   (its flux sensor's lag in the impedance controller, its gain on the
-  flux readings; the junction loop keeps its configured lag:
-  docs/calibration.md).
+  flux readings, its face layer's thickness in the master's model of the
+  pad and the idle policy searched again for it, about 85 s of CPU a pad
+  the first time, then cached; the junction loop keeps its configured
+  lag: docs/calibration.md).
 
 Per row and material: the skin error over the whole contact (mean over the
 pads and seeds, and the worst), the flux error from the decision, safety
@@ -48,6 +50,19 @@ SEEDS = (1, 2)
 #: same material's as modelled.
 TARGET_RATIO = 1.15
 ROWS = ("as_modelled", "uncalibrated", "calibrated")
+
+
+def lumped_face_true(scene, factors) -> float:
+    """The face layer's factor that carries a drawn display's stack
+    resistance but the junction-side layer's (what ``calibrate display``'s
+    lumped face layer should read; the bench reads the drawn truth): the
+    drawn layers' resistance, the middle ones' design resistance taken off,
+    over the face layer's design resistance."""
+    from telethermal.physics.layered import pad_resistance
+    layers = scene.pad.layers
+    drawn = sum(la.thickness_m * f / la.material.conductivity_w_mk
+                for la, f in zip(layers[:-1], factors[:-1]))
+    return (drawn - pad_resistance(layers[1:-1])) / pad_resistance(layers[:1])
 
 
 def _rows(scene, materials, identifier, generator, seeds, display_calibration=None) -> list:
@@ -117,7 +132,14 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7",
                             "flux_lag_s_lo": display_cal.flux_lag_s_lo,
                             "flux_lag_s_hi": display_cal.flux_lag_s_hi,
                             "flux_lag_factor_true": built.as_built.display.flux_lag_s,
-                            "flux_gain": display_cal.flux_gain, "cpu_s": display_cpu_s}})
+                            "flux_gain": display_cal.flux_gain,
+                            "flux_gain_true": built.as_built.display.flux_gain,
+                            **{k: getattr(display_cal, k) for k in (
+                                "face_layer_thickness", "face_layer_thickness_lo",
+                                "face_layer_thickness_hi")},
+                            "face_layer_thickness_true": lumped_face_true(
+                                scene, built.as_built.display.layer_thickness),
+                            "cpu_s": display_cpu_s}})
             step(f"pad {k}: calibrated")
             rows = _rows(built, materials, train_identifier(built, 0, calibration=pad_cal),
                          generator, seeds, display_calibration=display_cal)

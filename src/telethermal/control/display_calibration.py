@@ -32,9 +32,10 @@ drives: :mod:`telethermal.devices.display`), in two parts:
    thermocouple's bias). A low-effusivity block keeps the contact's own
    time ``(e / h)^2`` far below the lag (PMMA on grease: about 1 ms
    against 150 ms): on a metal block the contact and the lag could not be
-   told apart.
+   told apart. The same part then gives the pad's layers between the
+   junction and the face (:mod:`telethermal.control.display_stack`).
 
-Both fits are ``scipy.optimize.least_squares`` on residuals divided by the
+The fits are ``scipy.optimize.least_squares`` on residuals divided by the
 noise the configuration states (the junction sensor's, the thermocouple's,
 the flux sensor's carried through the un-lagging); each parameter's 95 %
 interval is ``+-1.96 sd`` of its ``ln`` (Gauss-Newton covariance at the
