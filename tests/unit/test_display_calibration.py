@@ -150,6 +150,11 @@ def test_a_calibration_of_another_scene_or_sensors_is_refused(built_cal):
     (lambda t: t.update(flux_lag_s_hi=0.01), "inside it"),
     (lambda t: t.update(junction_lag_s="fast"), "junction_lag_s"),
     (lambda t: t.update(extra=1), "unknown key 'extra'"),
+    (lambda t: t.update(format_version=2), "version 2, not a"),
+    (lambda t: t.update(face_layer_thickness=50.0, face_layer_thickness_hi=60.0),
+     "face_layer_thickness = 50.0"),
+    (lambda t: t.update(chi2_per_dof_stack=float("nan")), "chi2_per_dof_stack = nan"),
+    (lambda t: t.update(chi2_per_dof_block=99.0), "chi2_per_dof_block = 99.0"),
 ])
 def test_a_bad_table_is_refused_by_name(tmp_path, built_cal, edit, words):
     table = tomllib.loads(built_cal[1].to_toml())["display"]
@@ -157,6 +162,31 @@ def test_a_bad_table_is_refused_by_name(tmp_path, built_cal, edit, words):
     with pytest.raises(CalibrationError, match=r"x\.toml: \[display\]") as err:
         DisplayCalibration.from_table(table, "x.toml")
     assert words in str(err.value)
+
+
+def test_a_pad_calibration_is_refused_before_its_fit_beside_an_old_display_table(
+        tmp_path, built_cal, monkeypatch, capsys):
+    """``calibrate pad --out F`` where F holds a display table it cannot keep
+    (an older format) refuses before it fits, saying which table blocked it
+    and what to do; nothing is written."""
+    from telethermal.cli import main
+    from telethermal.ident import pad_calibration, registry
+    table = built_cal[1].to_toml().replace("format_version = 3", "format_version = 2")
+    assert "format_version = 2" in table
+    out = tmp_path / "cal.toml"
+    out.write_text(table)
+    fitted = []
+    # The dataset's reading and the fit stubbed: what is asserted is that
+    # the file is judged before them.
+    monkeypatch.setattr(registry, "pad_dataset", lambda path: path)
+    monkeypatch.setattr(registry, "touches_scene", lambda data, scene: None)
+    monkeypatch.setattr(pad_calibration, "calibrate_pad", lambda *a, **k: fitted.append(a))
+    code = main(["calibrate", "pad", "--scene", "fingertip-7", "--data", str(tmp_path),
+                 "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code != 0 and fitted == []
+    assert "version 2" in err and "the display's calibration" in err, err
+    assert out.read_text() == table
 
 
 def test_a_file_with_no_display_table_says_how_to_make_one(tmp_path):
@@ -269,6 +299,31 @@ def test_a_hardware_master_refuses_a_calibration_from_a_simulated_bench(built_ca
         refuse_on_hardware(cal)
     refuse_on_hardware(replace(cal, bench="hardware"))
     refuse_on_hardware(None)
+
+
+def test_a_hardware_master_refuses_it_before_searching_a_policy_for_it(tmp_path, built_cal,
+                                                                       monkeypatch):
+    """The master on hardware refuses a simulated bench's calibration in its
+    constructor, before it would search the idle policy of that
+    calibration's layers (minutes) or open a device."""
+    from dataclasses import replace
+
+    from telethermal.ident.pad_calibration import pad_digest
+    from telethermal.physics.scene import load_scene, with_finger
+    from telethermal.services import master
+    from telethermal.services.config import MasterConfig
+
+    scene = with_finger(load_scene("fingertip-7"))
+    _, cal = built_cal
+    path = write_display_calibration(replace(cal, scene=scene.name,
+                                             pad_digest=pad_digest(scene)), tmp_path / "c.toml")
+    searched = []
+    monkeypatch.setattr(master, "prepare_policy", lambda *a, **k: searched.append(a))
+    with pytest.raises(CalibrationError, match="simulated bench"):
+        master.MasterService(MasterConfig(devices="hardware", board_url="/dev/null",
+                                          can_bus="virtual:nobody",
+                                          pad_calibration=str(path)))
+    assert searched == []
 
 
 def test_the_flux_noise_the_fit_expects_is_the_configured_sensor_s():

@@ -319,3 +319,28 @@ def test_replay_reports_the_decision_when_the_session_does(recorded):
     assert result.summary["decision_time_s"] is not None
     assert slave["decision_time_s"] == pytest.approx(result.summary["decision_time_s"])
     assert slave["recorded_decision_time_s"] == pytest.approx(result.summary["decision_time_s"])
+
+
+def test_a_recording_keeps_the_idle_policy_the_display_applied(models):
+    """The display idled by another scene's policy (``idle_scene``: the
+    trained materials' scene where the touched object is outside them)
+    records that policy, the one it applied, not its own scene's (a replay
+    rebuilds the pre-conditioning from it)."""
+    from types import SimpleNamespace
+
+    from telethermal.control.preconditioning import policy_fractions
+    from telethermal.record.recorder import display_params
+    from telethermal.teleop.display_setup import build_display
+
+    other = with_finger(load_scene("gripper-case-I-cnv"))
+    assert policy_fractions(other) != policy_fractions(SCENE)
+    heard = SimpleNamespace(expected_material=None, object_temp_c=24.0, generator=models[1])
+    config = DisplayConfig()
+    display, idle_c = build_display(SCENE, config, 33.0, heard, idle_scene=other)
+    from telethermal.sim.touch import Operator
+    operator = Operator(33.0, 33.0, 1.0, 1.0, 2.0, 1e4)
+    params = display_params(SCENE, config, operator, idle_c, display)
+    assert params["idle_policy"] == policy_fractions(other)
+    own, own_idle = build_display(SCENE, config, 33.0, heard)
+    assert display_params(SCENE, config, operator, own_idle, own)["idle_policy"] == \
+        policy_fractions(SCENE)

@@ -15,16 +15,18 @@ def cmd_calibrate_pad(args) -> int:
     from telethermal.ident.registry import pad_dataset, touches_scene
     from telethermal.physics.scene import load_scene
 
+    from telethermal.teleop.display_calibration import keep_other_tables
+
     scene = load_scene(args.scene)
     data = pad_dataset(args.data)
     touches_scene(data, scene)                  # a dataset of another scene: refused
+    keep_other_tables(args.out, "pad")          # a file it cannot keep: refused before the fit
     with console.status(f"reading {data}"):
         trials = load_dataset(data)
     with console.status(f"fitting {scene.name}'s pad model to the reference touches"):
         cal = calibrate_pad(scene, trials, args.window_s, *(
             () if args.design_sd is None else (args.design_sd,)))
     from telethermal.jsonfile import write_text
-    from telethermal.teleop.display_calibration import keep_other_tables
     write_text(args.out, cal.to_toml() + keep_other_tables(args.out, "pad"))
     _print_lines(cal.describe() + [f"wrote {args.out}"])
     return 0
@@ -32,9 +34,11 @@ def cmd_calibrate_pad(args) -> int:
 
 def cmd_calibrate_display(args) -> int:
     from telethermal.physics.scene import load_scene
-    from telethermal.teleop.display_calibration import write_display_calibration
+    from telethermal.teleop.display_calibration import (keep_other_tables,
+                                                        write_display_calibration)
 
     scene = load_scene(args.scene)
+    keep_other_tables(args.out, "display")      # a file it cannot keep: refused before the routine
     lab = [f"--{k.replace('_', '-')}" for k in ("master_config", "board", "can",
                                                  "board_calibration") if getattr(args, k)]
     if args.devices == "hardware":

@@ -347,7 +347,8 @@ def idle_for(scene: Scene | str, material: str | None, object_temp_c: float,
 
 def precondition_from(fractions: dict[str, float], finger_temp_c: float):
     """The display's pre-conditioning (``MasterDisplay(precondition=...)``):
-    ``f(material or None, object_temp_c) -> idle offset from the object, K``."""
+    ``f(material or None, object_temp_c) -> idle offset from the object, K``;
+    its ``fractions`` attribute is the policy it applies (a recording keeps it)."""
     said = set()
 
     def offset(material, object_temp_c):
@@ -362,5 +363,6 @@ def precondition_from(fractions: dict[str, float], finger_temp_c: float):
             material = None
         return idle_from_fractions(fractions, material, object_temp_c,
                                    finger_temp_c) - object_temp_c
+    offset.fractions = dict(fractions)
     return offset
 

@@ -99,10 +99,13 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
     from telethermal.control.preconditioning import policy_fractions
 
     # The pad's layers as the display modelled them (a calibrated face layer),
-    # and the idle policy searched on them.
+    # and the idle policy it applies (searched on them, or on the scene the
+    # run named for it); without a display, the scene's.
     layers = display.pad_layers if display is not None and display.pad_layers \
         else tuple(scene.pad.layers)
-    model = replace(scene, pad=replace(scene.pad, layers=tuple(layers)))
+    applied = getattr(getattr(display, "precondition", None), "fractions", None)
+    policy = None if config.idle != "policy" else applied if applied is not None else \
+        policy_fractions(replace(scene, pad=replace(scene.pad, layers=tuple(layers))))
 
     return {"display": {"rate_hz": config.rate_hz, "before": config.before,
                         "idle": config.idle,
@@ -125,7 +128,7 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
             "flux_gain": 1.0 if display is None else display.flux_gain,
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
             # The idle policy the display applied (fractions of finger - object).
-            "idle_policy": policy_fractions(model) if config.idle == "policy" else None,
+            "idle_policy": policy,
             "operator": asdict(operator),
             "module": asdict(scene.pad.module_params()[0]), "pad_area_m2": scene.pad.area_m2,
             "junction_sensor": asdict(scene.sensors.junction_sensor_spec() if display is None

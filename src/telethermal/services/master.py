@@ -113,6 +113,8 @@ class MasterService:
         self.scene = with_finger(load_scene(config.scene))
         #: The display's calibration (the ``[display]`` table of ``pad_calibration``).
         self.display_calibration = display_calibration(config.pad_calibration, self.scene)
+        if config.devices == DeviceKind.HARDWARE:   # before its policy, and any device
+            refuse_on_hardware(self.display_calibration)
         self.display_config = DisplayConfig(rate_hz=config.rate_hz, before=config.before,
                                             idle=config.idle)
         if config.idle == "policy":       # before the sockets: no touch waits for it
@@ -180,8 +182,7 @@ class MasterService:
         from telethermal.devices.board import Calibration
         from telethermal.devices.display import HardwareDisplay
 
-        cfg = self.config
-        refuse_on_hardware(self.display_calibration)     # before any device is opened
+        cfg = self.config                     # (its calibration checked in __init__)
         calibration = Calibration.load(cfg.calibration) if cfg.calibration else Calibration()
         self.hardware = HardwareDisplay(cfg.board_url, cfg.can_bus, calibration)
         # The module behind the pad: the master commands its current.

@@ -12,6 +12,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from telethermal.control import display_calibration as routine
+from telethermal.control.display_stack import BOUND as STACK_BOUND   # a layer's fitted range
 from telethermal.errors import CalibrationError
 from telethermal.tomltables import table_values, toml_str
 
@@ -136,8 +137,11 @@ class DisplayCalibration:
             raise CalibrationError(f"{where}: expected a table, got {table!r}"[:300])
         values = table_values(cls, table, where, CalibrationError, exclude=("source",))
         if values.get("format") != FORMAT or values.get("format_version") != FORMAT_VERSION:
-            raise CalibrationError(f"{where}: not a {FORMAT} table of version {FORMAT_VERSION} "
-                                   "(calibrate the display again)")
+            found = (f"version {values.get('format_version')!r}"
+                     if values.get("format") == FORMAT else f"format {values.get('format')!r}")
+            raise CalibrationError(f"{where}: {found}, not a {FORMAT} table of version "
+                                   f"{FORMAT_VERSION} (version 3 added the pad's layers): "
+                                   "calibrate the display again")
         missing = [f.name for f in fields(cls) if f.name not in values and f.name != "source"]
         if missing:
             raise CalibrationError(f"{where}: missing {', '.join(missing)}")
@@ -150,6 +154,20 @@ class DisplayCalibration:
             if not all(math.isfinite(v) and v > 0 for v in (lo, x, hi)) or not lo <= x <= hi:
                 raise CalibrationError(f"{where}: {name} = {x!r} with interval [{lo!r}, "
                                        f"{hi!r}]: must be finite, > 0 and inside it")
+        for name in ("face_layer_thickness", "back_layer_thickness"):
+            if not 1 / STACK_BOUND <= values[name] <= STACK_BOUND:
+                raise CalibrationError(f"{where}: {name} = {values[name]!r}: the fit keeps a "
+                                       f"layer within {1 / STACK_BOUND:g}-{STACK_BOUND:g} of "
+                                       "its design; calibrate the display again")
+        if not GAIN_RANGE[0] <= values["flux_gain"] <= GAIN_RANGE[1]:
+            raise CalibrationError(f"{where}: flux_gain = {values['flux_gain']!r}: outside "
+                                   f"{GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g}, which the fit refuses")
+        for part in ("air", "block", "stack"):
+            chi2 = values[f"chi2_per_dof_{part}"]
+            if not 0 <= chi2 <= routine.CHI2_MAX:
+                raise CalibrationError(f"{where}: chi2_per_dof_{part} = {chi2!r}: the fit "
+                                       f"refuses a part past {routine.CHI2_MAX:g} (or not a "
+                                       "number); calibrate the display again")
         return cls(**values, source=source)
 
 
@@ -185,11 +203,18 @@ def keep_other_tables(path: str | Path, replaced: str) -> str:
         raise CalibrationError(f"{path}: not a calibration file (its keys: "
                                f"{', '.join(sorted(data))[:200]}): give another --out")
     text = ""
-    if replaced != "pad" and "format" in data:
-        from telethermal.ident.pad_calibration import PadCalibration
-        text = PadCalibration.from_dict(data, str(path)).to_toml() + "\n"
-    if replaced != "display" and "display" in data:
-        text += "\n" + DisplayCalibration.from_table(data["display"], str(path)).to_toml()
+    kept = {"pad": "the sensing pad's", "display": "the display's"}
+    try:
+        if replaced != "pad" and "format" in data:
+            from telethermal.ident.pad_calibration import PadCalibration
+            text = PadCalibration.from_dict(data, str(path)).to_toml() + "\n"
+        if replaced != "display" and "display" in data:
+            text += "\n" + DisplayCalibration.from_table(data["display"], str(path)).to_toml()
+    except CalibrationError as exc:
+        other = kept["display" if replaced == "pad" else "pad"]
+        raise CalibrationError(f"{exc}; {path} also holds {other} calibration, kept beside "
+                               f"{kept[replaced]} when it is written, and that one cannot be "
+                               "read: give another --out, or calibrate that one again") from exc
     return text
 
 
@@ -231,9 +256,12 @@ def fit_display(scene, on_block: routine.Record, in_air: routine.Record, block: 
             f"effusivity ({effusivity:.0f} W s^0.5/(m^2 K)) takes: no sensor is that far off "
             f"its datasheet (refused outside {GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g}); is the "
             f"block {block}, and 3 cm thick? (--block names its material)")
-    stack = fit_stack(on_block, scene.pad.layers, blk.params["flux_lag_s"].value, gain,
-                      js.tau_s, math.hypot(js.noise_k, js.lsb_k / 12 ** 0.5), tc_noise_k,
-                      flux_noise)
+    lag = blk.params["flux_lag_s"]
+    sd_ln = {name: math.log(blk.params[name].hi / blk.params[name].value) / routine.Z95
+             for name in ("flux_lag_s", "flux_gain")}
+    stack = fit_stack(on_block, scene.pad.layers, lag.value, gain, js.tau_s,
+                      math.hypot(js.noise_k, js.lsb_k / 12 ** 0.5), tc_noise_k, flux_noise,
+                      sd_ln["flux_lag_s"], sd_ln["flux_gain"])
     routine.refuse_misfit(f"on the {block} block (the pad's layers)", stack)
     values = {}
     for key, name, fit in (("junction_lag_s", "junction_lag_s", air),

@@ -105,12 +105,12 @@ def build_display(scene: Scene, config: DisplayConfig, finger_c: float, heard, *
     idling (a hardware display whose loop runs before anything is heard).
     Returns the display and its idle temperature (C; None when not idling)."""
     expected = heard.expected_material if expected_material is None else expected_material
+    model = display_model_args(scene, calibration)        # checks the calibration first
     idle_c, shift = display_idle(idle_scene or scene, config, finger_c,
                                  heard.object_temp_c if idling else None, expected,
                                  calibration)
     display = MasterDisplay(config, heard.generator, finger_temp_c=finger_c,
-                            idle_c=idle_c if idling else None, precondition=shift,
-                            **display_model_args(scene, calibration))
+                            idle_c=idle_c if idling else None, precondition=shift, **model)
     return display, (idle_c if idling else None)
 
 
