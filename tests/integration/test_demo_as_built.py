@@ -33,7 +33,23 @@ def as_built_scene(tmp_path, seed: int):
     return path
 
 
-def test_the_demo_calibrates_an_as_built_pad_and_names_every_touch(tmp_path, capsys):
+def cache_without_policies(tmp_path, monkeypatch):
+    """The suite's cache for this test without its idle policies (its other
+    entries linked, not recomputed): a policy found there afterwards was
+    searched by this demo."""
+    from telethermal.cachedir import CACHE_ENV, cache_dir
+    fresh = tmp_path / "cache"
+    fresh.mkdir()
+    if cache_dir().is_dir():
+        for entry in cache_dir().iterdir():
+            if not entry.name.startswith("idle-policy-"):
+                (fresh / entry.name).symlink_to(entry)
+    monkeypatch.setenv(CACHE_ENV, str(fresh))      # the services inherit it
+    return fresh
+
+
+def test_the_demo_calibrates_an_as_built_pad_and_names_every_touch(tmp_path, capsys,
+                                                                    monkeypatch):
     from telethermal.ident.pad_calibration import pad_calibration
     from telethermal.ident.registry import load_model
     from telethermal.physics.scene import load_scene
@@ -44,6 +60,7 @@ def test_the_demo_calibrates_an_as_built_pad_and_names_every_touch(tmp_path, cap
     path = as_built_scene(tmp_path, seed=5)
     scene = with_finger(load_scene(path))
     assert scene.as_built is not None
+    cache = cache_without_policies(tmp_path, monkeypatch)
     out = tmp_path / "demo"
     assert main(["demo", "--scene", str(path), "--materials", "plexiglass,aluminium",
                  "--contact-s", "1.5", "--out", str(out), "--seed", "2"]) == 0
@@ -61,12 +78,12 @@ def test_the_demo_calibrates_an_as_built_pad_and_names_every_touch(tmp_path, cap
     report = json.loads((out / "demo.json").read_text())
     assert report["calibration"]["pad"] == pad.to_dict()
     # The idle policy of the calibrated layers was searched (and cached).
-    from telethermal.cachedir import cache_dir
     from telethermal.control.preconditioning import policy_key
     from telethermal.teleop.display_calibration import modelled_scene
     model = modelled_scene(scene, display)
     assert model.pad.layers != scene.pad.layers
-    assert (cache_dir() / f"idle-policy-{policy_key(model)}.json").exists()
+    assert [p.name for p in cache.glob("idle-policy-*.json")] == [
+        f"idle-policy-{policy_key(model)}.json"]
     assert report["calibration"]["display"]["flux_lag_s"] == display.flux_lag_s
     touches = report["touches"]
     assert [t["material"] for t in touches] == ["plexiglass", "aluminium", "plexiglass"]
