@@ -97,6 +97,29 @@ def test_the_master_models_its_pad_with_the_calibrated_face_layer(built_cal):
     assert modelled_scene(scene, None) is scene
 
 
+@pytest.mark.parametrize("face, scale", [(1.3, 1.69), (1.0, 1.0), (0.8, 1.0)])
+def test_the_impedance_horizon_stretches_for_a_slower_face_layer(built_cal, face, scale):
+    """The impedance controller's horizon is the configured one times the
+    calibrated face layer's diffusion time over the design's (its thickness
+    factor squared), never shorter than configured; the display built with
+    the calibration steps that many periods ahead."""
+    from dataclasses import replace
+
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.display_setup import display_model_args
+    from telethermal.teleop.master import MasterDisplay
+    scene, cal = built_cal
+    cal = replace(cal, face_layer_thickness=face, face_layer_thickness_lo=face * 0.99,
+                  face_layer_thickness_hi=face * 1.01)
+    args = display_model_args(scene, cal)
+    assert args["impedance_horizon_scale"] == pytest.approx(scale, rel=1e-12)
+    config = DisplayConfig()
+    display = MasterDisplay(config, None, finger_temp_c=33.0, **args)
+    assert display.impedance.n_ahead == round(config.impedance_horizon_s * scale
+                                              * config.rate_hz)
+    assert display_model_args(scene)["impedance_horizon_scale"] == 1.0
+
+
 def test_a_calibrated_display_idles_by_the_policy_of_its_own_layers(built_cal, monkeypatch):
     """The display built with a calibration asks for the idle policy of its
     calibrated layers (a key of its own: searched and cached for them), not

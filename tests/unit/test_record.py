@@ -305,6 +305,7 @@ def test_a_calibrated_displays_touch_records_its_lags_and_replays_sample_for_sam
     assert params["pad_layers"][0] == [face.material.name, 1.3 * face.thickness_m]
     assert params["pad_layers"][1:] == [[la.material.name, la.thickness_m]
                                         for la in SCENE.pad.layers[1:]]
+    assert params["impedance_horizon_scale"] == pytest.approx(1.3 ** 2, rel=1e-12)
     same = replay(path)["summary"]
     assert same["identical"] and same["junction_max_abs_diff_c"] == 0.0
 

@@ -126,6 +126,8 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
             "sensor_lag_s": (scene.sensors.flux_lag_s if display is None
                              else display.sensor_lag_s),
             "flux_gain": 1.0 if display is None else display.flux_gain,
+            "impedance_horizon_scale": 1.0 if display is None
+            else display.impedance_horizon_scale,
             "finger_ir_c": operator.finger_ir_c, "idle_c": idle_c,
             # The idle policy the display applied (fractions of finger - object).
             "idle_policy": policy,

@@ -24,6 +24,23 @@ from telethermal.teleop.master import MasterDisplay
 log = logging.getLogger(__name__)
 
 
+def horizon_scale(scene: Scene, calibration=None) -> float:
+    """How much longer the impedance controller's horizon is on a display
+    whose calibrated face layer is slower than its design: the face layer's
+    diffusion time (``L^2 rho c / k``, its thickness factor squared) over the
+    design's, never under 1. The horizon (``impedance_horizon_s``) was set
+    for the design's film; held over it, a film 1.65x thick asks the
+    junction for swings its noise turns into chatter (measured on
+    ``bench render --as-built``'s pad 3, graphite: 15 current reversals per
+    s and 0.34 A of ripple, 1.34 per s with the design's layers; at the
+    horizon stretched 2.7x, 0.67 per s). A faster film keeps the design's
+    horizon (shortened in proportion, a film 0.83x thin chattered more on
+    marble: 3.7 reversals per s against 1.7)."""
+    if calibration is None:
+        return 1.0
+    return max(1.0, calibration.face_layer_thickness ** 2)
+
+
 def display_model_args(scene: Scene, calibration=None) -> dict:
     """What the display's skin controller knows of the display, all from the
     configuration: the pad's layers and resistance, the nominal pad-fingertip
@@ -32,8 +49,9 @@ def display_model_args(scene: Scene, calibration=None) -> dict:
     (``junction_sensor``, ``junction_lag_s``); with ``calibration`` (a
     :class:`~telethermal.teleop.display_calibration.DisplayCalibration`,
     checked against ``scene``) the flux sensor's lag and gain it measured
-    and the pad's layers with its face layer's fitted thickness (the
-    junction sensor keeps its stated lag: docs/calibration.md).
+    and the pad's layers with its face layer's fitted thickness, the
+    impedance horizon stretched for it (:func:`horizon_scale`; the junction
+    sensor keeps its stated lag: docs/calibration.md).
     ``MasterDisplay(config, generator, finger_temp_c=..., **these)``."""
     from telethermal.teleop.display_calibration import calibrated_lags, calibrated_layers
     flux_lag_s, junction_lag_s = calibrated_lags(scene, calibration)
@@ -45,7 +63,8 @@ def display_model_args(scene: Scene, calibration=None) -> dict:
             "junction_sensor": replace(scene.sensors.junction_sensor_spec(),
                                        tau_s=junction_lag_s),
             "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct),
-            "flux_gain": 1.0 if calibration is None else calibration.flux_gain}
+            "flux_gain": 1.0 if calibration is None else calibration.flux_gain,
+            "impedance_horizon_scale": horizon_scale(scene, calibration)}
 
 
 def precondition_for(scene: Scene, finger_c: float, calibration=None):

@@ -32,10 +32,9 @@ The controller: the flux setpoint is what the pad's sensor should read (the
 generator was trained on sensor readings). The ``"static"`` feed-forward
 inverts the sensor lag (``q + sensor_lag_s dq/dt``) and the pad's layers
 (``T_junction = T_pad_surface + q R_pad``); a PID on the measured flux removes
-what the model misses. The default, ``"impedance"``
-(:mod:`telethermal.control.feedforward`), renders the object instead: the
-pad's surface is steered to the object's surface temperature under the
-measured flux, and the flux PID is not used.
+what the model misses. The default, ``"impedance"`` (control/feedforward.py),
+renders the object instead: the pad's surface is steered to the object's
+surface temperature under the measured flux, and the flux PID is not used.
 """
 
 from __future__ import annotations
@@ -120,7 +119,8 @@ class MasterDisplay:
                  pad_layers=None, contact_conductance_w_m2k: float | None = None,
                  module: ModuleParams | None = None, precondition=None, pad_area_m2=None,
                  junction_sensor: JunctionSensorSpec | None = None,
-                 dew_floor_c: float | None = None, flux_gain: float = 1.0):
+                 dew_floor_c: float | None = None, flux_gain: float = 1.0,
+                 impedance_horizon_scale: float = 1.0):
         self.config = config
         self.generator = generator
         self.nominal_dt_s = 1.0 / config.rate_hz
@@ -184,9 +184,11 @@ class MasterDisplay:
                                "default) needs the display's pad model: pad_layers and "
                                "contact_conductance_w_m2k (the scene's [pad] layers and finger "
                                "contact conductance); give both, or choose 'static'")
+        #: The impedance horizon's stretch (teleop/display_setup.horizon_scale).
+        self.impedance_horizon_scale = float(impedance_horizon_scale)
         self.impedance = ImpedanceController(pad_layers, contact_conductance_w_m2k,
                                              sensor_lag_s, self.nominal_dt_s,
-                                             config.impedance_horizon_s,
+                                             config.impedance_horizon_s * impedance_horizon_scale,
                                              flux_inverse_s=config.flux_inverse_s,
                                              bias_filter_s=config.impedance_bias_filter_s) \
             if wants_impedance else None
