@@ -29,13 +29,16 @@ def horizon_scale(scene: Scene, calibration=None) -> float:
     whose calibrated face layer is slower than its design: the face layer's
     diffusion time (``L^2 rho c / k``, its thickness factor squared) over the
     design's, never under 1. The horizon (``impedance_horizon_s``) was set
-    for the design's film; held over it, a film 1.65x thick asks the
-    junction for swings its noise turns into chatter (measured on
-    ``bench render --as-built``'s pad 3, graphite: 15 current reversals per
-    s and 0.34 A of ripple, 1.34 per s with the design's layers; at the
-    horizon stretched 2.7x, 0.67 per s). A faster film keeps the design's
-    horizon (shortened in proportion, a film 0.83x thin chattered more on
-    marble: 3.7 reversals per s against 1.7)."""
+    for the design's film. A rule chosen after seeing, on ``bench render
+    --as-built``'s pad 3 (its film fitted 1.66x), the current chatter once
+    the layers were modelled (graphite, seed 1: 15 reversals per s, 0.34 A
+    of ripple; 1.34 per s with the design's layers), and checked on the
+    same five pads and two seeds (bench/results/README.md): stretched 2.76x
+    there, 0.67 per s. Not shortened for a faster film: a 0.1 s horizon
+    oscillated on the designed pad (docs/display-loop.md), and shortened
+    in proportion, pad 0 (0.82x) reversed 3.7 times per s on marble against
+    1.7 (seed 1). Exercised up to 2.76; a face layer up to 5x (the fit's
+    bound) would stretch it 25x, untested."""
     if calibration is None:
         return 1.0
     return max(1.0, calibration.face_layer_thickness ** 2)

@@ -248,7 +248,7 @@ def _replay_master(rec, params, cid, generator, gains, attached):
                            if fractions else None,
                            # Recordings before the display's gain was applied: none.
                            flux_gain=params.get("flux_gain", 1.0),
-                           # (before the calibrated layers: not stretched)
+                           # (recordings before the stretch: none)
                            impedance_horizon_scale=params.get("impedance_horizon_scale", 1.0))
     rows = periods(rec, cid)
     news_at = {n["k"]: n for n in rec.messages("/master/news")
