@@ -154,3 +154,19 @@ def test_a_pad_of_one_layer_is_refused_by_name():
     rec = _readings(1.0, 1.0, 0.1, 0.0)
     with pytest.raises(CalibrationError, match="1 layer"):
         _fit(rec, LAYERS[:1])
+
+
+def test_the_face_drop_takes_the_flux_at_each_steps_end():
+    """The drop over the face's half cell is taken with the flux at each
+    step's end, the mean of the two steps around it (the step's own mean
+    would lag it half a step on a ramp): on a layer whose heat capacity
+    holds its cells still over the steps, the face is the start less that
+    drop, exactly."""
+    from telethermal.physics.materials import Material
+    still = Material("still", "pad", 0.3, 1e12, 1e3, "a heat capacity no flux moves")
+    layers = (Layer(still, 3e-4), Layer(still, 1e-4))
+    a, b, r = ds.stack_system(layers)
+    q = np.array([0.0, 1000.0, 3000.0, 2000.0])
+    out = ds.face_c(a, b, r, np.full(q.size, 30.0), q, 0.01, 30.0)
+    at_end = np.array([500.0, 2000.0, 2500.0, 2000.0])
+    assert out == pytest.approx(30.0 - at_end * r, abs=1e-6)     # the cells move 2e-9 K
