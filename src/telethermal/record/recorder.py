@@ -11,7 +11,7 @@ trace, which holds the truth a lab cannot measure. Replaying a recording is
 from __future__ import annotations
 
 import tempfile
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -99,13 +99,13 @@ def display_params(scene, config, operator, idle_c, display=None) -> dict:
     from telethermal.control.preconditioning import policy_fractions
 
     # The pad's layers as the display modelled them (a calibrated face layer),
-    # and the idle policy it applies (searched on them, or on the scene the
-    # run named for it); without a display, the scene's.
+    # and the idle policy it applies (its pre-conditioning's); without a
+    # display, the scene's.
     layers = display.pad_layers if display is not None and display.pad_layers \
         else tuple(scene.pad.layers)
     applied = getattr(getattr(display, "precondition", None), "fractions", None)
-    policy = None if config.idle != "policy" else applied if applied is not None else \
-        policy_fractions(replace(scene, pad=replace(scene.pad, layers=tuple(layers))))
+    policy = None if config.idle != "policy" else \
+        applied if applied is not None else policy_fractions(scene)
 
     return {"display": {"rate_hz": config.rate_hz, "before": config.before,
                         "idle": config.idle,

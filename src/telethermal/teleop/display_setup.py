@@ -24,7 +24,7 @@ from telethermal.teleop.master import MasterDisplay
 log = logging.getLogger(__name__)
 
 
-def horizon_scale(scene: Scene, calibration=None) -> float:
+def horizon_scale(calibration=None) -> float:
     """How much longer the impedance controller's horizon is on a display
     whose calibrated face layer is slower than its design: the face layer's
     diffusion time (``L^2 rho c / k``, its thickness factor squared) over the
@@ -67,7 +67,7 @@ def display_model_args(scene: Scene, calibration=None) -> dict:
                                        tau_s=junction_lag_s),
             "dew_floor_c": idle_floor_c(scene.room_temp_c, scene.room_humidity_pct),
             "flux_gain": 1.0 if calibration is None else calibration.flux_gain,
-            "impedance_horizon_scale": horizon_scale(scene, calibration)}
+            "impedance_horizon_scale": horizon_scale(calibration)}
 
 
 def precondition_for(scene: Scene, finger_c: float, calibration=None):

@@ -132,9 +132,9 @@ class MasterDisplay:
         #: The junction sensor as the configuration states it (its lag is what
         #: the junction loop is designed for).
         self.junction_sensor = junction_sensor or get_junction_sensor(DEFAULT_JUNCTION_SENSOR)
-        #: junction target -> module current (control/junction.py); None: no module model.
         #: The pad's layers as the controllers model them (a recording keeps them).
         self.pad_layers = tuple(pad_layers or ())
+        #: junction target -> module current (control/junction.py); None: no module model.
         self.junction_loop = self._junction_loop(module, pad_layers or ()) if module else None
         #: When (session clock, s) the junction loop first stopped on an
         #: implausible sensor; None: it has not.
