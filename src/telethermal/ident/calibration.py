@@ -25,12 +25,21 @@ least squares (``scipy.optimize.least_squares``, trust-region reflective):
   conditional sd of ``ln factor`` stays under :data:`SD_MAX`; a candidate
   that does not, nearly parallel (cosine over :data:`LUMP_COS`) to one
   kept, is lumped with it (both scaled by one factor, said so); any other
-  is kept at its design value and named as not identifiable from these
-  touches.
-- each kept parameter's **95 % interval**: ``+-1.96 sd`` of ``ln factor``
-  from the Gauss-Newton covariance at the optimum (the nuisances
-  marginalised), widened by the residual's chi-square per degree of
-  freedom where it exceeds 1.
+  is named as not identifiable from these touches alone and fitted under
+  its **design prior**: ``ln factor ~ N(0, DESIGN_SD^2)``, what a lab
+  knows of it from its datasheet, one residual row ``ln factor / sd``
+  beside the touches' (a maximum a posteriori fit). The touches still
+  move it as far as they tell it apart: a part off its design that the
+  touches see only weakly (a thick cold plate whose conditional sd is
+  just over :data:`SD_MAX`) is not pinned at the design, where it would
+  bias what the model says of objects far from the references (a metal
+  more effusive than the metal reference). With ``design_sd = 0`` it is
+  held at its design value.
+- each parameter's **95 % interval**: ``+-1.96 sd`` of ``ln factor``
+  from the Gauss-Newton covariance at the optimum (the nuisances and the
+  prior-fitted parts marginalised; a prior-fitted part's own from the
+  same covariance, so never wider than its prior), widened by the
+  residual's chi-square per degree of freedom where it exceeds 1.
 - the **residual against the sensor's noise**: each sample's variance is
   the flux noise over the touch's gap plus the curves' own error (the
   scene's ``[model] tolerance_rel`` of the touch's rms, as the estimator);
@@ -106,9 +115,8 @@ CURVE_TOLERANCE_FACTOR = 1.0
 SD_MAX = 0.1
 #: How far (log sd) a candidate the touches cannot identify may be off its
 #: design value: a lab knows its layers from their datasheets to 10-30 %
-#: (the middle taken). The fit holds such a candidate at the design and
-#: widens the others' intervals by what it would move them
-#: (:func:`consider_sds`).
+#: (the middle taken). The fit takes it as such a candidate's prior (see
+#: the module); with 0 it holds the candidate at its design instead.
 DESIGN_SD = 0.2
 #: Columns (nuisances projected out) this parallel are one parameter.
 LUMP_COS = 0.95
@@ -271,18 +279,23 @@ class PadModelFit:
         gain = factors.pop("flux_gain", 1.0)
         return factors, math.log(gain), z[k:k + n], z[k + n:k + 2 * n], z[k + 2 * n:]
 
-    def residuals(self, z, free, fixed=None) -> np.ndarray:
+    def residuals(self, z, free, fixed=None, prior=None) -> np.ndarray:
+        """The touches' residuals in noise units, the amplitudes' prior,
+        then one row ``ln factor / sd`` per group ``prior`` gives a prior
+        sd (``prior``: one sd or None per group of ``free``)."""
         factors, log_gain, log_h, tau, log_a = self.split(z, free)
         factors = {**(fixed or {}), **factors}
         v, _ = self._at(self.curves(factors, log_h), tau)
         pred = np.exp(log_gain + log_a)[:, None] * v
         r = (self.touches.x - pred) / self.sigma[:, None]
-        return np.concatenate([r.ravel(), log_a / self.amplitude_sd])
+        return np.concatenate([r.ravel(), log_a / self.amplitude_sd,
+                               [z[j] / sd for j, sd in _priors(prior)]])
 
-    def jacobian(self, z, free, fixed=None) -> np.ndarray:
+    def jacobian(self, z, free, fixed=None, prior=None) -> np.ndarray:
         """d residuals / d z: finite differences of one batch solve per
         solved parameter (and one for every touch's contact conductance
-        at once), analytic in the contact instant and the amplitudes."""
+        at once), analytic in the contact instant and the amplitudes (and
+        the priors' rows, :meth:`residuals`)."""
         factors, log_gain, log_h, tau, log_a = self.split(z, free)
         factors = {**(fixed or {}), **factors}
         n, m = self.touches.x.shape
@@ -305,10 +318,16 @@ class PadModelFit:
             jac[i * m:(i + 1) * m, k + n + i] = amp[i] * d[i]       # d r / d tau_i
             jac[i * m:(i + 1) * m, k + 2 * n + i] = -amp[i] * v[i]  # d r / d log a_i
         jac[n * m + rows, k + 2 * n + rows] = 1.0 / self.amplitude_sd
+        priors = _priors(prior)
+        if priors:
+            rows_p = np.zeros((len(priors), len(z)))
+            for row, (j, sd) in enumerate(priors):
+                rows_p[row, j] = 1.0 / sd
+            jac = np.vstack([jac, rows_p])
         return jac
 
-    def solve(self, free, z0, fixed=None, max_nfev: int = 25):
-        """``least_squares`` from ``z0``; the result."""
+    def solve(self, free, z0, fixed=None, max_nfev: int = 25, prior=None):
+        """``least_squares`` from ``z0`` (``prior``: :meth:`residuals`); the result."""
         n = len(self.touches.labels)
         k = len(free)
         lo = np.concatenate([np.full(k, -LOG_FACTOR_BOUND), np.full(n, -LOG_H_BOUND),
@@ -316,8 +335,13 @@ class PadModelFit:
         hi = np.concatenate([np.full(k, LOG_FACTOR_BOUND), np.full(n, LOG_H_BOUND),
                              np.full(n, 0.05), np.full(n, 0.3)])
         return least_squares(self.residuals, np.clip(z0, lo, hi), jac=self.jacobian,
-                             bounds=(lo, hi), args=(free, fixed), method="trf",
+                             bounds=(lo, hi), args=(free, fixed, prior), method="trf",
                              x_scale="jac", max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
+
+
+def _priors(prior) -> list[tuple[int, float]]:
+    """(group index, sd) of each group ``prior`` gives a prior sd."""
+    return [(j, float(sd)) for j, sd in enumerate(prior or ()) if sd]
 
 
 def marginal_sds(jac: np.ndarray, k: int) -> np.ndarray:
@@ -374,6 +398,8 @@ def consider_sds(fit: "PadModelFit", z: np.ndarray, free, fixed, design_sd: floa
     at = [0.0] * len(fixed) + [math.log(factors[m]) for (m,) in members] + gain
     groups = parts + [("flux_gain",)] * len(gain)
     cols = fit.jacobian(np.concatenate([at, z[k:]]), groups, fixed=factors)[:, :len(parts)]
+    # A fit with priors has their rows last: a part moves none of them.
+    cols = np.vstack([cols, np.zeros((jac.shape[0] - cols.shape[0], cols.shape[1]))])
     shift, *_ = np.linalg.lstsq(jac, cols, rcond=None)     # d z / d ln(part's factor)
     shift = shift[:k]
     # A member moves its own lumped quantity by its weight: the fit's error

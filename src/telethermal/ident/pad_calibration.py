@@ -32,7 +32,10 @@ log = logging.getLogger(__name__)
 #: is refused (normal tails: 6e-5 of materials with a right table value).
 Z_MAX = 4.0
 
-FORMAT, FORMAT_VERSION = "telethermal-pad-calibration", 1
+#: Version 2 added ``prior_fitted``; a version-1 file (its parts the
+#: touches cannot tell held at their design) is still read.
+FORMAT, FORMAT_VERSION = "telethermal-pad-calibration", 2
+READABLE_VERSIONS = (1, 2)
 
 
 #: What a pad digest leaves out besides the parts' descriptions: a material's
@@ -83,10 +86,16 @@ class PadCalibration:
     #: carry (``ident.calibration.consider_sds``; 0: statistical alone, as
     #: for one made without it). :func:`calibrate_touches` sets it.
     design_sd: float = 0.0
+    #: The parts named in ``not_identifiable``, fitted under their design
+    #: prior (``ident.calibration``): each its factor and 95 % interval,
+    #: the prior's ``design_sd`` in it. Empty: held at their design values
+    #: (``design_sd = 0``, or a version-1 file).
+    prior_fitted: tuple[CalibratedParameter, ...] = ()
 
     def factors(self) -> dict:
         """Candidate name -> factor on its design value (the gain apart)."""
-        return {n: p.factor for p in self.parameters for n in p.names if n != "flux_gain"}
+        return {n: p.factor for p in self.parameters + self.prior_fitted for n in p.names
+                if n != "flux_gain"}
 
     def check(self, scene) -> None:
         """Refuse a calibration made for another scene (or another pad)."""
@@ -100,12 +109,13 @@ class PadCalibration:
                                    f"{scene.name!r} (the scene file changed since): calibrate "
                                    "again")
         known = candidates(scene)
-        for i, p in enumerate(self.parameters):
-            for name in p.names:
-                if name not in known:
-                    raise CalibrationError(f"{where}: parameters[{i}].names: {name!r} is not a "
-                                           f"parameter of scene {scene.name!r}'s pad; its "
-                                           f"parameters: {', '.join(known)}")
+        for key, rows in (("parameters", self.parameters), ("prior_fitted", self.prior_fitted)):
+            for i, p in enumerate(rows):
+                for name in p.names:
+                    if name not in known:
+                        raise CalibrationError(f"{where}: {key}[{i}].names: {name!r} is not a "
+                                               f"parameter of scene {scene.name!r}'s pad; "
+                                               f"its parameters: {', '.join(known)}")
 
     def apply(self, scene):
         """The product's model of ``scene``'s pad as calibrated."""
@@ -124,7 +134,12 @@ class PadCalibration:
                          f"{lumped}{loose}")
         lines.append(f"  contact conductance: {self.contact_conductance_w_m2k:.0f} W/m^2K "
                      "(the touches' geometric mean)")
-        if self.not_identifiable:
+        if self.prior_fitted:
+            lines.append(f"  not identifiable from these touches alone (fitted within their "
+                         f"design's spread, log sd {self.design_sd:g}):")
+            lines += [f"    {p.label}: x{p.factor:.3f} [{p.lo:.3f}, {p.hi:.3f}] 95 %"
+                      for p in self.prior_fitted]
+        elif self.not_identifiable:
             lines.append("  not identifiable from these touches (design value kept): "
                          + ", ".join(self.not_identifiable))
         if self.design_sd > 0:
@@ -142,10 +157,11 @@ class PadCalibration:
                "materials = [" + ", ".join(map(toml_str, self.materials)) + "]",
                "not_identifiable = [" + ", ".join(map(toml_str, self.not_identifiable))
                + "]", f"design_sd = {self.design_sd!r}"]
-        for p in self.parameters:
-            out += ["", "[[parameters]]", "names = [" + ", ".join(map(toml_str, p.names))
-                    + "]", f"label = {toml_str(p.label)}", f"factor = {p.factor!r}",
-                    f"lo = {p.lo!r}", f"hi = {p.hi!r}"]
+        for key, rows in (("parameters", self.parameters), ("prior_fitted", self.prior_fitted)):
+            for p in rows:
+                out += ["", f"[[{key}]]", "names = [" + ", ".join(map(toml_str, p.names))
+                        + "]", f"label = {toml_str(p.label)}", f"factor = {p.factor!r}",
+                        f"lo = {p.lo!r}", f"hi = {p.hi!r}"]
         return "\n".join(out) + "\n"
 
     @classmethod
@@ -153,24 +169,14 @@ class PadCalibration:
         """The calibration a ``CAL.toml``'s table holds; every field checked
         (its type; a number finite and > 0, a standard deviation >= 0; the
         names lists of strings), a bad one refused naming it."""
-        if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
+        version = data.get("format_version")
+        if data.get("format") != FORMAT or version not in READABLE_VERSIONS \
+                or isinstance(version, bool):
             raise CalibrationError(f"{source}: not a {FORMAT} file of version "
-                                   f"{FORMAT_VERSION}")
-        rows = _field(data, "parameters", list, source, ())
-        params = []
-        for i, p in enumerate(rows):
-            if not isinstance(p, dict):
-                raise CalibrationError(f"{source}: parameters[{i}]: expected a table, got {p!r}")
-            where = f"parameters[{i}]"
-            names = _strings(p, "names", source, where)
-            if not names:
-                raise CalibrationError(f"{source}: {where}.names: empty; at least one parameter")
-            factor, lo, hi = (_number(p, k, source, where) for k in ("factor", "lo", "hi"))
-            if not lo <= factor <= hi:
-                raise CalibrationError(f"{source}: {where}: factor {factor!r} outside its "
-                                       f"interval [{lo!r}, {hi!r}]")
-            params.append(CalibratedParameter(names, _field(p, "label", str, source,
-                                                            where=where), factor, lo, hi))
+                                   f"{' or '.join(map(str, READABLE_VERSIONS))} (format "
+                                   f"{data.get('format')!r}, version {version!r})")
+        params = _parameters(data, "parameters", source)
+        prior_fitted = _parameters(data, "prior_fitted", source, False) if version >= 2 else ()
         touches = _field(data, "touches", int, source)
         if touches < 1:
             raise CalibrationError(f"{source}: touches: {touches}; must be at least 1")
@@ -182,10 +188,32 @@ class PadCalibration:
                    _number(data, "chi2_per_dof", source, positive=False),
                    touches, _strings(data, "materials", source), source,
                    # A file written before the key: statistical intervals alone.
-                   _number(data, "design_sd", source, positive=False, default=0.0))
+                   _number(data, "design_sd", source, positive=False, default=0.0),
+                   prior_fitted)
 
     def to_dict(self) -> dict:
         return tomllib.loads(self.to_toml())
+
+
+def _parameters(data: dict, key: str, source: str,
+                required: bool = True) -> tuple[CalibratedParameter, ...]:
+    """The ``[[key]]`` tables of a calibration file, each checked (none:
+    an error when ``required``)."""
+    params = []
+    for i, p in enumerate(_field(data, key, list, source, _MISSING if required else [])):
+        if not isinstance(p, dict):
+            raise CalibrationError(f"{source}: {key}[{i}]: expected a table, got {p!r}")
+        where = f"{key}[{i}]"
+        names = _strings(p, "names", source, where)
+        if not names:
+            raise CalibrationError(f"{source}: {where}.names: empty; at least one parameter")
+        factor, lo, hi = (_number(p, k, source, where) for k in ("factor", "lo", "hi"))
+        if not lo <= factor <= hi:
+            raise CalibrationError(f"{source}: {where}: factor {factor!r} outside its "
+                                   f"interval [{lo!r}, {hi!r}]")
+        params.append(CalibratedParameter(names, _field(p, "label", str, source,
+                                                        where=where), factor, lo, hi))
+    return tuple(params)
 
 
 def read_calibration(path: str | Path) -> PadCalibration:
@@ -309,27 +337,36 @@ def calibrate_touches(scene, touches: ReferenceTouches,
     z_all = np.concatenate([[first.x[0]], np.zeros(len(names) - 1), first.x[1:]])
     cols = projected_columns(fit.jacobian(z_all, [(m,) for m in names]), len(names))
     free, fixed = select(cols, names)
+    # The parts the touches cannot tell alone: fitted under their design
+    # prior (held at the design when there is none).
+    prior_groups = [(m,) for m in fixed] if design_sd > 0 else []
+    groups = free + prior_groups
+    prior = [None] * len(free) + [design_sd] * len(prior_groups)
     z0 = np.concatenate([[first.x[0] if g == ("flux_gain",) else 0.0 for g in free],
-                         first.x[1:]])
-    result = fit.solve(free, z0, max_nfev=25)
-    dof = max(len(result.fun) - len(result.x), 1)
-    chi2 = 2.0 * result.cost / dof
+                         np.zeros(len(prior_groups)), first.x[1:]])
+    result = fit.solve(groups, z0, max_nfev=25, prior=prior)
+    data = result.fun[:len(result.fun) - len(prior_groups)]     # the priors' rows apart
+    dof = max(len(data) - len(result.x), 1)
+    chi2 = float(data @ data) / dof
     log.info("pad calibration: %d touches, %d evaluations, %.1f s of CPU, chi2/dof %.3f",
              n, result.nfev, time.process_time() - start, chi2)
-    _refuse_misfit(fit, result, touches, chi2, fit.split(result.x, free)[4])
-    sds = np.hypot(marginal_sds(result.jac, len(free)) * math.sqrt(max(1.0, chi2)),
-                   consider_sds(fit, result.x, free, fixed, design_sd, result.jac))
-    params = tuple(CalibratedParameter(g, " + ".join(describe(scene, m) for m in g),
-                                       math.exp(v), math.exp(v - Z95 * sd), math.exp(v + Z95 * sd))
-                   for g, v, sd in zip(free, result.x, sds))
+    _refuse_misfit(fit, result, touches, chi2, fit.split(result.x, groups)[4])
+    held = [] if prior_groups else fixed
+    sds = np.hypot(marginal_sds(result.jac, len(groups)) * math.sqrt(max(1.0, chi2)),
+                   consider_sds(fit, result.x, groups, held, design_sd, result.jac))
+    fitted = [CalibratedParameter(g, " + ".join(describe(scene, m) for m in g),
+                                  math.exp(v), math.exp(v - Z95 * sd), math.exp(v + Z95 * sd))
+              for g, v, sd in zip(groups, result.x, sds)]
+    params, prior_fitted = tuple(fitted[:len(free)]), tuple(fitted[len(free):])
     gain = next((p for p in params if p.names == ("flux_gain",)), None)
-    log_h = fit.split(result.x, free)[2]
+    log_h = fit.split(result.x, groups)[2]
     return PadCalibration(
         scene.name, pad_digest(scene), params, tuple(describe(scene, m) for m in fixed),
         float(scene.pad.contact_conductance_w_m2k * math.exp(float(np.mean(log_h)))),
         gain.factor if gain else 1.0,
         float((math.log(gain.hi) - math.log(gain.lo)) / (2 * Z95)) if gain else 0.0,
-        float(chi2), n, tuple(sorted(set(touches.labels))), design_sd=float(design_sd))
+        float(chi2), n, tuple(sorted(set(touches.labels))), design_sd=float(design_sd),
+        prior_fitted=prior_fitted)
 
 
 def amplitude_z(touches: ReferenceTouches, log_a: np.ndarray, sd: float) -> dict:
