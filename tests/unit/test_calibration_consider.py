@@ -142,3 +142,41 @@ def test_the_pad_fit_s_consider_columns_are_its_own_jacobian_s_at_the_fit():
     shift[2, 2] -= w[1]
     np.testing.assert_allclose(got, np.sqrt(np.sum(shift ** 2, axis=1)), rtol=1e-9)
     assert got[2] > 0                                   # the lump carries something
+
+
+def test_the_pad_fit_s_prior_rows_are_its_residuals_own_and_its_jacobian_s():
+    """A group given a prior sd adds one residual row ``ln factor / sd``
+    after the touches' and the amplitudes' (none for a group without), and
+    the Jacobian's row for it is exactly its derivative (1 / sd at that
+    group's column, 0 elsewhere); the rows before are the fit's without
+    priors, to the bit."""
+    import dataclasses
+
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.calibration import PadModelFit, ReferenceTouches
+    from telethermal.ident.pad_calibration import amplitude_sd
+
+    scene = load_scene("fingertip-7")
+    ref = dataclasses.replace(
+        scene, pad=dataclasses.replace(scene.pad, trials_per_material=3),
+        objects=tuple(o for o in scene.objects if o.material in ("steel", "plexiglass")))
+    touches = ReferenceTouches.from_trials(pad_database(ref, np.random.default_rng(3)))
+    fit = PadModelFit(scene, touches, amplitude_sd(scene), scene.sensors.flux_noise_w_m2())
+    n = len(touches.labels)
+    free = [("flux_gain",), ("flux_lag_s",), ("layers[2].resistance",)]
+    prior = [None, None, 0.2]
+    z = np.concatenate([[0.03, -0.05, 0.1], np.zeros(3 * n)])
+    plain_r, plain_j = fit.residuals(z, free), fit.jacobian(z, free)
+    r, j = fit.residuals(z, free, prior=prior), fit.jacobian(z, free, prior=prior)
+    assert r.shape == (len(plain_r) + 1,) and j.shape == (len(plain_r) + 1, len(z))
+    np.testing.assert_array_equal(r[:-1], plain_r)
+    np.testing.assert_array_equal(j[:-1], plain_j)
+    assert r[-1] == pytest.approx(0.1 / 0.2, rel=1e-15)
+    want = np.zeros(len(z))
+    want[2] = 1 / 0.2
+    np.testing.assert_array_equal(j[-1], want)
+    # The prior's posterior sd on a part the touches do not see at all is
+    # the prior's own: a column of zeros but for its prior row.
+    jac = np.vstack([np.column_stack([np.ones((5, 1)), np.zeros((5, 1))]), [[0.0, 1 / 0.2]]])
+    from telethermal.ident.calibration import marginal_sds
+    assert marginal_sds(jac, 2)[1] == pytest.approx(0.2, rel=1e-12)

@@ -4,6 +4,7 @@ deliverable 2): the hard cases."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -67,6 +68,38 @@ def test_a_pad_30_percent_off_from_two_materials_is_recovered_within_its_interva
     # Thickness and conductivity are never two parameters: resistance and
     # heat capacity per layer (the module's docstring).
     assert not any("thickness" in n or "conductivity" in n for n in names)
+    # What the touches cannot tell alone is fitted under its design prior
+    # (log sd design_sd): named, in the model, its interval no wider than
+    # the prior's own (the posterior's, chi2 under 1 here).
+    assert [p.label for p in calibrated.prior_fitted] == list(calibrated.not_identifiable)
+    prior_ratio = math.exp(2 * 1.96 * calibrated.design_sd)
+    for p in calibrated.prior_fitted:
+        assert p.hi / p.lo <= prior_ratio * (1 + 1e-9), p
+        assert all(calibrated.factors()[n] == p.factor for n in p.names)
+
+
+@pytest.mark.slow          # two calibrations, about a minute here
+def test_a_part_the_touches_see_weakly_is_fitted_under_its_prior_not_pinned():
+    """A cold plate 30 % thick, everything else as designed, touched on the
+    default references: its resistance (identified or fitted under its
+    design prior) holds 1.3 within its interval and moves most of the way
+    there; with no prior (design_sd = 0) a part the touches cannot tell
+    is held at its design value instead, and named."""
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.calibration import REFERENCE_MATERIALS
+    from telethermal.ident.pad_calibration import calibrate_pad
+    scene = _scene(REFERENCE_MATERIALS, trials=5)
+    built = with_as_built(scene, AsBuilt(BuiltFactors((1.0, 1.0, 1.3)), BuiltFactors((1, 1, 1))))
+    trials = pad_database(built, np.random.default_rng(1))
+    cal = calibrate_pad(scene, trials)
+    plate = next(p for p in cal.parameters + cal.prior_fitted
+                 if "layers[2].resistance" in p.names)
+    assert plate.lo <= 1.3 <= plate.hi and plate.factor > 1.15, plate
+    held = calibrate_pad(scene, trials, design_sd=0.0)
+    assert held.prior_fitted == ()
+    for p in cal.prior_fitted:
+        assert p.label in held.not_identifiable
+        assert all(n not in held.factors() for n in p.names)
 
 
 @pytest.mark.slow          # over 10 s here: make test-all and CI run it
@@ -265,6 +298,43 @@ def test_the_pad_digest_follows_the_figures_not_the_descriptions(monkeypatch):
     monkeypatch.setattr(te, "get_module", lambda name: dataclasses.replace(
         spec, resistance_ohm=spec.resistance_ohm * 1.05))
     assert pad_digest(scene) != base
+
+
+def test_prior_fitted_parts_round_trip_and_a_version_1_file_holds_them_at_the_design(
+        tmp_path):
+    """Format 2 keeps the prior-fitted parts (checked as the parameters are,
+    named when bad); a version-1 file reads with none (its parts at their
+    design, as it was made); another version is refused naming it."""
+    from telethermal.ident.pad_calibration import (CalibratedParameter, read_calibration,
+                                                   write_calibration)
+    scene = _scene()
+    cal = dataclasses.replace(_hand_made(scene), not_identifiable=("alumina resistance",),
+                              prior_fitted=(CalibratedParameter(
+                                  ("layers[2].resistance",), "alumina resistance",
+                                  1.2, 0.85, 1.7),), design_sd=0.2)
+    path = write_calibration(cal, tmp_path / "cal.toml")
+    back = read_calibration(path)
+    assert back.prior_fitted == cal.prior_fitted
+    assert back.apply(scene) == cal.apply(scene)
+    assert back.factors()["layers[2].resistance"] == 1.2
+    assert any("alumina resistance: x1.200" in line for line in back.describe())
+    text = path.read_text()
+    for old, new, why in (("factor = 1.2\n", "factor = 0.5\n", r"prior_fitted\[0\]: factor 0.5"),
+                          ('names = ["layers[2].resistance"]', 'names = "x"',
+                           r"prior_fitted\[0\].names: expected list")):
+        path.write_text(text.replace(old, new))
+        with pytest.raises(CalibrationError, match=why):
+            read_calibration(path)
+    path.write_text(text.replace(' layers[2].resistance"]', ' layers[9].resistance"]')
+                    .replace('"layers[2].resistance"', '"layers[9].resistance"'))
+    with pytest.raises(CalibrationError, match=r"prior_fitted\[0\].names: 'layers\[9\]"):
+        read_calibration(path).apply(scene)
+    path.write_text(text.replace("format_version = 2", "format_version = 1"))
+    old = read_calibration(path)
+    assert old.prior_fitted == () and "layers[2].resistance" not in old.factors()
+    path.write_text(text.replace("format_version = 2", "format_version = 3"))
+    with pytest.raises(CalibrationError, match="version 3"):
+        read_calibration(path)
 
 
 def test_names_with_quotes_and_backslashes_round_trip(tmp_path):

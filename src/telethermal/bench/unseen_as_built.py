@@ -113,7 +113,8 @@ def run(sd: float = 0.15, pads: int = 5, seeds: int = 1, scene_name: str = "fing
         cal, cpu_s, truth = iab.calibrate_drawn(base, built, references)
         out["calibrations"].append({"seed": k, "as_built": built.as_built.pad.to_dict(),
                                     "cpu_s": cpu_s, "chi2_per_dof": cal.chi2_per_dof,
-                                    "parameters": iab.coverage(cal, truth, base)})
+                                    "parameters": iab.coverage(cal, truth, base),
+                                    "prior_fitted": iab.coverage(cal, truth, base, True)})
         out["calibrated"].append(score(base, built, cal, objects, seeds, quick))
         out["summary"] = summary(out)
         if partial is not None:
