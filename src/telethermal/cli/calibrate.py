@@ -107,9 +107,10 @@ def add_parser(sub) -> None:
                    default=1.0,
                    help="seconds of each touch fitted from the onset (default 1)")
     q.add_argument("--design-sd", type=_non_negative, default=None,
-                   help="how far (log sd) the parts the touches cannot identify may be off "
-                        "their design, carried into the intervals (default 0.2: a part "
-                        "known to about 20 %%; 0: statistical intervals alone)")
+                   help="how far (log sd) the parts the touches cannot identify alone may "
+                        "be off their design: their prior, under which they are fitted, "
+                        "carried into the intervals (default 0.2: a part known to about "
+                        "20 %%; 0: held at their design, statistical intervals alone)")
     q.set_defaults(func=cmd_calibrate_pad)
     d = csub.add_parser("display", help="fit the display pad's flux sensor lag (and gain) and "
                                         "junction sensor lag from current steps with a "

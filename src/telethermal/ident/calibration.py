@@ -379,7 +379,9 @@ def consider_sds(fit: "PadModelFit", z: np.ndarray, free, fixed, design_sd: floa
 
     - a candidate held at its design value (``fixed``): where it truly is,
       its effect on the flux is absorbed by the free parameters (and the
-      nuisances) that can mimic it;
+      nuisances) that can mimic it (the calibration holds none since it
+      fits such candidates under their prior, whose covariance carries
+      them; kept for a fit that holds some);
     - each member of a lumped parameter apart from the others: the lumped
       factor stands for the members' total (:func:`lump_weights`), and a
       member off alone moves the fit and that total differently.
@@ -423,7 +425,8 @@ def select(cols: np.ndarray, names: list[str]):
     module): greedily in order of weight, kept while the conditional sd
     stays under :data:`SD_MAX`, else lumped with a kept column of the same
     kind (layers' resistances together, heat capacities together) it is
-    nearly parallel to, else left at the design value."""
+    nearly parallel to, else not identifiable (the calibration fits those
+    under their design prior, or holds them at the design without one)."""
     order = np.argsort(-np.linalg.norm(cols, axis=0))
     groups: list[list[int]] = []
     fixed = []

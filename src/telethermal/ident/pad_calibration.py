@@ -351,9 +351,10 @@ def calibrate_touches(scene, touches: ReferenceTouches,
     log.info("pad calibration: %d touches, %d evaluations, %.1f s of CPU, chi2/dof %.3f",
              n, result.nfev, time.process_time() - start, chi2)
     _refuse_misfit(fit, result, touches, chi2, fit.split(result.x, groups)[4])
-    held = [] if prior_groups else fixed
+    # The prior-fitted parts' uncertainty is in the covariance itself; what
+    # it cannot hold is a lumped parameter's members apart.
     sds = np.hypot(marginal_sds(result.jac, len(groups)) * math.sqrt(max(1.0, chi2)),
-                   consider_sds(fit, result.x, groups, held, design_sd, result.jac))
+                   consider_sds(fit, result.x, groups, [], design_sd, result.jac))
     fitted = [CalibratedParameter(g, " + ".join(describe(scene, m) for m in g),
                                   math.exp(v), math.exp(v - Z95 * sd), math.exp(v + Z95 * sd))
               for g, v, sd in zip(groups, result.x, sds)]
