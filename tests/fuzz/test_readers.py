@@ -160,8 +160,10 @@ def _calibration_text() -> bytes:
          CalibratedParameter(("flux_lag_s",), "flux sensor lag", 1.1, 1.0, 1.2),
          CalibratedParameter(("layers[0].resistance", "layers[1].resistance"),
                              "resistances", 0.9, 0.8, 1.0)),
-        ("layers[2].heat_capacity",), 3000.0, 1.02, 0.01, 0.03, 6,
-        ("steel", "wood")).to_toml().encode()
+        ("alumina heat capacity",), 3000.0, 1.02, 0.01, 0.03, 6,
+        ("steel", "wood"), design_sd=0.2,
+        prior_fitted=(CalibratedParameter(("layers[2].heat_capacity",), "alumina heat capacity",
+                                          1.05, 0.7, 1.5),)).to_toml().encode()
 
 
 def _load_calibration(path):

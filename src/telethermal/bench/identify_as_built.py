@@ -176,6 +176,7 @@ def summary(out: dict) -> dict:
     keys = ("accuracy_0.5", "accuracy_1.0", "named_rate", "pair_rate", "unknown_rate",
             "misfit_rate", "wrong_rate", "fallback_rate")
     held = [p["held"] for c in out["calibrations"] for p in c["parameters"]]
+    prior = [p["held"] for c in out["calibrations"] for p in c.get("prior_fitted", [])]
     return {"uncalibrated": {k: mean(out["uncalibrated"], k) for k in keys},
             "uncalibrated_fallback": {k: mean(out.get("uncalibrated_fallback", []), k)
                                       for k in keys},
@@ -183,6 +184,9 @@ def summary(out: dict) -> dict:
             "as_modelled": {k: out["as_modelled"].get(k) for k in keys},
             "coverage": float(np.mean(held)) if held else None,
             "parameters_fitted": len(held),
+            # The parts fitted under their design prior, apart (not the target's).
+            "prior_fitted_coverage": float(np.mean(prior)) if prior else None,
+            "prior_fitted": len(prior),
             "calibrate_cpu_s_max": max((c["cpu_s"] for c in out["calibrations"]), default=None)}
 
 
@@ -219,4 +223,8 @@ def text_lines(out: dict) -> list[str]:
                  f"parameters within their 95 % interval ({sum(sharp)} of the {len(sharp)} "
                  f"whose interval sd is within {SD_MAX:g}); CPU up to "
                  f"{s['calibrate_cpu_s_max']:.0f} s per pad")
+    if s.get("prior_fitted"):
+        lines.append(f"  fitted under their design prior (not identifiable alone): "
+                     f"{pct(s['prior_fitted_coverage'])} of {s['prior_fitted']} within their "
+                     "95 % interval")
     return lines

@@ -38,8 +38,13 @@ least squares (``scipy.optimize.least_squares``, trust-region reflective):
 - each parameter's **95 % interval**: ``+-1.96 sd`` of ``ln factor``
   from the Gauss-Newton covariance at the optimum (the nuisances and the
   prior-fitted parts marginalised; a prior-fitted part's own from the
-  same covariance, so never wider than its prior), widened by the
-  residual's chi-square per degree of freedom where it exceeds 1.
+  same covariance), the touches' rows widened by the residual's
+  chi-square per degree of freedom where it exceeds 1 (the priors' not).
+  The touches' rows are weighed with the curves' allowance in their
+  variance, far above the sensor's noise (a pad that fits reads a
+  chi-square per degree of freedom of a few hundredths), so the prior
+  pulls a weakly seen part toward its design harder than the noise alone
+  would: a conservative balance.
 - the **residual against the sensor's noise**: each sample's variance is
   the flux noise over the touch's gap plus the curves' own error (the
   scene's ``[model] tolerance_rel`` of the touch's rms, as the estimator);
@@ -386,8 +391,9 @@ def consider_sds(fit: "PadModelFit", z: np.ndarray, free, fixed, design_sd: floa
       factor stands for the members' total (:func:`lump_weights`), and a
       member off alone moves the fit and that total differently.
 
-    ``jac``: the fit's Jacobian at ``z`` (free parameters, then nuisances),
-    in the residuals' noise units."""
+    ``jac``: the fit's Jacobian at ``z`` (free parameters, then nuisances;
+    its rows the residuals', in noise units, then any priors' rows, which
+    no part moves)."""
     k = len(free)
     members = [(m,) for g in free if len(g) > 1 for m in g]
     parts = [(m,) for m in fixed] + members

@@ -82,14 +82,17 @@ class PadCalibration:
     touches: int
     materials: tuple[str, ...]
     source: str = ""
-    #: The log sd of the parts it could not identify that its intervals
-    #: carry (``ident.calibration.consider_sds``; 0: statistical alone, as
-    #: for one made without it). :func:`calibrate_touches` sets it.
+    #: The log sd of what the touches cannot tell: the prior of the parts
+    #: it could not identify (``prior_fitted``) and the spread of a lumped
+    #: parameter's members apart (``ident.calibration.consider_sds``); 0:
+    #: those parts held at their design, statistical intervals alone, as
+    #: for one made without it. :func:`calibrate_touches` sets it.
     design_sd: float = 0.0
     #: The parts named in ``not_identifiable``, fitted under their design
     #: prior (``ident.calibration``): each its factor and 95 % interval,
     #: the prior's ``design_sd`` in it. Empty: held at their design values
-    #: (``design_sd = 0``, or a version-1 file).
+    #: (``design_sd = 0``, or a version-1 file). The flux gain is never
+    #: among them (held, if the touches ever could not tell it).
     prior_fitted: tuple[CalibratedParameter, ...] = ()
 
     def factors(self) -> dict:
@@ -98,7 +101,8 @@ class PadCalibration:
                 if n != "flux_gain"}
 
     def check(self, scene) -> None:
-        """Refuse a calibration made for another scene (or another pad)."""
+        """Refuse a calibration made for another scene (or another pad), or
+        one naming a parameter of the pad twice."""
         where = self.source or "the calibration"
         if scene.name != self.scene:
             raise CalibrationError(f"{where} calibrates scene {self.scene!r}'s pad; this runs "
@@ -108,10 +112,14 @@ class PadCalibration:
             raise CalibrationError(f"{where} was made for another pad or sensors of scene "
                                    f"{scene.name!r} (the scene file changed since): calibrate "
                                    "again")
-        known = candidates(scene)
+        known, seen = candidates(scene), set()
         for key, rows in (("parameters", self.parameters), ("prior_fitted", self.prior_fitted)):
             for i, p in enumerate(rows):
                 for name in p.names:
+                    if name in seen:
+                        raise CalibrationError(f"{where}: {key}[{i}].names: {name!r} is "
+                                               "fitted twice in the file")
+                    seen.add(name)
                     if name not in known:
                         raise CalibrationError(f"{where}: {key}[{i}].names: {name!r} is not a "
                                                f"parameter of scene {scene.name!r}'s pad; "
@@ -139,12 +147,14 @@ class PadCalibration:
                          f"design's spread, log sd {self.design_sd:g}):")
             lines += [f"    {p.label}: x{p.factor:.3f} [{p.lo:.3f}, {p.hi:.3f}] 95 %"
                       for p in self.prior_fitted]
-        elif self.not_identifiable:
+        held = [m for m in self.not_identifiable
+                if m not in {p.label for p in self.prior_fitted}]
+        if held:
             lines.append("  not identifiable from these touches (design value kept): "
-                         + ", ".join(self.not_identifiable))
-        if self.design_sd > 0:
-            lines.append(f"  the intervals carry what the touches cannot tell (each such part "
-                         f"of the pad off its design by a log sd of {self.design_sd:g})")
+                         + ", ".join(held))
+        if self.design_sd > 0 and any(len(p.names) > 1 for p in self.parameters):
+            lines.append(f"  the lumped parameters' intervals carry their members apart "
+                         f"(each off its design by a log sd of {self.design_sd:g})")
         return lines
 
     # ------------------------------------------------------------ the file
@@ -170,37 +180,45 @@ class PadCalibration:
         (its type; a number finite and > 0, a standard deviation >= 0; the
         names lists of strings), a bad one refused naming it."""
         version = data.get("format_version")
-        if data.get("format") != FORMAT or version not in READABLE_VERSIONS \
-                or isinstance(version, bool):
+        if data.get("format") != FORMAT or type(version) is not int \
+                or version not in READABLE_VERSIONS:
             raise CalibrationError(f"{source}: not a {FORMAT} file of version "
                                    f"{' or '.join(map(str, READABLE_VERSIONS))} (format "
                                    f"{data.get('format')!r}, version {version!r})")
         params = _parameters(data, "parameters", source)
-        prior_fitted = _parameters(data, "prior_fitted", source, False) if version >= 2 else ()
+        prior_fitted = _parameters(data, "prior_fitted", source) if version >= 2 else ()
+        not_identifiable = _strings(data, "not_identifiable", source)
+        design_sd = _number(data, "design_sd", source, positive=False, default=0.0)
+        for i, p in enumerate(prior_fitted):
+            if p.label not in not_identifiable:
+                raise CalibrationError(f"{source}: prior_fitted[{i}]: {p.label!r} is not named in "
+                                       "not_identifiable (a part fitted under its prior is one "
+                                       "the touches could not identify)")
+        if prior_fitted and design_sd == 0:
+            raise CalibrationError(f"{source}: prior_fitted: parts fitted under a prior with "
+                                   "design_sd = 0 (no prior): the file contradicts itself")
         touches = _field(data, "touches", int, source)
         if touches < 1:
             raise CalibrationError(f"{source}: touches: {touches}; must be at least 1")
         return cls(_field(data, "scene", str, source), _field(data, "pad_digest", str, source),
-                   tuple(params), _strings(data, "not_identifiable", source),
+                   tuple(params), not_identifiable,
                    _number(data, "contact_conductance_w_m2k", source),
                    _number(data, "flux_gain", source),
                    _number(data, "flux_gain_sd", source, positive=False),
                    _number(data, "chi2_per_dof", source, positive=False),
                    touches, _strings(data, "materials", source), source,
                    # A file written before the key: statistical intervals alone.
-                   _number(data, "design_sd", source, positive=False, default=0.0),
-                   prior_fitted)
+                   design_sd, prior_fitted)
 
     def to_dict(self) -> dict:
         return tomllib.loads(self.to_toml())
 
 
-def _parameters(data: dict, key: str, source: str,
-                required: bool = True) -> tuple[CalibratedParameter, ...]:
-    """The ``[[key]]`` tables of a calibration file, each checked (none:
-    an error when ``required``)."""
+def _parameters(data: dict, key: str, source: str) -> tuple[CalibratedParameter, ...]:
+    """The ``[[key]]`` tables of a calibration file, each checked (none: a
+    calibration that fitted none of that kind, which writes no table)."""
     params = []
-    for i, p in enumerate(_field(data, key, list, source, _MISSING if required else [])):
+    for i, p in enumerate(_field(data, key, list, source, [])):
         if not isinstance(p, dict):
             raise CalibrationError(f"{source}: {key}[{i}]: expected a table, got {p!r}")
         where = f"{key}[{i}]"
@@ -339,21 +357,27 @@ def calibrate_touches(scene, touches: ReferenceTouches,
     free, fixed = select(cols, names)
     # The parts the touches cannot tell alone: fitted under their design
     # prior (held at the design when there is none).
-    prior_groups = [(m,) for m in fixed] if design_sd > 0 else []
+    prior_groups = [(m,) for m in fixed if m != "flux_gain"] if design_sd > 0 else []
     groups = free + prior_groups
     prior = [None] * len(free) + [design_sd] * len(prior_groups)
     z0 = np.concatenate([[first.x[0] if g == ("flux_gain",) else 0.0 for g in free],
                          np.zeros(len(prior_groups)), first.x[1:]])
     result = fit.solve(groups, z0, max_nfev=25, prior=prior)
-    data = result.fun[:len(result.fun) - len(prior_groups)]     # the priors' rows apart
-    dof = max(len(data) - len(result.x), 1)
+    n_data = len(result.fun) - len(prior_groups)                # the priors' rows apart
+    data = result.fun[:n_data]
+    # Every parameter counted against the data's rows: conservative by the
+    # prior-fitted ones (at most 4, against about 1,500 rows).
+    dof = max(n_data - len(result.x), 1)
     chi2 = float(data @ data) / dof
     log.info("pad calibration: %d touches, %d evaluations, %.1f s of CPU, chi2/dof %.3f",
              n, result.nfev, time.process_time() - start, chi2)
     _refuse_misfit(fit, result, touches, chi2, fit.split(result.x, groups)[4])
-    # The prior-fitted parts' uncertainty is in the covariance itself; what
-    # it cannot hold is a lumped parameter's members apart.
-    sds = np.hypot(marginal_sds(result.jac, len(groups)) * math.sqrt(max(1.0, chi2)),
+    # The prior-fitted parts' uncertainty is in the covariance itself (a
+    # misfit widens the data's rows, not the priors'); what it cannot hold
+    # is a lumped parameter's members apart.
+    jac = result.jac.copy()
+    jac[:n_data] /= math.sqrt(max(1.0, chi2))
+    sds = np.hypot(marginal_sds(jac, len(groups)),
                    consider_sds(fit, result.x, groups, [], design_sd, result.jac))
     fitted = [CalibratedParameter(g, " + ".join(describe(scene, m) for m in g),
                                   math.exp(v), math.exp(v - Z95 * sd), math.exp(v + Z95 * sd))
