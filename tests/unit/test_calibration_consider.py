@@ -7,6 +7,7 @@ form, to 1e-9)."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -42,6 +43,25 @@ def _fit_error(model: Linear, free, truth: dict) -> np.ndarray:
     jac = model.jacobian(None, free)
     est = np.linalg.lstsq(jac, data, rcond=None)[0][:len(free)]
     return est, jac
+
+
+@functools.lru_cache(maxsize=1)
+def _steel_plexiglass_fit():
+    """fingertip-7's pad fit on 3 touches each of steel and plexiglass
+    (seed 3): (scene, PadModelFit)."""
+    import dataclasses
+
+    from telethermal.data.generate import pad_database
+    from telethermal.ident.calibration import PadModelFit, ReferenceTouches
+    from telethermal.ident.pad_calibration import amplitude_sd
+
+    scene = load_scene("fingertip-7")
+    ref = dataclasses.replace(
+        scene, pad=dataclasses.replace(scene.pad, trials_per_material=3),
+        objects=tuple(o for o in scene.objects if o.material in ("steel", "plexiglass")))
+    touches = ReferenceTouches.from_trials(pad_database(ref, np.random.default_rng(3)))
+    return scene, PadModelFit(scene, touches, amplitude_sd(scene),
+                              scene.sensors.flux_noise_w_m2())
 
 
 def test_a_held_candidate_off_its_design_moves_the_fit_by_its_consider_shift():
@@ -114,19 +134,8 @@ def test_the_pad_fit_s_consider_columns_are_its_own_jacobian_s_at_the_fit():
     gain kept, a lumped group's members at its factor): consider_sds equals
     the shifts computed from one Jacobian over every candidate alone, at the
     same point, to 1e-9."""
-    import dataclasses
-
-    from telethermal.data.generate import pad_database
-    from telethermal.ident.calibration import PadModelFit, ReferenceTouches
-    from telethermal.ident.pad_calibration import amplitude_sd
-
-    scene = load_scene("fingertip-7")
-    ref = dataclasses.replace(
-        scene, pad=dataclasses.replace(scene.pad, trials_per_material=3),
-        objects=tuple(o for o in scene.objects if o.material in ("steel", "plexiglass")))
-    touches = ReferenceTouches.from_trials(pad_database(ref, np.random.default_rng(3)))
-    fit = PadModelFit(scene, touches, amplitude_sd(scene), scene.sensors.flux_noise_w_m2())
-    n = len(touches.labels)
+    scene, fit = _steel_plexiglass_fit()
+    n = len(fit.touches.labels)
     lump = ("layers[0].resistance", "layers[1].resistance")
     free, fixed = [("flux_gain",), ("flux_lag_s",), lump], ["layers[2].resistance"]
     z = np.concatenate([[0.03, -0.05, 0.1], np.zeros(3 * n)])
@@ -150,19 +159,8 @@ def test_the_pad_fit_s_prior_rows_are_its_residuals_own_and_its_jacobian_s():
     the Jacobian's row for it is exactly its derivative (1 / sd at that
     group's column, 0 elsewhere); the rows before are the fit's without
     priors, to the bit."""
-    import dataclasses
-
-    from telethermal.data.generate import pad_database
-    from telethermal.ident.calibration import PadModelFit, ReferenceTouches
-    from telethermal.ident.pad_calibration import amplitude_sd
-
-    scene = load_scene("fingertip-7")
-    ref = dataclasses.replace(
-        scene, pad=dataclasses.replace(scene.pad, trials_per_material=3),
-        objects=tuple(o for o in scene.objects if o.material in ("steel", "plexiglass")))
-    touches = ReferenceTouches.from_trials(pad_database(ref, np.random.default_rng(3)))
-    fit = PadModelFit(scene, touches, amplitude_sd(scene), scene.sensors.flux_noise_w_m2())
-    n = len(touches.labels)
+    scene, fit = _steel_plexiglass_fit()
+    n = len(fit.touches.labels)
     free = [("flux_gain",), ("flux_lag_s",), ("layers[2].resistance",)]
     prior = [None, None, 0.2]
     z = np.concatenate([[0.03, -0.05, 0.1], np.zeros(3 * n)])
