@@ -67,6 +67,17 @@ def test_summary_means_over_the_pads_and_prints_them():
     assert "uncalibrated" in text and "named 80.0 %" in text and "66.7 % of 3" in text
     # [0.7, 1.4] is an sd of 0.18 in ln factor: past the identifiability rule's 0.1.
     assert "(1 of the 2 whose interval sd is within 0.1)" in text
+    assert "design prior" not in text and s["prior_fitted"] == 0
+    # The parts fitted under their design prior are counted apart, never in
+    # the identified parameters' coverage.
+    out["calibrations"][0]["prior_fitted"] = [{"held": True, "lo": 0.7, "hi": 1.5},
+                                              {"held": False, "lo": 0.7, "hi": 1.5}]
+    s = summary(out)
+    assert s["coverage"] == pytest.approx(2 / 3) and s["parameters_fitted"] == 3
+    assert s["prior_fitted"] == 2 and s["prior_fitted_coverage"] == pytest.approx(0.5)
+    out["summary"] = s
+    assert "fitted under their design prior (not identifiable alone): 1 of 2 within" in \
+        "\n".join(text_lines(out))
 
 
 def _unseen_row(errors: dict, covered: int, n: int) -> dict:

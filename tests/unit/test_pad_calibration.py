@@ -352,6 +352,15 @@ def test_prior_fitted_parts_round_trip_and_a_version_1_file_holds_them_at_the_de
     path.write_text(text.replace("design_sd = 0.2", "design_sd = 0.0"))
     with pytest.raises(CalibrationError, match="design_sd = 0"):
         read_calibration(path)
+    path.write_text(text.replace('names = ["layers[2].resistance"]', 'names = ["flux_gain"]'))
+    with pytest.raises(CalibrationError, match=r"prior_fitted\[0\]: the flux gain is never"):
+        read_calibration(path)
+    # A version-1 file's held parts: said held, their spread carried.
+    lines = read_calibration(write_calibration(dataclasses.replace(
+        cal, prior_fitted=()), tmp_path / "held.toml")).describe()
+    assert any("design value kept): alumina resistance" in line for line in lines)
+    assert any("each part held at its design off it by a log sd of 0.2" in line
+               for line in lines)
     # A parameter fitted twice (identified and prior-fitted) is refused
     # where it would be applied; a file with no table of either kind reads.
     path.write_text(text.replace('"layers[2].resistance"', '"flux_lag_s"'))

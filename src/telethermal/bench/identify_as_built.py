@@ -223,8 +223,10 @@ def text_lines(out: dict) -> list[str]:
                  f"parameters within their 95 % interval ({sum(sharp)} of the {len(sharp)} "
                  f"whose interval sd is within {SD_MAX:g}); CPU up to "
                  f"{s['calibrate_cpu_s_max']:.0f} s per pad")
-    if s.get("prior_fitted"):
+    # From the calibrations, not the summary: a JSON made before the
+    # summary counted them has them there too.
+    prior = [p["held"] for c in out["calibrations"] for p in c.get("prior_fitted", [])]
+    if prior:
         lines.append(f"  fitted under their design prior (not identifiable alone): "
-                     f"{pct(s['prior_fitted_coverage'])} of {s['prior_fitted']} within their "
-                     "95 % interval")
+                     f"{sum(prior)} of {len(prior)} within their 95 % interval")
     return lines

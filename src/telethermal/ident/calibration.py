@@ -31,15 +31,16 @@ least squares (``scipy.optimize.least_squares``, trust-region reflective):
   beside the touches' (a maximum a posteriori fit). The touches still
   move it as far as they tell it apart: a part off its design that the
   touches see only weakly (a thick cold plate whose conditional sd is
-  just over :data:`SD_MAX`) is not pinned at the design, where it would
+  past :data:`SD_MAX`) is not pinned at the design, where it would
   bias what the model says of objects far from the references (a metal
   more effusive than the metal reference). With ``design_sd = 0`` it is
   held at its design value.
 - each parameter's **95 % interval**: ``+-1.96 sd`` of ``ln factor``
   from the Gauss-Newton covariance at the optimum (the nuisances and the
   prior-fitted parts marginalised; a prior-fitted part's own from the
-  same covariance), the touches' rows widened by the residual's
-  chi-square per degree of freedom where it exceeds 1 (the priors' not).
+  same covariance), the touches' and amplitudes' rows widened by the
+  residual's chi-square per degree of freedom where it exceeds 1 (the
+  priors' not).
   The touches' rows are weighed with the curves' allowance in their
   variance, far above the sensor's noise (a pad that fits reads a
   chi-square per degree of freedom of a few hundredths), so the prior

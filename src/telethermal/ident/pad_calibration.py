@@ -152,7 +152,10 @@ class PadCalibration:
         if held:
             lines.append("  not identifiable from these touches (design value kept): "
                          + ", ".join(held))
-        if self.design_sd > 0 and any(len(p.names) > 1 for p in self.parameters):
+        if self.design_sd > 0 and held:
+            lines.append(f"  the intervals carry what the touches cannot tell (each part "
+                         f"held at its design off it by a log sd of {self.design_sd:g})")
+        elif self.design_sd > 0 and any(len(p.names) > 1 for p in self.parameters):
             lines.append(f"  the lumped parameters' intervals carry their members apart "
                          f"(each off its design by a log sd of {self.design_sd:g})")
         return lines
@@ -190,6 +193,9 @@ class PadCalibration:
         not_identifiable = _strings(data, "not_identifiable", source)
         design_sd = _number(data, "design_sd", source, positive=False, default=0.0)
         for i, p in enumerate(prior_fitted):
+            if "flux_gain" in p.names:
+                raise CalibrationError(f"{source}: prior_fitted[{i}]: the flux gain is never "
+                                       "fitted under a prior (held when not identifiable)")
             if p.label not in not_identifiable:
                 raise CalibrationError(f"{source}: prior_fitted[{i}]: {p.label!r} is not named in "
                                        "not_identifiable (a part fitted under its prior is one "
@@ -366,7 +372,7 @@ def calibrate_touches(scene, touches: ReferenceTouches,
     n_data = len(result.fun) - len(prior_groups)                # the priors' rows apart
     data = result.fun[:n_data]
     # Every parameter counted against the data's rows: conservative by the
-    # prior-fitted ones (at most 4, against about 1,500 rows).
+    # prior-fitted ones (a few, against about 1,500 rows).
     dof = max(n_data - len(result.x), 1)
     chi2 = float(data @ data) / dof
     log.info("pad calibration: %d touches, %d evaluations, %.1f s of CPU, chi2/dof %.3f",
