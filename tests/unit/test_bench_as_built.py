@@ -182,7 +182,8 @@ def test_render_as_built_is_missed_on_a_safety_event_and_says_a_refused_calibrat
            "calibrations": [{"seed": 0}, {"seed": 1, "refused": "chi2/dof 9 past 2"}]}
     s = ra.summary(out)
     assert s["met"] and s["calibration_refused_pads"] == [1]
-    assert s["sessions"] == {"as_modelled": 2, "uncalibrated": 4, "calibrated": 2}
+    assert s["sessions"] == {"as_modelled": 2, "uncalibrated": 4, "calibrated": 2,
+                             "display_exact": 0}
     out["summary"] = s
     assert "calibration refused on pads 1" in "\n".join(ra.text_lines(out))
     fine["rows"][0]["safety_events"] = 1          # the ratio holds, a safety event does not
@@ -192,15 +193,19 @@ def test_render_as_built_is_missed_on_a_safety_event_and_says_a_refused_calibrat
 def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monkeypatch):
     """The run's wiring, its sessions and fits stubbed: the as-modelled row
     on the design (no [as_built]), the uncalibrated on the drawn pads with
-    neither calibration, the calibrated with both."""
+    neither calibration, the calibrated with both; the exact display's with
+    the sensing pad's calibration and the drawn display's own model and
+    idle scene in place of the display's calibration."""
     from telethermal.bench import render_as_built as ra
 
     calls = []
 
     def session(scene, material, identifier, generator, config, seed,
-                display_calibration=None):
+                display_calibration=None, display_model=None, idle_scene=None):
+        assert (display_model is None) == (idle_scene is None)
         calls.append((scene.as_built is not None, (identifier[0], id(identifier[1])),
-                      display_calibration))
+                      display_calibration, None if display_model is None
+                      else display_model["flux_gain"]))
         return {"material": material, "seed": seed, "temp_rms_error_c": 0.5,
                 "flux_rms_error_rel": 0.02, "identified": material, "safety_events": 0,
                 "module_limits": _render_pad(0, {"x": [0]})["rows"][0]["module_limits"]}
@@ -221,13 +226,89 @@ def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monk
     monkeypatch.setattr(rig, "calibrate_simulated", lambda scene, seed: DisplayCal)
     out = ra.run(0.15, pads=1, quick=True)
     n = len(out["as_modelled"]["rows"])
-    assert n == 3 * len(ra.SEEDS) and len(calls) == 3 * n
-    assert {c for c in calls[:n]} == {(False, ("identifier", id(None)), None)}
-    assert {c for c in calls[n:2 * n]} == {(True, ("identifier", id(None)), None)}
-    assert {c for c in calls[2 * n:]} == {(True, ("identifier", id(pad_cal)), DisplayCal)}
+    assert n == 3 * len(ra.SEEDS) and len(calls) == 4 * n
+    assert {c for c in calls[:n]} == {(False, ("identifier", id(None)), None, None)}
+    assert {c for c in calls[n:2 * n]} == {(True, ("identifier", id(None)), None, None)}
+    assert {c for c in calls[2 * n:3 * n]} == {(True, ("identifier", id(pad_cal)), DisplayCal,
+                                                None)}
+    gain = draw_as_built(0.15, 0, 3).display.flux_gain         # pad 0's drawn display
+    assert {c for c in calls[3 * n:]} == {(True, ("identifier", id(pad_cal)), None, gain)}
+    assert out["summary"]["sessions"]["display_exact"] == n
     display = out["calibrations"][0]["display"]
     assert out["summary"]["met"] and display["flux_lag_s"] == 0.15
     assert display["face_layer_thickness"] == 1.1 and display["face_layer_thickness_true"] > 0
+
+
+def test_the_exact_display_is_the_simulators_display_and_the_design_is_the_configured_one():
+    """bench render --as-built's oracle row: on a pad drawn at sd 0 the
+    master's exact model is the configured one, key for key, and its idle
+    scene the design's policy key; on a drawn pad each part is the design's
+    times its drawn factor (the stack's resistance summed by hand), the
+    horizon stretched by the product's rule for the lumped face factor."""
+    import dataclasses
+
+    from telethermal.bench import render_as_built as ra
+    from telethermal.control.preconditioning import policy_key
+    from telethermal.physics.as_built import with_as_built
+    from telethermal.physics.scene import load_scene, with_finger
+    from telethermal.teleop.display_setup import display_model_args
+
+    scene = with_finger(with_as_built(load_scene("fingertip-7"), None))
+    n = len(scene.pad.layers)
+    design = display_model_args(scene)
+    model, idle = ra.exact_display(scene, with_as_built(scene, draw_as_built(0.0, 0, n)))
+    assert model == design and policy_key(idle) == policy_key(scene)
+    drawn = draw_as_built(0.15, 3, n)
+    f = drawn.display
+    model, idle = ra.exact_display(scene, with_as_built(scene, drawn))
+    resistance = sum(la.thickness_m * k / la.material.conductivity_w_mk
+                     for la, k in zip(scene.pad.layers, f.layer_thickness))
+    assert model["pad_resistance_m2k_w"] == pytest.approx(resistance, rel=1e-12)
+    assert [la.thickness_m for la in model["pad_layers"]] == pytest.approx(
+        [la.thickness_m * k for la, k in zip(scene.pad.layers, f.layer_thickness)], rel=1e-12)
+    for key, factor in (("sensor_lag_s", f.flux_lag_s),
+                        ("contact_conductance_w_m2k", f.contact_conductance_w_m2k)):
+        assert model[key] == pytest.approx(design[key] * factor, rel=1e-12), key
+    assert model["flux_gain"] == f.flux_gain != 1.0
+    assert model["junction_sensor"].tau_s == pytest.approx(
+        design["junction_sensor"].tau_s * f.junction_lag_s, rel=1e-12)
+    for attr, factor in (("seebeck_v_k", f.module_seebeck), ("resistance_ohm",
+                         f.module_resistance), ("conductance_w_k", f.module_conductance)):
+        assert getattr(model["module"], attr) == pytest.approx(
+            getattr(design["module"], attr) * factor, rel=1e-12), attr
+    face = ra.lumped_face_true(scene, f.layer_thickness)
+    assert face > 1.5 and model["impedance_horizon_scale"] == pytest.approx(face ** 2)
+    # The idle policy's scene: the drawn layers and contact, no [as_built]
+    # (the search would not read it; the policy is another one).
+    assert idle.as_built is None and idle.pad.layers == model["pad_layers"]
+    assert idle.finger.contact_conductance_w_m2k == model["contact_conductance_w_m2k"]
+    assert dataclasses.replace(idle, pad=scene.pad, finger=scene.finger) == scene
+    assert policy_key(idle) != policy_key(scene)
+
+
+def test_the_exact_model_reaches_the_master_and_the_configured_one_changes_nothing(
+        trained_models):
+    """run_session's ``display_model`` replaces the master's model: the
+    configured model handed in explicitly renders the touch bit for bit as
+    none given; the same with another flux gain does not."""
+    import numpy as np
+
+    from telethermal.physics.scene import load_scene, with_finger
+    from telethermal.sim.inprocess import run_session
+    from telethermal.teleop.display_setup import display_model_args
+
+    scene = with_finger(load_scene("fingertip-7"))
+    models = trained_models.pair(scene, 0)
+    args = display_model_args(scene)
+
+    def current(model):
+        return run_session(scene, "steel", *models, contact_s=0.4, seed=3,
+                           display_model=model).trace["current_a"]
+
+    plain = current(None)
+    assert np.isfinite(plain).sum() > 100
+    np.testing.assert_array_equal(current(dict(args)), plain)
+    assert not np.allclose(current({**args, "flux_gain": 0.8}), plain, equal_nan=True)
 
 
 def test_bench_render_as_built_refuses_an_sd_out_of_range(capsys):

@@ -5,7 +5,7 @@ off their datasheet (issue 44, deliverable 6).
 factor of both pads log-normal, the display's junction sensor lag too), as
 ``bench identify --as-built`` draws them. Each material's first touch
 (the idle policy's pad for an unknown object, 3 s, the default display) is
-rendered on the same session seeds three ways:
+rendered on the same session seeds four ways:
 
 - ``as_modelled``: the pads as designed (the product's models are the
   simulator's pads: ``bench render``'s own first touches);
@@ -22,7 +22,11 @@ rendered on the same session seeds three ways:
   flux readings, its face layer's thickness in the master's model of the
   pad and the idle policy searched again for it, about 85 s of CPU a pad
   the first time, then cached; the junction loop keeps its configured
-  lag: docs/calibration.md).
+  lag: docs/calibration.md);
+- ``display_exact``: as ``calibrated``, but the master's model of its
+  display exactly as the simulator drew it (:func:`exact_display`: a
+  bench's oracle, which no product reads): the floor a display
+  calibration, however complete, cannot pass on these pads.
 
 Per row and material: the skin error over the whole contact (mean over the
 pads and seeds, and the worst), the flux error from the decision, safety
@@ -49,7 +53,9 @@ SEEDS = (1, 2)
 #: The issue's bound: a calibrated first touch's skin error against the
 #: same material's as modelled.
 TARGET_RATIO = 1.15
-ROWS = ("as_modelled", "uncalibrated", "calibrated")
+ROWS = ("as_modelled", "uncalibrated", "calibrated", "display_exact")
+#: The rows over the drawn pads (a list of pads each).
+DRAWN_ROWS = ROWS[1:]
 
 
 def lumped_face_true(scene, factors) -> float:
@@ -65,9 +71,47 @@ def lumped_face_true(scene, factors) -> float:
     return (drawn - pad_resistance(layers[1:-1])) / pad_resistance(layers[:1])
 
 
-def _rows(scene, materials, identifier, generator, seeds, display_calibration=None) -> list:
+def exact_display(scene, built) -> tuple[dict, object]:
+    """The master's model of ``built``'s display exactly as the simulator
+    builds it (:func:`~telethermal.physics.as_built.simulated_display`; a
+    bench's oracle): the drawn layers, flux sensor lag and gain, contact
+    conductance on the finger, module (S, R, K) and junction sensor lag,
+    the impedance horizon stretched by the product's own rule
+    (:func:`~telethermal.teleop.display_setup.horizon_scale`) for the drawn
+    face layer's lumped factor (:func:`lumped_face_true`); and the scene
+    whose idle policy it applies: ``scene`` with the drawn layers and
+    contact (the policy's search takes the module from its datasheet, as it
+    does for every display). ``scene``: the design (no ``as_built``).
+    Returns (``display_model_args``'s keys, the idle policy's scene)."""
+    import dataclasses
+
+    from telethermal.physics.as_built import simulated_display
+    from telethermal.physics.layered import pad_resistance
+    from telethermal.teleop.display_setup import display_model_args
+    drawn = simulated_display(built)
+    model = display_model_args(scene)
+    model.update(pad_resistance_m2k_w=pad_resistance(drawn.layers), pad_layers=drawn.layers,
+                 sensor_lag_s=drawn.flux_lag_s, flux_gain=drawn.flux_gain,
+                 contact_conductance_w_m2k=model["contact_conductance_w_m2k"]
+                 * drawn.contact_factor, module=drawn.module,
+                 junction_sensor=dataclasses.replace(
+                     model["junction_sensor"],
+                     tau_s=model["junction_sensor"].tau_s * drawn.junction_lag_factor),
+                 impedance_horizon_scale=max(1.0, lumped_face_true(
+                     scene, built.as_built.display.layer_thickness) ** 2))
+    finger = dataclasses.replace(scene.finger, contact_conductance_w_m2k=model[
+        "contact_conductance_w_m2k"])
+    idle = dataclasses.replace(scene, pad=dataclasses.replace(scene.pad, layers=drawn.layers),
+                               finger=finger, as_built=None)
+    return model, idle
+
+
+def _rows(scene, materials, identifier, generator, seeds, display_calibration=None,
+          exact=None) -> list:
+    model, idle = exact or (None, None)
     return [session_row(scene, m, identifier, generator, DisplayConfig(), s,
-                        display_calibration=display_calibration)
+                        display_calibration=display_calibration, display_model=model,
+                        idle_scene=idle)
             for m in materials for s in seeds]
 
 
@@ -106,7 +150,7 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7",
            "as_modelled": {"rows": modelled,
                            "per_material": _per_material(modelled),
                            "limits": limits_of(modelled)},
-           "uncalibrated": [], "calibrated": [], "calibrations": []}
+           **{key: [] for key in DRAWN_ROWS}, "calibrations": []}
     for k in range(pads):
         built = with_as_built(scene, draw_as_built(sd, k, len(scene.pad.layers)))
         step(f"pad {k}: uncalibrated")
@@ -141,9 +185,14 @@ def run(sd: float = 0.15, pads: int = 5, scene_name: str = "fingertip-7",
                                 scene, built.as_built.display.layer_thickness),
                             "cpu_s": display_cpu_s}})
             step(f"pad {k}: calibrated")
-            rows = _rows(built, materials, train_identifier(built, 0, calibration=pad_cal),
-                         generator, seeds, display_calibration=display_cal)
+            identifier = train_identifier(built, 0, calibration=pad_cal)
+            rows = _rows(built, materials, identifier, generator, seeds,
+                         display_calibration=display_cal)
             out["calibrated"].append(_pad_row(k, rows))
+            step(f"pad {k}: its display modelled exactly")
+            rows = _rows(built, materials, identifier, generator, seeds,
+                         exact=exact_display(scene, built))
+            out["display_exact"].append(_pad_row(k, rows))
         out["summary"] = summary(out)
         if partial is not None:
             partial({**out, "pads_done": k + 1})
@@ -167,8 +216,8 @@ def summary(out: dict) -> dict:
     per = {}
     for m, ref in modelled.items():
         entry = {"as_modelled_skin_rms_k": ref["skin_rms_k"]}
-        for key in ("uncalibrated", "calibrated"):
-            mine = [p["per_material"][m] for p in out[key]]
+        for key in DRAWN_ROWS:
+            mine = [p["per_material"][m] for p in out.get(key, [])]
             if not mine:
                 continue
             entry[f"{key}_skin_rms_k"] = float(np.mean([p["skin_rms_k"] for p in mine]))
@@ -180,8 +229,7 @@ def summary(out: dict) -> dict:
             entry[f"{key}_sessions"] = sum(p["sessions"] for p in mine)
         entry["met"] = entry.get("calibrated_ratio", np.inf) <= TARGET_RATIO
         per[m] = entry
-    every = {key: [r for p in out[key] for r in p["rows"]] for key in ("uncalibrated",
-                                                                        "calibrated")}
+    every = {key: [r for p in out.get(key, []) for r in p["rows"]] for key in DRAWN_ROWS}
     every["as_modelled"] = out["as_modelled"]["rows"]
     safety = {k: int(sum(r["safety_events"] for r in every[k])) for k in ROWS}
     worst = max(per, key=lambda m: per[m].get("calibrated_ratio", np.inf))
@@ -207,7 +255,8 @@ def text_lines(out: dict) -> list[str]:
              f"against as modelled, target <= {TARGET_RATIO:g}x)",
              iab.references_line(out) + " (the sensing pad)",
              f"  {'material':11s} {'as modelled':>12s} {'uncalibrated':>13s} "
-             f"{'calibrated':>11s} {'ratio':>6s}{'':18s}  named right (uncal. / cal.)"]
+             f"{'calibrated':>11s} {'ratio':>6s}{'':18s}  {'exact display':>13s} {'ratio':>6s}"
+             "  named right (uncal. / cal.)"]
 
     def k(e, key):
         return "-" if key not in e else f"{e[key]:.3f} K"
@@ -218,10 +267,16 @@ def text_lines(out: dict) -> list[str]:
                      + ("     -" if ratio is None else f"{ratio:5.2f}x")
                      + (f" (worst pad {e['calibrated_worst_pad_ratio']:.2f}x)"
                         if ratio is not None else "")
+                     + f"  {k(e, 'display_exact_skin_rms_k'):>13s} "
+                     + (f"{e['display_exact_ratio']:5.2f}x" if "display_exact_ratio" in e
+                        else "     -")
                      + f"  {e.get('uncalibrated_identified_right', 0)} / "
                      f"{e.get('calibrated_identified_right', 0)} of "
                      f"{e.get('calibrated_sessions', 0)}"
                      + ("" if e["met"] else "  (over the target)"))
+    lines.append("  (exact display: the sensing pad calibrated, the master's model of its "
+                 "display exactly as drawn, a bench's oracle: the floor of any display "
+                 "calibration)")
     worst = "-" if s["worst_ratio"] is None else f"{s['worst_ratio']:.2f}x"
     lines.append(f"  worst: {s['worst_material']} {worst}; safety events "
                  + ", ".join(f"{key} {s['safety_events'][key]} in {s['sessions'][key]}"

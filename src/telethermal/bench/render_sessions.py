@@ -54,8 +54,10 @@ class Totals:
 
 def session_row(scene, material, identifier, generator, config, seed,
                 expected_material=None, display_calibration=None,
-                totals: Totals | None = None, contact_s: float | None = None) -> dict:
-    """One session's row; added to ``totals`` if given."""
+                totals: Totals | None = None, contact_s: float | None = None,
+                display_model: dict | None = None, idle_scene=None) -> dict:
+    """One session's row; added to ``totals`` if given. ``display_model``
+    and ``idle_scene``: as :func:`~telethermal.sim.inprocess.run_session`'s."""
     contact_s = CONTACT_S if contact_s is None else contact_s
     start = time.process_time()
     # The pad idles by config.idle (control/preconditioning.py): by default a
@@ -63,7 +65,8 @@ def session_row(scene, material, identifier, generator, config, seed,
     # it, a first touch idles at the policy's choice for an unknown object.
     s = run_session(scene, material, identifier, generator, config, contact_s=contact_s,
                     seed=seed, expected_material=expected_material, fresh_fits=True,
-                    display_calibration=display_calibration).summary
+                    display_calibration=display_calibration, display_model=display_model,
+                    idle_scene=idle_scene).summary
     cpu = time.process_time() - start
     module = s["module"]
     row = {"material": material, "seed": seed, "identified": s["identified"],

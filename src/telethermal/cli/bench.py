@@ -150,7 +150,7 @@ def _bench_render_as_built(args) -> int:
     from telethermal.bench import render_as_built as ab
     from telethermal.jsonfile import write_json
 
-    with _progress(1 + 3 * args.pads, "bench render --as-built") as advance:
+    with _progress(1 + 4 * args.pads, "bench render --as-built") as advance:
         section = ab.run(args.as_built, args.pads, args.scene or "fingertip-7",
                          quick=args.quick, progress=advance, references=args.references,
                          partial=lambda part: write_json(
@@ -387,8 +387,9 @@ def _add_render(bsub) -> None:
                    help="instead: every material's first touch on pads built off their "
                         "datasheet (both pads' factors drawn log-normal with this sd), as "
                         "modelled, uncalibrated and after calibrating both pads "
-                        "(telethermal calibrate pad and calibrate display); with --quick, a "
-                        "third of the materials")
+                        "(telethermal calibrate pad and calibrate display), and beside them "
+                        "the display modelled exactly as drawn (the floor no display "
+                        "calibration passes); with --quick, a third of the materials")
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
     _references_arg(p)

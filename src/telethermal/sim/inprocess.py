@@ -110,7 +110,7 @@ def run_session(scene: Scene, material: str, identifier, generator,
                 fresh_fits: bool = False, junction_lag_scale: float = 1.0,
                 display_calibration=None,
                 network: NetworkSpec | None = None,
-                slave_sensors=None) -> SessionResult:
+                slave_sensors=None, display_model: dict | None = None) -> SessionResult:
     """One touch; see the module docstring. Returns the summary and the trace.
     ``devices``: "sim" (the simulator directly) or "emulated" (the master's
     sensor board on a pty and its Peltier driver on a CAN bus, emulated,
@@ -141,7 +141,10 @@ def run_session(scene: Scene, material: str, identifier, generator,
     in-process wire, no delay and no loss. ``slave_sensors``: the slave's
     instruments and thermometer calibration (a ``SensorSession``; a slave
     service's: :func:`service_sensors`, so the touch is the one that
-    service makes of the same seed); None: drawn for this touch."""
+    service makes of the same seed); None: drawn for this touch.
+    ``display_model``: the master's display model in place of the one its
+    configuration and calibration give (``display_model_args``'s keys; a
+    bench's oracle: ``bench render --as-built``'s exact display)."""
     kind = session_clock(realtime, SceneError)
     realtime = kind != SessionClock.SIMULATED
     if realtime or fresh_fits:
@@ -185,7 +188,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     master_side = SimMasterService(scene, config, curves, slave.classes,
                                    sides.announcement(-PRE_CONTACT_S), operator.finger_ir_c,
                                    news_filter=news_filter, calibration=display_calibration,
-                                   idle_scene=idle_scene and with_finger(idle_scene))
+                                   idle_scene=idle_scene and with_finger(idle_scene),
+                                   model=display_model)
     master, idle = master_side.display, master_side.idle_c
     if network is None:
         slave_end, master_end = instant_pair()

@@ -77,13 +77,13 @@ class SimMasterService:
     ``oracle``: the material the display is told at its own onset instead
     (no network; the floor of any compensation). ``news_filter(news, t)``:
     what the display reads instead of the session's news (a bench's
-    baseline target); None: the news as is. ``calibration`` and
-    ``idle_scene``: as :func:`~telethermal.teleop.display_setup.build_display`."""
+    baseline target); None: the news as is. ``calibration``, ``idle_scene``
+    and ``model``: as :func:`~telethermal.teleop.display_setup.build_display`."""
 
     def __init__(self, scene, config, curves: dict, classes, announcement: ContactEvent,
                  finger_c: float, oracle: str | None = None,
                  news_filter: Callable[[SlaveNews, float], SlaveNews] | None = None,
-                 calibration=None, idle_scene=None):
+                 calibration=None, idle_scene=None, model: dict | None = None):
         generator = SampledGenerator(curves)
         self.session = MasterSession(SlaveLink(generator=generator, classes=tuple(classes)))
         self.session.on_message(announcement, -PRE_CONTACT_S)
@@ -95,7 +95,7 @@ class SimMasterService:
         self.display, self.idle_c = build_display(scene, config, finger_c, self.session.link,
                                                   calibration=calibration,
                                                   idle_scene=idle_scene,
-                                                  expected_material=oracle)
+                                                  expected_material=oracle, model=model)
         self.onset_s: float | None = None       # the display's last onset
         self.last_news: SlaveNews | None = None     # what the display read last period
 

@@ -108,8 +108,8 @@ def display_idle(scene: Scene, config: DisplayConfig, finger_c: float,
 
 def build_display(scene: Scene, config: DisplayConfig, finger_c: float, heard, *,
                   calibration=None, idle_scene: Scene | None = None,
-                  expected_material: str | None = None, idling: bool = True
-                  ) -> tuple[MasterDisplay, float | None]:
+                  expected_material: str | None = None, idling: bool = True,
+                  model: dict | None = None) -> tuple[MasterDisplay, float | None]:
     """The master's display, as every driver builds it (the services, the
     in-process run, the simulated network): its skin controller's model
     from the configuration (:func:`display_model_args` of ``scene`` and the
@@ -125,9 +125,12 @@ def build_display(scene: Scene, config: DisplayConfig, finger_c: float, heard, *
     what the slave announced (the simulated network's oracle, which knows
     it). ``idling`` False: the display starts in its safe state rather than
     idling (a hardware display whose loop runs before anything is heard).
+    ``model``: the controller's model in place of :func:`display_model_args`'s
+    (its keys; a bench's oracle, never the services').
     Returns the display and its idle temperature (C; None when not idling)."""
     expected = heard.expected_material if expected_material is None else expected_material
-    model = display_model_args(scene, calibration)        # checks the calibration first
+    if model is None:
+        model = display_model_args(scene, calibration)    # checks the calibration first
     idle_c, shift = display_idle(idle_scene or scene, config, finger_c,
                                  heard.object_temp_c if idling else None, expected,
                                  calibration)
