@@ -242,15 +242,19 @@ def test_render_as_built_hands_the_calibrations_to_the_calibrated_row_alone(monk
 def test_the_exact_display_is_the_simulators_display_and_the_design_is_the_configured_one():
     """bench render --as-built's oracle row: on a pad drawn at sd 0 the
     master's exact model is the configured one, key for key, and its idle
-    scene the design's policy key; on a drawn pad each part is the design's
-    times its drawn factor (the stack's resistance summed by hand), the
-    horizon stretched by the product's rule for the lumped face factor."""
+    scene has the design's policy; on a drawn pad each part is the one the
+    simulator's display under the finger has (its DisplayTouch: layers,
+    flux sensor lag, gain, module, junction lag, contact factor; to 1e-12
+    relative, the same products), the stack's resistance as summed by hand,
+    the horizon stretched by the product's rule for the lumped face factor,
+    and the idle scene the drawn layers with the design's finger."""
     import dataclasses
 
     from telethermal.bench import render_as_built as ra
     from telethermal.control.preconditioning import policy_key
     from telethermal.physics.as_built import with_as_built
     from telethermal.physics.scene import load_scene, with_finger
+    from telethermal.sim.touch import MasterWorld
     from telethermal.teleop.display_setup import display_model_args
 
     scene = with_finger(with_as_built(load_scene("fingertip-7"), None))
@@ -258,31 +262,31 @@ def test_the_exact_display_is_the_simulators_display_and_the_design_is_the_confi
     design = display_model_args(scene)
     model, idle = ra.exact_display(scene, with_as_built(scene, draw_as_built(0.0, 0, n)))
     assert model == design and policy_key(idle) == policy_key(scene)
-    drawn = draw_as_built(0.15, 3, n)
-    f = drawn.display
-    model, idle = ra.exact_display(scene, with_as_built(scene, drawn))
-    resistance = sum(la.thickness_m * k / la.material.conductivity_w_mk
-                     for la, k in zip(scene.pad.layers, f.layer_thickness))
+    built = with_as_built(scene, draw_as_built(0.15, 3, n))
+    model, idle = ra.exact_display(scene, built)
+    touch = MasterWorld(built, 0).display(500.0, 1.0, 24.0)
+    assert model["pad_layers"] == touch.layers != scene.pad.layers
+    resistance = sum(la.thickness_m / la.material.conductivity_w_mk for la in touch.layers)
     assert model["pad_resistance_m2k_w"] == pytest.approx(resistance, rel=1e-12)
-    assert [la.thickness_m for la in model["pad_layers"]] == pytest.approx(
-        [la.thickness_m * k for la, k in zip(scene.pad.layers, f.layer_thickness)], rel=1e-12)
-    for key, factor in (("sensor_lag_s", f.flux_lag_s),
-                        ("contact_conductance_w_m2k", f.contact_conductance_w_m2k)):
-        assert model[key] == pytest.approx(design[key] * factor, rel=1e-12), key
-    assert model["flux_gain"] == f.flux_gain != 1.0
-    assert model["junction_sensor"].tau_s == pytest.approx(
-        design["junction_sensor"].tau_s * f.junction_lag_s, rel=1e-12)
-    for attr, factor in (("seebeck_v_k", f.module_seebeck), ("resistance_ohm",
-                         f.module_resistance), ("conductance_w_k", f.module_conductance)):
-        assert getattr(model["module"], attr) == pytest.approx(
-            getattr(design["module"], attr) * factor, rel=1e-12), attr
-    face = ra.lumped_face_true(scene, f.layer_thickness)
+    assert model["sensor_lag_s"] == touch.flux_sensor.lag_s != design["sensor_lag_s"]
+    assert model["flux_gain"] == touch.built.flux_gain != 1.0
+    assert model["module"] == touch.module != design["module"]
+    assert model["junction_sensor"].tau_s == pytest.approx(touch.junction_lag_s, rel=1e-12)
+    assert model["contact_conductance_w_m2k"] == pytest.approx(
+        design["contact_conductance_w_m2k"] * touch.built.contact_factor, rel=1e-12)
+    assert touch.built.contact_factor != 1.0 and model["pad_area_m2"] == touch.area_m2
+    # The horizon: the rule the master applies to a calibrated face factor
+    # (display_setup.horizon_scale: its square, never under 1), here on the
+    # drawn pad's lumped one, 1.65 times the design's.
+    face = ra.lumped_face_true(scene, built.as_built.display.layer_thickness)
     assert face > 1.5 and model["impedance_horizon_scale"] == pytest.approx(face ** 2)
-    # The idle policy's scene: the drawn layers and contact, no [as_built]
-    # (the search would not read it; the policy is another one).
-    assert idle.as_built is None and idle.pad.layers == model["pad_layers"]
-    assert idle.finger.contact_conductance_w_m2k == model["contact_conductance_w_m2k"]
-    assert dataclasses.replace(idle, pad=scene.pad, finger=scene.finger) == scene
+    thin = with_as_built(scene, draw_as_built(0.15, 0, n))      # its face layer x0.83
+    assert ra.lumped_face_true(scene, thin.as_built.display.layer_thickness) < 1.0
+    assert ra.exact_display(scene, thin)[0]["impedance_horizon_scale"] == 1.0
+    # The idle policy's scene: the drawn layers, no [as_built], the design's
+    # finger (the search's one conductance is also its finger-object target).
+    assert idle.as_built is None and idle.pad.layers == touch.layers
+    assert dataclasses.replace(idle, pad=scene.pad) == scene
     assert policy_key(idle) != policy_key(scene)
 
 
@@ -309,6 +313,50 @@ def test_the_exact_model_reaches_the_master_and_the_configured_one_changes_nothi
     assert np.isfinite(plain).sum() > 100
     np.testing.assert_array_equal(current(dict(args)), plain)
     assert not np.allclose(current({**args, "flux_gain": 0.8}), plain, equal_nan=True)
+    # The idle scene handed in is the policy the display idles by: the
+    # design's scene named explicitly idles where none given does.
+    idle = run_session(scene, "steel", *models, contact_s=0.4, seed=3, display_model=args,
+                       idle_scene=scene).summary["display_idle_c"]
+    assert idle == run_session(scene, "steel", *models, contact_s=0.4,
+                               seed=3).summary["display_idle_c"]
+
+
+def test_a_model_given_in_place_of_the_configured_one_takes_no_calibration():
+    from types import SimpleNamespace
+
+    from telethermal.errors import ControlError
+    from telethermal.physics.scene import load_scene, with_finger
+    from telethermal.teleop.display_config import DisplayConfig
+    from telethermal.teleop.display_setup import build_display, display_model_args
+
+    scene = with_finger(load_scene("fingertip-7"))
+    with pytest.raises(ControlError, match="takes no calibration"):
+        build_display(scene, DisplayConfig(), 33.0, SimpleNamespace(), calibration=object(),
+                      model=display_model_args(scene))
+
+
+def test_an_old_render_as_built_file_prints_no_exact_display_row():
+    """A report written before the exact display's row (its summary without
+    the key) prints its three rows and no line of the fourth."""
+    from telethermal.bench import render_as_built as ra
+
+    modelled = _render_pad(0, {"aluminium": [0.7, 0.7]})
+    pad = _render_pad(0, {"aluminium": [0.7, 0.75]})
+    out = {"sd": 0.15, "pads": 1, "seeds": [1, 2],
+           "as_modelled": {"rows": modelled["rows"], "per_material": modelled["per_material"]},
+           "uncalibrated": [pad], "calibrated": [pad], "calibrations": [{"seed": 0}]}
+    s = ra.summary(out)
+    for key in ("sessions", "safety_events", "limits"):
+        del s[key]["display_exact"]
+    out["summary"] = s
+    text = "\n".join(ra.text_lines(out))
+    assert "display_exact" not in text and "(exact display:" not in text
+    assert "module limits, calibrated" in text and "calibrated 0 in 2" in text
+    out["display_exact"] = [_render_pad(0, {"aluminium": [0.7, 0.71]})]
+    out["summary"] = ra.summary(out)
+    text = "\n".join(ra.text_lines(out))
+    assert "module limits, display_exact" in text and "(exact display:" in text
+    assert "0.705 K  1.01x" in text
 
 
 def test_bench_render_as_built_refuses_an_sd_out_of_range(capsys):

@@ -129,7 +129,8 @@ def run_session(scene: Scene, material: str, identifier, generator,
     news (a bench's oracle or closed set; the slave and its messages
     unchanged), None: as the services run. ``idle_scene``: the
     scene whose idle policy the display applies (default ``scene``; a bench
-    touching objects outside the trained ones gives the trained scene).
+    touching objects outside the trained ones gives the trained scene;
+    ``bench render --as-built``'s exact display, the drawn layers).
     ``fresh_fits``: the slave's fits made afresh, none of the process's
     kept ones (a run whose CPU is measured; always on the real clock).
     ``junction_lag_scale``: the display's junction sensor lags this many

@@ -16,6 +16,7 @@ import numpy as np
 from telethermal.control.current_quality import ripple_rms_a, sign_reversals
 from telethermal.control.dew import DEW_MARGIN_K, idle_floor_c
 from telethermal.control.safety import safety_event_count
+from telethermal.errors import ControlError
 from telethermal.physics.layered import pad_resistance
 from telethermal.physics.scene import Scene
 from telethermal.teleop.display_config import DisplayConfig, Idle
@@ -126,11 +127,16 @@ def build_display(scene: Scene, config: DisplayConfig, finger_c: float, heard, *
     it). ``idling`` False: the display starts in its safe state rather than
     idling (a hardware display whose loop runs before anything is heard).
     ``model``: the controller's model in place of :func:`display_model_args`'s
-    (its keys; a bench's oracle, never the services').
+    (its keys; a bench's oracle, never the services'), given without a
+    ``calibration`` (its idle policy: ``idle_scene``'s).
     Returns the display and its idle temperature (C; None when not idling)."""
-    expected = heard.expected_material if expected_material is None else expected_material
     if model is None:
         model = display_model_args(scene, calibration)    # checks the calibration first
+    elif calibration is not None:
+        raise ControlError("build_display: a model given in place of the configured one "
+                           "takes no calibration (it would go unchecked, and only pick the "
+                           "idle policy)")
+    expected = heard.expected_material if expected_material is None else expected_material
     idle_c, shift = display_idle(idle_scene or scene, config, finger_c,
                                  heard.object_temp_c if idling else None, expected,
                                  calibration)
