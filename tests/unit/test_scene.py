@@ -161,6 +161,25 @@ def test_any_bad_value_is_a_scene_error_not_a_crash(top_key, top_value, pad_key,
         assert "fuzz.toml" in str(exc)
 
 
+def test_the_display_floor_and_idle_policy_take_the_module_and_sink_the_scene_names():
+    """control/display_floor.hardware (the idle policy's search, bench
+    skin-floor) builds the module and heat sink of the scene's [pad], not
+    the default ones: a scene naming parts the catalogue lacks is refused
+    by their names (the catalogue holds one of each today)."""
+    import dataclasses
+
+    from telethermal.control.display_floor import hardware
+    from telethermal.physics.thermoelectric import derive, get_module
+
+    scene = parse_scene(tomllib.loads(MINIMAL), "x.toml")
+    assert hardware(scene).params == derive(get_module(scene.pad.module))
+    for key in ("module", "heat_sink"):
+        other = dataclasses.replace(scene, pad=dataclasses.replace(scene.pad, **{key: "X-1"}))
+        with pytest.raises(SceneError, match="'X-1'"):
+            hardware(other)
+        hardware(other, **{key: getattr(scene.pad, key)})     # named instead: built
+
+
 def test_the_pad_face_size_is_a_key_and_sets_the_area_the_module_pumps_over(tmp_path):
     import dataclasses
 

@@ -98,21 +98,24 @@ class Hardware:
 
 
 def hardware(scene: Scene, qmax_scale: float = 1.0, film_r_scale: float = 1.0,
-             module: str = te.DEFAULT_MODULE, heat_sink: str = te.DEFAULT_HEAT_SINK) -> Hardware:
-    """The display's hardware; ``qmax_scale`` multiplies Imax and Qmax
+             module: str | None = None, heat_sink: str | None = None) -> Hardware:
+    """The display's hardware: the module and heat sink the scene's
+    ``[pad]`` names (``module``, ``heat_sink``: others of
+    physics/modules.toml instead); ``qmax_scale`` multiplies Imax and Qmax
     together (S unchanged, R / scale, K x scale: more couples in parallel,
     the junction's heat capacity kept), ``film_r_scale`` the thickness of the
     contact-side layer (the flux film: a thinner film, R and C both scaled)."""
     if not (qmax_scale > 0 and film_r_scale > 0):
         raise ControlError(f"qmax_scale and film_r_scale must be > 0, got {qmax_scale}, "
                            f"{film_r_scale}")
-    spec = te.get_module(module)
+    spec = te.get_module(scene.pad.module if module is None else module)
     spec = replace(spec, imax_a=spec.imax_a * qmax_scale, qmax_w=spec.qmax_w * qmax_scale)
     params = te.derive(spec)
     layers = list(scene.pad.layers)
     layers[0] = Layer(layers[0].material, layers[0].thickness_m * film_r_scale)
     face = None if scene.pad.size_mm is None else scene.pad.area_m2
-    return Hardware(params, te.sink_params(te.get_heat_sink(heat_sink), spec),
+    sink = te.get_heat_sink(scene.pad.heat_sink if heat_sink is None else heat_sink)
+    return Hardware(params, te.sink_params(sink, spec),
                     te.default_driver(params), tuple(layers), scene.room_temp_c, face)
 
 
