@@ -388,8 +388,9 @@ def _add_render(bsub) -> None:
                         "datasheet (both pads' factors drawn log-normal with this sd), as "
                         "modelled, uncalibrated and after calibrating both pads "
                         "(telethermal calibrate pad and calibrate display), and beside them "
-                        "the display modelled exactly as drawn (the floor no display "
-                        "calibration passes); with --quick, a third of the materials")
+                        "the display modelled exactly as drawn (a bench's oracle: what a "
+                        "display calibration could reach); with --quick, a third of the "
+                        "materials")
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
     _references_arg(p)
