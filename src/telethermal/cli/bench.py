@@ -385,12 +385,9 @@ def _add_render(bsub) -> None:
                    help="a few materials, rates and gains, one seed (a smoke run)")
     p.add_argument("--as-built", type=_as_built_sd, metavar="SD",
                    help="instead: every material's first touch on pads built off their "
-                        "datasheet (both pads' factors drawn log-normal with this sd), as "
-                        "modelled, uncalibrated and after calibrating both pads "
-                        "(telethermal calibrate pad and calibrate display), and beside them "
-                        "the display modelled exactly as drawn (a bench's oracle: what a "
-                        "display calibration could reach); with --quick, a third of the "
-                        "materials")
+                        "datasheet (factors drawn log-normal with this sd): as modelled, "
+                        "uncalibrated, both pads calibrated, and the display modelled "
+                        "exactly as drawn (an oracle); with --quick, a third of the materials")
     p.add_argument("--pads", type=_positive(int), default=5,
                    help="with --as-built: how many pads are drawn (default 5)")
     _references_arg(p)
