@@ -245,15 +245,9 @@ def healthy_or_stalled(polls: list[tuple[bool, tuple]], trips: list[tuple[int, i
     each trip the core logged came within [WATCHDOG_MS, TRIP_LATE_MS] after
     the answer before it: a gap in the commands the core itself timed,
     which a stall of the shared host makes (the driver cannot tell it from
-    a cut line, and must not trust the element then). Where the core logged
-    such a trip, a poll may also be untrusted with no fault flag (its status
-    stale across the same stall, or the element not yet enabled again:
-    a CI rehearsal with a third process beside the suite saw one such poll
-    beside a trip of 101 ms); any other fault is never excused, nor an
-    untrusted poll where the core timed no gap."""
-    timed = bool(trips) and all(WATCHDOG_MS <= d <= TRIP_LATE_MS for _, d in trips)
-    return (timed or not trips) and \
-        all(h or faults == ("watchdog",) or (timed and faults == ()) for h, faults in polls)
+    a cut line, and must not trust the element then)."""
+    return all(WATCHDOG_MS <= d <= TRIP_LATE_MS for _, d in trips) and \
+        all(h or faults == ("watchdog",) for h, faults in polls)
 
 
 def test_the_watchdog_disables_the_element_after_100_ms_of_silence_over_20_trials(
