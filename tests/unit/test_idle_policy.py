@@ -64,6 +64,29 @@ def test_the_key_follows_the_physics_not_the_descriptions(scene, monkeypatch):
         to_air_k_w=t["heat_sinks"][sink]["to_air_k_w"] * 1.1)) != base
 
 
+def test_a_scene_naming_another_module_gets_its_hardware_and_its_own_key(scene, monkeypatch):
+    """A catalogue with a second module (the default's Qmax and Imax
+    doubled): a scene whose [pad] names it gets that module in the display
+    floor's hardware (the idle policy's search) and another policy key;
+    the scene naming the default keeps its own."""
+    import copy
+    import dataclasses
+
+    from telethermal.control import display_floor
+    from telethermal.physics import thermoelectric as te
+
+    base = pc.policy_key(scene)
+    table = copy.deepcopy(te._table())
+    other = dict(table["modules"][te.DEFAULT_MODULE])
+    other.update(qmax_w=2 * other["qmax_w"], imax_a=2 * other["imax_a"])
+    table["modules"]["TWICE-1"] = other
+    monkeypatch.setattr(te, "_table", lambda: table)
+    named = dataclasses.replace(scene, pad=dataclasses.replace(scene.pad, module="TWICE-1"))
+    assert display_floor.hardware(named).params.spec.qmax_w == 2 * display_floor.hardware(
+        scene).params.spec.qmax_w
+    assert pc.policy_key(named) != base and pc.policy_key(scene) == base
+
+
 def test_the_shipped_policy_is_used_without_computing(scene, monkeypatch):
     def refuse(_scene):
         raise AssertionError("computed although the package ships the policy")
